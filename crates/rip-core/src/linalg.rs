@@ -1,0 +1,510 @@
+//! Dense linear algebra for control design: argument validation, zero-order-hold
+//! discretisation and the discrete algebraic Riccati equation (DARE).
+//!
+//! # The DARE
+//!
+//! [`dare`] returns the stabilizing solution `X = Xᵀ` of the generalized equation
+//! (python-control `dare`, MATLAB `idare`)
+//!
+//! ```text
+//! AᵀXA − EᵀXE − (AᵀXB + S)(BᵀXB + R)⁻¹(BᵀXA + Sᵀ) + Q = 0,
+//! ```
+//!
+//! the gain `G = (BᵀXB + R)⁻¹(BᵀXA + Sᵀ)` and the closed-loop eigenvalues `eig(A − BG, E)`.
+//!
+//! The solver is the structured doubling algorithm (SDA) of Chu, Fan and Lin (2005). With
+//! `A₀ = A − BR⁻¹Sᵀ`, `G₀ = BR⁻¹Bᵀ`, `H₀ = Q − SR⁻¹Sᵀ` it iterates
+//!
+//! ```text
+//! W   = I + G_k H_k
+//! A₊  = A_k W⁻¹ A_k
+//! G₊  = G_k + A_k W⁻¹ G_k A_kᵀ
+//! H₊  = H_k + A_kᵀ H_k W⁻¹ A_k          (H_k → X quadratically)
+//! ```
+//!
+//! It never inverts `A`, so singular `A` (delays, pure integrators in discrete time) is fine,
+//! unlike methods built on the symplectic matrix. `E` is eliminated up front
+//! (`Â = E⁻¹A`, `B̂ = E⁻¹B`, `X = E⁻ᵀ Y E⁻¹`). Every answer is checked: the closed loop must be
+//! Schur stable and the relative residual below [`DARE_RESIDUAL_TOLERANCE`]; otherwise the
+//! failure is diagnosed (an unstable mode the input cannot reach, by the PBH test, or no
+//! stabilizing solution) instead of returning a wrong matrix.
+//!
+//! State dimensions up to 8 run the iteration on stack-allocated `SMatrix` types.
+
+use nalgebra::{
+    allocator::Allocator, Complex, Const, DMatrix, DefaultAllocator, DimMin, Dyn, OMatrix,
+};
+
+use crate::error::{Result, RipError};
+
+/// Dynamically sized `f64` matrix used by the design routines.
+pub type Mat = DMatrix<f64>;
+
+/// Relative residual above which a DARE solution is rejected.
+pub const DARE_RESIDUAL_TOLERANCE: f64 = 1e-8;
+
+const SDA_MAX_ITERATIONS: usize = 100;
+/// A mode counts as "unstable" for the stabilizability test when `|λ| ≥ 1 − this`.
+const UNIT_CIRCLE_MARGIN: f64 = 1e-9;
+
+/// Fails with [`RipError::Shape`] unless `m` is `rows × cols`.
+pub fn check_shape(name: &str, m: &Mat, rows: usize, cols: usize) -> Result<()> {
+    if m.nrows() != rows || m.ncols() != cols {
+        return Err(RipError::Shape {
+            name: name.to_string(),
+            expected: format!("({rows}, {cols})"),
+            rows: m.nrows(),
+            cols: m.ncols(),
+        });
+    }
+    Ok(())
+}
+
+/// Fails unless `m` is square and non-empty; returns its size.
+pub fn check_square(name: &str, m: &Mat) -> Result<usize> {
+    if m.nrows() != m.ncols() || m.nrows() == 0 {
+        return Err(RipError::Shape {
+            name: name.to_string(),
+            expected: "(n, n) with n ≥ 1".to_string(),
+            rows: m.nrows(),
+            cols: m.ncols(),
+        });
+    }
+    Ok(m.nrows())
+}
+
+/// Fails with [`RipError::NonFinite`] if `m` holds NaN or ±Inf.
+pub fn check_finite(name: &str, m: &Mat) -> Result<()> {
+    if m.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(RipError::NonFinite {
+            name: name.to_string(),
+        })
+    }
+}
+
+/// Fails unless `m` is symmetric to `1e-8` relative to its largest entry.
+pub fn check_symmetric(name: &str, m: &Mat) -> Result<()> {
+    let scale = m.amax().max(1.0);
+    let asymmetry = (m - m.transpose()).amax();
+    if asymmetry > 1e-8 * scale {
+        return Err(RipError::NotSymmetric {
+            name: name.to_string(),
+            asymmetry,
+        });
+    }
+    Ok(())
+}
+
+/// Fails unless the symmetric matrix `m` is positive semidefinite (to a relative `1e-10`).
+pub fn check_psd(name: &str, m: &Mat) -> Result<()> {
+    let min_eigenvalue = m.clone().symmetric_eigenvalues().min();
+    if min_eigenvalue < -1e-10 * m.amax().max(1e-300) {
+        return Err(RipError::NotPositiveSemidefinite {
+            name: name.to_string(),
+            min_eigenvalue,
+        });
+    }
+    Ok(())
+}
+
+/// Fails unless the symmetric matrix `m` is positive definite (it has a Cholesky factor).
+pub fn check_pd(name: &str, m: &Mat) -> Result<()> {
+    if m.clone().cholesky().is_none() {
+        return Err(RipError::NotPositiveDefinite {
+            name: name.to_string(),
+        });
+    }
+    Ok(())
+}
+
+/// `(m + mᵀ)/2`: removes the round-off asymmetry that products like `AᵀXA` accumulate.
+pub fn symmetrize(m: &Mat) -> Mat {
+    (m + m.transpose()) * 0.5
+}
+
+/// Largest eigenvalue modulus of a square matrix.
+pub fn spectral_radius(m: &Mat) -> f64 {
+    eigenvalues(m).iter().map(|z| z.norm()).fold(0.0, f64::max)
+}
+
+/// Eigenvalues of a square real matrix (real Schur form).
+pub fn eigenvalues(m: &Mat) -> Vec<Complex<f64>> {
+    m.clone().complex_eigenvalues().iter().copied().collect()
+}
+
+/// Zero-order-hold discretisation of `ẋ = A x + B u` with period `ts`:
+/// `A_d = e^{A Ts}`, `B_d = ∫₀^{Ts} e^{Aτ} dτ B`, both read off the exponential of the block
+/// matrix `[[A, B], [0, 0]] Ts` (Van Loan 1978; MATLAB `c2d(sys, Ts, 'zoh')`).
+pub fn c2d(a: &Mat, b: &Mat, ts: f64) -> Result<(Mat, Mat)> {
+    let n = check_square("A", a)?;
+    if b.nrows() != n {
+        return Err(RipError::Shape {
+            name: "B".into(),
+            expected: format!("({n}, m)"),
+            rows: b.nrows(),
+            cols: b.ncols(),
+        });
+    }
+    check_finite("A", a)?;
+    check_finite("B", b)?;
+    if !(ts.is_finite() && ts > 0.0) {
+        return Err(RipError::invalid(
+            "Ts",
+            format!("must be positive and finite, got {ts}"),
+        ));
+    }
+    let m = b.ncols();
+    let mut block = Mat::zeros(n + m, n + m);
+    block.view_mut((0, 0), (n, n)).copy_from(&(a * ts));
+    block.view_mut((0, n), (n, m)).copy_from(&(b * ts));
+    let e = block.exp();
+    Ok((
+        e.view((0, 0), (n, n)).into_owned(),
+        e.view((0, n), (n, m)).into_owned(),
+    ))
+}
+
+/// The stabilizing solution of a DARE with what was computed alongside it.
+#[derive(Debug, Clone)]
+pub struct DareSolution {
+    /// The stabilizing solution `X = Xᵀ`.
+    pub x: Mat,
+    /// `G = (BᵀXB + R)⁻¹(BᵀXA + Sᵀ)`; the optimal feedback is `u = −G x`.
+    pub gain: Mat,
+    /// Eigenvalues of the closed loop, `eig(A − BG, E)`.
+    pub closed_loop_eigenvalues: Vec<Complex<f64>>,
+    /// Doubling steps taken.
+    pub iterations: usize,
+    /// `‖residual‖_F / (‖Q‖_F + ‖X‖_F (1 + ‖A‖_F²))`.
+    pub relative_residual: f64,
+}
+
+/// Why a validated DARE could not be solved; callers name the pair in their own terms.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum DareFailure {
+    /// An eigenvalue of `A` on or outside the unit circle that `B` cannot reach.
+    Unreachable(Complex<f64>),
+    /// Everything else, with a reason.
+    NoSolution(String),
+}
+
+impl DareFailure {
+    /// Maps the failure onto the public error, naming the pair as `pair`; `dual` marks a
+    /// filtering problem, where unreachability of `(Aᵀ, Cᵀ)` means `(A, C)` is not detectable.
+    pub(crate) fn into_error(self, pair: &str, dual: bool) -> RipError {
+        match self {
+            DareFailure::Unreachable(z) if dual => RipError::NotDetectable {
+                pair: pair.to_string(),
+                re: z.re,
+                im: z.im,
+                modulus: z.norm(),
+            },
+            DareFailure::Unreachable(z) => RipError::NotStabilizable {
+                pair: pair.to_string(),
+                re: z.re,
+                im: z.im,
+                modulus: z.norm(),
+            },
+            DareFailure::NoSolution(reason) => RipError::NoStabilizingSolution { reason },
+        }
+    }
+}
+
+/// Solves the generalized DARE (see the module docs) after validating every argument.
+///
+/// `s` defaults to zero and `e` to the identity. Errors name the argument (`A`, `B`, `Q`, `R`,
+/// `S`, `E`) or the pair `(A, B)`.
+pub fn dare(
+    a: &Mat,
+    b: &Mat,
+    q: &Mat,
+    r: &Mat,
+    s: Option<&Mat>,
+    e: Option<&Mat>,
+) -> Result<DareSolution> {
+    let n = check_square("A", a)?;
+    let m = b.ncols();
+    check_shape("B", b, n, m)?;
+    if m == 0 {
+        return Err(RipError::Shape {
+            name: "B".into(),
+            expected: format!("({n}, m) with m ≥ 1"),
+            rows: b.nrows(),
+            cols: 0,
+        });
+    }
+    check_shape("Q", q, n, n)?;
+    check_shape("R", r, m, m)?;
+    if let Some(s) = s {
+        check_shape("S", s, n, m)?;
+    }
+    if let Some(e) = e {
+        check_shape("E", e, n, n)?;
+    }
+    for (name, mat) in [("A", a), ("B", b), ("Q", q), ("R", r)] {
+        check_finite(name, mat)?;
+    }
+    if let Some(s) = s {
+        check_finite("S", s)?;
+    }
+    if let Some(e) = e {
+        check_finite("E", e)?;
+    }
+    check_symmetric("Q", q)?;
+    check_symmetric("R", r)?;
+    check_pd("R", r)?;
+    solve_dare_validated(a, b, &symmetrize(q), &symmetrize(r), s, e)
+        .map_err(|f| f.into_error("(A, B)", false))
+}
+
+/// The solver behind [`dare`], for arguments already validated by the caller.
+pub(crate) fn solve_dare_validated(
+    a: &Mat,
+    b: &Mat,
+    q: &Mat,
+    r: &Mat,
+    s: Option<&Mat>,
+    e: Option<&Mat>,
+) -> std::result::Result<DareSolution, DareFailure> {
+    // Generalized problem → standard one in Y = EᵀXE with Â = E⁻¹A, B̂ = E⁻¹B.
+    let (a_hat, b_hat, e_inv) = match e {
+        Some(e) => {
+            let lu = e.clone().lu();
+            let e_inv = lu
+                .try_inverse()
+                .ok_or_else(|| DareFailure::NoSolution("E is singular".into()))?;
+            (&e_inv * a, &e_inv * b, Some(e_inv))
+        }
+        None => (a.clone(), b.clone(), None),
+    };
+    let r_chol = r
+        .clone()
+        .cholesky()
+        .ok_or_else(|| DareFailure::NoSolution("R is not positive definite".into()))?;
+    let r_inv_bt = r_chol.solve(&b_hat.transpose());
+    let g0 = symmetrize(&(&b_hat * &r_inv_bt));
+    let (a0, h0) = match s {
+        Some(s) => {
+            let r_inv_st = r_chol.solve(&s.transpose());
+            (
+                &a_hat - &b_hat * &r_inv_st,
+                symmetrize(&(q - s * &r_inv_st)),
+            )
+        }
+        None => (a_hat.clone(), q.clone()),
+    };
+
+    let diagnose = |reason: String| match unreachable_unstable_mode(a, b, e) {
+        Some(z) => DareFailure::Unreachable(z),
+        None => DareFailure::NoSolution(reason),
+    };
+
+    let (y, iterations) = sda_dispatch(&a0, &g0, &h0)
+        .ok_or_else(|| diagnose("the doubling iteration did not converge".into()))?;
+    let y = symmetrize(&y);
+    let btyb_r = symmetrize(&(b_hat.transpose() * &y * &b_hat + r));
+    let mut rhs = b_hat.transpose() * &y * &a_hat;
+    if let Some(s) = s {
+        rhs += s.transpose();
+    }
+    let gain = btyb_r
+        .clone()
+        .cholesky()
+        .map(|c| c.solve(&rhs))
+        .ok_or_else(|| diagnose("BᵀXB + R is not positive definite at the solution".into()))?;
+    let closed_loop = &a_hat - &b_hat * &gain;
+    let closed_loop_eigenvalues = eigenvalues(&closed_loop);
+    let radius = closed_loop_eigenvalues
+        .iter()
+        .map(|z| z.norm())
+        .fold(0.0, f64::max);
+    if radius.is_nan() || radius >= 1.0 {
+        return Err(diagnose(format!(
+            "the closed loop has spectral radius {radius:.6} ≥ 1 (a mode on the unit circle?)"
+        )));
+    }
+    let x = match &e_inv {
+        Some(e_inv) => symmetrize(&(e_inv.transpose() * &y * e_inv)),
+        None => y,
+    };
+    let relative_residual = dare_relative_residual(a, b, q, r, s, e, &x);
+    if relative_residual.is_nan() || relative_residual > DARE_RESIDUAL_TOLERANCE {
+        return Err(diagnose(format!(
+            "relative residual {relative_residual:.3e} exceeds {DARE_RESIDUAL_TOLERANCE:.0e}"
+        )));
+    }
+    Ok(DareSolution {
+        x,
+        gain,
+        closed_loop_eigenvalues,
+        iterations,
+        relative_residual,
+    })
+}
+
+/// Relative residual of the generalized DARE at `x` (see [`DareSolution::relative_residual`]).
+pub fn dare_relative_residual(
+    a: &Mat,
+    b: &Mat,
+    q: &Mat,
+    r: &Mat,
+    s: Option<&Mat>,
+    e: Option<&Mat>,
+    x: &Mat,
+) -> f64 {
+    let mut cross = a.transpose() * x * b;
+    if let Some(s) = s {
+        cross += s;
+    }
+    let btxb_r = b.transpose() * x * b + r;
+    let Some(chol) = btxb_r.cholesky() else {
+        return f64::INFINITY;
+    };
+    let exe = match e {
+        Some(e) => e.transpose() * x * e,
+        None => x.clone(),
+    };
+    let residual = a.transpose() * x * a - exe - &cross * chol.solve(&cross.transpose()) + q;
+    let scale = q.norm() + x.norm() * (1.0 + a.norm_squared());
+    residual.norm() / scale.max(f64::MIN_POSITIVE)
+}
+
+/// An eigenvalue of `E⁻¹A` with `|λ| ≥ 1` that fails the PBH rank test
+/// `rank [A − λE, B] = n`, if there is one.
+pub(crate) fn unreachable_unstable_mode(a: &Mat, b: &Mat, e: Option<&Mat>) -> Option<Complex<f64>> {
+    let n = a.nrows();
+    let e = e.cloned().unwrap_or_else(|| Mat::identity(n, n));
+    let a_eff = e.clone().lu().solve(a)?;
+    let scale = a.norm() + b.norm() + e.norm();
+    for lambda in eigenvalues(&a_eff) {
+        if lambda.norm() < 1.0 - UNIT_CIRCLE_MARGIN {
+            continue;
+        }
+        let mut pencil = DMatrix::<Complex<f64>>::zeros(n, n + b.ncols());
+        for i in 0..n {
+            for j in 0..n {
+                pencil[(i, j)] = Complex::new(a[(i, j)], 0.0) - lambda * e[(i, j)];
+            }
+            for j in 0..b.ncols() {
+                pencil[(i, n + j)] = Complex::new(b[(i, j)], 0.0);
+            }
+        }
+        let sigma_min = pencil.svd(false, false).singular_values.min();
+        if sigma_min <= 1e-9 * scale {
+            return Some(lambda);
+        }
+    }
+    None
+}
+
+/// Runs the doubling iteration on stack matrices when the state dimension is small.
+fn sda_dispatch(a0: &Mat, g0: &Mat, h0: &Mat) -> Option<(Mat, usize)> {
+    macro_rules! on_stack {
+        ($n:literal) => {{
+            let fixed = |m: &Mat| m.fixed_view::<$n, $n>(0, 0).into_owned();
+            let (x, iterations) = sda::<Const<$n>>(fixed(a0), fixed(g0), fixed(h0))?;
+            Some((Mat::from_column_slice($n, $n, x.as_slice()), iterations))
+        }};
+    }
+    match a0.nrows() {
+        1 => on_stack!(1),
+        2 => on_stack!(2),
+        3 => on_stack!(3),
+        4 => on_stack!(4),
+        5 => on_stack!(5),
+        6 => on_stack!(6),
+        7 => on_stack!(7),
+        8 => on_stack!(8),
+        _ => sda::<Dyn>(a0.clone(), g0.clone(), h0.clone()),
+    }
+}
+
+/// The structured doubling iteration; returns `H_∞ = X` and the number of steps.
+fn sda<D: DimMin<D, Output = D>>(
+    a0: OMatrix<f64, D, D>,
+    g0: OMatrix<f64, D, D>,
+    h0: OMatrix<f64, D, D>,
+) -> Option<(OMatrix<f64, D, D>, usize)>
+where
+    DefaultAllocator: Allocator<D, D> + Allocator<D>,
+{
+    let (rows, cols) = a0.shape_generic();
+    let eye = OMatrix::<f64, D, D>::identity_generic(rows, cols);
+    let (mut a, mut g, mut h) = (a0, g0, h0);
+    let a_scale = a.norm().max(1.0);
+    for iteration in 1..=SDA_MAX_ITERATIONS {
+        let lu = (&eye + &g * &h).lu();
+        let w_inv_a = lu.solve(&a)?;
+        let w_inv_g = lu.solve(&g)?;
+        let h_next = &h + a.transpose() * &h * &w_inv_a;
+        let g_next = &g + &a * &w_inv_g * a.transpose();
+        a = &a * &w_inv_a;
+        let change = (&h_next - &h).norm();
+        let size = h_next.norm();
+        if !size.is_finite() || !a.norm().is_finite() {
+            return None;
+        }
+        h = (&h_next + h_next.transpose()) * 0.5;
+        g = (&g_next + g_next.transpose()) * 0.5;
+        // A_k → 0 at the same quadratic rate; either test alone can stall at round-off level.
+        if change <= 1e-13 * size || a.norm() <= 1e-15 * a_scale {
+            return Some((h, iteration));
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn mat(rows: usize, cols: usize, v: &[f64]) -> Mat {
+        Mat::from_row_slice(rows, cols, v)
+    }
+
+    #[test]
+    fn scalar_dare_matches_closed_form() {
+        // x = a²x − a²x²b²/(b²x + r) + q has the positive root of b²x² + (r − a²r − qb²)x − qr = 0.
+        let (a, b, q, r) = (1.2_f64, 0.5_f64, 2.0_f64, 0.3_f64);
+        let (qa, qb, qc) = (b * b, r - a * a * r - q * b * b, -q * r);
+        let expected = (-qb + (qb * qb - 4.0 * qa * qc).sqrt()) / (2.0 * qa);
+        let sol = dare(
+            &mat(1, 1, &[a]),
+            &mat(1, 1, &[b]),
+            &mat(1, 1, &[q]),
+            &mat(1, 1, &[r]),
+            None,
+            None,
+        )
+        .unwrap();
+        assert!((sol.x[(0, 0)] - expected).abs() < 1e-12 * expected);
+        assert!(sol.closed_loop_eigenvalues[0].norm() < 1.0);
+    }
+
+    #[test]
+    fn singular_a_is_solved() {
+        let a = mat(2, 2, &[0.0, 1.0, 0.0, 0.0]);
+        let b = mat(2, 1, &[0.0, 1.0]);
+        let sol = dare(&a, &b, &Mat::identity(2, 2), &mat(1, 1, &[1.0]), None, None).unwrap();
+        assert!(sol.relative_residual < 1e-12);
+    }
+
+    #[test]
+    fn uncontrollable_unstable_mode_is_reported() {
+        let a = mat(2, 2, &[1.5, 0.0, 0.0, 0.5]);
+        let b = mat(2, 1, &[0.0, 1.0]);
+        let err = dare(&a, &b, &Mat::identity(2, 2), &mat(1, 1, &[1.0]), None, None).unwrap_err();
+        assert!(matches!(err, RipError::NotStabilizable { .. }), "{err}");
+    }
+
+    #[test]
+    fn c2d_of_double_integrator() {
+        let a = mat(2, 2, &[0.0, 1.0, 0.0, 0.0]);
+        let b = mat(2, 1, &[0.0, 1.0]);
+        let (ad, bd) = c2d(&a, &b, 0.1).unwrap();
+        assert!((ad - mat(2, 2, &[1.0, 0.1, 0.0, 1.0])).amax() < 1e-14);
+        assert!((bd - mat(2, 1, &[0.005, 0.1])).amax() < 1e-14);
+    }
+}

@@ -1,0 +1,20 @@
+//! `riprs._riprs`: the private native module behind the `riprs` Python package.
+//!
+//! This crate only converts: numpy arrays to `nalgebra` matrices and back, and [`RipError`]
+//! variants to Python exceptions. All numerics live in `rip-core`.
+
+use pyo3::prelude::*;
+
+mod convert;
+mod design;
+mod errors;
+mod paper;
+
+#[pymodule]
+fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    errors::register(m)?;
+    design::register(m)?;
+    paper::register(m)?;
+    Ok(())
+}

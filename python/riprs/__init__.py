@@ -1,0 +1,46 @@
+"""riprs: LQR, LQG and constrained MPC for the rotary inverted pendulum.
+
+A Rust core (``rip-core``) with numpy in and out. The design functions follow python-control's
+names, argument and return orders; :func:`kalman` follows MATLAB and returns both gains.
+"""
+
+from riprs import paper
+from riprs._riprs import (
+    InvalidParameterError,
+    NonFiniteError,
+    NoStabilizingSolutionError,
+    NotDetectableError,
+    NotPositiveDefiniteError,
+    NotPositiveSemidefiniteError,
+    NotStabilizableError,
+    NotSymmetricError,
+    RiprsError,
+    ShapeError,
+    SingularMatrixError,
+    __version__,
+)
+from riprs.design import KalmanDesign, c2d, dare, dlqe, dlqr, kalman
+from riprs.statespace import StateSpace
+
+__all__ = [
+    "InvalidParameterError",
+    "KalmanDesign",
+    "NoStabilizingSolutionError",
+    "NonFiniteError",
+    "NotDetectableError",
+    "NotPositiveDefiniteError",
+    "NotPositiveSemidefiniteError",
+    "NotStabilizableError",
+    "NotSymmetricError",
+    "RiprsError",
+    "ShapeError",
+    "SingularMatrixError",
+    "StateSpace",
+    "__version__",
+    "c2d",
+    "dare",
+    "dlqe",
+    "dlqr",
+    "kalman",
+    "paper",
+]

@@ -1,0 +1,68 @@
+"""The ``riprs`` command line."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Sequence
+
+import numpy as np
+
+from riprs import RiprsError, __version__, paper
+
+
+def _format_matrix(name: str, ours: np.ndarray, printed: np.ndarray | None) -> str:
+    lines = [f"{name} (riprs" + (" | paper eq. (12) | difference)" if printed is not None else ")")]
+    for i in range(ours.shape[0]):
+        row = " ".join(f"{v:9.4f}" for v in ours[i])
+        if printed is not None:
+            row += "  | " + " ".join(f"{v:9.4f}" for v in printed[i])
+            row += "  | " + " ".join(f"{v:+9.1e}" for v in ours[i] - printed[i])
+        lines.append("  " + row)
+    return "\n".join(lines)
+
+
+def cmd_gains(_: argparse.Namespace) -> int:
+    """Print the paper's LQR gain and Kalman gains next to the printed ones."""
+    K = paper.lqr_gain()
+    L, M = paper.kalman_gains()
+    print("LQR gain K (u = -K x): eq. (13) weights, section-3 plant (not printed in the paper)")
+    print(_format_matrix("K", K, None))
+    print()
+    print(_format_matrix("L", L, paper.PRINTED["L"]))
+    print()
+    print(_format_matrix("M", M, paper.PRINTED["M"]))
+    dev_l = np.abs(np.round(L, 4) - paper.PRINTED["L"]).max()
+    dev_m = np.abs(M - paper.PRINTED["M"]).max()
+    print()
+    print(f"max |round(L, 4) - printed L| = {dev_l:.1e};  max |M - printed M| = {dev_m:.1e}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="riprs",
+        description="LQR, LQG and MPC for the rotary inverted pendulum.",
+    )
+    parser.add_argument("--version", action="version", version=f"riprs {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    gains = sub.add_parser("gains", help="print the paper's LQR and Kalman gains")
+    gains.set_defaults(func=cmd_gains)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not hasattr(args, "func"):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args))
+    except (RiprsError, OSError) as exc:
+        print(f"riprs: error: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
