@@ -13,12 +13,14 @@
 //!
 //! Every fallible routine returns [`RipError`], whose variants name the offending argument.
 
+pub mod controller;
 pub mod error;
 pub mod kalman;
 pub mod linalg;
 pub mod lqr;
 pub mod paper;
 
+pub use controller::{Controller, StepStatus};
 pub use error::{Result, RipError};
 pub use kalman::{dlqe, kalman, CurrentEstimator, KalmanDesign};
 pub use linalg::{c2d, dare, DareSolution, Mat};
