@@ -19,12 +19,19 @@ from riprs._riprs import (
     SingularMatrixError,
     __version__,
 )
+from riprs.control import Lqg, Lqr
 from riprs.design import KalmanDesign, c2d, dare, dlqe, dlqr, kalman
+from riprs.log import RtLog, load_log
+from riprs.plant import FurutaParams, Plant
+from riprs.sim import SimResult, simulate, simulate_batch
 from riprs.statespace import StateSpace
 
 __all__ = [
+    "FurutaParams",
     "InvalidParameterError",
     "KalmanDesign",
+    "Lqg",
+    "Lqr",
     "NoStabilizingSolutionError",
     "NonFiniteError",
     "NotDetectableError",
@@ -32,8 +39,11 @@ __all__ = [
     "NotPositiveSemidefiniteError",
     "NotStabilizableError",
     "NotSymmetricError",
+    "Plant",
     "RiprsError",
+    "RtLog",
     "ShapeError",
+    "SimResult",
     "SingularMatrixError",
     "StateSpace",
     "__version__",
@@ -42,5 +52,8 @@ __all__ = [
     "dlqe",
     "dlqr",
     "kalman",
+    "load_log",
     "paper",
+    "simulate",
+    "simulate_batch",
 ]

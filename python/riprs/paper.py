@@ -52,6 +52,7 @@ __all__ = [
     "lqr_gain",
     "lqr_weights",
     "noise_model",
+    "plant",
 ]
 
 _printed = _riprs.paper_printed()
@@ -123,3 +124,12 @@ def kalman_gains() -> tuple[FloatArray, FloatArray]:
     """``(L, M)`` of eq. (11) designed from the augmented model: compare with eq. (12)."""
     L, M, _, _ = _riprs.paper_kalman()
     return L, M
+
+
+def plant() -> _riprs.Plant:
+    """The nonlinear plant fitted to the paper's model (:meth:`riprs.FurutaParams.paper`).
+
+    Its linearisation about upright, discretised at ``TS``, reproduces the printed ``A_d`` and
+    ``B_d`` to their printed precision; see :mod:`riprs.plant` for what was fitted.
+    """
+    return _riprs.Plant.paper()

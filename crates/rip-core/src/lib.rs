@@ -10,18 +10,30 @@
 //!   python-control's [`dlqe`] and the allocation-free [`CurrentEstimator`].
 //!
 //! - [`paper`] — the study's model, its recovered unrounded matrices and printed results.
+//! - [`plant`] — the nonlinear Furuta pendulum ([`Plant`], [`FurutaParams`]) and RK4; [`fit`]
+//!   recovers physical parameters from a discrete linear model.
+//! - [`regulators`] — [`Lqr`] and [`Lqg`] behind the [`Controller`] trait; [`sim`] runs them in
+//!   closed loop ([`simulate`], [`simulate_batch`]); [`metrics`] computes the paper's Tab. 1.
 //!
 //! Every fallible routine returns [`RipError`], whose variants name the offending argument.
 
 pub mod controller;
 pub mod error;
+pub mod fit;
 pub mod kalman;
 pub mod linalg;
 pub mod lqr;
+pub mod metrics;
 pub mod paper;
+pub mod plant;
+pub mod regulators;
+pub mod sim;
 
 pub use controller::{Controller, StepStatus};
 pub use error::{Result, RipError};
 pub use kalman::{dlqe, kalman, CurrentEstimator, KalmanDesign};
 pub use linalg::{c2d, dare, DareSolution, Mat};
 pub use lqr::{dlqr, LqrDesign};
+pub use plant::{FurutaParams, Plant, State};
+pub use regulators::{Lqg, Lqr};
+pub use sim::{simulate, simulate_batch, SimConfig, SimResult};

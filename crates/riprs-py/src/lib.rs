@@ -5,10 +5,13 @@
 
 use pyo3::prelude::*;
 
+mod control;
 mod convert;
 mod design;
 mod errors;
 mod paper;
+mod plant;
+mod sim;
 
 #[pymodule]
 fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -16,5 +19,8 @@ fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::register(m)?;
     design::register(m)?;
     paper::register(m)?;
+    plant::register(m)?;
+    control::register(m)?;
+    sim::register(m)?;
     Ok(())
 }

@@ -1,0 +1,481 @@
+//! The nonlinear rotary inverted pendulum (Furuta pendulum) driven by a DC motor.
+//!
+//! # Convention
+//!
+//! State `x = [θ, θ̇, α, α̇]` (the paper's order): arm angle θ (rad, positive counter-clockwise
+//! seen from above, the direction a positive voltage turns the motor), arm rate, pendulum angle
+//! α (rad, **0 = upright**), pendulum rate. α is positive when the pendulum leans *against*
+//! the direction of positive arm rotation, i.e. the way an upright pendulum falls when the arm
+//! accelerates positively. With this choice a positive voltage accelerates both θ and α
+//! positively about the upright equilibrium, as the all-positive `B_d` of the paper's eq. (3)
+//! requires. Input: motor voltage `u` (V). Outputs: `[θ, α]`.
+//!
+//! # Equations of motion (Euler–Lagrange)
+//!
+//! Both links are uniform rods pivoted at one end: arm of mass `mr`, length `lr` (motor axis to
+//! pendulum joint) and centroidal inertia `jr`; pendulum of mass `mp`, length `lp`, centre of
+//! mass at `lp/2`, centroidal inertia `jp` (about axes perpendicular to the rod; the rod's own
+//! axial inertia is neglected). With
+//!
+//! ```text
+//! J₀ = jr + mr lr²/4 + mp lr²      arm-axis inertia at α = 0 (parallel-axis theorem)
+//! Jα = jp + mp lp²/4               pendulum inertia about its joint
+//! m₁₂ = mp lr lp/2                 coupling,   G = mp g lp/2   gravity stiffness
+//! ```
+//!
+//! the kinetic and potential energies are
+//!
+//! ```text
+//! T = ½ (J₀ + Jα sin²α) θ̇² − m₁₂ cos α θ̇ α̇ + ½ Jα α̇²,      V = G cos α
+//! ```
+//!
+//! and Lagrange's equations with viscous friction `dr`, `dp` and the motor torque give
+//!
+//! ```text
+//! (J₀ + Jα sin²α) θ̈ − m₁₂ cos α α̈ + 2 Jα sin α cos α θ̇ α̇ + m₁₂ sin α α̇² = τ − dr θ̇ + τ_d
+//! −m₁₂ cos α θ̈ + Jα α̈ − Jα sin α cos α θ̇² − G sin α = −dp α̇
+//! τ = kt (u − km θ̇) / rm
+//! ```
+//!
+//! (`τ_d`: an external torque disturbance on the arm). These are the equations of the Quanser
+//! QUBE-Servo 2 workbook and of Cazzolato & Prime, "On the dynamics of the Furuta pendulum"
+//! (J. Control Sci. Eng., 2011), with the pendulum's `sin²α` inertia term kept and the arm's
+//! parallel-axis term included (see [`FurutaParams::qube_servo2`]).
+//!
+//! # Linearisation about upright
+//!
+//! With `M = [J₀ −m₁₂; −m₁₂ Jα]` and `c = dr + kt km/rm`, `b = kt/rm`:
+//!
+//! ```text
+//! [θ̈; α̈] = M⁻¹ ([−c θ̇ + b u; G α − dp α̇])
+//! ```
+//!
+//! which is the structure `ẋ = [0 1 0 0; 0 a₁₁ a₁₂ a₁₃; 0 0 0 1; 0 a₃₁ a₃₂ a₃₃] x + [0 b₁ 0 b₃]ᵀu`
+//! of [`crate::paper::continuous_model`]. [`Plant::linearize`] returns the exact Jacobian at
+//! any state and input, of which this is the special case.
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::error::{Result, RipError};
+use crate::linalg::{c2d, Mat};
+
+/// State vector `[θ, θ̇, α, α̇]`.
+pub type State = SVector<f64, 4>;
+
+/// Physical parameters of the pendulum and its motor (SI units).
+///
+/// Masses, lengths, inertias, `rm`, `kt` and `g` must be positive; `km`, `dr`, `dp` may be zero
+/// (zero back-EMF and friction give the conservative plant). See the module docs for how each
+/// enters the equations of motion.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FurutaParams {
+    /// Motor terminal resistance (Ω).
+    pub rm: f64,
+    /// Motor torque constant (N·m/A).
+    pub kt: f64,
+    /// Motor back-EMF constant (V·s/rad).
+    pub km: f64,
+    /// Arm mass (kg).
+    pub mr: f64,
+    /// Arm length, motor axis to pendulum joint (m).
+    pub lr: f64,
+    /// Arm moment of inertia about its own centre of mass (kg·m²).
+    pub jr: f64,
+    /// Pendulum mass (kg).
+    pub mp: f64,
+    /// Pendulum length (m); its centre of mass is at `lp/2`.
+    pub lp: f64,
+    /// Pendulum moment of inertia about its own centre of mass (kg·m²).
+    pub jp: f64,
+    /// Viscous friction of the arm joint (N·m·s/rad).
+    pub dr: f64,
+    /// Viscous friction of the pendulum joint (N·m·s/rad).
+    pub dp: f64,
+    /// Gravitational acceleration (m/s²).
+    pub g: f64,
+}
+
+/// The fields of [`FurutaParams`] in declaration order, as they are named in errors.
+pub const PARAM_NAMES: [&str; 12] = [
+    "rm", "kt", "km", "mr", "lr", "jr", "mp", "lp", "jp", "dr", "dp", "g",
+];
+
+impl FurutaParams {
+    /// Quanser QUBE-Servo 2 with the rotary-pendulum module.
+    ///
+    /// Source: Quanser, *QUBE-Servo 2 User Manual* and the parameter script of its
+    /// rotary-pendulum workbook (`qube2_rotpen_param.m`): `Rm = 8.4 Ω`,
+    /// `kt = km = 0.042`, `Mr = 0.095 kg`, `Lr = 0.085 m`, `Mp = 0.024 kg`, `Lp = 0.129 m`,
+    /// `Jr = Mr Lr²/12`, `Jp = Mp Lp²/12`, `Dr = 0.0015`, `Dp = 0.0005 N·m·s/rad`, `g = 9.81`.
+    ///
+    /// Convention chosen: `Mr Lr²/12` and `Mp Lp²/12` are *centroidal* inertias of uniform rods,
+    /// and both links pivot at an end, so the parallel-axis terms `Mr Lr²/4` and `Mp Lp²/4` are
+    /// added (arm-axis inertia `Mr Lr²/3`). The workbook's own model uses `Jr` directly as the
+    /// inertia about the motor axis (an arm pivoted at its centre, 4× less inertia) and drops the
+    /// `Jp sin²α θ̇²` term; both differences are second order for balancing, and ours is the
+    /// physically consistent reading of the published masses and lengths. The damping values are
+    /// the workbook's "equivalent viscous damping" estimates; other sources quote values up to
+    /// 10× smaller.
+    pub fn qube_servo2() -> Self {
+        let (mr, lr, mp, lp) = (0.095, 0.085, 0.024, 0.129);
+        Self {
+            rm: 8.4,
+            kt: 0.042,
+            km: 0.042,
+            mr,
+            lr,
+            jr: mr * lr * lr / 12.0,
+            mp,
+            lp,
+            jp: mp * lp * lp / 12.0,
+            dr: 0.0015,
+            dp: 0.0005,
+            g: 9.81,
+        }
+    }
+
+    /// Parameters fitted so that the linearisation about upright, discretised by zero-order hold
+    /// at `Ts = 0.01 s`, reproduces the paper's `A_d`, `B_d` (eq. (3)).
+    ///
+    /// The motor constants, both masses and `g` are not identifiable from a linear model (see
+    /// [`crate::fit`]) and are fixed at the QUBE-Servo 2 values; `lr`, `lp`, `jr`, `jp`, `dr`,
+    /// `dp` come from [`crate::fit::fit_params`] against [`crate::paper::discrete_model`] with
+    /// each residual weighted by half the last printed digit of the entry
+    /// ([`crate::fit::paper_weights`]). The result reproduces every printed entry of `B_d` and
+    /// of `A_d` (except the corrected typo `A_d[0][1]`, see [`crate::paper`]) after rounding;
+    /// the largest deviation from the unrounded model is 0.07 of half a printed unit.
+    pub fn paper() -> Self {
+        Self {
+            lr: 1.491_006_775_583e-1,
+            lp: 2.788_137_143_023e-1,
+            jr: 4.956_499_901_120e-4,
+            jp: 3.289_148_708_531e-4,
+            dr: 1.894_388_980_126e-3,
+            dp: 4.512_959_398_114e-4,
+            ..Self::qube_servo2()
+        }
+    }
+
+    /// The parameters as an array in [`PARAM_NAMES`] order.
+    pub fn to_array(&self) -> [f64; 12] {
+        [
+            self.rm, self.kt, self.km, self.mr, self.lr, self.jr, self.mp, self.lp, self.jp,
+            self.dr, self.dp, self.g,
+        ]
+    }
+
+    /// Builds parameters from an array in [`PARAM_NAMES`] order (not validated).
+    pub fn from_array(v: [f64; 12]) -> Self {
+        let [rm, kt, km, mr, lr, jr, mp, lp, jp, dr, dp, g] = v;
+        Self {
+            rm,
+            kt,
+            km,
+            mr,
+            lr,
+            jr,
+            mp,
+            lp,
+            jp,
+            dr,
+            dp,
+            g,
+        }
+    }
+
+    /// Checks every field; the error names the first bad one.
+    pub fn validate(&self) -> Result<()> {
+        for (name, value) in PARAM_NAMES.iter().zip(self.to_array()) {
+            let may_be_zero = matches!(*name, "km" | "dr" | "dp");
+            if !value.is_finite() {
+                return Err(RipError::invalid(
+                    *name,
+                    format!("must be finite, got {value}"),
+                ));
+            }
+            if may_be_zero && value < 0.0 {
+                return Err(RipError::invalid(
+                    *name,
+                    format!("must be non-negative, got {value}"),
+                ));
+            }
+            if !may_be_zero && value <= 0.0 {
+                return Err(RipError::invalid(
+                    *name,
+                    format!("must be positive, got {value}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Default for FurutaParams {
+    fn default() -> Self {
+        Self::qube_servo2()
+    }
+}
+
+/// The nonlinear plant: validated parameters and the lumped coefficients of the equations of
+/// motion (module docs). Cheap to copy; every method is allocation-free except the
+/// `Mat`-returning discretisation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Plant {
+    params: FurutaParams,
+    j0: f64,
+    ja: f64,
+    m12: f64,
+    grav: f64,
+    /// Motor torque per volt, `kt/rm`.
+    b: f64,
+    /// Arm damping including back-EMF, `dr + kt km/rm`.
+    c_arm: f64,
+    dp: f64,
+}
+
+impl Plant {
+    /// Validates `params` and precomputes the lumped coefficients.
+    pub fn new(params: FurutaParams) -> Result<Self> {
+        params.validate()?;
+        let p = params;
+        Ok(Self {
+            params,
+            j0: p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr,
+            ja: p.jp + p.mp * p.lp * p.lp / 4.0,
+            m12: p.mp * p.lr * p.lp / 2.0,
+            grav: p.mp * p.g * p.lp / 2.0,
+            b: p.kt / p.rm,
+            c_arm: p.dr + p.kt * p.km / p.rm,
+            dp: p.dp,
+        })
+    }
+
+    /// The QUBE-Servo 2 preset ([`FurutaParams::qube_servo2`]).
+    pub fn qube_servo2() -> Self {
+        Self::new(FurutaParams::qube_servo2()).expect("the preset is valid")
+    }
+
+    /// The preset fitted to the paper's model ([`FurutaParams::paper`]).
+    pub fn paper() -> Self {
+        Self::new(FurutaParams::paper()).expect("the preset is valid")
+    }
+
+    /// The physical parameters.
+    pub fn params(&self) -> &FurutaParams {
+        &self.params
+    }
+
+    /// Motor torque `τ = kt (u − km θ̇) / rm` (N·m) at state `x` and voltage `u`.
+    #[inline]
+    pub fn motor_torque(&self, x: &State, u: f64) -> f64 {
+        self.params.kt * (u - self.params.km * x[1]) / self.params.rm
+    }
+
+    /// Mass matrix entries `(M₁₁, M₁₂, M₂₂)` and the generalized forces `(f₁, f₂)` such that
+    /// `M [θ̈; α̈] = [f₁; f₂]`.
+    #[inline]
+    fn mass_and_forces(&self, x: &State, u: f64, tau_d: f64) -> ([f64; 3], [f64; 2]) {
+        let (s, c) = x[2].sin_cos();
+        let (td, ad) = (x[1], x[3]);
+        let m = [self.j0 + self.ja * s * s, -self.m12 * c, self.ja];
+        let f1 = self.b * u - self.c_arm * td + tau_d
+            - 2.0 * self.ja * s * c * td * ad
+            - self.m12 * s * ad * ad;
+        let f2 = -self.dp * ad + self.ja * s * c * td * td + self.grav * s;
+        (m, [f1, f2])
+    }
+
+    /// `ẋ = f(x, u, τ_d)`: the equations of motion of the module docs, `τ_d` (N·m) being an
+    /// external torque on the arm.
+    #[inline]
+    pub fn derivative(&self, x: &State, u: f64, tau_d: f64) -> State {
+        let ([m11, m12, m22], [f1, f2]) = self.mass_and_forces(x, u, tau_d);
+        let det = m11 * m22 - m12 * m12;
+        let thdd = (m22 * f1 - m12 * f2) / det;
+        let addd = (m11 * f2 - m12 * f1) / det;
+        State::new(x[1], thdd, x[3], addd)
+    }
+
+    /// One classical fourth-order Runge–Kutta step of length `h` with `u`, `τ_d` held.
+    #[inline]
+    pub fn rk4_step(&self, x: &mut State, u: f64, tau_d: f64, h: f64) {
+        let k1 = self.derivative(x, u, tau_d);
+        let k2 = self.derivative(&(*x + k1 * (0.5 * h)), u, tau_d);
+        let k3 = self.derivative(&(*x + k2 * (0.5 * h)), u, tau_d);
+        let k4 = self.derivative(&(*x + k3 * h), u, tau_d);
+        *x += (k1 + (k2 + k3) * 2.0 + k4) * (h / 6.0);
+    }
+
+    /// Advances `x` by `dt` with `substeps` RK4 steps under a zero-order-held input.
+    #[inline]
+    pub fn advance(&self, x: &mut State, u: f64, tau_d: f64, dt: f64, substeps: usize) {
+        let n = substeps.max(1);
+        let h = dt / n as f64;
+        for _ in 0..n {
+            self.rk4_step(x, u, tau_d, h);
+        }
+    }
+
+    /// Total mechanical energy `T + V` (J), with `V = G cos α` (module docs). Conserved when
+    /// `km = dr = dp = 0` and `u = τ_d = 0`.
+    pub fn energy(&self, x: &State) -> f64 {
+        let (s, c) = x[2].sin_cos();
+        let (td, ad) = (x[1], x[3]);
+        0.5 * (self.j0 + self.ja * s * s) * td * td - self.m12 * c * td * ad
+            + 0.5 * self.ja * ad * ad
+            + self.grav * c
+    }
+
+    /// Exact Jacobians `A = ∂f/∂x`, `B = ∂f/∂u` at `(x, u)` (with `τ_d = 0`).
+    ///
+    /// With `q̈ = M(α)⁻¹ F(x, u)`, the derivative is `∂q̈/∂z = M⁻¹ (∂F/∂z − (∂M/∂z) q̈)`, where
+    /// only α enters `M`: `∂M₁₁/∂α = 2 Jα sin α cos α`, `∂M₁₂/∂α = m₁₂ sin α`. At an equilibrium
+    /// (`θ̇ = α̇ = 0`, `α ∈ {0, π}`, `u = 0`) this is the linearised model; elsewhere it is the
+    /// first-order Taylor model about a moving point.
+    pub fn linearize(&self, x: &State, u: f64) -> (SMatrix<f64, 4, 4>, SVector<f64, 4>) {
+        let (s, c) = x[2].sin_cos();
+        let (td, ad) = (x[1], x[3]);
+        let ([m11, m12, m22], _) = self.mass_and_forces(x, u, 0.0);
+        let det = m11 * m22 - m12 * m12;
+        let minv = [[m22 / det, -m12 / det], [-m12 / det, m11 / det]];
+        let acc = self.derivative(x, u, 0.0);
+        let (thdd, addd) = (acc[1], acc[3]);
+        let c2 = c * c - s * s;
+        // ∂F/∂z for z = (θ̇, α, α̇, u); F does not depend on θ.
+        let df1 = [
+            -self.c_arm - 2.0 * self.ja * s * c * ad,
+            -2.0 * self.ja * c2 * td * ad - self.m12 * c * ad * ad,
+            -2.0 * self.ja * s * c * td - 2.0 * self.m12 * s * ad,
+            self.b,
+        ];
+        let df2 = [
+            2.0 * self.ja * s * c * td,
+            self.ja * c2 * td * td + self.grav * c,
+            -self.dp,
+            0.0,
+        ];
+        // Only the α column carries the −(∂M/∂α) q̈ term.
+        let dm11 = 2.0 * self.ja * s * c;
+        let dm12 = self.m12 * s;
+        let mut g1 = df1;
+        let mut g2 = df2;
+        g1[1] -= dm11 * thdd + dm12 * addd;
+        g2[1] -= dm12 * thdd;
+        let mut a = SMatrix::<f64, 4, 4>::zeros();
+        a[(0, 1)] = 1.0;
+        a[(2, 3)] = 1.0;
+        let cols = [1usize, 2, 3];
+        for (k, &col) in cols.iter().enumerate() {
+            a[(1, col)] = minv[0][0] * g1[k] + minv[0][1] * g2[k];
+            a[(3, col)] = minv[1][0] * g1[k] + minv[1][1] * g2[k];
+        }
+        let b = SVector::<f64, 4>::new(
+            0.0,
+            minv[0][0] * g1[3] + minv[0][1] * g2[3],
+            0.0,
+            minv[1][0] * g1[3] + minv[1][1] * g2[3],
+        );
+        (a, b)
+    }
+
+    /// The continuous-time linearisation about upright, `(A_c, B_c)` as dynamic matrices.
+    pub fn linearize_upright(&self) -> (Mat, Mat) {
+        let (a, b) = self.linearize(&State::zeros(), 0.0);
+        (
+            Mat::from_fn(4, 4, |i, j| a[(i, j)]),
+            Mat::from_fn(4, 1, |i, _| b[i]),
+        )
+    }
+
+    /// Zero-order-hold discretisation (period `ts`) of the linearisation at `(x, u)`.
+    pub fn linearize_discrete(&self, x: &State, u: f64, ts: f64) -> Result<(Mat, Mat)> {
+        let (a, b) = self.linearize(x, u);
+        c2d(
+            &Mat::from_fn(4, 4, |i, j| a[(i, j)]),
+            &Mat::from_fn(4, 1, |i, _| b[i]),
+            ts,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn linearization_matches_central_differences() {
+        let plant = Plant::qube_servo2();
+        let points = [
+            (State::zeros(), 0.0),
+            (State::new(0.3, 0.0, std::f64::consts::PI, 0.0), 0.0),
+            (State::new(0.4, -1.3, 0.7, 2.1), 3.5),
+            (State::new(-2.0, 4.0, -2.4, -5.0), -7.0),
+        ];
+        for (x, u) in points {
+            let (a, b) = plant.linearize(&x, u);
+            for j in 0..5 {
+                let h = 1e-6;
+                let (mut xp, mut xm, mut up, mut um) = (x, x, u, u);
+                if j < 4 {
+                    xp[j] += h;
+                    xm[j] -= h;
+                } else {
+                    up += h;
+                    um -= h;
+                }
+                let fd =
+                    (plant.derivative(&xp, up, 0.0) - plant.derivative(&xm, um, 0.0)) / (2.0 * h);
+                for i in 0..4 {
+                    let an = if j < 4 { a[(i, j)] } else { b[i] };
+                    let tol = 1e-6 * (1.0 + an.abs());
+                    assert!((an - fd[i]).abs() < tol, "({i},{j}) {an} vs {}", fd[i]);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn invalid_parameters_name_the_field() {
+        let mut p = FurutaParams::qube_servo2();
+        p.mp = -1.0;
+        let err = Plant::new(p).unwrap_err();
+        assert!(err.to_string().contains("mp"), "{err}");
+        let mut p = FurutaParams::qube_servo2();
+        p.dr = f64::NAN;
+        assert!(Plant::new(p).unwrap_err().to_string().contains("dr"));
+        let mut p = FurutaParams::qube_servo2();
+        p.km = 0.0;
+        assert!(Plant::new(p).is_ok());
+    }
+
+    #[test]
+    fn energy_is_conserved_without_friction() {
+        let p = FurutaParams {
+            km: 0.0,
+            dr: 0.0,
+            dp: 0.0,
+            ..FurutaParams::qube_servo2()
+        };
+        let plant = Plant::new(p).unwrap();
+        let mut x = State::new(0.0, 3.0, 0.5, -4.0);
+        let e0 = plant.energy(&x);
+        for _ in 0..2000 {
+            plant.advance(&mut x, 0.0, 0.0, 1e-3, 1);
+        }
+        // RK4 is not symplectic; its O(h⁵) local drift over 2 s at h = 1 ms is ~2·10⁻⁹ relative.
+        assert!((plant.energy(&x) - e0).abs() < 1e-8 * e0.abs());
+    }
+
+    #[test]
+    fn upright_linearization_has_the_paper_structure_and_signs() {
+        let (a, b) = Plant::paper().linearize_upright();
+        let (ap, bp) = crate::paper::continuous_model();
+        for i in 0..4 {
+            assert!((b[(i, 0)] - bp[(i, 0)]).abs() < 1e-3 * (1.0 + bp[(i, 0)].abs()));
+            for j in 0..4 {
+                let tol = 5e-3 * (1.0 + ap[(i, j)].abs());
+                assert!((a[(i, j)] - ap[(i, j)]).abs() < tol, "A[{i}][{j}]");
+            }
+        }
+    }
+}

@@ -1,0 +1,440 @@
+//! The paper's two linear regulators behind the [`Controller`] interface: [`Lqr`] (measured
+//! angles, rates from a filtered difference, no estimator) and [`Lqg`] (the same gain on the
+//! state of the steady-state Kalman filter in current form).
+//!
+//! Both track a reference for the two outputs `r = [θ_ref, α_ref]` (the paper steps θ from 0 to
+//! 1 rad; α_ref is normally 0) through the state reference `x_ref = [θ_ref, 0, α_ref, 0]`:
+//!
+//! ```text
+//! u[k] = sat(−K (x̂[k] − x_ref[k]),  u_min, u_max),     K = dlqr(A_d, B_d, Q, R)   (eq. (13))
+//! ```
+//!
+//! This is exact steady-state tracking for this plant because θ is a pure integrator: any
+//! constant `[θ_ref, 0, 0, 0]` is an equilibrium with `u = 0`. Both clamp to their input bounds
+//! (default ±12 V, the paper's actuator limit) and write only finite inputs.
+
+use nalgebra::{DVector, SMatrix, SVector};
+
+use crate::controller::{Controller, StepStatus};
+use crate::error::{Result, RipError};
+use crate::kalman::CurrentEstimator;
+use crate::linalg::{check_finite, check_shape, Mat};
+use crate::lqr::dlqr;
+use crate::paper;
+
+/// The paper's actuator limit (V).
+pub const DEFAULT_INPUT_LIMIT: f64 = 12.0;
+
+/// Default cut-off (Hz) of [`Lqr`]'s rate filter.
+pub const DEFAULT_RATE_CUTOFF_HZ: f64 = 20.0;
+
+/// Number of plant states `[θ, θ̇, α, α̇]`.
+const NX: usize = 4;
+
+fn check_bounds(u_min: f64, u_max: f64) -> Result<()> {
+    if !(u_min.is_finite() && u_max.is_finite() && u_min < u_max) {
+        return Err(RipError::invalid(
+            "input bounds",
+            format!("need finite u_min < u_max, got [{u_min}, {u_max}]"),
+        ));
+    }
+    Ok(())
+}
+
+fn check_ts(ts: f64) -> Result<()> {
+    if !(ts.is_finite() && ts > 0.0) {
+        return Err(RipError::invalid(
+            "Ts",
+            format!("must be positive and finite, got {ts}"),
+        ));
+    }
+    Ok(())
+}
+
+fn gain_row(k: &Mat) -> Result<SMatrix<f64, 1, NX>> {
+    check_shape("K", k, 1, NX)?;
+    check_finite("K", k)?;
+    Ok(SMatrix::<f64, 1, NX>::from_fn(|_, j| k[(0, j)]))
+}
+
+/// `sat(−K (x − x_ref))`; a non-finite value (only possible from non-finite measurements)
+/// becomes 0 and is reported as [`StepStatus::Fallback`].
+#[inline]
+fn feedback(
+    k: &SMatrix<f64, 1, NX>,
+    x: &SVector<f64, NX>,
+    r: &[f64],
+    bounds: (f64, f64),
+) -> (f64, StepStatus) {
+    let err = SVector::<f64, NX>::new(x[0] - r[0], x[1], x[2] - r[1], x[3]);
+    let u = -(k * err)[0];
+    if u.is_finite() {
+        (u.clamp(bounds.0, bounds.1), StepStatus::Nominal)
+    } else {
+        (0.0f64.clamp(bounds.0, bounds.1), StepStatus::Fallback)
+    }
+}
+
+/// LQR on measured angles with rates from a filtered difference (the paper's section 4: "the
+/// states are measured and computed", no estimator).
+///
+/// Each sample the rate of each angle `q ∈ {θ, α}` is the backward difference passed through a
+/// first-order low-pass filter (the zero-order-hold discretisation of `ωc/(s + ωc)`):
+///
+/// ```text
+/// d[k] = (q[k] − q[k−1]) / Ts,     q̇̂[k] = a q̇̂[k−1] + (1 − a) d[k],     a = e^{−2π f_c Ts}
+/// ```
+///
+/// with `f_c` the cut-off ([`DEFAULT_RATE_CUTOFF_HZ`]; `f64::INFINITY` gives the plain
+/// difference, `a = 0`). On the first sample after construction or [`reset`](Controller::reset)
+/// there is no previous angle and the rates start at zero. Then
+/// `x̂ = [θ, θ̇̂, α, α̇̂]` and `u = sat(−K(x̂ − x_ref))` (module docs).
+#[derive(Debug, Clone)]
+pub struct Lqr {
+    k: SMatrix<f64, 1, NX>,
+    ts: f64,
+    cutoff_hz: f64,
+    a: f64,
+    bounds: (f64, f64),
+    x_hat: SVector<f64, NX>,
+    started: bool,
+}
+
+impl Lqr {
+    /// An LQR with gain `k` (1×4, `u = −K x`), sample time `ts` (s) and rate-filter cut-off
+    /// `rate_cutoff_hz` (Hz, positive; infinity for no filtering). Input bounds ±12 V.
+    pub fn new(k: &Mat, ts: f64, rate_cutoff_hz: f64) -> Result<Self> {
+        let k = gain_row(k)?;
+        check_ts(ts)?;
+        if rate_cutoff_hz.is_nan() || rate_cutoff_hz <= 0.0 {
+            return Err(RipError::invalid(
+                "rate_cutoff",
+                format!("must be positive (or infinite), got {rate_cutoff_hz}"),
+            ));
+        }
+        Ok(Self {
+            k,
+            ts,
+            cutoff_hz: rate_cutoff_hz,
+            a: (-2.0 * std::f64::consts::PI * rate_cutoff_hz * ts).exp(),
+            bounds: (-DEFAULT_INPUT_LIMIT, DEFAULT_INPUT_LIMIT),
+            x_hat: SVector::zeros(),
+            started: false,
+        })
+    }
+
+    /// Designs `K = dlqr(A_d, B_d, Q, R)` and builds the regulator.
+    pub fn design(
+        ad: &Mat,
+        bd: &Mat,
+        q: &Mat,
+        r: &Mat,
+        ts: f64,
+        rate_cutoff_hz: f64,
+    ) -> Result<Self> {
+        check_shape("A", ad, NX, NX)?;
+        check_shape("B", bd, NX, 1)?;
+        let design = dlqr(ad, bd, q, r, None)?;
+        Self::new(&design.k, ts, rate_cutoff_hz)
+    }
+
+    /// The paper's LQR: eq. (13) weights on [`paper::discrete_model`], `Ts = 0.01 s`, default
+    /// rate filter and ±12 V.
+    pub fn paper() -> Result<Self> {
+        let plant = paper::discrete_model();
+        let (q, r) = paper::lqr_weights();
+        Self::design(
+            &plant.a,
+            &plant.b,
+            &q,
+            &r,
+            paper::TS,
+            DEFAULT_RATE_CUTOFF_HZ,
+        )
+    }
+
+    /// Replaces the input bounds (must be finite with `u_min < u_max`).
+    pub fn with_input_bounds(mut self, u_min: f64, u_max: f64) -> Result<Self> {
+        check_bounds(u_min, u_max)?;
+        self.bounds = (u_min, u_max);
+        Ok(self)
+    }
+
+    /// The gain `K` (1×4).
+    pub fn gain(&self) -> Mat {
+        Mat::from_fn(1, NX, |_, j| self.k[(0, j)])
+    }
+
+    /// Sample time (s).
+    pub fn ts(&self) -> f64 {
+        self.ts
+    }
+
+    /// Rate-filter cut-off (Hz).
+    pub fn rate_cutoff_hz(&self) -> f64 {
+        self.cutoff_hz
+    }
+
+    /// Input bounds `(u_min, u_max)`.
+    pub fn input_bounds(&self) -> (f64, f64) {
+        self.bounds
+    }
+}
+
+impl Controller for Lqr {
+    fn n_outputs(&self) -> usize {
+        2
+    }
+
+    fn n_inputs(&self) -> usize {
+        1
+    }
+
+    fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
+        if self.started {
+            for (q, rate) in [(0usize, 1usize), (2, 3)] {
+                let d = (y[q / 2] - self.x_hat[q]) / self.ts;
+                self.x_hat[rate] = self.a * self.x_hat[rate] + (1.0 - self.a) * d;
+            }
+        } else {
+            self.x_hat[1] = 0.0;
+            self.x_hat[3] = 0.0;
+            self.started = true;
+        }
+        self.x_hat[0] = y[0];
+        self.x_hat[2] = y[1];
+        let (value, status) = feedback(&self.k, &self.x_hat, r, self.bounds);
+        u[0] = value;
+        status
+    }
+
+    fn reset(&mut self) {
+        self.x_hat.fill(0.0);
+        self.started = false;
+    }
+
+    fn state_estimate(&self) -> Option<&[f64]> {
+        Some(self.x_hat.as_slice())
+    }
+}
+
+/// LQG: the LQR gain applied to the plant part of the current Kalman estimate `x̂[k|k]`
+/// (paper eqs. (3)–(6) with the gains of eq. (11)).
+///
+/// The estimator model is `x[k+1] = A x + B_u u`, `y = C x` with `n ≥ 4` states whose first four
+/// are the plant's `[θ, θ̇, α, α̇]`; the rest (e.g. the paper's output-disturbance integrator)
+/// are used by the estimator but not fed back. Each sample:
+///
+/// ```text
+/// e[k]     = y[k] − C x̂[k|k−1]
+/// x̂[k|k]   = x̂[k|k−1] + M e[k]                                  (5)
+/// u[k]     = sat(−K (x̂_plant[k|k] − x_ref[k]))
+/// x̂[k+1|k] = A x̂[k|k−1] + B_u u[k] + L e[k]                     (4)
+/// ```
+///
+/// The prediction uses the input actually applied (after clamping). `x̂[0|−1] = 0`.
+#[derive(Debug, Clone)]
+pub struct Lqg {
+    k: SMatrix<f64, 1, NX>,
+    estimator: CurrentEstimator,
+    l: Mat,
+    m: Mat,
+    ts: f64,
+    bounds: (f64, f64),
+    plant_estimate: SVector<f64, NX>,
+    u_buf: [f64; 1],
+}
+
+impl Lqg {
+    /// Builds the LQG from the gain `k` (1×4), the estimator model `a` (n×n), `b_u` (n×1), `c`
+    /// (2×n) and the Kalman gains `l` (predictor) and `m` (innovation), both n×2, as returned by
+    /// [`kalman`](crate::kalman::kalman). Input bounds ±12 V.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(k: &Mat, a: &Mat, b_u: &Mat, c: &Mat, l: &Mat, m: &Mat, ts: f64) -> Result<Self> {
+        let k = gain_row(k)?;
+        check_ts(ts)?;
+        let n = a.nrows();
+        if n < NX || a.ncols() != n {
+            return Err(RipError::Shape {
+                name: "A".into(),
+                expected: "(n, n) with n >= 4".into(),
+                rows: a.nrows(),
+                cols: a.ncols(),
+            });
+        }
+        check_shape("B", b_u, n, 1)?;
+        check_shape("C", c, 2, n)?;
+        check_shape("L", l, n, 2)?;
+        check_shape("M", m, n, 2)?;
+        let estimator = CurrentEstimator::new(
+            a.clone(),
+            b_u.clone(),
+            c.clone(),
+            None,
+            l.clone(),
+            m.clone(),
+            DVector::zeros(n),
+        )?;
+        Ok(Self {
+            k,
+            estimator,
+            l: l.clone(),
+            m: m.clone(),
+            ts,
+            bounds: (-DEFAULT_INPUT_LIMIT, DEFAULT_INPUT_LIMIT),
+            plant_estimate: SVector::zeros(),
+            u_buf: [0.0],
+        })
+    }
+
+    /// The paper's LQG: the eq. (13) gain on [`paper::discrete_model`] and the Kalman filter of
+    /// eq. (11) on the augmented model of eq. (3). The estimator predicts with the unscaled
+    /// `B_u = [B_d; 0]` (the `L_su` scaling of [`paper::augmented_model`] belongs to the noise
+    /// model only).
+    pub fn paper() -> Result<Self> {
+        let plant = paper::discrete_model();
+        let (q, r) = paper::lqr_weights();
+        let lqr = dlqr(&plant.a, &plant.b, &q, &r, None)?;
+        let aug = paper::augmented_model();
+        let kf = paper::kalman_design()?;
+        let n = aug.a.nrows();
+        let mut b_u = Mat::zeros(n, 1);
+        b_u.view_mut((0, 0), (NX, 1)).copy_from(&plant.b);
+        Self::new(&lqr.k, &aug.a, &b_u, &aug.c, &kf.l, &kf.m, paper::TS)
+    }
+
+    /// Replaces the input bounds (must be finite with `u_min < u_max`).
+    pub fn with_input_bounds(mut self, u_min: f64, u_max: f64) -> Result<Self> {
+        check_bounds(u_min, u_max)?;
+        self.bounds = (u_min, u_max);
+        Ok(self)
+    }
+
+    /// The gain `K` (1×4).
+    pub fn gain(&self) -> Mat {
+        Mat::from_fn(1, NX, |_, j| self.k[(0, j)])
+    }
+
+    /// Predictor gain `L` (n×2).
+    pub fn predictor_gain(&self) -> &Mat {
+        &self.l
+    }
+
+    /// Innovation gain `M` (n×2).
+    pub fn innovation_gain(&self) -> &Mat {
+        &self.m
+    }
+
+    /// Number of estimator states `n`.
+    pub fn n_states(&self) -> usize {
+        self.l.nrows()
+    }
+
+    /// Sample time (s).
+    pub fn ts(&self) -> f64 {
+        self.ts
+    }
+
+    /// Input bounds `(u_min, u_max)`.
+    pub fn input_bounds(&self) -> (f64, f64) {
+        self.bounds
+    }
+}
+
+impl Controller for Lqg {
+    fn n_outputs(&self) -> usize {
+        2
+    }
+
+    fn n_inputs(&self) -> usize {
+        1
+    }
+
+    fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
+        let posterior = self.estimator.correct(y, &self.u_buf);
+        for i in 0..NX {
+            self.plant_estimate[i] = posterior[i];
+        }
+        let (value, status) = feedback(&self.k, &self.plant_estimate, r, self.bounds);
+        self.u_buf[0] = value;
+        u[0] = value;
+        self.estimator.predict(&self.u_buf);
+        status
+    }
+
+    fn reset(&mut self) {
+        self.estimator.reset();
+        self.plant_estimate.fill(0.0);
+        self.u_buf[0] = 0.0;
+    }
+
+    fn state_estimate(&self) -> Option<&[f64]> {
+        Some(self.estimator.posterior().as_slice())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lqr_rate_filter_follows_a_ramp_and_clamps() {
+        let k = Mat::from_row_slice(1, 4, &[0.0, 1.0, 0.0, 0.0]);
+        let mut c = Lqr::new(&k, 0.01, 20.0).unwrap();
+        let mut u = [0.0];
+        // θ ramps at 2 rad/s: the filtered difference converges to 2 and u = −K x̂ → −2.
+        for i in 0..200 {
+            c.step(&[0.02 * i as f64, 0.0], &[0.0, 0.0], &mut u);
+        }
+        assert!((u[0] + 2.0).abs() < 1e-9, "{}", u[0]);
+        let k = Mat::from_row_slice(1, 4, &[100.0, 0.0, 0.0, 0.0]);
+        let mut c = Lqr::new(&k, 0.01, 20.0).unwrap();
+        c.step(&[1.0, 0.0], &[0.0, 0.0], &mut u);
+        assert_eq!(u[0], -12.0);
+        c.step(&[f64::NAN, 0.0], &[0.0, 0.0], &mut u);
+        assert_eq!(u[0], 0.0);
+    }
+
+    #[test]
+    fn lqg_step_is_the_current_estimator_equations() {
+        let mut c = Lqg::paper().unwrap();
+        let aug = paper::augmented_model();
+        let kf = paper::kalman_design().unwrap();
+        let k = c.gain();
+        let mut bu = Mat::zeros(5, 1);
+        bu.view_mut((0, 0), (4, 1))
+            .copy_from(&paper::discrete_model().b);
+        let mut prior = DVector::<f64>::zeros(5);
+        let mut u = [0.0];
+        for i in 0..50 {
+            let y = [0.01 * (i as f64).sin(), 0.002 * i as f64];
+            let r = [1.0, 0.0];
+            c.step(&y, &r, &mut u);
+            let e = DVector::from_row_slice(&y) - &aug.c * &prior;
+            let post = &prior + &kf.m * &e;
+            let err = DVector::from_row_slice(&[post[0] - 1.0, post[1], post[2], post[3]]);
+            let want = (-(&k * err)[0]).clamp(-12.0, 12.0);
+            assert!((u[0] - want).abs() < 1e-12, "step {i}");
+            prior = &aug.a * &prior + &bu * want + &kf.l * &e;
+        }
+    }
+
+    #[test]
+    fn bad_arguments_are_named() {
+        let k = Mat::zeros(1, 3);
+        assert!(Lqr::new(&k, 0.01, 20.0)
+            .unwrap_err()
+            .to_string()
+            .contains('K'));
+        let k = Mat::zeros(1, 4);
+        assert!(Lqr::new(&k, 0.0, 20.0)
+            .unwrap_err()
+            .to_string()
+            .contains("Ts"));
+        assert!(Lqr::new(&k, 0.01, -1.0)
+            .unwrap_err()
+            .to_string()
+            .contains("rate_cutoff"));
+        assert!(Lqr::paper().unwrap().with_input_bounds(3.0, 1.0).is_err());
+    }
+}

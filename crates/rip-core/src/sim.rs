@@ -1,0 +1,574 @@
+//! Closed-loop simulation: the nonlinear [`Plant`] integrated by RK4 at a fine step, a
+//! [`Controller`] sampled every `Ts` with its input held (zero-order hold), and a sensor model.
+//!
+//! Each control period `k` (time `t_k = k Ts`):
+//!
+//! ```text
+//! y[k] = quantise(C x(t_k)) + v[k] + d_y(t_k)         v ~ N(0, diag(σ²)), seeded
+//! u[k] = controller.step(y[k], r[k])                   timed with a monotonic clock
+//! x(t_{k+1}) = RK4 over [t_k, t_{k+1}] with sat(u[k], ±u_limit), torque disturbance τ_d(t)
+//! ```
+//!
+//! - quantise: an encoder of `N` counts per revolution reports `q·round(angle/q)`, `q = 2π/N`
+//!   (rounding to the nearest count keeps the error zero-mean, `|error| ≤ q/2`);
+//! - `d_y`: an optional output step disturbance (time, size per output);
+//! - `τ_d`: an optional step torque on the arm (N·m) from a given time;
+//! - the reference is a step (time, value per output) or a full sequence, one row per sample.
+//!
+//! The run stops early when the pendulum falls (`|α| > fall_limit`, checked after every RK4
+//! substep, or the state becomes non-finite); the result is then truncated to the samples
+//! taken and flagged, so it never holds NaN. Everything a run needs is preallocated before the
+//! loop. [`simulate_batch`] runs many seeds and parameter variants in parallel with rayon.
+
+use std::time::Instant;
+
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+use rayon::prelude::*;
+
+use crate::controller::{Controller, StepStatus};
+use crate::error::{Result, RipError};
+use crate::plant::{Plant, State};
+
+/// Largest number of control samples one run may have (guards against accidental huge
+/// allocations, e.g. a duration in ms passed as s).
+pub const MAX_SAMPLES: usize = 10_000_000;
+
+/// The reference `r[k] = [θ_ref, α_ref]`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Reference {
+    /// `r = 0` before `time`, `value` from `time` on.
+    Step { time: f64, value: [f64; 2] },
+    /// One row per control sample; its length must equal the number of samples.
+    Sequence(Vec<[f64; 2]>),
+}
+
+impl Default for Reference {
+    fn default() -> Self {
+        Reference::Step {
+            time: 0.0,
+            value: [0.0, 0.0],
+        }
+    }
+}
+
+/// Encoder quantisation and white measurement noise.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SensorModel {
+    /// Encoder counts per revolution of `[θ, α]`; `None` for exact angles.
+    pub counts_per_rev: Option<[f64; 2]>,
+    /// Standard deviation (rad) of the Gaussian noise added to `[θ, α]`.
+    pub noise_std: [f64; 2],
+}
+
+/// A step that starts at `time`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepDisturbance<T> {
+    /// Start time (s).
+    pub time: f64,
+    /// Size.
+    pub value: T,
+}
+
+/// Everything a run needs besides the plant and the controller.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimConfig {
+    /// Length of the run (s); the number of samples is `round(duration / ts)`.
+    pub duration: f64,
+    /// Control period (s).
+    pub ts: f64,
+    /// RK4 steps per control period.
+    pub substeps: usize,
+    /// Initial state `[θ, θ̇, α, α̇]`.
+    pub x0: [f64; 4],
+    /// Reference of the two outputs.
+    pub reference: Reference,
+    /// Sensor model.
+    pub sensor: SensorModel,
+    /// Step added to the measured outputs `[θ, α]` (rad).
+    pub output_disturbance: Option<StepDisturbance<[f64; 2]>>,
+    /// Step torque on the arm (N·m).
+    pub torque_disturbance: Option<StepDisturbance<f64>>,
+    /// Actuator saturation: the plant receives `clamp(u, −u_limit, u_limit)` (V).
+    pub u_limit: f64,
+    /// The run stops, flagged as a fall, when `|α|` exceeds this (rad).
+    pub fall_limit: f64,
+    /// Seed of the measurement noise.
+    pub seed: u64,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            duration: 10.0,
+            ts: 0.01,
+            substeps: 10,
+            x0: [0.0; 4],
+            reference: Reference::default(),
+            sensor: SensorModel::default(),
+            output_disturbance: None,
+            torque_disturbance: None,
+            u_limit: 12.0,
+            fall_limit: std::f64::consts::FRAC_PI_2,
+            seed: 0,
+        }
+    }
+}
+
+fn finite(name: &str, v: f64) -> Result<()> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(RipError::NonFinite { name: name.into() })
+    }
+}
+
+fn positive(name: &str, v: f64) -> Result<()> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(RipError::invalid(
+            name,
+            format!("must be positive and finite, got {v}"),
+        ))
+    }
+}
+
+impl SimConfig {
+    /// Validates the configuration and returns the number of control samples.
+    pub fn validate(&self) -> Result<usize> {
+        positive("duration", self.duration)?;
+        positive("Ts", self.ts)?;
+        let samples = (self.duration / self.ts).round();
+        if samples < 1.0 || samples > MAX_SAMPLES as f64 {
+            return Err(RipError::invalid(
+                "duration",
+                format!(
+                    "gives {samples} samples of Ts = {}; need 1 to {MAX_SAMPLES}",
+                    self.ts
+                ),
+            ));
+        }
+        let n = samples as usize;
+        if self.substeps == 0 || self.substeps > 100_000 {
+            return Err(RipError::invalid(
+                "substeps",
+                format!("must be between 1 and 100000, got {}", self.substeps),
+            ));
+        }
+        if self.x0.iter().any(|v| !v.is_finite()) {
+            return Err(RipError::NonFinite { name: "x0".into() });
+        }
+        positive("fall_limit", self.fall_limit)?;
+        if self.x0[2].abs() > self.fall_limit {
+            return Err(RipError::invalid(
+                "x0",
+                format!(
+                    "pendulum angle {} is already beyond fall_limit {}",
+                    self.x0[2], self.fall_limit
+                ),
+            ));
+        }
+        positive("u_limit", self.u_limit)?;
+        match &self.reference {
+            Reference::Step { time, value } => {
+                finite("reference time", *time)?;
+                finite("reference", value[0])?;
+                finite("reference", value[1])?;
+            }
+            Reference::Sequence(seq) => {
+                if seq.len() != n {
+                    return Err(RipError::Shape {
+                        name: "reference".into(),
+                        expected: format!("({n}, 2), one row per sample"),
+                        rows: seq.len(),
+                        cols: 2,
+                    });
+                }
+                if seq.iter().flatten().any(|v| !v.is_finite()) {
+                    return Err(RipError::NonFinite {
+                        name: "reference".into(),
+                    });
+                }
+            }
+        }
+        if let Some(cpr) = self.sensor.counts_per_rev {
+            for c in cpr {
+                positive("encoder_counts", c)?;
+            }
+        }
+        for s in self.sensor.noise_std {
+            if !(s.is_finite() && s >= 0.0) {
+                return Err(RipError::invalid(
+                    "noise_std",
+                    format!("must be non-negative and finite, got {s}"),
+                ));
+            }
+        }
+        if let Some(d) = &self.output_disturbance {
+            finite("output_disturbance time", d.time)?;
+            finite("output_disturbance", d.value[0])?;
+            finite("output_disturbance", d.value[1])?;
+        }
+        if let Some(d) = &self.torque_disturbance {
+            finite("torque_disturbance time", d.time)?;
+            finite("torque_disturbance", d.value)?;
+        }
+        Ok(n)
+    }
+}
+
+/// The record of one run; every `Vec` has one entry per control sample taken.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimResult {
+    /// Sample times `k Ts` (s).
+    pub t: Vec<f64>,
+    /// True state at each sample.
+    pub x: Vec<[f64; 4]>,
+    /// Measured outputs `[θ, α]`.
+    pub y: Vec<[f64; 2]>,
+    /// Input applied to the plant over the following period (after actuator saturation).
+    pub u: Vec<f64>,
+    /// Reference at each sample.
+    pub r: Vec<[f64; 2]>,
+    /// The controller's state estimate after each step, row-major with `n_estimate` columns;
+    /// empty when the controller has none.
+    pub x_hat: Vec<f64>,
+    /// Columns of `x_hat` (0 when there is no estimate).
+    pub n_estimate: usize,
+    /// Wall-clock time of each `Controller::step` call (s).
+    pub compute_time: Vec<f64>,
+    /// Number of steps the controller reported as [`StepStatus::Fallback`].
+    pub fallbacks: usize,
+    /// Whether the pendulum fell (or the state diverged) before the end.
+    pub fell: bool,
+    /// Time of the fall, to the RK4 substep (s).
+    pub fall_time: Option<f64>,
+    /// State at the end of the run (or at the fall).
+    pub x_final: [f64; 4],
+}
+
+impl SimResult {
+    fn with_capacity(n: usize, n_estimate: usize) -> Self {
+        Self {
+            t: Vec::with_capacity(n),
+            x: Vec::with_capacity(n),
+            y: Vec::with_capacity(n),
+            u: Vec::with_capacity(n),
+            r: Vec::with_capacity(n),
+            x_hat: Vec::with_capacity(n * n_estimate),
+            n_estimate,
+            compute_time: Vec::with_capacity(n),
+            fallbacks: 0,
+            fell: false,
+            fall_time: None,
+            x_final: [0.0; 4],
+        }
+    }
+
+    /// Number of samples recorded.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// Whether no sample was recorded.
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+}
+
+#[inline]
+fn quantise(angle: f64, counts: f64) -> f64 {
+    let q = std::f64::consts::TAU / counts;
+    q * (angle / q).round()
+}
+
+/// Runs one closed loop (module docs). The controller is [`reset`](Controller::reset) first and
+/// must have 2 outputs and 1 input.
+pub fn simulate(
+    plant: &Plant,
+    controller: &mut dyn Controller,
+    config: &SimConfig,
+) -> Result<SimResult> {
+    let n = config.validate()?;
+    if controller.n_outputs() != 2 || controller.n_inputs() != 1 {
+        return Err(RipError::invalid(
+            "controller",
+            format!(
+                "must have 2 outputs and 1 input, has {} and {}",
+                controller.n_outputs(),
+                controller.n_inputs()
+            ),
+        ));
+    }
+    controller.reset();
+    let n_est = controller.state_estimate().map_or(0, |s| s.len());
+    let mut out = SimResult::with_capacity(n, n_est);
+    let mut rng = StdRng::seed_from_u64(config.seed);
+    let mut x = State::from_row_slice(&config.x0);
+    let (ts, substeps) = (config.ts, config.substeps);
+    let h = ts / substeps as f64;
+    let mut u = [0.0];
+    let mut y = [0.0; 2];
+
+    for k in 0..n {
+        let t = k as f64 * ts;
+        for (i, yi) in y.iter_mut().enumerate() {
+            let angle = x[2 * i];
+            let mut v = match config.sensor.counts_per_rev {
+                Some(cpr) => quantise(angle, cpr[i]),
+                None => angle,
+            };
+            let std = config.sensor.noise_std[i];
+            if std > 0.0 {
+                let z: f64 = StandardNormal.sample(&mut rng);
+                v += std * z;
+            }
+            if let Some(d) = &config.output_disturbance {
+                if t >= d.time {
+                    v += d.value[i];
+                }
+            }
+            *yi = v;
+        }
+        let r = match &config.reference {
+            Reference::Step { time, value } => {
+                if t >= *time {
+                    *value
+                } else {
+                    [0.0, 0.0]
+                }
+            }
+            Reference::Sequence(seq) => seq[k],
+        };
+
+        let start = Instant::now();
+        let status = controller.step(&y, &r, &mut u);
+        let elapsed = start.elapsed().as_secs_f64();
+        if status == StepStatus::Fallback {
+            out.fallbacks += 1;
+        }
+        let u_applied = if u[0].is_finite() {
+            u[0].clamp(-config.u_limit, config.u_limit)
+        } else {
+            0.0
+        };
+
+        out.t.push(t);
+        out.x.push([x[0], x[1], x[2], x[3]]);
+        out.y.push(y);
+        out.u.push(u_applied);
+        out.r.push(r);
+        out.compute_time.push(elapsed);
+        if let Some(est) = controller.state_estimate() {
+            out.x_hat.extend_from_slice(&est[..n_est.min(est.len())]);
+        }
+
+        for j in 0..substeps {
+            let t_sub = t + j as f64 * h;
+            let tau = match &config.torque_disturbance {
+                Some(d) if t_sub >= d.time => d.value,
+                _ => 0.0,
+            };
+            let before = x;
+            plant.rk4_step(&mut x, u_applied, tau, h);
+            if !x.iter().all(|v| v.is_finite()) || x[2].abs() > config.fall_limit {
+                out.fell = true;
+                out.fall_time = Some(t_sub + h);
+                if !x.iter().all(|v| v.is_finite()) {
+                    x = before;
+                }
+                break;
+            }
+        }
+        if out.fell {
+            break;
+        }
+    }
+    out.x_final = [x[0], x[1], x[2], x[3]];
+    Ok(out)
+}
+
+/// Runs every `(plant variant, seed)` pair in parallel on all cores (rayon).
+///
+/// `controllers` holds one independent controller per run, in the order
+/// `plants[0]×seeds[0], plants[0]×seeds[1], …, plants[1]×seeds[0], …` (so
+/// `plants.len() · seeds.len()` of them); the results come back in the same order. Each run uses
+/// `config` with its own seed.
+pub fn simulate_batch(
+    plants: &[Plant],
+    seeds: &[u64],
+    config: &SimConfig,
+    controllers: Vec<Box<dyn Controller>>,
+) -> Result<Vec<SimResult>> {
+    config.validate()?;
+    if plants.is_empty() {
+        return Err(RipError::invalid("plants", "need at least one plant"));
+    }
+    if seeds.is_empty() {
+        return Err(RipError::invalid("seeds", "need at least one seed"));
+    }
+    let runs = plants.len() * seeds.len();
+    if controllers.len() != runs {
+        return Err(RipError::invalid(
+            "controllers",
+            format!(
+                "need one per run ({} plants × {} seeds = {runs}), got {}",
+                plants.len(),
+                seeds.len(),
+                controllers.len()
+            ),
+        ));
+    }
+    let n_seeds = seeds.len();
+    controllers
+        .into_par_iter()
+        .enumerate()
+        .map(|(i, mut controller)| {
+            let cfg = SimConfig {
+                seed: seeds[i % n_seeds],
+                ..config.clone()
+            };
+            simulate(&plants[i / n_seeds], controller.as_mut(), &cfg)
+        })
+        .collect()
+}
+
+/// [`simulate_batch`] for a cloneable controller: each run gets its own clone of `controller`.
+pub fn simulate_batch_cloned<C>(
+    plants: &[Plant],
+    seeds: &[u64],
+    config: &SimConfig,
+    controller: &C,
+) -> Result<Vec<SimResult>>
+where
+    C: Controller + Clone + 'static,
+{
+    let controllers = (0..plants.len() * seeds.len())
+        .map(|_| Box::new(controller.clone()) as Box<dyn Controller>)
+        .collect();
+    simulate_batch(plants, seeds, config, controllers)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::regulators::{Lqg, Lqr};
+
+    fn tilted(reference: Reference) -> SimConfig {
+        SimConfig {
+            duration: 10.0,
+            x0: [0.0, 0.0, 0.1, 0.0],
+            reference,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn lqr_and_lqg_balance_the_paper_plant_and_track_the_step() {
+        let plant = Plant::paper();
+        let step = Reference::Step {
+            time: 1.0,
+            value: [1.0, 0.0],
+        };
+        let config = SimConfig {
+            sensor: SensorModel {
+                counts_per_rev: Some([2048.0, 2048.0]),
+                noise_std: [1e-3, 1e-3],
+            },
+            ..tilted(step)
+        };
+        for (name, mut c) in [
+            (
+                "lqr",
+                Box::new(Lqr::paper().unwrap()) as Box<dyn Controller>,
+            ),
+            ("lqg", Box::new(Lqg::paper().unwrap())),
+        ] {
+            let res = simulate(&plant, c.as_mut(), &config).unwrap();
+            assert!(!res.fell, "{name} fell at {:?}", res.fall_time);
+            assert_eq!(res.len(), 1000);
+            let last = res.x.last().unwrap();
+            assert!((last[0] - 1.0).abs() < 0.05, "{name}: θ = {}", last[0]);
+            assert!(last[2].abs() < 0.02, "{name}: α = {}", last[2]);
+            assert!(res.u.iter().all(|u| u.abs() <= 12.0));
+        }
+    }
+
+    #[test]
+    fn a_fall_is_flagged_and_truncates_the_record() {
+        let plant = Plant::paper();
+        let mut c = Lqr::new(&crate::linalg::Mat::zeros(1, 4), 0.01, 20.0).unwrap();
+        let res = simulate(&plant, &mut c, &tilted(Reference::default())).unwrap();
+        assert!(res.fell);
+        let tf = res.fall_time.unwrap();
+        assert!(tf > 0.0 && tf < 10.0);
+        assert_eq!(res.len(), (tf / 0.01).ceil() as usize);
+        assert!(res.x.iter().flatten().all(|v| v.is_finite()));
+        assert!(res.x_final[2].abs() > std::f64::consts::FRAC_PI_2);
+    }
+
+    #[test]
+    fn runs_are_reproducible_and_batch_equals_serial() {
+        let plants = [Plant::paper(), Plant::qube_servo2()];
+        let seeds = [1, 2, 3];
+        let config = SimConfig {
+            duration: 2.0,
+            sensor: SensorModel {
+                counts_per_rev: None,
+                noise_std: [2e-3, 2e-3],
+            },
+            ..tilted(Reference::default())
+        };
+        let lqg = Lqg::paper().unwrap();
+        let batch = simulate_batch_cloned(&plants, &seeds, &config, &lqg).unwrap();
+        assert_eq!(batch.len(), 6);
+        for (i, res) in batch.iter().enumerate() {
+            let cfg = SimConfig {
+                seed: seeds[i % 3],
+                ..config.clone()
+            };
+            let serial = simulate(&plants[i / 3], &mut lqg.clone(), &cfg).unwrap();
+            assert_eq!(serial.x, res.x);
+            assert_eq!(serial.y, res.y);
+        }
+        assert_ne!(batch[0].y, batch[1].y);
+    }
+
+    #[test]
+    fn bad_configuration_is_rejected() {
+        let plant = Plant::paper();
+        let mut c = Lqr::paper().unwrap();
+        let bad = [
+            SimConfig {
+                ts: 0.0,
+                ..Default::default()
+            },
+            SimConfig {
+                substeps: 0,
+                ..Default::default()
+            },
+            SimConfig {
+                x0: [0.0, 0.0, 2.0, 0.0],
+                ..Default::default()
+            },
+            SimConfig {
+                reference: Reference::Sequence(vec![[0.0; 2]; 3]),
+                ..Default::default()
+            },
+            SimConfig {
+                sensor: SensorModel {
+                    counts_per_rev: None,
+                    noise_std: [-1.0, 0.0],
+                },
+                ..Default::default()
+            },
+        ];
+        let names = ["Ts", "substeps", "x0", "reference", "noise_std"];
+        for (cfg, name) in bad.iter().zip(names) {
+            let err = simulate(&plant, &mut c, cfg).unwrap_err();
+            assert!(err.to_string().contains(name), "{err}");
+        }
+    }
+}

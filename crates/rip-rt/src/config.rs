@@ -1,0 +1,461 @@
+//! The TOML configuration of `rip-rt run`. Every key is optional; the defaults are the paper's
+//! settings (Ts = 10 ms, |u| ≤ 12 V, LQR weights Q = diag(25, 0, 50, 0), R = 0.1, MPC P = 50,
+//! m = 3) and the encoders of the reference rig (2048 counts per revolution each).
+//!
+//! Unknown keys are rejected, and every value is checked; errors name the key, e.g.
+//! `safety.pendulum_limit: must be in (0, π], got 4`.
+
+use std::path::Path;
+
+use serde::Deserialize;
+
+/// A configuration problem, naming the key (or the file).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConfigError {
+    /// The offending key (`section.key`) or file.
+    pub key: String,
+    /// What is wrong.
+    pub reason: String,
+}
+
+impl std::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}", self.key, self.reason)
+    }
+}
+
+impl std::error::Error for ConfigError {}
+
+fn err(key: &str, reason: impl Into<String>) -> ConfigError {
+    ConfigError {
+        key: key.into(),
+        reason: reason.into(),
+    }
+}
+
+/// Where the pendulum encoder reads zero.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum PendulumZero {
+    /// Zero counts with the pendulum hanging down (an encoder reset at power-up); the loop
+    /// subtracts π so that 0 rad is upright.
+    #[default]
+    Down,
+    /// Zero counts with the pendulum upright.
+    Up,
+}
+
+/// `[loop]`: timing of the control loop.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LoopConfig {
+    /// Control period (ms). The controllers are designed for this sample time.
+    pub period_ms: f64,
+    /// How long to wait for the measurement after the sample request (ms, < period).
+    pub reply_timeout_ms: f64,
+    /// Consecutive periods without a valid measurement that stop the loop.
+    pub watchdog_periods: u32,
+}
+
+impl Default for LoopConfig {
+    fn default() -> Self {
+        Self {
+            period_ms: 10.0,
+            reply_timeout_ms: 5.0,
+            watchdog_periods: 5,
+        }
+    }
+}
+
+/// `[device]`: how encoder counts map to angles.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DeviceConfig {
+    /// Arm encoder counts per revolution (after quadrature decoding).
+    pub arm_counts_per_rev: u32,
+    /// Pendulum encoder counts per revolution (after quadrature decoding).
+    pub pendulum_counts_per_rev: u32,
+    /// Where the pendulum encoder reads zero.
+    pub pendulum_zero: PendulumZero,
+    /// +1 or −1: flips the arm encoder's direction to the model's convention.
+    pub arm_sign: f64,
+    /// +1 or −1: flips the pendulum encoder's direction to the model's convention.
+    pub pendulum_sign: f64,
+}
+
+impl Default for DeviceConfig {
+    fn default() -> Self {
+        Self {
+            arm_counts_per_rev: 2048,
+            pendulum_counts_per_rev: 2048,
+            pendulum_zero: PendulumZero::Down,
+            arm_sign: 1.0,
+            pendulum_sign: 1.0,
+        }
+    }
+}
+
+/// `[safety]`: limits that stop the motor.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SafetyConfig {
+    /// Every command is clamped to ±this (V).
+    pub voltage_limit: f64,
+    /// |pendulum angle| above this (rad from upright) stops the loop.
+    pub pendulum_limit: f64,
+    /// |arm angle| above this (rad) stops the loop.
+    pub arm_limit: f64,
+    /// Balancing starts only with |pendulum angle| below this (rad).
+    pub start_tolerance: f64,
+    /// How long to wait for the pendulum to be brought upright before refusing (s); 0 refuses
+    /// at once.
+    pub wait_upright_s: f64,
+}
+
+impl Default for SafetyConfig {
+    fn default() -> Self {
+        Self {
+            voltage_limit: 12.0,
+            pendulum_limit: 0.6,
+            arm_limit: 3.0,
+            start_tolerance: 0.15,
+            wait_upright_s: 0.0,
+        }
+    }
+}
+
+/// `[reference]`: the arm-angle reference, a step as in the paper's experiment (0 → 1 rad).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ReferenceConfig {
+    /// Step height (rad).
+    pub arm_step: f64,
+    /// Time of the step after balancing starts (s).
+    pub step_time: f64,
+}
+
+impl Default for ReferenceConfig {
+    fn default() -> Self {
+        Self {
+            arm_step: 1.0,
+            step_time: 1.0,
+        }
+    }
+}
+
+/// `[lqr]`: weights shared by LQR and LQG (eq. (13)).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LqrConfig {
+    /// Diagonal of Q over (θ, θ̇, α, α̇).
+    pub q: [f64; 4],
+    /// R.
+    pub r: f64,
+    /// Cut-off (Hz) of the LQR's filtered-difference rate estimate (LQR only).
+    pub rate_cutoff_hz: f64,
+}
+
+impl Default for LqrConfig {
+    fn default() -> Self {
+        Self {
+            q: [25.0, 0.0, 50.0, 0.0],
+            r: 0.1,
+            rate_cutoff_hz: 20.0,
+        }
+    }
+}
+
+/// `[mpc]`: the MPC of section 3.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MpcConfig {
+    /// Prediction horizon P.
+    pub horizon: usize,
+    /// Control horizon m.
+    pub control_horizon: usize,
+    /// Output weights (arm, pendulum).
+    pub output_weights: [f64; 2],
+    /// Weight on input moves Δu.
+    pub rate_weight: f64,
+    /// Soft bound on the pendulum angle (rad); the paper's ±π/6.
+    pub soft_bound: f64,
+    /// Penalty ρ_ε on the slack of the soft bound.
+    pub slack_weight: f64,
+    /// Which output carries the soft bound: `"pendulum"` or `"arm"` (the paper's "α" is
+    /// ambiguous; the pendulum is the angle whose excursion the bound is meant to limit).
+    pub bounded_output: BoundedOutput,
+    /// QP solver: `"clarabel"` (interior point, the reference) or `"active_set"`.
+    pub solver: String,
+}
+
+/// The output that carries the MPC's soft bound.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum BoundedOutput {
+    /// The pendulum angle.
+    #[default]
+    Pendulum,
+    /// The arm angle.
+    Arm,
+}
+
+impl Default for MpcConfig {
+    fn default() -> Self {
+        Self {
+            horizon: 50,
+            control_horizon: 3,
+            output_weights: [25.0, 50.0],
+            rate_weight: 1.0,
+            soft_bound: std::f64::consts::PI / 6.0,
+            slack_weight: 100.0,
+            bounded_output: BoundedOutput::Pendulum,
+            solver: "clarabel".into(),
+        }
+    }
+}
+
+/// The whole file.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    /// `[loop]`
+    #[serde(rename = "loop")]
+    pub loop_: LoopConfig,
+    /// `[device]`
+    pub device: DeviceConfig,
+    /// `[safety]`
+    pub safety: SafetyConfig,
+    /// `[reference]`
+    pub reference: ReferenceConfig,
+    /// `[lqr]`
+    pub lqr: LqrConfig,
+    /// `[mpc]`
+    pub mpc: MpcConfig,
+}
+
+fn positive(key: &str, v: f64) -> Result<(), ConfigError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(err(key, format!("must be a positive number, got {v}")))
+    }
+}
+
+fn nonnegative(key: &str, v: f64) -> Result<(), ConfigError> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(err(key, format!("must be a non-negative number, got {v}")))
+    }
+}
+
+fn sign(key: &str, v: f64) -> Result<(), ConfigError> {
+    if v == 1.0 || v == -1.0 {
+        Ok(())
+    } else {
+        Err(err(key, format!("must be 1 or -1, got {v}")))
+    }
+}
+
+impl Config {
+    /// Parses and validates TOML text.
+    pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
+        let cfg: Config = toml::from_str(text).map_err(|e| {
+            // toml's message names the key or table and the position.
+            err("config", e.to_string().trim_end().to_string())
+        })?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// Reads, parses and validates a file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| err(&format!("--config {}", path.display()), e.to_string()))?;
+        Self::from_toml(&text).map_err(|e| ConfigError {
+            key: if e.key == "config" {
+                format!("--config {}", path.display())
+            } else {
+                e.key
+            },
+            reason: e.reason,
+        })
+    }
+
+    /// Checks every value; the error names the first bad key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let l = &self.loop_;
+        positive("loop.period_ms", l.period_ms)?;
+        if l.period_ms > 1000.0 {
+            return Err(err("loop.period_ms", "must be at most 1000 ms"));
+        }
+        positive("loop.reply_timeout_ms", l.reply_timeout_ms)?;
+        if l.reply_timeout_ms >= l.period_ms {
+            return Err(err(
+                "loop.reply_timeout_ms",
+                format!(
+                    "must be shorter than loop.period_ms ({} ms), got {}",
+                    l.period_ms, l.reply_timeout_ms
+                ),
+            ));
+        }
+        if l.watchdog_periods == 0 {
+            return Err(err("loop.watchdog_periods", "must be at least 1"));
+        }
+        let d = &self.device;
+        if d.arm_counts_per_rev == 0 {
+            return Err(err("device.arm_counts_per_rev", "must be positive"));
+        }
+        if d.pendulum_counts_per_rev == 0 {
+            return Err(err("device.pendulum_counts_per_rev", "must be positive"));
+        }
+        sign("device.arm_sign", d.arm_sign)?;
+        sign("device.pendulum_sign", d.pendulum_sign)?;
+        let s = &self.safety;
+        positive("safety.voltage_limit", s.voltage_limit)?;
+        if s.voltage_limit > 32.0 {
+            return Err(err(
+                "safety.voltage_limit",
+                format!(
+                    "must be at most 32 V (the wire carries ±32.767 V), got {}",
+                    s.voltage_limit
+                ),
+            ));
+        }
+        let pi = std::f64::consts::PI;
+        positive("safety.pendulum_limit", s.pendulum_limit)?;
+        if s.pendulum_limit > pi {
+            return Err(err(
+                "safety.pendulum_limit",
+                format!("must be in (0, π], got {}", s.pendulum_limit),
+            ));
+        }
+        positive("safety.arm_limit", s.arm_limit)?;
+        positive("safety.start_tolerance", s.start_tolerance)?;
+        if s.start_tolerance >= s.pendulum_limit {
+            return Err(err(
+                "safety.start_tolerance",
+                format!(
+                    "must be below safety.pendulum_limit ({}), got {}",
+                    s.pendulum_limit, s.start_tolerance
+                ),
+            ));
+        }
+        nonnegative("safety.wait_upright_s", s.wait_upright_s)?;
+        let r = &self.reference;
+        if !r.arm_step.is_finite() || r.arm_step.abs() >= s.arm_limit {
+            return Err(err(
+                "reference.arm_step",
+                format!(
+                    "must be finite and inside safety.arm_limit ({}), got {}",
+                    s.arm_limit, r.arm_step
+                ),
+            ));
+        }
+        nonnegative("reference.step_time", r.step_time)?;
+        for (i, &q) in self.lqr.q.iter().enumerate() {
+            nonnegative(&format!("lqr.q[{i}]"), q)?;
+        }
+        positive("lqr.r", self.lqr.r)?;
+        if self.lqr.rate_cutoff_hz.is_nan() || self.lqr.rate_cutoff_hz <= 0.0 {
+            return Err(err(
+                "lqr.rate_cutoff_hz",
+                format!("must be positive (or inf), got {}", self.lqr.rate_cutoff_hz),
+            ));
+        }
+        let m = &self.mpc;
+        if m.horizon == 0 {
+            return Err(err("mpc.horizon", "must be at least 1"));
+        }
+        if m.control_horizon == 0 || m.control_horizon > m.horizon {
+            return Err(err(
+                "mpc.control_horizon",
+                format!(
+                    "must be in 1..=mpc.horizon ({}), got {}",
+                    m.horizon, m.control_horizon
+                ),
+            ));
+        }
+        for (i, &w) in m.output_weights.iter().enumerate() {
+            nonnegative(&format!("mpc.output_weights[{i}]"), w)?;
+        }
+        nonnegative("mpc.rate_weight", m.rate_weight)?;
+        positive("mpc.soft_bound", m.soft_bound)?;
+        positive("mpc.slack_weight", m.slack_weight)?;
+        if !matches!(m.solver.as_str(), "clarabel" | "active_set") {
+            return Err(err(
+                "mpc.solver",
+                format!("must be \"clarabel\" or \"active_set\", got {:?}", m.solver),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The control period in nanoseconds.
+    pub fn period_ns(&self) -> u64 {
+        (self.loop_.period_ms * 1e6).round() as u64
+    }
+
+    /// The control period in seconds.
+    pub fn period_s(&self) -> f64 {
+        self.loop_.period_ms * 1e-3
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn empty_file_gives_the_paper_defaults() {
+        let cfg = Config::from_toml("").unwrap();
+        assert_eq!(cfg, Config::default());
+        assert_eq!(cfg.period_ns(), 10_000_000);
+        assert_eq!(cfg.lqr.q, [25.0, 0.0, 50.0, 0.0]);
+        assert_eq!(cfg.safety.voltage_limit, 12.0);
+    }
+
+    #[test]
+    fn values_are_read() {
+        let cfg = Config::from_toml(
+            "[loop]\nperiod_ms = 5\nreply_timeout_ms = 2\n[device]\npendulum_zero = \"up\"\n\
+             arm_sign = -1\n[mpc]\nhorizon = 20\n",
+        )
+        .unwrap();
+        assert_eq!(cfg.period_ns(), 5_000_000);
+        assert_eq!(cfg.device.pendulum_zero, PendulumZero::Up);
+        assert_eq!(cfg.device.arm_sign, -1.0);
+        assert_eq!(cfg.mpc.horizon, 20);
+        assert_eq!(cfg.mpc.control_horizon, 3);
+    }
+
+    #[test]
+    fn unknown_keys_are_named() {
+        let e = Config::from_toml("[safety]\nvoltage_limt = 5\n").unwrap_err();
+        assert!(e.to_string().contains("voltage_limt"), "{e}");
+        let e = Config::from_toml("[sefety]\n").unwrap_err();
+        assert!(e.to_string().contains("sefety"), "{e}");
+    }
+
+    #[test]
+    fn bad_values_are_named() {
+        for (text, key) in [
+            ("[safety]\npendulum_limit = 4.0\n", "safety.pendulum_limit"),
+            ("[safety]\nvoltage_limit = -1\n", "safety.voltage_limit"),
+            ("[loop]\nreply_timeout_ms = 10\n", "loop.reply_timeout_ms"),
+            ("[loop]\nwatchdog_periods = 0\n", "loop.watchdog_periods"),
+            ("[device]\narm_sign = 2\n", "device.arm_sign"),
+            ("[lqr]\nr = 0\n", "lqr.r"),
+            ("[lqr]\nq = [1, 2, -3, 4]\n", "lqr.q[2]"),
+            ("[mpc]\ncontrol_horizon = 60\n", "mpc.control_horizon"),
+            ("[reference]\narm_step = 5\n", "reference.arm_step"),
+            ("[mpc]\nsolver = \"osqp\"\n", "mpc.solver"),
+            ("[lqr]\nrate_cutoff_hz = -1\n", "lqr.rate_cutoff_hz"),
+        ] {
+            let e = Config::from_toml(text).unwrap_err();
+            assert_eq!(e.key, key, "{text}: {e}");
+        }
+        let e = Config::from_toml("[loop]\nperiod_ms = \"fast\"\n").unwrap_err();
+        assert!(e.to_string().contains("period_ms"), "{e}");
+    }
+}

@@ -1,0 +1,23 @@
+//! # rip-rt
+//!
+//! The PC side of the rotary inverted pendulum rig: the control loop that talks to the
+//! pendulum's microcontroller over a serial link, and a device emulator that speaks the same
+//! protocol over a pseudo-terminal so the whole loop can be tested on any machine.
+//!
+//! - [`protocol`] — wire protocol v1: framing, CRC-16/CCITT-FALSE, a resynchronising parser.
+//! - [`runner`] — the periodic loop with its safety rules and exit codes.
+//! - [`timing`] — absolute-deadline scheduling, latency histograms, real-time settings.
+//! - [`config`] — the TOML configuration.
+//! - [`serial`] — raw termios serial I/O and pseudo-terminals.
+//!
+//! `docs/protocol.md` specifies the protocol for firmware authors and `docs/rip-rt.md` the
+//! command line, the safety rules, the exit codes and the log format.
+
+pub mod config;
+pub mod controllers;
+pub mod emulator;
+pub mod plant;
+pub mod protocol;
+pub mod runner;
+pub mod serial;
+pub mod timing;

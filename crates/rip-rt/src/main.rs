@@ -1,0 +1,415 @@
+//! `rip-rt`: the 100 Hz control loop over serial (`run`) and the device emulator (`emulate`).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, AtomicUsize};
+use std::sync::Arc;
+
+use clap::{Parser, Subcommand};
+
+use rip_rt::config::Config;
+use rip_rt::controllers::{self, ControllerKind};
+use rip_rt::emulator::{self, EmulatorConfig, EmulatorExit};
+use rip_rt::plant::Model;
+use rip_rt::runner::{self, exit_code, LogWriter, LoopCore, RunOptions};
+use rip_rt::serial::{Pty, SerialPort};
+use rip_rt::timing;
+
+const RUN_AFTER_HELP: &str = "\
+Exit codes:
+    0    the run finished (--duration elapsed)
+    1    could not start: port or controller design failed (motor never enabled)
+    2    bad command line or configuration
+    3    device lost: I/O error, or the device vanished
+    4    watchdog: no valid measurement for loop.watchdog_periods periods
+    5    angle limit exceeded (safety.pendulum_limit / safety.arm_limit)
+    6    refused to start: pendulum not within safety.start_tolerance of upright
+    7    controller fault: non-finite output
+    8    the device reported a driver fault
+    9    the log file could not be written
+    101  internal error (panic)
+    130  stopped by SIGINT (Ctrl-C)
+    143  stopped by SIGTERM
+Every exit after the device was opened sends 0 V with the driver disabled.";
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "rip-rt",
+    version,
+    about = "Real-time control loop for the rotary inverted pendulum over a serial link, \
+             and a device emulator"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run a controller in a periodic loop against the device on PORT.
+    #[command(after_help = RUN_AFTER_HELP)]
+    Run(RunArgs),
+    /// Emulate the device on a new pseudo-terminal (prints its path).
+    Emulate(EmulateArgs),
+}
+
+fn positive_seconds(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|_| format!("not a number: {s:?}"))?;
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("must be a positive number of seconds, got {s}"))
+    }
+}
+
+fn nonnegative(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|_| format!("not a number: {s:?}"))?;
+    if v.is_finite() && v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("must be a non-negative number, got {s}"))
+    }
+}
+
+fn probability(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|_| format!("not a number: {s:?}"))?;
+    if (0.0..=1.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("must be a probability in [0, 1], got {s}"))
+    }
+}
+
+fn finite(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|_| format!("not a number: {s:?}"))?;
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(format!("must be finite, got {s}"))
+    }
+}
+
+fn baud(s: &str) -> Result<u32, String> {
+    let v: u32 = s.parse().map_err(|_| format!("not a baud rate: {s:?}"))?;
+    if rip_rt::serial::SUPPORTED_BAUDS.contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!(
+            "must be one of {:?}, got {v}",
+            rip_rt::serial::SUPPORTED_BAUDS
+        ))
+    }
+}
+
+fn model(s: &str) -> Result<Model, String> {
+    match s {
+        "paper" => Ok(Model::Paper),
+        "qube" | "qube-servo2" => Ok(Model::QubeServo2),
+        _ => Err(format!("must be paper or qube, got {s:?}")),
+    }
+}
+
+#[derive(Debug, clap::Args)]
+struct RunArgs {
+    /// Serial device of the pendulum (e.g. /dev/ttyACM0, or the path `rip-rt emulate` prints).
+    #[arg(long, value_name = "PATH")]
+    port: PathBuf,
+    /// Baud rate (ignored by USB CDC devices and pseudo-terminals).
+    #[arg(long, value_name = "N", default_value_t = 115200, value_parser = baud)]
+    baud: u32,
+    /// Controller: lqr, lqg or mpc.
+    #[arg(long, value_name = "NAME")]
+    controller: ControllerKind,
+    /// TOML configuration (see docs/rip-rt.md); defaults are the paper's settings.
+    #[arg(long, value_name = "FILE.toml")]
+    config: Option<PathBuf>,
+    /// Stop after this many seconds of balancing (default: run until stopped).
+    #[arg(long, value_name = "S", allow_negative_numbers = true, value_parser = positive_seconds)]
+    duration: Option<f64>,
+    /// Write a CSV log of every period.
+    #[arg(long, value_name = "FILE.csv")]
+    log: Option<PathBuf>,
+    /// Run the loop with SCHED_FIFO at this priority (1-99) and locked memory, if permitted.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(i32).range(1..=99))]
+    rt_priority: Option<i32>,
+    /// Pin the loop to this CPU, if permitted.
+    #[arg(long, value_name = "N")]
+    cpu: Option<usize>,
+    /// Only print the final summary.
+    #[arg(long)]
+    quiet: bool,
+}
+
+#[derive(Debug, clap::Args)]
+struct EmulateArgs {
+    /// Also make a symbolic link at PATH to the device (removed on exit).
+    #[arg(long, value_name = "PATH")]
+    link: Option<PathBuf>,
+    /// Simulated pendulum: paper (fitted to the paper's model) or qube (QUBE-Servo 2).
+    #[arg(long, value_name = "NAME", default_value = "paper", value_parser = model)]
+    model: Model,
+    /// Gaussian noise on each encoder reading, standard deviation in counts.
+    #[arg(long, value_name = "COUNTS", default_value_t = 0.0, value_parser = nonnegative)]
+    noise: f64,
+    /// Probability that a measurement is not sent.
+    #[arg(long, value_name = "P", default_value_t = 0.0, value_parser = probability)]
+    drop_rate: f64,
+    /// Probability that a measurement is corrupted (flipped byte or inserted garbage).
+    #[arg(long, value_name = "P", default_value_t = 0.0, value_parser = probability)]
+    corrupt_rate: f64,
+    /// Vanish (close the device) this many seconds after the first command.
+    #[arg(long, value_name = "S", value_parser = nonnegative)]
+    vanish_after: Option<f64>,
+    /// Exit after this many seconds.
+    #[arg(long, value_name = "S", value_parser = positive_seconds)]
+    duration: Option<f64>,
+    /// Initial pendulum angle from upright (rad).
+    #[arg(long, value_name = "RAD", default_value_t = 0.05, allow_negative_numbers = true, value_parser = finite)]
+    initial_pendulum: f64,
+    /// Initial arm angle (rad).
+    #[arg(long, value_name = "RAD", default_value_t = 0.0, allow_negative_numbers = true, value_parser = finite)]
+    initial_arm: f64,
+    /// Let the pendulum fall from the start instead of holding it until the first enabling
+    /// command.
+    #[arg(long)]
+    no_hold: bool,
+    /// Device watchdog: zero the motor when no command arrives for this long (s).
+    #[arg(long, value_name = "S", default_value_t = 0.05, value_parser = positive_seconds)]
+    command_timeout: f64,
+    /// Simulation rate (Hz).
+    #[arg(long, value_name = "HZ", default_value_t = 1000.0, value_parser = positive_seconds)]
+    sim_rate: f64,
+    /// Seed of the noise and fault generator.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    seed: u64,
+    /// Append every command the device receives to this CSV (t_s,seq,voltage_mv,flags).
+    #[arg(long, value_name = "FILE.csv")]
+    record: Option<PathBuf>,
+}
+
+fn fail(code: i32, msg: impl std::fmt::Display) -> ExitCode {
+    eprintln!("rip-rt: error: {msg}");
+    ExitCode::from(code as u8)
+}
+
+fn cmd_run(args: RunArgs) -> ExitCode {
+    let cfg = match &args.config {
+        Some(path) => match Config::load(path) {
+            Ok(cfg) => cfg,
+            Err(e) => return fail(exit_code::USAGE, e),
+        },
+        None => Config::default(),
+    };
+    let controller = match controllers::build(args.controller, &cfg) {
+        Ok(c) => c,
+        Err(e) => return fail(exit_code::SETUP, e),
+    };
+    let mut core = match LoopCore::new(controller, &cfg) {
+        Ok(core) => core,
+        Err(e) => return fail(exit_code::SETUP, e),
+    };
+    let n_estimates = core.state_estimate().map_or(0, |x| x.len());
+
+    let signal = Arc::new(AtomicUsize::new(0));
+    for sig in [libc::SIGINT, libc::SIGTERM] {
+        if let Err(e) = signal_hook::flag::register_usize(sig, Arc::clone(&signal), sig as usize) {
+            return fail(
+                exit_code::SETUP,
+                format!("cannot install signal handler: {e}"),
+            );
+        }
+    }
+
+    let port = match SerialPort::open(&args.port, args.baud) {
+        Ok(p) => p,
+        Err(e) => return fail(exit_code::SETUP, e),
+    };
+    // From here on every exit path must stop the motor; a panic does it through this hook
+    // before unwinding, and again through the loop's stop guard.
+    let previous = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        runner::emergency_stop();
+        previous(info);
+    }));
+
+    if let Some(prio) = args.rt_priority {
+        if let Err(e) = timing::lock_memory() {
+            eprintln!("rip-rt: warning: cannot lock memory ({e}); continuing");
+        }
+        if let Err(e) = timing::set_realtime_priority(prio) {
+            eprintln!(
+                "rip-rt: warning: SCHED_FIFO priority {prio} not permitted ({e}); \
+                 continuing with normal scheduling"
+            );
+        }
+    }
+    if let Some(cpu) = args.cpu {
+        if let Err(e) = timing::pin_to_cpu(cpu) {
+            eprintln!("rip-rt: warning: cannot pin to CPU {cpu} ({e}); continuing");
+        }
+    }
+
+    let mut log = match &args.log {
+        Some(path) => {
+            let header = [
+                ("rip-rt", env!("CARGO_PKG_VERSION").to_string()),
+                ("protocol", rip_rt::protocol::VERSION.to_string()),
+                ("controller", args.controller.to_string()),
+                ("port", args.port.display().to_string()),
+                ("period_ms", cfg.loop_.period_ms.to_string()),
+                ("voltage_limit", cfg.safety.voltage_limit.to_string()),
+            ];
+            match LogWriter::create(path, &header, n_estimates) {
+                Ok(w) => Some(w),
+                Err(e) => return fail(exit_code::SETUP, e),
+            }
+        }
+        None => None,
+    };
+
+    if !args.quiet {
+        eprintln!(
+            "rip-rt: {} on {} every {} ms; Ctrl-C stops",
+            args.controller,
+            args.port.display(),
+            cfg.loop_.period_ms
+        );
+    }
+    let opts = RunOptions {
+        controller_name: args.controller.to_string(),
+        duration_s: args.duration,
+        quiet: args.quiet,
+    };
+    let report = runner::run(port.io(), &mut core, &cfg, &opts, log.as_mut(), &signal);
+    let mut code = report.reason.exit_code();
+    let stop_note = if report.stop_sent {
+        "stop command (0 V, disabled) sent"
+    } else {
+        "stop command could not be written (the device's own watchdog must stop the motor)"
+    };
+    let p = report.parser;
+    let parser_line = format!(
+        "frames={} crc_errors={} bad_headers={} unknown={} skipped_bytes={} missing_replies={}",
+        p.frames,
+        p.crc_errors,
+        p.bad_headers,
+        p.unknown_frames,
+        p.skipped_bytes,
+        report.missing_replies
+    );
+    if let Some(log) = log.as_mut() {
+        let footer = [
+            ("stop", report.reason.name().to_string()),
+            ("stop_message", report.reason.to_string()),
+            ("exit_code", code.to_string()),
+            ("stop_sent", report.stop_sent.to_string()),
+            ("balanced_s", format!("{:.3}", report.balanced_s)),
+            ("timing", report.timing.to_string()),
+            ("link", parser_line.clone()),
+        ];
+        if let Err(e) = log.finish(&footer) {
+            eprintln!("rip-rt: error: log write failed: {e}");
+            if code == exit_code::FINISHED {
+                code = exit_code::LOG_ERROR;
+            }
+        }
+    }
+    let level = if code == exit_code::FINISHED || matches!(code, 130 | 143) {
+        "stop"
+    } else {
+        "FAULT"
+    };
+    eprintln!("rip-rt: {level}: {} — {stop_note}", report.reason);
+    eprintln!("rip-rt: timing: {}", report.timing);
+    eprintln!("rip-rt: link: {parser_line}");
+    ExitCode::from(code as u8)
+}
+
+fn make_link(link: &Path, target: &Path) -> std::io::Result<()> {
+    match std::fs::symlink_metadata(link) {
+        Ok(meta) if meta.file_type().is_symlink() => std::fs::remove_file(link)?,
+        Ok(_) => {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::AlreadyExists,
+                format!(
+                    "--link {}: exists and is not a symbolic link",
+                    link.display()
+                ),
+            ))
+        }
+        Err(_) => {}
+    }
+    std::os::unix::fs::symlink(target, link)
+        .map_err(|e| std::io::Error::new(e.kind(), format!("--link {}: {e}", link.display())))
+}
+
+fn cmd_emulate(args: EmulateArgs) -> ExitCode {
+    let cfg = EmulatorConfig {
+        model: args.model,
+        sim_rate_hz: args.sim_rate,
+        initial_arm: args.initial_arm,
+        initial_pendulum: args.initial_pendulum,
+        hold_until_enabled: !args.no_hold,
+        command_timeout_s: args.command_timeout,
+        noise_counts: args.noise,
+        drop_rate: args.drop_rate,
+        corrupt_rate: args.corrupt_rate,
+        vanish_after_s: args.vanish_after,
+        seed: args.seed,
+        duration_s: args.duration,
+        record: args.record,
+        ..EmulatorConfig::default()
+    };
+    if let Err(e) = cfg.validate() {
+        return fail(exit_code::USAGE, e);
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [libc::SIGINT, libc::SIGTERM] {
+        if let Err(e) = signal_hook::flag::register(sig, Arc::clone(&stop)) {
+            return fail(
+                exit_code::SETUP,
+                format!("cannot install signal handler: {e}"),
+            );
+        }
+    }
+    let pty = match Pty::open() {
+        Ok(p) => p,
+        Err(e) => {
+            return fail(
+                exit_code::SETUP,
+                format!("cannot open a pseudo-terminal: {e}"),
+            )
+        }
+    };
+    if let Some(link) = &args.link {
+        if let Err(e) = make_link(link, pty.path()) {
+            return fail(exit_code::SETUP, e);
+        }
+    }
+    println!("device: {}", pty.path().display());
+    if let Some(link) = &args.link {
+        println!("link: {}", link.display());
+    }
+    let _ = std::io::stdout().flush();
+    let result = emulator::run(cfg, pty, &stop);
+    if let Some(link) = &args.link {
+        let _ = std::fs::remove_file(link);
+    }
+    match result {
+        Ok(EmulatorExit::Vanished) => {
+            eprintln!("rip-rt emulate: device vanished (injected fault)");
+            ExitCode::SUCCESS
+        }
+        Ok(EmulatorExit::Stopped) | Ok(EmulatorExit::Finished) => ExitCode::SUCCESS,
+        Err(e) => fail(exit_code::SETUP, format!("emulator: {e}")),
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Run(args) => cmd_run(args),
+        Command::Emulate(args) => cmd_emulate(args),
+    }
+}

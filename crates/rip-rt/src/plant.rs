@@ -1,0 +1,44 @@
+//! The emulator's physics: rip-core's nonlinear Furuta pendulum, integrated with RK4.
+
+use rip_core::plant::{Plant, State};
+
+/// Which physical parameter set the emulator simulates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Model {
+    /// Parameters fitted to the paper's linear model (the controllers' design model).
+    #[default]
+    Paper,
+    /// The Quanser QUBE-Servo 2 published parameters (a model mismatch for the paper's gains).
+    QubeServo2,
+}
+
+/// A simulated pendulum: the nonlinear plant and its state.
+#[derive(Debug, Clone)]
+pub struct PlantSim {
+    plant: Plant,
+    x: State,
+}
+
+impl PlantSim {
+    /// The `model` plant at rest at arm angle `theta` and pendulum angle `alpha` (0 = upright).
+    pub fn new(model: Model, theta: f64, alpha: f64) -> Self {
+        let plant = match model {
+            Model::Paper => Plant::paper(),
+            Model::QubeServo2 => Plant::qube_servo2(),
+        };
+        Self {
+            plant,
+            x: State::new(theta, 0.0, alpha, 0.0),
+        }
+    }
+
+    /// Advances by `dt` seconds with the motor voltage `u` held (one RK4 step).
+    pub fn step(&mut self, u: f64, dt: f64) {
+        self.plant.advance(&mut self.x, u, 0.0, dt, 1);
+    }
+
+    /// `[θ, θ̇, α, α̇]`.
+    pub fn state(&self) -> [f64; 4] {
+        [self.x[0], self.x[1], self.x[2], self.x[3]]
+    }
+}

@@ -1,0 +1,396 @@
+//! Wire protocol v1 between the PC (host) and the pendulum's microcontroller (device).
+//!
+//! The byte-level specification lives in `docs/protocol.md`; this module is its reference
+//! implementation. Every frame is
+//!
+//! ```text
+//! offset  size  field
+//! 0       1     sync 0xA5
+//! 1       1     sync 0x5A
+//! 2       1     protocol version (1)
+//! 3       1     message type
+//! 4       2     sequence number, u16 little-endian (each side counts its own frames)
+//! 6       1     payload length n (≤ MAX_PAYLOAD)
+//! 7       n     payload
+//! 7+n     2     CRC-16/CCITT-FALSE of bytes 2 .. 7+n, u16 little-endian
+//! ```
+//!
+//! All multi-byte fields are little-endian. Encoding and decoding never allocate, and the
+//! streaming [`Parser`] accepts any byte sequence without panicking: it skips garbage, rejects
+//! frames whose CRC, version, type or length is wrong, and resynchronises on the next sync
+//! pattern — including one that starts inside a rejected candidate frame.
+
+/// First sync byte.
+pub const SYNC0: u8 = 0xA5;
+/// Second sync byte.
+pub const SYNC1: u8 = 0x5A;
+/// Protocol version carried in every frame.
+pub const VERSION: u8 = 1;
+/// Bytes before the payload.
+pub const HEADER_LEN: usize = 7;
+/// Bytes after the payload (the CRC).
+pub const TRAILER_LEN: usize = 2;
+/// Largest payload a v1 parser accepts; longer length fields are treated as corruption.
+pub const MAX_PAYLOAD: usize = 32;
+/// Largest frame on the wire.
+pub const MAX_FRAME: usize = HEADER_LEN + MAX_PAYLOAD + TRAILER_LEN;
+
+/// Message type of a [`Measurement`] (device → host).
+pub const TYPE_MEASUREMENT: u8 = 0x01;
+/// Message type of a [`Command`] (host → device).
+pub const TYPE_COMMAND: u8 = 0x02;
+/// Message type of a sample request (host → device, empty payload).
+pub const TYPE_SAMPLE_REQUEST: u8 = 0x03;
+
+/// Payload length of a measurement.
+pub const MEASUREMENT_LEN: usize = 17;
+/// Payload length of a command.
+pub const COMMAND_LEN: usize = 3;
+
+/// Device status bit: the motor driver is enabled and applying the commanded voltage.
+pub const STATUS_ENABLED: u8 = 1 << 0;
+/// Device status bit: the device's own watchdog zeroed the motor because commands stopped.
+pub const STATUS_WATCHDOG: u8 = 1 << 1;
+/// Device status bit: the device received a corrupt or unknown frame since its last report.
+pub const STATUS_RX_ERROR: u8 = 1 << 2;
+/// Device status bit: the motor driver reports a fault (over-current, over-temperature, ...).
+pub const STATUS_FAULT: u8 = 1 << 3;
+
+/// Command flag bit: enable the motor driver. Without it the device applies 0 V.
+pub const COMMAND_ENABLE: u8 = 1 << 0;
+
+/// Encoder readings and status, sampled by the device when it receives a sample request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Measurement {
+    /// Sequence number of the host frame (the sample request) this measurement answers.
+    pub ack_seq: u16,
+    /// Arm encoder, counts since power-up (multi-turn, signed).
+    pub arm_counts: i32,
+    /// Pendulum encoder, counts since power-up (multi-turn, signed).
+    pub pendulum_counts: i32,
+    /// Voltage the device is applying at the sampling instant, millivolts.
+    pub applied_mv: i16,
+    /// `STATUS_*` bits.
+    pub status: u8,
+    /// Device clock at the sampling instant, microseconds (wraps around).
+    pub device_time_us: u32,
+}
+
+/// Motor command from the host.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Command {
+    /// Motor voltage, millivolts.
+    pub voltage_mv: i16,
+    /// `COMMAND_*` bits.
+    pub flags: u8,
+}
+
+impl Command {
+    /// The stop command: 0 V with the driver disabled.
+    pub const STOP: Command = Command {
+        voltage_mv: 0,
+        flags: 0,
+    };
+
+    /// Whether the enable bit is set.
+    pub fn enabled(&self) -> bool {
+        self.flags & COMMAND_ENABLE != 0
+    }
+}
+
+/// A decoded message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Message {
+    /// Device → host.
+    Measurement(Measurement),
+    /// Host → device.
+    Command(Command),
+    /// Host → device: sample the encoders now and answer with a [`Measurement`].
+    SampleRequest,
+}
+
+/// A decoded frame: the sender's sequence number and the message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Frame {
+    /// The sender's sequence number (wraps around).
+    pub seq: u16,
+    /// The message.
+    pub message: Message,
+}
+
+/// CRC-16/CCITT-FALSE: polynomial 0x1021, initial value 0xFFFF, no reflection, no final XOR
+/// (check value `crc16(b"123456789") == 0x29B1`).
+pub fn crc16(data: &[u8]) -> u16 {
+    let mut crc: u16 = 0xFFFF;
+    for &byte in data {
+        crc ^= (byte as u16) << 8;
+        for _ in 0..8 {
+            crc = if crc & 0x8000 != 0 {
+                (crc << 1) ^ 0x1021
+            } else {
+                crc << 1
+            };
+        }
+    }
+    crc
+}
+
+/// Writes `frame` into `out` and returns the number of bytes used.
+pub fn encode(frame: &Frame, out: &mut [u8; MAX_FRAME]) -> usize {
+    let (kind, len) = match frame.message {
+        Message::Measurement(m) => {
+            let p = &mut out[HEADER_LEN..HEADER_LEN + MEASUREMENT_LEN];
+            p[0..2].copy_from_slice(&m.ack_seq.to_le_bytes());
+            p[2..6].copy_from_slice(&m.arm_counts.to_le_bytes());
+            p[6..10].copy_from_slice(&m.pendulum_counts.to_le_bytes());
+            p[10..12].copy_from_slice(&m.applied_mv.to_le_bytes());
+            p[12] = m.status;
+            p[13..17].copy_from_slice(&m.device_time_us.to_le_bytes());
+            (TYPE_MEASUREMENT, MEASUREMENT_LEN)
+        }
+        Message::Command(c) => {
+            let p = &mut out[HEADER_LEN..HEADER_LEN + COMMAND_LEN];
+            p[0..2].copy_from_slice(&c.voltage_mv.to_le_bytes());
+            p[2] = c.flags;
+            (TYPE_COMMAND, COMMAND_LEN)
+        }
+        Message::SampleRequest => (TYPE_SAMPLE_REQUEST, 0),
+    };
+    out[0] = SYNC0;
+    out[1] = SYNC1;
+    out[2] = VERSION;
+    out[3] = kind;
+    out[4..6].copy_from_slice(&frame.seq.to_le_bytes());
+    out[6] = len as u8;
+    let end = HEADER_LEN + len;
+    let crc = crc16(&out[2..end]);
+    out[end..end + TRAILER_LEN].copy_from_slice(&crc.to_le_bytes());
+    end + TRAILER_LEN
+}
+
+/// Decodes the payload of a CRC-valid frame; `None` for an unknown type or a wrong length.
+fn decode_payload(kind: u8, p: &[u8]) -> Option<Message> {
+    let u16_at = |i: usize| u16::from_le_bytes([p[i], p[i + 1]]);
+    let i16_at = |i: usize| i16::from_le_bytes([p[i], p[i + 1]]);
+    let u32_at = |i: usize| u32::from_le_bytes([p[i], p[i + 1], p[i + 2], p[i + 3]]);
+    match (kind, p.len()) {
+        (TYPE_MEASUREMENT, MEASUREMENT_LEN) => Some(Message::Measurement(Measurement {
+            ack_seq: u16_at(0),
+            arm_counts: u32_at(2) as i32,
+            pendulum_counts: u32_at(6) as i32,
+            applied_mv: i16_at(10),
+            status: p[12],
+            device_time_us: u32_at(13),
+        })),
+        (TYPE_COMMAND, COMMAND_LEN) => Some(Message::Command(Command {
+            voltage_mv: i16_at(0),
+            flags: p[2],
+        })),
+        (TYPE_SAMPLE_REQUEST, 0) => Some(Message::SampleRequest),
+        _ => None,
+    }
+}
+
+/// Counters kept by the [`Parser`], for diagnostics and the run summary.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ParserStats {
+    /// Frames decoded.
+    pub frames: u64,
+    /// Bytes skipped while looking for a frame start.
+    pub skipped_bytes: u64,
+    /// Candidate frames whose CRC did not match.
+    pub crc_errors: u64,
+    /// Candidates with a wrong version or an oversized length field.
+    pub bad_headers: u64,
+    /// CRC-valid frames with an unknown type or a payload length that does not fit the type.
+    pub unknown_frames: u64,
+}
+
+impl ParserStats {
+    /// All rejected candidates and skipped bytes (anything that was not a good frame).
+    pub fn errors(&self) -> u64 {
+        self.crc_errors + self.bad_headers + self.unknown_frames
+    }
+}
+
+/// A streaming frame parser with a fixed buffer.
+///
+/// Feed bytes with [`push`](Self::push) and collect frames with [`poll`](Self::poll) until it
+/// returns `None`, or use [`feed`](Self::feed). After every `poll` that returns `None` the buffer
+/// holds at most one incomplete candidate frame, so it never overflows.
+#[derive(Debug, Clone)]
+pub struct Parser {
+    buf: [u8; MAX_FRAME],
+    len: usize,
+    stats: ParserStats,
+}
+
+impl Default for Parser {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Parser {
+    /// An empty parser.
+    pub fn new() -> Self {
+        Self {
+            buf: [0; MAX_FRAME],
+            len: 0,
+            stats: ParserStats::default(),
+        }
+    }
+
+    /// The counters so far.
+    pub fn stats(&self) -> ParserStats {
+        self.stats
+    }
+
+    /// Forgets any partial frame (the counters are kept).
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    /// Appends one byte. Call [`poll`](Self::poll) until it returns `None` before the next push.
+    pub fn push(&mut self, byte: u8) {
+        if self.len == self.buf.len() {
+            // Only reachable when the caller skipped `poll`: keep the newest bytes.
+            self.discard(1);
+        }
+        if self.len == 0 && byte != SYNC0 {
+            self.stats.skipped_bytes += 1;
+            return;
+        }
+        self.buf[self.len] = byte;
+        self.len += 1;
+    }
+
+    /// Pushes every byte of `data`, handing each decoded frame to `sink`.
+    pub fn feed(&mut self, data: &[u8], mut sink: impl FnMut(Frame)) {
+        for &byte in data {
+            self.push(byte);
+            while let Some(frame) = self.poll() {
+                sink(frame);
+            }
+        }
+    }
+
+    /// Returns the next complete frame in the buffer, if any.
+    pub fn poll(&mut self) -> Option<Frame> {
+        loop {
+            if self.len == 0 {
+                return None;
+            }
+            if self.buf[0] != SYNC0 {
+                self.resync();
+                continue;
+            }
+            if self.len >= 2 && self.buf[1] != SYNC1 {
+                self.resync();
+                continue;
+            }
+            if self.len >= 3 && self.buf[2] != VERSION {
+                self.stats.bad_headers += 1;
+                self.resync();
+                continue;
+            }
+            if self.len < HEADER_LEN {
+                return None;
+            }
+            let payload_len = self.buf[6] as usize;
+            if payload_len > MAX_PAYLOAD {
+                self.stats.bad_headers += 1;
+                self.resync();
+                continue;
+            }
+            let total = HEADER_LEN + payload_len + TRAILER_LEN;
+            if self.len < total {
+                return None;
+            }
+            let end = HEADER_LEN + payload_len;
+            let crc = u16::from_le_bytes([self.buf[end], self.buf[end + 1]]);
+            if crc16(&self.buf[2..end]) != crc {
+                self.stats.crc_errors += 1;
+                self.resync();
+                continue;
+            }
+            let seq = u16::from_le_bytes([self.buf[4], self.buf[5]]);
+            let decoded = decode_payload(self.buf[3], &self.buf[HEADER_LEN..end]);
+            // A CRC-valid frame is consumed whole even when it is not understood: its bytes are
+            // not a plausible place for another frame to start.
+            self.discard(total);
+            match decoded {
+                Some(message) => {
+                    self.stats.frames += 1;
+                    return Some(Frame { seq, message });
+                }
+                None => self.stats.unknown_frames += 1,
+            }
+        }
+    }
+
+    /// Drops the first buffered byte and everything up to the next possible frame start.
+    fn resync(&mut self) {
+        let next = self.buf[1..self.len]
+            .iter()
+            .position(|&b| b == SYNC0)
+            .map_or(self.len, |i| i + 1);
+        self.stats.skipped_bytes += next as u64;
+        self.discard(next);
+    }
+
+    fn discard(&mut self, n: usize) {
+        let n = n.min(self.len);
+        self.buf.copy_within(n..self.len, 0);
+        self.len -= n;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crc_check_value() {
+        assert_eq!(crc16(b"123456789"), 0x29B1);
+    }
+
+    #[test]
+    fn command_frame_bytes_are_as_documented() {
+        let mut out = [0u8; MAX_FRAME];
+        let n = encode(
+            &Frame {
+                seq: 0x0102,
+                message: Message::Command(Command {
+                    voltage_mv: -1500,
+                    flags: COMMAND_ENABLE,
+                }),
+            },
+            &mut out,
+        );
+        // -1500 = 0xFA24; the CRC is over 01 02 02 01 03 24 FA 01.
+        let body = [0x01, 0x02, 0x02, 0x01, 0x03, 0x24, 0xFA, 0x01];
+        let crc = crc16(&body).to_le_bytes();
+        let expected = [
+            0xA5, 0x5A, 0x01, 0x02, 0x02, 0x01, 0x03, 0x24, 0xFA, 0x01, crc[0], crc[1],
+        ];
+        assert_eq!(&out[..n], &expected);
+    }
+
+    #[test]
+    fn parser_skips_garbage_and_decodes() {
+        let mut out = [0u8; MAX_FRAME];
+        let frame = Frame {
+            seq: 7,
+            message: Message::SampleRequest,
+        };
+        let n = encode(&frame, &mut out);
+        let mut stream = vec![0x00, 0xA5, 0xA5, 0x13, 0x5A];
+        stream.extend_from_slice(&out[..n]);
+        let mut got = Vec::new();
+        let mut parser = Parser::new();
+        parser.feed(&stream, |f| got.push(f));
+        assert_eq!(got, vec![frame]);
+        assert_eq!(parser.stats().skipped_bytes, 5);
+    }
+}

@@ -1,0 +1,370 @@
+//! End to end: `rip-rt emulate` on a pseudo-terminal and `rip-rt run` against it, for a few
+//! seconds each, checking the closed-loop behaviour, the fault handling and the exit codes.
+//! Timing figures are printed by the runner but not asserted.
+
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_rip-rt");
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("rip-rt-e2e-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+/// A running emulator; killed (SIGTERM) on drop.
+struct Emulator {
+    child: Child,
+    device: PathBuf,
+    record: PathBuf,
+}
+
+impl Emulator {
+    fn start(name: &str, extra: &[&str]) -> Self {
+        let record = scratch(&format!("{name}-record.csv"));
+        let mut child = Command::new(BIN)
+            .arg("emulate")
+            .arg("--record")
+            .arg(&record)
+            .args(extra)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawn emulator");
+        let mut line = String::new();
+        BufReader::new(child.stdout.as_mut().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let device = PathBuf::from(
+            line.trim()
+                .strip_prefix("device: ")
+                .unwrap_or_else(|| panic!("unexpected emulator output {line:?}")),
+        );
+        assert!(device.exists(), "{device:?}");
+        Emulator {
+            child,
+            device,
+            record,
+        }
+    }
+
+    /// The commands the device received: (voltage_mv, flags).
+    fn commands(&self) -> Vec<(i32, u8)> {
+        std::fs::read_to_string(&self.record)
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                (f[2].parse().unwrap(), f[3].parse().unwrap())
+            })
+            .collect()
+    }
+}
+
+impl Drop for Emulator {
+    fn drop(&mut self) {
+        unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
+        let _ = self.child.wait();
+    }
+}
+
+struct RunResult {
+    status: ExitStatus,
+    stderr: String,
+}
+
+fn wait_with_timeout(mut child: Child, timeout: Duration) -> RunResult {
+    let start = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            let mut stderr = String::new();
+            child
+                .stderr
+                .take()
+                .unwrap()
+                .read_to_string(&mut stderr)
+                .unwrap();
+            return RunResult { status, stderr };
+        }
+        if start.elapsed() > timeout {
+            let _ = child.kill();
+            panic!("rip-rt run did not finish within {timeout:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn spawn_run(device: &Path, controller: &str, extra: &[&str]) -> Child {
+    Command::new(BIN)
+        .arg("run")
+        .arg("--port")
+        .arg(device)
+        .args(["--controller", controller])
+        .args(extra)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn run")
+}
+
+fn run(device: &Path, controller: &str, extra: &[&str]) -> RunResult {
+    wait_with_timeout(
+        spawn_run(device, controller, extra),
+        Duration::from_secs(30),
+    )
+}
+
+/// Log rows as maps column → value.
+struct Log {
+    columns: Vec<String>,
+    rows: Vec<Vec<f64>>,
+    comments: Vec<String>,
+}
+
+impl Log {
+    fn read(path: &Path) -> Log {
+        let text = std::fs::read_to_string(path).unwrap();
+        let mut columns = Vec::new();
+        let mut rows = Vec::new();
+        let mut comments = Vec::new();
+        for line in text.lines() {
+            if let Some(c) = line.strip_prefix("# ") {
+                comments.push(c.to_string());
+            } else if columns.is_empty() {
+                columns = line.split(',').map(str::to_string).collect();
+            } else {
+                rows.push(
+                    line.split(',')
+                        .map(|v| {
+                            if v.is_empty() {
+                                f64::NAN
+                            } else {
+                                v.parse().unwrap()
+                            }
+                        })
+                        .collect(),
+                );
+            }
+        }
+        Log {
+            columns,
+            rows,
+            comments,
+        }
+    }
+
+    fn col(&self, name: &str) -> Vec<f64> {
+        let i = self.columns.iter().position(|c| c == name).unwrap();
+        self.rows.iter().map(|r| r[i]).collect()
+    }
+}
+
+/// Balances for 4 s with the default step of the arm reference (0 → 1 rad at 1 s) and checks
+/// that the pendulum stayed up, the arm followed, and the device was left stopped.
+fn balance_and_track(controller: &str) {
+    let emu = Emulator::start(controller, &["--noise", "0.3", "--seed", "3"]);
+    let log_path = scratch(&format!("{controller}.csv"));
+    let r = run(
+        &emu.device,
+        controller,
+        &["--duration", "4", "--log", log_path.to_str().unwrap()],
+    );
+    assert_eq!(r.status.code(), Some(0), "{}", r.stderr);
+    assert!(r.stderr.contains("timing:"), "{}", r.stderr);
+    println!("{controller}: {}", r.stderr);
+    let log = Log::read(&log_path);
+    let t = log.col("t");
+    let alpha = log.col("alpha");
+    let theta = log.col("theta");
+    let reference = log.col("theta_ref");
+    assert!(t.len() >= 380, "only {} rows", t.len());
+    let max_alpha = alpha.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+    assert!(
+        max_alpha < 0.25,
+        "{controller}: pendulum swung to {max_alpha} rad"
+    );
+    // The step happened and the arm is near the reference for the last half second.
+    assert_eq!(reference.last(), Some(&1.0));
+    for (ti, th) in t.iter().zip(&theta) {
+        if *ti > 3.5 {
+            assert!(
+                (th - 1.0).abs() < 0.2,
+                "{controller}: arm at {th} rad at t = {ti}"
+            );
+        }
+    }
+    assert!(log.comments.iter().any(|c| c == "stop: finished"));
+    let commands = emu.commands();
+    assert!(commands.iter().any(|&(mv, f)| f == 1 && mv != 0));
+    assert_eq!(
+        commands.last(),
+        Some(&(0, 0)),
+        "last command must be 0 V, disabled"
+    );
+}
+
+#[test]
+fn lqr_balances_and_tracks_a_step() {
+    balance_and_track("lqr");
+}
+
+#[test]
+fn lqg_balances_and_tracks_a_step() {
+    balance_and_track("lqg");
+}
+
+#[cfg(feature = "mpc")]
+#[test]
+fn mpc_balances_and_tracks_a_step() {
+    balance_and_track("mpc");
+}
+
+#[test]
+fn corrupt_and_dropped_frames_are_survived() {
+    let emu = Emulator::start(
+        "corrupt",
+        &[
+            "--corrupt-rate",
+            "0.1",
+            "--drop-rate",
+            "0.03",
+            "--seed",
+            "7",
+        ],
+    );
+    let log_path = scratch("corrupt.csv");
+    let r = run(
+        &emu.device,
+        "lqr",
+        &["--duration", "3", "--log", log_path.to_str().unwrap()],
+    );
+    assert_eq!(r.status.code(), Some(0), "{}", r.stderr);
+    let log = Log::read(&log_path);
+    let link = log
+        .comments
+        .iter()
+        .find(|c| c.starts_with("link:"))
+        .unwrap();
+    let field = |name: &str| -> u64 {
+        link.split_whitespace()
+            .find_map(|kv| kv.strip_prefix(&format!("{name}=")))
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    assert!(field("crc_errors") > 0, "{link}");
+    assert!(field("skipped_bytes") > 0, "{link}");
+    assert!(field("missing_replies") > 0, "{link}");
+    let status = log.col("status");
+    assert!(
+        status.iter().any(|s| (*s as u32) & 0x100 != 0),
+        "no NO_REPLY row"
+    );
+    let max_alpha = log.col("alpha").iter().fold(0.0f64, |m, a| m.max(a.abs()));
+    assert!(max_alpha < 0.3, "pendulum swung to {max_alpha}");
+    assert_eq!(emu.commands().last(), Some(&(0, 0)));
+}
+
+#[test]
+fn vanished_device_is_a_safe_stop_with_exit_code_3() {
+    let emu = Emulator::start("vanish", &["--vanish-after", "1.0"]);
+    let r = run(&emu.device, "lqg", &["--duration", "10"]);
+    assert_eq!(r.status.code(), Some(3), "{}", r.stderr);
+    assert!(r.stderr.contains("device lost"), "{}", r.stderr);
+    // The device is gone, so the stop cannot be delivered: the message must say so.
+    assert!(
+        r.stderr.contains("watchdog must stop the motor"),
+        "{}",
+        r.stderr
+    );
+}
+
+#[test]
+fn sigint_leaves_zero_volts_as_the_last_command() {
+    let emu = Emulator::start("sigint", &["--noise", "0.3"]);
+    let child = spawn_run(&emu.device, "lqr", &[]);
+    std::thread::sleep(Duration::from_millis(1500));
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let r = wait_with_timeout(child, Duration::from_secs(10));
+    assert_eq!(r.status.code(), Some(130), "{}", r.stderr);
+    assert!(r.stderr.contains("SIGINT"), "{}", r.stderr);
+    let commands = emu.commands();
+    assert!(
+        commands.iter().any(|&(mv, f)| f == 1 && mv != 0),
+        "never balanced"
+    );
+    assert_eq!(commands.last(), Some(&(0, 0)));
+}
+
+#[test]
+fn refuses_to_balance_a_hanging_pendulum() {
+    let emu = Emulator::start("upright", &["--initial-pendulum", "1.0"]);
+    let r = run(&emu.device, "lqr", &["--duration", "2"]);
+    assert_eq!(r.status.code(), Some(6), "{}", r.stderr);
+    assert!(r.stderr.contains("refusing to balance"), "{}", r.stderr);
+    let commands = emu.commands();
+    assert!(commands.iter().all(|&(_, f)| f == 0), "motor was enabled");
+}
+
+#[test]
+fn silent_device_trips_the_watchdog() {
+    let emu = Emulator::start("watchdog", &["--drop-rate", "1"]);
+    let r = run(&emu.device, "lqr", &["--duration", "2"]);
+    assert_eq!(r.status.code(), Some(4), "{}", r.stderr);
+    assert!(r.stderr.contains("watchdog"), "{}", r.stderr);
+    assert!(emu.commands().iter().all(|&(_, f)| f == 0));
+}
+
+#[test]
+fn a_falling_pendulum_hits_the_angle_limit() {
+    // 0.05 V cannot hold the pendulum: it falls and the limit stops the motor.
+    let cfg = scratch("weak.toml");
+    std::fs::write(&cfg, "[safety]\nvoltage_limit = 0.05\n").unwrap();
+    let emu = Emulator::start("limit", &["--initial-pendulum", "0.1"]);
+    let r = run(
+        &emu.device,
+        "lqr",
+        &["--duration", "5", "--config", cfg.to_str().unwrap()],
+    );
+    assert_eq!(r.status.code(), Some(5), "{}", r.stderr);
+    assert!(r.stderr.contains("pendulum angle limit"), "{}", r.stderr);
+    assert_eq!(emu.commands().last(), Some(&(0, 0)));
+}
+
+#[test]
+fn bad_configuration_and_arguments_exit_2_naming_the_key() {
+    let cfg = scratch("bad.toml");
+    std::fs::write(&cfg, "[safety]\npendulum_limit = 9\n").unwrap();
+    let r = run(
+        Path::new("/nonexistent"),
+        "lqr",
+        &["--config", cfg.to_str().unwrap()],
+    );
+    assert_eq!(r.status.code(), Some(2));
+    assert!(r.stderr.contains("safety.pendulum_limit"), "{}", r.stderr);
+
+    std::fs::write(&cfg, "[loop]\nperiod = 5\n").unwrap();
+    let r = run(
+        Path::new("/nonexistent"),
+        "lqr",
+        &["--config", cfg.to_str().unwrap()],
+    );
+    assert_eq!(r.status.code(), Some(2));
+    assert!(r.stderr.contains("period"), "{}", r.stderr);
+
+    let r = run(Path::new("/nonexistent"), "pid", &[]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(r.stderr.contains("--controller"), "{}", r.stderr);
+
+    let r = run(Path::new("/nonexistent"), "lqr", &["--duration", "-1"]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(r.stderr.contains("--duration"), "{}", r.stderr);
+
+    let r = run(Path::new("/nonexistent/tty"), "lqr", &[]);
+    assert_eq!(r.status.code(), Some(1));
+    assert!(r.stderr.contains("--port /nonexistent/tty"), "{}", r.stderr);
+}

@@ -1,0 +1,367 @@
+//! Bindings for `rip_core::regulators`: `Lqr` and `Lqg`, and [`extract_controller`], which turns
+//! any controller object from Python into an owned `Box<dyn Controller>` for the simulator.
+
+use numpy::ndarray::Array1;
+use numpy::{IntoPyArray, PyArray1, PyArray2};
+use pyo3::exceptions::PyTypeError;
+use pyo3::prelude::*;
+use rip_core::regulators::DEFAULT_RATE_CUTOFF_HZ;
+use rip_core::{Controller, Lqg, Lqr};
+
+use crate::convert::mat_to_py;
+use crate::errors::IntoPyResult;
+use crate::plant::{matrix_arg, vector_arg};
+
+type Py1<'py> = Bound<'py, PyArray1<f64>>;
+type Py2<'py> = Bound<'py, PyArray2<f64>>;
+
+/// An owned copy of the Rust controller inside a Python controller object.
+///
+/// Each arm downcasts one controller pyclass and clones its inner controller, so the simulator
+/// runs on its own copy (and a batch on one copy per run). New controller classes add an arm.
+pub fn extract_controller(obj: &Bound<'_, PyAny>) -> PyResult<Box<dyn Controller>> {
+    if let Ok(c) = obj.downcast::<PyLqr>() {
+        return Ok(Box::new(c.borrow().inner.clone()));
+    }
+    if let Ok(c) = obj.downcast::<PyLqg>() {
+        return Ok(Box::new(c.borrow().inner.clone()));
+    }
+    Err(PyTypeError::new_err(format!(
+        "controller must be a riprs controller (Lqr, Lqg), got {}",
+        obj.get_type().name()?
+    )))
+}
+
+/// Runs one `Controller::step` on array-like `y`, `r` and returns `u` as an array.
+fn step_py<'py>(
+    py: Python<'py>,
+    c: &mut dyn Controller,
+    y: &Bound<'py, PyAny>,
+    r: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Py1<'py>> {
+    let y = vector_arg::<2>(y, "y")?;
+    let r = match r {
+        Some(r) if !r.is_none() => vector_arg::<2>(r, "r")?,
+        _ => [0.0; 2],
+    };
+    let mut u = [0.0];
+    c.step(&y, &r, &mut u);
+    Ok(Array1::from_vec(u.to_vec()).into_pyarray(py))
+}
+
+fn estimate_py<'py>(py: Python<'py>, c: &dyn Controller) -> Option<Py1<'py>> {
+    c.state_estimate()
+        .map(|s| Array1::from_vec(s.to_vec()).into_pyarray(py))
+}
+
+/// LQR as the paper uses it: measured angles, rates from a filtered difference, no estimator.
+///
+/// Each sample, with :math:`a = e^{-2\pi f_c T_s}`, the rate of each angle :math:`q` is
+///
+/// .. math::
+///
+///     \hat{\dot q}[k] = a\,\hat{\dot q}[k-1] + (1 - a)\,\frac{q[k] - q[k-1]}{T_s}
+///
+/// (zero on the first sample), :math:`\hat x = [\theta, \hat{\dot\theta}, \alpha,
+/// \hat{\dot\alpha}]` and
+///
+/// .. math::
+///
+///     u = \mathrm{sat}\big(-K(\hat x - x_{ref})\big), \qquad
+///     x_{ref} = [r_\theta, 0, r_\alpha, 0].
+///
+/// Parameters
+/// ----------
+/// K : array_like, shape (1, 4)
+///     State-feedback gain (``u = -K x``), e.g. from :func:`riprs.dlqr`.
+/// Ts : float
+///     Sample time (s).
+/// rate_cutoff : float
+///     Cut-off frequency of the rate filter (Hz); ``inf`` for the plain difference.
+/// u_min, u_max : float
+///     Input bounds (V).
+#[pyclass(name = "Lqr", module = "riprs._riprs")]
+#[derive(Clone)]
+pub struct PyLqr {
+    inner: Lqr,
+}
+
+#[pymethods]
+impl PyLqr {
+    #[new]
+    #[pyo3(signature = (K, Ts=0.01, *, rate_cutoff=DEFAULT_RATE_CUTOFF_HZ, u_min=-12.0, u_max=12.0))]
+    #[allow(non_snake_case)]
+    fn new(
+        K: &Bound<'_, PyAny>,
+        Ts: f64,
+        rate_cutoff: f64,
+        u_min: f64,
+        u_max: f64,
+    ) -> PyResult<Self> {
+        let k = matrix_arg(K, "K", Some(1), Some(4))?;
+        let inner = Lqr::new(&k, Ts, rate_cutoff)
+            .and_then(|c| c.with_input_bounds(u_min, u_max))
+            .py()?;
+        Ok(Self { inner })
+    }
+
+    /// Design ``K = dlqr(A, B, Q, R)`` and build the regulator.
+    ///
+    /// Parameters
+    /// ----------
+    /// A : array_like, shape (4, 4)
+    /// B : array_like, shape (4, 1)
+    /// Q : array_like, shape (4, 4)
+    /// R : array_like, shape (1, 1)
+    /// Ts, rate_cutoff, u_min, u_max
+    ///     As for the constructor.
+    #[staticmethod]
+    #[pyo3(signature = (A, B, Q, R, Ts=0.01, *, rate_cutoff=DEFAULT_RATE_CUTOFF_HZ, u_min=-12.0, u_max=12.0))]
+    #[allow(non_snake_case, clippy::too_many_arguments)]
+    fn design(
+        py: Python<'_>,
+        A: &Bound<'_, PyAny>,
+        B: &Bound<'_, PyAny>,
+        Q: &Bound<'_, PyAny>,
+        R: &Bound<'_, PyAny>,
+        Ts: f64,
+        rate_cutoff: f64,
+        u_min: f64,
+        u_max: f64,
+    ) -> PyResult<Self> {
+        let a = matrix_arg(A, "A", Some(4), Some(4))?;
+        let b = matrix_arg(B, "B", Some(4), Some(1))?;
+        let q = matrix_arg(Q, "Q", Some(4), Some(4))?;
+        let r = matrix_arg(R, "R", Some(1), Some(1))?;
+        let inner = py
+            .allow_threads(|| Lqr::design(&a, &b, &q, &r, Ts, rate_cutoff))
+            .and_then(|c| c.with_input_bounds(u_min, u_max))
+            .py()?;
+        Ok(Self { inner })
+    }
+
+    /// The paper's LQR: eq. (13) weights on its model, ``Ts = 0.01``, default filter, +-12 V.
+    #[staticmethod]
+    fn paper() -> PyResult<Self> {
+        Ok(Self {
+            inner: Lqr::paper().py()?,
+        })
+    }
+
+    /// Compute the input for measured angles ``y = [theta, alpha]`` and reference ``r``.
+    ///
+    /// Parameters
+    /// ----------
+    /// y : array_like, shape (2,)
+    /// r : array_like, shape (2,), optional
+    ///     Reference ``[theta_ref, alpha_ref]``; zero by default.
+    ///
+    /// Returns
+    /// -------
+    /// u : ndarray, shape (1,)
+    #[pyo3(signature = (y, r=None))]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        y: &Bound<'py, PyAny>,
+        r: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Py1<'py>> {
+        step_py(py, &mut self.inner, y, r)
+    }
+
+    /// Forget the previous measurement and the filtered rates.
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+
+    /// State-feedback gain (1x4).
+    #[getter(K)]
+    fn k<'py>(&self, py: Python<'py>) -> Py2<'py> {
+        mat_to_py(py, &self.inner.gain())
+    }
+
+    /// Sample time (s).
+    #[getter(Ts)]
+    fn ts(&self) -> f64 {
+        self.inner.ts()
+    }
+
+    /// Rate-filter cut-off (Hz).
+    #[getter]
+    fn rate_cutoff(&self) -> f64 {
+        self.inner.rate_cutoff_hz()
+    }
+
+    /// Lower input bound (V).
+    #[getter]
+    fn u_min(&self) -> f64 {
+        self.inner.input_bounds().0
+    }
+
+    /// Upper input bound (V).
+    #[getter]
+    fn u_max(&self) -> f64 {
+        self.inner.input_bounds().1
+    }
+
+    /// The state used by the last step, ``[theta, rate, alpha, rate]``.
+    #[getter]
+    fn x_hat<'py>(&self, py: Python<'py>) -> Option<Py1<'py>> {
+        estimate_py(py, &self.inner)
+    }
+
+    fn __repr__(&self) -> String {
+        let k = self.inner.gain();
+        format!(
+            "Lqr(K=[{:.4}, {:.4}, {:.4}, {:.4}], Ts={}, rate_cutoff={})",
+            k[0],
+            k[1],
+            k[2],
+            k[3],
+            self.inner.ts(),
+            self.inner.rate_cutoff_hz()
+        )
+    }
+}
+
+/// LQG: the LQR gain on the steady-state Kalman filter's current estimate (paper eqs. (3)-(12)).
+///
+/// Each sample
+///
+/// .. math::
+///
+///     e[k] = y[k] - C\hat x[k|k-1], \quad \hat x[k|k] = \hat x[k|k-1] + M e[k],
+///
+///     u[k] = \mathrm{sat}\big(-K(\hat x_p[k|k] - x_{ref})\big), \quad
+///     \hat x[k+1|k] = A\hat x[k|k-1] + B u[k] + L e[k],
+///
+/// where :math:`\hat x_p` are the first four (plant) states; further states (the paper's output
+/// disturbance) are estimated but not fed back.
+///
+/// Parameters
+/// ----------
+/// K : array_like, shape (1, 4)
+/// A : array_like, shape (n, n)
+///     Estimator model, ``n >= 4``, plant states first.
+/// B : array_like, shape (n, 1)
+///     Input column used for prediction (unscaled).
+/// C : array_like, shape (2, n)
+/// L, M : array_like, shape (n, 2)
+///     Predictor and innovation gains, e.g. from :func:`riprs.kalman`.
+/// Ts : float
+/// u_min, u_max : float
+#[pyclass(name = "Lqg", module = "riprs._riprs")]
+#[derive(Clone)]
+pub struct PyLqg {
+    inner: Lqg,
+}
+
+#[pymethods]
+impl PyLqg {
+    #[new]
+    #[pyo3(signature = (K, A, B, C, L, M, Ts=0.01, *, u_min=-12.0, u_max=12.0))]
+    #[allow(non_snake_case, clippy::too_many_arguments)]
+    fn new(
+        K: &Bound<'_, PyAny>,
+        A: &Bound<'_, PyAny>,
+        B: &Bound<'_, PyAny>,
+        C: &Bound<'_, PyAny>,
+        L: &Bound<'_, PyAny>,
+        M: &Bound<'_, PyAny>,
+        Ts: f64,
+        u_min: f64,
+        u_max: f64,
+    ) -> PyResult<Self> {
+        let k = matrix_arg(K, "K", Some(1), Some(4))?;
+        let a = matrix_arg(A, "A", None, None)?;
+        let n = a.nrows();
+        let b = matrix_arg(B, "B", Some(n), Some(1))?;
+        let c = matrix_arg(C, "C", Some(2), Some(n))?;
+        let l = matrix_arg(L, "L", Some(n), Some(2))?;
+        let m = matrix_arg(M, "M", Some(n), Some(2))?;
+        let inner = Lqg::new(&k, &a, &b, &c, &l, &m, Ts)
+            .and_then(|c| c.with_input_bounds(u_min, u_max))
+            .py()?;
+        Ok(Self { inner })
+    }
+
+    /// The paper's LQG: eq. (13) gain and the eq. (11) Kalman filter on the augmented model.
+    #[staticmethod]
+    fn paper() -> PyResult<Self> {
+        Ok(Self {
+            inner: Lqg::paper().py()?,
+        })
+    }
+
+    /// Compute the input for measured angles ``y`` and reference ``r`` (see :class:`Lqr`).
+    #[pyo3(signature = (y, r=None))]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        y: &Bound<'py, PyAny>,
+        r: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Py1<'py>> {
+        step_py(py, &mut self.inner, y, r)
+    }
+
+    /// Restart the estimator from zero.
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+
+    /// State-feedback gain (1x4).
+    #[getter(K)]
+    fn k<'py>(&self, py: Python<'py>) -> Py2<'py> {
+        mat_to_py(py, &self.inner.gain())
+    }
+
+    /// Predictor gain L (n x 2).
+    #[getter(L)]
+    fn l<'py>(&self, py: Python<'py>) -> Py2<'py> {
+        mat_to_py(py, self.inner.predictor_gain())
+    }
+
+    /// Innovation gain M (n x 2).
+    #[getter(M)]
+    fn m<'py>(&self, py: Python<'py>) -> Py2<'py> {
+        mat_to_py(py, self.inner.innovation_gain())
+    }
+
+    /// Sample time (s).
+    #[getter(Ts)]
+    fn ts(&self) -> f64 {
+        self.inner.ts()
+    }
+
+    /// Lower input bound (V).
+    #[getter]
+    fn u_min(&self) -> f64 {
+        self.inner.input_bounds().0
+    }
+
+    /// Upper input bound (V).
+    #[getter]
+    fn u_max(&self) -> f64 {
+        self.inner.input_bounds().1
+    }
+
+    /// The current estimate x[k|k] (n,).
+    #[getter]
+    fn x_hat<'py>(&self, py: Python<'py>) -> Option<Py1<'py>> {
+        estimate_py(py, &self.inner)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Lqg(states={}, Ts={})",
+            self.inner.n_states(),
+            self.inner.ts()
+        )
+    }
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyLqr>()?;
+    m.add_class::<PyLqg>()?;
+    Ok(())
+}

@@ -1,0 +1,594 @@
+//! Bindings for `rip_core::plant` and `rip_core::fit`: `FurutaParams` and `Plant`, plus the
+//! array-like coercion the controller and simulator bindings share.
+
+use numpy::ndarray::{Array1, Array2};
+use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLikeDyn};
+use pyo3::exceptions::PyTypeError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use rip_core::fit::{fit_params, FitOptions};
+use rip_core::plant::PARAM_NAMES;
+use rip_core::{FurutaParams, Mat, Plant, RipError, State};
+
+use crate::convert::mat_to_py;
+use crate::errors::{to_py, IntoPyResult};
+
+type Py1<'py> = Bound<'py, PyArray1<f64>>;
+type Py2<'py> = Bound<'py, PyArray2<f64>>;
+
+/// Python names of the parameters, in `PARAM_NAMES` order (Quanser's spelling).
+const PY_NAMES: [&str; 12] = [
+    "Rm", "kt", "km", "mr", "Lr", "Jr", "mp", "Lp", "Jp", "Dr", "Dp", "g",
+];
+
+fn py_name(core: &str) -> String {
+    PARAM_NAMES
+        .iter()
+        .position(|n| *n == core)
+        .map_or_else(|| core.to_string(), |i| PY_NAMES[i].to_string())
+}
+
+/// Renames a parameter error from the core's field name to the Python keyword.
+fn param_err(err: RipError) -> PyErr {
+    match err {
+        RipError::InvalidParameter { name, reason } => to_py(RipError::InvalidParameter {
+            name: py_name(&name),
+            reason,
+        }),
+        other => to_py(other),
+    }
+}
+
+/// Any array-like of reals as `(shape, row-major values)`; the error names `name`.
+fn array_like(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<usize>, Vec<f64>)> {
+    let arr: PyArrayLikeDyn<'_, f64, AllowTypeChange> = obj.extract().map_err(|e| {
+        PyTypeError::new_err(format!("{name} must be an array of real numbers: {e}"))
+    })?;
+    let view = arr.as_array();
+    let values: Vec<f64> = view.iter().copied().collect();
+    if values.iter().any(|v| !v.is_finite()) {
+        return Err(to_py(RipError::NonFinite { name: name.into() }));
+    }
+    Ok((view.shape().to_vec(), values))
+}
+
+/// A matrix of the given shape from an array-like (a 1-D input counts as one row, a scalar as
+/// 1×1, as in python-control); `None` for a dimension accepts any size.
+pub(crate) fn matrix_arg(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    rows: Option<usize>,
+    cols: Option<usize>,
+) -> PyResult<Mat> {
+    let (shape, values) = array_like(obj, name)?;
+    let (r, c) = match shape.as_slice() {
+        [] => (1, 1),
+        [n] => (1, *n),
+        [r, c] => (*r, *c),
+        _ => {
+            return Err(to_py(RipError::Shape {
+                name: name.into(),
+                expected: "a 2-D array".into(),
+                rows: shape[0],
+                cols: shape[1..].iter().product(),
+            }))
+        }
+    };
+    if rows.is_some_and(|n| n != r) || cols.is_some_and(|n| n != c) {
+        let show = |d: Option<usize>| d.map_or("n".to_string(), |v| v.to_string());
+        return Err(to_py(RipError::Shape {
+            name: name.into(),
+            expected: format!("({}, {})", show(rows), show(cols)),
+            rows: r,
+            cols: c,
+        }));
+    }
+    Ok(Mat::from_row_slice(r, c, &values))
+}
+
+/// A vector of exactly `len` finite entries from a scalar or 1-D array-like.
+pub(crate) fn vector_arg<const N: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; N]> {
+    let (shape, values) = array_like(obj, name)?;
+    if shape.len() > 1 || values.len() != N {
+        let (rows, cols) = match shape.as_slice() {
+            [] => (1, 1),
+            [n] => (*n, 1),
+            s => (s[0], s[1..].iter().product()),
+        };
+        return Err(to_py(RipError::Shape {
+            name: name.into(),
+            expected: format!("({N},)"),
+            rows,
+            cols,
+        }));
+    }
+    let mut out = [0.0; N];
+    out.copy_from_slice(&values);
+    Ok(out)
+}
+
+fn finite_scalar(v: f64, name: &str) -> PyResult<f64> {
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(to_py(RipError::NonFinite { name: name.into() }))
+    }
+}
+
+fn state_arg(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<State> {
+    Ok(match obj {
+        Some(o) if !o.is_none() => State::from(vector_arg::<4>(o, name)?),
+        _ => State::zeros(),
+    })
+}
+
+fn state_to_py<'py>(py: Python<'py>, x: &State) -> Py1<'py> {
+    Array1::from_iter(x.iter().copied()).into_pyarray(py)
+}
+
+/// Physical parameters of a rotary inverted pendulum and its DC motor (SI units).
+///
+/// Both links are uniform rods pivoted at an end; ``Jr`` and ``Jp`` are inertias about each
+/// link's own centre of mass (the parallel-axis terms are added by the model). Keywords not
+/// given take the QUBE-Servo 2 values.
+///
+/// Parameters
+/// ----------
+/// Rm : float
+///     Motor resistance (Ohm), > 0.
+/// kt : float
+///     Motor torque constant (N m/A), > 0.
+/// km : float
+///     Back-EMF constant (V s/rad), >= 0.
+/// mr, Lr, Jr : float
+///     Arm mass (kg), length from the motor axis to the pendulum joint (m) and centroidal
+///     inertia (kg m^2), all > 0.
+/// mp, Lp, Jp : float
+///     Pendulum mass, length (centre of mass at ``Lp/2``) and centroidal inertia, all > 0.
+/// Dr, Dp : float
+///     Viscous friction of the arm and pendulum joints (N m s/rad), >= 0.
+/// g : float
+///     Gravitational acceleration (m/s^2), > 0.
+///
+/// Raises
+/// ------
+/// InvalidParameterError
+///     A value is out of range; the message names the parameter.
+#[pyclass(name = "FurutaParams", module = "riprs._riprs", frozen, eq)]
+#[derive(Clone, PartialEq)]
+pub struct PyFurutaParams {
+    pub(crate) inner: FurutaParams,
+}
+
+fn params_from_kwargs(
+    base: &FurutaParams,
+    kwargs: Option<&Bound<'_, PyDict>>,
+) -> PyResult<FurutaParams> {
+    let mut values = base.to_array();
+    if let Some(kw) = kwargs {
+        for (key, value) in kw.iter() {
+            let key: String = key.extract()?;
+            let Some(i) = PY_NAMES.iter().position(|n| *n == key) else {
+                return Err(PyTypeError::new_err(format!(
+                    "unknown parameter {key:?}; expected one of {}",
+                    PY_NAMES.join(", ")
+                )));
+            };
+            values[i] = value
+                .extract::<f64>()
+                .map_err(|_| PyTypeError::new_err(format!("{key} must be a real number")))?;
+        }
+    }
+    let params = FurutaParams::from_array(values);
+    params.validate().map_err(param_err)?;
+    Ok(params)
+}
+
+#[pymethods]
+impl PyFurutaParams {
+    #[new]
+    #[pyo3(signature = (**kwargs))]
+    fn new(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        Ok(Self {
+            inner: params_from_kwargs(&FurutaParams::qube_servo2(), kwargs)?,
+        })
+    }
+
+    /// Quanser QUBE-Servo 2 (published values; see the ``riprs.plant`` module docs).
+    #[staticmethod]
+    fn qube_servo2() -> Self {
+        Self {
+            inner: FurutaParams::qube_servo2(),
+        }
+    }
+
+    /// Parameters fitted so that the upright linearisation, discretised at 0.01 s, reproduces the
+    /// paper's ``A_d``, ``B_d`` to their printed precision.
+    #[staticmethod]
+    fn paper() -> Self {
+        Self {
+            inner: FurutaParams::paper(),
+        }
+    }
+
+    /// A copy with some parameters replaced, e.g. ``p.replace(mp=0.03)``.
+    #[pyo3(signature = (**changes))]
+    fn replace(&self, changes: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        Ok(Self {
+            inner: params_from_kwargs(&self.inner, changes)?,
+        })
+    }
+
+    /// The parameters as a ``dict`` keyed by their Python names.
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        for (name, value) in PY_NAMES.iter().zip(self.inner.to_array()) {
+            d.set_item(name, value)?;
+        }
+        Ok(d)
+    }
+
+    /// Fit physical parameters to a discrete linear model.
+    ///
+    /// Finds the parameters whose linearisation about upright, discretised by zero-order hold at
+    /// ``Ts``, best reproduces ``(Ad, Bd)`` in the weighted least-squares sense
+    /// :math:`\min \sum_{ij} (W_{ij} (F(p) - [A_d\ B_d])_{ij})^2` (Levenberg-Marquardt on the
+    /// logarithms of the free parameters). A linear model determines only six combinations of the
+    /// parameters, so ``Rm``, ``kt``, ``km``, ``mr``, ``mp`` and ``g`` are held at the values of
+    /// ``base`` and ``Lr``, ``Lp``, ``Jr``, ``Jp``, ``Dr``, ``Dp`` are fitted.
+    ///
+    /// Parameters
+    /// ----------
+    /// Ad : array_like, shape (4, 4)
+    /// Bd : array_like, shape (4, 1) or (4,)
+    /// Ts : float
+    ///     Sample time of ``(Ad, Bd)`` (s).
+    /// base : FurutaParams, optional
+    ///     Fixed parameters and initial guess; QUBE-Servo 2 by default.
+    /// weights : array_like, shape (4, 5), optional
+    ///     Weight of each entry of ``[Ad Bd]``; by default the inverse magnitude of each entry of
+    ///     ``[Ad - I, Bd]`` (relative errors, floored at 1e-3 of the largest).
+    /// max_iter : int
+    ///     Iteration limit.
+    ///
+    /// Returns
+    /// -------
+    /// params : FurutaParams
+    ///     The fitted parameters.
+    /// report : dict
+    ///     ``Ad``, ``Bd`` of the fit, ``max_weighted_residual``, ``max_abs_residual``,
+    ///     ``rms_weighted_residual``, ``iterations``, ``converged``.
+    #[staticmethod]
+    #[pyo3(signature = (Ad, Bd, Ts, *, base=None, weights=None, max_iter=200))]
+    #[allow(non_snake_case)]
+    fn fit<'py>(
+        py: Python<'py>,
+        Ad: &Bound<'py, PyAny>,
+        Bd: &Bound<'py, PyAny>,
+        Ts: f64,
+        base: Option<PyFurutaParams>,
+        weights: Option<&Bound<'py, PyAny>>,
+        max_iter: usize,
+    ) -> PyResult<(Self, Bound<'py, PyDict>)> {
+        let ad = matrix_arg(Ad, "Ad", Some(4), Some(4))?;
+        let bd = match matrix_arg(Bd, "Bd", Some(4), Some(1)) {
+            Ok(b) => b,
+            Err(_) => Mat::from_column_slice(4, 1, &vector_arg::<4>(Bd, "Bd")?),
+        };
+        let weights = match weights {
+            Some(w) if !w.is_none() => Some(matrix_arg(w, "weights", Some(4), Some(5))?),
+            _ => None,
+        };
+        let options = FitOptions {
+            base: base.map_or_else(FurutaParams::qube_servo2, |b| b.inner),
+            weights,
+            max_iterations: max_iter,
+            ..Default::default()
+        };
+        let report = py
+            .allow_threads(|| fit_params(&ad, &bd, Ts, &options))
+            .map_err(param_err)?;
+        let d = PyDict::new(py);
+        d.set_item("Ad", mat_to_py(py, &report.ad))?;
+        d.set_item("Bd", mat_to_py(py, &report.bd))?;
+        d.set_item("max_weighted_residual", report.max_weighted_residual)?;
+        d.set_item("max_abs_residual", report.max_abs_residual)?;
+        d.set_item("rms_weighted_residual", report.rms_weighted_residual)?;
+        d.set_item("iterations", report.iterations)?;
+        d.set_item("converged", report.converged)?;
+        Ok((
+            Self {
+                inner: report.params,
+            },
+            d,
+        ))
+    }
+
+    #[getter(Rm)]
+    fn rm(&self) -> f64 {
+        self.inner.rm
+    }
+    #[getter]
+    fn kt(&self) -> f64 {
+        self.inner.kt
+    }
+    #[getter]
+    fn km(&self) -> f64 {
+        self.inner.km
+    }
+    #[getter]
+    fn mr(&self) -> f64 {
+        self.inner.mr
+    }
+    #[getter(Lr)]
+    fn lr(&self) -> f64 {
+        self.inner.lr
+    }
+    #[getter(Jr)]
+    fn jr(&self) -> f64 {
+        self.inner.jr
+    }
+    #[getter]
+    fn mp(&self) -> f64 {
+        self.inner.mp
+    }
+    #[getter(Lp)]
+    fn lp(&self) -> f64 {
+        self.inner.lp
+    }
+    #[getter(Jp)]
+    fn jp(&self) -> f64 {
+        self.inner.jp
+    }
+    #[getter(Dr)]
+    fn dr(&self) -> f64 {
+        self.inner.dr
+    }
+    #[getter(Dp)]
+    fn dp(&self) -> f64 {
+        self.inner.dp
+    }
+    #[getter]
+    fn g(&self) -> f64 {
+        self.inner.g
+    }
+
+    fn __repr__(&self) -> String {
+        let body: Vec<String> = PY_NAMES
+            .iter()
+            .zip(self.inner.to_array())
+            .map(|(n, v)| format!("{n}={v}"))
+            .collect();
+        format!("FurutaParams({})", body.join(", "))
+    }
+}
+
+/// The nonlinear Furuta pendulum driven by motor voltage.
+///
+/// State ``x = [theta, theta_dot, alpha, alpha_dot]``: arm angle, arm rate, pendulum angle
+/// (0 = upright, positive when leaning against positive arm rotation), pendulum rate; input:
+/// voltage ``u``; outputs ``[theta, alpha]``. The equations of motion are
+///
+/// .. math::
+///
+///     (J_0 + J_\alpha \sin^2\alpha)\ddot\theta - m_{12}\cos\alpha\,\ddot\alpha
+///       + 2J_\alpha\sin\alpha\cos\alpha\,\dot\theta\dot\alpha + m_{12}\sin\alpha\,\dot\alpha^2
+///       = \tau - D_r\dot\theta + \tau_d
+///
+///     -m_{12}\cos\alpha\,\ddot\theta + J_\alpha\ddot\alpha
+///       - J_\alpha\sin\alpha\cos\alpha\,\dot\theta^2 - G\sin\alpha = -D_p\dot\alpha
+///
+/// with :math:`J_0 = J_r + m_r L_r^2/4 + m_p L_r^2`, :math:`J_\alpha = J_p + m_p L_p^2/4`,
+/// :math:`m_{12} = m_p L_r L_p/2`, :math:`G = m_p g L_p/2` and the motor torque
+/// :math:`\tau = k_t (u - k_m\dot\theta)/R_m`.
+///
+/// Parameters
+/// ----------
+/// params : FurutaParams, optional
+///     QUBE-Servo 2 by default.
+#[pyclass(name = "Plant", module = "riprs._riprs", frozen)]
+#[derive(Clone)]
+pub struct PyPlant {
+    pub(crate) inner: Plant,
+}
+
+#[pymethods]
+impl PyPlant {
+    #[new]
+    #[pyo3(signature = (params=None))]
+    fn new(params: Option<PyFurutaParams>) -> PyResult<Self> {
+        let p = params.map_or_else(FurutaParams::qube_servo2, |p| p.inner);
+        Ok(Self {
+            inner: Plant::new(p).map_err(param_err)?,
+        })
+    }
+
+    /// The QUBE-Servo 2 plant.
+    #[staticmethod]
+    fn qube_servo2() -> Self {
+        Self {
+            inner: Plant::qube_servo2(),
+        }
+    }
+
+    /// The plant fitted to the paper's model (``FurutaParams.paper()``).
+    #[staticmethod]
+    fn paper() -> Self {
+        Self {
+            inner: Plant::paper(),
+        }
+    }
+
+    /// The physical parameters.
+    #[getter]
+    fn params(&self) -> PyFurutaParams {
+        PyFurutaParams {
+            inner: *self.inner.params(),
+        }
+    }
+
+    /// State derivative ``dx/dt = f(x, u, torque)``.
+    ///
+    /// Parameters
+    /// ----------
+    /// x : array_like, shape (4,)
+    /// u : float
+    ///     Motor voltage (V).
+    /// torque : float
+    ///     External torque on the arm (N m).
+    ///
+    /// Returns
+    /// -------
+    /// ndarray, shape (4,)
+    #[pyo3(signature = (x, u=0.0, torque=0.0))]
+    fn derivative<'py>(
+        &self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        u: f64,
+        torque: f64,
+    ) -> PyResult<Py1<'py>> {
+        let x = state_arg(Some(x), "x")?;
+        let (u, torque) = (finite_scalar(u, "u")?, finite_scalar(torque, "torque")?);
+        Ok(state_to_py(py, &self.inner.derivative(&x, u, torque)))
+    }
+
+    /// Advance the state by ``dt`` with ``substeps`` classical RK4 steps, ``u`` held.
+    ///
+    /// Returns
+    /// -------
+    /// ndarray, shape (4,)
+    ///     The state at ``t + dt``.
+    #[pyo3(signature = (x, u, dt, substeps=1, torque=0.0))]
+    fn step<'py>(
+        &self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        u: f64,
+        dt: f64,
+        substeps: usize,
+        torque: f64,
+    ) -> PyResult<Py1<'py>> {
+        let mut x = state_arg(Some(x), "x")?;
+        let (u, torque) = (finite_scalar(u, "u")?, finite_scalar(torque, "torque")?);
+        check_step(dt, substeps)?;
+        self.inner.advance(&mut x, u, torque, dt, substeps);
+        Ok(state_to_py(py, &x))
+    }
+
+    /// Open-loop trajectory under a zero-order-held input sequence (RK4).
+    ///
+    /// Parameters
+    /// ----------
+    /// x0 : array_like, shape (4,)
+    /// u : array_like, shape (N,)
+    ///     Voltage held over each interval of length ``dt``.
+    /// dt : float
+    /// substeps : int
+    ///     RK4 steps per interval.
+    ///
+    /// Returns
+    /// -------
+    /// ndarray, shape (N + 1, 4)
+    ///     States at ``0, dt, ..., N dt``.
+    #[pyo3(signature = (x0, u, dt, substeps=1))]
+    fn integrate<'py>(
+        &self,
+        py: Python<'py>,
+        x0: &Bound<'py, PyAny>,
+        u: &Bound<'py, PyAny>,
+        dt: f64,
+        substeps: usize,
+    ) -> PyResult<Py2<'py>> {
+        let x0 = state_arg(Some(x0), "x0")?;
+        let (shape, u) = array_like(u, "u")?;
+        if shape.len() > 1 {
+            return Err(to_py(RipError::Shape {
+                name: "u".into(),
+                expected: "(N,)".into(),
+                rows: shape[0],
+                cols: shape[1..].iter().product(),
+            }));
+        }
+        check_step(dt, substeps)?;
+        let plant = self.inner;
+        let traj = py.allow_threads(|| {
+            let mut out = Array2::<f64>::zeros((u.len() + 1, 4));
+            let mut x = x0;
+            for (k, &uk) in u.iter().enumerate() {
+                for i in 0..4 {
+                    out[[k, i]] = x[i];
+                }
+                plant.advance(&mut x, uk, 0.0, dt, substeps);
+            }
+            for i in 0..4 {
+                out[[u.len(), i]] = x[i];
+            }
+            out
+        });
+        Ok(traj.into_pyarray(py))
+    }
+
+    /// Total mechanical energy ``T + V`` (J), with ``V = G cos(alpha)``.
+    fn energy(&self, x: &Bound<'_, PyAny>) -> PyResult<f64> {
+        Ok(self.inner.energy(&state_arg(Some(x), "x")?))
+    }
+
+    /// Analytic Jacobians of ``f`` at ``(x, u)``: ``(A, B)`` with ``A = df/dx`` (4x4) and
+    /// ``B = df/du`` (4x1). ``x`` defaults to upright at rest.
+    #[pyo3(signature = (x=None, u=0.0))]
+    fn linearize<'py>(
+        &self,
+        py: Python<'py>,
+        x: Option<&Bound<'py, PyAny>>,
+        u: f64,
+    ) -> PyResult<(Py2<'py>, Py2<'py>)> {
+        let x = state_arg(x, "x")?;
+        let (a, b) = self.inner.linearize(&x, finite_scalar(u, "u")?);
+        Ok((
+            mat_to_py(py, &Mat::from_fn(4, 4, |i, j| a[(i, j)])),
+            mat_to_py(py, &Mat::from_fn(4, 1, |i, _| b[i])),
+        ))
+    }
+
+    /// Zero-order-hold discretisation (period ``Ts``) of :meth:`linearize`: ``(Ad, Bd)``.
+    #[pyo3(signature = (Ts, x=None, u=0.0))]
+    #[allow(non_snake_case)]
+    fn linearize_discrete<'py>(
+        &self,
+        py: Python<'py>,
+        Ts: f64,
+        x: Option<&Bound<'py, PyAny>>,
+        u: f64,
+    ) -> PyResult<(Py2<'py>, Py2<'py>)> {
+        let x = state_arg(x, "x")?;
+        let (ad, bd) = self
+            .inner
+            .linearize_discrete(&x, finite_scalar(u, "u")?, Ts)
+            .py()?;
+        Ok((mat_to_py(py, &ad), mat_to_py(py, &bd)))
+    }
+
+    fn __repr__(&self) -> String {
+        format!("Plant({})", self.params().__repr__())
+    }
+}
+
+fn check_step(dt: f64, substeps: usize) -> PyResult<()> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(to_py(RipError::invalid(
+            "dt",
+            format!("must be positive and finite, got {dt}"),
+        )));
+    }
+    if substeps == 0 {
+        return Err(to_py(RipError::invalid("substeps", "must be at least 1")));
+    }
+    Ok(())
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyFurutaParams>()?;
+    m.add_class::<PyPlant>()?;
+    Ok(())
+}

@@ -1,0 +1,163 @@
+//! Bindings for `rip_core::sim`: one closed-loop run and a parallel batch, both with the GIL
+//! released. The public wrappers (`riprs.simulate`, `riprs.simulate_batch`) coerce the
+//! arguments and pass them here as a configuration dict.
+
+use numpy::ndarray::{Array1, Array2};
+use numpy::IntoPyArray;
+use pyo3::exceptions::{PyKeyError, PyTypeError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+use rip_core::metrics::table1_rmse;
+use rip_core::sim::{Reference, SensorModel, StepDisturbance};
+use rip_core::{Controller, Plant, SimConfig, SimResult};
+
+use crate::control::extract_controller;
+use crate::errors::IntoPyResult;
+use crate::plant::{matrix_arg, vector_arg, PyPlant};
+
+fn item<'py>(d: &Bound<'py, PyDict>, key: &str) -> PyResult<Bound<'py, PyAny>> {
+    d.get_item(key)?
+        .ok_or_else(|| PyKeyError::new_err(format!("simulation config is missing {key:?}")))
+}
+
+fn opt_item<'py>(d: &Bound<'py, PyDict>, key: &str) -> PyResult<Option<Bound<'py, PyAny>>> {
+    Ok(d.get_item(key)?.filter(|v| !v.is_none()))
+}
+
+fn scalar<T: for<'a> FromPyObject<'a>>(d: &Bound<'_, PyDict>, key: &str) -> PyResult<T> {
+    item(d, key)?
+        .extract()
+        .map_err(|e| PyTypeError::new_err(format!("{key}: {e}")))
+}
+
+/// Builds the core configuration from the wrapper's dict.
+fn config_from_dict(d: &Bound<'_, PyDict>) -> PyResult<SimConfig> {
+    let reference = match opt_item(d, "reference_sequence")? {
+        Some(seq) => {
+            let m = matrix_arg(&seq, "reference", None, Some(2))?;
+            Reference::Sequence((0..m.nrows()).map(|i| [m[(i, 0)], m[(i, 1)]]).collect())
+        }
+        None => Reference::Step {
+            time: scalar(d, "reference_time")?,
+            value: vector_arg::<2>(&item(d, "reference_value")?, "reference")?,
+        },
+    };
+    let counts_per_rev = match opt_item(d, "encoder_counts")? {
+        Some(c) => Some(vector_arg::<2>(&c, "encoder_counts")?),
+        None => None,
+    };
+    let output_disturbance = match opt_item(d, "output_disturbance")? {
+        Some(v) => {
+            let (time, value): (f64, Bound<'_, PyAny>) = v.extract()?;
+            Some(StepDisturbance {
+                time,
+                value: vector_arg::<2>(&value, "output_disturbance")?,
+            })
+        }
+        None => None,
+    };
+    let torque_disturbance = match opt_item(d, "torque_disturbance")? {
+        Some(v) => {
+            let (time, value): (f64, f64) = v.extract()?;
+            Some(StepDisturbance { time, value })
+        }
+        None => None,
+    };
+    Ok(SimConfig {
+        duration: scalar(d, "duration")?,
+        ts: scalar(d, "Ts")?,
+        substeps: scalar(d, "substeps")?,
+        x0: vector_arg::<4>(&item(d, "x0")?, "x0")?,
+        reference,
+        sensor: SensorModel {
+            counts_per_rev,
+            noise_std: vector_arg::<2>(&item(d, "noise_std")?, "noise_std")?,
+        },
+        output_disturbance,
+        torque_disturbance,
+        u_limit: scalar(d, "u_limit")?,
+        fall_limit: scalar(d, "fall_limit")?,
+        seed: scalar(d, "seed")?,
+    })
+}
+
+fn rows<const N: usize>(v: &[[f64; N]]) -> Array2<f64> {
+    Array2::from_shape_fn((v.len(), N), |(i, j)| v[i][j])
+}
+
+fn result_to_dict<'py>(py: Python<'py>, res: SimResult) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let n = res.len();
+    d.set_item("rmse", table1_rmse(&res).to_vec())?;
+    d.set_item("t", Array1::from_vec(res.t).into_pyarray(py))?;
+    d.set_item("x", rows(&res.x).into_pyarray(py))?;
+    d.set_item("y", rows(&res.y).into_pyarray(py))?;
+    d.set_item("u", Array1::from_vec(res.u).into_pyarray(py))?;
+    d.set_item("r", rows(&res.r).into_pyarray(py))?;
+    if res.n_estimate > 0 {
+        let xh = Array2::from_shape_vec((n, res.n_estimate), res.x_hat)
+            .map_err(|e| PyTypeError::new_err(e.to_string()))?;
+        d.set_item("x_hat", xh.into_pyarray(py))?;
+    } else {
+        d.set_item("x_hat", py.None())?;
+    }
+    d.set_item(
+        "compute_time",
+        Array1::from_vec(res.compute_time).into_pyarray(py),
+    )?;
+    d.set_item("fell", res.fell)?;
+    d.set_item("fall_time", res.fall_time)?;
+    d.set_item("fallbacks", res.fallbacks)?;
+    d.set_item(
+        "x_final",
+        Array1::from_vec(res.x_final.to_vec()).into_pyarray(py),
+    )?;
+    Ok(d)
+}
+
+/// One closed-loop run; returns the record as a dict of numpy arrays.
+#[pyfunction]
+fn sim_run<'py>(
+    py: Python<'py>,
+    plant: PyRef<'py, PyPlant>,
+    controller: &Bound<'py, PyAny>,
+    config: &Bound<'py, PyDict>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let cfg = config_from_dict(config)?;
+    let plant: Plant = plant.inner;
+    let mut c = extract_controller(controller)?;
+    let res = py
+        .allow_threads(move || rip_core::simulate(&plant, c.as_mut(), &cfg))
+        .py()?;
+    result_to_dict(py, res)
+}
+
+/// Every (plant, seed) pair in parallel; results in plant-major order.
+#[pyfunction]
+fn sim_batch<'py>(
+    py: Python<'py>,
+    plants: Vec<PyRef<'py, PyPlant>>,
+    controller: &Bound<'py, PyAny>,
+    seeds: Vec<u64>,
+    config: &Bound<'py, PyDict>,
+) -> PyResult<Bound<'py, PyList>> {
+    let cfg = config_from_dict(config)?;
+    let plants: Vec<Plant> = plants.iter().map(|p| p.inner).collect();
+    let controllers = (0..plants.len() * seeds.len())
+        .map(|_| extract_controller(controller))
+        .collect::<PyResult<Vec<Box<dyn Controller>>>>()?;
+    let results = py
+        .allow_threads(move || rip_core::simulate_batch(&plants, &seeds, &cfg, controllers))
+        .py()?;
+    let list = PyList::empty(py);
+    for res in results {
+        list.append(result_to_dict(py, res)?)?;
+    }
+    Ok(list)
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(sim_run, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_batch, m)?)?;
+    Ok(())
+}

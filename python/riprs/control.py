@@ -1,0 +1,23 @@
+"""The paper's regulators, with one interface shared by every riprs controller.
+
+Every controller has ``step(y, r=None) -> u`` (measured angles ``y = [theta, alpha]``,
+reference ``r = [theta_ref, alpha_ref]``, input ``u`` as a length-1 array), ``reset()`` and the
+read-only attributes ``Ts``, ``u_min``, ``u_max`` and ``x_hat``. :func:`riprs.simulate` accepts
+any of them.
+
+:class:`Lqr`
+    The paper's LQR (section 4): angles measured, rates from a low-pass filtered difference, no
+    estimator, ``u = sat(-K (x_hat - x_ref))`` with ``x_ref = [r_theta, 0, r_alpha, 0]``.
+:class:`Lqg`
+    The same gain on the plant part of the steady-state Kalman filter's current estimate
+    ``x[k|k]`` (eqs. (3)-(12)); the output-disturbance state is estimated, not fed back.
+
+Both clamp their input to ``[u_min, u_max]`` (default +-12 V). ``Lqr.paper()`` and
+``Lqg.paper()`` build the study's designs.
+"""
+
+from __future__ import annotations
+
+from riprs._riprs import Lqg, Lqr
+
+__all__ = ["Lqg", "Lqr"]

@@ -1,0 +1,92 @@
+"""Figures like the paper's Figs. 9-11 (arm angle, pendulum angle, control voltage), and the
+Monte Carlo box plot. matplotlib runs headless (Agg) so the figures render on any machine."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["plot_comparison", "plot_monte_carlo", "plot_trajectories"]
+
+_COLORS = {"LQR": "tab:blue", "LQG": "tab:orange", "MPC": "tab:green"}
+_PANELS = (
+    ("arm_angle", "arm", "Arm angle (cf. Fig. 9)", "arm angle θ [rad]"),
+    ("pendulum_angle", "pendulum", "Pendulum angle (cf. Fig. 10)", "pendulum angle α [rad]"),
+    ("control_voltage", "voltage", "Control voltage (cf. Fig. 11)", "voltage u [V]"),
+)
+
+
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_trajectories(trajectories: Mapping[str, Any], quantity: str, ax: Any = None) -> Any:
+    """Draw one quantity (``"arm"``, ``"pendulum"`` or ``"voltage"``) of every run on one axes.
+
+    ``trajectories`` maps a label to a :class:`riprs.compare.Trajectory` (from a simulation or
+    a ``rip-rt`` log). Returns the axes.
+    """
+    plt = _pyplot()
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 3.6))
+    for i, (name, tr) in enumerate(trajectories.items()):
+        color = _COLORS.get(name, f"C{i}")
+        ax.plot(tr.t, getattr(tr, quantity), label=name, color=color, linewidth=1.1)
+    if quantity == "arm":
+        first = next(iter(trajectories.values()))
+        ax.plot(first.t, first.reference, "k--", linewidth=1.0, label="reference")
+    ax.set_xlabel("time [s]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=9)
+    return ax
+
+
+def plot_comparison(trajectories: Mapping[str, Any], out: Path) -> list[Path]:
+    """Write ``arm_angle``, ``pendulum_angle`` and ``control_voltage`` as PNG and SVG."""
+    plt = _pyplot()
+    files: list[Path] = []
+    for stem, quantity, title, ylabel in _PANELS:
+        fig, ax = plt.subplots(figsize=(8, 3.6), constrained_layout=True)
+        plot_trajectories(trajectories, quantity, ax)
+        ax.set_title(title)
+        ax.set_ylabel(ylabel)
+        for ext in ("png", "svg"):
+            path = out / f"{stem}.{ext}"
+            fig.savefig(path, dpi=120)
+            files.append(path)
+        plt.close(fig)
+    return files
+
+
+def plot_monte_carlo(mc: Any, out: Path) -> list[Path]:
+    """Box plots of each RMSE index over the Monte Carlo runs that stayed up."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, 3, figsize=(11, 3.6), constrained_layout=True)
+    names = list(mc.rmse)
+    for j, (ax, label) in enumerate(
+        zip(
+            axes,
+            ("arm angle RMSE [rad]", "pendulum angle RMSE [rad]", "voltage RMSE [V]"),
+            strict=True,
+        )
+    ):
+        data = [mc.rmse[n][~mc.fell[n], j] for n in names]
+        data = [d if len(d) else np.array([np.nan]) for d in data]
+        ax.boxplot(data, tick_labels=names)
+        ax.set_title(label)
+        ax.grid(True, axis="y", alpha=0.3)
+    files = []
+    for ext in ("png", "svg"):
+        path = out / f"monte_carlo.{ext}"
+        fig.savefig(path, dpi=120)
+        files.append(path)
+    plt.close(fig)
+    return files
