@@ -68,7 +68,7 @@ def run_numpy_rk4(f, lqr: riprs.Lqr) -> np.ndarray:
     ctrl = NumpyLqr(lqr.K, lqr.rate_cutoff)
     h = TS / SUBSTEPS
     x = X0.copy()
-    out = np.empty((int(round(DURATION / TS)), 4))
+    out = np.empty((round(DURATION / TS), 4))
     for k in range(out.shape[0]):
         out[k] = x
         u = ctrl.step(x[[0, 2]], reference(k))
@@ -84,7 +84,7 @@ def run_numpy_rk4(f, lqr: riprs.Lqr) -> np.ndarray:
 def run_solve_ivp(f, lqr: riprs.Lqr) -> np.ndarray:
     ctrl = NumpyLqr(lqr.K, lqr.rate_cutoff)
     x = X0.copy()
-    out = np.empty((int(round(DURATION / TS)), 4))
+    out = np.empty((round(DURATION / TS), 4))
     for k in range(out.shape[0]):
         out[k] = x
         u = ctrl.step(x[[0, 2]], reference(k))

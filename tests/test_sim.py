@@ -198,3 +198,17 @@ def test_bad_arguments_raise_naming_them() -> None:
         simulate_batch(plant, Lqr.paper(), [])
     with pytest.raises(TypeError, match="seeds"):
         simulate_batch(plant, Lqr.paper(), seed=3)
+
+
+def test_paired_batch_equals_individual_runs():
+    params = [riprs.FurutaParams.paper(), riprs.FurutaParams.paper().replace(mp=0.03)]
+    ctrl = riprs.Lqr.paper()
+    opts = {"noise_std": 1e-3, "x0": [0.0, 0.0, 0.05, 0.0], "reference": 1.0}
+    batch = riprs.simulate_batch(params, ctrl, [11, 12], 2.0, paired=True, **opts)
+    assert len(batch) == 2
+    for p, seed, got in zip(params, [11, 12], batch, strict=True):
+        ref = riprs.simulate(p, ctrl, 2.0, seed=seed, **opts)
+        np.testing.assert_array_equal(got.x, ref.x)
+        np.testing.assert_array_equal(got.u, ref.u)
+    with pytest.raises(ValueError, match="seeds"):
+        riprs.simulate_batch(params, ctrl, [1, 2, 3], 1.0, paired=True)

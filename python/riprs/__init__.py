@@ -22,6 +22,7 @@ from riprs._riprs import (
 from riprs.control import Lqg, Lqr
 from riprs.design import KalmanDesign, c2d, dare, dlqe, dlqr, kalman
 from riprs.log import RtLog, load_log
+from riprs.mpc import Mpc, MpcSolution
 from riprs.plant import FurutaParams, Plant
 from riprs.sim import SimResult, simulate, simulate_batch
 from riprs.statespace import StateSpace
@@ -32,6 +33,8 @@ __all__ = [
     "KalmanDesign",
     "Lqg",
     "Lqr",
+    "Mpc",
+    "MpcSolution",
     "NoStabilizingSolutionError",
     "NonFiniteError",
     "NotDetectableError",

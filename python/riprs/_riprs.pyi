@@ -1,6 +1,6 @@
 """Type stubs for the native module ``riprs._riprs`` (checked by ``mypy.stubtest``)."""
 
-from typing import Any, final
+from typing import Any, Sequence, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -199,5 +199,86 @@ class Lqg:
 
 def sim_run(plant: Plant, controller: Any, config: dict[str, Any]) -> dict[str, Any]: ...
 def sim_batch(
-    plants: list[Plant], controller: Any, seeds: list[int], config: dict[str, Any]
+    plants: list[Plant],
+    controller: Any,
+    seeds: list[int],
+    config: dict[str, Any],
+    paired: bool,
 ) -> list[dict[str, Any]]: ...
+
+@final
+class MpcSolution:
+    @property
+    def u(self) -> _F: ...
+    @property
+    def du(self) -> _F: ...
+    @property
+    def slack(self) -> float: ...
+    @property
+    def status(self) -> str: ...
+    @property
+    def fallback(self) -> bool: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def solve_time(self) -> float: ...
+    @property
+    def y_pred(self) -> _F | None: ...
+
+@final
+class Mpc:
+    def __new__(
+        cls,
+        A: ArrayLike,
+        B: ArrayLike,
+        C: ArrayLike,
+        Ts: float,
+        *,
+        prediction_horizon: int = 10,
+        control_horizon: int = 2,
+        output_weights: ArrayLike | None = None,
+        input_rate_weights: ArrayLike | None = None,
+        input_weights: ArrayLike | None = None,
+        input_target: ArrayLike | None = None,
+        input_bounds: Sequence[tuple[float | None, float | None] | None] | None = None,
+        output_bounds: Sequence[tuple[float | None, float | None] | None] | None = None,
+        ecr_weight: float = 100000.0,
+        input_scales: ArrayLike | None = None,
+        output_scales: ArrayLike | None = None,
+        output_disturbance: tuple[ArrayLike, ArrayLike, ArrayLike] | None = None,
+        measurement_noise: ArrayLike | None = None,
+        solver: str = "clarabel",
+        max_iterations: int = 200,
+    ) -> Mpc: ...
+    @staticmethod
+    def paper(solver: str = "clarabel") -> Mpc: ...
+    def solve(self, x: ArrayLike, u_prev: ArrayLike, r: ArrayLike | None = None) -> MpcSolution: ...
+    def step(self, y: ArrayLike, r: ArrayLike | None = None) -> _F: ...
+    def reset(self) -> None: ...
+    def qp_matrices(
+        self, x: ArrayLike, u_prev: ArrayLike, r: ArrayLike | None = None
+    ) -> tuple[_F, _F, _F, _F]: ...
+    @property
+    def last_solution(self) -> MpcSolution: ...
+    @property
+    def model(self) -> tuple[_F, _F, _F]: ...
+    @property
+    def L(self) -> _F: ...
+    @property
+    def M(self) -> _F: ...
+    @property
+    def Ts(self) -> float: ...
+    @property
+    def prediction_horizon(self) -> int: ...
+    @property
+    def control_horizon(self) -> int: ...
+    @property
+    def solver(self) -> str: ...
+    @property
+    def u_min(self) -> _F: ...
+    @property
+    def u_max(self) -> _F: ...
+    @property
+    def x_hat(self) -> _F | None: ...
+    @property
+    def u_prev(self) -> _F: ...

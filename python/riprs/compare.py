@@ -325,24 +325,17 @@ def format_table(
     runs: Mapping[str, SimResult] | None = None,
 ) -> str:
     """Tab. 1 layout: per controller, riprs's RMSE next to the paper's experimental value."""
-    head = (
-        f"{'controller':<11}{'arm angle [rad]':>22}{'pendulum angle [rad]':>24}"
-        f"{'voltage [V]':>20}\n{'':<11}"
-        + f"{'riprs':>11}{'paper':>11}" * 2
-        + f"{'riprs':>13}{'paper':>11}"
-        + f"{'riprs':>10}{'paper':>10}"[20:]
-    )
+    groups = ("arm angle [rad]", "pendulum angle [rad]", "voltage [V]")
     lines = [
         "Tab. 1: RMSE in simulation (riprs) and in the paper's experiment (paper)",
-        head,
+        f"{'':<11}" + "".join(f"{g:>22}" for g in groups),
+        f"{'controller':<11}" + f"{'riprs':>12}{'paper':>10}" * 3,
     ]
-    for name, (arm, pend, volt) in summary.items():
+    for name, values in summary.items():
         ref = paper.TABLE1.get(name, (float("nan"),) * 3)
         note = "  (fell)" if runs is not None and name in runs and runs[name].fell else ""
-        lines.append(
-            f"{name:<11}{arm:>11.3f}{ref[0]:>11.3f}{pend:>13.4f}{ref[1]:>11.3f}"
-            f"{volt:>10.3f}{ref[2]:>10.3f}{note}"
-        )
+        cells = "".join(f"{v:>12.4f}{p:>10.3f}" for v, p in zip(values, ref, strict=True))
+        lines.append(f"{name:<11}{cells}{note}")
     return "\n".join(lines)
 
 

@@ -274,6 +274,8 @@ def simulate_batch(
     controller: Any,
     seeds: Sequence[int] | int = 1,
     duration: float = 10.0,
+    *,
+    paired: bool = False,
     **options: Any,
 ) -> list[SimResult]:
     """Run many seeds and plant variants in parallel (Monte Carlo).
@@ -281,6 +283,8 @@ def simulate_batch(
     Every pair ``(plant, seed)`` is simulated, each with its own copy of ``controller``, on all
     cores (rayon) with the GIL released. The results come back in plant-major order:
     ``[(plants[0], seeds[0]), (plants[0], seeds[1]), ..., (plants[1], seeds[0]), ...]``.
+    With ``paired=True`` run ``i`` is ``(plants[i], seeds[i])`` instead (one fresh plant
+    variant and noise seed per run); both sequences must then have the same length.
 
     Parameters
     ----------
@@ -289,6 +293,8 @@ def simulate_batch(
     controller : Lqr, Lqg or another riprs controller
     seeds : int or sequence of int
         An int ``n`` means seeds ``0 .. n-1``.
+    paired : bool
+        Pair plants and seeds one to one instead of running every combination.
     duration : float
         Length of each run (s).
     **options
@@ -329,5 +335,5 @@ def simulate_batch(
     config = _config(duration=duration, seed=0, **{**defaults, **options})
     return [
         SimResult._from_native(d)
-        for d in _riprs.sim_batch(natives, controller, seed_list, config)
+        for d in _riprs.sim_batch(natives, controller, seed_list, config, paired)
     ]

@@ -26,7 +26,7 @@
 //!
 //! Levenberg–Marquardt on the logarithms of the free parameters (which keeps them positive),
 //! minimising `Σᵢⱼ (wᵢⱼ (F(p) − [A_d B_d])ᵢⱼ)²` with `F(p) = c2d(linearisation(p), Ts)`
-//! computed exactly by [`c2d`](crate::linalg::c2d) and its Jacobian by central differences.
+//! computed exactly by [`c2d`] and its Jacobian by central differences.
 //! The weights `w` default to the inverse magnitude of each entry of `[A_d − I, B_d]` (relative
 //! errors, floored at 10⁻³ of the largest entry); [`paper_weights`] weights each entry by half
 //! its last printed digit in the paper, which makes "residual ≤ 1" mean "rounds to the printed

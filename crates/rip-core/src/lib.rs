@@ -14,6 +14,8 @@
 //!   recovers physical parameters from a discrete linear model.
 //! - [`regulators`] — [`Lqr`] and [`Lqg`] behind the [`Controller`] trait; [`sim`] runs them in
 //!   closed loop ([`simulate`], [`simulate_batch`]); [`metrics`] computes the paper's Tab. 1.
+//! - [`mpc`] — constrained MPC with soft output bounds and the disturbance-model Kalman filter
+//!   ([`Mpc`]), solved by Clarabel or a dense active-set method.
 //!
 //! Every fallible routine returns [`RipError`], whose variants name the offending argument.
 
@@ -24,6 +26,7 @@ pub mod kalman;
 pub mod linalg;
 pub mod lqr;
 pub mod metrics;
+pub mod mpc;
 pub mod paper;
 pub mod plant;
 pub mod regulators;
@@ -34,6 +37,7 @@ pub use error::{Result, RipError};
 pub use kalman::{dlqe, kalman, CurrentEstimator, KalmanDesign};
 pub use linalg::{c2d, dare, DareSolution, Mat};
 pub use lqr::{dlqr, LqrDesign};
+pub use mpc::{Mpc, MpcSettings, QpSolver, QpStatus};
 pub use plant::{FurutaParams, Plant, State};
 pub use regulators::{Lqg, Lqr};
 pub use sim::{simulate, simulate_batch, SimConfig, SimResult};

@@ -422,15 +422,50 @@ pub fn simulate_batch(
         ));
     }
     let n_seeds = seeds.len();
+    let runs: Vec<(usize, u64)> = (0..runs)
+        .map(|i| (i / n_seeds, seeds[i % n_seeds]))
+        .collect();
+    simulate_runs(plants, &runs, config, controllers)
+}
+
+/// Runs an explicit list of `(plant index, seed)` pairs in parallel on all cores (rayon), one
+/// controller per run, results in the same order. Monte Carlo studies that draw a fresh plant
+/// variant *and* a fresh noise seed per run use this instead of [`simulate_batch`]'s product.
+pub fn simulate_runs(
+    plants: &[Plant],
+    runs: &[(usize, u64)],
+    config: &SimConfig,
+    controllers: Vec<Box<dyn Controller>>,
+) -> Result<Vec<SimResult>> {
+    config.validate()?;
+    if runs.is_empty() {
+        return Err(RipError::invalid("runs", "need at least one run"));
+    }
+    if let Some(&(bad, _)) = runs.iter().find(|(p, _)| *p >= plants.len()) {
+        return Err(RipError::invalid(
+            "runs",
+            format!("plant index {bad} out of range for {} plants", plants.len()),
+        ));
+    }
+    if controllers.len() != runs.len() {
+        return Err(RipError::invalid(
+            "controllers",
+            format!(
+                "need one per run ({}), got {}",
+                runs.len(),
+                controllers.len()
+            ),
+        ));
+    }
     controllers
         .into_par_iter()
-        .enumerate()
-        .map(|(i, mut controller)| {
+        .zip(runs.par_iter())
+        .map(|(mut controller, &(plant, seed))| {
             let cfg = SimConfig {
-                seed: seeds[i % n_seeds],
+                seed,
                 ..config.clone()
             };
-            simulate(&plants[i / n_seeds], controller.as_mut(), &cfg)
+            simulate(&plants[plant], controller.as_mut(), &cfg)
         })
         .collect()
 }

@@ -5,10 +5,11 @@
 use std::fmt;
 use std::str::FromStr;
 
+use rip_core::mpc::{Mpc, MpcSettings, OutputDisturbance, QpSolver};
 use rip_core::regulators::{Lqg, Lqr};
-use rip_core::{c2d, dlqr, kalman, paper, Controller, Mat};
+use rip_core::{c2d, dlqr, paper, Controller, Mat};
 
-use crate::config::Config;
+use crate::config::{BoundedOutput, Config};
 
 /// The controllers `rip-rt run --controller` accepts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -76,45 +77,21 @@ pub fn build(kind: ControllerKind, cfg: &Config) -> Result<Box<dyn Controller>, 
             let k = dlqr(&ad, &bd, &q, &r, None)
                 .map_err(|e| design_err("lqg", e))?
                 .k;
-            // The paper's estimator model (eq. (3)): plant plus one integrated-white-noise
-            // disturbance on both outputs; noise inputs [u·L_su, w_od, w_n] (eqs. (8)–(11)).
-            let mut a = Mat::zeros(5, 5);
-            a.view_mut((0, 0), (4, 4)).copy_from(&ad);
-            a[(4, 4)] = 1.0;
-            let mut b_u = Mat::zeros(5, 1);
-            b_u.view_mut((0, 0), (4, 1)).copy_from(&bd);
-            let mut bn = Mat::zeros(5, 4);
-            bn.view_mut((0, 0), (4, 1))
-                .copy_from(&(&bd * paper::INPUT_SCALE));
-            bn[(4, 1)] = 0.01;
-            let mut c = Mat::zeros(2, 5);
-            c[(0, 0)] = 1.0;
-            c[(1, 2)] = 1.0;
-            c[(0, 4)] = 1.0;
-            c[(1, 4)] = 1.0;
-            let mut dn = Mat::zeros(2, 4);
-            dn[(0, 2)] = 1.0;
-            dn[(1, 3)] = 1.0;
-            let qn = &bn * bn.transpose();
-            let rn = &dn * dn.transpose();
-            let nn = &bn * dn.transpose();
-            let kf = kalman(&a, &Mat::identity(5, 5), &c, &qn, &rn, Some(&nn), None)
-                .map_err(|e| design_err("lqg kalman", e))?;
-            let lqg = Lqg::new(&k, &a, &b_u, &c, &kf.l, &kf.m, ts)
+            // LQG uses the MPC's estimator, as in the paper: the augmented model of eq. (3) and
+            // the Kalman gains of eq. (11), designed once in one place.
+            let mpc = mpc(cfg, &ad, &bd, ts)?;
+            let (model, kf) = (mpc.model(), mpc.kalman_design());
+            let lqg = Lqg::new(&k, &model.a, &model.b, &model.c, &kf.l, &kf.m, ts)
                 .and_then(|c| c.with_input_bounds(-v, v))
                 .map_err(|e| design_err("lqg", e))?;
             Ok(Box::new(lqg))
         }
-        ControllerKind::Mpc => build_mpc(cfg, ad, bd, ts),
+        ControllerKind::Mpc => Ok(Box::new(mpc(cfg, &ad, &bd, ts)?)),
     }
 }
 
 /// The MPC of section 3 with the configured settings.
-#[cfg(feature = "mpc")]
-fn build_mpc(cfg: &Config, ad: Mat, bd: Mat, ts: f64) -> Result<Box<dyn Controller>, String> {
-    use crate::config::BoundedOutput;
-    use rip_core::mpc::{Mpc, MpcSettings, OutputDisturbance, QpSolver};
-
+fn mpc(cfg: &Config, ad: &Mat, bd: &Mat, ts: f64) -> Result<Mpc, String> {
     let m = &cfg.mpc;
     let v = cfg.safety.voltage_limit;
     let design_err = |e: rip_core::RipError| format!("mpc design: {e}");
@@ -140,12 +117,5 @@ fn build_mpc(cfg: &Config, ad: Mat, bd: Mat, ts: f64) -> Result<Box<dyn Controll
         .solver(solver)
         .build()
         .map_err(design_err)?;
-    let mpc = Mpc::new(&ad, &bd, &paper::output_matrix(), ts, settings).map_err(design_err)?;
-    Ok(Box::new(mpc))
-}
-
-/// Until rip-core exports its MPC this build has none; the error says how to get one.
-#[cfg(not(feature = "mpc"))]
-fn build_mpc(_: &Config, _: Mat, _: Mat, _: f64) -> Result<Box<dyn Controller>, String> {
-    Err("mpc: this build of rip-rt has no MPC (build with the `mpc` feature)".into())
+    Mpc::new(ad, bd, &paper::output_matrix(), ts, settings).map_err(design_err)
 }

@@ -217,7 +217,6 @@ fn lqg_balances_and_tracks_a_step() {
     balance_and_track("lqg");
 }
 
-#[cfg(feature = "mpc")]
 #[test]
 fn mpc_balances_and_tracks_a_step() {
     balance_and_track("mpc");

@@ -26,8 +26,11 @@ pub fn extract_controller(obj: &Bound<'_, PyAny>) -> PyResult<Box<dyn Controller
     if let Ok(c) = obj.downcast::<PyLqg>() {
         return Ok(Box::new(c.borrow().inner.clone()));
     }
+    if let Ok(c) = obj.downcast::<crate::mpc::PyMpc>() {
+        return Ok(Box::new(c.borrow().inner.clone()));
+    }
     Err(PyTypeError::new_err(format!(
-        "controller must be a riprs controller (Lqr, Lqg), got {}",
+        "controller must be a riprs controller (Lqr, Lqg, Mpc), got {}",
         obj.get_type().name()?
     )))
 }

@@ -9,6 +9,7 @@ mod control;
 mod convert;
 mod design;
 mod errors;
+mod mpc;
 mod paper;
 mod plant;
 mod sim;
@@ -22,5 +23,6 @@ fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     plant::register(m)?;
     control::register(m)?;
     sim::register(m)?;
+    mpc::register(m)?;
     Ok(())
 }

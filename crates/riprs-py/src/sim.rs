@@ -4,7 +4,7 @@
 
 use numpy::ndarray::{Array1, Array2};
 use numpy::IntoPyArray;
-use pyo3::exceptions::{PyKeyError, PyTypeError};
+use pyo3::exceptions::{PyKeyError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use rip_core::metrics::table1_rmse;
@@ -132,7 +132,7 @@ fn sim_run<'py>(
     result_to_dict(py, res)
 }
 
-/// Every (plant, seed) pair in parallel; results in plant-major order.
+/// Every (plant, seed) pair in parallel, plant-major; or, with `paired`, plant `i` with seed `i`.
 #[pyfunction]
 fn sim_batch<'py>(
     py: Python<'py>,
@@ -140,14 +140,29 @@ fn sim_batch<'py>(
     controller: &Bound<'py, PyAny>,
     seeds: Vec<u64>,
     config: &Bound<'py, PyDict>,
+    paired: bool,
 ) -> PyResult<Bound<'py, PyList>> {
     let cfg = config_from_dict(config)?;
     let plants: Vec<Plant> = plants.iter().map(|p| p.inner).collect();
-    let controllers = (0..plants.len() * seeds.len())
+    let runs: Vec<(usize, u64)> = if paired {
+        if plants.len() != seeds.len() {
+            return Err(PyValueError::new_err(format!(
+                "seeds: paired runs need one seed per plant ({} plants, {} seeds)",
+                plants.len(),
+                seeds.len()
+            )));
+        }
+        seeds.iter().copied().enumerate().collect()
+    } else {
+        (0..plants.len())
+            .flat_map(|p| seeds.iter().map(move |&s| (p, s)))
+            .collect()
+    };
+    let controllers = (0..runs.len())
         .map(|_| extract_controller(controller))
         .collect::<PyResult<Vec<Box<dyn Controller>>>>()?;
     let results = py
-        .allow_threads(move || rip_core::simulate_batch(&plants, &seeds, &cfg, controllers))
+        .allow_threads(move || rip_core::sim::simulate_runs(&plants, &runs, &cfg, controllers))
         .py()?;
     let list = PyList::empty(py);
     for res in results {

@@ -1,0 +1,588 @@
+//! Bindings for `rip_core::mpc`: the `Mpc` controller and its `MpcSolution`.
+
+use numpy::ndarray::Array1;
+use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLikeDyn};
+use pyo3::exceptions::PyTypeError;
+use pyo3::prelude::*;
+use rip_core::mpc::{paper, Mpc, MpcSettings, MpcSolution, OutputDisturbance, QpSolver};
+use rip_core::{Controller, Mat, RipError};
+
+use crate::convert::mat_to_py;
+use crate::errors::{to_py, IntoPyResult};
+use crate::plant::matrix_arg;
+
+type Py1<'py> = Bound<'py, PyArray1<f64>>;
+type Py2<'py> = Bound<'py, PyArray2<f64>>;
+
+/// Shape and row-major values of an array-like of reals (NaN/Inf kept; the core rejects them
+/// with the argument's name).
+fn array_values(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<usize>, Vec<f64>)> {
+    let arr: PyArrayLikeDyn<'_, f64, AllowTypeChange> = obj.extract().map_err(|e| {
+        PyTypeError::new_err(format!("{name} must be an array of real numbers: {e}"))
+    })?;
+    let view = arr.as_array();
+    Ok((view.shape().to_vec(), view.iter().copied().collect()))
+}
+
+fn shape_err(name: &str, expected: &str, shape: &[usize]) -> PyErr {
+    let (rows, cols) = match shape {
+        [] => (1, 1),
+        [n] => (*n, 1),
+        s => (s[0], s[1..].iter().product()),
+    };
+    to_py(RipError::Shape {
+        name: name.into(),
+        expected: expected.into(),
+        rows,
+        cols,
+    })
+}
+
+/// A scalar or 1-D array-like as a vector; `None` gives an empty vector (the core's default).
+fn vec_arg(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Vec<f64>> {
+    match obj {
+        Some(o) if !o.is_none() => {
+            let (shape, values) = array_values(o, name)?;
+            if shape.len() > 1 {
+                return Err(shape_err(name, "a 1-D array", &shape));
+            }
+            Ok(values)
+        }
+        _ => Ok(Vec::new()),
+    }
+}
+
+/// A 1-D vector of exactly `n` entries.
+fn vec_exact(obj: &Bound<'_, PyAny>, name: &str, n: usize) -> PyResult<Vec<f64>> {
+    let (shape, values) = array_values(obj, name)?;
+    if shape.len() > 1 || values.len() != n {
+        return Err(shape_err(name, &format!("({n},)"), &shape));
+    }
+    Ok(values)
+}
+
+/// A reference: `(ny,)` constant or `(q, ny)` preview, flattened row by row.
+fn reference_arg(obj: Option<&Bound<'_, PyAny>>, ny: usize, p: usize) -> PyResult<Vec<f64>> {
+    match obj {
+        Some(o) if !o.is_none() => {
+            let (shape, values) = array_values(o, "r")?;
+            let ok = match shape.as_slice() {
+                [] => ny == 1,
+                [n] => *n == ny,
+                [q, n] => *n == ny && (1..=p).contains(q),
+                _ => false,
+            };
+            if !ok {
+                return Err(shape_err(
+                    "r",
+                    &format!("({ny},) or (q, {ny}) with 1 <= q <= P = {p}"),
+                    &shape,
+                ));
+            }
+            Ok(values)
+        }
+        _ => Ok(vec![0.0; ny]),
+    }
+}
+
+/// `None`, or a sequence whose items are `None` (unbounded) or `(lo, hi)` with `None` for a
+/// missing side.
+fn bounds_arg(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Vec<(f64, f64)>> {
+    let Some(obj) = obj.filter(|o| !o.is_none()) else {
+        return Ok(Vec::new());
+    };
+    let type_err = || {
+        PyTypeError::new_err(format!(
+            "{name} must be a sequence of None or (lower, upper) pairs"
+        ))
+    };
+    let mut out = Vec::new();
+    for item in obj.try_iter().map_err(|_| type_err())? {
+        let item = item?;
+        if item.is_none() {
+            out.push((f64::NEG_INFINITY, f64::INFINITY));
+            continue;
+        }
+        let pair: Vec<Option<f64>> = item.extract().map_err(|_| type_err())?;
+        if pair.len() != 2 {
+            return Err(to_py(RipError::Shape {
+                name: format!("{name}[{}]", out.len()),
+                expected: "(lower, upper)".into(),
+                rows: pair.len(),
+                cols: 1,
+            }));
+        }
+        out.push((
+            pair[0].unwrap_or(f64::NEG_INFINITY),
+            pair[1].unwrap_or(f64::INFINITY),
+        ));
+    }
+    Ok(out)
+}
+
+fn disturbance_arg(obj: Option<&Bound<'_, PyAny>>) -> PyResult<Option<OutputDisturbance>> {
+    let Some(obj) = obj.filter(|o| !o.is_none()) else {
+        return Ok(None);
+    };
+    let parts: Vec<Bound<'_, PyAny>> = obj
+        .try_iter()
+        .and_then(|it| it.collect::<PyResult<Vec<_>>>())
+        .map_err(|_| {
+            PyTypeError::new_err("output_disturbance must be None or a tuple (A_od, B_od, C_od)")
+        })?;
+    if parts.len() != 3 {
+        return Err(to_py(RipError::invalid(
+            "output_disturbance",
+            format!("expected (A_od, B_od, C_od), got {} items", parts.len()),
+        )));
+    }
+    Ok(Some(OutputDisturbance {
+        a: matrix_arg(&parts[0], "A_od", None, None)?,
+        b: matrix_arg(&parts[1], "B_od", None, None)?,
+        c: matrix_arg(&parts[2], "C_od", None, None)?,
+    }))
+}
+
+fn vec_to_py<'py>(py: Python<'py>, v: &[f64]) -> Py1<'py> {
+    Array1::from_vec(v.to_vec()).into_pyarray(py)
+}
+
+/// The result of one MPC solve.
+///
+/// Attributes
+/// ----------
+/// u : ndarray, shape (nu,)
+///     The move :math:`u(k)`; the fallback move when ``fallback`` is true.
+/// du : ndarray, shape (m, nu)
+///     Moves :math:`\Delta u(k), \dots, \Delta u(k+m-1)` of the applied plan.
+/// slack : float
+///     :math:`\varepsilon \ge 0` in scaled output units; ``nan`` when the QP failed.
+/// status : str
+///     ``"solved"``, ``"almost_solved"``, ``"max_iterations"``, ``"numerical_trouble"``,
+///     ``"infeasible"`` or ``"invalid_input"``.
+/// fallback : bool
+///     Whether the fallback move (previous plan's next move, clamped) was applied.
+/// iterations : int
+///     Interior-point iterations (Clarabel) or active-set subproblems.
+/// solve_time : float
+///     Wall time of the QP update and solve (s).
+/// y_pred : ndarray, shape (P, ny) or None
+///     Predicted outputs :math:`y(k+i|k)`, :math:`i = 1..P` (engineering units) along the
+///     plan, from :meth:`Mpc.solve` only (``None`` after :meth:`Mpc.step`).
+#[pyclass(name = "MpcSolution", module = "riprs._riprs", frozen)]
+pub struct PyMpcSolution {
+    sol: MpcSolution,
+    nu: usize,
+    y_pred: Option<Mat>,
+}
+
+#[pymethods]
+impl PyMpcSolution {
+    #[getter]
+    fn u<'py>(&self, py: Python<'py>) -> Py1<'py> {
+        vec_to_py(py, self.sol.u.as_slice())
+    }
+
+    #[getter]
+    fn du<'py>(&self, py: Python<'py>) -> Py2<'py> {
+        let m = self.sol.du.len() / self.nu;
+        mat_to_py(py, &Mat::from_row_slice(m, self.nu, self.sol.du.as_slice()))
+    }
+
+    #[getter]
+    fn slack(&self) -> f64 {
+        self.sol.slack
+    }
+
+    #[getter]
+    fn status(&self) -> &'static str {
+        self.sol.status.name()
+    }
+
+    #[getter]
+    fn fallback(&self) -> bool {
+        self.sol.fallback
+    }
+
+    #[getter]
+    fn iterations(&self) -> usize {
+        self.sol.iterations
+    }
+
+    #[getter]
+    fn solve_time(&self) -> f64 {
+        self.sol.solve_time
+    }
+
+    #[getter]
+    fn y_pred<'py>(&self, py: Python<'py>) -> Option<Py2<'py>> {
+        self.y_pred.as_ref().map(|y| mat_to_py(py, y))
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "MpcSolution(u={:?}, slack={:.3e}, status={:?}, iterations={}, solve_time={:.1e})",
+            self.sol.u.as_slice(),
+            self.sol.slack,
+            self.sol.status.name(),
+            self.sol.iterations,
+            self.sol.solve_time
+        )
+    }
+}
+
+/// Constrained MPC with soft output bounds and a built-in Kalman filter (MATLAB MPC Toolbox
+/// semantics; the paper's section 3).
+///
+/// Prediction model: the plant :math:`x^+ = Ax + Bu`, :math:`y = Cx` augmented with the
+/// output disturbance :math:`x_{od}^+ = A_{od}x_{od} + B_{od}w_{od}`,
+/// :math:`y_{od} = C_{od}x_{od}` (eq. (1)) on scaled outputs:
+///
+/// .. math::
+///
+///     A_{aug} = \begin{bmatrix} A & 0 \\ 0 & A_{od} \end{bmatrix}, \quad
+///     B_u = \begin{bmatrix} B \\ 0 \end{bmatrix}, \quad
+///     C_{aug} = \begin{bmatrix} S_y^{-1} C & C_{od} \end{bmatrix}.
+///
+/// Estimator: the steady-state Kalman filter ``kalman(A_aug, I, C_aug, Q, R, N)`` with
+/// :math:`Q = B_n B_n^T`, :math:`R = D_n D_n^T`, :math:`N = B_n D^T` (eqs. (7)-(11)), the inputs
+/// modelled as unit white noise in scaled units (:math:`B_n = [B S_u, 0; 0, B_{od}]`), run in
+/// current form (eqs. (4)-(6)). Each step minimises over
+/// :math:`z = [\Delta u(k), \dots, \Delta u(k+m-1), \varepsilon]`
+///
+/// .. math::
+///
+///     \sum_{i=1}^{P}\sum_j \Big(\frac{w^y_j (r_j(k+i) - y_j(k+i|k))}{s^y_j}\Big)^2
+///     + \sum_{i=0}^{m-1}\sum_j \Big(\frac{w^{\Delta u}_j \Delta u_j(k+i)}{s^u_j}\Big)^2
+///     + \sum_{i=0}^{P-1}\sum_j \Big(\frac{w^u_j (u_j(k+i) - u_{t,j})}{s^u_j}\Big)^2
+///     + \rho_\varepsilon \varepsilon^2
+///
+/// subject to :math:`u_{min} \le u(k+i) \le u_{max}` (hard), :math:`y_{min} - \varepsilon \le
+/// y(k+i|k) \le y_{max} + \varepsilon` (soft, equal concern), :math:`\varepsilon \ge 0` and
+/// :math:`\Delta u(k+i) = 0` for :math:`i \ge m`; it applies :math:`u(k) = u(k-1) + \Delta u(k)`.
+/// If the QP fails, the previous plan's next move clamped to the bounds is applied and the
+/// solution says so (``fallback``); the input is never NaN.
+///
+/// Parameters
+/// ----------
+/// A, B, C : array_like, shapes (n, n), (n, nu), (ny, n)
+///     Discrete-time plant.
+/// Ts : float
+///     Sample time (s).
+/// prediction_horizon : int
+///     :math:`P` (default 10).
+/// control_horizon : int
+///     :math:`m \le P` (default 2).
+/// output_weights, input_rate_weights, input_weights : array_like or None
+///     :math:`w^y` (ny,), :math:`w^{\Delta u}` (nu,), :math:`w^u` (nu,); MATLAB defaults 1,
+///     0.1, 0.
+/// input_target : array_like or None
+///     :math:`u_t` (nu,), default 0.
+/// input_bounds, output_bounds : sequence or None
+///     One item per input / output: ``None`` (unbounded) or ``(lower, upper)``, either side
+///     ``None`` or infinite for none. Input bounds are hard, output bounds soft.
+/// ecr_weight : float
+///     :math:`\rho_\varepsilon > 0` (default 1e5).
+/// input_scales, output_scales : array_like or None
+///     Scale factors :math:`s^u`, :math:`s^y` (default 1).
+/// output_disturbance : tuple or None
+///     ``(A_od, B_od, C_od)``; ``None`` for no disturbance model.
+/// measurement_noise : array_like or None
+///     :math:`D_n` (ny, nv) on the scaled outputs; ``None`` for the identity.
+/// solver : {"clarabel", "active_set"}
+///     QP backend: Clarabel (interior point) or the dense active-set method with warm start.
+/// max_iterations : int
+///     Iteration limit of the QP solver.
+///
+/// Raises
+/// ------
+/// ValueError
+///     (a :class:`riprs.RiprsError` subclass) naming the argument, for wrong shapes, NaN,
+///     negative weights, ``m > P``, empty or inverted bounds, or an undetectable model.
+#[pyclass(name = "Mpc", module = "riprs._riprs")]
+#[derive(Clone)]
+pub struct PyMpc {
+    pub(crate) inner: Mpc,
+}
+
+#[pymethods]
+impl PyMpc {
+    #[new]
+    #[pyo3(signature = (
+        A, B, C, Ts, *, prediction_horizon=10, control_horizon=2, output_weights=None,
+        input_rate_weights=None, input_weights=None, input_target=None, input_bounds=None,
+        output_bounds=None, ecr_weight=1e5, input_scales=None, output_scales=None,
+        output_disturbance=None, measurement_noise=None, solver="clarabel", max_iterations=200
+    ))]
+    #[allow(non_snake_case, clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        A: &Bound<'_, PyAny>,
+        B: &Bound<'_, PyAny>,
+        C: &Bound<'_, PyAny>,
+        Ts: f64,
+        prediction_horizon: usize,
+        control_horizon: usize,
+        output_weights: Option<&Bound<'_, PyAny>>,
+        input_rate_weights: Option<&Bound<'_, PyAny>>,
+        input_weights: Option<&Bound<'_, PyAny>>,
+        input_target: Option<&Bound<'_, PyAny>>,
+        input_bounds: Option<&Bound<'_, PyAny>>,
+        output_bounds: Option<&Bound<'_, PyAny>>,
+        ecr_weight: f64,
+        input_scales: Option<&Bound<'_, PyAny>>,
+        output_scales: Option<&Bound<'_, PyAny>>,
+        output_disturbance: Option<&Bound<'_, PyAny>>,
+        measurement_noise: Option<&Bound<'_, PyAny>>,
+        solver: &str,
+        max_iterations: usize,
+    ) -> PyResult<Self> {
+        let a = matrix_arg(A, "A", None, None)?;
+        let b = matrix_arg(B, "B", None, None)?;
+        let c = matrix_arg(C, "C", None, None)?;
+        let settings = MpcSettings {
+            prediction_horizon,
+            control_horizon,
+            output_weights: vec_arg(output_weights, "output_weights")?,
+            input_weights: vec_arg(input_weights, "input_weights")?,
+            input_rate_weights: vec_arg(input_rate_weights, "input_rate_weights")?,
+            input_target: vec_arg(input_target, "input_target")?,
+            input_scales: vec_arg(input_scales, "input_scales")?,
+            output_scales: vec_arg(output_scales, "output_scales")?,
+            input_bounds: bounds_arg(input_bounds, "input_bounds")?,
+            output_bounds: bounds_arg(output_bounds, "output_bounds")?,
+            ecr_weight,
+            output_disturbance: disturbance_arg(output_disturbance)?,
+            measurement_noise: match measurement_noise.filter(|o| !o.is_none()) {
+                Some(o) => Some(matrix_arg(o, "measurement_noise", None, None)?),
+                None => None,
+            },
+            solver: QpSolver::from_name(solver).py()?,
+            max_iterations,
+        };
+        let inner = py
+            .allow_threads(|| Mpc::new(&a, &b, &c, Ts, settings))
+            .py()?;
+        Ok(Self { inner })
+    }
+
+    /// The paper's MPC (section 3) on its model; see :func:`riprs.paper.mpc`.
+    #[staticmethod]
+    #[pyo3(signature = (solver="clarabel"))]
+    fn paper(py: Python<'_>, solver: &str) -> PyResult<Self> {
+        let solver = QpSolver::from_name(solver).py()?;
+        let inner = py.allow_threads(|| paper::controller(solver)).py()?;
+        Ok(Self { inner })
+    }
+
+    /// Solve the QP for a given augmented state.
+    ///
+    /// Parameters
+    /// ----------
+    /// x : array_like, shape (nx,)
+    ///     Augmented state: plant states, then disturbance states.
+    /// u_prev : array_like, shape (nu,)
+    ///     The previous move :math:`u(k-1)`.
+    /// r : array_like, shape (ny,) or (q, ny), optional
+    ///     Constant reference, or a preview of rows :math:`r(k+1), \dots, r(k+q)`,
+    ///     :math:`q \le P`, the last row held to :math:`k+P`. Zero by default.
+    ///
+    /// Returns
+    /// -------
+    /// MpcSolution
+    ///
+    /// Does not touch the estimator; it updates the solver's warm start and the plan used by
+    /// the fallback.
+    #[pyo3(signature = (x, u_prev, r=None))]
+    fn solve(
+        &mut self,
+        py: Python<'_>,
+        x: &Bound<'_, PyAny>,
+        u_prev: &Bound<'_, PyAny>,
+        r: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<PyMpcSolution> {
+        let x = vec_exact(x, "x", self.inner.n_states())?;
+        let u_prev = vec_exact(u_prev, "u_prev", self.inner.n_inputs())?;
+        let r = reference_arg(r, self.inner.n_outputs(), self.inner.prediction_horizon())?;
+        let inner = &mut self.inner;
+        let (sol, y_pred) = py
+            .allow_threads(|| {
+                let sol = inner.solve(&x, &u_prev, &r)?.clone();
+                let y = if sol.fallback {
+                    None
+                } else {
+                    Some(inner.predict_outputs(&x, &u_prev, sol.du.as_slice())?)
+                };
+                Ok::<_, RipError>((sol, y))
+            })
+            .py()?;
+        Ok(PyMpcSolution {
+            sol,
+            nu: self.inner.n_inputs(),
+            y_pred,
+        })
+    }
+
+    /// One controller sample with the built-in estimator.
+    ///
+    /// Corrects the estimate with ``y`` (eqs. (5)-(6)), solves for the move from
+    /// :math:`\hat x[k|k]` and :math:`u(k-1)`, predicts with the applied move (eq. (4)).
+    ///
+    /// Parameters
+    /// ----------
+    /// y : array_like, shape (ny,)
+    ///     Measured outputs.
+    /// r : array_like, shape (ny,) or (q, ny), optional
+    ///     Reference (see :meth:`solve`); zero by default.
+    ///
+    /// Returns
+    /// -------
+    /// u : ndarray, shape (nu,)
+    ///     Always finite and within the input bounds; see :attr:`last_solution` for the status.
+    #[pyo3(signature = (y, r=None))]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        y: &Bound<'py, PyAny>,
+        r: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Py1<'py>> {
+        let y = vec_exact(y, "y", self.inner.n_outputs())?;
+        let r = reference_arg(r, self.inner.n_outputs(), self.inner.prediction_horizon())?;
+        let mut u = vec![0.0; self.inner.n_inputs()];
+        let inner = &mut self.inner;
+        py.allow_threads(|| inner.step_preview(&y, &r, &mut u));
+        Ok(Array1::from_vec(u).into_pyarray(py))
+    }
+
+    /// Restart: zero estimate, zero previous move, no warm start.
+    fn reset(&mut self) {
+        self.inner.reset_state();
+    }
+
+    /// The result of the last :meth:`solve` or :meth:`step`.
+    #[getter]
+    fn last_solution(&self) -> PyMpcSolution {
+        PyMpcSolution {
+            sol: self.inner.last_solution().clone(),
+            nu: self.inner.n_inputs(),
+            y_pred: None,
+        }
+    }
+
+    /// The augmented prediction model ``(A, B, C)`` (``C`` on scaled outputs).
+    #[getter]
+    fn model<'py>(&self, py: Python<'py>) -> (Py2<'py>, Py2<'py>, Py2<'py>) {
+        let m = self.inner.model();
+        (
+            mat_to_py(py, &m.a),
+            mat_to_py(py, &m.b),
+            mat_to_py(py, &m.c),
+        )
+    }
+
+    /// Predictor gain L of the built-in Kalman filter (nx, ny).
+    #[getter(L)]
+    fn l<'py>(&self, py: Python<'py>) -> Py2<'py> {
+        mat_to_py(py, &self.inner.kalman_design().l)
+    }
+
+    /// Innovation gain M of the built-in Kalman filter (nx, ny).
+    #[getter(M)]
+    fn m<'py>(&self, py: Python<'py>) -> Py2<'py> {
+        mat_to_py(py, &self.inner.kalman_design().m)
+    }
+
+    /// The condensed QP ``(H, f, A, b)`` for given data: minimise
+    /// ``0.5 z^T H z + f^T z`` subject to ``A z <= b`` over ``z = [du(k..k+m-1), eps]``.
+    ///
+    /// Rows of ``A``: hard input bounds for ``u(k..k+m-1)``, then soft output bounds for
+    /// ``y(k+1..k+P)``, then ``-eps <= 0``.
+    #[pyo3(signature = (x, u_prev, r=None))]
+    #[allow(clippy::type_complexity)]
+    fn qp_matrices<'py>(
+        &self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        u_prev: &Bound<'py, PyAny>,
+        r: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<(Py2<'py>, Py1<'py>, Py2<'py>, Py1<'py>)> {
+        let x = vec_exact(x, "x", self.inner.n_states())?;
+        let u_prev = vec_exact(u_prev, "u_prev", self.inner.n_inputs())?;
+        let r = reference_arg(r, self.inner.n_outputs(), self.inner.prediction_horizon())?;
+        let (h, f, a, b) = self.inner.qp_matrices(&x, &u_prev, &r).py()?;
+        Ok((
+            mat_to_py(py, &h),
+            vec_to_py(py, f.as_slice()),
+            mat_to_py(py, &a),
+            vec_to_py(py, b.as_slice()),
+        ))
+    }
+
+    /// Sample time (s).
+    #[getter(Ts)]
+    fn ts(&self) -> f64 {
+        self.inner.ts()
+    }
+
+    /// Prediction horizon P.
+    #[getter]
+    fn prediction_horizon(&self) -> usize {
+        self.inner.prediction_horizon()
+    }
+
+    /// Control horizon m.
+    #[getter]
+    fn control_horizon(&self) -> usize {
+        self.inner.control_horizon()
+    }
+
+    /// The QP backend, ``"clarabel"`` or ``"active_set"``.
+    #[getter]
+    fn solver(&self) -> &'static str {
+        self.inner.settings().solver.name()
+    }
+
+    /// Lower input bounds (nu,), ``-inf`` where unbounded.
+    #[getter]
+    fn u_min<'py>(&self, py: Python<'py>) -> Py1<'py> {
+        vec_to_py(py, self.inner.input_bounds().0)
+    }
+
+    /// Upper input bounds (nu,), ``inf`` where unbounded.
+    #[getter]
+    fn u_max<'py>(&self, py: Python<'py>) -> Py1<'py> {
+        vec_to_py(py, self.inner.input_bounds().1)
+    }
+
+    /// The current estimate :math:`\hat x[k|k]` (nx,).
+    #[getter]
+    fn x_hat<'py>(&self, py: Python<'py>) -> Option<Py1<'py>> {
+        self.inner.state_estimate().map(|s| vec_to_py(py, s))
+    }
+
+    /// The previous move :math:`u(k-1)` (nu,).
+    #[getter]
+    fn u_prev<'py>(&self, py: Python<'py>) -> Py1<'py> {
+        vec_to_py(py, self.inner.last_input())
+    }
+
+    fn __repr__(&self) -> String {
+        let m = self.inner.model();
+        format!(
+            "Mpc(states={}, inputs={}, outputs={}, P={}, m={}, solver={:?}, Ts={})",
+            m.a.nrows(),
+            m.b.ncols(),
+            m.c.nrows(),
+            self.inner.prediction_horizon(),
+            self.inner.control_horizon(),
+            self.inner.settings().solver.name(),
+            self.inner.ts()
+        )
+    }
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyMpc>()?;
+    m.add_class::<PyMpcSolution>()?;
+    Ok(())
+}
