@@ -110,6 +110,20 @@ def median_time(fn: Callable[[], np.ndarray], repeats: int) -> tuple[float, np.n
     return statistics.median(times), result
 
 
+def baseline_rows(repeats: int = 5) -> list[tuple[str, str, float, float]]:
+    """``(case, baseline, riprs seconds, baseline seconds)`` rows for ``benches/baselines.py``."""
+    plant, lqr = riprs.paper.plant(), riprs.Lqr.paper()
+    f = equations(plant.params)
+    t_riprs, x_riprs = median_time(lambda: run_riprs(plant, lqr), max(50, repeats))
+    t_numpy, x_numpy = median_time(lambda: run_numpy_rk4(f, lqr), repeats)
+    t_ivp, x_ivp = median_time(lambda: run_solve_ivp(f, lqr), max(1, repeats // 2))
+    # The implementations must agree, or the timing compares different work.
+    assert np.max(np.abs(x_riprs - x_numpy)) < 1e-9
+    assert np.max(np.abs(x_riprs - x_ivp)) < 1e-6
+    case = "10 s closed-loop LQR (1000 steps)"
+    return [(case, "numpy RK4 loop", t_riprs, t_numpy), (case, "scipy solve_ivp", t_riprs, t_ivp)]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)

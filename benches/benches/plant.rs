@@ -1,7 +1,9 @@
 //! The plant and the paper's regulators: one RK4 step, one controller step, and a 10 s
-//! closed-loop run (1000 control periods, 10 RK4 substeps each, encoder and noise model).
+//! closed-loop run per controller (1000 control periods, 10 RK4 substeps each, encoder and
+//! noise model; the MPC once per QP backend).
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use rip_core::mpc::QpSolver;
 use rip_core::sim::{Reference, SensorModel};
 use rip_core::{simulate, Controller, Lqg, Lqr, Plant, SimConfig, State};
 
@@ -56,6 +58,12 @@ fn plant(c: &mut Criterion) {
         let mut ctrl = Lqg::paper().unwrap();
         b.iter(|| simulate(&plant, &mut ctrl, black_box(&config)).unwrap())
     });
+    for solver in [QpSolver::ActiveSet, QpSolver::Clarabel] {
+        group.bench_function(format!("mpc_{}", solver.name()), |b| {
+            let mut ctrl = rip_core::mpc::paper::controller(solver).unwrap();
+            b.iter(|| simulate(&plant, &mut ctrl, black_box(&config)).unwrap())
+        });
+    }
     group.finish();
 }
 

@@ -52,13 +52,22 @@ fn vec_arg(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Vec<f64>> {
     }
 }
 
-/// A 1-D vector of exactly `n` entries.
+/// Fails unless every value is finite.
+fn finite(values: Vec<f64>, name: &str) -> PyResult<Vec<f64>> {
+    if values.iter().all(|v| v.is_finite()) {
+        Ok(values)
+    } else {
+        Err(to_py(RipError::NonFinite { name: name.into() }))
+    }
+}
+
+/// A 1-D vector of exactly `n` finite entries.
 fn vec_exact(obj: &Bound<'_, PyAny>, name: &str, n: usize) -> PyResult<Vec<f64>> {
     let (shape, values) = array_values(obj, name)?;
     if shape.len() > 1 || values.len() != n {
         return Err(shape_err(name, &format!("({n},)"), &shape));
     }
-    Ok(values)
+    finite(values, name)
 }
 
 /// A reference: `(ny,)` constant or `(q, ny)` preview, flattened row by row.
@@ -79,7 +88,7 @@ fn reference_arg(obj: Option<&Bound<'_, PyAny>>, ny: usize, p: usize) -> PyResul
                     &shape,
                 ));
             }
-            Ok(values)
+            finite(values, "r")
         }
         _ => Ok(vec![0.0; ny]),
     }

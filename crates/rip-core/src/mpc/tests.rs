@@ -175,7 +175,11 @@ fn paper_backends_agree_along_a_closed_loop_on_the_linear_model() {
         let (z_cl, z_as) = (z_of(&s), z_of(asb.last_solution()));
         let cost = |z: &DVector<f64>| 0.5 * z.dot(&(&h * z)) + f.dot(z);
         assert!((&a * &z_as - &b).max() <= 1e-9 * (1.0 + b.amax()));
-        assert!(cost(&z_as) <= cost(&z_cl) + 1e-12 * cost(&z_cl).abs().max(1.0));
+        let (c_as, c_cl) = (cost(&z_as), cost(&z_cl));
+        assert!(
+            c_as <= c_cl + 1e-10 * c_cl.abs().max(1.0),
+            "k={k}: {c_as} > {c_cl}"
+        );
         assert_eq!(asb.last_solution().status, QpStatus::Solved);
         max_du = max_du.max((s.u[0] - u[0]).abs());
         saturated += usize::from(u[0].abs() > 12.0 - 1e-9);
