@@ -184,7 +184,8 @@ pub struct MpcConfig {
     /// Which output carries the soft bound: `"pendulum"` or `"arm"` (the paper's "α" is
     /// ambiguous; the pendulum is the angle whose excursion the bound is meant to limit).
     pub bounded_output: BoundedOutput,
-    /// QP solver: `"clarabel"` (interior point, the reference) or `"active_set"`.
+    /// QP solver: `"active_set"` (dense, warm-started, ~2 µs per step; the default in the loop)
+    /// or `"clarabel"` (interior point, the reference, ~200 µs).
     pub solver: String,
 }
 
@@ -209,7 +210,7 @@ impl Default for MpcConfig {
             soft_bound: std::f64::consts::PI / 6.0,
             slack_weight: 100.0,
             bounded_output: BoundedOutput::Pendulum,
-            solver: "clarabel".into(),
+            solver: "active_set".into(),
         }
     }
 }
