@@ -91,3 +91,8 @@ def test_complex_and_non_numeric_input_raise_type_error():
         riprs.dare(A, B, "not a matrix", R)
     with pytest.raises(riprs.ShapeError, match="A"):
         riprs.dare(np.ones((2, 2, 2)), B, Q, R)
+
+
+def test_c2d_overflow_raises_instead_of_nan():
+    with pytest.raises(riprs.InvalidParameterError, match="Ts"):
+        riprs.c2d(A * 1e300, B, 0.1)

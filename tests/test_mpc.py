@@ -310,9 +310,23 @@ def test_unconstrained_long_horizon_rate_weight_gives_dlqr_gain_of_rate_form():
 
 def test_paper_mpc_kalman_gains_are_eq_12():
     mpc = riprs.paper.mpc()
-    L, M = riprs.paper.kalman_gains()
-    np.testing.assert_allclose(mpc.L, L, atol=1e-13)
-    np.testing.assert_allclose(mpc.M, M, atol=1e-13)
+    # Eqs. (3) and (8)-(11) built here from the plant: the augmented model with the output
+    # disturbance of eq. (1), the input as unit noise scaled by L_su, unit measurement noise.
+    plant = riprs.paper.discrete_model()
+    Ad, Bd, Cp = plant.A, plant.B, plant.C
+    A = scipy.linalg.block_diag(Ad, [[1.0]])
+    C = np.hstack([Cp, np.ones((2, 1))])
+    Bn = np.zeros((5, 4))
+    Bn[:4, 0] = Bd[:, 0] * riprs.paper.INPUT_SCALE
+    Bn[4, 1] = 0.01
+    Dn = np.hstack([np.zeros((2, 2)), np.eye(2)])
+    Q, R, N = Bn @ Bn.T, Dn @ Dn.T, Bn @ Dn.T
+    P = scipy.linalg.solve_discrete_are(A.T, C.T, Q, R, s=N)
+    S = C @ P @ C.T + R
+    L = (A @ P @ C.T + N) @ np.linalg.inv(S)
+    M = P @ C.T @ np.linalg.inv(S)
+    np.testing.assert_allclose(mpc.L, L, atol=1e-9)
+    np.testing.assert_allclose(mpc.M, M, atol=1e-9)
     printed_L, printed_M = riprs.paper.PRINTED["L"], riprs.paper.PRINTED["M"]
     np.testing.assert_array_equal(np.round(mpc.L, 4), printed_L)
     digits = np.full(printed_M.shape, 4)
@@ -463,6 +477,8 @@ def test_max_iterations_applies_a_finite_bounded_fallback():
     [
         (dict(prediction_horizon=3, control_horizon=4), "control_horizon"),
         (dict(prediction_horizon=0), "prediction_horizon"),
+        (dict(prediction_horizon=10**9), "prediction_horizon"),
+        (dict(prediction_horizon=10_000, control_horizon=10_000), "prediction_horizon"),
         (dict(output_weights=[1, -1]), "output_weights"),
         (dict(input_rate_weights=[-0.1]), "input_rate_weights"),
         (dict(input_weights=[float("nan")]), "input_weights"),
@@ -485,6 +501,20 @@ def test_bad_settings_raise_value_error_naming_the_argument(kwargs, name):
     plant = riprs.paper.discrete_model()
     with pytest.raises(ValueError, match=name):
         riprs.Mpc(plant.A, plant.B, plant.C, 0.01, **kwargs)
+
+
+def test_huge_horizon_is_refused_before_anything_is_allocated():
+    plant = riprs.paper.discrete_model()
+    with pytest.raises(riprs.InvalidParameterError, match=r"prediction_horizon.*10000"):
+        riprs.Mpc(plant.A, plant.B, plant.C, 0.01, prediction_horizon=10**9,
+                  control_horizon=2)
+    with pytest.raises(riprs.InvalidParameterError, match="prediction_horizon"):
+        riprs.Mpc(plant.A, plant.B, plant.C, 0.01, prediction_horizon=5000,
+                  control_horizon=5000)
+    # The largest horizon itself is accepted with a short control horizon.
+    mpc = riprs.Mpc(plant.A, plant.B, plant.C, 0.01, prediction_horizon=10_000,
+                    control_horizon=1, solver="active_set")
+    assert mpc.prediction_horizon == 10_000
 
 
 def test_bad_model_shapes_and_values_raise():
@@ -517,6 +547,9 @@ def test_bad_call_arguments_raise_and_change_nothing():
         (lambda: mpc.solve(np.zeros(4), [0.0], [0.0, 0.0]), "x"),
         (lambda: mpc.solve(np.zeros(5), [0.0, 1.0], [0.0, 0.0]), "u_prev"),
         (lambda: mpc.solve(np.zeros(5), [0.0], [0.0, 0.0, 0.0]), "r"),
+        (lambda: mpc.solve(np.zeros(5), [0.0], np.zeros((1, 1, 2))), r"r: .*got \(1, 1, 2\)"),
+        (lambda: mpc.step([0.0, 0.0], np.zeros((2, 3, 2))), r"r: .*got \(2, 3, 2\)"),
+        (lambda: mpc.step(np.zeros((2, 1)), [0.0, 0.0]), r"y: .*got \(2, 1\)"),
     ]
     for call, name in bad_calls:
         with pytest.raises(ValueError, match=name):

@@ -3,7 +3,14 @@
 //!
 //! Each sample `k` the caller hands over the measured outputs `y[k]` and the reference `r[k]`
 //! (one entry per output; for the pendulum: arm angle, pendulum angle) and receives the input
-//! `u[k]` to hold over the next period. `step` must not allocate: it runs inside a 100 Hz loop.
+//! `u[k]` to hold over the next period. When a period passes without a measurement the caller
+//! calls [`Controller::hold`] instead, with the input the plant keeps receiving, so that the
+//! controller's notion of elapsed time and applied input stays true.
+//!
+//! `step` and `hold` run inside a 100 Hz loop. The regulators ([`Lqr`](crate::Lqr),
+//! [`Lqg`](crate::Lqg)) and the MPC with the active-set backend never allocate in them; the MPC
+//! with the Clarabel backend allocates inside Clarabel's own `solve` (about one allocation per
+//! step), which this crate cannot avoid.
 
 /// What happened inside one [`Controller::step`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -17,6 +24,12 @@ pub enum StepStatus {
 }
 
 /// A discrete-time output-feedback controller.
+///
+/// [`step`](Self::step) and [`hold`](Self::hold) are allocation-free for [`Lqr`](crate::Lqr),
+/// [`Lqg`](crate::Lqg) and the [`Mpc`](crate::Mpc) with
+/// [`QpSolver::ActiveSet`](crate::QpSolver::ActiveSet); with
+/// [`QpSolver::Clarabel`](crate::QpSolver::Clarabel) the MPC allocates inside the solver on
+/// every step that solves a QP.
 pub trait Controller: Send {
     /// Number of measured outputs in `y` (and of references in `r`).
     fn n_outputs(&self) -> usize;
@@ -28,6 +41,17 @@ pub trait Controller: Send {
     /// [`n_outputs`](Self::n_outputs) and [`n_inputs`](Self::n_inputs). The written input is
     /// finite and within the controller's input bounds.
     fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus;
+
+    /// No measurement this period; the input `u` (length [`n_inputs`](Self::n_inputs)) is held
+    /// over it instead of a newly computed one.
+    ///
+    /// Takes the place of one [`step`](Self::step): the next `step` then belongs to the period
+    /// after this one. Controllers with memory of time or of the applied input (rate filters,
+    /// estimators, move plans) advance it by one period, as if a sample with no information
+    /// had arrived. The default does nothing, which suits memoryless controllers.
+    fn hold(&mut self, u: &[f64]) {
+        let _ = u;
+    }
 
     /// Returns to the state right after construction (estimator, previous input, filters).
     fn reset(&mut self);

@@ -148,12 +148,7 @@ pub fn fit_params(ad: &Mat, bd: &Mat, ts: f64, options: &FitOptions) -> Result<F
     check_shape("Bd", bd, 4, 1)?;
     check_finite("Ad", ad)?;
     check_finite("Bd", bd)?;
-    if !(ts.is_finite() && ts > 0.0) {
-        return Err(RipError::invalid(
-            "Ts",
-            format!("must be positive and finite, got {ts}"),
-        ));
-    }
+    crate::linalg::check_sample_time("Ts", ts)?;
     options.base.validate()?;
     if options.max_iterations == 0 {
         return Err(RipError::invalid("max_iterations", "must be at least 1"));

@@ -37,8 +37,8 @@ use nalgebra::{Complex, DVector};
 
 use crate::error::{Result, RipError};
 use crate::linalg::{
-    check_finite, check_psd, check_shape, check_square, check_symmetric, eigenvalues,
-    solve_dare_validated, symmetrize, Mat,
+    check_finite, check_joint_psd, check_psd, check_shape, check_square, check_symmetric,
+    eigenvalues, solve_dare_validated, symmetrize, Mat,
 };
 
 /// The result of [`kalman`]: MATLAB's `[~, L, P, M, Z] = kalman(sys, Qn, Rn, Nn)`.
@@ -166,22 +166,14 @@ fn check_noise_covariance(qn: &Mat, rn: &Mat, nn: Option<&Mat>) -> Result<()> {
     }
     match nn {
         None => check_psd("Qn", qn),
-        Some(nn) => {
-            let (nw, ny) = nn.shape();
-            let mut joint = Mat::zeros(nw + ny, nw + ny);
-            joint.view_mut((0, 0), (nw, nw)).copy_from(qn);
-            joint.view_mut((0, nw), (nw, ny)).copy_from(nn);
-            joint.view_mut((nw, 0), (ny, nw)).copy_from(&nn.transpose());
-            joint.view_mut((nw, nw), (ny, ny)).copy_from(rn);
-            check_psd("[[Qn, Nn], [Nnᵀ, Rn]]", &joint)
-        }
+        Some(nn) => check_joint_psd("[[Qn, Nn], [Nnᵀ, Rn]]", qn, nn, rn),
     }
 }
 
 /// Steady-state Kalman filter in "current" form (module docs, paper eqs. (4)–(6)).
 ///
-/// All buffers are allocated in [`CurrentEstimator::new`]; [`correct`](Self::correct) and
-/// [`predict`](Self::predict) only write into them.
+/// All buffers are allocated in [`CurrentEstimator::new`]; [`correct`](Self::correct),
+/// [`predict`](Self::predict) and their `_without_measurement` variants only write into them.
 #[derive(Debug, Clone)]
 pub struct CurrentEstimator {
     a: Mat,
@@ -280,6 +272,26 @@ impl CurrentEstimator {
         self.scratch.gemv(1.0, &self.b, &u, 1.0);
         self.scratch.gemv(1.0, &self.l, &self.innovation, 1.0);
         self.prior.copy_from(&self.scratch);
+    }
+
+    /// Measurement update for a sample without a usable measurement: `e[k] = 0`, so
+    /// `x̂[k|k] = x̂[k|k−1]`. Exact, unlike passing `y = C x̂[k|k−1]` to
+    /// [`correct`](Self::correct), whose rounding can leave a tiny innovation.
+    pub fn correct_without_measurement(&mut self) -> &DVector<f64> {
+        self.innovation.fill(0.0);
+        self.posterior.copy_from(&self.prior);
+        &self.posterior
+    }
+
+    /// A whole period without a measurement, the input `u` applied over it: the zero-innovation
+    /// update of [`correct_without_measurement`](Self::correct_without_measurement)
+    /// (`x̂[k|k] = x̂[k|k−1]`), then the time update `x̂[k+1|k] = A x̂[k|k−1] + B u`.
+    ///
+    /// The posterior stays the estimate of the state at the period just passed, as after any
+    /// other [`correct`](Self::correct); only the prior moves on to the next period.
+    pub fn predict_without_measurement(&mut self, u: &[f64]) {
+        self.correct_without_measurement();
+        self.predict(u);
     }
 
     /// The current estimate `x̂[k|k]`.

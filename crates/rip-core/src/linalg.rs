@@ -160,10 +160,41 @@ pub fn c2d(a: &Mat, b: &Mat, ts: f64) -> Result<(Mat, Mat)> {
     block.view_mut((0, 0), (n, n)).copy_from(&(a * ts));
     block.view_mut((0, n), (n, m)).copy_from(&(b * ts));
     let e = block.exp();
+    if e.iter().any(|v| !v.is_finite()) {
+        return Err(RipError::invalid(
+            "Ts",
+            format!("A·Ts is too large to discretise (e^(A·Ts) overflows) at Ts = {ts}"),
+        ));
+    }
     Ok((
         e.view((0, 0), (n, n)).into_owned(),
         e.view((0, n), (n, m)).into_owned(),
     ))
+}
+
+/// Fails with [`RipError::InvalidParameter`] named `name` unless `ts` is a positive, finite
+/// sample time.
+pub fn check_sample_time(name: &str, ts: f64) -> Result<()> {
+    if ts.is_finite() && ts > 0.0 {
+        Ok(())
+    } else {
+        Err(RipError::invalid(
+            name,
+            format!("must be positive and finite, got {ts}"),
+        ))
+    }
+}
+
+/// Fails unless the joint weight or covariance `[[Q, N], [Nᵀ, R]]` is positive semidefinite;
+/// the error names it `name`. `q` and `r` must already be symmetric.
+pub fn check_joint_psd(name: &str, q: &Mat, n: &Mat, r: &Mat) -> Result<()> {
+    let (nq, nr) = (q.nrows(), r.nrows());
+    let mut joint = Mat::zeros(nq + nr, nq + nr);
+    joint.view_mut((0, 0), (nq, nq)).copy_from(q);
+    joint.view_mut((0, nq), (nq, nr)).copy_from(n);
+    joint.view_mut((nq, 0), (nr, nq)).copy_from(&n.transpose());
+    joint.view_mut((nq, nq), (nr, nr)).copy_from(r);
+    check_psd(name, &joint)
 }
 
 /// The stabilizing solution of a DARE with what was computed alongside it.
@@ -497,6 +528,13 @@ mod tests {
         let b = mat(2, 1, &[0.0, 1.0]);
         let err = dare(&a, &b, &Mat::identity(2, 2), &mat(1, 1, &[1.0]), None, None).unwrap_err();
         assert!(matches!(err, RipError::NotStabilizable { .. }), "{err}");
+    }
+
+    #[test]
+    fn c2d_overflow_is_an_error_not_nan() {
+        let a = mat(1, 1, &[1e300]);
+        let err = c2d(&a, &mat(1, 1, &[1.0]), 0.1).unwrap_err();
+        assert!(matches!(err, RipError::InvalidParameter { .. }), "{err}");
     }
 
     #[test]

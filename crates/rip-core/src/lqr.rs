@@ -7,7 +7,8 @@ use nalgebra::Complex;
 
 use crate::error::Result;
 use crate::linalg::{
-    check_finite, check_psd, check_shape, check_square, check_symmetric, dare, symmetrize, Mat,
+    check_finite, check_joint_psd, check_psd, check_shape, check_square, check_symmetric, dare,
+    symmetrize, Mat,
 };
 
 /// The result of [`dlqr`], in python-control's order `(K, S, E)`.
@@ -39,12 +40,7 @@ pub fn dlqr(a: &Mat, b: &Mat, q: &Mat, r: &Mat, n: Option<&Mat>) -> Result<LqrDe
         Some(n) => {
             check_shape("N", n, nx, nu)?;
             check_finite("N", n)?;
-            let mut joint = Mat::zeros(nx + nu, nx + nu);
-            joint.view_mut((0, 0), (nx, nx)).copy_from(&symmetrize(q));
-            joint.view_mut((0, nx), (nx, nu)).copy_from(n);
-            joint.view_mut((nx, 0), (nu, nx)).copy_from(&n.transpose());
-            joint.view_mut((nx, nx), (nu, nu)).copy_from(&symmetrize(r));
-            check_psd("[[Q, N], [Nᵀ, R]]", &joint)?;
+            check_joint_psd("[[Q, N], [Nᵀ, R]]", &symmetrize(q), n, &symmetrize(r))?;
         }
         None => check_psd("Q", &symmetrize(q))?,
     }

@@ -41,16 +41,6 @@ fn check_bounds(u_min: f64, u_max: f64) -> Result<()> {
     Ok(())
 }
 
-fn check_ts(ts: f64) -> Result<()> {
-    if !(ts.is_finite() && ts > 0.0) {
-        return Err(RipError::invalid(
-            "Ts",
-            format!("must be positive and finite, got {ts}"),
-        ));
-    }
-    Ok(())
-}
-
 fn gain_row(k: &Mat) -> Result<SMatrix<f64, 1, NX>> {
     check_shape("K", k, 1, NX)?;
     check_finite("K", k)?;
@@ -89,6 +79,16 @@ fn feedback(
 /// difference, `a = 0`). On the first sample after construction or [`reset`](Controller::reset)
 /// there is no previous angle and the rates start at zero. Then
 /// `x̂ = [θ, θ̇̂, α, α̇̂]` and `u = sat(−K(x̂ − x_ref))` (module docs).
+///
+/// When `n − 1` periods were [held](Controller::hold) since the last measured angle, the
+/// difference spans `n` periods and the filter advances over all of them at once (the same
+/// zero-order-hold discretisation with step `n Ts`):
+///
+/// ```text
+/// d[k] = (q[k] − q[k−n]) / (n Ts),     q̇̂[k] = aⁿ q̇̂[k−n] + (1 − aⁿ) d[k]
+/// ```
+///
+/// During a held period the estimate `x̂` is left as it was.
 #[derive(Debug, Clone)]
 pub struct Lqr {
     k: SMatrix<f64, 1, NX>,
@@ -98,6 +98,8 @@ pub struct Lqr {
     bounds: (f64, f64),
     x_hat: SVector<f64, NX>,
     started: bool,
+    /// Periods held since the last measured angle.
+    held: u32,
 }
 
 impl Lqr {
@@ -105,7 +107,7 @@ impl Lqr {
     /// `rate_cutoff_hz` (Hz, positive; infinity for no filtering). Input bounds ±12 V.
     pub fn new(k: &Mat, ts: f64, rate_cutoff_hz: f64) -> Result<Self> {
         let k = gain_row(k)?;
-        check_ts(ts)?;
+        crate::linalg::check_sample_time("Ts", ts)?;
         if rate_cutoff_hz.is_nan() || rate_cutoff_hz <= 0.0 {
             return Err(RipError::invalid(
                 "rate_cutoff",
@@ -120,6 +122,7 @@ impl Lqr {
             bounds: (-DEFAULT_INPUT_LIMIT, DEFAULT_INPUT_LIMIT),
             x_hat: SVector::zeros(),
             started: false,
+            held: 0,
         })
     }
 
@@ -192,15 +195,19 @@ impl Controller for Lqr {
 
     fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
         if self.started {
+            let periods = self.held.saturating_add(1);
+            let dt = f64::from(periods) * self.ts;
+            let a = self.a.powi(i32::try_from(periods).unwrap_or(i32::MAX));
             for (q, rate) in [(0usize, 1usize), (2, 3)] {
-                let d = (y[q / 2] - self.x_hat[q]) / self.ts;
-                self.x_hat[rate] = self.a * self.x_hat[rate] + (1.0 - self.a) * d;
+                let d = (y[q / 2] - self.x_hat[q]) / dt;
+                self.x_hat[rate] = a * self.x_hat[rate] + (1.0 - a) * d;
             }
         } else {
             self.x_hat[1] = 0.0;
             self.x_hat[3] = 0.0;
             self.started = true;
         }
+        self.held = 0;
         self.x_hat[0] = y[0];
         self.x_hat[2] = y[1];
         let (value, status) = feedback(&self.k, &self.x_hat, r, self.bounds);
@@ -208,9 +215,17 @@ impl Controller for Lqr {
         status
     }
 
+    /// Counts the period, so that the next rate difference spans it (type docs).
+    fn hold(&mut self, _u: &[f64]) {
+        if self.started {
+            self.held = self.held.saturating_add(1);
+        }
+    }
+
     fn reset(&mut self) {
         self.x_hat.fill(0.0);
         self.started = false;
+        self.held = 0;
     }
 
     fn state_estimate(&self) -> Option<&[f64]> {
@@ -233,6 +248,10 @@ impl Controller for Lqr {
 /// ```
 ///
 /// The prediction uses the input actually applied (after clamping). `x̂[0|−1] = 0`.
+///
+/// A [held](Controller::hold) period with input `u_h` has no measurement, so `e = 0`:
+/// `x̂[k|k] = x̂[k|k−1]` and `x̂[k+1|k] = A x̂[k|k−1] + B_u u_h`
+/// ([`CurrentEstimator::predict_without_measurement`]).
 #[derive(Debug, Clone)]
 pub struct Lqg {
     k: SMatrix<f64, 1, NX>,
@@ -252,7 +271,7 @@ impl Lqg {
     #[allow(clippy::too_many_arguments)]
     pub fn new(k: &Mat, a: &Mat, b_u: &Mat, c: &Mat, l: &Mat, m: &Mat, ts: f64) -> Result<Self> {
         let k = gain_row(k)?;
-        check_ts(ts)?;
+        crate::linalg::check_sample_time("Ts", ts)?;
         let n = a.nrows();
         if n < NX || a.ncols() != n {
             return Err(RipError::Shape {
@@ -362,6 +381,20 @@ impl Controller for Lqg {
         status
     }
 
+    /// Advances the estimator over the period with `u` and no innovation (type docs).
+    fn hold(&mut self, u: &[f64]) {
+        // A non-finite held input would poison the estimator for good; the last applied one is
+        // the best remaining guess of what the plant received.
+        if let Some(&held) = u.first().filter(|v| v.is_finite()) {
+            self.u_buf[0] = held;
+        }
+        self.estimator.predict_without_measurement(&self.u_buf);
+        let posterior = self.estimator.posterior();
+        for i in 0..NX {
+            self.plant_estimate[i] = posterior[i];
+        }
+    }
+
     fn reset(&mut self) {
         self.estimator.reset();
         self.plant_estimate.fill(0.0);
@@ -417,6 +450,116 @@ mod tests {
             assert!((u[0] - want).abs() < 1e-12, "step {i}");
             prior = &aug.a * &prior + &bu * want + &kf.l * &e;
         }
+    }
+
+    #[test]
+    fn lqr_rate_spans_held_periods() {
+        // θ = 0.01 k (1 rad/s) with sample 4 missing: the difference over the gap covers two
+        // periods, so the rate, and u = −θ̇̂, stay at −1 instead of jumping to −2.
+        let k = Mat::from_row_slice(1, 4, &[0.0, 1.0, 0.0, 0.0]);
+        let mut c = Lqr::new(&k, 0.01, f64::INFINITY).unwrap();
+        let mut u = [0.0];
+        let mut applied = Vec::new();
+        for i in 0..8 {
+            if i == 4 {
+                c.hold(&u);
+                continue;
+            }
+            c.step(&[0.01 * i as f64, 0.0], &[0.0, 0.0], &mut u);
+            applied.push(u[0]);
+        }
+        assert_eq!(applied[0], 0.0);
+        for (i, v) in applied.iter().enumerate().skip(1) {
+            assert!((v + 1.0).abs() < 1e-12, "sample {i}: {v}");
+        }
+
+        // With the filter on, a settled ramp estimate stays settled over three held periods.
+        let mut c = Lqr::new(&k, 0.01, 20.0).unwrap();
+        let mut i = 0;
+        for _ in 0..200 {
+            c.step(&[0.02 * i as f64, 0.5], &[0.0, 0.0], &mut u);
+            i += 1;
+        }
+        assert!((u[0] + 2.0).abs() < 1e-9, "{}", u[0]);
+        for _ in 0..3 {
+            c.hold(&u);
+            i += 1;
+        }
+        c.step(&[0.02 * i as f64, 0.5], &[0.0, 0.0], &mut u);
+        assert!((u[0] + 2.0).abs() < 1e-9, "{}", u[0]);
+        assert_eq!(c.state_estimate().unwrap()[3], 0.0);
+
+        // An unsettled filter advances over the two periods of a hold with a².
+        let mut held = Lqr::new(&k, 0.01, 20.0).unwrap();
+        let mut full = held.clone();
+        let (mut uh, mut uf) = ([0.0], [0.0]);
+        for (j, q) in [0.0, 0.03, 0.01].iter().enumerate() {
+            held.step(&[*q, 0.0], &[0.0, 0.0], &mut uh);
+            full.step(&[*q, 0.0], &[0.0, 0.0], &mut uf);
+            assert_eq!(uh, uf, "sample {j}");
+        }
+        held.hold(&uh);
+        held.step(&[0.05, 0.0], &[0.0, 0.0], &mut uh);
+        let a = (-2.0 * std::f64::consts::PI * 20.0 * 0.01f64).exp();
+        let rate = full.state_estimate().unwrap()[1];
+        let want = a * a * rate + (1.0 - a * a) * (0.05 - 0.01) / 0.02;
+        assert!((uh[0] + want).abs() < 1e-12, "{} vs {}", uh[0], -want);
+        // reset forgets a pending hold.
+        held.hold(&uh);
+        held.reset();
+        held.step(&[0.0, 0.0], &[0.0, 0.0], &mut uh);
+        held.step(&[0.01, 0.0], &[0.0, 0.0], &mut uh);
+        full.reset();
+        full.step(&[0.0, 0.0], &[0.0, 0.0], &mut uf);
+        full.step(&[0.01, 0.0], &[0.0, 0.0], &mut uf);
+        assert_eq!(uh, uf);
+    }
+
+    #[test]
+    fn lqg_hold_is_a_time_update_without_innovation() {
+        let mut c = Lqg::paper().unwrap();
+        let aug = paper::augmented_model();
+        let kf = paper::kalman_design().unwrap();
+        let k = c.gain();
+        let mut bu = Mat::zeros(5, 1);
+        bu.view_mut((0, 0), (4, 1))
+            .copy_from(&paper::discrete_model().b);
+        let mut prior = DVector::<f64>::zeros(5);
+        let mut u = [0.0];
+        for i in 0..60 {
+            if i % 7 == 3 || i % 11 == 5 {
+                // The device keeps applying a command that differs from the last computed one
+                // (rounding, the loop's own voltage limit): the estimator must use it.
+                let held = u[0] * 0.9 + 0.01;
+                c.hold(&[held]);
+                let post = c.state_estimate().unwrap();
+                assert!(
+                    post.iter()
+                        .zip(prior.iter())
+                        .all(|(a, b)| (a - b).abs() < 1e-12),
+                    "step {i}: the posterior of a held period is its prior"
+                );
+                prior = &aug.a * &prior + &bu * held;
+                u[0] = held;
+                continue;
+            }
+            let y = [0.01 * (i as f64).sin(), 0.002 * i as f64];
+            let r = [1.0, 0.0];
+            c.step(&y, &r, &mut u);
+            let e = DVector::from_row_slice(&y) - &aug.c * &prior;
+            let post = &prior + &kf.m * &e;
+            let err = DVector::from_row_slice(&[post[0] - 1.0, post[1], post[2], post[3]]);
+            let want = (-(&k * err)[0]).clamp(-12.0, 12.0);
+            assert!((u[0] - want).abs() < 1e-12, "step {i}: {} vs {want}", u[0]);
+            prior = &aug.a * &prior + &bu * want + &kf.l * &e;
+        }
+        // A non-finite held input leaves the estimator on the last applied one.
+        let before = c.clone();
+        c.hold(&[f64::NAN]);
+        assert!(c.state_estimate().unwrap().iter().all(|v| v.is_finite()));
+        let mut again = before;
+        again.hold(&[u[0]]);
+        assert_eq!(c.state_estimate(), again.state_estimate());
     }
 
     #[test]

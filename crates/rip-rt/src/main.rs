@@ -221,6 +221,26 @@ fn cmd_run(args: RunArgs) -> ExitCode {
         }
     }
 
+    // The log is created before the port opens, so failing to create it cannot leave an
+    // opened device without its stop command.
+    let mut log = match &args.log {
+        Some(path) => {
+            let header = [
+                ("rip-rt", env!("CARGO_PKG_VERSION").to_string()),
+                ("protocol", rip_rt::protocol::VERSION.to_string()),
+                ("controller", args.controller.to_string()),
+                ("port", args.port.display().to_string()),
+                ("period_ms", cfg.loop_.period_ms.to_string()),
+                ("voltage_limit", cfg.safety.voltage_limit.to_string()),
+            ];
+            match LogWriter::create(path, &header, n_estimates) {
+                Ok(w) => Some(w),
+                Err(e) => return fail(exit_code::SETUP, e),
+            }
+        }
+        None => None,
+    };
+
     let port = match SerialPort::open(&args.port, args.baud) {
         Ok(p) => p,
         Err(e) => return fail(exit_code::SETUP, e),
@@ -249,24 +269,6 @@ fn cmd_run(args: RunArgs) -> ExitCode {
             eprintln!("rip-rt: warning: cannot pin to CPU {cpu} ({e}); continuing");
         }
     }
-
-    let mut log = match &args.log {
-        Some(path) => {
-            let header = [
-                ("rip-rt", env!("CARGO_PKG_VERSION").to_string()),
-                ("protocol", rip_rt::protocol::VERSION.to_string()),
-                ("controller", args.controller.to_string()),
-                ("port", args.port.display().to_string()),
-                ("period_ms", cfg.loop_.period_ms.to_string()),
-                ("voltage_limit", cfg.safety.voltage_limit.to_string()),
-            ];
-            match LogWriter::create(path, &header, n_estimates) {
-                Ok(w) => Some(w),
-                Err(e) => return fail(exit_code::SETUP, e),
-            }
-        }
-        None => None,
-    };
 
     if !args.quiet {
         eprintln!(

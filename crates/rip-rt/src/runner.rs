@@ -33,7 +33,8 @@ use crate::serial::{Fd, Readiness};
 use crate::timing::{now_ns, Histogram, Periodic, TimingSummary};
 
 /// Log status bit (above the device's 8 status bits): no measurement arrived this period; the
-/// previous command was repeated and the controller was not stepped.
+/// previous command was repeated and the controller, instead of being stepped, was told that
+/// the period passed with that command ([`LoopCore::hold`]).
 pub const FLAG_NO_REPLY: u32 = 1 << 8;
 /// Log status bit: the controller used its fallback (e.g. the MPC solver failed).
 pub const FLAG_FALLBACK: u32 = 1 << 9;
@@ -348,6 +349,26 @@ impl LoopCore {
         self.controller.reset();
         self.u = [0.0];
         self.last_command = Command::STOP;
+    }
+
+    /// The voltage the device applies under the last command: its value when the driver is
+    /// enabled, else 0 V.
+    pub fn held_voltage(&self) -> f64 {
+        if self.last_command.enabled() {
+            f64::from(self.last_command.voltage_mv) / 1000.0
+        } else {
+            0.0
+        }
+    }
+
+    /// A period without a measurement, in which the device keeps applying the last command:
+    /// passes its voltage to [`Controller::hold`], so that rate filters and estimators account
+    /// for the period (and for the input actually applied, after clamping and rounding to mV)
+    /// before the next step. Returns that voltage.
+    pub fn hold(&mut self) -> f64 {
+        let held = [self.held_voltage()];
+        self.controller.hold(&held);
+        held[0]
     }
 
     /// Encodes a sample request; returns its sequence number and length.
@@ -694,6 +715,11 @@ pub fn run(
             if let Err(e) = io.write_all(&tx[..n]) {
                 break StopReason::DeviceLost(e.to_string());
             }
+            // Without this the controller's next step would treat two periods as one: a rate
+            // difference over 2 Ts divided by Ts, an estimator prior one period stale.
+            if matches!(phase, Phase::Balancing { .. }) {
+                core.hold();
+            }
             if let (Phase::Balancing { start_ns }, Some(log), Some(prev)) =
                 (&phase, log.as_deref_mut(), last_step)
             {
@@ -810,6 +836,28 @@ mod tests {
         fn reset(&mut self) {}
     }
 
+    /// Records what the loop tells it about held periods.
+    struct Recorder {
+        held: std::sync::Arc<std::sync::Mutex<Vec<f64>>>,
+    }
+
+    impl Controller for Recorder {
+        fn n_outputs(&self) -> usize {
+            2
+        }
+        fn n_inputs(&self) -> usize {
+            1
+        }
+        fn step(&mut self, _y: &[f64], _r: &[f64], u: &mut [f64]) -> StepStatus {
+            u[0] = 3.21049;
+            StepStatus::Nominal
+        }
+        fn hold(&mut self, u: &[f64]) {
+            self.held.lock().unwrap().push(u[0]);
+        }
+        fn reset(&mut self) {}
+    }
+
     fn core(gain: f64) -> LoopCore {
         LoopCore::new(Box::new(Affine { gain }), &Config::default()).unwrap()
     }
@@ -828,6 +876,22 @@ mod tests {
         let mut out = None;
         p.feed(bytes, |f| out = Some(f));
         out.expect("one frame")
+    }
+
+    #[test]
+    fn hold_passes_the_command_the_device_applies() {
+        let held = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let rec = Recorder { held: held.clone() };
+        let mut c = LoopCore::new(Box::new(rec), &Config::default()).unwrap();
+        let mut out = [0u8; MAX_FRAME];
+        // Before any command the driver is disabled: 0 V.
+        assert_eq!(c.hold(), 0.0);
+        c.control(&measurement(1, 0, 1024), 0.0, &mut out).unwrap();
+        // The command is rounded to millivolts; the controller hears the rounded value.
+        assert_eq!(c.hold(), 3.21);
+        c.encode_stop(&mut out);
+        assert_eq!(c.hold(), 0.0);
+        assert_eq!(*held.lock().unwrap(), vec![0.0, 3.21, 0.0]);
     }
 
     #[test]

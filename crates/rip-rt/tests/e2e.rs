@@ -166,8 +166,14 @@ impl Log {
 /// Balances for 4 s with the default step of the arm reference (0 → 1 rad at 1 s) and checks
 /// that the pendulum stayed up, the arm followed, and the device was left stopped.
 fn balance_and_track(controller: &str) {
-    let emu = Emulator::start(controller, &["--noise", "0.3", "--seed", "3"]);
-    let log_path = scratch(&format!("{controller}.csv"));
+    balance_and_track_on(controller, controller, &["--noise", "0.3", "--seed", "3"]);
+}
+
+/// [`balance_and_track`] against an emulator started with `emulator_args`; `name` keeps the
+/// files of concurrent runs apart. Returns the log.
+fn balance_and_track_on(controller: &str, name: &str, emulator_args: &[&str]) -> Log {
+    let emu = Emulator::start(name, emulator_args);
+    let log_path = scratch(&format!("{name}.csv"));
     let r = run(
         &emu.device,
         controller,
@@ -205,6 +211,7 @@ fn balance_and_track(controller: &str) {
         Some(&(0, 0)),
         "last command must be 0 V, disabled"
     );
+    log
 }
 
 #[test]
@@ -266,6 +273,34 @@ fn corrupt_and_dropped_frames_are_survived() {
     let max_alpha = log.col("alpha").iter().fold(0.0f64, |m, a| m.max(a.abs()));
     assert!(max_alpha < 0.3, "pendulum swung to {max_alpha}");
     assert_eq!(emu.commands().last(), Some(&(0, 0)));
+}
+
+/// The controllers with memory (LQG's and MPC's estimators, MPC's plan) are told about every
+/// lost reply; with one reply in ten lost they must still balance and track like without.
+#[test]
+fn estimators_stay_balanced_through_dropped_replies() {
+    let runs: Vec<_> = ["lqg", "mpc"]
+        .into_iter()
+        .map(|controller| {
+            std::thread::spawn(move || {
+                let name = format!("{controller}-drops");
+                let args = ["--noise", "0.3", "--drop-rate", "0.1", "--seed", "11"];
+                (controller, balance_and_track_on(controller, &name, &args))
+            })
+        })
+        .collect();
+    for run in runs {
+        let (controller, log) = run.join().unwrap();
+        let no_reply = log
+            .col("status")
+            .iter()
+            .filter(|s| (**s as u32) & 0x100 != 0)
+            .count();
+        assert!(
+            no_reply >= 10,
+            "{controller}: only {no_reply} NO_REPLY rows"
+        );
+    }
 }
 
 #[test]

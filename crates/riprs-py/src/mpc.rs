@@ -8,7 +8,7 @@ use rip_core::mpc::{paper, Mpc, MpcSettings, MpcSolution, OutputDisturbance, QpS
 use rip_core::{Controller, Mat, RipError};
 
 use crate::convert::mat_to_py;
-use crate::errors::{to_py, IntoPyResult};
+use crate::errors::{to_py, IntoPyResult, ShapeError};
 use crate::plant::matrix_arg;
 
 type Py1<'py> = Bound<'py, PyArray1<f64>>;
@@ -25,17 +25,23 @@ fn array_values(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<usize>, Vec
 }
 
 fn shape_err(name: &str, expected: &str, shape: &[usize]) -> PyErr {
-    let (rows, cols) = match shape {
-        [] => (1, 1),
-        [n] => (*n, 1),
-        s => (s[0], s[1..].iter().product()),
-    };
-    to_py(RipError::Shape {
-        name: name.into(),
-        expected: expected.into(),
-        rows,
-        cols,
-    })
+    // `RipError::Shape` holds two dimensions, which would misreport a 3-D or higher array;
+    // the message keeps its wording but shows the array's whole shape, as numpy writes it.
+    ShapeError::new_err(format!(
+        "{name}: expected shape {expected}, got {}",
+        numpy_shape(shape)
+    ))
+}
+
+/// `shape` as numpy prints it: `()`, `(3,)`, `(1, 1, 2)`.
+fn numpy_shape(shape: &[usize]) -> String {
+    match shape {
+        [n] => format!("({n},)"),
+        dims => {
+            let parts: Vec<String> = dims.iter().map(usize::to_string).collect();
+            format!("({})", parts.join(", "))
+        }
+    }
 }
 
 /// A scalar or 1-D array-like as a vector; `None` gives an empty vector (the core's default).
@@ -279,7 +285,8 @@ impl PyMpcSolution {
 /// Ts : float
 ///     Sample time (s).
 /// prediction_horizon : int
-///     :math:`P` (default 10).
+///     :math:`P` (default 10), at most 10 000; larger horizons, or a condensed problem of more
+///     than 10 million entries per matrix, raise :class:`riprs.InvalidParameterError`.
 /// control_horizon : int
 ///     :math:`m \le P` (default 2).
 /// output_weights, input_rate_weights, input_weights : array_like or None

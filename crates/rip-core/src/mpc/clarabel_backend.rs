@@ -4,6 +4,14 @@
 //! (upper triangle), `q = f`, `A = A_c` and `K` the nonnegative orthant, so `A_c z ≤ b`. The
 //! solver, its factorisation pattern and equilibration are set up once; each solve overwrites
 //! only `q` and `b` (presolve and zero dropping are off so that data updates are allowed).
+//!
+//! # Allocation
+//!
+//! Nothing in this module allocates per solve, but Clarabel's own `solve` does (one heap
+//! allocation per call with Clarabel 0.11): an [`Mpc`](super::Mpc) on this backend is
+//! therefore not allocation-free in [`step`](crate::Controller::step). The allocation-free
+//! guarantee of the real-time loop holds for the active-set backend and the regulators; choose
+//! [`QpSolver::ActiveSet`](super::QpSolver::ActiveSet) where every allocation counts.
 
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
@@ -94,7 +102,7 @@ impl ClarabelBackend {
     }
 
     /// Solves for new `f` and `b`, writing the primal solution into `z`. Returns the status
-    /// and the interior-point iteration count.
+    /// and the interior-point iteration count. Allocates inside Clarabel (module docs).
     pub fn solve(
         &mut self,
         f: &DVector<f64>,

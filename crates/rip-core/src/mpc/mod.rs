@@ -53,6 +53,25 @@
 //! move, `u(k|k−1)` from the last successful solve (shifted once per sample, the last planned
 //! move held), clamped to the input bounds, and reports [`StepStatus::Fallback`]. The applied
 //! input is therefore always finite and within the bounds.
+//!
+//! A measurement is discarded, as if it had not arrived (zero innovation, so
+//! `x̂[k|k] = x̂[k|k−1]`), when it holds NaN or Inf or when anything computed from it overflows:
+//! the innovation, the corrected estimate, or the QP data `f`, `b` built on that estimate. The
+//! step then applies the fallback, and the estimator keeps predicting from its last good
+//! estimate instead of carrying the overflow into every later sample.
+//!
+//! # Missing samples
+//!
+//! [`Controller::hold`] stands for a period without a measurement in which the plant receives
+//! a given input: the estimator runs the time update with zero innovation and that input, the
+//! plan advances one sample as in a fallback step, and the held input becomes the previous move
+//! `u(k−1)` of the next step.
+//!
+//! # Size limits
+//!
+//! The condensed matrices are dense, so their size is bounded before anything is built:
+//! `P ≤` [`MAX_PREDICTION_HORIZON`] ([`MpcSettings::validate`]) and at most
+//! [`MAX_CONDENSED_ENTRIES`] entries in the largest condensed matrix ([`Mpc::new`]).
 
 mod active_set;
 mod clarabel_backend;
@@ -74,13 +93,24 @@ pub use active_set::{ActiveSetOutcome, ActiveSetSolver};
 pub use clarabel_backend::ClarabelBackend;
 use condense::{CondenseInput, Condensed};
 
+/// Largest accepted prediction horizon `P`: 100 s at the paper's 100 Hz, far beyond any useful
+/// horizon, while keeping the memory of the condensed problem bounded.
+pub const MAX_PREDICTION_HORIZON: usize = 10_000;
+
+/// Largest accepted number of entries (`f64`) in one condensed matrix (80 MB), estimated as
+/// `(P·(ny + nu) + 2·m·nu + 1) · (m·nu + 1 + nx + nu)`: the prediction, constraint and
+/// linear-term matrices all fit in that many rows and columns.
+pub const MAX_CONDENSED_ENTRIES: usize = 10_000_000;
+
 /// Which QP solver computes the move.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum QpSolver {
-    /// Clarabel interior-point solver (the reference).
+    /// Clarabel interior-point solver (the reference). Clarabel allocates inside its `solve`,
+    /// so a step with this backend is not allocation-free.
     #[default]
     Clarabel,
-    /// Dense primal active-set solver with warm start (module [`ActiveSetSolver`]).
+    /// Dense primal active-set solver with warm start (module [`ActiveSetSolver`]); solves
+    /// without allocating.
     ActiveSet,
 }
 
@@ -120,7 +150,8 @@ pub enum QpStatus {
     NumericalTrouble,
     /// The solver reported (or found) an infeasible problem.
     Infeasible,
-    /// The state, previous input, measurement or reference held NaN or Inf.
+    /// The state, previous input, measurement or reference held NaN or Inf, or the QP data
+    /// computed from them overflowed.
     InvalidInput,
 }
 
@@ -169,7 +200,8 @@ impl OutputDisturbance {
 /// [`validate`](Self::validate) (intrinsic checks) and [`Mpc::new`] (sizes).
 #[derive(Debug, Clone)]
 pub struct MpcSettings {
-    /// Prediction horizon `P` \[`PredictionHorizon`\]; default 10.
+    /// Prediction horizon `P`, at most [`MAX_PREDICTION_HORIZON`] \[`PredictionHorizon`\];
+    /// default 10.
     pub prediction_horizon: usize,
     /// Control horizon `m ≤ P` (moves `Δu(k..k+m−1)`, then blocked) \[`ControlHorizon`\];
     /// default 2.
@@ -233,13 +265,15 @@ impl MpcSettings {
         }
     }
 
-    /// Checks everything that does not depend on the plant's sizes.
+    /// Checks everything that does not depend on the plant's sizes, including
+    /// `1 ≤ P ≤` [`MAX_PREDICTION_HORIZON`]. The bound on the condensed problem's size, which
+    /// does, is checked by [`Mpc::new`].
     pub fn validate(&self) -> Result<()> {
         let (p, m) = (self.prediction_horizon, self.control_horizon);
-        if p == 0 {
+        if p == 0 || p > MAX_PREDICTION_HORIZON {
             return Err(RipError::invalid(
                 "prediction_horizon",
-                "must be at least 1",
+                format!("must be between 1 and {MAX_PREDICTION_HORIZON}, got {p}"),
             ));
         }
         if m == 0 || m > p {
@@ -467,6 +501,10 @@ pub struct Mpc {
     az: DVector<f64>,
     x: Vec<f64>,
     y_scaled: DVector<f64>,
+    /// `x̂[k|k−1]` before the time update, to undo one that overflowed.
+    prior_backup: DVector<f64>,
+    /// A zero reference, to test the QP data of an estimate when the given reference is bad.
+    r_zero: Vec<f64>,
     u_prev: Vec<f64>,
     plan: Vec<f64>,
     solution: MpcSolution,
@@ -496,6 +534,30 @@ fn fill_bounds(name: &str, v: &[(f64, f64)], n: usize) -> Result<Vec<(f64, f64)>
             cols: 2,
         }),
     }
+}
+
+/// Rejects horizons whose condensed matrices would exceed [`MAX_CONDENSED_ENTRIES`]; the
+/// arithmetic saturates so that absurd sizes cannot wrap around to small ones.
+fn check_condensed_size(settings: &MpcSettings, nx: usize, nu: usize, ny: usize) -> Result<()> {
+    let (p, m) = (settings.prediction_horizon, settings.control_horizon);
+    let nd = m.saturating_mul(nu);
+    let rows = p
+        .saturating_mul(ny.saturating_add(nu))
+        .saturating_add(nd.saturating_mul(2))
+        .saturating_add(1);
+    let cols = nd.saturating_add(1).saturating_add(nx).saturating_add(nu);
+    let entries = rows.saturating_mul(cols);
+    if entries > MAX_CONDENSED_ENTRIES {
+        return Err(RipError::invalid(
+            "prediction_horizon",
+            format!(
+                "P = {p} with control_horizon m = {m}, {nx} states, {nu} inputs and {ny} outputs \
+                 needs condensed matrices of about {entries} entries; at most \
+                 {MAX_CONDENSED_ENTRIES} are allowed"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 fn check_len(name: &str, v: &[f64], n: usize) -> Result<()> {
@@ -532,12 +594,7 @@ impl Mpc {
         check_finite("A", a)?;
         check_finite("B", b)?;
         check_finite("C", c)?;
-        if !(ts.is_finite() && ts > 0.0) {
-            return Err(RipError::invalid(
-                "Ts",
-                format!("must be positive and finite, got {ts}"),
-            ));
-        }
+        crate::linalg::check_sample_time("Ts", ts)?;
         let wy = fill_default("output_weights", &settings.output_weights, ny, 1.0)?;
         let wu = fill_default("input_weights", &settings.input_weights, nu, 0.0)?;
         let wdu = fill_default("input_rate_weights", &settings.input_rate_weights, nu, 0.1)?;
@@ -571,6 +628,7 @@ impl Mpc {
 
         let model = augment(a, b, c, &su, &sy, settings.output_disturbance.as_ref(), &dn);
         let nx = model.a.nrows();
+        check_condensed_size(&settings, nx, nu, ny)?;
         let q = &model.b_noise * model.b_noise.transpose();
         let r = &model.d_noise * model.d_noise.transpose();
         let nn = &model.b_noise * model.d_noise.transpose();
@@ -655,6 +713,8 @@ impl Mpc {
             az: DVector::zeros(ncon),
             x: vec![0.0; nx],
             y_scaled: DVector::zeros(ny),
+            prior_backup: DVector::zeros(nx),
+            r_zero: vec![0.0; ny],
             u_prev: vec![0.0; nu],
             plan: vec![0.0; m * nu],
             solution: MpcSolution {
@@ -791,40 +851,57 @@ impl Mpc {
     pub fn solve(&mut self, x: &[f64], u_prev: &[f64], r: &[f64]) -> Result<&MpcSolution> {
         self.check_solve_args(x, u_prev, r)?;
         self.x.copy_from_slice(x);
-        self.solve_buffers(u_prev, r, QpStatus::Solved);
+        self.solve_buffers(u_prev, r, QpStatus::Solved, false);
         Ok(&self.solution)
     }
 
     /// One controller sample with a reference preview (see [`solve`](Self::solve) for `r`):
     /// estimator correction with `y`, move, estimator prediction with the applied move.
-    /// The written `u` is always finite and within the input bounds.
+    /// The written `u` is always finite and within the input bounds. A measurement that is
+    /// non-finite or overflows the correction or the QP data is discarded (module docs).
     pub fn step_preview(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
         let ny = self.qp.ny;
-        let y_ok = y.len() == ny && y.iter().all(|v| v.is_finite());
         let r_ok = self.check_reference(r).is_ok();
-        if y_ok {
+        let mut measured = y.len() == ny && y.iter().all(|v| v.is_finite());
+        if measured {
             for ((ys, &yi), &s) in self.y_scaled.iter_mut().zip(y).zip(&self.output_scales) {
                 *ys = yi / s;
             }
-        } else {
-            // No usable measurement: a zero innovation keeps the estimator on its prediction.
-            self.y_scaled
-                .gemv(1.0, &self.model.c, self.estimator.prior(), 0.0);
+            let posterior = self
+                .estimator
+                .correct(self.y_scaled.as_slice(), &self.u_prev);
+            self.x.copy_from_slice(posterior.as_slice());
+            measured = all_finite(&self.x) && all_finite(self.estimator.innovation().as_slice());
         }
-        let posterior = self
-            .estimator
-            .correct(self.y_scaled.as_slice(), &self.u_prev);
-        self.x.copy_from_slice(posterior.as_slice());
-        let pre_status = if y_ok && r_ok {
+        if measured {
+            // A finite but huge estimate can still overflow the QP data; kept, it would make
+            // every later step fail too. Tested even when this step's reference is unusable.
+            let r_fill = if r_ok { r } else { &self.r_zero };
+            self.qp
+                .fill_linear(&self.x, &self.u_prev, r_fill, &mut self.f, &mut self.b);
+            measured = all_finite(self.f.as_slice()) && all_finite(self.b.as_slice());
+        }
+        if !measured {
+            let posterior = self.estimator.correct_without_measurement();
+            self.x.copy_from_slice(posterior.as_slice());
+        }
+        let pre_status = if measured && r_ok {
             QpStatus::Solved
         } else {
             QpStatus::InvalidInput
         };
         let u_prev = std::mem::take(&mut self.u_prev);
-        self.solve_buffers(&u_prev, if r_ok { r } else { &[] }, pre_status);
+        self.solve_buffers(&u_prev, if r_ok { r } else { &[] }, pre_status, true);
         self.u_prev = u_prev;
         self.u_prev.copy_from_slice(self.solution.u.as_slice());
+        self.prior_backup.copy_from(self.estimator.prior());
         self.estimator.predict(&self.u_prev);
+        if !all_finite(self.estimator.prior().as_slice()) {
+            // Same reasoning for the time update: redo it from the last good prior, without
+            // the innovation, rather than carry an overflow into every later sample.
+            self.estimator.set_prior(self.prior_backup.as_slice());
+            self.estimator.predict_without_measurement(&self.u_prev);
+        }
         let n = u.len().min(self.u_prev.len());
         u[..n].copy_from_slice(&self.u_prev[..n]);
         if self.solution.fallback {
@@ -834,29 +911,56 @@ impl Mpc {
         }
     }
 
+    /// A period without a measurement in which the plant receives `u` (the
+    /// [`Controller::hold`] of this controller; module docs): the estimator's time update with
+    /// zero innovation, the plan shifted by one sample, and `u` as the next step's `u(k−1)`.
+    /// Non-finite entries of `u` keep the previous input. [`last_solution`](Self::last_solution)
+    /// is left as it was.
+    pub fn hold_input(&mut self, u: &[f64]) {
+        for (prev, &held) in self.u_prev.iter_mut().zip(u) {
+            if held.is_finite() {
+                *prev = held;
+            }
+        }
+        self.estimator.predict_without_measurement(&self.u_prev);
+        self.x
+            .copy_from_slice(self.estimator.posterior().as_slice());
+        let nu = self.qp.nu;
+        if self.qp.m > 1 {
+            self.plan.copy_within(nu.., 0);
+        }
+    }
+
     /// Solves from `self.x`, writes `self.solution`, shifts the plan. `pre_status` other than
-    /// `Solved` skips the QP and applies the fallback.
+    /// `Solved` skips the QP and applies the fallback. `filled`: `f` and `b` already hold the
+    /// data for `self.x`, `u_prev` and `r`.
     #[allow(clippy::needless_range_loop)] // input index c runs over several arrays
-    fn solve_buffers(&mut self, u_prev: &[f64], r: &[f64], pre_status: QpStatus) {
+    fn solve_buffers(&mut self, u_prev: &[f64], r: &[f64], pre_status: QpStatus, filled: bool) {
         let start = Instant::now();
         let (nu, m) = (self.qp.nu, self.qp.m);
         let (status, iterations) = if pre_status == QpStatus::Solved {
-            self.qp
-                .fill_linear(&self.x, u_prev, r, &mut self.f, &mut self.b);
-            match &mut self.backend {
-                Backend::Clarabel(solver) => solver.solve(&self.f, &self.b, &mut self.z),
-                Backend::ActiveSet(solver) => {
-                    let (lo, hi) = (&self.u_lo, &self.u_hi);
-                    let out =
-                        solver.solve(&self.f, &self.b, |z| project_inputs(z, u_prev, lo, hi, m));
-                    self.z.copy_from(solver.solution());
-                    let status = if out.status.is_usable() && self.z.iter().any(|v| !v.is_finite())
-                    {
-                        QpStatus::NumericalTrouble
-                    } else {
-                        out.status
-                    };
-                    (status, out.iterations)
+            if !filled {
+                self.qp
+                    .fill_linear(&self.x, u_prev, r, &mut self.f, &mut self.b);
+            }
+            if !(all_finite(self.f.as_slice()) && all_finite(self.b.as_slice())) {
+                (QpStatus::InvalidInput, 0)
+            } else {
+                match &mut self.backend {
+                    Backend::Clarabel(solver) => solver.solve(&self.f, &self.b, &mut self.z),
+                    Backend::ActiveSet(solver) => {
+                        let (lo, hi) = (&self.u_lo, &self.u_hi);
+                        let out = solver
+                            .solve(&self.f, &self.b, |z| project_inputs(z, u_prev, lo, hi, m));
+                        self.z.copy_from(solver.solution());
+                        let status =
+                            if out.status.is_usable() && self.z.iter().any(|v| !v.is_finite()) {
+                                QpStatus::NumericalTrouble
+                            } else {
+                                out.status
+                            };
+                        (status, out.iterations)
+                    }
                 }
             }
         } else {
@@ -940,6 +1044,10 @@ impl Mpc {
     }
 }
 
+fn all_finite(v: &[f64]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
 /// Moves `Δ` so that every blocked input `u(k+j) = u⁻ + Σ_{l≤j} Δu(k+l)` lies in its bounds:
 /// the running sums are clamped and the moves recomputed from them.
 fn project_inputs(z: &mut [f64], u_prev: &[f64], lo: &[f64], hi: &[f64], m: usize) {
@@ -1014,6 +1122,10 @@ impl Controller for Mpc {
 
     fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
         self.step_preview(y, r, u)
+    }
+
+    fn hold(&mut self, u: &[f64]) {
+        self.hold_input(u);
     }
 
     fn reset(&mut self) {

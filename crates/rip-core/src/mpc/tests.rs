@@ -277,6 +277,22 @@ fn bad_settings_name_the_argument() {
             },
             "input_rate_weights",
         ),
+        (
+            MpcSettings {
+                prediction_horizon: 1_000_000_000,
+                ..Default::default()
+            },
+            "prediction_horizon",
+        ),
+        (
+            // Within the horizon bound, but m = P makes the condensed matrices P² in size.
+            MpcSettings {
+                prediction_horizon: MAX_PREDICTION_HORIZON,
+                control_horizon: MAX_PREDICTION_HORIZON,
+                ..Default::default()
+            },
+            "prediction_horizon",
+        ),
     ];
     for (settings, name) in cases {
         let err = Mpc::new(&a, &b, &c, 0.1, settings).unwrap_err();
@@ -334,4 +350,103 @@ fn preview_of_one_row_equals_constant_reference() {
     assert!((u1 - u2).abs() < 1e-10 && (u1 - u3).abs() < 1e-10);
     assert!(mpc.solve(&x, &[0.0], &[1.0; 3]).is_err());
     assert!(mpc.solve(&x, &[0.0], &vec![1.0; 102]).is_err());
+}
+
+#[test]
+fn hold_is_the_time_update_without_innovation_and_shifts_the_plan() {
+    for solver in [QpSolver::ActiveSet, QpSolver::Clarabel] {
+        let mut mpc = paper::controller(solver).unwrap();
+        let mut twin = paper::controller(solver).unwrap();
+        let (a, b, c) = (
+            mpc.model().a.clone(),
+            mpc.model().b.clone(),
+            mpc.model().c.clone(),
+        );
+        let (l, m) = (mpc.kalman_design().l.clone(), mpc.kalman_design().m.clone());
+        let r = [0.5, 0.0];
+        let mut u = [0.0];
+        for k in 0..5 {
+            mpc.step(&[0.01 * k as f64, 0.05], &r, &mut u);
+        }
+        let prior = mpc.estimator().prior().clone();
+
+        // The plant keeps a command other than the last move (rounded, limited by the loop).
+        let held = u[0] - 0.25;
+        mpc.hold(&[held]);
+        assert_eq!(mpc.estimator().posterior(), &prior);
+        assert_eq!(mpc.state_estimate().unwrap(), prior.as_slice());
+        assert!(mpc.estimator().innovation().iter().all(|&e| e == 0.0));
+        let want = &a * &prior + &b * held;
+        assert!((mpc.estimator().prior() - &want).amax() < 1e-12);
+        assert_eq!(mpc.last_input(), &[held]);
+
+        // The next sample: eqs. (4)-(6) from the held period's prediction, and a move from u_h.
+        let y = [0.02, 0.04];
+        mpc.step(&y, &r, &mut u);
+        let e = DVector::from_row_slice(&y) - &c * &want;
+        let post = &want + &m * &e;
+        assert!((mpc.estimator().posterior() - &post).amax() < 1e-12);
+        let expected = twin.solve(post.as_slice(), &[held], &r).unwrap().u[0];
+        assert!(
+            (u[0] - expected).abs() < 1e-9,
+            "{solver:?}: {} vs {expected}",
+            u[0]
+        );
+        let next_prior = &a * &want + &b * u[0] + &l * &e;
+        assert!((mpc.estimator().prior() - &next_prior).amax() < 1e-12);
+
+        // A hold advances the plan like a sample: after one hold and one failed step, the
+        // fallback is the move planned for two samples ahead.
+        let mut mpc = paper::controller(solver).unwrap();
+        for k in 0..5 {
+            mpc.step(&[0.01 * k as f64, 0.05], &r, &mut u);
+        }
+        let sol = mpc.last_solution().clone();
+        let two_ahead = (sol.u[0] + sol.du[1] + sol.du[2]).clamp(-12.0, 12.0);
+        mpc.hold(&u);
+        assert_eq!(mpc.step(&[f64::NAN, 0.0], &r, &mut u), StepStatus::Fallback);
+        assert!((u[0] - two_ahead).abs() < 1e-12, "{} vs {two_ahead}", u[0]);
+    }
+}
+
+#[test]
+fn an_overflowing_measurement_is_discarded_and_the_controller_recovers() {
+    for solver in [QpSolver::ActiveSet, QpSolver::Clarabel] {
+        let mut mpc = paper::controller(solver).unwrap();
+        let mut skipped = paper::controller(solver).unwrap();
+        let mut u = [0.0];
+        let mut v = [0.0];
+        for k in 0..3 {
+            let y = [0.001 * k as f64, 0.02];
+            mpc.step(&y, &[0.0, 0.0], &mut u);
+            skipped.step(&y, &[0.0, 0.0], &mut v);
+        }
+        let prior = mpc.estimator().prior().clone();
+        let status = mpc.step(&[1e308, -1e308], &[0.0, 0.0], &mut u);
+        assert_eq!(status, StepStatus::Fallback);
+        assert_eq!(mpc.last_solution().status, QpStatus::InvalidInput);
+        assert_eq!(mpc.estimator().posterior(), &prior);
+        assert!(u[0].is_finite() && u[0].abs() <= 12.0);
+        // Exactly as if the sample had been NaN.
+        skipped.step(&[f64::NAN, f64::NAN], &[0.0, 0.0], &mut v);
+        assert_eq!(u, v);
+        assert_eq!(mpc.estimator().prior(), skipped.estimator().prior());
+        for k in 0..5 {
+            let y = [0.0, 0.01 * k as f64];
+            let status = mpc.step(&y, &[0.0, 0.0], &mut u);
+            skipped.step(&y, &[0.0, 0.0], &mut v);
+            assert_eq!(status, StepStatus::Nominal, "{solver:?} sample {k}");
+            assert_eq!(mpc.last_solution().status, QpStatus::Solved);
+            assert_eq!(u, v);
+        }
+        // Also when the reference of that sample is unusable too (no QP to solve).
+        let prior = mpc.estimator().prior().clone();
+        mpc.step(&[-1e308, 1e308], &[f64::NAN, 0.0], &mut u);
+        assert_eq!(mpc.estimator().posterior(), &prior);
+        mpc.step(&[0.0, 0.0], &[0.0, 0.0], &mut u);
+        assert_eq!(mpc.last_solution().status, QpStatus::Solved, "{solver:?}");
+        // The same holds for a direct solve from an absurd state: no solver call, a fallback.
+        let sol = mpc.solve(&[1e307, 0.0, -1e307, 0.0, 0.0], &[0.0], &[0.0, 0.0]);
+        assert_eq!(sol.unwrap().status, QpStatus::InvalidInput);
+    }
 }

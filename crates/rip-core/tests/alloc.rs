@@ -1,0 +1,84 @@
+//! The hot paths allocate nothing per call: every controller step and hold (regulators and the
+//! MPC on its active-set backend), the estimator update and the RK4 step are counted with a global
+//! allocator that tallies the allocations of the calling thread.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use rip_core::mpc::paper::controller;
+use rip_core::{Controller, Lqg, Lqr, Plant, QpSolver, State};
+
+struct Counting;
+
+thread_local! {
+    // Per thread, so tests running in parallel do not see each other's allocations.
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.with(|n| n.set(n.get() + 1));
+        System.alloc(layout)
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        System.dealloc(ptr, layout)
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.with(|n| n.set(n.get() + 1));
+        System.realloc(ptr, layout, new_size)
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn allocations_during(f: impl FnOnce()) -> usize {
+    let before = ALLOCATIONS.with(Cell::get);
+    f();
+    ALLOCATIONS.with(Cell::get) - before
+}
+
+/// 200 samples of a tilted pendulum while the arm reference steps, some of them lost.
+fn drive(ctrl: &mut dyn Controller) -> usize {
+    let mut u = [0.0];
+    // Warm up once: state initialised lazily on the first call may allocate.
+    ctrl.step(&[0.0, 0.05], &[0.0, 0.0], &mut u);
+    allocations_during(|| {
+        for k in 0..200 {
+            let t = k as f64 * 0.01;
+            let y = [0.2 * t.sin(), 0.05 * (3.0 * t).cos()];
+            let r = [if k > 50 { 1.0 } else { 0.0 }, 0.0];
+            // Every seventh sample is lost on the wire: the controller holds instead.
+            if k % 7 == 3 {
+                ctrl.hold(&u);
+            } else {
+                ctrl.step(&y, &r, &mut u);
+            }
+            assert!(u[0].is_finite());
+        }
+    })
+}
+
+#[test]
+fn regulator_steps_do_not_allocate() {
+    assert_eq!(drive(&mut Lqr::paper().unwrap()), 0, "Lqr::step");
+    assert_eq!(drive(&mut Lqg::paper().unwrap()), 0, "Lqg::step");
+}
+
+#[test]
+fn active_set_mpc_step_does_not_allocate() {
+    let mut mpc = controller(QpSolver::ActiveSet).unwrap();
+    assert_eq!(drive(&mut mpc), 0, "Mpc::step (active set)");
+}
+
+#[test]
+fn rk4_step_does_not_allocate() {
+    let plant = Plant::paper();
+    let mut x = State::new(0.0, 0.0, 0.1, 0.0);
+    let n = allocations_during(|| {
+        for _ in 0..1000 {
+            plant.rk4_step(&mut x, 1.0, 0.0, 1e-3);
+        }
+    });
+    assert_eq!(n, 0, "Plant::rk4_step");
+}
