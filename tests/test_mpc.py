@@ -20,8 +20,8 @@ import riprs
 
 BACKENDS = ["clarabel", "active_set"]
 # Interior-point accuracy vs. the exact active-set solution.
-U_TOL = {"clarabel": 2e-5, "active_set": 1e-8}
-SLACK_TOL = {"clarabel": 1e-4, "active_set": 1e-8}
+U_TOL = {"clarabel": 2e-6, "active_set": 1e-8}
+SLACK_TOL = {"clarabel": 1e-6, "active_set": 1e-8}
 
 
 # --------------------------------------------------------------------------------------------

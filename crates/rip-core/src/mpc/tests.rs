@@ -189,7 +189,7 @@ fn paper_backends_agree_along_a_closed_loop_on_the_linear_model() {
     }
     assert!(saturated > 0, "the scenario should saturate the input");
     assert!(soft_active > 0, "the scenario should use the slack");
-    assert!(max_du < 2e-5, "backends differ by {max_du} V");
+    assert!(max_du < 1e-6, "backends differ by {max_du} V");
     assert!(
         x[2].abs() < 0.05 && (x[0] - 1.0).abs() < 0.1,
         "did not settle: {x}"
@@ -387,8 +387,14 @@ fn hold_is_the_time_update_without_innovation_and_shifts_the_plan() {
         let post = &want + &m * &e;
         assert!((mpc.estimator().posterior() - &post).amax() < 1e-12);
         let expected = twin.solve(post.as_slice(), &[held], &r).unwrap().u[0];
+        // An interior-point solve stops within its tolerances of an active bound, so two
+        // solves from estimates equal to 1e-12 agree only to that tolerance.
+        let tol = match solver {
+            QpSolver::ActiveSet => 1e-9,
+            QpSolver::Clarabel => 1e-6,
+        };
         assert!(
-            (u[0] - expected).abs() < 1e-9,
+            (u[0] - expected).abs() < tol,
             "{solver:?}: {} vs {expected}",
             u[0]
         );
