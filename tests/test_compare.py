@@ -134,6 +134,15 @@ def test_monte_carlo_small(tmp_path):
         ("[mpc]\noutput_bounds = [[], [0.5, -0.5]]\n", "mpc.output_bounds[1]"),
         ("controllers = ['LQR', 'PID']\n", "controllers[1]"),
         ("[reference\n", "invalid TOML"),
+        ("[plant]\ninitial_state = [0.0, 0.0, nan, 0.0]\n", "plant.initial_state[2]"),
+        ("[mpc]\ninput_bounds = [-inf, inf]\n", "mpc.input_bounds"),
+        ("[reference]\nduration = 0.001\n", "reference.duration"),
+        ("[reference]\nduration = 1e6\n", "reference.duration"),
+        ("[mpc]\nprediction_horizon = 100000\n", "mpc.prediction_horizon"),
+        ("[mpc]\necr_weight = 0.0\n", "mpc.ecr_weight"),
+        ("[mpc]\ndisturbance_gain = -0.01\n", "mpc.disturbance_gain"),
+        ("[lqr]\nrate_cutoff = 0.0\n", "lqr.rate_cutoff"),
+        ("[lqg]\nrate_cutoff = 10.0\n", "lqg.rate_cutoff"),
     ],
 )
 def test_bad_config_fails_clearly(tmp_path, capsys, text, needle):
@@ -144,3 +153,45 @@ def test_bad_config_fails_clearly(tmp_path, capsys, text, needle):
     assert code == 1
     assert needle in capsys.readouterr().err
     assert not (tmp_path / "o").exists()  # nothing written on a bad config
+
+
+def test_values_that_fail_together_name_the_section(tmp_path, capsys):
+    # Each weight is a valid number; together they overflow the condensed QP in the core.
+    cfg = _write(tmp_path, "[mpc]\noutput_weights = [1e308, 1e308]\n")
+    code = main(["compare", "--config", str(cfg), "--out", str(tmp_path / "o"), "--quiet"])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert "[mpc]" in err and "output_weights" in err and "Traceback" not in err
+
+
+def test_undecodable_config_is_a_config_error(tmp_path):
+    path = tmp_path / "latin1.toml"
+    path.write_bytes(b'[plant]\npreset = "\xff"\n')
+    with pytest.raises(ConfigError, match="invalid TOML"):
+        load_config(path)
+
+
+def test_a_bad_log_fails_before_the_runs(tmp_path, capsys):
+    not_a_log = _write(tmp_path, "controller,rmse_arm\nLQR,0.1\n")
+    out = tmp_path / "o"
+    code = main(["compare", "--log", str(not_a_log), "--out", str(out), "--quiet"])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert "not a rip-rt log" in err and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_compare_leaves_the_callers_config_alone():
+    cfg = CompareConfig.from_dict({"reference": {"duration": 0.5}})
+    compare(cfg, monte_carlo=2, progress=False)
+    assert cfg.monte_carlo.runs == 0
+
+
+def test_lqr_rate_cutoff_reaches_the_controller():
+    # A plain difference (no filter) passes the quantisation noise to the voltage.
+    base = {"reference": {"duration": 3.0}, "controllers": ["LQR"]}
+    filtered = compare(CompareConfig.from_dict(base), progress=False).summary["LQR"]
+    raw = compare(
+        CompareConfig.from_dict({**base, "lqr": {"rate_cutoff": float("inf")}}), progress=False
+    ).summary["LQR"]
+    assert raw[2] > 1.15 * filtered[2]

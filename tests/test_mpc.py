@@ -511,10 +511,15 @@ def test_huge_horizon_is_refused_before_anything_is_allocated():
     with pytest.raises(riprs.InvalidParameterError, match="prediction_horizon"):
         riprs.Mpc(plant.A, plant.B, plant.C, 0.01, prediction_horizon=5000,
                   control_horizon=5000)
-    # The largest horizon itself is accepted with a short control horizon.
-    mpc = riprs.Mpc(plant.A, plant.B, plant.C, 0.01, prediction_horizon=10_000,
-                    control_horizon=1, solver="active_set")
+    # The largest horizon itself is accepted with a short control horizon on a stable plant...
+    mpc = riprs.Mpc([[0.9, 0.0], [0.1, 0.95]], [[1.0], [0.0]], [[0.0, 1.0]], 0.01,
+                    prediction_horizon=10_000, control_horizon=1, solver="active_set")
     assert mpc.prediction_horizon == 10_000
+    assert np.isfinite(mpc.solve([1.0, -1.0], [0.0], [0.5]).u).all()
+    # ...while the upright pendulum's unstable pole (|z| = 1.07) overflows 10⁴ steps ahead.
+    with pytest.raises(riprs.InvalidParameterError, match="overflow"):
+        riprs.Mpc(plant.A, plant.B, plant.C, 0.01, prediction_horizon=10_000,
+                  control_horizon=1, solver="active_set")
 
 
 def test_bad_model_shapes_and_values_raise():

@@ -21,7 +21,7 @@ from riprs._riprs import (
 )
 from riprs.control import Lqg, Lqr
 from riprs.design import KalmanDesign, c2d, dare, dlqe, dlqr, kalman
-from riprs.log import RtLog, load_log
+from riprs.log import LogError, RtLog, load_log
 from riprs.mpc import Mpc, MpcSolution
 from riprs.plant import FurutaParams, Plant
 from riprs.sim import SimResult, simulate, simulate_batch
@@ -31,6 +31,7 @@ __all__ = [
     "FurutaParams",
     "InvalidParameterError",
     "KalmanDesign",
+    "LogError",
     "Lqg",
     "Lqr",
     "Mpc",

@@ -46,6 +46,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
     from riprs.compare import Trajectory, compare, format_monte_carlo
     from riprs.log import load_log
 
+    # Logs are read first, so that a wrong path fails before the runs, not after them.
+    logs = {f"rip-rt {Path(p).stem}": Trajectory.from_log(load_log(p)) for p in args.log or []}
     result = compare(
         args.config,
         out=args.out,
@@ -58,19 +60,11 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if result.monte_carlo is not None:
         print()
         print(format_monte_carlo(result.monte_carlo))
-    if args.log:
+    if logs and not args.no_plots:
         from riprs import plots
 
-        out = Path(args.out)
-        logged = dict(result.trajectories)
-        for path in args.log:
-            logged[f"rip-rt {Path(path).stem}"] = Trajectory.from_log(load_log(path))
-        for stem, quantity, *_ in plots._PANELS:
-            import matplotlib.pyplot as plt
-
-            ax = plots.plot_trajectories(logged, quantity)
-            ax.figure.savefig(out / f"{stem}_with_logs.png", dpi=120)
-            plt.close(ax.figure)
+        overlay = {**result.trajectories, **logs}
+        result.files += plots.plot_comparison(overlay, Path(args.out), suffix="_with_logs")
     print()
     print(f"wrote {len(result.files)} files to {args.out}/")
     return 0

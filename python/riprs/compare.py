@@ -20,6 +20,7 @@ over every sample of the run (a run that falls is cut at the fall and flagged).
 
 from __future__ import annotations
 
+import copy
 import csv
 import os
 from collections.abc import Mapping, Sequence
@@ -30,7 +31,7 @@ from typing import Any, Union
 import numpy as np
 
 from riprs import paper
-from riprs._riprs import FurutaParams, Lqg, Lqr, Plant
+from riprs._riprs import FurutaParams, Lqg, Lqr, Plant, RiprsError
 from riprs.config import CompareConfig, ConfigError, load_config
 from riprs.design import dlqr
 from riprs.sim import SimResult, simulate, simulate_batch
@@ -172,7 +173,7 @@ def _mpc(config: CompareConfig, model: StateSpace) -> Any:
         ecr_weight=m.ecr_weight,
         input_scales=m.input_scales,
         output_scales=m.output_scales,
-        output_disturbance=(np.eye(1), 0.01 * np.eye(1), np.ones((2, 1))),
+        output_disturbance=(np.eye(1), m.disturbance_gain * np.eye(1), np.ones((2, 1))),
         solver=m.solver,
     )
 
@@ -188,11 +189,18 @@ def build_controllers(config: CompareConfig | None = None) -> dict[str, Any]:
     model = _design_model(config)
     u_min, u_max = config.mpc.input_bounds
     controllers: dict[str, Any] = {}
-    mpc = _mpc(config, model)
+    try:
+        mpc = _mpc(config, model)
+    except RiprsError as exc:
+        # Values that pass the per-key checks can still fail together (say, weights whose
+        # Hessian overflows); the core's message names the argument, this adds the section.
+        raise ConfigError(f"[mpc]: {exc}") from None
     for name in config.controllers:
         if name == "LQR":
             K, _, _ = dlqr(model.A, model.B, np.diag(config.lqr.Q), [[config.lqr.R]])
-            controllers[name] = Lqr(K, model.Ts, u_min=u_min, u_max=u_max)
+            controllers[name] = Lqr(
+                K, model.Ts, rate_cutoff=config.lqr.rate_cutoff, u_min=u_min, u_max=u_max
+            )
         elif name == "LQG":
             K, _, _ = dlqr(model.A, model.B, np.diag(config.lqg.Q), [[config.lqg.R]])
             A_aug, B_aug, C_aug = mpc.model
@@ -260,7 +268,8 @@ def compare(
     if config is None:
         cfg = CompareConfig()
     elif isinstance(config, CompareConfig):
-        cfg = config
+        # The caller's object stays as it was, whatever ``monte_carlo`` overrides.
+        cfg = copy.deepcopy(config)
     else:
         cfg = load_config(config)
     cfg.validate()

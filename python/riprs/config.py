@@ -23,11 +23,17 @@ Example (every section and key is optional)::
     [lqr]
     Q = [25.0, 0.0, 50.0, 0.0]  # diagonal of eq. (13)
     R = 0.1
+    rate_cutoff = 20.0          # Hz, the rate filter of the measured angles
+
+    [lqg]
+    Q = [25.0, 0.0, 50.0, 0.0]
+    R = 0.1
 
     [mpc]
     prediction_horizon = 50
     control_horizon = 3
     solver = "active_set"
+    disturbance_gain = 0.01     # eq. (1): integrated white noise on both outputs
 
     [monte_carlo]
     runs = 100
@@ -67,6 +73,10 @@ CONTROLLERS = ("LQR", "LQG", "MPC")
 PRESETS = ("paper", "qube_servo2")
 SOLVERS = ("active_set", "clarabel")
 PERTURBABLE = ("mr", "Lr", "Jr", "mp", "Lp", "Jp", "Dr", "Dp", "Rm", "kt", "km")
+# The simulator's and the MPC's own limits, checked here so that the error names the key.
+MAX_DURATION = 3600.0
+MAX_PREDICTION_HORIZON = 10_000
+TS = 0.01
 
 
 class ConfigError(RiprsError):
@@ -86,6 +96,8 @@ class PlantConfig:
         _one_of(self.preset, PRESETS, f"{prefix}.preset")
         _positive_int(self.substeps, f"{prefix}.substeps")
         _length(self.initial_state, 4, f"{prefix}.initial_state")
+        for i, v in enumerate(self.initial_state):
+            _finite(v, f"{prefix}.initial_state[{i}]")
         _positive(self.fall_limit, f"{prefix}.fall_limit")
 
 
@@ -120,12 +132,17 @@ class ReferenceConfig:
     def validate(self, prefix: str) -> None:
         _finite(self.arm_step, f"{prefix}.arm_step")
         _non_negative(self.step_time, f"{prefix}.step_time")
-        _positive(self.duration, f"{prefix}.duration")
+        if not (math.isfinite(self.duration) and TS <= self.duration <= MAX_DURATION):
+            raise ConfigError(
+                f"{prefix}.duration must be between one sample ({TS} s) and {MAX_DURATION} s, "
+                f"got {self.duration}"
+            )
 
 
 @dataclass
-class LqrConfig:
-    """Eq. (13): ``Q = diag(Q)``, ``R``."""
+class LqgConfig:
+    """The LQR weights of eq. (13), ``Q = diag(Q)`` and ``R``, on the estimate of the Kalman
+    filter the LQG shares with the MPC (eqs. (3)-(12); its noise model is ``[mpc]``'s)."""
 
     Q: list[float] = field(default_factory=lambda: [25.0, 0.0, 50.0, 0.0])
     R: float = 0.1
@@ -138,8 +155,19 @@ class LqrConfig:
 
 
 @dataclass
-class LqgConfig(LqrConfig):
-    """The LQR weights on the estimate of the paper's Kalman filter (eqs. (3)-(12))."""
+class LqrConfig(LqgConfig):
+    """Eq. (13): ``Q = diag(Q)``, ``R``; the rates come from the measured angles through a
+    first-order filtered difference with cut-off ``rate_cutoff`` (Hz, ``inf`` for the plain
+    difference), as :class:`riprs.Lqr`."""
+
+    rate_cutoff: float = 20.0
+
+    def validate(self, prefix: str) -> None:
+        super().validate(prefix)
+        if math.isnan(self.rate_cutoff) or self.rate_cutoff <= 0:
+            raise ConfigError(
+                f"{prefix}.rate_cutoff must be positive (Hz) or inf, got {self.rate_cutoff}"
+            )
 
 
 @dataclass
@@ -163,9 +191,15 @@ class MpcConfig:
     input_scales: list[float] = field(default_factory=lambda: [10.0])
     output_scales: list[float] = field(default_factory=lambda: [1.0, 1.0])
     solver: str = "active_set"
+    disturbance_gain: float = 0.01
 
     def validate(self, prefix: str) -> None:
         _positive_int(self.prediction_horizon, f"{prefix}.prediction_horizon")
+        if self.prediction_horizon > MAX_PREDICTION_HORIZON:
+            raise ConfigError(
+                f"{prefix}.prediction_horizon must be at most {MAX_PREDICTION_HORIZON}, "
+                f"got {self.prediction_horizon}"
+            )
         _positive_int(self.control_horizon, f"{prefix}.control_horizon")
         if self.control_horizon > self.prediction_horizon:
             raise ConfigError(
@@ -191,8 +225,9 @@ class MpcConfig:
                 raise ConfigError(f"{prefix}.output_bounds[{i}] must be a list, got {b!r}")
             if b:
                 _bounds(b, f"{prefix}.output_bounds[{i}]")
-        _non_negative(self.ecr_weight, f"{prefix}.ecr_weight")
+        _positive(self.ecr_weight, f"{prefix}.ecr_weight")
         _one_of(self.solver, SOLVERS, f"{prefix}.solver")
+        _positive(self.disturbance_gain, f"{prefix}.disturbance_gain")
 
 
 @dataclass
@@ -263,8 +298,8 @@ def load_config(path: Union[str, os.PathLike[str]]) -> CompareConfig:
     with open(path, "rb") as fh:
         try:
             data = tomllib.load(fh)
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{os.fspath(path)}: invalid TOML: {exc}") from exc
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"{os.fspath(path)}: invalid TOML: {exc}") from None
     try:
         return CompareConfig.from_dict(data)
     except ConfigError as exc:
@@ -356,8 +391,8 @@ def _length(values: list[Any], n: int, key: str) -> None:
 def _bounds(b: list[float], key: str) -> None:
     _length(b, 2, key)
     lo, hi = b
-    if math.isnan(lo) or math.isnan(hi) or not lo < hi:
-        raise ConfigError(f"{key} must be [lower, upper] with lower < upper, got {b}")
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise ConfigError(f"{key} must be [lower, upper], finite, with lower < upper, got {b}")
 
 
 def _one_of(value: str, allowed: tuple[str, ...], key: str) -> None:

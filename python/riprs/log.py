@@ -13,13 +13,19 @@ from typing import Dict, List, Union
 
 import numpy as np
 
+from riprs._riprs import RiprsError
+
 # Bits of the ``status`` column above the device's own eight status bits.
 FLAG_NO_REPLY = 1 << 8
 FLAG_FALLBACK = 1 << 9
-FLAG_CLAMPED = 1 << 10
+FLAG_CLAMPED = 1 << 10  # the command is at the voltage limit
 FLAG_DEADLINE_MISS = 1 << 11
 
 _REQUIRED = ("t", "seq", "theta", "alpha", "theta_ref", "u", "compute_us", "jitter_us", "status")
+
+
+class LogError(RiprsError):
+    """A file is not a readable ``rip-rt`` log; the message names the file, line and column."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,10 +77,17 @@ def load_log(path: Union[str, os.PathLike[str]]) -> RtLog:
     ------
     OSError
         If the file cannot be read.
-    ValueError
-        If it is not a ``rip-rt`` log (missing columns, or a row that does not parse); the
-        message names the file, the line and the column.
+    LogError
+        If it is not a ``rip-rt`` log (not text, missing columns, or a row that does not
+        parse); the message names the file, the line and the column. A ``ValueError``.
     """
+    try:
+        return _parse(path)
+    except UnicodeDecodeError as exc:
+        raise LogError(f"{os.fspath(path)}: not a rip-rt log (not UTF-8 text: {exc})") from None
+
+
+def _parse(path: Union[str, os.PathLike[str]]) -> RtLog:
     meta: Dict[str, str] = {}
     columns: List[str] | None = None
     rows: List[List[float]] = []
@@ -93,12 +106,12 @@ def load_log(path: Union[str, os.PathLike[str]]) -> RtLog:
                 columns = fields
                 missing = [c for c in _REQUIRED if c not in columns]
                 if missing:
-                    raise ValueError(
+                    raise LogError(
                         f"{path}: line {lineno}: not a rip-rt log, missing columns {missing}"
                     )
                 continue
             if len(fields) != len(columns):
-                raise ValueError(
+                raise LogError(
                     f"{path}: line {lineno}: {len(fields)} fields, expected {len(columns)}"
                 )
             row = []
@@ -106,12 +119,12 @@ def load_log(path: Union[str, os.PathLike[str]]) -> RtLog:
                 try:
                     row.append(float(value) if value else float("nan"))
                 except ValueError:
-                    raise ValueError(
+                    raise LogError(
                         f"{path}: line {lineno}: column {name!r}: not a number: {value!r}"
                     ) from None
             rows.append(row)
     if columns is None:
-        raise ValueError(f"{path}: not a rip-rt log (no column row)")
+        raise LogError(f"{path}: not a rip-rt log (no column row)")
     data = np.array(rows, dtype=np.float64).reshape(len(rows), len(columns))
     index = {name: i for i, name in enumerate(columns)}
     xhat_cols = sorted(

@@ -49,8 +49,11 @@ def plot_trajectories(trajectories: Mapping[str, Any], quantity: str, ax: Any = 
     return ax
 
 
-def plot_comparison(trajectories: Mapping[str, Any], out: Path) -> list[Path]:
-    """Write ``arm_angle``, ``pendulum_angle`` and ``control_voltage`` as PNG and SVG."""
+def plot_comparison(
+    trajectories: Mapping[str, Any], out: Path, *, suffix: str = ""
+) -> list[Path]:
+    """Write ``arm_angle``, ``pendulum_angle`` and ``control_voltage`` (each followed by
+    ``suffix``) as PNG and SVG; ``trajectories`` may mix simulations and ``rip-rt`` logs."""
     plt = _pyplot()
     files: list[Path] = []
     for stem, quantity, title, ylabel in _PANELS:
@@ -59,7 +62,7 @@ def plot_comparison(trajectories: Mapping[str, Any], out: Path) -> list[Path]:
         ax.set_title(title)
         ax.set_ylabel(ylabel)
         for ext in ("png", "svg"):
-            path = out / f"{stem}.{ext}"
+            path = out / f"{stem}{suffix}.{ext}"
             fig.savefig(path, dpi=120)
             files.append(path)
         plt.close(fig)

@@ -411,22 +411,28 @@ pub fn run(cfg: EmulatorConfig, pty: Pty, stop: &AtomicBool) -> io::Result<Emula
         let n = io.read_available(&mut rx)?;
         let mut error = None;
         let t = device.time_s();
-        parser.feed(&rx[..n], |frame| {
-            if first_command_at.is_none() && matches!(frame.message, Message::Command(_)) {
-                first_command_at = Some(t);
-            }
-            if let Err(e) = write_record(&mut record, t, &frame) {
-                error.get_or_insert(e);
-            }
-            if let Reply::Bytes(len) = device.handle(&frame, &mut out) {
-                device.inject_faults(&out[..len], &mut wire);
-                if !wire.is_empty() {
-                    if let Err(e) = io.write_all(&wire) {
-                        error.get_or_insert(e);
+        for &byte in &rx[..n] {
+            parser.push(byte);
+            while let Some(frame) = parser.poll() {
+                // A bad frame ahead of this one in the same read is reported in this reply,
+                // the next measurement, as protocol.md asks.
+                device.note_rx_errors(parser.stats().errors());
+                if first_command_at.is_none() && matches!(frame.message, Message::Command(_)) {
+                    first_command_at = Some(t);
+                }
+                if let Err(e) = write_record(&mut record, t, &frame) {
+                    error.get_or_insert(e);
+                }
+                if let Reply::Bytes(len) = device.handle(&frame, &mut out) {
+                    device.inject_faults(&out[..len], &mut wire);
+                    if !wire.is_empty() {
+                        if let Err(e) = io.write_all(&wire) {
+                            error.get_or_insert(e);
+                        }
                     }
                 }
             }
-        });
+        }
         device.note_rx_errors(parser.stats().errors());
         if let Some(e) = error {
             return Err(e);

@@ -21,3 +21,14 @@ pub mod protocol;
 pub mod runner;
 pub mod serial;
 pub mod timing;
+
+/// `eprintln!` that ignores a failed write: once the terminal or the pipe behind stderr has
+/// gone (SIGHUP, a closed SSH session), a status line must not turn into a panic and its exit
+/// code 101 in place of the stop's own.
+#[macro_export]
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use ::std::io::Write as _;
+        let _ = ::std::writeln!(::std::io::stderr(), $($arg)*);
+    }};
+}

@@ -19,7 +19,8 @@ use rip_rt::timing;
 const RUN_AFTER_HELP: &str = "\
 Exit codes:
     0    the run finished (--duration elapsed)
-    1    could not start: port or controller design failed (motor never enabled)
+    1    could not start: port (missing, busy) or log file or controller design failed
+         (motor never enabled)
     2    bad command line or configuration
     3    device lost: I/O error, or the device vanished
     4    watchdog: no valid measurement for loop.watchdog_periods periods
@@ -29,7 +30,9 @@ Exit codes:
     8    the device reported a driver fault
     9    the log file could not be written
     101  internal error (panic)
+    129  stopped by SIGHUP (terminal or session closed)
     130  stopped by SIGINT (Ctrl-C)
+    131  stopped by SIGQUIT (Ctrl-Backslash)
     143  stopped by SIGTERM
 Every exit after the device was opened sends 0 V with the driver disabled.";
 
@@ -189,7 +192,7 @@ struct EmulateArgs {
 }
 
 fn fail(code: i32, msg: impl std::fmt::Display) -> ExitCode {
-    eprintln!("rip-rt: error: {msg}");
+    rip_rt::say!("rip-rt: error: {msg}");
     ExitCode::from(code as u8)
 }
 
@@ -212,7 +215,7 @@ fn cmd_run(args: RunArgs) -> ExitCode {
     let n_estimates = core.state_estimate().map_or(0, |x| x.len());
 
     let signal = Arc::new(AtomicUsize::new(0));
-    for sig in [libc::SIGINT, libc::SIGTERM] {
+    for sig in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP, libc::SIGQUIT] {
         if let Err(e) = signal_hook::flag::register_usize(sig, Arc::clone(&signal), sig as usize) {
             return fail(
                 exit_code::SETUP,
@@ -221,8 +224,12 @@ fn cmd_run(args: RunArgs) -> ExitCode {
         }
     }
 
-    // The log is created before the port opens, so failing to create it cannot leave an
-    // opened device without its stop command.
+    let port = match SerialPort::open(&args.port, args.baud) {
+        Ok(p) => p,
+        Err(e) => return fail(exit_code::SETUP, e),
+    };
+    // The port opens first, so that a wrong --port leaves an existing log untouched; nothing
+    // has been sent to the device when the log then fails to open.
     let mut log = match &args.log {
         Some(path) => {
             let header = [
@@ -241,10 +248,6 @@ fn cmd_run(args: RunArgs) -> ExitCode {
         None => None,
     };
 
-    let port = match SerialPort::open(&args.port, args.baud) {
-        Ok(p) => p,
-        Err(e) => return fail(exit_code::SETUP, e),
-    };
     // From here on every exit path must stop the motor; a panic does it through this hook
     // before unwinding, and again through the loop's stop guard.
     let previous = std::panic::take_hook();
@@ -255,10 +258,10 @@ fn cmd_run(args: RunArgs) -> ExitCode {
 
     if let Some(prio) = args.rt_priority {
         if let Err(e) = timing::lock_memory() {
-            eprintln!("rip-rt: warning: cannot lock memory ({e}); continuing");
+            rip_rt::say!("rip-rt: warning: cannot lock memory ({e}); continuing");
         }
         if let Err(e) = timing::set_realtime_priority(prio) {
-            eprintln!(
+            rip_rt::say!(
                 "rip-rt: warning: SCHED_FIFO priority {prio} not permitted ({e}); \
                  continuing with normal scheduling"
             );
@@ -266,12 +269,12 @@ fn cmd_run(args: RunArgs) -> ExitCode {
     }
     if let Some(cpu) = args.cpu {
         if let Err(e) = timing::pin_to_cpu(cpu) {
-            eprintln!("rip-rt: warning: cannot pin to CPU {cpu} ({e}); continuing");
+            rip_rt::say!("rip-rt: warning: cannot pin to CPU {cpu} ({e}); continuing");
         }
     }
 
     if !args.quiet {
-        eprintln!(
+        rip_rt::say!(
             "rip-rt: {} on {} every {} ms; Ctrl-C stops",
             args.controller,
             args.port.display(),
@@ -311,20 +314,26 @@ fn cmd_run(args: RunArgs) -> ExitCode {
             ("link", parser_line.clone()),
         ];
         if let Err(e) = log.finish(&footer) {
-            eprintln!("rip-rt: error: log write failed: {e}");
+            rip_rt::say!("rip-rt: error: log write failed: {e}");
             if code == exit_code::FINISHED {
                 code = exit_code::LOG_ERROR;
             }
         }
     }
-    let level = if code == exit_code::FINISHED || matches!(code, 130 | 143) {
-        "stop"
+    let level =
+        if code == exit_code::FINISHED || matches!(report.reason, runner::StopReason::Signal(_)) {
+            "stop"
+        } else {
+            "FAULT"
+        };
+    let reason = if code == exit_code::LOG_ERROR && report.reason == runner::StopReason::Finished {
+        "run finished, but its log could not be completed".to_string()
     } else {
-        "FAULT"
+        report.reason.to_string()
     };
-    eprintln!("rip-rt: {level}: {} — {stop_note}", report.reason);
-    eprintln!("rip-rt: timing: {}", report.timing);
-    eprintln!("rip-rt: link: {parser_line}");
+    rip_rt::say!("rip-rt: {level}: {reason} — {stop_note}");
+    rip_rt::say!("rip-rt: timing: {}", report.timing);
+    rip_rt::say!("rip-rt: link: {parser_line}");
     ExitCode::from(code as u8)
 }
 
@@ -400,7 +409,7 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
     }
     match result {
         Ok(EmulatorExit::Vanished) => {
-            eprintln!("rip-rt emulate: device vanished (injected fault)");
+            rip_rt::say!("rip-rt emulate: device vanished (injected fault)");
             ExitCode::SUCCESS
         }
         Ok(EmulatorExit::Stopped) | Ok(EmulatorExit::Finished) => ExitCode::SUCCESS,

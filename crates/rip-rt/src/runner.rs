@@ -4,7 +4,7 @@
 //!
 //! # Safety
 //!
-//! Every way out of [`run`] — the duration elapsing, SIGINT/SIGTERM (a flag checked every
+//! Every way out of [`run`] — the duration elapsing, SIGINT/SIGTERM/SIGHUP/SIGQUIT (a flag checked every
 //! period), the watchdog, an angle limit, a device fault, an I/O error, and a panic — ends with
 //! the stop frame (0 V, driver disabled) written to the device:
 //!
@@ -38,7 +38,8 @@ use crate::timing::{now_ns, Histogram, Periodic, TimingSummary};
 pub const FLAG_NO_REPLY: u32 = 1 << 8;
 /// Log status bit: the controller used its fallback (e.g. the MPC solver failed).
 pub const FLAG_FALLBACK: u32 = 1 << 9;
-/// Log status bit: the controller's voltage exceeded `safety.voltage_limit` and was clamped.
+/// Log status bit: the command is at `±safety.voltage_limit`, saturated by the controller (LQR and
+/// LQG saturate, the MPC bounds its moves, at that limit) or clamped by the loop.
 pub const FLAG_CLAMPED: u32 = 1 << 10;
 /// Log status bit: deadlines were missed (skipped) right before this period.
 pub const FLAG_DEADLINE_MISS: u32 = 1 << 11;
@@ -106,6 +107,10 @@ pub mod exit_code {
     pub const SIGINT: i32 = 130;
     /// SIGTERM (128 + 15).
     pub const SIGTERM: i32 = 143;
+    /// SIGHUP (128 + 1): the terminal or the SSH session closed.
+    pub const SIGHUP: i32 = 129;
+    /// SIGQUIT (128 + 3): Ctrl-Backslash.
+    pub const SIGQUIT: i32 = 131;
 }
 
 impl StopReason {
@@ -148,6 +153,8 @@ impl fmt::Display for StopReason {
                 let name = match *s {
                     libc::SIGINT => "SIGINT",
                     libc::SIGTERM => "SIGTERM",
+                    libc::SIGHUP => "SIGHUP",
+                    libc::SIGQUIT => "SIGQUIT",
                     _ => "signal",
                 };
                 write!(f, "stopped by {name} ({s})")
@@ -496,7 +503,9 @@ impl LoopCore {
             )));
         }
         let voltage = raw.clamp(-self.voltage_limit, self.voltage_limit);
-        if voltage != raw {
+        // LQR/LQG saturate and the MPC bounds its moves at the same limit, so a saturated
+        // command usually arrives already at the limit rather than beyond it.
+        if voltage.abs() >= self.voltage_limit {
             flags |= FLAG_CLAMPED;
         }
         self.last_command = Command {
@@ -632,7 +641,8 @@ enum Phase {
 }
 
 /// Runs the loop on `io` until a stop reason arises (see the module docs); always ends with the
-/// stop frame. `signal` is set (to the signal number) by the SIGINT/SIGTERM handlers.
+/// stop frame. `signal` is set (to the signal number) by the handlers of SIGINT, SIGTERM,
+/// SIGHUP and SIGQUIT.
 pub fn run(
     io: &Fd,
     core: &mut LoopCore,
@@ -682,7 +692,9 @@ pub fn run(
         if let Err(e) = io.write_all(&tx[..n]) {
             break StopReason::DeviceLost(e.to_string());
         }
-        let reply_deadline = tick.deadline_ns + reply_timeout_ns;
+        // Counted from the request, so a late wake-up does not cost a measurement the device
+        // answers at once; capped at the next deadline, which the next request must keep.
+        let reply_deadline = (now_ns() + reply_timeout_ns).min(tick.deadline_ns + period_ns);
         let mut measurement = None;
         let mut rx_done_ns = 0;
         while measurement.is_none() {
@@ -742,7 +754,7 @@ pub fn run(
                 Ok(()) => {
                     core.reset();
                     if !opts.quiet {
-                        eprintln!("rip-rt: pendulum upright, balancing");
+                        crate::say!("rip-rt: pendulum upright, balancing");
                     }
                     phase = Phase::Balancing {
                         start_ns: tick.deadline_ns,
@@ -755,7 +767,7 @@ pub fn run(
                         break reason;
                     }
                     if !*told && !opts.quiet {
-                        eprintln!(
+                        crate::say!(
                             "rip-rt: waiting for the pendulum to be brought upright ({reason})"
                         );
                         *told = true;

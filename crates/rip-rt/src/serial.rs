@@ -244,6 +244,22 @@ impl SerialPort {
                 format!("--port {}: not a serial device (terminal)", path.display()),
             ));
         }
+        // Two loops on one device would steal each other's replies while both drive the
+        // motor. TIOCEXCL does not bind root, so the claim is an advisory lock every rip-rt
+        // takes; it ends with the descriptor, however the process exits.
+        // SAFETY: flock only inspects the descriptor.
+        if unsafe { libc::flock(raw, libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+            let e = io::Error::last_os_error();
+            let why = if e.kind() == io::ErrorKind::WouldBlock {
+                "in use by another rip-rt".to_string()
+            } else {
+                format!("cannot lock: {e}")
+            };
+            return Err(io::Error::new(
+                io::ErrorKind::WouldBlock,
+                format!("--port {}: {why}", path.display()),
+            ));
+        }
         make_raw(raw, Some(speed))
             .map_err(|e| io::Error::new(e.kind(), format!("--port {}: {e}", path.display())))?;
         let io = Fd::new(fd);

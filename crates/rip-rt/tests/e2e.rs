@@ -1,6 +1,11 @@
 //! End to end: `rip-rt emulate` on a pseudo-terminal and `rip-rt run` against it, for a few
 //! seconds each, checking the closed-loop behaviour, the fault handling and the exit codes.
 //! Timing figures are printed by the runner but not asserted.
+//!
+//! Each test holds [`one_at_a_time`]: every run is a 100 Hz loop against a 1 kHz emulator, and
+//! the default test threads would otherwise run several such pairs on two cores at once, so
+//! that scheduling delays (skipped periods, watchdog stops) rather than the code decide the
+//! outcome.
 
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
@@ -8,6 +13,15 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 const BIN: &str = env!("CARGO_BIN_EXE_rip-rt");
+
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Serialises the tests of this file (module docs); a failed test does not block the others.
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("rip-rt-e2e-{}", std::process::id()));
@@ -51,11 +65,20 @@ impl Emulator {
         }
     }
 
-    /// The commands the device received: (voltage_mv, flags).
+    /// The commands the device received: (voltage_mv, flags). The last frames a run wrote
+    /// before exiting may still be in the emulator's input, so this waits until the record
+    /// stops growing.
     fn commands(&self) -> Vec<(i32, u8)> {
-        std::fs::read_to_string(&self.record)
-            .unwrap()
-            .lines()
+        let mut text = std::fs::read_to_string(&self.record).unwrap();
+        for _ in 0..40 {
+            std::thread::sleep(Duration::from_millis(50));
+            let again = std::fs::read_to_string(&self.record).unwrap();
+            if again == text {
+                break;
+            }
+            text = again;
+        }
+        text.lines()
             .skip(1)
             .map(|l| {
                 let f: Vec<&str> = l.split(',').collect();
@@ -216,21 +239,25 @@ fn balance_and_track_on(controller: &str, name: &str, emulator_args: &[&str]) ->
 
 #[test]
 fn lqr_balances_and_tracks_a_step() {
+    let _serial = one_at_a_time();
     balance_and_track("lqr");
 }
 
 #[test]
 fn lqg_balances_and_tracks_a_step() {
+    let _serial = one_at_a_time();
     balance_and_track("lqg");
 }
 
 #[test]
 fn mpc_balances_and_tracks_a_step() {
+    let _serial = one_at_a_time();
     balance_and_track("mpc");
 }
 
 #[test]
 fn corrupt_and_dropped_frames_are_survived() {
+    let _serial = one_at_a_time();
     let emu = Emulator::start(
         "corrupt",
         &[
@@ -279,6 +306,7 @@ fn corrupt_and_dropped_frames_are_survived() {
 /// lost reply; with one reply in ten lost they must still balance and track like without.
 #[test]
 fn estimators_stay_balanced_through_dropped_replies() {
+    let _serial = one_at_a_time();
     let runs: Vec<_> = ["lqg", "mpc"]
         .into_iter()
         .map(|controller| {
@@ -305,6 +333,7 @@ fn estimators_stay_balanced_through_dropped_replies() {
 
 #[test]
 fn vanished_device_is_a_safe_stop_with_exit_code_3() {
+    let _serial = one_at_a_time();
     let emu = Emulator::start("vanish", &["--vanish-after", "1.0"]);
     let r = run(&emu.device, "lqg", &["--duration", "10"]);
     assert_eq!(r.status.code(), Some(3), "{}", r.stderr);
@@ -318,24 +347,75 @@ fn vanished_device_is_a_safe_stop_with_exit_code_3() {
 }
 
 #[test]
-fn sigint_leaves_zero_volts_as_the_last_command() {
-    let emu = Emulator::start("sigint", &["--noise", "0.3"]);
-    let child = spawn_run(&emu.device, "lqr", &[]);
-    std::thread::sleep(Duration::from_millis(1500));
-    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
-    let r = wait_with_timeout(child, Duration::from_secs(10));
-    assert_eq!(r.status.code(), Some(130), "{}", r.stderr);
-    assert!(r.stderr.contains("SIGINT"), "{}", r.stderr);
-    let commands = emu.commands();
-    assert!(
-        commands.iter().any(|&(mv, f)| f == 1 && mv != 0),
-        "never balanced"
+fn signals_leave_zero_volts_as_the_last_command() {
+    let _serial = one_at_a_time();
+    for (sig, name, code) in [(libc::SIGINT, "SIGINT", 130), (libc::SIGHUP, "SIGHUP", 129)] {
+        let emu = Emulator::start(&format!("signal-{sig}"), &["--noise", "0.3"]);
+        let child = spawn_run(&emu.device, "lqr", &[]);
+        std::thread::sleep(Duration::from_millis(1500));
+        unsafe { libc::kill(child.id() as i32, sig) };
+        let r = wait_with_timeout(child, Duration::from_secs(10));
+        assert_eq!(r.status.code(), Some(code), "{}", r.stderr);
+        assert!(r.stderr.contains(name), "{}", r.stderr);
+        let commands = emu.commands();
+        assert!(
+            commands.iter().any(|&(mv, f)| f == 1 && mv != 0),
+            "{name}: never balanced"
+        );
+        assert_eq!(commands.last(), Some(&(0, 0)), "{name}");
+    }
+}
+
+#[test]
+fn a_second_loop_cannot_take_a_busy_port_and_saturation_is_flagged() {
+    let _serial = one_at_a_time();
+    let emu = Emulator::start("busy", &["--noise", "0.3", "--seed", "5"]);
+    let config = scratch("busy.toml");
+    const LIMIT: f64 = 6.0;
+    std::fs::write(&config, format!("[safety]\nvoltage_limit = {LIMIT}\n")).unwrap();
+    let log = scratch("busy.csv");
+    let first = spawn_run(
+        &emu.device,
+        "lqr",
+        &[
+            "--duration",
+            "3",
+            "--config",
+            config.to_str().unwrap(),
+            "--log",
+            log.to_str().unwrap(),
+        ],
     );
-    assert_eq!(commands.last(), Some(&(0, 0)));
+    std::thread::sleep(Duration::from_millis(800));
+    let second = run(&emu.device, "mpc", &["--duration", "1"]);
+    assert_eq!(second.status.code(), Some(1), "{}", second.stderr);
+    assert!(second.stderr.contains("in use"), "{}", second.stderr);
+    let first = wait_with_timeout(first, Duration::from_secs(20));
+    assert_eq!(first.status.code(), Some(0), "{}", first.stderr);
+
+    // The 1 rad step saturates a 6 V limit; exactly the rows at the limit carry CLAMPED.
+    let log = Log::read(&log);
+    let (u, status) = (log.col("u"), log.col("status"));
+    let mut at_limit = 0;
+    for (u, status) in u.iter().zip(&status) {
+        if (*status as u32) & (1 << 8) != 0 {
+            continue; // NO_REPLY: no step, the previous command repeated
+        }
+        let clamped = (*status as u32) & (1 << 10) != 0;
+        assert!(u.abs() <= LIMIT + 1e-9, "{u} V beyond the limit");
+        assert_eq!(
+            clamped,
+            u.abs() >= LIMIT - 1e-9,
+            "u = {u}, status = {status}"
+        );
+        at_limit += usize::from(clamped);
+    }
+    assert!(at_limit > 0, "the step never saturated the {LIMIT} V limit");
 }
 
 #[test]
 fn refuses_to_balance_a_hanging_pendulum() {
+    let _serial = one_at_a_time();
     let emu = Emulator::start("upright", &["--initial-pendulum", "1.0"]);
     let r = run(&emu.device, "lqr", &["--duration", "2"]);
     assert_eq!(r.status.code(), Some(6), "{}", r.stderr);
@@ -346,6 +426,7 @@ fn refuses_to_balance_a_hanging_pendulum() {
 
 #[test]
 fn silent_device_trips_the_watchdog() {
+    let _serial = one_at_a_time();
     let emu = Emulator::start("watchdog", &["--drop-rate", "1"]);
     let r = run(&emu.device, "lqr", &["--duration", "2"]);
     assert_eq!(r.status.code(), Some(4), "{}", r.stderr);
@@ -355,6 +436,7 @@ fn silent_device_trips_the_watchdog() {
 
 #[test]
 fn a_falling_pendulum_hits_the_angle_limit() {
+    let _serial = one_at_a_time();
     // 0.05 V cannot hold the pendulum: it falls and the limit stops the motor.
     let cfg = scratch("weak.toml");
     std::fs::write(&cfg, "[safety]\nvoltage_limit = 0.05\n").unwrap();
@@ -371,6 +453,7 @@ fn a_falling_pendulum_hits_the_angle_limit() {
 
 #[test]
 fn bad_configuration_and_arguments_exit_2_naming_the_key() {
+    let _serial = one_at_a_time();
     let cfg = scratch("bad.toml");
     std::fs::write(&cfg, "[safety]\npendulum_limit = 9\n").unwrap();
     let r = run(

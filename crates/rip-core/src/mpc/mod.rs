@@ -678,6 +678,13 @@ impl Mpc {
             output_bounds: &yb,
             ecr_weight: settings.ecr_weight,
         });
+        if qp.h.iter().chain(qp.a.iter()).any(|v| !v.is_finite()) {
+            return Err(RipError::invalid(
+                "output_weights",
+                "the weights and scales overflow the condensed QP (entries beyond 1e308); \
+                 scale them down",
+            ));
+        }
         if qp.h.clone().cholesky().is_none() {
             return Err(RipError::invalid(
                 "input_rate_weights",
