@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import control
 import numpy as np
+import pytest
 import scipy.linalg as sl
 import scipy.signal as ss
 from hypothesis import assume, given
@@ -214,3 +215,58 @@ def test_outputs_are_float64_numpy():
     A = np.array([[1.1, 0.1], [0.0, 0.9]], dtype=np.float32)
     X, eigs, G = riprs.dare(A, [[0.0], [1.0]], np.eye(2), [[1.0]])
     assert X.dtype == np.float64 and G.dtype == np.float64 and eigs.dtype == np.complex128
+
+
+# --------------------------------------------------------------------------------------------
+# Hard cases: each once returned a wrong answer, an error, or never returned
+# --------------------------------------------------------------------------------------------
+
+
+def test_deadbeat_closed_loop_of_order_three_returns():
+    # A - B G = 0 exactly: an eigenvalue solver without an iteration cap never returns.
+    A, B = np.zeros((3, 3)), np.ones((3, 1))
+    X, L, _ = riprs.dare(A, B, np.eye(3), np.eye(1))
+    np.testing.assert_allclose(X, sl.solve_discrete_are(A, B, np.eye(3), np.eye(1)), atol=1e-14)
+    np.testing.assert_allclose(L, 0.0, atol=1e-15)
+    kf = riprs.kalman(np.zeros((3, 3)), np.eye(3), np.eye(3), np.eye(3), np.eye(3))
+    np.testing.assert_allclose(kf.L, 0.0, atol=1e-15)
+
+
+def test_mode_on_the_unit_circle_invisible_to_the_output_is_not_detectable():
+    # The third state is a pure integrator that neither the noise nor the output reaches.
+    A = np.array([[1.0, 0.1, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    G = np.array([[0.005], [0.1], [0.0]])
+    C = np.array([[1.0, 0.0, 1.0]])
+    with pytest.raises(riprs.RiprsError):
+        riprs.dlqe(A, G, C, [[1.0]], [[1.0]])
+    with pytest.raises(Exception):  # noqa: B017 - python-control's own error type varies
+        control.dlqe(A, G, C, [[1.0]], [[1.0]])
+
+
+@pytest.mark.parametrize(
+    ("A", "B", "Q"),
+    [
+        ([[1.1]], [[1.0]], [[0.0]]),
+        (np.diag([1.2, 0.5]), np.ones((2, 1)), np.zeros((2, 2))),
+        (np.diag([1.5, 0.9, 1.1]), np.eye(3)[:, :2] + 0.3, np.diag([0.0, 1.0, 0.0])),
+    ],
+)
+def test_unstable_mode_without_state_weight_gets_the_stabilizing_solution(A, B, Q):
+    # (Q, A) is not detectable, so X = 0 solves the DARE too; the stabilizing X is the answer.
+    K, S, E = riprs.dlqr(A, B, Q, [[1.0]] if np.shape(B)[1] == 1 else np.eye(2))
+    R = np.eye(np.shape(B)[1])
+    K_ref, S_ref, _ = control.dlqr(np.array(A), np.array(B), np.array(Q), R)
+    np.testing.assert_allclose(S, S_ref, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(K, K_ref, rtol=1e-9, atol=1e-12)
+    assert np.abs(E).max() < 1.0
+
+
+@pytest.mark.parametrize("r_small", [1e-8, 1e-10, 1e-12])
+def test_ill_conditioned_input_weight(r_small):
+    A = np.array([[2.0, 1.0, 0.0], [0.0, 1.3, 1.0], [0.0, 0.0, 0.5]])
+    B = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    R = np.diag([1.0, r_small])
+    X, L, _ = riprs.dare(A, B, np.eye(3), R)
+    X_ref = sl.solve_discrete_are(A, B, np.eye(3), R)
+    np.testing.assert_allclose(X, X_ref, rtol=1e-12)
+    assert np.abs(L).max() < 1.0

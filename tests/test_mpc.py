@@ -569,3 +569,9 @@ def test_reset_restores_the_initial_behaviour():
     mpc.reset()
     again = [mpc.step([0.0, 0.1 * k], [0.0, 0.0]).copy() for k in range(5)]
     np.testing.assert_array_equal(first, again)
+
+
+@pytest.mark.parametrize("name", ["prediction_horizon", "control_horizon", "max_iterations"])
+def test_negative_counts_are_named_value_errors(name):
+    with pytest.raises(riprs.InvalidParameterError, match=name):
+        riprs.Mpc(np.eye(1) * 0.9, [[1.0]], [[1.0]], 0.1, **{name: -1})

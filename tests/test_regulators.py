@@ -110,3 +110,25 @@ def test_bad_arguments_raise_naming_them() -> None:
         lqr.step([0.0, 0.0], [np.inf, 0.0])
     # A failed call changes nothing.
     assert lqr.x_hat is not None and not np.any(lqr.x_hat)
+
+
+def test_one_huge_reading_does_not_disable_the_lqr():
+    # 1e308 overflows the rate difference; the sample is discarded, not kept as inf/NaN.
+    c = riprs.Lqr.paper()
+    fresh = riprs.Lqr.paper()
+    c.step([0.0, 0.0])
+    c.step([1e308, 0.0])
+    assert np.isfinite(c.x_hat).all()
+    for _ in range(50):
+        u = c.step([0.0, 0.05])
+    fresh.step([0.0, 0.0])
+    for _ in range(50):
+        v = fresh.step([0.0, 0.05])
+    # Both have seen the pendulum at 0.05 rad long enough for the rate filters to settle.
+    np.testing.assert_allclose(u, v, atol=1e-9)
+    assert abs(u[0]) > 1.0
+
+
+def test_simulating_at_another_sample_time_is_refused():
+    with pytest.raises(riprs.InvalidParameterError, match="Ts"):
+        riprs.simulate(riprs.paper.plant(), riprs.Lqg.paper(), 1.0, Ts=0.02)

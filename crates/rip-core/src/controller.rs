@@ -60,4 +60,10 @@ pub trait Controller: Send {
     fn state_estimate(&self) -> Option<&[f64]> {
         None
     }
+
+    /// The sample time (s) the controller was designed for, when it has one: a loop that
+    /// runs it at another period feeds it rates and predictions for the wrong interval.
+    fn sample_time(&self) -> Option<f64> {
+        None
+    }
 }

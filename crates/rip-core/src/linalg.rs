@@ -44,6 +44,12 @@ pub type Mat = DMatrix<f64>;
 pub const DARE_RESIDUAL_TOLERANCE: f64 = 1e-8;
 
 const SDA_MAX_ITERATIONS: usize = 100;
+/// Relative residual above which the doubling's solution is polished by Newton's method; the
+/// doubling alone reaches `~1e-15` on well-conditioned problems, so only ill-conditioned ones
+/// (say `cond(R) ≳ 1e8`, where `BR⁻¹Bᵀ` loses digits) pay for the polish.
+const NEWTON_REFINEMENT_THRESHOLD: f64 = 1e-13;
+/// Newton (Hewer) steps allowed when refining a DARE solution.
+const NEWTON_MAX_ITERATIONS: usize = 50;
 /// A mode counts as "unstable" for the stabilizability test when `|λ| ≥ 1 − this`.
 const UNIT_CIRCLE_MARGIN: f64 = 1e-9;
 
@@ -130,8 +136,20 @@ pub fn spectral_radius(m: &Mat) -> f64 {
 }
 
 /// Eigenvalues of a square real matrix (real Schur form).
+///
+/// nalgebra's Schur iteration first divides the matrix by its largest entry and never returns
+/// when that is zero or not finite (the zero matrix of order three or more is the closed loop
+/// of every deadbeat design). Those inputs are answered here: zeros for the zero matrix, NaN,
+/// which every caller rejects, for non-finite entries.
 pub fn eigenvalues(m: &Mat) -> Vec<Complex<f64>> {
-    m.clone().complex_eigenvalues().iter().copied().collect()
+    let n = m.nrows();
+    if m.iter().any(|v| !v.is_finite()) {
+        return vec![Complex::new(f64::NAN, f64::NAN); n];
+    }
+    if m.iter().all(|&v| v == 0.0) {
+        return vec![Complex::new(0.0, 0.0); n];
+    }
+    m.complex_eigenvalues().iter().copied().collect()
 }
 
 /// Zero-order-hold discretisation of `ẋ = A x + B u` with period `ts`:
@@ -332,35 +350,74 @@ pub(crate) fn solve_dare_validated(
         None => DareFailure::NoSolution(reason),
     };
 
-    let (y, iterations) = sda_dispatch(&a0, &g0, &h0)
-        .ok_or_else(|| diagnose("the doubling iteration did not converge".into()))?;
-    let y = symmetrize(&y);
-    let btyb_r = symmetrize(&(b_hat.transpose() * &y * &b_hat + r));
-    let mut rhs = b_hat.transpose() * &y * &a_hat;
-    if let Some(s) = s {
-        rhs += s.transpose();
+    let problem = StandardDare {
+        a: &a_hat,
+        b: &b_hat,
+        q,
+        r,
+        s,
+    };
+    // The doubling from H₀ converges to the stabilizing solution when (H₀, A₀) is detectable;
+    // otherwise (an unstable mode Q does not weigh) it may settle on another solution, and with
+    // an ill-conditioned R its G₀ = BR⁻¹Bᵀ limits the accuracy. Both are repaired by Newton's
+    // method from a stabilizing gain: the doubling's own when it stabilizes, else that of the
+    // doubling on H₀ + δI, which is detectable for any δ > 0.
+    let doubled = sda_dispatch(&a0, &g0, &h0).map(|(y, it)| (symmetrize(&y), it));
+    let mut candidate = doubled
+        .as_ref()
+        .and_then(|(y, it)| problem.closed_loop(y).map(|cl| (y.clone(), cl, *it)))
+        .filter(|(_, cl, _)| cl.radius < 1.0 - UNIT_CIRCLE_MARGIN);
+    // The doubling's answer with its residual, kept when no polish is needed.
+    let mut checked: Option<(Mat, f64)> = candidate.as_ref().map(|(y, _, _)| {
+        let x = unreduce(y, e_inv.as_ref());
+        let residual = dare_relative_residual(a, b, q, r, s, e, &x);
+        (x, residual)
+    });
+    if !checked
+        .as_ref()
+        .is_some_and(|(_, residual)| *residual <= NEWTON_REFINEMENT_THRESHOLD)
+    {
+        checked = None;
+        if candidate.is_none() {
+            let delta = 1e-6 * h0.norm().max(1.0);
+            let h_reg = &h0 + Mat::identity(h0.nrows(), h0.nrows()) * delta;
+            candidate = sda_dispatch(&a0, &g0, &h_reg)
+                .and_then(|(y, it)| {
+                    let y = symmetrize(&y);
+                    problem.closed_loop(&y).map(|cl| (y, cl, it))
+                })
+                .filter(|(_, cl, _)| cl.radius < 1.0);
+        }
+        let (_, start, it) = candidate.ok_or_else(|| {
+            diagnose("the doubling iteration found no stabilizing gain to start from".into())
+        })?;
+        let (y, newton_steps) = problem.newton(start.gain).ok_or_else(|| {
+            diagnose("Newton's method did not converge to a stabilizing solution".into())
+        })?;
+        let cl = problem
+            .closed_loop(&y)
+            .ok_or_else(|| diagnose("BᵀXB + R is not positive definite at the solution".into()))?;
+        candidate = Some((y, cl, it + newton_steps));
     }
-    let gain = btyb_r
-        .clone()
-        .cholesky()
-        .map(|c| c.solve(&rhs))
-        .ok_or_else(|| diagnose("BᵀXB + R is not positive definite at the solution".into()))?;
-    let closed_loop = &a_hat - &b_hat * &gain;
-    let closed_loop_eigenvalues = eigenvalues(&closed_loop);
-    let radius = closed_loop_eigenvalues
-        .iter()
-        .map(|z| z.norm())
-        .fold(0.0, f64::max);
-    if radius.is_nan() || radius >= 1.0 {
+    let (
+        y,
+        ClosedLoop {
+            gain,
+            eigenvalues: closed_loop_eigenvalues,
+            radius,
+        },
+        iterations,
+    ) = candidate.ok_or_else(|| diagnose("no stabilizing solution".into()))?;
+    if radius.is_nan() || radius >= 1.0 - UNIT_CIRCLE_MARGIN {
         return Err(diagnose(format!(
             "the closed loop has spectral radius {radius:.6} ≥ 1 (a mode on the unit circle?)"
         )));
     }
-    let x = match &e_inv {
-        Some(e_inv) => symmetrize(&(e_inv.transpose() * &y * e_inv)),
-        None => y,
-    };
-    let relative_residual = dare_relative_residual(a, b, q, r, s, e, &x);
+    let (x, relative_residual) = checked.unwrap_or_else(|| {
+        let x = unreduce(&y, e_inv.as_ref());
+        let residual = dare_relative_residual(a, b, q, r, s, e, &x);
+        (x, residual)
+    });
     if relative_residual.is_nan() || relative_residual > DARE_RESIDUAL_TOLERANCE {
         return Err(diagnose(format!(
             "relative residual {relative_residual:.3e} exceeds {DARE_RESIDUAL_TOLERANCE:.0e}"
@@ -373,6 +430,103 @@ pub(crate) fn solve_dare_validated(
         iterations,
         relative_residual,
     })
+}
+
+/// `X = E⁻ᵀ Y E⁻¹`: the generalized problem's solution from the standard one's.
+fn unreduce(y: &Mat, e_inv: Option<&Mat>) -> Mat {
+    match e_inv {
+        Some(e_inv) => symmetrize(&(e_inv.transpose() * y * e_inv)),
+        None => y.clone(),
+    }
+}
+
+/// The standard-form DARE `ÂᵀYÂ − Y − (ÂᵀYB̂ + S)(B̂ᵀYB̂ + R)⁻¹(B̂ᵀYÂ + Sᵀ) + Q = 0`.
+struct StandardDare<'a> {
+    a: &'a Mat,
+    b: &'a Mat,
+    q: &'a Mat,
+    r: &'a Mat,
+    s: Option<&'a Mat>,
+}
+
+/// The gain `G = (B̂ᵀYB̂ + R)⁻¹(B̂ᵀYÂ + Sᵀ)` of a candidate `Y` and its closed loop.
+struct ClosedLoop {
+    gain: Mat,
+    eigenvalues: Vec<Complex<f64>>,
+    radius: f64,
+}
+
+impl StandardDare<'_> {
+    fn gain(&self, y: &Mat) -> Option<Mat> {
+        let btyb_r = symmetrize(&(self.b.transpose() * y * self.b + self.r));
+        let mut rhs = self.b.transpose() * y * self.a;
+        if let Some(s) = self.s {
+            rhs += s.transpose();
+        }
+        btyb_r.cholesky().map(|c| c.solve(&rhs))
+    }
+
+    fn closed_loop(&self, y: &Mat) -> Option<ClosedLoop> {
+        let gain = self.gain(y)?;
+        let eigenvalues = eigenvalues(&(self.a - self.b * &gain));
+        let radius = eigenvalues.iter().map(|z| z.norm()).fold(0.0, f64::max);
+        Some(ClosedLoop {
+            gain,
+            eigenvalues,
+            radius,
+        })
+    }
+
+    /// Newton's method for the DARE (Hewer 1971) from a stabilizing gain `G₀`: each step
+    /// solves the Stein equation of the closed loop `A_G = Â − B̂G`,
+    ///
+    /// ```text
+    /// Y = A_Gᵀ Y A_G + Q − S G − Gᵀ Sᵀ + Gᵀ R G,
+    /// ```
+    ///
+    /// and takes the gain of that `Y`. The gains stay stabilizing and `Y` decreases
+    /// monotonically to the stabilizing solution, quadratically once close. `R⁻¹` is never
+    /// formed. Returns `Y` and the number of steps.
+    fn newton(&self, mut gain: Mat) -> Option<(Mat, usize)> {
+        let mut y_prev: Option<Mat> = None;
+        for step in 1..=NEWTON_MAX_ITERATIONS {
+            let closed = self.a - self.b * &gain;
+            let mut weight = self.q + gain.transpose() * self.r * &gain;
+            if let Some(s) = self.s {
+                let sg = s * &gain;
+                weight -= &sg + sg.transpose();
+            }
+            let y = stein(&closed, &symmetrize(&weight))?;
+            gain = self.gain(&y)?;
+            if let Some(prev) = &y_prev {
+                if (&y - prev).norm() <= 1e-14 * y.norm().max(f64::MIN_POSITIVE) {
+                    return Some((y, step));
+                }
+            }
+            y_prev = Some(y);
+        }
+        y_prev.map(|y| (y, NEWTON_MAX_ITERATIONS))
+    }
+}
+
+/// Solves the Stein equation `Y = Φᵀ Y Φ + M` for a Schur-stable `Φ` by Smith's doubling,
+/// `Y₊ = Y + Φ_kᵀ Y Φ_k`, `Φ₊ = Φ_k²`, which sums `Σ (Φᵀ)ʲ M Φʲ` in `log₂` as many steps.
+fn stein(phi: &Mat, m: &Mat) -> Option<Mat> {
+    let mut y = m.clone();
+    let mut phi = phi.clone();
+    for _ in 0..64 {
+        let increment = phi.transpose() * &y * &phi;
+        y += &increment;
+        phi = &phi * &phi;
+        let size = y.norm();
+        if !size.is_finite() || !phi.norm().is_finite() {
+            return None;
+        }
+        if increment.norm() <= 1e-17 * size || phi.norm() <= 1e-300 {
+            return Some(symmetrize(&y));
+        }
+    }
+    None
 }
 
 /// Relative residual of the generalized DARE at `x` (see [`DareSolution::relative_residual`]).

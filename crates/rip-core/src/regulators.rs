@@ -88,7 +88,10 @@ fn feedback(
 /// d[k] = (q[k] − q[k−n]) / (n Ts),     q̇̂[k] = aⁿ q̇̂[k−n] + (1 − aⁿ) d[k]
 /// ```
 ///
-/// During a held period the estimate `x̂` is left as it was.
+/// During a held period the estimate `x̂` is left as it was. A sample whose angles, or the
+/// rates computed from them, are not finite is treated the same way: discarded, the period
+/// counted as held, the move computed on the kept `x̂` and reported as
+/// [`StepStatus::Fallback`].
 #[derive(Debug, Clone)]
 pub struct Lqr {
     k: SMatrix<f64, 1, NX>,
@@ -182,6 +185,20 @@ impl Lqr {
     pub fn input_bounds(&self) -> (f64, f64) {
         self.bounds
     }
+
+    fn count_held_period(&mut self) {
+        if self.started {
+            self.held = self.held.saturating_add(1);
+        }
+    }
+
+    /// The step for an unusable sample: `x̂` stays, the period counts as held, and the move is
+    /// the feedback on the kept estimate (zero before the first usable sample).
+    fn discard_sample(&mut self, r: &[f64], u: &mut [f64]) -> StepStatus {
+        self.count_held_period();
+        u[0] = feedback(&self.k, &self.x_hat, r, self.bounds).0;
+        StepStatus::Fallback
+    }
 }
 
 impl Controller for Lqr {
@@ -198,10 +215,20 @@ impl Controller for Lqr {
             let periods = self.held.saturating_add(1);
             let dt = f64::from(periods) * self.ts;
             let a = self.a.powi(i32::try_from(periods).unwrap_or(i32::MAX));
-            for (q, rate) in [(0usize, 1usize), (2, 3)] {
+            let mut rates = [0.0; 2];
+            for (i, (q, rate)) in [(0usize, 1usize), (2, 3)].into_iter().enumerate() {
                 let d = (y[q / 2] - self.x_hat[q]) / dt;
-                self.x_hat[rate] = a * self.x_hat[rate] + (1.0 - a) * d;
+                rates[i] = a * self.x_hat[rate] + (1.0 - a) * d;
             }
+            if !(y[0].is_finite() && y[1].is_finite() && rates.iter().all(|v| v.is_finite())) {
+                // A sample whose angles or rates are not finite is discarded as if it had not
+                // arrived: one bad reading must not leave NaN in the filter for good.
+                return self.discard_sample(r, u);
+            }
+            self.x_hat[1] = rates[0];
+            self.x_hat[3] = rates[1];
+        } else if !(y[0].is_finite() && y[1].is_finite()) {
+            return self.discard_sample(r, u);
         } else {
             self.x_hat[1] = 0.0;
             self.x_hat[3] = 0.0;
@@ -217,15 +244,17 @@ impl Controller for Lqr {
 
     /// Counts the period, so that the next rate difference spans it (type docs).
     fn hold(&mut self, _u: &[f64]) {
-        if self.started {
-            self.held = self.held.saturating_add(1);
-        }
+        self.count_held_period();
     }
 
     fn reset(&mut self) {
         self.x_hat.fill(0.0);
         self.started = false;
         self.held = 0;
+    }
+
+    fn sample_time(&self) -> Option<f64> {
+        Some(self.ts())
     }
 
     fn state_estimate(&self) -> Option<&[f64]> {
@@ -251,7 +280,9 @@ impl Controller for Lqr {
 ///
 /// A [held](Controller::hold) period with input `u_h` has no measurement, so `e = 0`:
 /// `x̂[k|k] = x̂[k|k−1]` and `x̂[k+1|k] = A x̂[k|k−1] + B_u u_h`
-/// ([`CurrentEstimator::predict_without_measurement`]).
+/// ([`CurrentEstimator::predict_without_measurement`]). A sample with non-finite angles, or
+/// whose correction overflows, is discarded the same way (`e = 0`), the move computed on
+/// `x̂[k|k−1]` and reported as [`StepStatus::Fallback`].
 #[derive(Debug, Clone)]
 pub struct Lqg {
     k: SMatrix<f64, 1, NX>,
@@ -370,7 +401,17 @@ impl Controller for Lqg {
     }
 
     fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
-        let posterior = self.estimator.correct(y, &self.u_buf);
+        let mut usable = y.iter().all(|v| v.is_finite());
+        if usable {
+            let posterior = self.estimator.correct(y, &self.u_buf);
+            usable = posterior.iter().all(|v| v.is_finite());
+        }
+        if !usable {
+            // Discarded as if it had not arrived (e = 0, x̂[k|k] = x̂[k|k−1]): one bad reading
+            // must not leave NaN or Inf in the estimator for good.
+            self.estimator.correct_without_measurement();
+        }
+        let posterior = self.estimator.posterior();
         for i in 0..NX {
             self.plant_estimate[i] = posterior[i];
         }
@@ -378,7 +419,11 @@ impl Controller for Lqg {
         self.u_buf[0] = value;
         u[0] = value;
         self.estimator.predict(&self.u_buf);
-        status
+        if usable {
+            status
+        } else {
+            StepStatus::Fallback
+        }
     }
 
     /// Advances the estimator over the period with `u` and no innovation (type docs).
@@ -401,6 +446,10 @@ impl Controller for Lqg {
         self.u_buf[0] = 0.0;
     }
 
+    fn sample_time(&self) -> Option<f64> {
+        Some(self.ts())
+    }
+
     fn state_estimate(&self) -> Option<&[f64]> {
         Some(self.estimator.posterior().as_slice())
     }
@@ -409,6 +458,52 @@ impl Controller for Lqg {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_unusable_sample_leaves_no_nan_behind() {
+        for bad in [f64::NAN, f64::INFINITY, 1e308] {
+            let mut lqr = Lqr::paper().unwrap();
+            let mut twin = Lqr::paper().unwrap();
+            let mut lqg = Lqg::paper().unwrap();
+            let mut lqg_twin = Lqg::paper().unwrap();
+            let r = [0.0, 0.0];
+            let mut u = [0.0];
+            let mut v = [0.0];
+            for k in 0..5 {
+                let y = [0.01 * f64::from(k), 0.02];
+                lqr.step(&y, &r, &mut u);
+                twin.step(&y, &r, &mut v);
+                lqg.step(&y, &r, &mut u);
+                lqg_twin.step(&y, &r, &mut v);
+            }
+            // The bad sample is a held period for the twins.
+            assert_eq!(lqr.step(&[bad, 0.02], &r, &mut u), StepStatus::Fallback);
+            assert!(u[0].is_finite());
+            twin.hold(&[u[0]]);
+            let status = lqg.step(&[0.05, bad], &r, &mut u);
+            if bad.is_finite() {
+                // 1e308 is finite: the LQG's correction does not overflow (M is small), so the
+                // sample is used; only the LQR's rate overflows.
+                assert!(lqg.state_estimate().unwrap().iter().all(|v| v.is_finite()));
+                continue;
+            }
+            assert_eq!(status, StepStatus::Fallback);
+            lqg_twin.hold(&[u[0]]);
+            let y = [0.06, 0.03];
+            lqr.step(&y, &r, &mut u);
+            twin.step(&y, &r, &mut v);
+            assert_eq!(u, v, "LQR after {bad}");
+            assert!(lqr.state_estimate().unwrap().iter().all(|v| v.is_finite()));
+            lqg.step(&y, &r, &mut u);
+            lqg_twin.step(&y, &r, &mut v);
+            assert!(
+                (u[0] - v[0]).abs() < 1e-12,
+                "LQG after {bad}: {} vs {}",
+                u[0],
+                v[0]
+            );
+        }
+    }
 
     #[test]
     fn lqr_rate_filter_follows_a_ramp_and_clamps() {
@@ -424,8 +519,12 @@ mod tests {
         let mut c = Lqr::new(&k, 0.01, 20.0).unwrap();
         c.step(&[1.0, 0.0], &[0.0, 0.0], &mut u);
         assert_eq!(u[0], -12.0);
-        c.step(&[f64::NAN, 0.0], &[0.0, 0.0], &mut u);
-        assert_eq!(u[0], 0.0);
+        // An unusable sample keeps x̂, so the move stays the feedback on it.
+        assert_eq!(
+            c.step(&[f64::NAN, 0.0], &[0.0, 0.0], &mut u),
+            StepStatus::Fallback
+        );
+        assert_eq!(u[0], -12.0);
     }
 
     #[test]

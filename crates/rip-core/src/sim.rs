@@ -302,6 +302,18 @@ pub fn simulate(
             ),
         ));
     }
+    if let Some(designed) = controller.sample_time() {
+        if (designed - config.ts).abs() > 1e-9 * designed {
+            return Err(RipError::invalid(
+                "Ts",
+                format!(
+                    "the controller was designed for Ts = {designed} s; sampling it every {} s \
+                     would run it at the wrong rate",
+                    config.ts
+                ),
+            ));
+        }
+    }
     controller.reset();
     let n_est = controller.state_estimate().map_or(0, |s| s.len());
     let mut out = SimResult::with_capacity(n, n_est);

@@ -337,8 +337,8 @@ impl PyMpc {
         B: &Bound<'_, PyAny>,
         C: &Bound<'_, PyAny>,
         Ts: f64,
-        prediction_horizon: usize,
-        control_horizon: usize,
+        prediction_horizon: i64,
+        control_horizon: i64,
         output_weights: Option<&Bound<'_, PyAny>>,
         input_rate_weights: Option<&Bound<'_, PyAny>>,
         input_weights: Option<&Bound<'_, PyAny>>,
@@ -351,14 +351,14 @@ impl PyMpc {
         output_disturbance: Option<&Bound<'_, PyAny>>,
         measurement_noise: Option<&Bound<'_, PyAny>>,
         solver: &str,
-        max_iterations: usize,
+        max_iterations: i64,
     ) -> PyResult<Self> {
         let a = matrix_arg(A, "A", None, None)?;
         let b = matrix_arg(B, "B", None, None)?;
         let c = matrix_arg(C, "C", None, None)?;
         let settings = MpcSettings {
-            prediction_horizon,
-            control_horizon,
+            prediction_horizon: count_arg(prediction_horizon, "prediction_horizon")?,
+            control_horizon: count_arg(control_horizon, "control_horizon")?,
             output_weights: vec_arg(output_weights, "output_weights")?,
             input_weights: vec_arg(input_weights, "input_weights")?,
             input_rate_weights: vec_arg(input_rate_weights, "input_rate_weights")?,
@@ -374,7 +374,7 @@ impl PyMpc {
                 None => None,
             },
             solver: QpSolver::from_name(solver).py()?,
-            max_iterations,
+            max_iterations: count_arg(max_iterations, "max_iterations")?,
         };
         let inner = py
             .allow_threads(|| Mpc::new(&a, &b, &c, Ts, settings))
@@ -601,4 +601,12 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyMpc>()?;
     m.add_class::<PyMpcSolution>()?;
     Ok(())
+}
+
+/// A count from Python: negative values get the same named error as zero, not an
+/// `OverflowError` from the conversion to `usize`.
+fn count_arg(value: i64, name: &str) -> PyResult<usize> {
+    usize::try_from(value)
+        .map_err(|_| RipError::invalid(name, format!("must be a positive integer, got {value}")))
+        .py()
 }

@@ -1139,6 +1139,10 @@ impl Controller for Mpc {
         self.reset_state();
     }
 
+    fn sample_time(&self) -> Option<f64> {
+        Some(self.ts())
+    }
+
     fn state_estimate(&self) -> Option<&[f64]> {
         Some(self.estimator.posterior().as_slice())
     }
