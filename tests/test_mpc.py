@@ -575,3 +575,18 @@ def test_reset_restores_the_initial_behaviour():
 def test_negative_counts_are_named_value_errors(name):
     with pytest.raises(riprs.InvalidParameterError, match=name):
         riprs.Mpc(np.eye(1) * 0.9, [[1.0]], [[1.0]], 0.1, **{name: -1})
+
+
+def test_active_set_solves_nearly_dependent_constraints():
+    # Two inputs, one slow output: the late output rows of the horizon are almost parallel, so
+    # the active-set working-set systems turn singular; the answer must still be the optimum.
+    kw = dict(prediction_horizon=8, control_horizon=3, output_weights=[1.0],
+              input_rate_weights=[0.7, 0.7], input_bounds=[(-1, 1), (-1, 1)],
+              output_bounds=[(-0.5, 0.5)], ecr_weight=1.0)
+    sols = {
+        s: riprs.Mpc([[0.6]], [[1.4, -0.1]], [[1.0]], 0.1, solver=s, **kw).solve(
+            [0.4], [-0.2, 0.1], [1.3])
+        for s in BACKENDS
+    }
+    assert all(sol.status == "solved" and not sol.fallback for sol in sols.values())
+    np.testing.assert_allclose(sols["active_set"].u, sols["clarabel"].u, atol=U_TOL["clarabel"])

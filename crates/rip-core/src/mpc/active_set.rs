@@ -165,7 +165,10 @@ impl ActiveSetSolver {
             self.step.copy_from(&self.z_w);
             self.step -= &self.z;
             let z_scale = 1.0 + self.z.amax().max(self.z_w.amax());
-            if self.step.amax() <= 1e-12 * z_scale {
+            // With n rows in W, z_W is a vertex and z is on it up to round-off: a step would
+            // only find another row through the same (degenerate) vertex, so z_W is taken as
+            // reached and the multipliers decide.
+            if self.step.amax() <= 1e-12 * z_scale || self.working.len() == self.n {
                 self.z.copy_from(&self.z_w);
                 // Most negative multiplier decides which constraint to release.
                 let k = self.working.len();

@@ -110,7 +110,9 @@ pub enum QpSolver {
     #[default]
     Clarabel,
     /// Dense primal active-set solver with warm start (module [`ActiveSetSolver`]); solves
-    /// without allocating.
+    /// without allocating. A problem whose nearly dependent constraints make its working-set
+    /// systems singular (rare: none along the paper's loop) is handed to Clarabel, which
+    /// allocates.
     ActiveSet,
 }
 
@@ -443,14 +445,17 @@ pub struct MpcSolution {
 
 enum Backend {
     Clarabel(Box<ClarabelBackend>),
-    ActiveSet(Box<ActiveSetSolver>),
+    /// The active-set solver, and Clarabel on the same QP for the rare problem whose nearly
+    /// dependent constraints (output rows late in a long horizon converge to the steady-state
+    /// gain) make its working-set systems singular.
+    ActiveSet(Box<ActiveSetSolver>, Box<ClarabelBackend>),
 }
 
 impl Clone for Backend {
     fn clone(&self) -> Self {
         match self {
             Self::Clarabel(c) => Self::Clarabel(c.clone()),
-            Self::ActiveSet(a) => Self::ActiveSet(a.clone()),
+            Self::ActiveSet(a, rescue) => Self::ActiveSet(a.clone(), rescue.clone()),
         }
     }
 }
@@ -459,7 +464,7 @@ impl std::fmt::Debug for Backend {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::Clarabel(c) => c.fmt(f),
-            Self::ActiveSet(_) => f.write_str("ActiveSetSolver"),
+            Self::ActiveSet(..) => f.write_str("ActiveSetSolver"),
         }
     }
 }
@@ -698,12 +703,15 @@ impl Mpc {
                 &qp.a,
                 settings.max_iterations,
             )?)),
-            QpSolver::ActiveSet => Backend::ActiveSet(Box::new(
-                ActiveSetSolver::new(&qp.h, &qp.a, Some(qp.nz - 1), settings.max_iterations)
-                    .ok_or_else(|| RipError::NotPositiveDefinite {
-                        name: "QP Hessian".into(),
-                    })?,
-            )),
+            QpSolver::ActiveSet => Backend::ActiveSet(
+                Box::new(
+                    ActiveSetSolver::new(&qp.h, &qp.a, Some(qp.nz - 1), settings.max_iterations)
+                        .ok_or_else(|| RipError::NotPositiveDefinite {
+                            name: "QP Hessian".into(),
+                        })?,
+                ),
+                Box::new(ClarabelBackend::new(&qp.h, &qp.a, settings.max_iterations)?),
+            ),
         };
         let (nz, ncon, m) = (qp.nz, qp.ncon, qp.m);
         Ok(Self {
@@ -955,7 +963,7 @@ impl Mpc {
             } else {
                 match &mut self.backend {
                     Backend::Clarabel(solver) => solver.solve(&self.f, &self.b, &mut self.z),
-                    Backend::ActiveSet(solver) => {
+                    Backend::ActiveSet(solver, rescue) => {
                         let (lo, hi) = (&self.u_lo, &self.u_hi);
                         let out = solver
                             .solve(&self.f, &self.b, |z| project_inputs(z, u_prev, lo, hi, m));
@@ -966,7 +974,12 @@ impl Mpc {
                             } else {
                                 out.status
                             };
-                        (status, out.iterations)
+                        if status == QpStatus::NumericalTrouble {
+                            let (status, iterations) = rescue.solve(&self.f, &self.b, &mut self.z);
+                            (status, out.iterations + iterations)
+                        } else {
+                            (status, out.iterations)
+                        }
                     }
                 }
             }
@@ -1040,7 +1053,7 @@ impl Mpc {
         self.estimator.reset();
         self.u_prev.fill(0.0);
         self.plan.fill(0.0);
-        if let Backend::ActiveSet(s) = &mut self.backend {
+        if let Backend::ActiveSet(s, _) = &mut self.backend {
             s.reset();
         }
     }
