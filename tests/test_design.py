@@ -270,3 +270,18 @@ def test_ill_conditioned_input_weight(r_small):
     X_ref = sl.solve_discrete_are(A, B, np.eye(3), R)
     np.testing.assert_allclose(X, X_ref, rtol=1e-12)
     assert np.abs(L).max() < 1.0
+
+
+def test_dlqr_takes_a_state_space_object_like_python_control():
+    plant = riprs.paper.discrete_model()
+    Q, R = riprs.paper.lqr_weights()
+    sys = control.ss(plant.A, plant.B, plant.C, plant.D, plant.Ts)
+    K_ref, S_ref, _ = control.dlqr(sys, Q, R)
+    for first in (sys, plant):
+        K, S, _ = riprs.dlqr(first, Q, R)
+        np.testing.assert_allclose(K, K_ref, rtol=1e-10)
+        np.testing.assert_allclose(S, S_ref, rtol=1e-10)
+    np.testing.assert_allclose(riprs.dlqr(plant.A, plant.B, Q, R, np.zeros((4, 1)))[0], K_ref,
+                               rtol=1e-10)
+    with pytest.raises(TypeError):
+        riprs.dlqr(plant.A, plant.B, Q)

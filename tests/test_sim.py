@@ -210,5 +210,5 @@ def test_paired_batch_equals_individual_runs():
         ref = riprs.simulate(p, ctrl, 2.0, seed=seed, **opts)
         np.testing.assert_array_equal(got.x, ref.x)
         np.testing.assert_array_equal(got.u, ref.u)
-    with pytest.raises(ValueError, match="seeds"):
+    with pytest.raises(riprs.InvalidParameterError, match="seeds"):
         riprs.simulate_batch(params, ctrl, [1, 2, 3], 1.0, paired=True)

@@ -6,6 +6,8 @@ Every function accepts array-likes, returns float64 numpy arrays, and raises a s
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -79,13 +81,14 @@ def dare(
 
 
 def dlqr(
-    A: ArrayLike,
-    B: ArrayLike,
-    Q: ArrayLike,
-    R: ArrayLike,
+    *args: Any,
     N: ArrayLike | None = None,
 ) -> tuple[FloatArray, FloatArray, ComplexArray]:
     r"""Discrete-time linear-quadratic regulator (python-control / MATLAB ``dlqr``).
+
+    Called as ``dlqr(A, B, Q, R[, N])`` or, like python-control, ``dlqr(sys, Q, R[, N])``
+    with a state-space object ``sys`` (anything with ``.A`` and ``.B``, e.g.
+    :class:`riprs.StateSpace` or a ``control.StateSpace``).
 
     Minimises :math:`\sum_k x^T Q x + u^T R u + 2 x^T N u` for :math:`x[k+1] = A x + B u`.
     The optimal law is :math:`u = -K x`.
@@ -109,6 +112,13 @@ def dlqr(
     E : ndarray of complex, shape (n,)
         Closed-loop eigenvalues ``eig(A - B K)``.
     """
+    if args and hasattr(args[0], "A") and hasattr(args[0], "B"):
+        args = (args[0].A, args[0].B, *args[1:])
+    if len(args) == 5 and N is None:
+        *args, N = args
+    if len(args) != 4:
+        raise TypeError("dlqr takes (A, B, Q, R[, N]) or (sys, Q, R[, N])")
+    A, B, Q, R = args
     return _riprs.dlqr(
         as_matrix(A, "A"),
         as_matrix(B, "B"),

@@ -4,15 +4,15 @@
 
 use numpy::ndarray::{Array1, Array2};
 use numpy::IntoPyArray;
-use pyo3::exceptions::{PyKeyError, PyTypeError, PyValueError};
+use pyo3::exceptions::{PyKeyError, PyTypeError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use rip_core::metrics::table1_rmse;
 use rip_core::sim::{Reference, SensorModel, StepDisturbance};
-use rip_core::{Controller, Plant, SimConfig, SimResult};
+use rip_core::{Controller, Plant, RipError, SimConfig, SimResult};
 
 use crate::control::extract_controller;
-use crate::errors::IntoPyResult;
+use crate::errors::{to_py, IntoPyResult};
 use crate::plant::{matrix_arg, vector_arg, PyPlant};
 
 fn item<'py>(d: &Bound<'py, PyDict>, key: &str) -> PyResult<Bound<'py, PyAny>> {
@@ -146,10 +146,13 @@ fn sim_batch<'py>(
     let plants: Vec<Plant> = plants.iter().map(|p| p.inner).collect();
     let runs: Vec<(usize, u64)> = if paired {
         if plants.len() != seeds.len() {
-            return Err(PyValueError::new_err(format!(
-                "seeds: paired runs need one seed per plant ({} plants, {} seeds)",
-                plants.len(),
-                seeds.len()
+            return Err(to_py(RipError::invalid(
+                "seeds",
+                format!(
+                    "paired runs need one seed per plant ({} plants, {} seeds)",
+                    plants.len(),
+                    seeds.len()
+                ),
             )));
         }
         seeds.iter().copied().enumerate().collect()
