@@ -143,6 +143,8 @@ def test_monte_carlo_small(tmp_path):
         ("[mpc]\ndisturbance_gain = -0.01\n", "mpc.disturbance_gain"),
         ("[lqr]\nrate_cutoff = 0.0\n", "lqr.rate_cutoff"),
         ("[lqg]\nrate_cutoff = 10.0\n", "lqg.rate_cutoff"),
+        ("[sensor]\nencoder_counts = [0.5, 2048]\n", "sensor.encoder_counts[0]"),
+        ("[reference]\narm_step = 1e300\n", "reference.arm_step"),
     ],
 )
 def test_bad_config_fails_clearly(tmp_path, capsys, text, needle):

@@ -115,7 +115,11 @@ class SensorConfig:
     def validate(self, prefix: str) -> None:
         _length(self.encoder_counts, 2, f"{prefix}.encoder_counts")
         for i, c in enumerate(self.encoder_counts):
-            _positive(c, f"{prefix}.encoder_counts[{i}]")
+            if not (math.isfinite(c) and c >= 1 and c == int(c)):
+                raise ConfigError(
+                    f"{prefix}.encoder_counts[{i}] must be a whole number of counts per "
+                    f"revolution, at least 1; got {c}"
+                )
         _length(self.noise_std, 2, f"{prefix}.noise_std")
         for i, s in enumerate(self.noise_std):
             _non_negative(s, f"{prefix}.noise_std[{i}]")
@@ -130,7 +134,10 @@ class ReferenceConfig:
     duration: float = 10.0
 
     def validate(self, prefix: str) -> None:
-        _finite(self.arm_step, f"{prefix}.arm_step")
+        if not (math.isfinite(self.arm_step) and abs(self.arm_step) <= math.pi):
+            raise ConfigError(
+                f"{prefix}.arm_step must be within [-pi, pi] rad, got {self.arm_step}"
+            )
         _non_negative(self.step_time, f"{prefix}.step_time")
         if not (math.isfinite(self.duration) and TS <= self.duration <= MAX_DURATION):
             raise ConfigError(

@@ -287,8 +287,10 @@ impl Config {
     pub fn validate(&self) -> Result<(), ConfigError> {
         let l = &self.loop_;
         positive("loop.period_ms", l.period_ms)?;
-        if l.period_ms > 1000.0 {
-            return Err(err("loop.period_ms", "must be at most 1000 ms"));
+        // Below 1 ms a serial round trip (about 4 ms at 115200 baud, protocol.md) cannot fit
+        // and every period would end in the watchdog.
+        if !(1.0..=1000.0).contains(&l.period_ms) {
+            return Err(err("loop.period_ms", "must be between 1 and 1000 ms"));
         }
         positive("loop.reply_timeout_ms", l.reply_timeout_ms)?;
         if l.reply_timeout_ms >= l.period_ms {
@@ -445,6 +447,7 @@ mod tests {
             ("[safety]\nvoltage_limit = -1\n", "safety.voltage_limit"),
             ("[loop]\nreply_timeout_ms = 10\n", "loop.reply_timeout_ms"),
             ("[loop]\nwatchdog_periods = 0\n", "loop.watchdog_periods"),
+            ("[loop]\nperiod_ms = 0.001\nreply_timeout_ms = 0.0005\n", "loop.period_ms"),
             ("[device]\narm_sign = 2\n", "device.arm_sign"),
             ("[lqr]\nr = 0\n", "lqr.r"),
             ("[lqr]\nq = [1, 2, -3, 4]\n", "lqr.q[2]"),
