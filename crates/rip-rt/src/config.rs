@@ -447,7 +447,10 @@ mod tests {
             ("[safety]\nvoltage_limit = -1\n", "safety.voltage_limit"),
             ("[loop]\nreply_timeout_ms = 10\n", "loop.reply_timeout_ms"),
             ("[loop]\nwatchdog_periods = 0\n", "loop.watchdog_periods"),
-            ("[loop]\nperiod_ms = 0.001\nreply_timeout_ms = 0.0005\n", "loop.period_ms"),
+            (
+                "[loop]\nperiod_ms = 0.001\nreply_timeout_ms = 0.0005\n",
+                "loop.period_ms",
+            ),
             ("[device]\narm_sign = 2\n", "device.arm_sign"),
             ("[lqr]\nr = 0\n", "lqr.r"),
             ("[lqr]\nq = [1, 2, -3, 4]\n", "lqr.q[2]"),
