@@ -590,3 +590,9 @@ def test_active_set_solves_nearly_dependent_constraints():
     }
     assert all(sol.status == "solved" and not sol.fallback for sol in sols.values())
     np.testing.assert_allclose(sols["active_set"].u, sols["clarabel"].u, atol=U_TOL["clarabel"])
+
+
+def test_complex_state_is_a_type_error():
+    mpc = riprs.paper.mpc()
+    with pytest.raises(TypeError, match="x"):
+        mpc.solve(np.zeros(5, dtype=complex), [0.0], [0.0, 0.0])

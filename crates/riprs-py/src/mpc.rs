@@ -1,7 +1,7 @@
 //! Bindings for `rip_core::mpc`: the `Mpc` controller and its `MpcSolution`.
 
 use numpy::ndarray::Array1;
-use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLikeDyn};
+use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use rip_core::mpc::{paper, Mpc, MpcSettings, MpcSolution, OutputDisturbance, QpSolver};
@@ -9,20 +9,10 @@ use rip_core::{Controller, Mat, RipError};
 
 use crate::convert::mat_to_py;
 use crate::errors::{to_py, IntoPyResult, ShapeError};
-use crate::plant::matrix_arg;
+use crate::plant::{matrix_arg, real_array};
 
 type Py1<'py> = Bound<'py, PyArray1<f64>>;
 type Py2<'py> = Bound<'py, PyArray2<f64>>;
-
-/// Shape and row-major values of an array-like of reals (NaN/Inf kept; the core rejects them
-/// with the argument's name).
-fn array_values(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<usize>, Vec<f64>)> {
-    let arr: PyArrayLikeDyn<'_, f64, AllowTypeChange> = obj.extract().map_err(|e| {
-        PyTypeError::new_err(format!("{name} must be an array of real numbers: {e}"))
-    })?;
-    let view = arr.as_array();
-    Ok((view.shape().to_vec(), view.iter().copied().collect()))
-}
 
 fn shape_err(name: &str, expected: &str, shape: &[usize]) -> PyErr {
     // `RipError::Shape` holds two dimensions, which would misreport a 3-D or higher array;
@@ -48,7 +38,7 @@ fn numpy_shape(shape: &[usize]) -> String {
 fn vec_arg(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Vec<f64>> {
     match obj {
         Some(o) if !o.is_none() => {
-            let (shape, values) = array_values(o, name)?;
+            let (shape, values) = real_array(o, name)?;
             if shape.len() > 1 {
                 return Err(shape_err(name, "a 1-D array", &shape));
             }
@@ -69,7 +59,7 @@ fn finite(values: Vec<f64>, name: &str) -> PyResult<Vec<f64>> {
 
 /// A 1-D vector of exactly `n` finite entries.
 fn vec_exact(obj: &Bound<'_, PyAny>, name: &str, n: usize) -> PyResult<Vec<f64>> {
-    let (shape, values) = array_values(obj, name)?;
+    let (shape, values) = real_array(obj, name)?;
     if shape.len() > 1 || values.len() != n {
         return Err(shape_err(name, &format!("({n},)"), &shape));
     }
@@ -80,7 +70,7 @@ fn vec_exact(obj: &Bound<'_, PyAny>, name: &str, n: usize) -> PyResult<Vec<f64>>
 fn reference_arg(obj: Option<&Bound<'_, PyAny>>, ny: usize, p: usize) -> PyResult<Vec<f64>> {
     match obj {
         Some(o) if !o.is_none() => {
-            let (shape, values) = array_values(o, "r")?;
+            let (shape, values) = real_array(o, "r")?;
             let ok = match shape.as_slice() {
                 [] => ny == 1,
                 [n] => *n == ny,

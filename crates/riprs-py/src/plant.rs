@@ -41,15 +41,31 @@ fn param_err(err: RipError) -> PyErr {
 
 /// Any array-like of reals as `(shape, row-major values)`; the error names `name`.
 fn array_like(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<usize>, Vec<f64>)> {
+    let (shape, values) = real_array(obj, name)?;
+    if values.iter().any(|v| !v.is_finite()) {
+        return Err(to_py(RipError::NonFinite { name: name.into() }));
+    }
+    Ok((shape, values))
+}
+
+/// The shape and the row-major values of an array-like of real numbers. A complex array is a
+/// `TypeError`: numpy's cast to float64 would drop its imaginary part without a word.
+pub(crate) fn real_array(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<usize>, Vec<f64>)> {
+    let complex = obj
+        .getattr("dtype")
+        .and_then(|dtype| dtype.getattr("kind"))
+        .and_then(|kind| kind.extract::<String>())
+        .is_ok_and(|kind| kind == "c");
+    if complex {
+        return Err(PyTypeError::new_err(format!(
+            "{name} must be an array of real numbers, got a complex array"
+        )));
+    }
     let arr: PyArrayLikeDyn<'_, f64, AllowTypeChange> = obj.extract().map_err(|e| {
         PyTypeError::new_err(format!("{name} must be an array of real numbers: {e}"))
     })?;
     let view = arr.as_array();
-    let values: Vec<f64> = view.iter().copied().collect();
-    if values.iter().any(|v| !v.is_finite()) {
-        return Err(to_py(RipError::NonFinite { name: name.into() }));
-    }
-    Ok((view.shape().to_vec(), values))
+    Ok((view.shape().to_vec(), view.iter().copied().collect()))
 }
 
 /// A matrix of the given shape from an array-like (a 1-D input counts as one row, a scalar as
