@@ -210,7 +210,11 @@ fn balance_and_track_on(controller: &str, name: &str, emulator_args: &[&str]) ->
     let alpha = log.col("alpha");
     let theta = log.col("theta");
     let reference = log.col("theta_ref");
-    assert!(t.len() >= 380, "only {} rows", t.len());
+    // A row per period that ran; periods skipped after a late wake-up (reported as deadline
+    // misses, more of them on a loaded machine) have none, so the count is not asserted
+    // tightly: the log must span the run.
+    assert!(t.len() >= 300, "only {} rows", t.len());
+    assert!(t.last().is_some_and(|&end| end >= 3.9), "log ends early");
     let max_alpha = alpha.iter().fold(0.0f64, |m, a| m.max(a.abs()));
     assert!(
         max_alpha < 0.25,
@@ -307,18 +311,10 @@ fn corrupt_and_dropped_frames_are_survived() {
 #[test]
 fn estimators_stay_balanced_through_dropped_replies() {
     let _serial = one_at_a_time();
-    let runs: Vec<_> = ["lqg", "mpc"]
-        .into_iter()
-        .map(|controller| {
-            std::thread::spawn(move || {
-                let name = format!("{controller}-drops");
-                let args = ["--noise", "0.3", "--drop-rate", "0.1", "--seed", "11"];
-                (controller, balance_and_track_on(controller, &name, &args))
-            })
-        })
-        .collect();
-    for run in runs {
-        let (controller, log) = run.join().unwrap();
+    for controller in ["lqg", "mpc"] {
+        let name = format!("{controller}-drops");
+        let args = ["--noise", "0.3", "--drop-rate", "0.1", "--seed", "11"];
+        let log = balance_and_track_on(controller, &name, &args);
         let no_reply = log
             .col("status")
             .iter()
