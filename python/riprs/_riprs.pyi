@@ -9,6 +9,7 @@ _F = NDArray[np.float64]
 _C = NDArray[np.complex128]
 
 __version__: str
+MAX_PREDICTION_HORIZON: int
 
 class RiprsError(ValueError): ...
 class ShapeError(RiprsError): ...

@@ -362,62 +362,66 @@ pub(crate) fn solve_dare_validated(
     // an ill-conditioned R its G₀ = BR⁻¹Bᵀ limits the accuracy. Both are repaired by Newton's
     // method from a stabilizing gain: the doubling's own when it stabilizes, else that of the
     // doubling on H₀ + δI, which is detectable for any δ > 0.
-    let doubled = sda_dispatch(&a0, &g0, &h0).map(|(y, it)| (symmetrize(&y), it));
-    let mut candidate = doubled
-        .as_ref()
-        .and_then(|(y, it)| problem.closed_loop(y).map(|cl| (y.clone(), cl, *it)))
-        .filter(|(_, cl, _)| cl.radius < 1.0 - UNIT_CIRCLE_MARGIN);
-    // The doubling's answer with its residual, kept when no polish is needed.
-    let mut checked: Option<(Mat, f64)> = candidate.as_ref().map(|(y, _, _)| {
-        let x = unreduce(y, e_inv.as_ref());
+    let doubling = |h: &Mat| {
+        let (y, iterations) = sda_dispatch(&a0, &g0, h)?;
+        let y = symmetrize(&y);
+        let closed_loop = problem.closed_loop(&y)?;
+        Some(Candidate {
+            y,
+            closed_loop,
+            iterations,
+        })
+    };
+    let with_residual = |candidate: Candidate| {
+        let x = unreduce(&candidate.y, e_inv.as_ref());
         let residual = dare_relative_residual(a, b, q, r, s, e, &x);
-        (x, residual)
-    });
-    if !checked
-        .as_ref()
-        .is_some_and(|(_, residual)| *residual <= NEWTON_REFINEMENT_THRESHOLD)
-    {
-        checked = None;
-        if candidate.is_none() {
-            let delta = 1e-6 * h0.norm().max(1.0);
-            let h_reg = &h0 + Mat::identity(h0.nrows(), h0.nrows()) * delta;
-            candidate = sda_dispatch(&a0, &g0, &h_reg)
-                .and_then(|(y, it)| {
-                    let y = symmetrize(&y);
-                    problem.closed_loop(&y).map(|cl| (y, cl, it))
-                })
-                .filter(|(_, cl, _)| cl.radius < 1.0);
+        (candidate, x, residual)
+    };
+    let doubled = doubling(&h0)
+        .filter(|c| c.closed_loop.radius < 1.0 - UNIT_CIRCLE_MARGIN)
+        .map(with_residual);
+    let (solution, x, relative_residual) = match doubled {
+        Some(done) if done.2 <= NEWTON_REFINEMENT_THRESHOLD => done,
+        doubled => {
+            let start = match doubled {
+                Some((candidate, _, _)) => candidate,
+                None => {
+                    let delta = 1e-6 * h0.norm().max(1.0);
+                    let h_reg = &h0 + Mat::identity(h0.nrows(), h0.nrows()) * delta;
+                    doubling(&h_reg)
+                        .filter(|c| c.closed_loop.radius < 1.0)
+                        .ok_or_else(|| {
+                            diagnose(
+                                "the doubling iteration found no stabilizing gain to start from"
+                                    .into(),
+                            )
+                        })?
+                }
+            };
+            let (y, newton_steps) = problem.newton(start.closed_loop.gain).ok_or_else(|| {
+                diagnose("Newton's method did not converge to a stabilizing solution".into())
+            })?;
+            let closed_loop = problem.closed_loop(&y).ok_or_else(|| {
+                diagnose("BᵀXB + R is not positive definite at the solution".into())
+            })?;
+            with_residual(Candidate {
+                y,
+                closed_loop,
+                iterations: start.iterations + newton_steps,
+            })
         }
-        let (_, start, it) = candidate.ok_or_else(|| {
-            diagnose("the doubling iteration found no stabilizing gain to start from".into())
-        })?;
-        let (y, newton_steps) = problem.newton(start.gain).ok_or_else(|| {
-            diagnose("Newton's method did not converge to a stabilizing solution".into())
-        })?;
-        let cl = problem
-            .closed_loop(&y)
-            .ok_or_else(|| diagnose("BᵀXB + R is not positive definite at the solution".into()))?;
-        candidate = Some((y, cl, it + newton_steps));
-    }
-    let (
-        y,
-        ClosedLoop {
-            gain,
-            eigenvalues: closed_loop_eigenvalues,
-            radius,
-        },
-        iterations,
-    ) = candidate.ok_or_else(|| diagnose("no stabilizing solution".into()))?;
+    };
+    let ClosedLoop {
+        gain,
+        eigenvalues: closed_loop_eigenvalues,
+        radius,
+    } = solution.closed_loop;
+    let iterations = solution.iterations;
     if radius.is_nan() || radius >= 1.0 - UNIT_CIRCLE_MARGIN {
         return Err(diagnose(format!(
             "the closed loop has spectral radius {radius:.6} ≥ 1 (a mode on the unit circle?)"
         )));
     }
-    let (x, relative_residual) = checked.unwrap_or_else(|| {
-        let x = unreduce(&y, e_inv.as_ref());
-        let residual = dare_relative_residual(a, b, q, r, s, e, &x);
-        (x, residual)
-    });
     if relative_residual.is_nan() || relative_residual > DARE_RESIDUAL_TOLERANCE {
         return Err(diagnose(format!(
             "relative residual {relative_residual:.3e} exceeds {DARE_RESIDUAL_TOLERANCE:.0e}"
@@ -447,6 +451,13 @@ struct StandardDare<'a> {
     q: &'a Mat,
     r: &'a Mat,
     s: Option<&'a Mat>,
+}
+
+/// A solution `Y` of the standard-form DARE with its closed loop and the iterations spent.
+struct Candidate {
+    y: Mat,
+    closed_loop: ClosedLoop,
+    iterations: usize,
 }
 
 /// The gain `G = (B̂ᵀYB̂ + R)⁻¹(B̂ᵀYÂ + Sᵀ)` of a candidate `Y` and its closed loop.

@@ -211,6 +211,11 @@ impl Controller for Lqr {
     }
 
     fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
+        // A sample whose angles or rates are not finite is discarded as if it had not arrived:
+        // one bad reading must not leave NaN in the filter for good.
+        if !(y[0].is_finite() && y[1].is_finite()) {
+            return self.discard_sample(r, u);
+        }
         if self.started {
             let periods = self.held.saturating_add(1);
             let dt = f64::from(periods) * self.ts;
@@ -220,15 +225,11 @@ impl Controller for Lqr {
                 let d = (y[q / 2] - self.x_hat[q]) / dt;
                 rates[i] = a * self.x_hat[rate] + (1.0 - a) * d;
             }
-            if !(y[0].is_finite() && y[1].is_finite() && rates.iter().all(|v| v.is_finite())) {
-                // A sample whose angles or rates are not finite is discarded as if it had not
-                // arrived: one bad reading must not leave NaN in the filter for good.
+            if !rates.iter().all(|v| v.is_finite()) {
                 return self.discard_sample(r, u);
             }
             self.x_hat[1] = rates[0];
             self.x_hat[3] = rates[1];
-        } else if !(y[0].is_finite() && y[1].is_finite()) {
-            return self.discard_sample(r, u);
         } else {
             self.x_hat[1] = 0.0;
             self.x_hat[3] = 0.0;

@@ -588,6 +588,10 @@ impl PyMpc {
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add(
+        "MAX_PREDICTION_HORIZON",
+        rip_core::mpc::MAX_PREDICTION_HORIZON,
+    )?;
     m.add_class::<PyMpc>()?;
     m.add_class::<PyMpcSolution>()?;
     Ok(())
