@@ -70,6 +70,39 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_campaign(args: argparse.Namespace) -> int:
+    """Many runs over a grid of plant errors and settings; results in Parquet, maps."""
+    from riprs import campaign
+
+    if args.example:
+        print(campaign.EXAMPLE_SPEC, end="")
+        return 0
+    if args.spec is None:
+        print("riprs: error: campaign needs SPEC.toml (or --example)", file=sys.stderr)
+        return 2
+    try:
+        result = campaign.run(
+            args.spec,
+            args.out,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            chunk_size=args.chunk_size,
+            progress=not args.quiet,
+            plots=not args.no_plots,
+        )
+    except KeyboardInterrupt:
+        print(
+            f"riprs: interrupted; finished chunks are in {args.out}/runs, "
+            "the same command resumes",
+            file=sys.stderr,
+        )
+        return 130
+    print(campaign.summary(result.table))
+    print(f"{result.table.num_rows} runs in {args.out}/runs ({result.chunks} chunks computed now, "
+          f"engine: {result.engine}); {len(result.files)} figures")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="riprs",
@@ -100,6 +133,22 @@ def build_parser() -> argparse.ArgumentParser:
     comp.add_argument("--no-plots", action="store_true", help="skip the figures")
     comp.add_argument("--quiet", action="store_true", help="no progress bars")
     comp.set_defaults(func=cmd_compare)
+    camp = sub.add_parser(
+        "campaign",
+        help="many runs over a grid of plant errors and settings (robustness maps)",
+        description="Runs every controller over the grid and seeds of a campaign spec, in "
+        "process on all cores or on a Dask cluster, writes one Parquet row per run and "
+        "robustness maps; the same command resumes an interrupted campaign.",
+    )
+    camp.add_argument("spec", nargs="?", metavar="SPEC.toml", help="campaign spec")
+    camp.add_argument("--out", metavar="DIR", default="riprs-campaign", help="output directory")
+    camp.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a running Dask scheduler")
+    camp.add_argument("--workers", type=int, metavar="N", help="start a local Dask cluster")
+    camp.add_argument("--chunk-size", type=int, metavar="N", help="runs per chunk")
+    camp.add_argument("--example", action="store_true", help="print the example spec")
+    camp.add_argument("--no-plots", action="store_true", help="skip the figures")
+    camp.add_argument("--quiet", action="store_true", help="no progress bar")
+    camp.set_defaults(func=cmd_campaign)
     return parser
 
 

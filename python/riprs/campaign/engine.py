@@ -1,0 +1,345 @@
+"""Engines (in process, Dask) and :func:`run`."""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Union
+
+from riprs import __version__
+from riprs.campaign.chunk import _run_payload_chunk, compute_chunk
+from riprs.campaign.spec import Campaign, CampaignError, _int, load_spec
+from riprs.campaign.store import (
+    _EXTRA,
+    _check_out,
+    _done_ranges,
+    _pending,
+    _require_arrow,
+    _to_table,
+    _write_chunk,
+    _write_manifest,
+    load,
+)
+
+if sys.version_info >= (3, 11):
+    pass
+else:  # pragma: no cover
+    pass
+
+__all__ = ["CampaignResult", "run", "summary"]
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+EXAMPLE_SPEC = """\
+# riprs campaign: LQR vs LQG vs MPC when the pendulum mass and the arm length are not what the
+# controllers were designed for (the paper's robustness question, as a map).
+# Every section of the experiment spec ([plant], [sensor], [reference], [lqr], [mpc], ...)
+# may follow; without them the paper's setting is used.
+
+[campaign]
+controllers = ["LQR", "LQG", "MPC"]
+seeds = 20                 # noise seeds per grid point
+duration = 10.0            # s per run
+
+[[campaign.axis]]
+name = "mp"                # pendulum mass: a scale factor on the base plant's value
+scale = [0.7, 1.3]
+points = 13
+
+[[campaign.axis]]
+name = "Lr"                # arm length
+scale = [0.8, 1.2]
+points = 9
+"""
+
+
+# -- engines ------------------------------------------------------------------------------------
+
+
+@dataclass
+class CampaignResult:
+    """What :func:`run` produced.
+
+    Attributes
+    ----------
+    campaign : Campaign
+    table : pyarrow.Table
+        One row per run, sorted by ``run``.
+    out : Path or None
+    engine : str
+    files : list of Path
+        Figures written.
+    chunks : int
+        Chunks computed by this call (not those found on disk).
+    """
+
+    campaign: Campaign
+    table: Any
+    out: Path | None
+    engine: str
+    files: list[Path] = field(default_factory=list)
+    chunks: int = 0
+
+
+ChunkResult = tuple[tuple[int, int], dict[str, Any]]
+
+
+def _in_process(campaign: Campaign, chunks: Sequence[tuple[int, int]]) -> Iterator[ChunkResult]:
+    """Chunks on local threads; each goes through the Rust batch API on all cores (rayon), and
+    a second thread overlaps one chunk's Python bookkeeping with another's native runs."""
+    from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
+    pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="riprs-campaign")
+    todo = list(chunks)[::-1]
+    running: dict[Any, tuple[int, int]] = {}
+    try:
+        while todo or running:
+            while todo and len(running) < 4:
+                c = todo.pop()
+                running[pool.submit(compute_chunk, campaign, *c)] = c
+            done, _ = wait(list(running), return_when=FIRST_COMPLETED)
+            for fut in done:
+                c = running.pop(fut)
+                yield c, fut.result()
+    finally:
+        for fut in running:
+            fut.cancel()
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _connect(scheduler: str | None, workers: int | None, timeout: float) -> tuple[Any, Any]:
+    """A Dask client (and the local cluster it owns, if any); errors before any work."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise CampaignError(
+            f"running on a Dask cluster needs dask.distributed, which is not installed: {_EXTRA}"
+        ) from None
+    if scheduler is not None:
+        if not re.match(r"^(tcp|tls|inproc|ucx)://\S+$", scheduler):
+            raise CampaignError(
+                f"scheduler must be an address like tcp://HOST:PORT, got {scheduler!r}"
+            )
+        try:
+            client = Client(scheduler, timeout=timeout, set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise CampaignError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+        try:
+            client.wait_for_workers(1, timeout=timeout)
+        except (OSError, TimeoutError) as exc:
+            client.close()
+            raise CampaignError(
+                f"the Dask scheduler at {scheduler} has no workers ({exc}); start some with "
+                f"`dask worker {scheduler}`"
+            ) from None
+        return client, None
+    assert workers is not None
+    cores = os.cpu_count() or 1
+    # Each worker process has its own rayon pool; share the cores instead of oversubscribing.
+    threads = str(max(1, cores // workers))
+    cluster = LocalCluster(
+        n_workers=workers,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        env={"RAYON_NUM_THREADS": threads},
+    )
+    return Client(cluster, set_as_default=False), cluster
+
+
+def _on_dask(
+    campaign: Campaign, chunks: Sequence[tuple[int, int]], client: Any
+) -> Iterator[ChunkResult]:
+    """Chunks as Dask tasks; a worker that dies has its tasks recomputed elsewhere by the
+    scheduler, and every result comes back here to be written."""
+    from distributed import as_completed
+
+    payload = {"spec": campaign.data, "hash": campaign.spec_hash, "version": __version__}
+    futures = {}
+    for start, stop in chunks:
+        fut = client.submit(
+            _run_payload_chunk,
+            payload,
+            start,
+            stop,
+            key=f"riprs-campaign-{campaign.spec_hash[:16]}-{start}-{stop}",
+            retries=2,
+        )
+        futures[fut.key] = (fut, (start, stop))
+    try:
+        for fut in as_completed([f for f, _ in futures.values()], loop=client.loop):
+            _, c = futures.pop(fut.key)
+            result = fut.result()
+            fut.release()
+            yield c, result
+    finally:
+        if futures:
+            client.cancel([f for f, _ in futures.values()])
+
+
+def run(
+    spec: PathLike | Mapping[str, Any] | Campaign,
+    out: PathLike | None = None,
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    chunk_size: int | None = None,
+    progress: bool = True,
+    plots: bool = True,
+    connect_timeout: float = 10.0,
+    on_chunk: Callable[[int, int], None] | None = None,
+) -> CampaignResult:
+    """Run a campaign, resuming whatever ``out`` already holds.
+
+    Parameters
+    ----------
+    spec : path to a TOML file, its parsed tables, or a Campaign
+    out : path, optional
+        Results directory (created); without it, results are kept in memory only.
+    scheduler : str, optional
+        Address of a running Dask scheduler (``tcp://HOST:PORT``): chunks become its tasks.
+    workers : int, optional
+        Start a local Dask cluster of that many worker processes.
+    chunk_size : int, optional
+        Runs per chunk (default ``[campaign] chunk_size``); results do not depend on it.
+    progress : bool
+        Show a progress bar (runs done, runs/s, time left).
+    plots : bool
+        Write the robustness maps and marginal plots into ``out``.
+    connect_timeout : float
+        Seconds to wait for the scheduler and its first worker.
+    on_chunk : callable, optional
+        Called as ``on_chunk(done_runs, total_runs)`` after each chunk is on disk.
+
+    Returns
+    -------
+    CampaignResult
+
+    Raises
+    ------
+    CampaignError
+        Bad spec, ``out`` holding another campaign, an unreachable scheduler or a missing
+        optional dependency; raised before any run.
+    KeyboardInterrupt
+        Re-raised after every finished chunk is written; run again to finish.
+    """
+    spec_text = None
+    if isinstance(spec, Campaign):
+        campaign = spec
+    else:
+        if not isinstance(spec, Mapping):
+            spec_text = Path(spec).read_text(encoding="utf-8")
+        campaign = load_spec(spec)
+    if chunk_size is not None:
+        campaign.chunk_size = _int(chunk_size, "chunk_size", 1)
+    if scheduler is not None and workers is not None:
+        raise CampaignError("give scheduler or workers, not both")
+    if workers is not None:
+        _int(workers, "workers", 1)
+    engine = (
+        f"dask {scheduler}"
+        if scheduler
+        else f"dask local cluster, {workers} workers"
+        if workers
+        else "in-process"
+    )
+    _require_arrow()
+
+    out_path = Path(out) if out is not None else None
+    results: dict[tuple[int, int], dict[str, Any]] = {}
+    previous = None
+    done: list[tuple[int, int]] = []
+    if out_path is not None:
+        previous = _check_out(campaign, out_path)
+        done = _done_ranges(out_path / "runs", campaign.runs)
+    chunks = _pending(done, campaign.runs, campaign.chunk_size)
+    done_runs = sum(b - a for a, b in done)
+
+    # Everything that can fail before the runs does so before anything is written.
+    client = cluster = None
+    if chunks and engine != "in-process":
+        client, cluster = _connect(scheduler, workers, connect_timeout)
+    if out_path is not None:
+        try:
+            _write_manifest(campaign, out_path, engine, spec_text, previous)
+        except BaseException:
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
+            raise
+    bar = None
+    if progress and chunks:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(
+            total=campaign.runs,
+            initial=done_runs,
+            unit="run",
+            desc="campaign",
+            smoothing=0.05,
+            dynamic_ncols=True,
+        )
+    computed = 0
+    try:
+        stream = (
+            _in_process(campaign, chunks) if client is None else _on_dask(campaign, chunks, client)
+        )
+        for (start, stop), columns in stream:
+            if out_path is not None:
+                _write_chunk(out_path / "runs", start, stop, columns)
+            else:
+                results[(start, stop)] = columns
+            computed += 1
+            done_runs += stop - start
+            if bar is not None:
+                bar.update(stop - start)
+            if on_chunk is not None:
+                on_chunk(done_runs, campaign.runs)
+    finally:
+        if bar is not None:
+            bar.close()
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+
+    if out_path is not None:
+        table = load(out_path)
+    else:
+        pa = _require_arrow()
+        table = (
+            pa.concat_tables([_to_table(results[c]) for c in sorted(results)]) if results else None
+        )
+    result = CampaignResult(campaign, table, out_path, engine, chunks=computed)
+    if plots and out_path is not None and table is not None:
+        from riprs.campaign import plots as campaign_plots
+
+        result.files = campaign_plots.plot_campaign(campaign, table, out_path)
+    return result
+
+
+def summary(table: Any) -> str:
+    """Per controller: runs, fall rate and the mean of each RMSE over the runs that stayed up."""
+    from riprs.campaign.plots import aggregate
+
+    names = ("rmse_arm", "rmse_pendulum", "rmse_voltage")
+    controllers, _, falls = aggregate(table, (), "fall_rate")
+    means = [aggregate(table, (), m)[2] for m in names]
+    counts = {c: 0 for c in controllers}
+    for c in table.column("controller").to_pylist():
+        counts[c] += 1
+    lines = [
+        f"{'controller':<11}{'runs':>9}{'falls':>8}{'arm [rad]':>12}{'pendulum [rad]':>16}"
+        f"{'voltage [V]':>13}   (RMSE: mean over the runs that stayed up)"
+    ]
+    for k, name in enumerate(controllers):
+        lines.append(
+            f"{name:<11}{counts[name]:>9}{100 * falls[k]:>7.1f}%{means[0][k]:>12.4f}"
+            f"{means[1][k]:>16.5f}{means[2][k]:>13.3f}"
+        )
+    return "\n".join(lines)

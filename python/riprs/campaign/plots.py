@@ -1,0 +1,190 @@
+"""Figures of a campaign: robustness maps over two axes and marginal plots over each axis.
+
+Every value is an average over the runs of a cell (all seeds, and all values of the axes not
+shown): the fall rate over every run, an RMSE over the runs that stayed up (a cell where every
+run fell is blank). matplotlib runs headless (Agg).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["aggregate", "plot_campaign", "plot_map", "plot_marginals"]
+
+LABELS = {
+    "fall_rate": "fall rate",
+    "rmse_arm": "arm angle RMSE [rad]",
+    "rmse_pendulum": "pendulum angle RMSE [rad]",
+    "rmse_voltage": "voltage RMSE [V]",
+    "peak_voltage": "peak voltage [V]",
+    "settle_time": "settling time [s]",
+}
+_COLORS = {"LQR": "tab:blue", "LQG": "tab:orange", "MPC": "tab:green"}
+
+
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _column(table: Any, name: str) -> np.ndarray:
+    if name not in table.column_names:
+        raise KeyError(f"no column {name!r}; columns: {', '.join(table.column_names)}")
+    return np.asarray(table.column(name).to_numpy(zero_copy_only=False))
+
+
+def aggregate(
+    table: Any, axes: Sequence[str], metric: str
+) -> tuple[list[str], list[np.ndarray], np.ndarray]:
+    """Per controller, the mean of ``metric`` over each cell of ``axes``.
+
+    ``metric`` is ``"fall_rate"`` (mean of ``fell`` over every run) or a result column
+    (mean over the runs that did not fall). Returns the controllers, the sorted values of each
+    axis and an array of shape ``(controllers, len(values[0]), len(values[1]), ...)``.
+    """
+    controllers = list(dict.fromkeys(_column(table, "controller").tolist()))
+    ctrl = np.array([controllers.index(c) for c in _column(table, "controller").tolist()])
+    values, index = [], []
+    for name in axes:
+        col = _column(table, name)
+        uniq, inv = np.unique(col, return_inverse=True)
+        values.append(uniq)
+        index.append(inv)
+    shape = (len(controllers), *(len(v) for v in values))
+    flat = np.ravel_multi_index((ctrl, *index), shape)
+    fell = _column(table, "fell").astype(bool)
+    if metric == "fall_rate":
+        weight = np.ones(len(fell))
+        data = fell.astype(float)
+    else:
+        weight = (~fell).astype(float)
+        data = np.where(fell, 0.0, _column(table, metric))
+        data = np.where(np.isfinite(data), data, 0.0)
+        weight = np.where(np.isfinite(_column(table, metric)) | fell, weight, 0.0)
+    size = int(np.prod(shape))
+    total = np.bincount(flat, weights=data * weight, minlength=size)
+    count = np.bincount(flat, weights=weight, minlength=size)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(count > 0, total / np.maximum(count, 1e-300), np.nan)
+    return controllers, values, mean.reshape(shape)
+
+
+def _edges(v: np.ndarray) -> np.ndarray:
+    if len(v) == 1:
+        return np.array([v[0] - 0.5, v[0] + 0.5]) if v[0] == 0 else v[0] * np.array([0.95, 1.05])
+    mid = (v[1:] + v[:-1]) / 2
+    return np.concatenate([[v[0] - (mid[0] - v[0])], mid, [v[-1] + (v[-1] - mid[-1])]])
+
+
+def _save(fig: Any, out: Path, stem: str) -> list[Path]:
+    files = []
+    for ext in ("png", "svg"):
+        path = out / f"{stem}.{ext}"
+        fig.savefig(path, dpi=120)
+        files.append(path)
+    _pyplot().close(fig)
+    return files
+
+
+def plot_map(
+    table: Any, x: str, y: str, metric: str, out: Path, *, stem: str | None = None
+) -> list[Path]:
+    """One panel per controller of ``metric`` over axes ``x`` and ``y``, one colour scale for
+    all panels; writes ``{metric}_map_{x}_{y}`` (or ``stem``) as PNG and SVG."""
+    plt = _pyplot()
+    controllers, (xv, yv), mean = aggregate(table, (x, y), metric)
+    if metric == "fall_rate":
+        vmin, vmax, cmap = 0.0, 1.0, "Reds"
+    else:
+        finite = mean[np.isfinite(mean)]
+        vmin, vmax = (float(finite.min()), float(finite.max())) if len(finite) else (0.0, 1.0)
+        if vmin == vmax:
+            vmax = vmin + 1e-12
+        cmap = "viridis"
+    fig, axes = plt.subplots(
+        1,
+        len(controllers),
+        figsize=(3.6 * len(controllers) + 1.2, 3.6),
+        sharey=True,
+        constrained_layout=True,
+        squeeze=False,
+    )
+    mesh = None
+    for ax, name, grid in zip(axes[0], controllers, mean, strict=True):
+        mesh = ax.pcolormesh(_edges(xv), _edges(yv), grid.T, vmin=vmin, vmax=vmax, cmap=cmap)
+        ax.set_title(name)
+        ax.set_xlabel(x)
+        if metric == "fall_rate":
+            ax.text(
+                0.03,
+                0.04,
+                f"mean {np.nanmean(grid):.0%}",
+                transform=ax.transAxes,
+                fontsize=9,
+                bbox={"facecolor": "white", "alpha": 0.7, "linewidth": 0},
+            )
+    axes[0][0].set_ylabel(y)
+    fig.colorbar(mesh, ax=axes[0].tolist(), label=LABELS.get(metric, metric))
+    return _save(fig, out, stem or f"{metric}_map_{x}_{y}".replace(".", "_"))
+
+
+def plot_marginals(
+    table: Any,
+    axes: Sequence[str],
+    out: Path,
+    metrics: Sequence[str] = ("fall_rate", "rmse_pendulum"),
+) -> list[Path]:
+    """For each axis (columns) and metric (rows), the metric against the axis value, one line
+    per controller; writes ``marginals`` as PNG and SVG."""
+    plt = _pyplot()
+    fig, grid = plt.subplots(
+        len(metrics),
+        len(axes),
+        figsize=(3.8 * len(axes) + 0.6, 2.8 * len(metrics)),
+        constrained_layout=True,
+        squeeze=False,
+        sharex="col",
+    )
+    for j, axis in enumerate(axes):
+        for i, metric in enumerate(metrics):
+            controllers, (values,), mean = aggregate(table, (axis,), metric)
+            ax = grid[i][j]
+            for k, name in enumerate(controllers):
+                ax.plot(
+                    values,
+                    mean[k],
+                    marker="o",
+                    markersize=3,
+                    label=name,
+                    color=_COLORS.get(name, f"C{k}"),
+                )
+            ax.grid(True, alpha=0.3)
+            if j == 0:
+                ax.set_ylabel(LABELS.get(metric, metric))
+            if i == len(metrics) - 1:
+                ax.set_xlabel(axis)
+            if metric == "fall_rate":
+                ax.set_ylim(-0.03, 1.03)
+    grid[0][0].legend(fontsize=8)
+    return _save(fig, out, "marginals")
+
+
+def plot_campaign(campaign: Any, table: Any, out: Path) -> list[Path]:
+    """The default figures: fall-rate and pendulum-RMSE maps over the first two axes, and the
+    marginal plots over every axis."""
+    names = [a.name for a in campaign.axes]
+    files: list[Path] = []
+    if len(names) >= 2:
+        for metric in ("fall_rate", "rmse_pendulum"):
+            files += plot_map(table, names[0], names[1], metric, out, stem=f"{metric}_map")
+    if names:
+        files += plot_marginals(table, names, out)
+    return files

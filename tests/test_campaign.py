@@ -1,0 +1,476 @@
+"""`riprs campaign`: run mapping, metrics, resume, refusal of a changed spec, bad specs, and a
+real Dask cluster (a scheduler and two workers as processes) that loses a worker mid-way."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pyarrow")
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+import riprs
+from riprs import campaign
+from riprs.compare import build_controllers
+from riprs.config import CompareConfig
+
+SMALL = """
+[campaign]
+controllers = ["LQR", "MPC"]
+seeds = 2
+duration = 3.0
+seed = 7
+chunk_size = 5
+
+[[campaign.axis]]
+name = "mp"
+scale = [0.6, 1.4]
+points = 3
+
+[[campaign.axis]]
+name = "noise_std"
+values = [0.001, 0.004]
+
+[[campaign.axis]]
+name = "lqr.R"
+range = [0.05, 0.2]
+points = 2
+
+[sensor]
+encoder_counts = [4096, 4096]
+"""
+
+
+def _spec(tmp_path: Path, text: str, name: str = "spec.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def _column(table, name):
+    return table.column(name).to_numpy(zero_copy_only=False)
+
+
+def _settle_time(t, theta, ref, band, step_time):
+    """Independent reference: walk back from the end while the arm is inside the band."""
+    k = len(t)
+    while k > 0 and abs(theta[k - 1] - ref[k - 1]) <= band:
+        k -= 1
+    if k == len(t):
+        return None
+    return max(t[k] - step_time, 0.0) if k > 0 else 0.0
+
+
+def test_example_spec_is_the_papers_question(capsys):
+    from riprs.cli import main
+
+    assert main(["campaign", "--example"]) == 0
+    printed = capsys.readouterr().out
+    assert printed == campaign.EXAMPLE_SPEC
+    c = campaign.load_spec(tomllib.loads(printed))
+    assert c.controllers == ["LQR", "LQG", "MPC"]
+    assert [a.parameter for a in c.axes] == ["mp", "Lr"]
+    np.testing.assert_allclose(c.axes[0].values, np.linspace(0.7, 1.3, 13))
+    assert c.runs == 3 * 13 * 9 * 20
+
+
+def test_each_run_is_the_simulation_its_index_names():
+    """Rows against riprs.simulate with the inputs decoded by hand from the module's rule
+    run = (c * P + p) * S + s, noise seed = seed + p * S + s."""
+    c = campaign.load_spec(tomllib.loads(SMALL))
+    assert c.runs == 2 * 12 * 2
+    cols = campaign.compute_chunk(c, 0, c.runs)
+    mp0 = riprs.FurutaParams.paper().mp
+    for run in (0, 5, 17, 26, 47):
+        ctrl, rest = divmod(run, 24)
+        point, s = divmod(rest, 2)
+        i_mp, i_noise, i_r = np.unravel_index(point, (3, 2, 2))
+        mp = [0.6, 1.0, 1.4][i_mp]
+        noise = [0.001, 0.004][i_noise]
+        R = [0.05, 0.2][i_r]
+        cfg = CompareConfig.from_dict(
+            {
+                "sensor": {"encoder_counts": [4096, 4096], "noise_std": [noise, noise]},
+                "lqr": {"R": R},
+            }
+        )
+        name = ["LQR", "MPC"][ctrl]
+        cfg.controllers = [name]
+        controller = build_controllers(cfg)[name]
+        ref = riprs.simulate(
+            riprs.FurutaParams.paper().replace(mp=mp0 * mp),
+            controller,
+            3.0,
+            reference=1.0,
+            reference_time=1.0,
+            encoder_counts=4096,
+            noise_std=noise,
+            x0=[0.0, 0.0, 0.05, 0.0],
+            seed=7 + point * 2 + s,
+        )
+        assert cols["controller"][run] == name
+        assert (cols["mp"][run], cols["noise_std"][run], cols["lqr.R"][run]) == (mp, noise, R)
+        assert cols["noise_seed"][run] == 7 + point * 2 + s
+        np.testing.assert_array_equal(
+            [cols["rmse_arm"][run], cols["rmse_pendulum"][run], cols["rmse_voltage"][run]],
+            ref.rmse,
+        )
+        assert cols["fell"][run] == ref.fell
+        assert cols["peak_voltage"][run] == np.max(np.abs(ref.u))
+        expected = _settle_time(ref.t, ref.x[:, 0], ref.r[:, 0], 0.05, 1.0)
+        if ref.fell or expected is None:
+            assert np.isnan(cols["settle_time"][run])
+        else:
+            assert cols["settle_time"][run] == pytest.approx(expected, abs=1e-12)
+    # The LQR design sees lqr.R: the two weights give different runs on equal inputs.
+    assert cols["rmse_voltage"][0] != cols["rmse_voltage"][2]
+
+
+def test_chunking_and_engine_order_do_not_change_results(tmp_path):
+    c = campaign.load_spec(tomllib.loads(SMALL))
+    whole = campaign.compute_chunk(c, 0, c.runs)
+    res = campaign.run(c, chunk_size=7, progress=False, plots=False)
+    assert _column(res.table, "run").tolist() == list(range(c.runs))
+    for name in ("rmse_arm", "rmse_pendulum", "rmse_voltage", "peak_voltage", "fell"):
+        np.testing.assert_array_equal(_column(res.table, name), whole[name])
+
+
+def _run_cli(args, **kwargs):
+    return subprocess.Popen(
+        [sys.executable, "-m", "riprs.cli", "campaign", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **kwargs,
+    )
+
+
+def test_ctrl_c_keeps_finished_chunks_and_the_same_command_resumes(tmp_path):
+    spec = _spec(
+        tmp_path,
+        """
+[campaign]
+controllers = ["LQR", "LQG"]
+seeds = 40
+duration = 2.0
+chunk_size = 20
+
+[[campaign.axis]]
+name = "Lr"
+scale = [0.9, 1.1]
+points = 50
+""",
+    )
+    out = tmp_path / "out"
+    proc = _run_cli([str(spec), "--out", str(out), "--quiet", "--no-plots"])
+    try:
+        deadline = time.monotonic() + 120
+        while not list((out / "runs").glob("part-*.parquet")):
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "no chunk written in 120 s"
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=30)
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "Traceback" not in err
+    partial = campaign.load(out)
+    c = campaign.load_spec(spec)
+    assert 0 < partial.num_rows < c.runs
+    assert not [p for p in (out / "runs").iterdir() if not p.name.startswith("part-")]
+
+    result = campaign.run(spec, out, progress=False, plots=False)
+    runs = _column(result.table, "run")
+    assert runs.tolist() == list(range(c.runs))
+    assert 0 < result.chunks < -(-c.runs // 20)  # only the missing chunks ran
+    # Rows written before the interrupt equal a fresh computation of the same runs.
+    first = int(_column(partial, "run")[0])
+    fresh = campaign.compute_chunk(c, first, first + 20)
+    np.testing.assert_array_equal(_column(partial, "rmse_arm")[:20], fresh["rmse_arm"])
+
+
+def test_interrupt_from_python_then_resume_equals_one_uninterrupted_run(tmp_path):
+    c = campaign.load_spec(tomllib.loads(SMALL))
+    out = tmp_path / "out"
+
+    def stop_after_two(done, total):
+        if done >= 10:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        campaign.run(c, out, progress=False, plots=False, on_chunk=stop_after_two)
+    assert 0 < campaign.load(out).num_rows < c.runs
+    resumed = campaign.run(c, out, progress=False, plots=True)
+    assert resumed.chunks < -(-c.runs // c.chunk_size)
+    reference = campaign.run(c, progress=False, plots=False)
+    assert resumed.table.equals(reference.table)
+    names = {p.name for p in resumed.files}
+    for stem in ("fall_rate_map", "rmse_pendulum_map", "marginals"):
+        assert {f"{stem}.png", f"{stem}.svg"} <= names
+
+
+def test_a_changed_spec_is_refused_and_nothing_is_touched(tmp_path):
+    spec = _spec(tmp_path, SMALL)
+    out = tmp_path / "out"
+    campaign.run(spec, out, progress=False, plots=False)
+    before = {p: p.stat().st_mtime_ns for p in out.rglob("*")}
+    changed = _spec(tmp_path, SMALL.replace("seeds = 2", "seeds = 3"), "changed.toml")
+    with pytest.raises(campaign.CampaignError, match="another spec"):
+        campaign.run(changed, out, progress=False)
+    assert {p: p.stat().st_mtime_ns for p in out.rglob("*")} == before
+    # The chunk size is not part of the spec's identity: a new one resumes (nothing to do).
+    rechunked = _spec(tmp_path, SMALL.replace("chunk_size = 5", "chunk_size = 9"), "r.toml")
+    assert campaign.run(rechunked, out, progress=False, plots=False).chunks == 0
+
+
+@pytest.mark.parametrize(
+    ("text", "key"),
+    [
+        ("[campaign]\nseeds = 0\n", "campaign.seeds"),
+        ("[campaign]\nsneeds = 2\n", "campaign.sneeds"),
+        ('[campaign]\ncontrollers = ["LQR", "PID"]\n', "campaign.controllers[1]"),
+        ("[campaign]\nduration = -1.0\n", "campaign.duration"),
+        (
+            '[campaign]\n[[campaign.axis]]\nname = "mpp"\nscale = [0.9, 1.1]\npoints = 3\n',
+            "campaign.axis[0].name",
+        ),
+        (
+            '[campaign]\n[[campaign.axis]]\nname = "mp"\nscale = [0.9, 1.1]\npoint = 3\n',
+            "campaign.axis[0].point",
+        ),
+        (
+            '[campaign]\n[[campaign.axis]]\nname = "mp"\nscale = [1.1, 0.9]\npoints = 3\n',
+            "campaign.axis[0].scale",
+        ),
+        (
+            '[campaign]\n[[campaign.axis]]\nname = "mp"\nscale = [0.9, 1.1]\npoints = 0\n',
+            "campaign.axis[0].points",
+        ),
+        (
+            '[campaign]\n[[campaign.axis]]\nname = "mp"\nscale = [-1.0, 1.1]\npoints = 3\n',
+            "campaign.axis[0].scale",
+        ),
+        (
+            '[campaign]\n[[campaign.axis]]\nname = "mp"\nvalues = [1.0]\n'
+            '[[campaign.axis]]\nname = "mp"\nvalues = [2.0]\n',
+            "campaign.axis[1].name",
+        ),
+        (
+            '[campaign]\n[[campaign.axis]]\nname = "mpc.solver"\nvalues = [1.0]\n',
+            "campaign.axis[0].name",
+        ),
+        (
+            '[campaign]\n[[campaign.axis]]\nname = "mpc.prediction_horizon"\nvalues = [0, 10]\n',
+            "mpc.prediction_horizon",
+        ),
+        (
+            '[campaign]\n[[campaign.axis]]\nname = "mpc.control_horizon"\nvalues = [3, 60]\n',
+            "mpc.control_horizon",
+        ),
+        ("[campaign]\n[mpc]\nprediction_horizn = 10\n", "mpc.prediction_horizn"),
+        ("[mpc]\nprediction_horizon = 10\n", "[campaign]"),
+    ],
+)
+def test_bad_specs_name_the_key(tmp_path, text, key):
+    spec = _spec(tmp_path, text)
+    with pytest.raises(riprs.RiprsError) as info:
+        campaign.run(spec, tmp_path / "out", progress=False)
+    assert key in str(info.value)
+    assert str(spec) in str(info.value)
+    assert not (tmp_path / "out").exists()
+
+
+def test_integer_settings_and_random_axes_follow_the_spec():
+    c = campaign.load_spec(
+        tomllib.loads(
+            """
+[campaign]
+seed = 3
+[[campaign.axis]]
+name = "mpc.prediction_horizon"
+scale = [0.4, 1.0]
+points = 3
+[[campaign.axis]]
+name = "initial_tilt"
+range = [0.0, 0.2]
+samples = 4
+"""
+        )
+    )
+    horizon, tilt = c.axes
+    # Factors on the base horizon (50) that land on whole steps: 20, 35, 50.
+    np.testing.assert_allclose(horizon.values * 50, [20, 35, 50])
+    assert c.config_for((1, 0)).mpc.prediction_horizon == 35
+    expected = np.sort(np.random.default_rng([3, 1]).uniform(0.0, 0.2, 4))
+    np.testing.assert_array_equal(tilt.values, expected)
+    assert c.config_for((0, 2)).plant.initial_state[2] == expected[2]
+
+
+def test_missing_extra_is_one_line_saying_what_to_install(tmp_path, monkeypatch):
+    spec = _spec(tmp_path, SMALL)
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    with pytest.raises(campaign.CampaignError) as info:
+        campaign.run(spec, tmp_path / "a", workers=2, progress=False)
+    assert "pip install 'riprs[campaign]'" in str(info.value) and "\n" not in str(info.value)
+    monkeypatch.setitem(sys.modules, "pyarrow", None)
+    with pytest.raises(campaign.CampaignError, match=r"pip install 'riprs\[campaign\]'"):
+        campaign.run(spec, tmp_path / "b", progress=False)
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_an_unreachable_scheduler_fails_before_any_work(tmp_path):
+    spec = _spec(tmp_path, SMALL)
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    with pytest.raises(campaign.CampaignError, match="cannot reach the Dask scheduler"):
+        campaign.run(spec, tmp_path / "out", scheduler=address, connect_timeout=2)
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(campaign.CampaignError, match="tcp://HOST:PORT"):
+        campaign.run(spec, tmp_path / "out", scheduler="127.0.0.1:8786")
+
+
+DASK_SPEC = """
+[campaign]
+controllers = ["LQR", "LQG"]
+seeds = 30
+duration = 1.5
+chunk_size = 40
+
+[[campaign.axis]]
+name = "mp"
+scale = [0.6, 1.4]
+points = 9
+
+[[campaign.axis]]
+name = "Lr"
+scale = [0.85, 1.15]
+points = 5
+"""
+
+
+@pytest.fixture
+def dask_cluster(tmp_path):
+    """A `dask scheduler` and two `dask worker` processes on 127.0.0.1 (no nanny, so killing a
+    worker's process is losing the worker); every process is ended on any outcome."""
+    pytest.importorskip("distributed")
+    dask = [sys.executable, "-m", "dask", "scheduler"]
+    worker_cmd = [sys.executable, "-m", "dask", "worker"]
+    scheduler_file = tmp_path / "scheduler.json"
+    env = {**os.environ, "RAYON_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
+    procs: list[subprocess.Popen] = []
+    logs = []
+
+    def start(cmd, name):
+        log = open(tmp_path / f"{name}.log", "w")
+        logs.append(log)
+        procs.append(subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env))
+        return procs[-1]
+
+    try:
+        start(
+            [
+                *dask,
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(_free_port()),
+                "--no-dashboard",
+                "--scheduler-file",
+                str(scheduler_file),
+            ],
+            "scheduler",
+        )
+        deadline = time.monotonic() + 90
+        while not scheduler_file.exists() or not scheduler_file.read_text().strip():
+            assert procs[0].poll() is None, (tmp_path / "scheduler.log").read_text()
+            assert time.monotonic() < deadline, "scheduler did not start in 90 s"
+            time.sleep(0.1)
+        import json
+
+        address = json.loads(scheduler_file.read_text())["address"]
+        workers = [
+            start(
+                [
+                    *worker_cmd,
+                    address,
+                    "--nthreads",
+                    "1",
+                    "--no-nanny",
+                    "--no-dashboard",
+                    "--memory-limit",
+                    "0",
+                    "--name",
+                    f"w{i}",
+                    "--host",
+                    "127.0.0.1",
+                ],
+                f"worker{i}",
+            )
+            for i in range(2)
+        ]
+        from distributed import Client
+
+        with Client(address, timeout=60) as client:
+            client.wait_for_workers(2, timeout=90)
+        yield address, workers
+    finally:
+        for p in reversed(procs):
+            with contextlib.suppress(ProcessLookupError):
+                p.terminate()
+        for p in reversed(procs):
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(timeout=20)
+        for log in logs:
+            log.close()
+
+
+def test_a_worker_killed_mid_campaign_costs_no_run(tmp_path, dask_cluster):
+    address, workers = dask_cluster
+    spec = _spec(tmp_path, DASK_SPEC)
+    c = campaign.load_spec(spec)
+    assert c.runs == 2 * 45 * 30
+    killed_at: list[int] = []
+
+    def kill_one_worker(done, total):
+        if not killed_at and done >= 6 * 40:
+            workers[1].kill()
+            workers[1].wait(timeout=30)
+            killed_at.append(done)
+
+    out = tmp_path / "out"
+    result = campaign.run(
+        spec, out, scheduler=address, progress=False, plots=False, on_chunk=kill_one_worker
+    )
+    assert killed_at and killed_at[0] < c.runs, "the worker was not killed mid-way"
+    assert workers[1].returncode is not None
+    table = campaign.load(out)
+    runs = _column(table, "run")
+    assert len(runs) == c.runs and np.array_equal(np.sort(runs), np.arange(c.runs))
+    in_process = campaign.run(spec, progress=False, plots=False)
+    assert table.equals(in_process.table)
+    assert result.table.equals(table)
+    assert "dask" in result.engine
