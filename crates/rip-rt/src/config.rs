@@ -45,17 +45,44 @@ pub enum PendulumZero {
     Up,
 }
 
-/// `[loop]`: timing of the control loop.
+/// `[loop]`: timing of the control loop and its overrun rules.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LoopConfig {
-    /// Control period (ms). The controllers are designed for this sample time.
+    /// Control period (ms), in [`PERIOD_MS`]. The controllers are designed for this sample
+    /// time.
     pub period_ms: f64,
-    /// How long to wait for the measurement after the sample request (ms, < period).
+    /// How long to wait for the measurement after the sample request (ms), at least
+    /// [`MIN_REPLY_TIMEOUT_MS`] and shorter than the period.
     pub reply_timeout_ms: f64,
-    /// Consecutive periods without a valid measurement that stop the loop.
+    /// Consecutive periods without a valid measurement that stop the loop, in
+    /// [`WATCHDOG_PERIODS`], and at most [`MAX_BLIND_MS`] of driving on a repeated command.
     pub watchdog_periods: u32,
+    /// A controller step (measurement decoded → command encoded) longer than this many periods
+    /// is a compute overrun: the command is not sent and the loop stops. In
+    /// [`MAX_STEP_PERIODS`].
+    pub max_step_periods: f64,
+    /// This many periods in a row that overran their deadline are a compute overrun. In
+    /// [`MAX_CONSECUTIVE_MISSES`].
+    pub max_consecutive_misses: u32,
 }
+
+/// Allowed `loop.period_ms`. Above 20 ms the device's 50 ms command watchdog (protocol.md)
+/// would see fewer than three commands per window and the pendulum (unstable pole near
+/// 10 rad/s) is no longer controllable at that rate; below 1 ms a serial round trip cannot fit.
+pub const PERIOD_MS: std::ops::RangeInclusive<f64> = 1.0..=20.0;
+/// Shortest `loop.reply_timeout_ms`: a USB round trip alone takes about this long.
+pub const MIN_REPLY_TIMEOUT_MS: f64 = 0.1;
+/// Allowed `loop.watchdog_periods`.
+pub const WATCHDOG_PERIODS: std::ops::RangeInclusive<u32> = 1..=10;
+/// Longest time (ms) the loop may keep the motor enabled on a repeated command without a new
+/// measurement, whatever the configuration: `loop.watchdog_periods × loop.period_ms` must not
+/// exceed it, and the loop enforces it again at run time.
+pub const MAX_BLIND_MS: f64 = 100.0;
+/// Allowed `loop.max_step_periods`.
+pub const MAX_STEP_PERIODS: std::ops::RangeInclusive<f64> = 0.1..=5.0;
+/// Allowed `loop.max_consecutive_misses`.
+pub const MAX_CONSECUTIVE_MISSES: std::ops::RangeInclusive<u32> = 1..=20;
 
 impl Default for LoopConfig {
     fn default() -> Self {
@@ -63,6 +90,8 @@ impl Default for LoopConfig {
             period_ms: 10.0,
             reply_timeout_ms: 5.0,
             watchdog_periods: 5,
+            max_step_periods: 2.0,
+            max_consecutive_misses: 5,
         }
     }
 }
@@ -71,9 +100,10 @@ impl Default for LoopConfig {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DeviceConfig {
-    /// Arm encoder counts per revolution (after quadrature decoding).
+    /// Arm encoder counts per revolution (after quadrature decoding), in [`COUNTS_PER_REV`].
     pub arm_counts_per_rev: u32,
-    /// Pendulum encoder counts per revolution (after quadrature decoding).
+    /// Pendulum encoder counts per revolution (after quadrature decoding), in
+    /// [`COUNTS_PER_REV`].
     pub pendulum_counts_per_rev: u32,
     /// Where the pendulum encoder reads zero.
     pub pendulum_zero: PendulumZero,
@@ -95,20 +125,33 @@ impl Default for DeviceConfig {
     }
 }
 
+/// Allowed encoder resolutions: below 64 counts per revolution (0.1 rad) the pendulum angle
+/// is too coarse to balance on; above 2²⁴ the multi-turn i32 count overflows within 128 turns.
+pub const COUNTS_PER_REV: std::ops::RangeInclusive<u32> = 64..=(1 << 24);
+/// Largest `safety.voltage_limit` (V): the rigs this loop is for have 12 V to 24 V motors.
+pub const MAX_VOLTAGE_LIMIT: f64 = 24.0;
+/// Largest `safety.pendulum_limit` (rad): past horizontal no balancing controller recovers.
+pub const MAX_PENDULUM_LIMIT: f64 = std::f64::consts::FRAC_PI_2;
+/// Largest `safety.arm_limit` (rad): one turn either way, before the cable winds up.
+pub const MAX_ARM_LIMIT: f64 = std::f64::consts::TAU;
+/// Longest `safety.wait_upright_s` (s); the motor stays disabled while waiting.
+pub const MAX_WAIT_UPRIGHT_S: f64 = 600.0;
+
 /// `[safety]`: limits that stop the motor.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SafetyConfig {
-    /// Every command is clamped to ±this (V).
+    /// Every command is clamped to ±this (V), in (0, [`MAX_VOLTAGE_LIMIT`]].
     pub voltage_limit: f64,
-    /// |pendulum angle| above this (rad from upright) stops the loop.
+    /// |pendulum angle| above this (rad from upright) stops the loop while balancing, in
+    /// (0, [`MAX_PENDULUM_LIMIT`]].
     pub pendulum_limit: f64,
-    /// |arm angle| above this (rad) stops the loop.
+    /// |arm angle| above this (rad) stops the loop, in (0, [`MAX_ARM_LIMIT`]].
     pub arm_limit: f64,
     /// Balancing starts only with |pendulum angle| below this (rad).
     pub start_tolerance: f64,
-    /// How long to wait for the pendulum to be brought upright before refusing (s); 0 refuses
-    /// at once.
+    /// How long to wait for the pendulum to be brought upright before refusing (s), in
+    /// [0, [`MAX_WAIT_UPRIGHT_S`]]; 0 refuses at once.
     pub wait_upright_s: f64,
 }
 
@@ -250,6 +293,34 @@ fn nonnegative(key: &str, v: f64) -> Result<(), ConfigError> {
     }
 }
 
+fn in_range(
+    key: &str,
+    v: f64,
+    range: std::ops::RangeInclusive<f64>,
+    unit: &str,
+) -> Result<(), ConfigError> {
+    if range.contains(&v) {
+        Ok(())
+    } else {
+        Err(err(
+            key,
+            format!(
+                "must be in [{}, {}] {unit}, got {v}",
+                range.start(),
+                range.end()
+            ),
+        ))
+    }
+}
+
+fn in_open_closed(key: &str, v: f64, max: f64, unit: &str) -> Result<(), ConfigError> {
+    if v > 0.0 && v <= max {
+        Ok(())
+    } else {
+        Err(err(key, format!("must be in (0, {max}] {unit}, got {v}")))
+    }
+}
+
 fn sign(key: &str, v: f64) -> Result<(), ConfigError> {
     if v == 1.0 || v == -1.0 {
         Ok(())
@@ -285,66 +356,10 @@ impl Config {
 
     /// Checks every value; the error names the first bad key.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let l = &self.loop_;
-        positive("loop.period_ms", l.period_ms)?;
-        // Below 1 ms a serial round trip (about 4 ms at 115200 baud, protocol.md) cannot fit
-        // and every period would end in the watchdog.
-        if !(1.0..=1000.0).contains(&l.period_ms) {
-            return Err(err("loop.period_ms", "must be between 1 and 1000 ms"));
-        }
-        positive("loop.reply_timeout_ms", l.reply_timeout_ms)?;
-        if l.reply_timeout_ms >= l.period_ms {
-            return Err(err(
-                "loop.reply_timeout_ms",
-                format!(
-                    "must be shorter than loop.period_ms ({} ms), got {}",
-                    l.period_ms, l.reply_timeout_ms
-                ),
-            ));
-        }
-        if l.watchdog_periods == 0 {
-            return Err(err("loop.watchdog_periods", "must be at least 1"));
-        }
-        let d = &self.device;
-        if d.arm_counts_per_rev == 0 {
-            return Err(err("device.arm_counts_per_rev", "must be positive"));
-        }
-        if d.pendulum_counts_per_rev == 0 {
-            return Err(err("device.pendulum_counts_per_rev", "must be positive"));
-        }
-        sign("device.arm_sign", d.arm_sign)?;
-        sign("device.pendulum_sign", d.pendulum_sign)?;
+        self.validate_loop()?;
+        self.validate_device()?;
+        self.validate_safety()?;
         let s = &self.safety;
-        positive("safety.voltage_limit", s.voltage_limit)?;
-        if s.voltage_limit > 32.0 {
-            return Err(err(
-                "safety.voltage_limit",
-                format!(
-                    "must be at most 32 V (the wire carries ±32.767 V), got {}",
-                    s.voltage_limit
-                ),
-            ));
-        }
-        let pi = std::f64::consts::PI;
-        positive("safety.pendulum_limit", s.pendulum_limit)?;
-        if s.pendulum_limit > pi {
-            return Err(err(
-                "safety.pendulum_limit",
-                format!("must be in (0, π], got {}", s.pendulum_limit),
-            ));
-        }
-        positive("safety.arm_limit", s.arm_limit)?;
-        positive("safety.start_tolerance", s.start_tolerance)?;
-        if s.start_tolerance >= s.pendulum_limit {
-            return Err(err(
-                "safety.start_tolerance",
-                format!(
-                    "must be below safety.pendulum_limit ({}), got {}",
-                    s.pendulum_limit, s.start_tolerance
-                ),
-            ));
-        }
-        nonnegative("safety.wait_upright_s", s.wait_upright_s)?;
         let r = &self.reference;
         if !r.arm_step.is_finite() || r.arm_step.abs() >= s.arm_limit {
             return Err(err(
@@ -392,6 +407,118 @@ impl Config {
             ));
         }
         Ok(())
+    }
+
+    fn validate_loop(&self) -> Result<(), ConfigError> {
+        let l = &self.loop_;
+        in_range("loop.period_ms", l.period_ms, PERIOD_MS, "ms")?;
+        if !(l.reply_timeout_ms.is_finite()
+            && l.reply_timeout_ms >= MIN_REPLY_TIMEOUT_MS
+            && l.reply_timeout_ms < l.period_ms)
+        {
+            return Err(err(
+                "loop.reply_timeout_ms",
+                format!(
+                    "must be at least {MIN_REPLY_TIMEOUT_MS} ms and shorter than \
+                     loop.period_ms ({} ms), got {}",
+                    l.period_ms, l.reply_timeout_ms
+                ),
+            ));
+        }
+        if !WATCHDOG_PERIODS.contains(&l.watchdog_periods) {
+            return Err(err(
+                "loop.watchdog_periods",
+                format!(
+                    "must be in {}..={}, got {}",
+                    WATCHDOG_PERIODS.start(),
+                    WATCHDOG_PERIODS.end(),
+                    l.watchdog_periods
+                ),
+            ));
+        }
+        let blind_ms = f64::from(l.watchdog_periods) * l.period_ms;
+        if blind_ms > MAX_BLIND_MS {
+            return Err(err(
+                "loop.watchdog_periods",
+                format!(
+                    "{} periods of {} ms are {blind_ms} ms without a measurement; at most \
+                     {MAX_BLIND_MS} ms are allowed",
+                    l.watchdog_periods, l.period_ms
+                ),
+            ));
+        }
+        in_range(
+            "loop.max_step_periods",
+            l.max_step_periods,
+            MAX_STEP_PERIODS,
+            "periods",
+        )?;
+        if !MAX_CONSECUTIVE_MISSES.contains(&l.max_consecutive_misses) {
+            return Err(err(
+                "loop.max_consecutive_misses",
+                format!(
+                    "must be in {}..={}, got {}",
+                    MAX_CONSECUTIVE_MISSES.start(),
+                    MAX_CONSECUTIVE_MISSES.end(),
+                    l.max_consecutive_misses
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    fn validate_device(&self) -> Result<(), ConfigError> {
+        let d = &self.device;
+        for (key, counts) in [
+            ("device.arm_counts_per_rev", d.arm_counts_per_rev),
+            ("device.pendulum_counts_per_rev", d.pendulum_counts_per_rev),
+        ] {
+            if !COUNTS_PER_REV.contains(&counts) {
+                return Err(err(
+                    key,
+                    format!(
+                        "must be in {}..={}, got {counts}",
+                        COUNTS_PER_REV.start(),
+                        COUNTS_PER_REV.end()
+                    ),
+                ));
+            }
+        }
+        sign("device.arm_sign", d.arm_sign)?;
+        sign("device.pendulum_sign", d.pendulum_sign)
+    }
+
+    fn validate_safety(&self) -> Result<(), ConfigError> {
+        let s = &self.safety;
+        in_open_closed(
+            "safety.voltage_limit",
+            s.voltage_limit,
+            MAX_VOLTAGE_LIMIT,
+            "V",
+        )?;
+        in_open_closed(
+            "safety.pendulum_limit",
+            s.pendulum_limit,
+            MAX_PENDULUM_LIMIT,
+            "rad",
+        )?;
+        in_open_closed("safety.arm_limit", s.arm_limit, MAX_ARM_LIMIT, "rad")?;
+        positive("safety.start_tolerance", s.start_tolerance)?;
+        if s.start_tolerance >= s.pendulum_limit {
+            return Err(err(
+                "safety.start_tolerance",
+                format!(
+                    "must be below safety.pendulum_limit ({}), got {}",
+                    s.pendulum_limit, s.start_tolerance
+                ),
+            ));
+        }
+        in_range(
+            "safety.wait_upright_s",
+            s.wait_upright_s,
+            0.0..=MAX_WAIT_UPRIGHT_S,
+            "s",
+        )
     }
 
     /// The control period in nanoseconds.
@@ -447,6 +574,41 @@ mod tests {
             ("[safety]\nvoltage_limit = -1\n", "safety.voltage_limit"),
             ("[loop]\nreply_timeout_ms = 10\n", "loop.reply_timeout_ms"),
             ("[loop]\nwatchdog_periods = 0\n", "loop.watchdog_periods"),
+            (
+                "[loop]\nwatchdog_periods = 4294967295\n",
+                "loop.watchdog_periods",
+            ),
+            // 10 periods of 20 ms: 200 ms of driving blind.
+            (
+                "[loop]\nperiod_ms = 20\nwatchdog_periods = 10\n",
+                "loop.watchdog_periods",
+            ),
+            ("[loop]\nperiod_ms = 1000\n", "loop.period_ms"),
+            ("[loop]\nperiod_ms = nan\n", "loop.period_ms"),
+            ("[loop]\nreply_timeout_ms = 0.01\n", "loop.reply_timeout_ms"),
+            ("[loop]\nmax_step_periods = 0\n", "loop.max_step_periods"),
+            ("[loop]\nmax_step_periods = 1e9\n", "loop.max_step_periods"),
+            (
+                "[loop]\nmax_consecutive_misses = 0\n",
+                "loop.max_consecutive_misses",
+            ),
+            (
+                "[loop]\nmax_consecutive_misses = 1000\n",
+                "loop.max_consecutive_misses",
+            ),
+            (
+                "[device]\narm_counts_per_rev = 1\n",
+                "device.arm_counts_per_rev",
+            ),
+            (
+                "[device]\npendulum_counts_per_rev = 4294967295\n",
+                "device.pendulum_counts_per_rev",
+            ),
+            ("[safety]\nvoltage_limit = 30\n", "safety.voltage_limit"),
+            ("[safety]\nvoltage_limit = inf\n", "safety.voltage_limit"),
+            ("[safety]\narm_limit = 1e300\n", "safety.arm_limit"),
+            ("[safety]\npendulum_limit = 2.0\n", "safety.pendulum_limit"),
+            ("[safety]\nwait_upright_s = 1e12\n", "safety.wait_upright_s"),
             (
                 "[loop]\nperiod_ms = 0.001\nreply_timeout_ms = 0.0005\n",
                 "loop.period_ms",

@@ -93,6 +93,15 @@ fn finite(s: &str) -> Result<f64, String> {
     }
 }
 
+fn cpu(s: &str) -> Result<usize, String> {
+    let max = libc::CPU_SETSIZE as usize - 1;
+    match s.parse::<i64>() {
+        Ok(v) if (0..=max as i64).contains(&v) => Ok(v as usize),
+        Ok(v) => Err(format!("must be a CPU number in 0..={max}, got {v}")),
+        Err(_) => Err(format!("not a CPU number: {s:?}")),
+    }
+}
+
 fn baud(s: &str) -> Result<u32, String> {
     let v: u32 = s.parse().map_err(|_| format!("not a baud rate: {s:?}"))?;
     if rip_rt::serial::SUPPORTED_BAUDS.contains(&v) {
@@ -119,7 +128,7 @@ struct RunArgs {
     #[arg(long, value_name = "PATH")]
     port: PathBuf,
     /// Baud rate (ignored by USB CDC devices and pseudo-terminals).
-    #[arg(long, value_name = "N", default_value_t = 115200, value_parser = baud)]
+    #[arg(long, value_name = "N", default_value_t = 115200, allow_negative_numbers = true, value_parser = baud)]
     baud: u32,
     /// Controller: lqr, lqg or mpc.
     #[arg(long, value_name = "NAME")]
@@ -134,10 +143,10 @@ struct RunArgs {
     #[arg(long, value_name = "FILE.csv")]
     log: Option<PathBuf>,
     /// Run the loop with SCHED_FIFO at this priority (1-99) and locked memory, if permitted.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(i32).range(1..=99))]
+    #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = clap::value_parser!(i32).range(1..=99))]
     rt_priority: Option<i32>,
     /// Pin the loop to this CPU, if permitted.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = cpu)]
     cpu: Option<usize>,
     /// Only print the final summary.
     #[arg(long)]
@@ -153,19 +162,19 @@ struct EmulateArgs {
     #[arg(long, value_name = "NAME", default_value = "paper", value_parser = model)]
     model: Model,
     /// Gaussian noise on each encoder reading, standard deviation in counts.
-    #[arg(long, value_name = "COUNTS", default_value_t = 0.0, value_parser = nonnegative)]
+    #[arg(long, allow_negative_numbers = true, value_name = "COUNTS", default_value_t = 0.0, value_parser = nonnegative)]
     noise: f64,
     /// Probability that a measurement is not sent.
-    #[arg(long, value_name = "P", default_value_t = 0.0, value_parser = probability)]
+    #[arg(long, allow_negative_numbers = true, value_name = "P", default_value_t = 0.0, value_parser = probability)]
     drop_rate: f64,
     /// Probability that a measurement is corrupted (flipped byte or inserted garbage).
-    #[arg(long, value_name = "P", default_value_t = 0.0, value_parser = probability)]
+    #[arg(long, allow_negative_numbers = true, value_name = "P", default_value_t = 0.0, value_parser = probability)]
     corrupt_rate: f64,
     /// Vanish (close the device) this many seconds after the first command.
-    #[arg(long, value_name = "S", value_parser = nonnegative)]
+    #[arg(long, allow_negative_numbers = true, value_name = "S", value_parser = nonnegative)]
     vanish_after: Option<f64>,
     /// Exit after this many seconds.
-    #[arg(long, value_name = "S", value_parser = positive_seconds)]
+    #[arg(long, allow_negative_numbers = true, value_name = "S", value_parser = positive_seconds)]
     duration: Option<f64>,
     /// Initial pendulum angle from upright (rad).
     #[arg(long, value_name = "RAD", default_value_t = 0.05, allow_negative_numbers = true, value_parser = finite)]
@@ -178,13 +187,18 @@ struct EmulateArgs {
     #[arg(long)]
     no_hold: bool,
     /// Device watchdog: zero the motor when no command arrives for this long (s).
-    #[arg(long, value_name = "S", default_value_t = 0.05, value_parser = positive_seconds)]
+    #[arg(long, allow_negative_numbers = true, value_name = "S", default_value_t = 0.05, value_parser = positive_seconds)]
     command_timeout: f64,
     /// Simulation rate (Hz).
-    #[arg(long, value_name = "HZ", default_value_t = 1000.0, value_parser = positive_seconds)]
+    #[arg(long, allow_negative_numbers = true, value_name = "HZ", default_value_t = 1000.0, value_parser = positive_seconds)]
     sim_rate: f64,
     /// Seed of the noise and fault generator.
-    #[arg(long, value_name = "N", default_value_t = 1)]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "N",
+        default_value_t = 1
+    )]
     seed: u64,
     /// Append every command the device receives to this CSV (t_s,seq,voltage_mv,flags).
     #[arg(long, value_name = "FILE.csv")]

@@ -477,6 +477,44 @@ fn bad_configuration_and_arguments_exit_2_naming_the_key() {
     assert_eq!(r.status.code(), Some(2));
     assert!(r.stderr.contains("--duration"), "{}", r.stderr);
 
+    // Negative numbers are values, refused with the option's name, not "unexpected argument".
+    for (flag, value) in [
+        ("--cpu", "-1"),
+        ("--rt-priority", "-5"),
+        ("--baud", "-9600"),
+    ] {
+        let r = run(Path::new("/nonexistent"), "lqr", &[flag, value]);
+        assert_eq!(r.status.code(), Some(2), "{flag}: {}", r.stderr);
+        assert!(r.stderr.contains(flag), "{flag}: {}", r.stderr);
+        assert!(!r.stderr.contains("unexpected argument"), "{}", r.stderr);
+    }
+    for (flag, value) in [("--noise", "-1"), ("--drop-rate", "-0.5"), ("--seed", "-3")] {
+        let out = Command::new(BIN)
+            .args(["emulate", flag, value])
+            .output()
+            .expect("spawn emulate");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{flag}: {stderr}");
+        assert!(stderr.contains(flag), "{flag}: {stderr}");
+        assert!(!stderr.contains("unexpected argument"), "{stderr}");
+    }
+
+    // A watchdog that would let the loop drive blind for 500 ms (or, at u32::MAX periods,
+    // forever) is refused before the port is touched.
+    for text in [
+        "[loop]\nwatchdog_periods = 4294967295\n",
+        "[loop]\nperiod_ms = 20\nwatchdog_periods = 10\n",
+    ] {
+        std::fs::write(&cfg, text).unwrap();
+        let r = run(
+            Path::new("/nonexistent"),
+            "lqr",
+            &["--config", cfg.to_str().unwrap()],
+        );
+        assert_eq!(r.status.code(), Some(2), "{text}: {}", r.stderr);
+        assert!(r.stderr.contains("loop.watchdog_periods"), "{}", r.stderr);
+    }
+
     let r = run(Path::new("/nonexistent/tty"), "lqr", &[]);
     assert_eq!(r.status.code(), Some(1));
     assert!(r.stderr.contains("--port /nonexistent/tty"), "{}", r.stderr);
