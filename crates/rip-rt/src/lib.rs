@@ -4,7 +4,7 @@
 //! pendulum's microcontroller over a serial link, and a device emulator that speaks the same
 //! protocol over a pseudo-terminal so the whole loop can be tested on any machine.
 //!
-//! - [`protocol`] — wire protocol v1: framing, CRC-16/CCITT-FALSE, a resynchronising parser.
+//! - [`protocol`] — wire protocol v1, the `rip-protocol` crate that the firmware runs too.
 //! - [`runner`] — the periodic loop with its safety rules and exit codes.
 //! - [`timing`] — absolute-deadline scheduling, latency histograms, real-time settings.
 //! - [`config`] — the TOML configuration.
@@ -17,7 +17,7 @@ pub mod config;
 pub mod controllers;
 pub mod emulator;
 pub mod plant;
-pub mod protocol;
+pub use rip_protocol as protocol;
 pub mod runner;
 pub mod serial;
 pub mod timing;

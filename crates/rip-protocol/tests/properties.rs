@@ -3,8 +3,8 @@
 
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
-use rip_rt::protocol::{
-    crc16, encode, Command, Frame, Measurement, Message, Parser, MAX_FRAME, SYNC0, SYNC1, VERSION,
+use rip_protocol::{
+    crc16, encode, Command, Event, Frame, Measurement, Message, Parser, MAX_FRAME, SYNC0, SYNC1,
 };
 
 fn message() -> impl Strategy<Value = Message> {
@@ -52,10 +52,19 @@ fn parse_all(stream: &[u8]) -> (Vec<Frame>, Parser) {
     (out, parser)
 }
 
-/// Whether `garbage` holds something that looks like a frame header (sync and version), which
-/// could legitimately start a candidate frame.
-fn has_header(garbage: &[u8]) -> bool {
-    garbage.windows(3).any(|w| w == [SYNC0, SYNC1, VERSION])
+/// Line noise rich in the bytes that start a candidate frame (sync bytes, the version, small
+/// length fields), so that false syncs reaching into the following real frame are common.
+fn garbage() -> impl Strategy<Value = Vec<u8>> {
+    proptest::collection::vec(
+        prop_oneof![
+            3 => Just(SYNC0),
+            2 => Just(SYNC1),
+            1 => Just(1u8),
+            1 => 0u8..=40,
+            3 => any::<u8>(),
+        ],
+        0..40,
+    )
 }
 
 fn config() -> ProptestConfig {
@@ -77,6 +86,27 @@ proptest! {
         let (frames, parser) = parse_all(&stream);
         prop_assert_eq!(parser.stats().frames, frames.len() as u64);
         prop_assert!(parser.stats().skipped_bytes <= stream.len() as u64);
+        // Event by event: every event is counted once, and the buffer never holds a complete
+        // candidate after a poll returned `None`.
+        let mut p = Parser::new();
+        let mut events = 0u64;
+        for &b in &stream {
+            p.push(b);
+            while let Some(e) = p.poll_event() {
+                events += 1;
+                if let Event::Frame(f) = e {
+                    prop_assert!(frames.contains(&f));
+                }
+            }
+        }
+        prop_assert_eq!(p.stats().frames + p.stats().errors(), events);
+        prop_assert_eq!(p.stats(), parser.stats());
+    }
+
+    #[test]
+    fn noise_shaped_like_frames_never_panics(stream in garbage()) {
+        let (frames, parser) = parse_all(&stream);
+        prop_assert_eq!(parser.stats().frames, frames.len() as u64);
     }
 
     #[test]
@@ -89,19 +119,28 @@ proptest! {
     }
 
     #[test]
-    fn resynchronises_after_garbage(
-        items in proptest::collection::vec(
-            (proptest::collection::vec(any::<u8>(), 0..40), frame()), 1..12),
+    fn every_frame_embedded_in_garbage_is_recovered(
+        items in proptest::collection::vec((garbage(), frame()), 1..12),
+        tail in garbage(),
     ) {
-        prop_assume!(items.iter().all(|(g, _)| !has_header(g)));
+        // Holds unless a false candidate passes its CRC by chance (probability 2⁻¹⁶ per false
+        // candidate); the fixed seed keeps the suite deterministic.
         let mut stream = Vec::new();
         for (garbage, f) in &items {
             stream.extend_from_slice(garbage);
             stream.extend_from_slice(&bytes_of(f));
         }
+        stream.extend_from_slice(&tail);
+        // The tail may be a truncated false candidate that holds back the last frame; the
+        // next period's frame completes it, as on the wire.
+        let flush = Frame { seq: 0, message: Message::SampleRequest };
+        for _ in 0..(MAX_FRAME / 9 + 1) {
+            stream.extend_from_slice(&bytes_of(&flush));
+        }
         let (decoded, _) = parse_all(&stream);
         let expected: Vec<Frame> = items.iter().map(|(_, f)| *f).collect();
-        prop_assert_eq!(decoded, expected);
+        prop_assert_eq!(&decoded[..expected.len()], &expected[..]);
+        prop_assert!(decoded[expected.len()..].iter().all(|f| *f == flush));
     }
 
     #[test]
@@ -140,17 +179,21 @@ proptest! {
         second in frame(),
         third in frame(),
     ) {
-        // A truncated frame can hold back a shorter frame behind it until enough bytes have
-        // arrived to complete (and reject) the truncated candidate; the frame after that
-        // completes it, and both are then decoded.
+        // A truncated frame holds back the frames behind it until enough bytes have arrived
+        // to complete (and reject) the truncated candidate, at most MAX_FRAME bytes; the
+        // frames after that complete it, and all are then decoded.
         let a = bytes_of(&first);
         let cut = 1 + cut.index(a.len() - 1);
         let mut stream = a[..cut].to_vec();
         stream.extend_from_slice(&bytes_of(&second));
-        stream.extend_from_slice(&bytes_of(&third));
-        stream.extend_from_slice(&bytes_of(&third));
+        let n = MAX_FRAME / 12 + 1;
+        for _ in 0..n {
+            stream.extend_from_slice(&bytes_of(&third));
+        }
         let (decoded, _) = parse_all(&stream);
-        prop_assert_eq!(decoded, vec![second, third, third]);
+        let mut expected = vec![second];
+        expected.extend(std::iter::repeat_n(third, n));
+        prop_assert_eq!(decoded, expected);
     }
 }
 
@@ -164,33 +207,4 @@ fn crc_covers_version_to_payload() {
     assert_eq!(b.len(), 9);
     assert_eq!(&b[..7], &[0xA5, 0x5A, 0x01, 0x03, 0xEF, 0xBE, 0x00]);
     assert_eq!(u16::from_le_bytes([b[7], b[8]]), crc16(&b[2..7]));
-}
-
-#[test]
-fn oversized_length_is_rejected_without_waiting_for_the_bytes() {
-    // A header announcing 200 payload bytes must not swallow the frame that follows.
-    let mut stream = vec![0xA5, 0x5A, 0x01, 0x02, 0x00, 0x00, 200];
-    let f = Frame {
-        seq: 1,
-        message: Message::Command(Command::STOP),
-    };
-    stream.extend_from_slice(&bytes_of(&f));
-    let (decoded, parser) = parse_all(&stream);
-    assert_eq!(decoded, vec![f]);
-    assert_eq!(parser.stats().bad_headers, 1);
-}
-
-#[test]
-fn unknown_type_with_valid_crc_is_counted_and_skipped() {
-    let mut raw = vec![0xA5, 0x5A, 0x01, 0x7F, 0x00, 0x00, 0x01, 0x42];
-    let crc = crc16(&raw[2..]).to_le_bytes();
-    raw.extend_from_slice(&crc);
-    let f = Frame {
-        seq: 2,
-        message: Message::SampleRequest,
-    };
-    raw.extend_from_slice(&bytes_of(&f));
-    let (decoded, parser) = parse_all(&raw);
-    assert_eq!(decoded, vec![f]);
-    assert_eq!(parser.stats().unknown_frames, 1);
 }

@@ -1,7 +1,12 @@
-//! Wire protocol v1 between the PC (host) and the pendulum's microcontroller (device).
+//! # rip-protocol
 //!
-//! The byte-level specification lives in `docs/protocol.md`; this module is its reference
-//! implementation. Every frame is
+//! Wire protocol v1 between the PC (host) and the pendulum's microcontroller (device). The PC's
+//! control loop (`rip-rt`), its device emulator and the STM32 firmware all use this crate, so
+//! both ends of the wire run the same code.
+//!
+//! The byte-level specification lives in `docs/protocol.md`; this crate is its reference
+//! implementation and `crates/rip-protocol/vectors.toml` holds the conformance vectors that both
+//! refer to. Every frame is
 //!
 //! ```text
 //! offset  size  field
@@ -15,10 +20,25 @@
 //! 7+n     2     CRC-16/CCITT-FALSE of bytes 2 .. 7+n, u16 little-endian
 //! ```
 //!
-//! All multi-byte fields are little-endian. Encoding and decoding never allocate, and the
-//! streaming [`Parser`] accepts any byte sequence without panicking: it skips garbage, rejects
-//! frames whose CRC, version, type or length is wrong, and resynchronises on the next sync
-//! pattern — including one that starts inside a rejected candidate frame.
+//! All multi-byte fields are little-endian. The crate is `no_std` and never allocates, and the
+//! streaming [`Parser`] accepts any byte sequence without panicking.
+//!
+//! ## Resynchronisation rule
+//!
+//! The parser skips bytes until `0xA5 0x5A`, then reads a candidate frame. What it discards after
+//! a rejection depends on whether the CRC has established where the candidate ends:
+//!
+//! - a candidate that fails its CRC, or whose header is impossible (length field above
+//!   [`MAX_PAYLOAD`]), proves nothing about framing — its sync bytes may have been noise in the
+//!   middle of a real frame, or a real frame may have lost a byte — so only its first byte is
+//!   dropped and the search for `0xA5 0x5A` restarts one byte later, inside the rejected bytes;
+//! - a candidate whose CRC is valid but which this version cannot use (another version byte, an
+//!   unknown type, a payload length that does not fit its type) was sent as that frame by the
+//!   peer: a random match has probability 2⁻¹⁶. It is discarded whole, because any `0xA5 0x5A`
+//!   inside it is payload data, and resynchronising there would decode data as frames.
+
+#![no_std]
+#![forbid(unsafe_code)]
 
 /// First sync byte.
 pub const SYNC0: u8 = 0xA5;
@@ -26,6 +46,8 @@ pub const SYNC0: u8 = 0xA5;
 pub const SYNC1: u8 = 0x5A;
 /// Protocol version carried in every frame.
 pub const VERSION: u8 = 1;
+/// Offset of the version byte.
+const VERSION_AT: usize = 2;
 /// Bytes before the payload.
 pub const HEADER_LEN: usize = 7;
 /// Bytes after the payload (the CRC).
@@ -200,24 +222,55 @@ pub struct ParserStats {
     pub skipped_bytes: u64,
     /// Candidate frames whose CRC did not match.
     pub crc_errors: u64,
-    /// Candidates with a wrong version or an oversized length field.
+    /// Candidates with an oversized length field.
     pub bad_headers: u64,
+    /// CRC-valid frames of another protocol version.
+    pub version_mismatches: u64,
     /// CRC-valid frames with an unknown type or a payload length that does not fit the type.
     pub unknown_frames: u64,
 }
 
 impl ParserStats {
-    /// All rejected candidates and skipped bytes (anything that was not a good frame).
+    /// All rejected candidates (skipped bytes between frames are not counted).
     pub fn errors(&self) -> u64 {
-        self.crc_errors + self.bad_headers + self.unknown_frames
+        self.crc_errors + self.bad_headers + self.version_mismatches + self.unknown_frames
     }
+}
+
+/// Why the [`Parser`] rejected a candidate frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Rejection {
+    /// The CRC did not match: corruption on the wire or a false sync.
+    Crc,
+    /// The length field exceeds [`MAX_PAYLOAD`].
+    BadHeader,
+    /// A CRC-valid frame of another protocol version: the peer speaks another protocol.
+    Version(u8),
+    /// A CRC-valid frame with an unknown type, or a payload length that does not fit its type.
+    Unknown {
+        /// The message type byte.
+        kind: u8,
+        /// The payload length.
+        len: u8,
+    },
+}
+
+/// What the [`Parser`] found next in the stream.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Event {
+    /// A good frame.
+    Frame(Frame),
+    /// A rejected candidate frame.
+    Rejected(Rejection),
 }
 
 /// A streaming frame parser with a fixed buffer.
 ///
-/// Feed bytes with [`push`](Self::push) and collect frames with [`poll`](Self::poll) until it
-/// returns `None`, or use [`feed`](Self::feed). After every `poll` that returns `None` the buffer
-/// holds at most one incomplete candidate frame, so it never overflows.
+/// Feed bytes with [`push`](Self::push) and collect frames with [`poll`](Self::poll) (or frames
+/// and rejections with [`poll_event`](Self::poll_event)) until it returns `None`, or use
+/// [`feed`](Self::feed). After every poll that returns `None` the buffer holds at most one
+/// incomplete candidate frame, so it never overflows. The resynchronisation rule is described
+/// in the crate documentation.
 #[derive(Debug, Clone)]
 pub struct Parser {
     buf: [u8; MAX_FRAME],
@@ -275,22 +328,24 @@ impl Parser {
         }
     }
 
-    /// Returns the next complete frame in the buffer, if any.
+    /// Returns the next complete frame in the buffer, if any, passing over rejected candidates
+    /// (they are counted in [`stats`](Self::stats)).
     pub fn poll(&mut self) -> Option<Frame> {
+        loop {
+            match self.poll_event()? {
+                Event::Frame(frame) => return Some(frame),
+                Event::Rejected(_) => {}
+            }
+        }
+    }
+
+    /// Returns the next complete frame or rejected candidate in the buffer, if any.
+    pub fn poll_event(&mut self) -> Option<Event> {
         loop {
             if self.len == 0 {
                 return None;
             }
-            if self.buf[0] != SYNC0 {
-                self.resync();
-                continue;
-            }
-            if self.len >= 2 && self.buf[1] != SYNC1 {
-                self.resync();
-                continue;
-            }
-            if self.len >= 3 && self.buf[2] != VERSION {
-                self.stats.bad_headers += 1;
+            if self.buf[0] != SYNC0 || (self.len >= 2 && self.buf[1] != SYNC1) {
                 self.resync();
                 continue;
             }
@@ -299,9 +354,11 @@ impl Parser {
             }
             let payload_len = self.buf[6] as usize;
             if payload_len > MAX_PAYLOAD {
+                // Rejected at once: waiting for up to 255 bytes would hold back the good frames
+                // behind a corrupted length field.
                 self.stats.bad_headers += 1;
                 self.resync();
-                continue;
+                return Some(Event::Rejected(Rejection::BadHeader));
             }
             let total = HEADER_LEN + payload_len + TRAILER_LEN;
             if self.len < total {
@@ -309,23 +366,38 @@ impl Parser {
             }
             let end = HEADER_LEN + payload_len;
             let crc = u16::from_le_bytes([self.buf[end], self.buf[end + 1]]);
-            if crc16(&self.buf[2..end]) != crc {
+            if crc16(&self.buf[VERSION_AT..end]) != crc {
                 self.stats.crc_errors += 1;
                 self.resync();
-                continue;
+                return Some(Event::Rejected(Rejection::Crc));
             }
+            let version = self.buf[VERSION_AT];
+            let kind = self.buf[3];
             let seq = u16::from_le_bytes([self.buf[4], self.buf[5]]);
-            let decoded = decode_payload(self.buf[3], &self.buf[HEADER_LEN..end]);
-            // A CRC-valid frame is consumed whole even when it is not understood: its bytes are
-            // not a plausible place for another frame to start.
+            let decoded = if version == VERSION {
+                decode_payload(kind, &self.buf[HEADER_LEN..end])
+            } else {
+                None
+            };
+            // The CRC has established the frame's extent: it is consumed whole (crate docs).
             self.discard(total);
-            match decoded {
+            return Some(match decoded {
                 Some(message) => {
                     self.stats.frames += 1;
-                    return Some(Frame { seq, message });
+                    Event::Frame(Frame { seq, message })
                 }
-                None => self.stats.unknown_frames += 1,
-            }
+                None if version != VERSION => {
+                    self.stats.version_mismatches += 1;
+                    Event::Rejected(Rejection::Version(version))
+                }
+                None => {
+                    self.stats.unknown_frames += 1;
+                    Event::Rejected(Rejection::Unknown {
+                        kind,
+                        len: payload_len as u8,
+                    })
+                }
+            });
         }
     }
 
@@ -343,54 +415,5 @@ impl Parser {
         let n = n.min(self.len);
         self.buf.copy_within(n..self.len, 0);
         self.len -= n;
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn crc_check_value() {
-        assert_eq!(crc16(b"123456789"), 0x29B1);
-    }
-
-    #[test]
-    fn command_frame_bytes_are_as_documented() {
-        let mut out = [0u8; MAX_FRAME];
-        let n = encode(
-            &Frame {
-                seq: 0x0102,
-                message: Message::Command(Command {
-                    voltage_mv: -1500,
-                    flags: COMMAND_ENABLE,
-                }),
-            },
-            &mut out,
-        );
-        // -1500 = 0xFA24; the CRC is over 01 02 02 01 03 24 FA 01.
-        let body = [0x01, 0x02, 0x02, 0x01, 0x03, 0x24, 0xFA, 0x01];
-        let crc = crc16(&body).to_le_bytes();
-        let expected = [
-            0xA5, 0x5A, 0x01, 0x02, 0x02, 0x01, 0x03, 0x24, 0xFA, 0x01, crc[0], crc[1],
-        ];
-        assert_eq!(&out[..n], &expected);
-    }
-
-    #[test]
-    fn parser_skips_garbage_and_decodes() {
-        let mut out = [0u8; MAX_FRAME];
-        let frame = Frame {
-            seq: 7,
-            message: Message::SampleRequest,
-        };
-        let n = encode(&frame, &mut out);
-        let mut stream = vec![0x00, 0xA5, 0xA5, 0x13, 0x5A];
-        stream.extend_from_slice(&out[..n]);
-        let mut got = Vec::new();
-        let mut parser = Parser::new();
-        parser.feed(&stream, |f| got.push(f));
-        assert_eq!(got, vec![frame]);
-        assert_eq!(parser.stats().skipped_bytes, 5);
     }
 }

@@ -1,0 +1,172 @@
+//! Runs the conformance vectors of `vectors.toml` (referenced by docs/protocol.md) against the
+//! encoder, the CRC and the parser.
+
+use rip_protocol::{
+    crc16, encode, Command, Event, Frame, Measurement, Message, Parser, Rejection, MAX_FRAME,
+};
+use toml::Value;
+
+fn vectors() -> toml::Table {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/vectors.toml");
+    std::fs::read_to_string(path)
+        .expect("vectors.toml")
+        .parse()
+        .expect("vectors.toml is TOML")
+}
+
+fn entries<'a>(t: &'a toml::Table, key: &str) -> &'a [Value] {
+    t[key].as_array().expect(key)
+}
+
+fn hex(s: &str) -> Vec<u8> {
+    s.split_whitespace()
+        .map(|b| u8::from_str_radix(b, 16).expect("hex byte"))
+        .collect()
+}
+
+fn int(v: &Value, key: &str) -> i64 {
+    v.get(key)
+        .and_then(Value::as_integer)
+        .unwrap_or_else(|| panic!("missing integer `{key}` in {v}"))
+}
+
+fn name(v: &Value) -> &str {
+    v["name"].as_str().expect("name")
+}
+
+fn frame_of(v: &Value) -> Frame {
+    let message = match v["type"].as_str().expect("type") {
+        "command" => Message::Command(Command {
+            voltage_mv: int(v, "voltage_mv") as i16,
+            flags: int(v, "flags") as u8,
+        }),
+        "sample_request" => Message::SampleRequest,
+        "measurement" => Message::Measurement(Measurement {
+            ack_seq: int(v, "ack_seq") as u16,
+            arm_counts: int(v, "arm_counts") as i32,
+            pendulum_counts: int(v, "pendulum_counts") as i32,
+            applied_mv: int(v, "applied_mv") as i16,
+            status: int(v, "status") as u8,
+            device_time_us: int(v, "device_time_us") as u32,
+        }),
+        other => panic!("unknown type {other}"),
+    };
+    Frame {
+        seq: int(v, "seq") as u16,
+        message,
+    }
+}
+
+fn event_name(e: &Event) -> &'static str {
+    match e {
+        Event::Frame(_) => "frame",
+        Event::Rejected(Rejection::Crc) => "crc",
+        Event::Rejected(Rejection::BadHeader) => "bad_header",
+        Event::Rejected(Rejection::Version(_)) => "version",
+        Event::Rejected(Rejection::Unknown { .. }) => "unknown",
+    }
+}
+
+/// Every event of `stream`, fed one byte at a time as a UART delivers it.
+fn events(stream: &[u8]) -> (Vec<Event>, Parser) {
+    let mut parser = Parser::new();
+    let mut out = Vec::new();
+    for &b in stream {
+        parser.push(b);
+        while let Some(e) = parser.poll_event() {
+            out.push(e);
+        }
+    }
+    (out, parser)
+}
+
+#[test]
+fn crc_vectors() {
+    let t = vectors();
+    for v in entries(&t, "crc") {
+        let data = match v.get("ascii") {
+            Some(s) => s.as_str().unwrap().as_bytes().to_vec(),
+            None => hex(v["hex"].as_str().unwrap()),
+        };
+        assert_eq!(crc16(&data), int(v, "crc") as u16, "{}", name(v));
+    }
+}
+
+#[test]
+fn frame_vectors_encode_and_decode() {
+    let t = vectors();
+    let frames = entries(&t, "frame");
+    assert!(frames.len() >= 5);
+    for v in frames {
+        let bytes = hex(v["hex"].as_str().unwrap());
+        let frame = frame_of(v);
+        let mut out = [0u8; MAX_FRAME];
+        let n = encode(&frame, &mut out);
+        assert_eq!(&out[..n], &bytes[..], "encoding {}", name(v));
+        let (ev, parser) = events(&bytes);
+        assert_eq!(ev, vec![Event::Frame(frame)], "decoding {}", name(v));
+        assert_eq!(parser.stats().frames, 1);
+        assert_eq!(parser.stats().errors(), 0);
+    }
+}
+
+#[test]
+fn stream_vectors_parse_as_specified() {
+    let t = vectors();
+    let streams = entries(&t, "stream");
+    assert!(streams.len() >= 10);
+    for v in streams {
+        let bytes = hex(v["hex"].as_str().unwrap());
+        let (ev, parser) = events(&bytes);
+        let names: Vec<&str> = ev.iter().map(event_name).collect();
+        let expected: Vec<&str> = v["events"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|e| e.as_str().unwrap())
+            .collect();
+        assert_eq!(names, expected, "events of {}", name(v));
+        let frames: Vec<Frame> = ev
+            .iter()
+            .filter_map(|e| match e {
+                Event::Frame(f) => Some(*f),
+                Event::Rejected(_) => None,
+            })
+            .collect();
+        let expected: Vec<Frame> = v["frames"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(frame_of)
+            .collect();
+        assert_eq!(frames, expected, "frames of {}", name(v));
+        let s = parser.stats();
+        assert_eq!(s.frames, frames.len() as u64, "{}", name(v));
+        assert_eq!(s.errors(), (ev.len() - frames.len()) as u64, "{}", name(v));
+        if let Some(skipped) = v.get("skipped_bytes") {
+            assert_eq!(
+                s.skipped_bytes,
+                skipped.as_integer().unwrap() as u64,
+                "skipped bytes of {}",
+                name(v)
+            );
+        }
+        // The same stream fed in one call decodes the same frames.
+        let mut whole = Parser::new();
+        let mut got = Vec::new();
+        whole.feed(&bytes, |f| got.push(f));
+        assert_eq!(got, frames, "{}", name(v));
+    }
+}
+
+#[test]
+fn the_version_rejection_reports_the_version() {
+    let t = vectors();
+    let v = entries(&t, "stream")
+        .iter()
+        .find(|v| name(v).contains("version 2 is rejected whole"))
+        .expect("version vector");
+    let (ev, parser) = events(&hex(v["hex"].as_str().unwrap()));
+    assert_eq!(ev[0], Event::Rejected(Rejection::Version(2)));
+    assert_eq!(parser.stats().version_mismatches, 1);
+}
