@@ -35,10 +35,11 @@
 
 use nalgebra::{Complex, DVector};
 
+use crate::dare::solve_dare_validated;
 use crate::error::{Result, RipError};
 use crate::linalg::{
     check_finite, check_joint_psd, check_psd, check_shape, check_square, check_symmetric,
-    eigenvalues, solve_dare_validated, symmetrize, Mat,
+    eigenvalues, symmetrize, Mat,
 };
 
 /// The result of [`kalman`]: MATLAB's `[~, L, P, M, Z] = kalman(sys, Qn, Rn, Nn)`.

@@ -4,7 +4,8 @@
 //! (Furuta pendulum), written to agree with MATLAB's Control System / MPC toolboxes and with
 //! python-control.
 //!
-//! - [`linalg`] — argument validation, zero-order-hold [`c2d`] and the Riccati solver [`dare`].
+//! - [`linalg`] — argument validation, eigenvalues and zero-order-hold [`c2d`].
+//! - [`dare`](mod@dare) — the discrete algebraic Riccati equation ([`dare`](fn@dare)).
 //! - [`lqr`] — [`dlqr`].
 //! - [`kalman`](mod@kalman) — MATLAB's [`kalman`](fn@kalman) (both gains `L` and `M`),
 //!   python-control's [`dlqe`] and the allocation-free [`CurrentEstimator`].
@@ -20,6 +21,7 @@
 //! Every fallible routine returns [`RipError`], whose variants name the offending argument.
 
 pub mod controller;
+pub mod dare;
 pub mod error;
 pub mod fit;
 pub mod kalman;
@@ -33,9 +35,10 @@ pub mod regulators;
 pub mod sim;
 
 pub use controller::{Controller, StepStatus};
+pub use dare::{dare, DareSolution};
 pub use error::{Result, RipError};
 pub use kalman::{dlqe, kalman, CurrentEstimator, KalmanDesign};
-pub use linalg::{c2d, dare, DareSolution, Mat};
+pub use linalg::{c2d, Mat};
 pub use lqr::{dlqr, LqrDesign};
 pub use mpc::{Mpc, MpcSettings, QpSolver, QpStatus};
 pub use plant::{FurutaParams, Plant, State};

@@ -5,9 +5,10 @@
 
 use nalgebra::Complex;
 
+use crate::dare::dare;
 use crate::error::Result;
 use crate::linalg::{
-    check_finite, check_joint_psd, check_psd, check_shape, check_square, check_symmetric, dare,
+    check_finite, check_joint_psd, check_psd, check_shape, check_square, check_symmetric,
     symmetrize, Mat,
 };
 

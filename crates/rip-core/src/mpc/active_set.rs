@@ -39,7 +39,7 @@ use crate::linalg::Mat;
 
 /// Outcome of one [`ActiveSetSolver::solve`].
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ActiveSetOutcome {
+pub(crate) struct ActiveSetOutcome {
     pub status: QpStatus,
     /// Subproblems solved (working-set changes plus one).
     pub iterations: usize,
@@ -47,7 +47,7 @@ pub struct ActiveSetOutcome {
 
 /// Dense primal active-set solver with warm start (module docs).
 #[derive(Debug, Clone)]
-pub struct ActiveSetSolver {
+pub(crate) struct ActiveSetSolver {
     n: usize,
     ncon: usize,
     a: Mat,
@@ -105,11 +105,6 @@ impl ActiveSetSolver {
     /// The last solution.
     pub fn solution(&self) -> &DVector<f64> {
         &self.z
-    }
-
-    /// The current working set (row indices of `A`).
-    pub fn working_set(&self) -> &[usize] {
-        &self.working
     }
 
     /// Forgets the warm start.

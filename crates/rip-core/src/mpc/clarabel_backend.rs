@@ -38,7 +38,7 @@ use crate::error::{Result, RipError};
 use crate::linalg::Mat;
 
 /// Clarabel on the condensed QP, with its data kept to rebuild the solver on `clone`.
-pub struct ClarabelBackend {
+pub(crate) struct ClarabelBackend {
     solver: DefaultSolver<f64>,
     p: CscMatrix<f64>,
     a: CscMatrix<f64>,

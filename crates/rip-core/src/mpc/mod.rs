@@ -74,9 +74,12 @@
 //! [`MAX_CONDENSED_ENTRIES`] entries in the largest condensed matrix ([`Mpc::new`]).
 
 mod active_set;
+mod backend;
 mod clarabel_backend;
 mod condense;
+mod model;
 pub mod paper;
+mod settings;
 #[cfg(test)]
 mod tests;
 
@@ -89,339 +92,16 @@ use crate::error::{Result, RipError};
 use crate::kalman::{kalman, CurrentEstimator, KalmanDesign};
 use crate::linalg::{check_finite, check_shape, check_square, Mat};
 
-pub use active_set::{ActiveSetOutcome, ActiveSetSolver};
-pub use clarabel_backend::ClarabelBackend;
+use backend::Backend;
+pub use backend::{QpSolver, QpStatus};
 use condense::{CondenseInput, Condensed};
-
-/// Largest accepted prediction horizon `P`: 100 s at the paper's 100 Hz, far beyond any useful
-/// horizon, while keeping the memory of the condensed problem bounded.
-pub const MAX_PREDICTION_HORIZON: usize = 10_000;
-
-/// Largest accepted number of entries (`f64`) in one condensed matrix (80 MB), estimated as
-/// `(P·(ny + nu) + 2·m·nu + 1) · (m·nu + 1 + nx + nu)`: the prediction, constraint and
-/// linear-term matrices all fit in that many rows and columns.
-pub const MAX_CONDENSED_ENTRIES: usize = 10_000_000;
-
-/// Which QP solver computes the move.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum QpSolver {
-    /// Clarabel interior-point solver (the reference). Clarabel allocates inside its `solve`,
-    /// so a step with this backend is not allocation-free.
-    #[default]
-    Clarabel,
-    /// Dense primal active-set solver with warm start (module [`ActiveSetSolver`]); solves
-    /// without allocating. A problem whose nearly dependent constraints make its working-set
-    /// systems singular (rare: none along the paper's loop) is handed to Clarabel, which
-    /// allocates.
-    ActiveSet,
-}
-
-impl QpSolver {
-    /// Parses `"clarabel"` or `"active_set"` (also `"active-set"`, `"dense"`).
-    pub fn from_name(name: &str) -> Result<Self> {
-        match name.to_ascii_lowercase().as_str() {
-            "clarabel" => Ok(Self::Clarabel),
-            "active_set" | "active-set" | "activeset" | "dense" => Ok(Self::ActiveSet),
-            _ => Err(RipError::invalid(
-                "solver",
-                format!("must be 'clarabel' or 'active_set', got {name:?}"),
-            )),
-        }
-    }
-
-    /// The name accepted by [`from_name`](Self::from_name).
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Clarabel => "clarabel",
-            Self::ActiveSet => "active_set",
-        }
-    }
-}
-
-/// Outcome of one QP solve.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum QpStatus {
-    /// Solved to the solver's full accuracy.
-    #[default]
-    Solved,
-    /// Clarabel's reduced-accuracy solution; the move is applied.
-    AlmostSolved,
-    /// The iteration limit was reached.
-    MaxIterations,
-    /// A factorisation failed or the solution is not finite.
-    NumericalTrouble,
-    /// The solver reported (or found) an infeasible problem.
-    Infeasible,
-    /// The state, previous input, measurement or reference held NaN or Inf, or the QP data
-    /// computed from them overflowed.
-    InvalidInput,
-}
-
-impl QpStatus {
-    /// Whether the computed move is applied (otherwise the fallback is).
-    pub fn is_usable(self) -> bool {
-        matches!(self, Self::Solved | Self::AlmostSolved)
-    }
-
-    /// Snake-case name (`"solved"`, `"max_iterations"`, ...).
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Solved => "solved",
-            Self::AlmostSolved => "almost_solved",
-            Self::MaxIterations => "max_iterations",
-            Self::NumericalTrouble => "numerical_trouble",
-            Self::Infeasible => "infeasible",
-            Self::InvalidInput => "invalid_input",
-        }
-    }
-}
-
-/// Output-disturbance model `x_od⁺ = A_od x_od + B_od w_od`, `y_od = C_od x_od` (eq. (1)),
-/// added to the scaled outputs.
-#[derive(Debug, Clone)]
-pub struct OutputDisturbance {
-    pub a: Mat,
-    pub b: Mat,
-    pub c: Mat,
-}
-
-impl OutputDisturbance {
-    /// One integrated white noise (`A_od = 1`, `B_od = gain`) feeding every one of `ny`
-    /// outputs (`C_od = 1`): the paper's eq. (1) with `gain = 0.01`, `ny = 2`.
-    pub fn integrated_white_noise(ny: usize, gain: f64) -> Self {
-        Self {
-            a: Mat::identity(1, 1),
-            b: Mat::from_element(1, 1, gain),
-            c: Mat::from_element(ny, 1, 1.0),
-        }
-    }
-}
-
-/// MPC settings (MATLAB names in brackets). Empty vectors take MATLAB's defaults; otherwise
-/// they have one entry per input or output of the plant. Validated by
-/// [`validate`](Self::validate) (intrinsic checks) and [`Mpc::new`] (sizes).
-#[derive(Debug, Clone)]
-pub struct MpcSettings {
-    /// Prediction horizon `P`, at most [`MAX_PREDICTION_HORIZON`] \[`PredictionHorizon`\];
-    /// default 10.
-    pub prediction_horizon: usize,
-    /// Control horizon `m ≤ P` (moves `Δu(k..k+m−1)`, then blocked) \[`ControlHorizon`\];
-    /// default 2.
-    pub control_horizon: usize,
-    /// `w^y ≥ 0` per output \[`Weights.OutputVariables`\]; default 1.
-    pub output_weights: Vec<f64>,
-    /// `w^u ≥ 0` per input \[`Weights.ManipulatedVariables`\]; default 0.
-    pub input_weights: Vec<f64>,
-    /// `w^Δu ≥ 0` per input \[`Weights.ManipulatedVariablesRate`\]; default 0.1.
-    pub input_rate_weights: Vec<f64>,
-    /// Input target `u_t` that `w^u` pulls towards (engineering units); default 0.
-    pub input_target: Vec<f64>,
-    /// Input scale factors `s^u > 0` \[`MV.ScaleFactor`\]; default 1.
-    pub input_scales: Vec<f64>,
-    /// Output scale factors `s^y > 0` \[`OV.ScaleFactor`\]; default 1.
-    pub output_scales: Vec<f64>,
-    /// Hard bounds `(u_min, u_max)` per input, `±∞` for none \[`MV.Min/Max`\]; default none.
-    pub input_bounds: Vec<(f64, f64)>,
-    /// Soft bounds `(y_min, y_max)` per output (engineering units), `±∞` for none
-    /// \[`OV.Min/Max`, ECR 1\]; default none.
-    pub output_bounds: Vec<(f64, f64)>,
-    /// Slack weight `ρ_ε > 0` on `ε²` \[`Weights.ECR`\]; default 1e5.
-    pub ecr_weight: f64,
-    /// Output-disturbance model; `None` for none.
-    pub output_disturbance: Option<OutputDisturbance>,
-    /// Measurement-noise model `D_n` (ny × nv) on the scaled outputs; `None` for `I`.
-    pub measurement_noise: Option<Mat>,
-    /// QP solver.
-    pub solver: QpSolver,
-    /// Iteration limit of the QP solver.
-    pub max_iterations: usize,
-}
-
-impl Default for MpcSettings {
-    fn default() -> Self {
-        Self {
-            prediction_horizon: 10,
-            control_horizon: 2,
-            output_weights: Vec::new(),
-            input_weights: Vec::new(),
-            input_rate_weights: Vec::new(),
-            input_target: Vec::new(),
-            input_scales: Vec::new(),
-            output_scales: Vec::new(),
-            input_bounds: Vec::new(),
-            output_bounds: Vec::new(),
-            ecr_weight: 1e5,
-            output_disturbance: None,
-            measurement_noise: None,
-            solver: QpSolver::Clarabel,
-            max_iterations: 200,
-        }
-    }
-}
-
-impl MpcSettings {
-    /// A builder starting from the defaults.
-    pub fn builder() -> MpcSettingsBuilder {
-        MpcSettingsBuilder {
-            settings: Self::default(),
-        }
-    }
-
-    /// Checks everything that does not depend on the plant's sizes, including
-    /// `1 ≤ P ≤` [`MAX_PREDICTION_HORIZON`]. The bound on the condensed problem's size, which
-    /// does, is checked by [`Mpc::new`].
-    pub fn validate(&self) -> Result<()> {
-        let (p, m) = (self.prediction_horizon, self.control_horizon);
-        if p == 0 || p > MAX_PREDICTION_HORIZON {
-            return Err(RipError::invalid(
-                "prediction_horizon",
-                format!("must be between 1 and {MAX_PREDICTION_HORIZON}, got {p}"),
-            ));
-        }
-        if m == 0 || m > p {
-            return Err(RipError::invalid(
-                "control_horizon",
-                format!("must be between 1 and prediction_horizon = {p}, got {m}"),
-            ));
-        }
-        for (name, v) in [
-            ("output_weights", &self.output_weights),
-            ("input_weights", &self.input_weights),
-            ("input_rate_weights", &self.input_rate_weights),
-        ] {
-            check_all(name, v, |w| w >= 0.0, "must be nonnegative")?;
-        }
-        check_all("input_target", &self.input_target, |_| true, "")?;
-        for (name, v) in [
-            ("input_scales", &self.input_scales),
-            ("output_scales", &self.output_scales),
-        ] {
-            check_all(name, v, |s| s > 0.0, "must be positive")?;
-        }
-        check_bounds("input_bounds", &self.input_bounds)?;
-        check_bounds("output_bounds", &self.output_bounds)?;
-        if !(self.ecr_weight.is_finite() && self.ecr_weight > 0.0) {
-            return Err(RipError::invalid(
-                "ecr_weight",
-                format!("must be positive and finite, got {}", self.ecr_weight),
-            ));
-        }
-        if self.max_iterations == 0 {
-            return Err(RipError::invalid("max_iterations", "must be at least 1"));
-        }
-        if let Some(od) = &self.output_disturbance {
-            let nd = check_square("A_od", &od.a)?;
-            check_shape("B_od", &od.b, nd, od.b.ncols())?;
-            check_shape("C_od", &od.c, od.c.nrows(), nd)?;
-            check_finite("A_od", &od.a)?;
-            check_finite("B_od", &od.b)?;
-            check_finite("C_od", &od.c)?;
-        }
-        if let Some(dn) = &self.measurement_noise {
-            check_finite("measurement_noise", dn)?;
-        }
-        Ok(())
-    }
-}
-
-fn check_all(name: &str, v: &[f64], ok: impl Fn(f64) -> bool, what: &str) -> Result<()> {
-    for (i, &x) in v.iter().enumerate() {
-        if !x.is_finite() {
-            return Err(RipError::NonFinite {
-                name: format!("{name}[{i}]"),
-            });
-        }
-        if !ok(x) {
-            return Err(RipError::invalid(
-                name,
-                format!("{what}, got {x} at index {i}"),
-            ));
-        }
-    }
-    Ok(())
-}
-
-fn check_bounds(name: &str, v: &[(f64, f64)]) -> Result<()> {
-    for (i, &(lo, hi)) in v.iter().enumerate() {
-        if lo.is_nan() || hi.is_nan() {
-            return Err(RipError::NonFinite {
-                name: format!("{name}[{i}]"),
-            });
-        }
-        if lo == f64::INFINITY || hi == f64::NEG_INFINITY {
-            return Err(RipError::invalid(
-                name,
-                format!("bound {i} = ({lo}, {hi}) excludes every value"),
-            ));
-        }
-        if lo > hi {
-            return Err(RipError::invalid(
-                name,
-                format!("bound {i} is empty: lower {lo} > upper {hi}"),
-            ));
-        }
-    }
-    Ok(())
-}
-
-/// Builder for [`MpcSettings`]; [`build`](Self::build) validates.
-#[derive(Debug, Clone)]
-pub struct MpcSettingsBuilder {
-    settings: MpcSettings,
-}
-
-macro_rules! setter {
-    ($(#[$doc:meta] $name:ident: $ty:ty),* $(,)?) => {
-        $(
-            #[$doc]
-            pub fn $name(mut self, value: $ty) -> Self {
-                self.settings.$name = value;
-                self
-            }
-        )*
-    };
-}
-
-impl MpcSettingsBuilder {
-    setter! {
-        /// See [`MpcSettings::prediction_horizon`].
-        prediction_horizon: usize,
-        /// See [`MpcSettings::control_horizon`].
-        control_horizon: usize,
-        /// See [`MpcSettings::output_weights`].
-        output_weights: Vec<f64>,
-        /// See [`MpcSettings::input_weights`].
-        input_weights: Vec<f64>,
-        /// See [`MpcSettings::input_rate_weights`].
-        input_rate_weights: Vec<f64>,
-        /// See [`MpcSettings::input_target`].
-        input_target: Vec<f64>,
-        /// See [`MpcSettings::input_scales`].
-        input_scales: Vec<f64>,
-        /// See [`MpcSettings::output_scales`].
-        output_scales: Vec<f64>,
-        /// See [`MpcSettings::input_bounds`].
-        input_bounds: Vec<(f64, f64)>,
-        /// See [`MpcSettings::output_bounds`].
-        output_bounds: Vec<(f64, f64)>,
-        /// See [`MpcSettings::ecr_weight`].
-        ecr_weight: f64,
-        /// See [`MpcSettings::output_disturbance`].
-        output_disturbance: Option<OutputDisturbance>,
-        /// See [`MpcSettings::measurement_noise`].
-        measurement_noise: Option<Mat>,
-        /// See [`MpcSettings::solver`].
-        solver: QpSolver,
-        /// See [`MpcSettings::max_iterations`].
-        max_iterations: usize,
-    }
-
-    /// Validates and returns the settings.
-    pub fn build(self) -> Result<MpcSettings> {
-        self.settings.validate()?;
-        Ok(self.settings)
-    }
-}
+use model::augment;
+pub use model::AugmentedModel;
+use settings::{check_condensed_size, fill_bounds, fill_default};
+pub use settings::{
+    MpcSettings, MpcSettingsBuilder, OutputDisturbance, MAX_CONDENSED_ENTRIES,
+    MAX_PREDICTION_HORIZON,
+};
 
 /// The result of one MPC solve.
 #[derive(Debug, Clone)]
@@ -441,49 +121,6 @@ pub struct MpcSolution {
     pub iterations: usize,
     /// Wall time of the QP setup and solve (s).
     pub solve_time: f64,
-}
-
-enum Backend {
-    Clarabel(Box<ClarabelBackend>),
-    /// The active-set solver, and Clarabel on the same QP for the rare problem whose nearly
-    /// dependent constraints (output rows late in a long horizon converge to the steady-state
-    /// gain) make its working-set systems singular.
-    ActiveSet(Box<ActiveSetSolver>, Box<ClarabelBackend>),
-}
-
-impl Clone for Backend {
-    fn clone(&self) -> Self {
-        match self {
-            Self::Clarabel(c) => Self::Clarabel(c.clone()),
-            Self::ActiveSet(a, rescue) => Self::ActiveSet(a.clone(), rescue.clone()),
-        }
-    }
-}
-
-impl std::fmt::Debug for Backend {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Self::Clarabel(c) => c.fmt(f),
-            Self::ActiveSet(..) => f.write_str("ActiveSetSolver"),
-        }
-    }
-}
-
-/// The augmented prediction model (module docs).
-#[derive(Debug, Clone)]
-pub struct AugmentedModel {
-    /// `A_aug = blkdiag(A, A_od)`.
-    pub a: Mat,
-    /// `B_u = [B; 0]`.
-    pub b: Mat,
-    /// `C_aug = [S_y⁻¹ C, C_od]`.
-    pub c: Mat,
-    /// Noise input matrix `[B S_u 0 0; 0 B_od 0]` of eq. (3).
-    pub b_noise: Mat,
-    /// Noise feedthrough `[0 0 D_n]` of eq. (3).
-    pub d_noise: Mat,
-    /// Number of plant states (the first states of the augmented model).
-    pub n_plant: usize,
 }
 
 /// Constrained MPC with a built-in Kalman filter (module docs). `Clone + Send`.
@@ -513,56 +150,6 @@ pub struct Mpc {
     u_prev: Vec<f64>,
     plan: Vec<f64>,
     solution: MpcSolution,
-}
-
-fn fill_default(name: &str, v: &[f64], n: usize, default: f64) -> Result<Vec<f64>> {
-    match v.len() {
-        0 => Ok(vec![default; n]),
-        len if len == n => Ok(v.to_vec()),
-        len => Err(RipError::Shape {
-            name: name.into(),
-            expected: format!("({n},)"),
-            rows: len,
-            cols: 1,
-        }),
-    }
-}
-
-fn fill_bounds(name: &str, v: &[(f64, f64)], n: usize) -> Result<Vec<(f64, f64)>> {
-    match v.len() {
-        0 => Ok(vec![(f64::NEG_INFINITY, f64::INFINITY); n]),
-        len if len == n => Ok(v.to_vec()),
-        len => Err(RipError::Shape {
-            name: name.into(),
-            expected: format!("({n}, 2)"),
-            rows: len,
-            cols: 2,
-        }),
-    }
-}
-
-/// Rejects horizons whose condensed matrices would exceed [`MAX_CONDENSED_ENTRIES`]; the
-/// arithmetic saturates so that absurd sizes cannot wrap around to small ones.
-fn check_condensed_size(settings: &MpcSettings, nx: usize, nu: usize, ny: usize) -> Result<()> {
-    let (p, m) = (settings.prediction_horizon, settings.control_horizon);
-    let nd = m.saturating_mul(nu);
-    let rows = p
-        .saturating_mul(ny.saturating_add(nu))
-        .saturating_add(nd.saturating_mul(2))
-        .saturating_add(1);
-    let cols = nd.saturating_add(1).saturating_add(nx).saturating_add(nu);
-    let entries = rows.saturating_mul(cols);
-    if entries > MAX_CONDENSED_ENTRIES {
-        return Err(RipError::invalid(
-            "prediction_horizon",
-            format!(
-                "P = {p} with control_horizon m = {m}, {nx} states, {nu} inputs and {ny} outputs \
-                 needs condensed matrices of about {entries} entries; at most \
-                 {MAX_CONDENSED_ENTRIES} are allowed"
-            ),
-        ));
-    }
-    Ok(())
 }
 
 fn check_len(name: &str, v: &[f64], n: usize) -> Result<()> {
@@ -697,22 +284,7 @@ impl Mpc {
                  give positive input_rate_weights (or input_weights)",
             ));
         }
-        let backend = match settings.solver {
-            QpSolver::Clarabel => Backend::Clarabel(Box::new(ClarabelBackend::new(
-                &qp.h,
-                &qp.a,
-                settings.max_iterations,
-            )?)),
-            QpSolver::ActiveSet => Backend::ActiveSet(
-                Box::new(
-                    ActiveSetSolver::new(&qp.h, &qp.a, Some(qp.nz - 1), settings.max_iterations)
-                        .ok_or_else(|| RipError::NotPositiveDefinite {
-                            name: "QP Hessian".into(),
-                        })?,
-                ),
-                Box::new(ClarabelBackend::new(&qp.h, &qp.a, settings.max_iterations)?),
-            ),
-        };
+        let backend = Backend::new(settings.solver, &qp, settings.max_iterations)?;
         let (nz, ncon, m) = (qp.nz, qp.ncon, qp.m);
         Ok(Self {
             ts,
@@ -961,27 +533,9 @@ impl Mpc {
             if !(all_finite(self.f.as_slice()) && all_finite(self.b.as_slice())) {
                 (QpStatus::InvalidInput, 0)
             } else {
-                match &mut self.backend {
-                    Backend::Clarabel(solver) => solver.solve(&self.f, &self.b, &mut self.z),
-                    Backend::ActiveSet(solver, rescue) => {
-                        let (lo, hi) = (&self.u_lo, &self.u_hi);
-                        let out = solver
-                            .solve(&self.f, &self.b, |z| project_inputs(z, u_prev, lo, hi, m));
-                        self.z.copy_from(solver.solution());
-                        let status =
-                            if out.status.is_usable() && self.z.iter().any(|v| !v.is_finite()) {
-                                QpStatus::NumericalTrouble
-                            } else {
-                                out.status
-                            };
-                        if status == QpStatus::NumericalTrouble {
-                            let (status, iterations) = rescue.solve(&self.f, &self.b, &mut self.z);
-                            (status, out.iterations + iterations)
-                        } else {
-                            (status, out.iterations)
-                        }
-                    }
-                }
+                let bounds = (self.u_lo.as_slice(), self.u_hi.as_slice());
+                self.backend
+                    .solve(&self.f, &self.b, u_prev, bounds, m, &mut self.z)
             }
         } else {
             (pre_status, 0)
@@ -1053,9 +607,7 @@ impl Mpc {
         self.estimator.reset();
         self.u_prev.fill(0.0);
         self.plan.fill(0.0);
-        if let Backend::ActiveSet(s, _) = &mut self.backend {
-            s.reset();
-        }
+        self.backend.reset();
     }
 
     /// The estimator (its posterior `x̂[k|k]` and prior `x̂[k+1|k]`).
@@ -1066,69 +618,6 @@ impl Mpc {
 
 fn all_finite(v: &[f64]) -> bool {
     v.iter().all(|x| x.is_finite())
-}
-
-/// Moves `Δ` so that every blocked input `u(k+j) = u⁻ + Σ_{l≤j} Δu(k+l)` lies in its bounds:
-/// the running sums are clamped and the moves recomputed from them.
-fn project_inputs(z: &mut [f64], u_prev: &[f64], lo: &[f64], hi: &[f64], m: usize) {
-    let nu = u_prev.len();
-    for c in 0..nu {
-        let mut target = u_prev[c];
-        let mut prev = u_prev[c];
-        for j in 0..m {
-            target += z[j * nu + c];
-            let v = target.max(lo[c]).min(hi[c]);
-            z[j * nu + c] = v - prev;
-            prev = v;
-        }
-    }
-}
-
-/// Builds the augmented model of the module docs.
-fn augment(
-    a: &Mat,
-    b: &Mat,
-    c: &Mat,
-    su: &[f64],
-    sy: &[f64],
-    od: Option<&OutputDisturbance>,
-    dn: &Mat,
-) -> AugmentedModel {
-    let (n, nu, ny) = (a.nrows(), b.ncols(), c.nrows());
-    let (nd, nw) = od.map_or((0, 0), |od| (od.a.nrows(), od.b.ncols()));
-    let nv = dn.ncols();
-    let nx = n + nd;
-    let mut aa = Mat::zeros(nx, nx);
-    aa.view_mut((0, 0), (n, n)).copy_from(a);
-    let mut bb = Mat::zeros(nx, nu);
-    bb.view_mut((0, 0), (n, nu)).copy_from(b);
-    let mut cc = Mat::zeros(ny, nx);
-    for i in 0..ny {
-        for j in 0..n {
-            cc[(i, j)] = c[(i, j)] / sy[i];
-        }
-    }
-    let mut b_noise = Mat::zeros(nx, nu + nw + nv);
-    for j in 0..nu {
-        for i in 0..n {
-            b_noise[(i, j)] = b[(i, j)] * su[j];
-        }
-    }
-    if let Some(od) = od {
-        aa.view_mut((n, n), (nd, nd)).copy_from(&od.a);
-        cc.view_mut((0, n), (ny, nd)).copy_from(&od.c);
-        b_noise.view_mut((n, nu), (nd, nw)).copy_from(&od.b);
-    }
-    let mut d_noise = Mat::zeros(ny, nu + nw + nv);
-    d_noise.view_mut((0, nu + nw), (ny, nv)).copy_from(dn);
-    AugmentedModel {
-        a: aa,
-        b: bb,
-        c: cc,
-        b_noise,
-        d_noise,
-        n_plant: n,
-    }
 }
 
 impl Controller for Mpc {
