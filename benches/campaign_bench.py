@@ -1,0 +1,112 @@
+"""Campaign throughput: runs/s per core in process vs. through a local Dask cluster, for LQR and
+MPC, and the overhead of one chunk through the cluster.
+
+    python benches/campaign_bench.py [--repeats 3] [--runs 400]
+
+Each figure is the median of ``--repeats`` repetitions. A run is the paper's 10 s experiment
+(the nominal design on a plant whose pendulum mass is off by up to +-30 %). The cluster is a
+``LocalCluster`` of one worker process per core, one thread each, started once and reused, so
+its start-up is not counted. Overhead per chunk is the median round trip of a one-run chunk
+through the cluster minus the same chunk computed in process.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+
+import riprs
+from riprs import campaign
+from riprs.campaign.chunk import _run_payload_chunk
+
+
+def spec(controller: str, runs: int, chunk_size: int) -> dict:
+    return {
+        "campaign": {
+            "controllers": [controller],
+            "seeds": 10,
+            "duration": 10.0,
+            "chunk_size": chunk_size,
+            "axis": [{"name": "mp", "scale": [0.7, 1.3], "points": max(1, runs // 10)}],
+        }
+    }
+
+
+def timed(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--runs", type=int, default=400, help="runs per measurement")
+    parser.add_argument("--chunk-size", type=int, default=campaign.spec.DEFAULT_CHUNK_SIZE)
+    args = parser.parse_args()
+
+    from distributed import Client, LocalCluster
+
+    cores = os.cpu_count() or 1
+    cluster = LocalCluster(
+        n_workers=cores,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        env={"RAYON_NUM_THREADS": "1"},
+    )
+    address = cluster.scheduler_address
+    rows = []
+    try:
+        for controller in ("LQR", "MPC"):
+            c = campaign.load_spec(spec(controller, args.runs, args.chunk_size))
+            local = timed(lambda c=c: campaign.run(c, progress=False, plots=False), args.repeats)
+            dask = timed(
+                lambda c=c: campaign.run(c, scheduler=address, progress=False, plots=False),
+                args.repeats,
+            )
+            chunks = -(-c.runs // c.chunk_size)
+            rows.append((controller, c.runs, chunks, c.runs / local / cores, c.runs / dask / cores))
+
+        one = campaign.load_spec(spec("LQR", 1, 1))
+        payload = {"spec": one.data, "hash": one.spec_hash, "version": riprs.__version__}
+        with Client(address, set_as_default=False) as client:
+            client.submit(_run_payload_chunk, payload, 0, 1, pure=False).result()  # warm up
+            trips = []
+            for _ in range(max(10, 5 * args.repeats)):
+                t0 = time.perf_counter()
+                client.submit(_run_payload_chunk, payload, 0, 1, pure=False).result()
+                trips.append(time.perf_counter() - t0)
+        inproc = []
+        for _ in range(max(10, 5 * args.repeats)):
+            t0 = time.perf_counter()
+            campaign.compute_chunk(one, 0, 1)
+            inproc.append(time.perf_counter() - t0)
+        overhead = statistics.median(trips) - statistics.median(inproc)
+    finally:
+        cluster.close()
+
+    print(f"{cores} cores; medians of {args.repeats}; chunk size {args.chunk_size}")
+    print(
+        "| controller | runs (chunks) | in process, runs/s per core | local Dask cluster, "
+        "runs/s per core | cluster / in process |"
+    )
+    print("| --- | ---: | ---: | ---: | ---: |")
+    for controller, runs, chunks, local, dask in rows:
+        print(
+            f"| {controller} | {runs} ({chunks}) | {local:.0f} | {dask:.0f} | {dask / local:.2f} |"
+        )
+    print(
+        f"overhead per chunk through the cluster: {overhead * 1e3:.1f} ms "
+        f"(round trip {statistics.median(trips) * 1e3:.1f} ms, "
+        f"in process {statistics.median(inproc) * 1e3:.1f} ms)"
+    )
+
+
+if __name__ == "__main__":
+    main()
