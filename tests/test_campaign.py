@@ -195,7 +195,11 @@ points = 50
     assert 0 < partial.num_rows < c.runs
     assert not [p for p in (out / "runs").iterdir() if not p.name.startswith("part-")]
 
+    # As a process killed mid-write (SIGKILL) would leave it: ignored, then removed.
+    stale = out / "runs" / ".part-0000000000-0000000020.parquet.1.tmp"
+    stale.write_bytes(b"PAR1 half a file")
     result = campaign.run(spec, out, progress=False, plots=False)
+    assert not stale.exists()
     runs = _column(result.table, "run")
     assert runs.tolist() == list(range(c.runs))
     assert 0 < result.chunks < -(-c.runs // 20)  # only the missing chunks ran
@@ -234,6 +238,11 @@ def test_a_changed_spec_is_refused_and_nothing_is_touched(tmp_path):
     with pytest.raises(campaign.CampaignError, match="another spec"):
         campaign.run(changed, out, progress=False)
     assert {p: p.stat().st_mtime_ns for p in out.rglob("*")} == before
+    # A second process writing the same directory is refused while the first holds it.
+    from riprs.campaign.store import _exclusive
+
+    with _exclusive(out), pytest.raises(campaign.CampaignError, match="another riprs campaign"):
+        campaign.run(spec, out, progress=False)
     # The chunk size is not part of the spec's identity: a new one resumes (nothing to do).
     rechunked = _spec(tmp_path, SMALL.replace("chunk_size = 5", "chunk_size = 9"), "r.toml")
     assert campaign.run(rechunked, out, progress=False, plots=False).chunks == 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import sys
@@ -17,6 +18,7 @@ from riprs.campaign.store import (
     _EXTRA,
     _check_out,
     _done_ranges,
+    _exclusive,
     _pending,
     _require_arrow,
     _to_table,
@@ -251,55 +253,54 @@ def run(
 
     out_path = Path(out) if out is not None else None
     results: dict[tuple[int, int], dict[str, Any]] = {}
-    previous = None
     done: list[tuple[int, int]] = []
     if out_path is not None:
-        previous = _check_out(campaign, out_path)
+        _check_out(campaign, out_path)
         done = _done_ranges(out_path / "runs", campaign.runs)
     chunks = _pending(done, campaign.runs, campaign.chunk_size)
-    done_runs = sum(b - a for a, b in done)
 
     # Everything that can fail before the runs does so before anything is written.
     client = cluster = None
     if chunks and engine != "in-process":
         client, cluster = _connect(scheduler, workers, connect_timeout)
-    if out_path is not None:
-        try:
-            _write_manifest(campaign, out_path, engine, spec_text, previous)
-        except BaseException:
-            if client is not None:
-                client.close()
-            if cluster is not None:
-                cluster.close()
-            raise
     bar = None
-    if progress and chunks:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(
-            total=campaign.runs,
-            initial=done_runs,
-            unit="run",
-            desc="campaign",
-            smoothing=0.05,
-            dynamic_ncols=True,
-        )
     computed = 0
     try:
-        stream = (
-            _in_process(campaign, chunks) if client is None else _on_dask(campaign, chunks, client)
-        )
-        for (start, stop), columns in stream:
+        with _exclusive(out_path) if out_path is not None else contextlib.nullcontext():
             if out_path is not None:
-                _write_chunk(out_path / "runs", start, stop, columns)
-            else:
-                results[(start, stop)] = columns
-            computed += 1
-            done_runs += stop - start
-            if bar is not None:
-                bar.update(stop - start)
-            if on_chunk is not None:
-                on_chunk(done_runs, campaign.runs)
+                # Read again under the lock: another process may have finished chunks since.
+                previous = _check_out(campaign, out_path)
+                _write_manifest(campaign, out_path, engine, spec_text, previous)
+                done = _done_ranges(out_path / "runs", campaign.runs)
+                chunks = _pending(done, campaign.runs, campaign.chunk_size)
+            done_runs = sum(b - a for a, b in done)
+            if progress and chunks:
+                from tqdm.auto import tqdm
+
+                bar = tqdm(
+                    total=campaign.runs,
+                    initial=done_runs,
+                    unit="run",
+                    desc="campaign",
+                    smoothing=0.05,
+                    dynamic_ncols=True,
+                )
+            stream = (
+                _in_process(campaign, chunks)
+                if client is None
+                else _on_dask(campaign, chunks, client)
+            )
+            for (start, stop), columns in stream:
+                if out_path is not None:
+                    _write_chunk(out_path / "runs", start, stop, columns)
+                else:
+                    results[(start, stop)] = columns
+                computed += 1
+                done_runs += stop - start
+                if bar is not None:
+                    bar.update(stop - start)
+                if on_chunk is not None:
+                    on_chunk(done_runs, campaign.runs)
     finally:
         if bar is not None:
             bar.close()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import os
@@ -9,7 +10,7 @@ import platform
 import re
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Union
 
@@ -94,12 +95,18 @@ def _write_chunk(runs_dir: Path, start: int, stop: int, columns: Mapping[str, An
 
     path = _chunk_path(runs_dir, start, stop)
     tmp = runs_dir / f".{path.name}.{os.getpid()}.tmp"
-    pq.write_table(_to_table(columns), tmp)
-    os.replace(tmp, path)
+    try:
+        pq.write_table(_to_table(columns), tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        # Ctrl-C or a full disk mid-write: the chunk is not on disk and will be run again.
+        tmp.unlink(missing_ok=True)
+        raise
     return path
 
 
 def _done_ranges(runs_dir: Path, total: int) -> list[tuple[int, int]]:
+    """The run ranges of the chunk files in ``runs_dir``, sorted."""
     ranges = []
     for p in sorted(runs_dir.iterdir()) if runs_dir.is_dir() else []:
         m = _CHUNK_FILE.match(p.name)
@@ -159,7 +166,7 @@ def _check_out(campaign: Campaign, out: Path) -> dict[str, Any] | None:
                 f"{campaign.spec_hash[:12]}); choose another --out or remove {out}"
             )
         return previous
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+    if out.exists() and (not out.is_dir() or any(p.name != ".lock" for p in out.iterdir())):
         raise CampaignError(f"{out} exists, is not an empty directory and holds no manifest")
     return None
 
@@ -173,6 +180,9 @@ def _write_manifest(
 ) -> None:
     """Create ``out`` and (re)write its manifest and spec copy, each atomically."""
     (out / "runs").mkdir(parents=True, exist_ok=True)
+    # Left by a process killed mid-write (SIGKILL, power loss); its chunk is run again.
+    for stale in (out / "runs").glob(".part-*.tmp"):
+        stale.unlink(missing_ok=True)
     manifest = {
         "format": _MANIFEST_FORMAT,
         "spec_hash": campaign.spec_hash,
@@ -197,6 +207,26 @@ def _write_manifest(
         tmp = out / ".spec.toml.tmp"
         tmp.write_text(spec_text)
         os.replace(tmp, out / "spec.toml")
+
+
+@contextlib.contextmanager
+def _exclusive(out: Path) -> Iterator[None]:
+    """Hold ``out``'s lock: one campaign process writes a directory at a time."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX: no lock
+        yield
+        return
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / ".lock", "a") as fh:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            raise CampaignError(f"another riprs campaign is writing to {out}") from None
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
 
 
 def load(out: PathLike) -> Any:
