@@ -1,10 +1,12 @@
 //! A device emulator: the device side of protocol v1 over a pseudo-terminal, with the pendulum
 //! simulated in real time at 1 kHz and injectable faults.
 //!
-//! The emulated firmware behaves as `docs/protocol.md` asks of a real one: it samples the
-//! encoders when a sample request arrives and answers at once; it applies the last command's
-//! voltage only while the command enables the driver and is fresh (its own watchdog zeroes the
-//! motor when commands stop); and it reports what it applies.
+//! The emulated firmware is the firmware's own logic, `rip-device`: command handling, the
+//! command watchdog, clamping to the device's voltage limit, status flags, the 16-bit encoder
+//! counters and the PWM duty. Only the hardware is replaced: the encoder counters are the
+//! simulated angles truncated to 16 bits, and the motor receives the voltage that the PWM duty
+//! and direction produce from the bridge supply. So every end-to-end test of `rip-rt run`
+//! against the emulator runs the code that the STM32 runs.
 //!
 //! Until the first enabling command arrives the pendulum is held still at its initial pose, the
 //! way an operator holds it upright before the loop takes over; `hold_until_enabled = false`
@@ -18,14 +20,16 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
+use rip_device::{Direction, Inputs};
 
 use crate::plant::{Model, PlantSim};
-use crate::protocol::{
-    encode, Command, Frame, Measurement, Message, Parser, MAX_FRAME, STATUS_ENABLED,
-    STATUS_RX_ERROR, STATUS_WATCHDOG,
-};
+use crate::protocol::{encode, Event, Frame, Message, Parser, MAX_FRAME, SYNC0};
 use crate::serial::{Fd, Pty, Readiness};
 use crate::timing::now_ns;
+
+/// Compare range of the firmware's PWM timer (84 MHz timer clock, 20 kHz PWM: 4200 steps);
+/// the emulated bridge applies the same quantised voltage as the real one.
+pub const PWM_MAX_DUTY: u16 = 4199;
 
 /// Settings of the emulated device and of the faults it injects.
 #[derive(Debug, Clone, PartialEq)]
@@ -46,6 +50,10 @@ pub struct EmulatorConfig {
     pub hold_until_enabled: bool,
     /// The device watchdog: zero the motor when no command arrived for this long (s).
     pub command_timeout_s: f64,
+    /// The device's own voltage limit (V); commands beyond it are clamped.
+    pub voltage_limit: f64,
+    /// H-bridge supply (V): the voltage at 100 % PWM duty.
+    pub supply: f64,
     /// Standard deviation of Gaussian noise added to each encoder reading (counts).
     pub noise_counts: f64,
     /// Probability that a measurement is not sent.
@@ -74,6 +82,8 @@ impl Default for EmulatorConfig {
             initial_pendulum: 0.05,
             hold_until_enabled: true,
             command_timeout_s: 0.05,
+            voltage_limit: 24.0,
+            supply: 24.0,
             noise_counts: 0.0,
             drop_rate: 0.0,
             corrupt_rate: 0.0,
@@ -109,6 +119,22 @@ impl EmulatorConfig {
                 self.sim_rate_hz
             ));
         }
+        if !(self.voltage_limit.is_finite()
+            && self.voltage_limit > 0.0
+            && self.voltage_limit <= 32.767)
+        {
+            return Err(format!(
+                "voltage limit: must be in (0, 32.767] V, got {}",
+                self.voltage_limit
+            ));
+        }
+        if !(self.supply.is_finite() && self.supply >= self.voltage_limit && self.supply <= 65.535)
+        {
+            return Err(format!(
+                "supply: must be between the voltage limit and 65.535 V, got {}",
+                self.supply
+            ));
+        }
         if !(self.command_timeout_s.is_finite() && self.command_timeout_s > 0.0) {
             return Err(format!(
                 "--command-timeout: must be positive, got {}",
@@ -142,21 +168,17 @@ impl EmulatorConfig {
     }
 }
 
-/// The emulated firmware: protocol handling, the motor driver and the encoders, without I/O.
+/// The emulated device: the firmware's logic (`rip-device`) on a simulated pendulum.
 #[derive(Debug)]
 pub struct Device {
     cfg: EmulatorConfig,
     plant: PlantSim,
     rng: StdRng,
     noise: Normal<f64>,
-    seq: u16,
-    command: Command,
-    last_command_s: Option<f64>,
+    firmware: rip_device::Device,
     released: bool,
-    watchdog_tripped: bool,
-    rx_error: bool,
-    seen_errors: u64,
-    time_s: f64,
+    commands_seen: bool,
+    time_ns: u64,
 }
 
 /// What the device did with a frame.
@@ -169,29 +191,37 @@ pub enum Reply {
 }
 
 impl Device {
-    /// A device with the plant at its initial pose, at rest.
+    /// A device with the plant at its initial pose, at rest, and the firmware at power-up.
     pub fn new(cfg: EmulatorConfig) -> Self {
         let plant = PlantSim::new(cfg.model, cfg.initial_arm, cfg.initial_pendulum);
-        let released = !cfg.hold_until_enabled;
-        Self {
+        let firmware_cfg = rip_device::Config {
+            command_timeout_us: (cfg.command_timeout_s * 1e6).round().min(u32::MAX as f64) as u32,
+            voltage_limit_mv: (cfg.voltage_limit * 1000.0).round() as u16,
+            supply_mv: (cfg.supply * 1000.0).round() as u16,
+        };
+        let mut dev = Self {
             rng: StdRng::seed_from_u64(cfg.seed),
             noise: Normal::new(0.0, cfg.noise_counts.max(0.0)).expect("validated"),
             plant,
-            seq: 0,
-            command: Command::STOP,
-            last_command_s: None,
-            released,
-            watchdog_tripped: false,
-            rx_error: false,
-            seen_errors: 0,
-            time_s: 0.0,
+            firmware: rip_device::Device::new(firmware_cfg, &Inputs::default()),
+            released: !cfg.hold_until_enabled,
+            commands_seen: false,
+            time_ns: 0,
             cfg,
-        }
+        };
+        let [arm, pendulum] = dev.counts(false);
+        let inputs = Inputs {
+            now_us: 0,
+            encoders: [arm as u16, pendulum as u16],
+            driver_fault: false,
+        };
+        dev.firmware = rip_device::Device::with_positions(firmware_cfg, &inputs, [arm, pendulum]);
+        dev
     }
 
     /// Simulated time (s).
     pub fn time_s(&self) -> f64 {
-        self.time_s
+        self.time_ns as f64 * 1e-9
     }
 
     /// Plant state `[θ, θ̇, α, α̇]`.
@@ -201,102 +231,84 @@ impl Device {
 
     /// Whether any command has arrived.
     pub fn first_command_seen(&self) -> bool {
-        self.last_command_s.is_some()
+        self.commands_seen
     }
 
-    /// The voltage the driver applies now: the last command's while it enables the driver and
-    /// is fresh, else zero.
+    /// The firmware's state.
+    pub fn firmware(&self) -> &rip_device::Device {
+        &self.firmware
+    }
+
+    /// The voltage the bridge applies now: the firmware's PWM duty and direction on the supply.
     pub fn applied_voltage(&self) -> f64 {
-        match self.last_command_s {
-            Some(t) if self.command.enabled() && self.time_s - t <= self.cfg.command_timeout_s => {
-                self.command.voltage_mv as f64 / 1000.0
-            }
-            _ => 0.0,
+        let pwm = self.firmware.pwm(PWM_MAX_DUTY);
+        if !pwm.enable {
+            return 0.0;
+        }
+        let v = self.cfg.supply * pwm.duty as f64 / PWM_MAX_DUTY as f64;
+        match pwm.direction {
+            Direction::Forward => v,
+            Direction::Reverse => -v,
         }
     }
 
-    /// Advances the simulation by `dt` seconds.
-    pub fn advance(&mut self, dt: f64) {
-        if self.command.enabled()
-            && self
-                .last_command_s
-                .is_some_and(|t| self.time_s - t > self.cfg.command_timeout_s)
-        {
-            self.watchdog_tripped = true;
+    /// Encoder counts of the plant's angles (pendulum zero hanging down), with reading noise.
+    fn counts(&mut self, noisy: bool) -> [i32; 2] {
+        let [theta, _, alpha, _] = self.plant.state();
+        let mut c = [
+            theta * self.cfg.arm_counts_per_rev as f64,
+            (alpha + std::f64::consts::PI) * self.cfg.pendulum_counts_per_rev as f64,
+        ];
+        for v in &mut c {
+            *v /= std::f64::consts::TAU;
+            if noisy && self.cfg.noise_counts > 0.0 {
+                *v += self.noise.sample(&mut self.rng);
+            }
         }
+        c.map(|v| v.round().clamp(i32::MIN as f64, i32::MAX as f64) as i32)
+    }
+
+    /// The hardware readings now: the microsecond clock and the 16-bit encoder counters.
+    fn inputs(&mut self) -> Inputs {
+        let [arm, pendulum] = self.counts(true);
+        Inputs {
+            // The firmware's clock is a wrapping 32-bit microsecond counter.
+            now_us: (self.time_ns / 1000) as u32,
+            encoders: [arm as u16, pendulum as u16],
+            driver_fault: false,
+        }
+    }
+
+    /// Advances the simulation by `dt_ns` nanoseconds: the firmware's tick (encoders,
+    /// watchdog), then the plant under the voltage the bridge applies.
+    pub fn advance(&mut self, dt_ns: u64) {
+        let inputs = self.inputs();
+        self.firmware.tick(&inputs);
         let u = self.applied_voltage();
         if self.released {
-            self.plant.step(u, dt);
+            self.plant.step(u, dt_ns as f64 * 1e-9);
         }
-        self.time_s += dt;
+        self.time_ns += dt_ns;
     }
 
-    /// Notes that a corrupt frame was received (reported in the next measurement's status).
-    pub fn note_rx_errors(&mut self, total_errors: u64) {
-        if total_errors > self.seen_errors {
-            self.seen_errors = total_errors;
-            self.rx_error = true;
+    /// Hands one parser event to the firmware; a sample request writes the measurement into
+    /// `out`.
+    pub fn handle(&mut self, event: Event, out: &mut [u8; MAX_FRAME]) -> Reply {
+        if let Event::Frame(Frame {
+            message: Message::Command(_),
+            ..
+        }) = event
+        {
+            self.commands_seen = true;
         }
-    }
-
-    fn encoder(&mut self, angle: f64, cpr: u32) -> i32 {
-        let mut counts = angle * cpr as f64 / std::f64::consts::TAU;
-        if self.cfg.noise_counts > 0.0 {
-            counts += self.noise.sample(&mut self.rng);
+        let inputs = self.inputs();
+        let reply = self.firmware.handle(event, &inputs);
+        if self.firmware.enabled() {
+            self.released = true;
         }
-        counts.round().clamp(i32::MIN as f64, i32::MAX as f64) as i32
-    }
-
-    /// Handles one frame from the host; a sample request writes the measurement into `out`.
-    pub fn handle(&mut self, frame: &Frame, out: &mut [u8; MAX_FRAME]) -> Reply {
-        match frame.message {
-            Message::Command(c) => {
-                self.command = c;
-                self.last_command_s = Some(self.time_s);
-                self.watchdog_tripped = false;
-                if c.enabled() {
-                    self.released = true;
-                }
-                Reply::None
-            }
-            Message::SampleRequest => {
-                let [theta, _, alpha, _] = self.plant.state();
-                let arm_counts = self.encoder(theta, self.cfg.arm_counts_per_rev);
-                let pendulum_counts = self.encoder(
-                    alpha + std::f64::consts::PI,
-                    self.cfg.pendulum_counts_per_rev,
-                );
-                let u = self.applied_voltage();
-                let mut status = 0;
-                if u != 0.0 || (self.command.enabled() && !self.watchdog_tripped) {
-                    status |= STATUS_ENABLED;
-                }
-                if self.watchdog_tripped {
-                    status |= STATUS_WATCHDOG;
-                }
-                if self.rx_error {
-                    status |= STATUS_RX_ERROR;
-                    self.rx_error = false;
-                }
-                let m = Measurement {
-                    ack_seq: frame.seq,
-                    arm_counts,
-                    pendulum_counts,
-                    applied_mv: (u * 1000.0).round() as i16,
-                    status,
-                    device_time_us: (self.time_s * 1e6) as u64 as u32,
-                };
-                let seq = self.seq;
-                self.seq = self.seq.wrapping_add(1);
-                Reply::Bytes(encode(
-                    &Frame {
-                        seq,
-                        message: Message::Measurement(m),
-                    },
-                    out,
-                ))
-            }
-            Message::Measurement(_) => Reply::None,
+        match reply {
+            Some(frame) => Reply::Bytes(encode(&frame, out)),
+            None => Reply::None,
         }
     }
 
@@ -313,7 +325,7 @@ impl Device {
                 let n = self.rng.gen_range(1..=8);
                 for _ in 0..n {
                     let b = if self.rng.gen_bool(0.3) {
-                        crate::protocol::SYNC0
+                        SYNC0
                     } else {
                         self.rng.gen()
                     };
@@ -368,7 +380,6 @@ pub fn run(cfg: EmulatorConfig, pty: Pty, stop: &AtomicBool) -> io::Result<Emula
         None => None,
     };
     let dt_ns = (1e9 / cfg.sim_rate_hz).round() as u64;
-    let dt = dt_ns as f64 * 1e-9;
     let duration = cfg.duration_s;
     let vanish_after = cfg.vanish_after_s;
     let mut device = Device::new(cfg);
@@ -386,7 +397,7 @@ pub fn run(cfg: EmulatorConfig, pty: Pty, stop: &AtomicBool) -> io::Result<Emula
         }
         let now = now_ns();
         if now >= next_tick {
-            device.advance(dt);
+            device.advance(dt_ns);
             next_tick += dt_ns;
             if now > next_tick + 100 * dt_ns {
                 // Far behind (the machine stalled): resume from now rather than fast-forward.
@@ -413,17 +424,18 @@ pub fn run(cfg: EmulatorConfig, pty: Pty, stop: &AtomicBool) -> io::Result<Emula
         let t = device.time_s();
         for &byte in &rx[..n] {
             parser.push(byte);
-            while let Some(frame) = parser.poll() {
-                // A bad frame ahead of this one in the same read is reported in this reply,
-                // the next measurement, as protocol.md asks.
-                device.note_rx_errors(parser.stats().errors());
-                if first_command_at.is_none() && matches!(frame.message, Message::Command(_)) {
-                    first_command_at = Some(t);
+            // Rejected candidates go to the firmware too: it reports them with RX_ERROR in the
+            // next measurement and disables the motor on a frame of another version.
+            while let Some(event) = parser.poll_event() {
+                if let Event::Frame(frame) = event {
+                    if first_command_at.is_none() && matches!(frame.message, Message::Command(_)) {
+                        first_command_at = Some(t);
+                    }
+                    if let Err(e) = write_record(&mut record, t, &frame) {
+                        error.get_or_insert(e);
+                    }
                 }
-                if let Err(e) = write_record(&mut record, t, &frame) {
-                    error.get_or_insert(e);
-                }
-                if let Reply::Bytes(len) = device.handle(&frame, &mut out) {
+                if let Reply::Bytes(len) = device.handle(event, &mut out) {
                     device.inject_faults(&out[..len], &mut wire);
                     if !wire.is_empty() {
                         if let Err(e) = io.write_all(&wire) {
@@ -433,9 +445,85 @@ pub fn run(cfg: EmulatorConfig, pty: Pty, stop: &AtomicBool) -> io::Result<Emula
                 }
             }
         }
-        device.note_rx_errors(parser.stats().errors());
         if let Some(e) = error {
             return Err(e);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::{Command, Measurement, COMMAND_ENABLE, STATUS_ENABLED, STATUS_WATCHDOG};
+
+    fn measure(dev: &mut Device) -> Measurement {
+        let mut out = [0u8; MAX_FRAME];
+        let Reply::Bytes(n) = dev.handle(
+            Event::Frame(Frame {
+                seq: 3,
+                message: Message::SampleRequest,
+            }),
+            &mut out,
+        ) else {
+            panic!("no reply");
+        };
+        let mut frames = Vec::new();
+        Parser::new().feed(&out[..n], |f| frames.push(f));
+        match frames[..] {
+            [Frame {
+                message: Message::Measurement(m),
+                ..
+            }] => m,
+            _ => panic!("{frames:?}"),
+        }
+    }
+
+    #[test]
+    fn the_motor_gets_the_pwm_voltage_until_the_watchdog_trips() {
+        let mut dev = Device::new(EmulatorConfig::default());
+        let mut out = [0u8; MAX_FRAME];
+        let enable = Event::Frame(Frame {
+            seq: 0,
+            message: Message::Command(Command {
+                voltage_mv: -5000,
+                flags: COMMAND_ENABLE,
+            }),
+        });
+        assert_eq!(dev.handle(enable, &mut out), Reply::None);
+        dev.advance(1_000_000);
+        // 24 V over 4199 steps: within half a step of the command.
+        let step = 24.0 / PWM_MAX_DUTY as f64;
+        assert!((dev.applied_voltage() + 5.0).abs() <= step / 2.0);
+        let m = measure(&mut dev);
+        assert_eq!((m.applied_mv, m.status), (-5000, STATUS_ENABLED));
+        // 50 ms after the command the firmware's watchdog zeroes the motor.
+        for _ in 0..49 {
+            dev.advance(1_000_000);
+        }
+        assert!(dev.applied_voltage() != 0.0);
+        dev.advance(1_000_000);
+        dev.advance(1_000_000);
+        assert_eq!(dev.applied_voltage(), 0.0);
+        let m = measure(&mut dev);
+        assert_eq!((m.applied_mv, m.status), (0, STATUS_WATCHDOG));
+    }
+
+    #[test]
+    fn counts_beyond_the_16_bit_counter_are_reported_whole() {
+        // 400 rad of arm angle is 130 380 counts: two wraps of the firmware's 16-bit counter.
+        let cfg = EmulatorConfig {
+            initial_arm: 400.0,
+            ..EmulatorConfig::default()
+        };
+        let mut dev = Device::new(cfg);
+        for _ in 0..10 {
+            dev.advance(1_000_000);
+        }
+        let m = measure(&mut dev);
+        let expected = (400.0 * 2048.0 / std::f64::consts::TAU).round() as i32;
+        assert_eq!(m.arm_counts, expected);
+        // Hanging down is zero: upright (initial 0.05 rad) is half a revolution, 1024 counts on.
+        let pendulum = ((0.05 + std::f64::consts::PI) * 2048.0 / std::f64::consts::TAU).round();
+        assert_eq!(m.pendulum_counts, pendulum as i32);
     }
 }

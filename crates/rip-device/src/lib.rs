@@ -1,0 +1,356 @@
+//! # rip-device
+//!
+//! What the pendulum's microcontroller does, independent of its hardware: protocol v1 command
+//! handling (`docs/protocol.md`, "What the device must do"), enabling and disabling the motor
+//! driver, the command watchdog, clamping to the device's own voltage limit, sequence numbers,
+//! status flags, multi-turn encoder positions from 16-bit timer counters, and the voltage →
+//! PWM duty and direction mapping.
+//!
+//! The STM32 firmware (`firmware/`) and `rip-rt emulate` both run this crate, so every
+//! end-to-end test of the PC loop against the emulator exercises the firmware's logic with only
+//! the hardware replaced by a simulated plant. It is `no_std`, allocation-free and never panics.
+//!
+//! A main loop reads the hardware into [`Inputs`], calls [`Device::tick`] at least every
+//! millisecond or so (and in any case more often than every 2³¹ µs, half the wrap of the
+//! microsecond clock), feeds received bytes through [`Device::receive`], and drives the
+//! H-bridge from [`Device::pwm`].
+
+#![no_std]
+#![forbid(unsafe_code)]
+
+use rip_protocol::{
+    encode, Command, Event, Frame, Measurement, Message, Parser, Rejection, MAX_FRAME,
+    STATUS_ENABLED, STATUS_FAULT, STATUS_RX_ERROR, STATUS_WATCHDOG,
+};
+
+/// The device's fixed settings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Config {
+    /// Command watchdog: with no valid command for longer than this (µs) the motor gets 0 V and
+    /// the driver is disabled. `docs/protocol.md` asks for 50 ms (5 periods of 10 ms).
+    pub command_timeout_us: u32,
+    /// The device's own voltage limit (mV): commands beyond ±limit are clamped. At most
+    /// `supply_mv`, since the bridge cannot apply more than its supply.
+    pub voltage_limit_mv: u16,
+    /// H-bridge supply voltage (mV): the voltage at 100 % duty.
+    pub supply_mv: u16,
+}
+
+impl Config {
+    /// 50 ms watchdog, 12 V limit on a 12 V supply (the reference rig).
+    pub const DEFAULT: Config = Config {
+        command_timeout_us: 50_000,
+        voltage_limit_mv: 12_000,
+        supply_mv: 12_000,
+    };
+
+    /// The same settings with the limit reduced to the supply where it exceeds it, and a zero
+    /// watchdog time raised to 1 µs, so that every `Config` a [`Device`] holds is usable.
+    pub const fn sanitized(self) -> Config {
+        Config {
+            command_timeout_us: if self.command_timeout_us == 0 {
+                1
+            } else {
+                self.command_timeout_us
+            },
+            voltage_limit_mv: if self.voltage_limit_mv > self.supply_mv {
+                self.supply_mv
+            } else {
+                self.voltage_limit_mv
+            },
+            supply_mv: self.supply_mv,
+        }
+    }
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// A 32-bit multi-turn position from a 16-bit hardware counter (a timer in encoder mode).
+///
+/// The counter wraps every 65 536 counts; the position accumulates the signed difference
+/// between successive readings, `Δ = (raw − last) mod 2¹⁶` read as an `i16`, which is the true
+/// movement as long as the shaft moves fewer than 32 768 counts between two readings (16
+/// revolutions of a 2048-count encoder: far more than a pendulum does in a millisecond). The
+/// position itself wraps at ±2³¹ counts (a million revolutions at 2048 counts).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct EncoderCounter {
+    last: u16,
+    position: i32,
+}
+
+impl EncoderCounter {
+    /// A counter whose current raw reading `raw` stands for `position`.
+    pub const fn new(raw: u16, position: i32) -> Self {
+        Self {
+            last: raw,
+            position,
+        }
+    }
+
+    /// Takes a new raw reading and returns the position.
+    pub fn update(&mut self, raw: u16) -> i32 {
+        let delta = raw.wrapping_sub(self.last) as i16;
+        self.last = raw;
+        self.position = self.position.wrapping_add(delta as i32);
+        self.position
+    }
+
+    /// The position at the last reading.
+    pub const fn position(&self) -> i32 {
+        self.position
+    }
+}
+
+/// The hardware readings a device step works from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Inputs {
+    /// Free-running microsecond clock (wraps around).
+    pub now_us: u32,
+    /// Raw 16-bit counters of the arm and the pendulum encoder.
+    pub encoders: [u16; 2],
+    /// The motor driver's fault line is asserted.
+    pub driver_fault: bool,
+}
+
+/// Which way the H-bridge drives the motor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Direction {
+    /// Positive voltage: the arm turns in the positive θ direction.
+    Forward,
+    /// Negative voltage.
+    Reverse,
+}
+
+/// The H-bridge drive: duty cycle, direction and the driver's enable line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Pwm {
+    /// Compare value, `0 ..= max_duty`.
+    pub duty: u16,
+    /// Direction pin level.
+    pub direction: Direction,
+    /// Driver enable line. When false, `duty` is 0.
+    pub enable: bool,
+}
+
+impl Pwm {
+    /// The safe state: driver disabled, duty 0.
+    pub const OFF: Pwm = Pwm {
+        duty: 0,
+        direction: Direction::Forward,
+        enable: false,
+    };
+}
+
+/// The device: command state, watchdog, status and encoder positions.
+#[derive(Debug, Clone)]
+pub struct Device {
+    cfg: Config,
+    seq: u16,
+    command: Command,
+    last_command_us: u32,
+    watchdog: bool,
+    rx_error: bool,
+    fault: bool,
+    arm: EncoderCounter,
+    pendulum: EncoderCounter,
+    commands: u32,
+}
+
+impl Device {
+    /// A device at power-up: driver disabled, encoder positions zero at the current readings.
+    pub fn new(cfg: Config, inputs: &Inputs) -> Self {
+        Self::with_positions(cfg, inputs, [0, 0])
+    }
+
+    /// A device whose current encoder readings stand for `positions` (arm, pendulum).
+    pub fn with_positions(cfg: Config, inputs: &Inputs, positions: [i32; 2]) -> Self {
+        Self {
+            cfg: cfg.sanitized(),
+            seq: 0,
+            command: Command::STOP,
+            last_command_us: inputs.now_us,
+            watchdog: false,
+            rx_error: false,
+            fault: inputs.driver_fault,
+            arm: EncoderCounter::new(inputs.encoders[0], positions[0]),
+            pendulum: EncoderCounter::new(inputs.encoders[1], positions[1]),
+            commands: 0,
+        }
+    }
+
+    /// The settings in force.
+    pub fn config(&self) -> &Config {
+        &self.cfg
+    }
+
+    /// Updates the encoder positions, the fault state and the watchdog from `inputs`.
+    pub fn tick(&mut self, inputs: &Inputs) {
+        self.arm.update(inputs.encoders[0]);
+        self.pendulum.update(inputs.encoders[1]);
+        self.fault = inputs.driver_fault;
+        if self.fault {
+            // A driver fault drops the command: after it clears the host must enable again.
+            self.command = Command::STOP;
+        }
+        if self.command.enabled()
+            && inputs.now_us.wrapping_sub(self.last_command_us) > self.cfg.command_timeout_us
+        {
+            self.command = Command::STOP;
+            self.watchdog = true;
+        }
+    }
+
+    /// Handles one parser event at the instant `inputs` was read; a sample request returns the
+    /// measurement frame to send.
+    pub fn handle(&mut self, event: Event, inputs: &Inputs) -> Option<Frame> {
+        self.tick(inputs);
+        match event {
+            Event::Frame(Frame {
+                message: Message::Command(c),
+                ..
+            }) => {
+                self.commands = self.commands.wrapping_add(1);
+                self.last_command_us = inputs.now_us;
+                self.watchdog = false;
+                self.command = if self.fault { Command::STOP } else { c };
+                None
+            }
+            Event::Frame(Frame {
+                seq,
+                message: Message::SampleRequest,
+            }) => {
+                let m = Measurement {
+                    ack_seq: seq,
+                    arm_counts: self.arm.position(),
+                    pendulum_counts: self.pendulum.position(),
+                    applied_mv: self.voltage_mv(),
+                    status: self.take_status(),
+                    device_time_us: inputs.now_us,
+                };
+                let seq = self.seq;
+                self.seq = self.seq.wrapping_add(1);
+                Some(Frame {
+                    seq,
+                    message: Message::Measurement(m),
+                })
+            }
+            // A measurement is a device frame: from the host it is a protocol error.
+            Event::Frame(Frame {
+                message: Message::Measurement(_),
+                ..
+            }) => {
+                self.rx_error = true;
+                None
+            }
+            Event::Rejected(Rejection::Version(_)) => {
+                // The peer speaks another protocol: none of its frames can be trusted.
+                self.command = Command::STOP;
+                self.rx_error = true;
+                None
+            }
+            Event::Rejected(_) => {
+                self.rx_error = true;
+                None
+            }
+        }
+    }
+
+    /// Feeds received bytes through `parser`, handles every event and passes each encoded reply
+    /// to `send`.
+    pub fn receive(
+        &mut self,
+        parser: &mut Parser,
+        data: &[u8],
+        inputs: &Inputs,
+        mut send: impl FnMut(&[u8]),
+    ) {
+        let mut out = [0u8; MAX_FRAME];
+        for &byte in data {
+            parser.push(byte);
+            while let Some(event) = parser.poll_event() {
+                if let Some(reply) = self.handle(event, inputs) {
+                    let n = encode(&reply, &mut out);
+                    send(&out[..n]);
+                }
+            }
+        }
+    }
+
+    /// Whether the motor driver is enabled.
+    pub fn enabled(&self) -> bool {
+        self.command.enabled() && !self.fault
+    }
+
+    /// The voltage applied now (mV): the last command's, clamped to the device's limit, while
+    /// the driver is enabled; else 0.
+    pub fn voltage_mv(&self) -> i16 {
+        if !self.enabled() {
+            return 0;
+        }
+        let limit = self.cfg.voltage_limit_mv.min(i16::MAX as u16) as i16;
+        self.command.voltage_mv.clamp(-limit, limit)
+    }
+
+    /// The H-bridge drive for a PWM timer whose compare range is `0 ..= max_duty`:
+    /// `duty = round(|V| · max_duty / supply)`.
+    pub fn pwm(&self, max_duty: u16) -> Pwm {
+        if !self.enabled() || self.cfg.supply_mv == 0 {
+            return Pwm::OFF;
+        }
+        let v = self.voltage_mv();
+        let supply = self.cfg.supply_mv as u32;
+        let duty = (v.unsigned_abs() as u32 * max_duty as u32 + supply / 2) / supply;
+        Pwm {
+            duty: duty.min(max_duty as u32) as u16,
+            direction: if v < 0 {
+                Direction::Reverse
+            } else {
+                Direction::Forward
+            },
+            enable: true,
+        }
+    }
+
+    /// The status bits now, without clearing the one-shot `RX_ERROR`.
+    pub fn status(&self) -> u8 {
+        let mut s = 0;
+        if self.enabled() {
+            s |= STATUS_ENABLED;
+        }
+        if self.watchdog {
+            s |= STATUS_WATCHDOG;
+        }
+        if self.rx_error {
+            s |= STATUS_RX_ERROR;
+        }
+        if self.fault {
+            s |= STATUS_FAULT;
+        }
+        s
+    }
+
+    fn take_status(&mut self) -> u8 {
+        let s = self.status();
+        self.rx_error = false;
+        s
+    }
+
+    /// Encoder positions (arm, pendulum) at the last reading, counts since power-up.
+    pub fn positions(&self) -> [i32; 2] {
+        [self.arm.position(), self.pendulum.position()]
+    }
+
+    /// Commands received since power-up (wraps).
+    pub fn commands_received(&self) -> u32 {
+        self.commands
+    }
+
+    /// The sequence number of the next measurement.
+    pub fn next_seq(&self) -> u16 {
+        self.seq
+    }
+}
