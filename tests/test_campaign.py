@@ -143,9 +143,21 @@ def test_chunking_and_engine_order_do_not_change_results(tmp_path):
     c = campaign.load_spec(tomllib.loads(SMALL))
     whole = campaign.compute_chunk(c, 0, c.runs)
     res = campaign.run(c, chunk_size=7, progress=False, plots=False)
+    assert res.chunk_size == 7 and c.chunk_size == 5
     assert _column(res.table, "run").tolist() == list(range(c.runs))
     for name in ("rmse_arm", "rmse_pendulum", "rmse_voltage", "peak_voltage", "fell"):
         np.testing.assert_array_equal(_column(res.table, name), whole[name])
+
+
+def test_automatic_chunks_are_large_yet_four_per_worker_thread():
+    from riprs.campaign.engine import _auto_chunk_size
+
+    assert _auto_chunk_size(7020, 1) == 256
+    assert _auto_chunk_size(400, 2) == 50
+    assert _auto_chunk_size(10, 8) == 16
+    c = campaign.load_spec(tomllib.loads(SMALL.replace("chunk_size = 5", "")))
+    assert c.chunk_size is None
+    assert campaign.run(c, progress=False, plots=False).chunk_size == 16
 
 
 def _run_cli(args, **kwargs):

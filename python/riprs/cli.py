@@ -98,8 +98,11 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         )
         return 130
     print(campaign.summary(result.table))
-    print(f"{result.table.num_rows} runs in {args.out}/runs ({result.chunks} chunks computed now, "
-          f"engine: {result.engine}); {len(result.files)} figures")
+    print(
+        f"{result.table.num_rows} runs in {args.out}/runs ({result.chunks} chunks of "
+        f"{result.chunk_size} runs computed now, engine: {result.engine}); "
+        f"{len(result.files)} figures"
+    )
     return 0
 
 

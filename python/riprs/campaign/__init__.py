@@ -8,7 +8,7 @@ A campaign spec is an experiment spec (``[plant]``, ``[sensor]``, ``[reference]`
     seeds = 20              # noise seeds per grid point
     duration = 10.0         # s per run (default: reference.duration)
     seed = 0                # first noise seed
-    chunk_size = 256        # runs per unit of work (does not change any result)
+    chunk_size = 256        # runs per unit of work (default: automatic; no result depends on it)
     settle_band = 0.05      # settling band, a fraction of the arm step
 
     [[campaign.axis]]

@@ -13,7 +13,7 @@ from typing import Any, Union
 
 from riprs import __version__
 from riprs.campaign.chunk import _run_payload_chunk, compute_chunk
-from riprs.campaign.spec import Campaign, CampaignError, _int, load_spec
+from riprs.campaign.spec import DEFAULT_CHUNK_SIZE, Campaign, CampaignError, _int, load_spec
 from riprs.campaign.store import (
     _EXTRA,
     _check_out,
@@ -77,6 +77,8 @@ class CampaignResult:
         Figures written.
     chunks : int
         Chunks computed by this call (not those found on disk).
+    chunk_size : int
+        Runs per chunk in this call.
     """
 
     campaign: Campaign
@@ -85,6 +87,7 @@ class CampaignResult:
     engine: str
     files: list[Path] = field(default_factory=list)
     chunks: int = 0
+    chunk_size: int = 0
 
 
 ChunkResult = tuple[tuple[int, int], dict[str, Any]]
@@ -183,6 +186,12 @@ def _on_dask(
             client.cancel([f for f, _ in futures.values()])
 
 
+def _auto_chunk_size(runs: int, slots: int) -> int:
+    """Chunks large enough that a chunk's scheduling (tens of ms through Dask) stays a few
+    percent of its work, yet at least four per worker thread so that none waits at the end."""
+    return max(16, min(DEFAULT_CHUNK_SIZE, -(-runs // (4 * max(slots, 1)))))
+
+
 def run(
     spec: PathLike | Mapping[str, Any] | Campaign,
     out: PathLike | None = None,
@@ -207,7 +216,9 @@ def run(
     workers : int, optional
         Start a local Dask cluster of that many worker processes.
     chunk_size : int, optional
-        Runs per chunk (default ``[campaign] chunk_size``); results do not depend on it.
+        Runs per chunk; results do not depend on it. Default: ``[campaign] chunk_size``, or
+        :data:`DEFAULT_CHUNK_SIZE` runs, fewer when needed for four chunks per worker thread
+        (one thread in process, where each chunk is spread over all cores).
     progress : bool
         Show a progress bar (runs done, runs/s, time left).
     plots : bool
@@ -236,8 +247,7 @@ def run(
         if not isinstance(spec, Mapping):
             spec_text = Path(spec).read_text(encoding="utf-8")
         campaign = load_spec(spec)
-    if chunk_size is not None:
-        campaign.chunk_size = _int(chunk_size, "chunk_size", 1)
+    size = _int(chunk_size, "chunk_size", 1) if chunk_size is not None else campaign.chunk_size
     if scheduler is not None and workers is not None:
         raise CampaignError("give scheduler or workers, not both")
     if workers is not None:
@@ -257,12 +267,18 @@ def run(
     if out_path is not None:
         _check_out(campaign, out_path)
         done = _done_ranges(out_path / "runs", campaign.runs)
-    chunks = _pending(done, campaign.runs, campaign.chunk_size)
+    missing = campaign.runs - sum(b - a for a, b in done)
 
     # Everything that can fail before the runs does so before anything is written.
     client = cluster = None
-    if chunks and engine != "in-process":
+    if missing and engine != "in-process":
         client, cluster = _connect(scheduler, workers, connect_timeout)
+    if size is None:
+        slots = 1
+        if client is not None:
+            slots = sum(w["nthreads"] for w in client.scheduler_info()["workers"].values())
+        size = _auto_chunk_size(missing, slots)
+    chunks = _pending(done, campaign.runs, size)
     bar = None
     computed = 0
     try:
@@ -272,7 +288,7 @@ def run(
                 previous = _check_out(campaign, out_path)
                 _write_manifest(campaign, out_path, engine, spec_text, previous)
                 done = _done_ranges(out_path / "runs", campaign.runs)
-                chunks = _pending(done, campaign.runs, campaign.chunk_size)
+                chunks = _pending(done, campaign.runs, size)
             done_runs = sum(b - a for a, b in done)
             if progress and chunks:
                 from tqdm.auto import tqdm
@@ -316,7 +332,7 @@ def run(
         table = (
             pa.concat_tables([_to_table(results[c]) for c in sorted(results)]) if results else None
         )
-    result = CampaignResult(campaign, table, out_path, engine, chunks=computed)
+    result = CampaignResult(campaign, table, out_path, engine, chunks=computed, chunk_size=size)
     if plots and out_path is not None and table is not None:
         from riprs.campaign import plots as campaign_plots
 

@@ -154,7 +154,7 @@ class Campaign:
     seeds: int
     duration: float
     seed: int
-    chunk_size: int
+    chunk_size: int | None
     settle_band: float
     axes: list[Axis]
     spec_hash: str
@@ -268,7 +268,9 @@ def _parse(data: dict[str, Any]) -> Campaign:
         raise CampaignError(f"campaign.controllers has duplicates: {controllers}")
     seeds = _int(section.get("seeds", 1), "campaign.seeds", 1)
     seed = _int(section.get("seed", 0), "campaign.seed", 0)
-    chunk_size = _int(section.get("chunk_size", DEFAULT_CHUNK_SIZE), "campaign.chunk_size", 1)
+    chunk_size = section.get("chunk_size")
+    if chunk_size is not None:
+        chunk_size = _int(chunk_size, "campaign.chunk_size", 1)
     duration = _number(section.get("duration", base.reference.duration), "campaign.duration")
     if not paper.TS <= duration <= 3600.0:
         raise CampaignError(
