@@ -241,6 +241,29 @@ def test_interrupt_from_python_then_resume_equals_one_uninterrupted_run(tmp_path
         assert {f"{stem}.png", f"{stem}.svg"} <= names
 
 
+def test_map_cells_average_the_runs_they_hold():
+    from riprs.campaign.plots import aggregate
+
+    c = campaign.load_spec(tomllib.loads(SMALL))
+    table = campaign.run(c, progress=False, plots=False).table
+    rows = table.to_pylist()
+    names, (mp, noise), fall = aggregate(table, ("mp", "noise_std"), "fall_rate")
+    _, _, pend = aggregate(table, ("mp", "noise_std"), "rmse_pendulum")
+    assert names == ["LQR", "MPC"]
+    for k, name in enumerate(names):
+        for i, m in enumerate(mp):
+            for j, n in enumerate(noise):
+                key = (name, m, n)
+                cell = [r for r in rows if (r["controller"], r["mp"], r["noise_std"]) == key]
+                assert len(cell) == 4  # two seeds x two lqr.R values
+                assert fall[k, i, j] == sum(r["fell"] for r in cell) / 4
+                up = [r["rmse_pendulum"] for r in cell if not r["fell"]]
+                if up:
+                    assert pend[k, i, j] == pytest.approx(sum(up) / len(up), rel=1e-12)
+                else:
+                    assert np.isnan(pend[k, i, j])
+
+
 def test_a_changed_spec_is_refused_and_nothing_is_touched(tmp_path):
     spec = _spec(tmp_path, SMALL)
     out = tmp_path / "out"
