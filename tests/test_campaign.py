@@ -232,7 +232,9 @@ def test_interrupt_from_python_then_resume_equals_one_uninterrupted_run(tmp_path
     with pytest.raises(KeyboardInterrupt):
         campaign.run(c, out, progress=False, plots=False, on_chunk=stop_after_two)
     assert 0 < campaign.load(out).num_rows < c.runs
-    resumed = campaign.run(c, out, progress=False, plots=True)
+    with pytest.raises(campaign.CampaignError, match="'Lr' is not an axis"):
+        campaign.run(c, out, map_axes=("mp", "Lr"))
+    resumed = campaign.run(c, out, progress=False, plots=True, map_axes=("noise_std", "mp"))
     assert resumed.chunks < -(-c.runs // c.chunk_size)
     reference = campaign.run(c, progress=False, plots=False)
     assert resumed.table.equals(reference.table)

@@ -89,6 +89,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
             chunk_size=args.chunk_size,
             progress=not args.quiet,
             plots=not args.no_plots,
+            map_axes=args.map.split(",") if args.map else None,
         )
     except KeyboardInterrupt:
         print(
@@ -148,6 +149,7 @@ def build_parser() -> argparse.ArgumentParser:
     camp.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a running Dask scheduler")
     camp.add_argument("--workers", type=int, metavar="N", help="start a local Dask cluster")
     camp.add_argument("--chunk-size", type=int, metavar="N", help="runs per chunk")
+    camp.add_argument("--map", metavar="X,Y", help="axes of the maps (default: the first two)")
     camp.add_argument("--example", action="store_true", help="print the example spec")
     camp.add_argument("--no-plots", action="store_true", help="skip the figures")
     camp.add_argument("--quiet", action="store_true", help="no progress bar")

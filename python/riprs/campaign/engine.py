@@ -201,6 +201,7 @@ def run(
     chunk_size: int | None = None,
     progress: bool = True,
     plots: bool = True,
+    map_axes: Sequence[str] | None = None,
     connect_timeout: float = 10.0,
     on_chunk: Callable[[int, int], None] | None = None,
 ) -> CampaignResult:
@@ -223,6 +224,8 @@ def run(
         Show a progress bar (runs done, runs/s, time left).
     plots : bool
         Write the robustness maps and marginal plots into ``out``.
+    map_axes : pair of axis names, optional
+        The axes of the maps (default: the spec's first two).
     connect_timeout : float
         Seconds to wait for the scheduler and its first worker.
     on_chunk : callable, optional
@@ -252,6 +255,15 @@ def run(
         raise CampaignError("give scheduler or workers, not both")
     if workers is not None:
         _int(workers, "workers", 1)
+    pair = None
+    if map_axes is not None:
+        names = [a.name for a in campaign.axes]
+        if len(map_axes) != 2 or len(set(map_axes)) != 2:
+            raise CampaignError(f"map_axes must name two different axes, got {list(map_axes)}")
+        for name in map_axes:
+            if name not in names:
+                raise CampaignError(f"map_axes: {name!r} is not an axis ({', '.join(names)})")
+        pair = (map_axes[0], map_axes[1])
     engine = (
         f"dask {scheduler}"
         if scheduler
@@ -336,7 +348,7 @@ def run(
     if plots and out_path is not None and table is not None:
         from riprs.campaign import plots as campaign_plots
 
-        result.files = campaign_plots.plot_campaign(campaign, table, out_path)
+        result.files = campaign_plots.plot_campaign(campaign, table, out_path, pair)
     return result
 
 

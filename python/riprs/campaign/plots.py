@@ -177,14 +177,17 @@ def plot_marginals(
     return _save(fig, out, "marginals")
 
 
-def plot_campaign(campaign: Any, table: Any, out: Path) -> list[Path]:
-    """The default figures: fall-rate and pendulum-RMSE maps over the first two axes, and the
-    marginal plots over every axis."""
+def plot_campaign(
+    campaign: Any, table: Any, out: Path, axes: tuple[str, str] | None = None
+) -> list[Path]:
+    """The default figures: fall-rate and pendulum-RMSE maps over ``axes`` (default: the first
+    two axes of the spec), and the marginal plots over every axis."""
     names = [a.name for a in campaign.axes]
     files: list[Path] = []
-    if len(names) >= 2:
+    pair = axes or (tuple(names[:2]) if len(names) >= 2 else None)
+    if pair is not None:
         for metric in ("fall_rate", "rmse_pendulum"):
-            files += plot_map(table, names[0], names[1], metric, out, stem=f"{metric}_map")
+            files += plot_map(table, pair[0], pair[1], metric, out, stem=f"{metric}_map")
     if names:
         files += plot_marginals(table, names, out)
     return files
