@@ -1,11 +1,11 @@
 //! One iteration of the real-time loop without I/O: decode a measurement frame, step the
-//! controller, clamp and encode the command (`rip_rt::runner::LoopCore::iterate`).
+//! controller, clamp and encode the command (`rip_rt::loop_core::LoopCore::iterate`).
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use rip_rt::config::Config;
 use rip_rt::controllers::{build, ControllerKind};
+use rip_rt::loop_core::LoopCore;
 use rip_rt::protocol::{encode, Frame, Measurement, Message, MAX_FRAME};
-use rip_rt::runner::LoopCore;
 
 fn rt_loop(c: &mut Criterion) {
     let cfg = Config::default();

@@ -5,7 +5,11 @@
 //! protocol over a pseudo-terminal so the whole loop can be tested on any machine.
 //!
 //! - [`protocol`] — wire protocol v1, the `rip-protocol` crate that the firmware runs too.
-//! - [`runner`] — the periodic loop with its safety rules and exit codes.
+//! - [`runner`] — the periodic loop and its phases (probe, arming, balancing).
+//! - [`loop_core`] — the loop's logic without I/O: decoding, limits, the controller step,
+//!   command frames.
+//! - [`stop`] — stop reasons and exit codes, the stop frame on every exit path, signals.
+//! - [`log`] — the CSV log and its writer thread.
 //! - [`timing`] — absolute-deadline scheduling, latency histograms, real-time settings.
 //! - [`config`] — the TOML configuration.
 //! - [`serial`] — raw termios serial I/O and pseudo-terminals.
@@ -16,10 +20,13 @@
 pub mod config;
 pub mod controllers;
 pub mod emulator;
+pub mod log;
+pub mod loop_core;
 pub mod plant;
 pub use rip_protocol as protocol;
 pub mod runner;
 pub mod serial;
+pub mod stop;
 pub mod timing;
 
 /// `eprintln!` that ignores a failed write: once the terminal or the pipe behind stderr has

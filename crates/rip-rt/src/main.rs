@@ -3,7 +3,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, AtomicUsize};
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use clap::{Parser, Subcommand};
@@ -11,29 +11,34 @@ use clap::{Parser, Subcommand};
 use rip_rt::config::Config;
 use rip_rt::controllers::{self, ControllerKind};
 use rip_rt::emulator::{self, EmulatorConfig, EmulatorExit};
+use rip_rt::log::LogWriter;
+use rip_rt::loop_core::LoopCore;
 use rip_rt::plant::Model;
-use rip_rt::runner::{self, exit_code, LogWriter, LoopCore, RunOptions};
+use rip_rt::runner::{self, RunOptions};
 use rip_rt::serial::{Pty, SerialPort};
+use rip_rt::stop::{self, exit_code, SetupError, StopReason};
 use rip_rt::timing;
 
 const RUN_AFTER_HELP: &str = "\
-Exit codes:
+Exit codes (docs/rip-rt.md has the safety rules behind each):
     0    the run finished (--duration elapsed)
-    1    could not start: port (missing, busy) or log file or controller design failed
-         (motor never enabled)
+    1    could not start: port (missing, busy), log file (header not writable) or controller
+         design failed (motor never enabled)
     2    bad command line or configuration
     3    device lost: I/O error, or the device vanished
-    4    watchdog: no valid measurement for loop.watchdog_periods periods
+    4    watchdog: no valid measurement for loop.watchdog_periods periods (at most 100 ms)
     5    angle limit exceeded (safety.pendulum_limit / safety.arm_limit)
     6    refused to start: pendulum not within safety.start_tolerance of upright
     7    controller fault: non-finite output
     8    the device reported a driver fault
-    9    the log file could not be written
+    9    log fault: the log could not be written (disk full, file-size limit, storage stalled)
+    10   compute overrun: a step over loop.max_step_periods, loop.max_consecutive_misses
+         overrun periods in a row, or the loop stalled (suspended) for loop.watchdog_periods
+    11   refused to start: timed controller steps do not fit the period (motor never enabled)
     101  internal error (panic)
-    129  stopped by SIGHUP (terminal or session closed)
-    130  stopped by SIGINT (Ctrl-C)
-    131  stopped by SIGQUIT (Ctrl-Backslash)
-    143  stopped by SIGTERM
+    128+N  stopped by signal N: 129 SIGHUP, 130 SIGINT (Ctrl-C), 131 SIGQUIT, 138 SIGUSR1,
+         143 SIGTERM, 148 SIGTSTP (Ctrl-Z ends the run), ...; a fatal signal (SIGSEGV,
+         SIGABRT, ...) ends the process by that signal after the stop command
 Every exit after the device was opened sends 0 V with the driver disabled.";
 
 #[derive(Debug, Parser)]
@@ -210,41 +215,22 @@ fn fail(code: i32, msg: impl std::fmt::Display) -> ExitCode {
     ExitCode::from(code as u8)
 }
 
-fn cmd_run(args: RunArgs) -> ExitCode {
+/// Everything that can fail before the motor is enabled, in an order that leaves nothing
+/// behind on failure: configuration, controller design, signal dispositions, the port (a
+/// mistyped `--port` leaves an existing log untouched), the log with its header flushed.
+fn prepare(
+    args: &RunArgs,
+) -> Result<(Config, LoopCore, SerialPort, Option<LogWriter>), SetupError> {
     let cfg = match &args.config {
-        Some(path) => match Config::load(path) {
-            Ok(cfg) => cfg,
-            Err(e) => return fail(exit_code::USAGE, e),
-        },
+        Some(path) => Config::load(path)?,
         None => Config::default(),
     };
-    let controller = match controllers::build(args.controller, &cfg) {
-        Ok(c) => c,
-        Err(e) => return fail(exit_code::SETUP, e),
-    };
-    let mut core = match LoopCore::new(controller, &cfg) {
-        Ok(core) => core,
-        Err(e) => return fail(exit_code::SETUP, e),
-    };
+    let controller = controllers::build(args.controller, &cfg).map_err(SetupError::Design)?;
+    let core = LoopCore::new(controller, &cfg)?;
     let n_estimates = core.state_estimate().map_or(0, |x| x.len());
-
-    let signal = Arc::new(AtomicUsize::new(0));
-    for sig in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP, libc::SIGQUIT] {
-        if let Err(e) = signal_hook::flag::register_usize(sig, Arc::clone(&signal), sig as usize) {
-            return fail(
-                exit_code::SETUP,
-                format!("cannot install signal handler: {e}"),
-            );
-        }
-    }
-
-    let port = match SerialPort::open(&args.port, args.baud) {
-        Ok(p) => p,
-        Err(e) => return fail(exit_code::SETUP, e),
-    };
-    // The port opens first, so that a wrong --port leaves an existing log untouched; nothing
-    // has been sent to the device when the log then fails to open.
-    let mut log = match &args.log {
+    stop::install_signal_handlers()?;
+    let port = SerialPort::open(&args.port, args.baud).map_err(SetupError::Port)?;
+    let log = match &args.log {
         Some(path) => {
             let header = [
                 ("rip-rt", env!("CARGO_PKG_VERSION").to_string()),
@@ -254,21 +240,22 @@ fn cmd_run(args: RunArgs) -> ExitCode {
                 ("period_ms", cfg.loop_.period_ms.to_string()),
                 ("voltage_limit", cfg.safety.voltage_limit.to_string()),
             ];
-            match LogWriter::create(path, &header, n_estimates) {
-                Ok(w) => Some(w),
-                Err(e) => return fail(exit_code::SETUP, e),
-            }
+            Some(LogWriter::create(path, &header, n_estimates)?)
         }
         None => None,
+    };
+    Ok((cfg, core, port, log))
+}
+
+fn cmd_run(args: RunArgs) -> ExitCode {
+    let (cfg, mut core, port, mut log) = match prepare(&args) {
+        Ok(ready) => ready,
+        Err(e) => return fail(e.exit_code(), e),
     };
 
     // From here on every exit path must stop the motor; a panic does it through this hook
     // before unwinding, and again through the loop's stop guard.
-    let previous = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        runner::emergency_stop();
-        previous(info);
-    }));
+    stop::install_panic_hook();
 
     if let Some(prio) = args.rt_priority {
         if let Err(e) = timing::lock_memory() {
@@ -296,11 +283,10 @@ fn cmd_run(args: RunArgs) -> ExitCode {
         );
     }
     let opts = RunOptions {
-        controller_name: args.controller.to_string(),
         duration_s: args.duration,
         quiet: args.quiet,
     };
-    let report = runner::run(port.io(), &mut core, &cfg, &opts, log.as_mut(), &signal);
+    let report = runner::run(port.io(), &mut core, &cfg, &opts, log.as_mut());
     let mut code = report.reason.exit_code();
     let stop_note = if report.stop_sent {
         "stop command (0 V, disabled) sent"
@@ -317,36 +303,42 @@ fn cmd_run(args: RunArgs) -> ExitCode {
         p.skipped_bytes,
         report.missing_replies
     );
+    let probe_line = report
+        .probe
+        .map_or_else(|| "not run".to_string(), |p| p.to_string());
+    let mut reason = report.reason.to_string();
     if let Some(log) = log.as_mut() {
         let footer = [
             ("stop", report.reason.name().to_string()),
-            ("stop_message", report.reason.to_string()),
+            ("stop_message", reason.clone()),
             ("exit_code", code.to_string()),
             ("stop_sent", report.stop_sent.to_string()),
             ("balanced_s", format!("{:.3}", report.balanced_s)),
             ("timing", report.timing.to_string()),
+            ("probe", probe_line.clone()),
             ("link", parser_line.clone()),
         ];
+        // After a log fault the reason already says what failed; a second message about the
+        // same file would only repeat it.
         if let Err(e) = log.finish(&footer) {
-            rip_rt::say!("rip-rt: error: log write failed: {e}");
-            if code == exit_code::FINISHED {
-                code = exit_code::LOG_ERROR;
+            if !matches!(report.reason, StopReason::LogError(_)) {
+                if code == exit_code::FINISHED {
+                    code = exit_code::LOG_ERROR;
+                    reason = format!("run finished, but its log could not be completed: {e}");
+                } else {
+                    reason = format!("{reason}; the log could not be completed: {e}");
+                }
             }
         }
     }
-    let level =
-        if code == exit_code::FINISHED || matches!(report.reason, runner::StopReason::Signal(_)) {
-            "stop"
-        } else {
-            "FAULT"
-        };
-    let reason = if code == exit_code::LOG_ERROR && report.reason == runner::StopReason::Finished {
-        "run finished, but its log could not be completed".to_string()
+    let level = if report.reason.is_orderly() && code != exit_code::LOG_ERROR {
+        "stop"
     } else {
-        report.reason.to_string()
+        "FAULT"
     };
     rip_rt::say!("rip-rt: {level}: {reason} — {stop_note}");
     rip_rt::say!("rip-rt: timing: {}", report.timing);
+    rip_rt::say!("rip-rt: probe: {probe_line}");
     rip_rt::say!("rip-rt: link: {parser_line}");
     ExitCode::from(code as u8)
 }

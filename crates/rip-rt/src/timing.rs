@@ -78,6 +78,11 @@ impl Periodic {
         self.period_ns
     }
 
+    /// The deadline [`wait`](Self::wait) will wait for next (before any skipping).
+    pub fn next_deadline_ns(&self) -> u64 {
+        self.next_ns
+    }
+
     /// Deadline misses so far: iterations that ended after the next deadline had passed.
     pub fn missed(&self) -> u64 {
         self.missed

@@ -8,6 +8,7 @@
 //! outcome.
 
 use std::io::{BufRead, BufReader, Read};
+use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
@@ -132,6 +133,33 @@ fn spawn_run(device: &Path, controller: &str, extra: &[&str]) -> Child {
         .stderr(Stdio::piped())
         .spawn()
         .expect("spawn run")
+}
+
+/// `rip-rt run` with a file-size limit of `bytes` (`ulimit -f`): the kernel sends SIGXFSZ on
+/// the write that crosses it.
+fn spawn_run_with_file_limit(device: &Path, controller: &str, extra: &[&str], bytes: u64) -> Child {
+    let mut cmd = Command::new(BIN);
+    cmd.arg("run")
+        .arg("--port")
+        .arg(device)
+        .args(["--controller", controller])
+        .args(extra)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped());
+    // SAFETY: setrlimit is async-signal-safe and touches only the child.
+    unsafe {
+        cmd.pre_exec(move || {
+            let lim = libc::rlimit {
+                rlim_cur: bytes,
+                rlim_max: bytes,
+            };
+            if libc::setrlimit(libc::RLIMIT_FSIZE, &lim) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    cmd.spawn().expect("spawn run")
 }
 
 fn run(device: &Path, controller: &str, extra: &[&str]) -> RunResult {
@@ -342,24 +370,183 @@ fn vanished_device_is_a_safe_stop_with_exit_code_3() {
     );
 }
 
+/// Starts a balancing run, sends `sig` after 1.5 s and returns the result with the commands
+/// the device received.
+fn signal_a_balancing_run(sig: i32, name: &str) -> (RunResult, Vec<(i32, u8)>) {
+    let emu = Emulator::start(&format!("signal-{sig}"), &["--noise", "0.3"]);
+    let child = spawn_run(&emu.device, "lqr", &[]);
+    std::thread::sleep(Duration::from_millis(1500));
+    unsafe { libc::kill(child.id() as i32, sig) };
+    let r = wait_with_timeout(child, Duration::from_secs(10));
+    let commands = emu.commands();
+    assert!(
+        commands.iter().any(|&(mv, f)| f == 1 && mv != 0),
+        "{name}: never balanced: {}",
+        r.stderr
+    );
+    (r, commands)
+}
+
+/// Stop signals (operator's, job control, timers, user-defined, real-time) end the run with
+/// 128 + the signal and 0 V as the last command the device received.
 #[test]
 fn signals_leave_zero_volts_as_the_last_command() {
     let _serial = one_at_a_time();
-    for (sig, name, code) in [(libc::SIGINT, "SIGINT", 130), (libc::SIGHUP, "SIGHUP", 129)] {
-        let emu = Emulator::start(&format!("signal-{sig}"), &["--noise", "0.3"]);
-        let child = spawn_run(&emu.device, "lqr", &[]);
-        std::thread::sleep(Duration::from_millis(1500));
-        unsafe { libc::kill(child.id() as i32, sig) };
-        let r = wait_with_timeout(child, Duration::from_secs(10));
-        assert_eq!(r.status.code(), Some(code), "{}", r.stderr);
+    let rtmin = libc::SIGRTMIN();
+    for (sig, name) in [
+        (libc::SIGINT, "SIGINT"),
+        (libc::SIGHUP, "SIGHUP"),
+        (libc::SIGUSR1, "SIGUSR1"),
+        (libc::SIGUSR2, "SIGUSR2"),
+        (libc::SIGALRM, "SIGALRM"),
+        (libc::SIGTSTP, "SIGTSTP"),
+        (rtmin, "SIGRTMIN+0"),
+    ] {
+        let (r, commands) = signal_a_balancing_run(sig, name);
+        assert_eq!(r.status.code(), Some(128 + sig), "{name}: {}", r.stderr);
         assert!(r.stderr.contains(name), "{}", r.stderr);
-        let commands = emu.commands();
-        assert!(
-            commands.iter().any(|&(mv, f)| f == 1 && mv != 0),
-            "{name}: never balanced"
-        );
         assert_eq!(commands.last(), Some(&(0, 0)), "{name}");
     }
+}
+
+/// Fatal signals (what a crash raises) send the stop frame from the handler, then end the
+/// process with the signal's default action.
+#[test]
+fn fatal_signals_leave_zero_volts_as_the_last_command() {
+    let _serial = one_at_a_time();
+    for (sig, name) in [(libc::SIGSEGV, "SIGSEGV"), (libc::SIGABRT, "SIGABRT")] {
+        let (r, commands) = signal_a_balancing_run(sig, name);
+        assert_eq!(
+            r.status.signal(),
+            Some(sig),
+            "{name}: {:?} {}",
+            r.status,
+            r.stderr
+        );
+        assert!(r.stderr.contains("fatal signal"), "{}", r.stderr);
+        assert_eq!(commands.last(), Some(&(0, 0)), "{name}");
+    }
+}
+
+/// Signals that must not end the run: terminal and job-control noise, a resumed process, a
+/// broken pipe raised by someone else.
+#[test]
+fn harmless_signals_do_not_end_the_run() {
+    let _serial = one_at_a_time();
+    let emu = Emulator::start("harmless", &["--noise", "0.3", "--seed", "4"]);
+    let child = spawn_run(&emu.device, "lqr", &["--duration", "3"]);
+    std::thread::sleep(Duration::from_millis(1200));
+    for sig in [
+        libc::SIGWINCH,
+        libc::SIGCONT,
+        libc::SIGTTOU,
+        libc::SIGPIPE,
+        libc::SIGXFSZ,
+        libc::SIGCHLD,
+        libc::SIGURG,
+    ] {
+        unsafe { libc::kill(child.id() as i32, sig) };
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let r = wait_with_timeout(child, Duration::from_secs(15));
+    assert_eq!(r.status.code(), Some(0), "{}", r.stderr);
+    assert_eq!(emu.commands().last(), Some(&(0, 0)));
+}
+
+/// A log that outgrows the file-size limit: the kernel's SIGXFSZ must not kill the loop; the
+/// failed write (EFBIG) is a log fault that stops the run safely, reported once.
+#[test]
+fn a_log_over_the_file_size_limit_is_a_log_fault() {
+    let _serial = one_at_a_time();
+    let emu = Emulator::start("xfsz", &["--noise", "0.3", "--seed", "6"]);
+    let log = scratch("xfsz.csv");
+    // About 200 rows of the LQR's log: two seconds of balancing.
+    let child = spawn_run_with_file_limit(
+        &emu.device,
+        "lqr",
+        &["--duration", "10", "--log", log.to_str().unwrap()],
+        20 * 1024,
+    );
+    let r = wait_with_timeout(child, Duration::from_secs(20));
+    assert_eq!(r.status.code(), Some(9), "{:?}: {}", r.status, r.stderr);
+    assert!(r.stderr.contains("log fault"), "{}", r.stderr);
+    assert_eq!(
+        r.stderr.matches("File too large").count(),
+        1,
+        "reported once: {}",
+        r.stderr
+    );
+    let commands = emu.commands();
+    assert!(
+        commands.iter().any(|&(mv, f)| f == 1 && mv != 0),
+        "never balanced"
+    );
+    assert_eq!(commands.last(), Some(&(0, 0)));
+}
+
+/// A log that cannot be written at all fails the start, before any enabling command.
+#[test]
+fn an_unwritable_log_fails_before_the_motor_is_enabled() {
+    let _serial = one_at_a_time();
+    let emu = Emulator::start("devfull", &[]);
+    let r = run(
+        &emu.device,
+        "lqr",
+        &["--duration", "2", "--log", "/dev/full"],
+    );
+    assert_eq!(r.status.code(), Some(1), "{}", r.stderr);
+    assert!(r.stderr.contains("--log /dev/full"), "{}", r.stderr);
+    assert!(
+        emu.commands().iter().all(|&(_, f)| f == 0),
+        "motor was enabled"
+    );
+}
+
+/// A design far too slow for the period (an MPC of horizon 200 on Clarabel, hundreds of ms
+/// per step at a 10 ms period) is timed before enabling and refused.
+#[test]
+fn a_controller_too_slow_for_the_period_is_refused_before_enabling() {
+    let _serial = one_at_a_time();
+    let cfg = scratch("slow.toml");
+    std::fs::write(
+        &cfg,
+        "[mpc]\nhorizon = 200\ncontrol_horizon = 200\nsolver = \"clarabel\"\n",
+    )
+    .unwrap();
+    let emu = Emulator::start("slow", &[]);
+    let r = run(
+        &emu.device,
+        "mpc",
+        &["--duration", "2", "--config", cfg.to_str().unwrap()],
+    );
+    assert_eq!(r.status.code(), Some(11), "{}", r.stderr);
+    assert!(r.stderr.contains("per step"), "{}", r.stderr);
+    assert!(
+        emu.commands().iter().all(|&(_, f)| f == 0),
+        "motor was enabled"
+    );
+}
+
+/// A loop that stops running while the motor is enabled (SIGSTOP, which cannot be caught) and
+/// is resumed later must not carry on from its stale state: it stops as stalled.
+#[test]
+fn a_loop_resumed_after_a_stall_stops() {
+    let _serial = one_at_a_time();
+    let emu = Emulator::start("stall", &["--noise", "0.3"]);
+    let child = spawn_run(&emu.device, "lqr", &["--duration", "10"]);
+    std::thread::sleep(Duration::from_millis(1500));
+    unsafe { libc::kill(child.id() as i32, libc::SIGSTOP) };
+    std::thread::sleep(Duration::from_millis(300));
+    unsafe { libc::kill(child.id() as i32, libc::SIGCONT) };
+    let r = wait_with_timeout(child, Duration::from_secs(15));
+    assert_eq!(r.status.code(), Some(10), "{}", r.stderr);
+    assert!(r.stderr.contains("stalled"), "{}", r.stderr);
+    let commands = emu.commands();
+    assert!(
+        commands.iter().any(|&(mv, f)| f == 1 && mv != 0),
+        "never balanced"
+    );
+    assert_eq!(commands.last(), Some(&(0, 0)));
 }
 
 #[test]
