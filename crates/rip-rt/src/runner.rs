@@ -17,11 +17,9 @@
 //! `loop.max_step_periods` (compute overrun) and no repeated enabling command more than
 //! `loop.watchdog_periods` (and never more than [`MAX_BLIND_MS`]) after the last measurement;
 //! `loop.max_consecutive_misses` overrun periods in a row, or a loop that did not run for
-//! `loop.watchdog_periods`, stop it.
-//!
-//! [`MAX_BLIND_MS`]: crate::config::MAX_BLIND_MS
+//! [`MAX_BLIND_MS`] (suspended, starved), stop it.
 
-use crate::config::Config;
+use crate::config::{Config, MAX_BLIND_MS};
 use crate::log::{LogWriter, Row};
 use crate::loop_core::{LoopCore, StepOutput, FLAG_DEADLINE_MISS, FLAG_NO_REPLY};
 use crate::protocol::{Measurement, ParserStats, MAX_FRAME};
@@ -226,10 +224,15 @@ impl Runner<'_> {
         let Phase::Balancing { start_ns } = phase else {
             return Ok(());
         };
-        // A loop that did not run (suspended with SIGSTOP, starved of the CPU) for as long as
-        // the watchdog tolerates no measurement has driven blind as long.
-        if tick.skipped >= u64::from(self.watchdog) {
-            return Err(StopReason::Overrun(Overrun::Stall(tick.skipped)));
+        // A loop that did not run (suspended with SIGSTOP, starved of the CPU) has driven
+        // blind all that time; past the hard bound its controller state is too stale to go on.
+        // Deadlines skipped before the wait, and lateness after it: a stop during the sleep
+        // shows as the latter.
+        let absent_ns = tick.skipped * self.period_ns + tick.lateness_ns;
+        if absent_ns as f64 >= MAX_BLIND_MS * 1e6 {
+            return Err(StopReason::Overrun(Overrun::Stall {
+                ms: absent_ns as f64 * 1e-6,
+            }));
         }
         if tick.skipped > 0 {
             self.misses_in_row += 1;

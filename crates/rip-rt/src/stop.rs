@@ -78,10 +78,13 @@ pub enum Overrun {
     /// `loop.max_consecutive_misses` periods in a row overran their deadline.
     #[error("{0} periods in a row overran their deadline (loop.max_consecutive_misses)")]
     Misses(u32),
-    /// The loop did not run for this many periods (suspended, or starved of the CPU): as long
-    /// as the watchdog allows driving without a measurement, or longer.
-    #[error("the loop stalled for {0} periods (suspended or starved of the CPU)")]
-    Stall(u64),
+    /// The loop did not run (suspended, or starved of the CPU) for
+    /// [`MAX_BLIND_MS`](crate::config::MAX_BLIND_MS) or longer.
+    #[error("the loop stalled for {ms:.0} ms (suspended or starved of the CPU)")]
+    Stall {
+        /// How long (ms).
+        ms: f64,
+    },
 }
 
 /// Why the loop stopped. Each reason has its own exit code ([`StopReason::exit_code`]).
