@@ -24,10 +24,11 @@ from riprs.design import KalmanDesign, c2d, dare, dlqe, dlqr, kalman
 from riprs.log import LogError, RtLog, load_log
 from riprs.mpc import Mpc, MpcSolution
 from riprs.plant import FurutaParams, Plant
-from riprs.sim import SimResult, simulate, simulate_batch
+from riprs.sim import BatchMetrics, SimResult, simulate, simulate_batch, simulate_metrics
 from riprs.statespace import StateSpace
 
 __all__ = [
+    "BatchMetrics",
     "FurutaParams",
     "InvalidParameterError",
     "KalmanDesign",
@@ -60,4 +61,5 @@ __all__ = [
     "paper",
     "simulate",
     "simulate_batch",
+    "simulate_metrics",
 ]

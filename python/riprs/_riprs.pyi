@@ -1,6 +1,6 @@
 """Type stubs for the native module ``riprs._riprs`` (checked by ``mypy.stubtest``)."""
 
-from typing import Any, Sequence, final
+from typing import Any, Callable, Sequence, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -206,6 +206,17 @@ def sim_batch(
     config: dict[str, Any],
     paired: bool,
 ) -> list[dict[str, Any]]: ...
+def sim_metrics(
+    plant: Plant,
+    controller: Any,
+    config: dict[str, Any],
+    runs: int,
+    first_run: int,
+    perturbation: float,
+    parameters: list[str],
+    settle_band: float,
+    progress: Callable[[int, int], object] | None = None,
+) -> dict[str, Any]: ...
 
 @final
 class MpcSolution:

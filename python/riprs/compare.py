@@ -34,7 +34,7 @@ from riprs import paper
 from riprs._riprs import FurutaParams, Lqg, Lqr, Plant, RiprsError
 from riprs.config import CompareConfig, ConfigError, load_config
 from riprs.design import dlqr
-from riprs.sim import SimResult, simulate, simulate_batch
+from riprs.sim import BatchMetrics, SimResult, simulate, simulate_metrics
 from riprs.statespace import StateSpace
 
 __all__ = [
@@ -94,18 +94,32 @@ def rmse(traj: Trajectory) -> tuple[float, float, float]:
 
 @dataclass(frozen=True)
 class MonteCarloResult:
-    """Per controller, one row ``(rmse_arm, rmse_pendulum, rmse_voltage)`` per run, and falls."""
+    """Per controller, the metrics of every Monte Carlo run (:class:`riprs.BatchMetrics`).
 
-    rmse: dict[str, np.ndarray]
-    fell: dict[str, np.ndarray]
+    Only a few numbers per run are kept, never a trajectory, so a study of any size fits in
+    memory. The RMSE indices are :attr:`riprs.SimResult.rmse`'s (``rip-core``'s Tab. 1
+    definition).
+    """
+
+    runs: dict[str, BatchMetrics]
+
+    @property
+    def rmse(self) -> dict[str, np.ndarray]:
+        """Per controller, one row ``(rmse_arm, rmse_pendulum, rmse_voltage)`` per run."""
+        return {name: m.rmse for name, m in self.runs.items()}
+
+    @property
+    def fell(self) -> dict[str, np.ndarray]:
+        """Per controller, whether each run fell."""
+        return {name: m.fell for name, m in self.runs.items()}
 
     def summary(self) -> dict[str, dict[str, float]]:
         """Mean and standard deviation of each index over the runs that stayed up, and the fall
         rate."""
         out: dict[str, dict[str, float]] = {}
-        for name, values in self.rmse.items():
-            up = values[~self.fell[name]]
-            stats: dict[str, float] = {"fall_rate": float(self.fell[name].mean())}
+        for name, m in self.runs.items():
+            up = m.rmse[~m.fell]
+            stats: dict[str, float] = {"fall_rate": float(m.fell.mean())}
             for j, key in enumerate(("arm", "pendulum", "voltage")):
                 column = up[:, j] if len(up) else np.array([np.nan])
                 stats[f"{key}_mean"] = float(np.mean(column))
@@ -296,37 +310,41 @@ def compare(
     return result
 
 
-def _perturbed_params(cfg: CompareConfig, seed: int) -> list[FurutaParams]:
-    base = _params(cfg)
-    nominal = base.to_dict()
-    rng = np.random.default_rng(seed)
-    p = cfg.monte_carlo.perturbation
-    variants = []
-    for _ in range(cfg.monte_carlo.runs):
-        factors = rng.uniform(1 - p, 1 + p, len(cfg.monte_carlo.parameters))
-        changes = {
-            name: nominal[name] * f
-            for name, f in zip(cfg.monte_carlo.parameters, factors, strict=True)
-        }
-        variants.append(base.replace(**changes))
-    return variants
-
-
 def _monte_carlo(
     cfg: CompareConfig, controllers: Mapping[str, Any], seed: int, progress: bool
 ) -> MonteCarloResult:
-    variants = [Plant(p) for p in _perturbed_params(cfg, seed)]
-    seeds = [seed + 1 + i for i in range(cfg.monte_carlo.runs)]
+    """Run ``i`` uses noise seed ``seed + 1 + i`` and its own parameter draw (see
+    :func:`riprs.simulate_metrics`); only per-run metrics are kept."""
     options = _sim_options(cfg)
-    rmse_rows: dict[str, np.ndarray] = {}
-    fell: dict[str, np.ndarray] = {}
-    for name in _progress(list(controllers), "monte carlo", progress):
-        results = simulate_batch(
-            variants, controllers[name], seeds, cfg.reference.duration, paired=True, **options
-        )
-        rmse_rows[name] = np.array([rmse(Trajectory.from_sim(r)) for r in results])
-        fell[name] = np.array([r.fell for r in results])
-    return MonteCarloResult(rmse_rows, fell)
+    runs = cfg.monte_carlo.runs
+    results: dict[str, BatchMetrics] = {}
+    for name, controller in controllers.items():
+        bar = _progress_bar(runs, f"monte carlo {name}", progress)
+        report = None if bar is None else (lambda done, _total, b=bar: b.update(done - b.n))
+        try:
+            results[name] = simulate_metrics(
+                _plant(cfg),
+                controller,
+                runs,
+                cfg.reference.duration,
+                seed=seed + 1,
+                perturbation=cfg.monte_carlo.perturbation,
+                parameters=cfg.monte_carlo.parameters,
+                progress=report,
+                **options,
+            )
+        finally:
+            if bar is not None:
+                bar.close()
+    return MonteCarloResult(results)
+
+
+def _progress_bar(total: int, desc: str, enabled: bool) -> Any:
+    if not enabled:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=desc, unit="run", leave=False)
 
 
 def format_table(
@@ -414,10 +432,40 @@ def _write_trajectories(trajectories: Mapping[str, Trajectory], path: Path) -> P
 
 
 def _write_monte_carlo(mc: MonteCarloResult, path: Path) -> Path:
+    """One row per controller and run; empty cells for a fall time or settling time that does
+    not exist."""
+
+    def cell(v: float) -> str:
+        return repr(float(v)) if np.isfinite(v) else ""
+
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["controller", "run", "rmse_arm", "rmse_pendulum", "rmse_voltage", "fell"])
-        for name, rows in mc.rmse.items():
-            for i, (row, fell) in enumerate(zip(rows, mc.fell[name], strict=True)):
-                w.writerow([name, i, *(repr(float(v)) for v in row), int(fell)])
+        w.writerow(
+            [
+                "controller",
+                "run",
+                "seed",
+                "rmse_arm",
+                "rmse_pendulum",
+                "rmse_voltage",
+                "fell",
+                "fall_time",
+                "peak_voltage",
+                "settle_time",
+            ]
+        )
+        for name, m in mc.runs.items():
+            for i in range(len(m)):
+                w.writerow(
+                    [
+                        name,
+                        int(m.run[i]),
+                        int(m.seed[i]),
+                        *(repr(float(v)) for v in m.rmse[i]),
+                        int(m.fell[i]),
+                        cell(m.fall_time[i]),
+                        repr(float(m.peak_voltage[i])),
+                        cell(m.settle_time[i]),
+                    ]
+                )
     return path

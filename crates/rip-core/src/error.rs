@@ -54,6 +54,9 @@ pub enum RipError {
     /// A scalar setting or parameter is out of its valid range.
     #[error("invalid {name}: {reason}")]
     InvalidParameter { name: String, reason: String },
+    /// The caller asked a long computation to stop (for example on Ctrl-C) before it finished.
+    #[error("cancelled before the computation finished")]
+    Cancelled,
 }
 
 impl RipError {

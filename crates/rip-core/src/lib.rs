@@ -14,12 +14,14 @@
 //! - [`plant`] — the nonlinear Furuta pendulum ([`Plant`], [`FurutaParams`]) and RK4; [`fit`]
 //!   recovers physical parameters from a discrete linear model.
 //! - [`regulators`] — [`Lqr`] and [`Lqg`] behind the [`Controller`] trait; [`sim`] runs them in
-//!   closed loop ([`simulate`], [`simulate_batch`]); [`metrics`] computes the paper's Tab. 1.
+//!   closed loop ([`simulate`], [`simulate_batch`]); [`metrics`] computes the paper's Tab. 1;
+//!   [`batch`] runs Monte Carlo studies that keep only per-run metrics.
 //! - [`mpc`] — constrained MPC with soft output bounds and the disturbance-model Kalman filter
 //!   ([`Mpc`]), solved by Clarabel or a dense active-set method.
 //!
 //! Every fallible routine returns [`RipError`], whose variants name the offending argument.
 
+pub mod batch;
 pub mod controller;
 pub mod dare;
 pub mod error;

@@ -20,18 +20,39 @@ pub fn rmse(a: &[f64], b: &[f64]) -> f64 {
 /// [ √(Σ (θ_k − θ_ref,k)²/N),  √(Σ (α_k − α_ref,k)²/N),  √(Σ u_k²/N) ]
 /// ```
 pub fn table1_rmse(result: &SimResult) -> [f64; 3] {
-    let n = result.len();
-    if n == 0 {
-        return [f64::NAN; 3];
+    let mut acc = Table1::default();
+    for k in 0..result.len() {
+        acc.push(&result.x[k], &result.y[k], result.u[k], &result.r[k]);
     }
-    let mut acc = [0.0; 3];
-    for k in 0..n {
-        let (x, r) = (result.x[k], result.r[k]);
-        acc[0] += (x[0] - r[0]).powi(2);
-        acc[1] += (x[2] - r[1]).powi(2);
-        acc[2] += result.u[k].powi(2);
+    acc.finish()
+}
+
+/// [`table1_rmse`] accumulated one sample at a time, so a batch that keeps no trajectory
+/// (`crate::batch`) computes exactly the same indices in constant memory.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Table1 {
+    sums: [f64; 3],
+    n: usize,
+}
+
+impl Table1 {
+    /// Adds sample `k`: true state `x`, measured outputs `y`, applied input `u`, reference `r`.
+    #[inline]
+    pub fn push(&mut self, x: &[f64; 4], y: &[f64; 2], u: f64, r: &[f64; 2]) {
+        let _ = y;
+        self.sums[0] += (x[0] - r[0]).powi(2);
+        self.sums[1] += (x[2] - r[1]).powi(2);
+        self.sums[2] += u * u;
+        self.n += 1;
     }
-    acc.map(|s| (s / n as f64).sqrt())
+
+    /// The indices so far (`NaN` before the first sample).
+    pub fn finish(&self) -> [f64; 3] {
+        if self.n == 0 {
+            return [f64::NAN; 3];
+        }
+        self.sums.map(|s| (s / self.n as f64).sqrt())
+    }
 }
 
 #[cfg(test)]

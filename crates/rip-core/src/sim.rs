@@ -20,6 +20,7 @@
 //! taken and flagged, so it never holds NaN. Everything a run needs is preallocated before the
 //! loop. [`simulate_batch`] runs many seeds and parameter variants in parallel with rayon.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use rand::rngs::StdRng;
@@ -284,13 +285,63 @@ fn quantise(angle: f64, counts: f64) -> f64 {
     q * (angle / q).round()
 }
 
-/// Runs one closed loop (module docs). The controller is [`reset`](Controller::reset) first and
-/// must have 2 outputs and 1 input.
-pub fn simulate(
-    plant: &Plant,
-    controller: &mut dyn Controller,
-    config: &SimConfig,
-) -> Result<SimResult> {
+/// Never set: the cancel flag of the calls that cannot be cancelled.
+static NEVER: AtomicBool = AtomicBool::new(false);
+
+/// What one closed-loop run hands to its record, once per control sample.
+pub(crate) trait Recorder {
+    /// Sample `k` at time `t`: true state `x`, measured `y`, applied input `u`, reference `r`,
+    /// the controller's estimate after its step and the step's wall-clock time (s).
+    #[allow(clippy::too_many_arguments)]
+    fn sample(
+        &mut self,
+        t: f64,
+        x: &[f64; 4],
+        y: &[f64; 2],
+        u: f64,
+        r: &[f64; 2],
+        estimate: Option<&[f64]>,
+        elapsed: f64,
+    );
+}
+
+/// How a run ended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Outcome {
+    pub fallbacks: usize,
+    pub fell: bool,
+    pub fall_time: Option<f64>,
+    pub x_final: [f64; 4],
+}
+
+impl Recorder for SimResult {
+    #[inline]
+    fn sample(
+        &mut self,
+        t: f64,
+        x: &[f64; 4],
+        y: &[f64; 2],
+        u: f64,
+        r: &[f64; 2],
+        estimate: Option<&[f64]>,
+        elapsed: f64,
+    ) {
+        self.t.push(t);
+        self.x.push(*x);
+        self.y.push(*y);
+        self.u.push(u);
+        self.r.push(*r);
+        self.compute_time.push(elapsed);
+        if let Some(est) = estimate {
+            self.x_hat
+                .extend_from_slice(&est[..self.n_estimate.min(est.len())]);
+        }
+    }
+}
+
+/// Validates a run and returns its number of samples: the configuration, and a controller
+/// with 2 outputs, 1 input and (if it has one) the configured sample time.
+pub(crate) fn prepare(controller: &dyn Controller, config: &SimConfig) -> Result<usize> {
     let n = config.validate()?;
     if controller.n_outputs() != 2 || controller.n_inputs() != 1 {
         return Err(RipError::invalid(
@@ -314,17 +365,37 @@ pub fn simulate(
             ));
         }
     }
+    Ok(n)
+}
+
+/// The closed loop of the module docs over `n` samples of a [`prepare`]d run, feeding `record`.
+/// Checks `cancel` once per control sample.
+pub(crate) fn run_loop(
+    plant: &Plant,
+    controller: &mut dyn Controller,
+    config: &SimConfig,
+    n: usize,
+    record: &mut impl Recorder,
+    cancel: &AtomicBool,
+) -> Result<Outcome> {
     controller.reset();
-    let n_est = controller.state_estimate().map_or(0, |s| s.len());
-    let mut out = SimResult::with_capacity(n, n_est);
     let mut rng = StdRng::seed_from_u64(config.seed);
     let mut x = State::from_row_slice(&config.x0);
     let (ts, substeps) = (config.ts, config.substeps);
     let h = ts / substeps as f64;
     let mut u = [0.0];
     let mut y = [0.0; 2];
+    let mut out = Outcome {
+        fallbacks: 0,
+        fell: false,
+        fall_time: None,
+        x_final: [0.0; 4],
+    };
 
     for k in 0..n {
+        if cancel.load(Ordering::Relaxed) {
+            return Err(RipError::Cancelled);
+        }
         let t = k as f64 * ts;
         for (i, yi) in y.iter_mut().enumerate() {
             let angle = x[2 * i];
@@ -366,16 +437,15 @@ pub fn simulate(
         } else {
             0.0
         };
-
-        out.t.push(t);
-        out.x.push([x[0], x[1], x[2], x[3]]);
-        out.y.push(y);
-        out.u.push(u_applied);
-        out.r.push(r);
-        out.compute_time.push(elapsed);
-        if let Some(est) = controller.state_estimate() {
-            out.x_hat.extend_from_slice(&est[..n_est.min(est.len())]);
-        }
+        record.sample(
+            t,
+            &[x[0], x[1], x[2], x[3]],
+            &y,
+            u_applied,
+            &r,
+            controller.state_estimate(),
+            elapsed,
+        );
 
         for j in 0..substeps {
             let t_sub = t + j as f64 * h;
@@ -399,6 +469,35 @@ pub fn simulate(
         }
     }
     out.x_final = [x[0], x[1], x[2], x[3]];
+    Ok(out)
+}
+
+/// Runs one closed loop (module docs). The controller is [`reset`](Controller::reset) first and
+/// must have 2 outputs and 1 input.
+pub fn simulate(
+    plant: &Plant,
+    controller: &mut dyn Controller,
+    config: &SimConfig,
+) -> Result<SimResult> {
+    simulate_cancellable(plant, controller, config, &NEVER)
+}
+
+/// [`simulate`] that stops with [`RipError::Cancelled`] within one control sample of `cancel`
+/// being set (by another thread, e.g. on Ctrl-C).
+pub fn simulate_cancellable(
+    plant: &Plant,
+    controller: &mut dyn Controller,
+    config: &SimConfig,
+    cancel: &AtomicBool,
+) -> Result<SimResult> {
+    let n = prepare(controller, config)?;
+    let n_est = controller.state_estimate().map_or(0, |s| s.len());
+    let mut out = SimResult::with_capacity(n, n_est);
+    let end = run_loop(plant, controller, config, n, &mut out, cancel)?;
+    out.fallbacks = end.fallbacks;
+    out.fell = end.fell;
+    out.fall_time = end.fall_time;
+    out.x_final = end.x_final;
     Ok(out)
 }
 
@@ -449,6 +548,18 @@ pub fn simulate_runs(
     config: &SimConfig,
     controllers: Vec<Box<dyn Controller>>,
 ) -> Result<Vec<SimResult>> {
+    simulate_runs_cancellable(plants, runs, config, controllers, &NEVER)
+}
+
+/// [`simulate_runs`] that stops with [`RipError::Cancelled`] soon after `cancel` is set: no run
+/// starts after it, and running ones stop within one control sample.
+pub fn simulate_runs_cancellable(
+    plants: &[Plant],
+    runs: &[(usize, u64)],
+    config: &SimConfig,
+    controllers: Vec<Box<dyn Controller>>,
+    cancel: &AtomicBool,
+) -> Result<Vec<SimResult>> {
     config.validate()?;
     if runs.is_empty() {
         return Err(RipError::invalid("runs", "need at least one run"));
@@ -477,7 +588,7 @@ pub fn simulate_runs(
                 seed,
                 ..config.clone()
             };
-            simulate(&plants[plant], controller.as_mut(), &cfg)
+            simulate_cancellable(&plants[plant], controller.as_mut(), &cfg, cancel)
         })
         .collect()
 }

@@ -1,5 +1,9 @@
-//! Bindings for `rip_core::regulators`: `Lqr` and `Lqg`, and [`extract_controller`], which turns
-//! any controller object from Python into an owned `Box<dyn Controller>` for the simulator.
+//! Bindings for `rip_core::regulators`: `Lqr` and `Lqg`, and [`controller_factory`], which turns
+//! any controller object from Python into owned copies (`Box<dyn Controller>`) for the simulator.
+//! The classes are `frozen` with their controller in a [`Shared`] mutex, so several Python
+//! threads may use one object at once (see `crate::shared`).
+
+use std::sync::{Mutex, PoisonError};
 
 use numpy::ndarray::Array1;
 use numpy::{IntoPyArray, PyArray1, PyArray2};
@@ -11,23 +15,42 @@ use rip_core::{Controller, Lqg, Lqr};
 use crate::convert::mat_to_py;
 use crate::errors::IntoPyResult;
 use crate::plant::{matrix_arg, vector_arg};
+use crate::shared::Shared;
 
 type Py1<'py> = Bound<'py, PyArray1<f64>>;
 type Py2<'py> = Bound<'py, PyArray2<f64>>;
 
-/// An owned copy of the Rust controller inside a Python controller object.
+/// Makes fresh copies of one controller, for a simulation or one per run of a batch.
+pub type ControllerFactory = Box<dyn Fn() -> Box<dyn Controller> + Send + Sync>;
+
+fn factory_of<C: Controller + Clone + 'static>(template: C) -> ControllerFactory {
+    // Behind a mutex so controllers that are `Send` but not `Sync` can be cloned from any
+    // worker thread.
+    let template = Mutex::new(template);
+    Box::new(move || {
+        let c = template
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone();
+        Box::new(c)
+    })
+}
+
+/// A factory of copies of the Rust controller inside a Python controller object, taken at this
+/// moment: the simulator runs on its own copies, never on the object itself, so it neither
+/// changes the caller's controller nor races with another thread stepping it.
 ///
-/// Each arm downcasts one controller pyclass and clones its inner controller, so the simulator
-/// runs on its own copy (and a batch on one copy per run). New controller classes add an arm.
-pub fn extract_controller(obj: &Bound<'_, PyAny>) -> PyResult<Box<dyn Controller>> {
+/// Each arm downcasts one controller pyclass. New controller classes add an arm.
+pub fn controller_factory(obj: &Bound<'_, PyAny>) -> PyResult<ControllerFactory> {
+    let py = obj.py();
     if let Ok(c) = obj.downcast::<PyLqr>() {
-        return Ok(Box::new(c.borrow().inner.clone()));
+        return Ok(factory_of(c.get().inner.lock(py).clone()));
     }
     if let Ok(c) = obj.downcast::<PyLqg>() {
-        return Ok(Box::new(c.borrow().inner.clone()));
+        return Ok(factory_of(c.get().inner.lock(py).clone()));
     }
     if let Ok(c) = obj.downcast::<crate::mpc::PyMpc>() {
-        return Ok(Box::new(c.borrow().inner.clone()));
+        return Ok(factory_of(c.get().inner.lock(py).clone()));
     }
     Err(PyTypeError::new_err(format!(
         "controller must be a riprs controller (Lqr, Lqg, Mpc), got {}",
@@ -35,10 +58,17 @@ pub fn extract_controller(obj: &Bound<'_, PyAny>) -> PyResult<Box<dyn Controller
     )))
 }
 
-/// Runs one `Controller::step` on array-like `y`, `r` and returns `u` as an array.
-fn step_py<'py>(
+/// An owned copy of the Rust controller inside a Python controller object (see
+/// [`controller_factory`]).
+pub fn extract_controller(obj: &Bound<'_, PyAny>) -> PyResult<Box<dyn Controller>> {
+    Ok(controller_factory(obj)?())
+}
+
+/// Runs one `Controller::step` on array-like `y`, `r` and returns `u` as an array. The step
+/// itself runs with the GIL released.
+fn step_py<'py, C: Controller>(
     py: Python<'py>,
-    c: &mut dyn Controller,
+    c: &Shared<C>,
     y: &Bound<'py, PyAny>,
     r: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Py1<'py>> {
@@ -48,13 +78,16 @@ fn step_py<'py>(
         _ => [0.0; 2],
     };
     let mut u = [0.0];
-    c.step(&y, &r, &mut u);
+    let mut guard = c.lock(py);
+    let inner: &mut C = &mut guard;
+    py.allow_threads(|| inner.step(&y, &r, &mut u));
+    drop(guard);
     Ok(Array1::from_vec(u.to_vec()).into_pyarray(py))
 }
 
-fn estimate_py<'py>(py: Python<'py>, c: &dyn Controller) -> Option<Py1<'py>> {
-    c.state_estimate()
-        .map(|s| Array1::from_vec(s.to_vec()).into_pyarray(py))
+fn estimate_py<'py, C: Controller>(py: Python<'py>, c: &Shared<C>) -> Option<Py1<'py>> {
+    let estimate = c.lock(py).state_estimate().map(<[f64]>::to_vec);
+    estimate.map(|s| Array1::from_vec(s).into_pyarray(py))
 }
 
 /// LQR as the paper uses it: measured angles, rates from a filtered difference, no estimator.
@@ -83,10 +116,9 @@ fn estimate_py<'py>(py: Python<'py>, c: &dyn Controller) -> Option<Py1<'py>> {
 ///     Cut-off frequency of the rate filter (Hz); ``inf`` for the plain difference.
 /// u_min, u_max : float
 ///     Input bounds (V).
-#[pyclass(name = "Lqr", module = "riprs._riprs")]
-#[derive(Clone)]
+#[pyclass(name = "Lqr", module = "riprs._riprs", frozen)]
 pub struct PyLqr {
-    inner: Lqr,
+    inner: Shared<Lqr>,
 }
 
 #[pymethods]
@@ -105,7 +137,9 @@ impl PyLqr {
         let inner = Lqr::new(&k, Ts, rate_cutoff)
             .and_then(|c| c.with_input_bounds(u_min, u_max))
             .py()?;
-        Ok(Self { inner })
+        Ok(Self {
+            inner: Shared::new(inner),
+        })
     }
 
     /// Design ``K = dlqr(A, B, Q, R)`` and build the regulator.
@@ -140,14 +174,16 @@ impl PyLqr {
             .allow_threads(|| Lqr::design(&a, &b, &q, &r, Ts, rate_cutoff))
             .and_then(|c| c.with_input_bounds(u_min, u_max))
             .py()?;
-        Ok(Self { inner })
+        Ok(Self {
+            inner: Shared::new(inner),
+        })
     }
 
     /// The paper's LQR: eq. (13) weights on its model, ``Ts = 0.01``, default filter, +-12 V.
     #[staticmethod]
     fn paper() -> PyResult<Self> {
         Ok(Self {
-            inner: Lqr::paper().py()?,
+            inner: Shared::new(Lqr::paper().py()?),
         })
     }
 
@@ -164,47 +200,47 @@ impl PyLqr {
     /// u : ndarray, shape (1,)
     #[pyo3(signature = (y, r=None))]
     fn step<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         y: &Bound<'py, PyAny>,
         r: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Py1<'py>> {
-        step_py(py, &mut self.inner, y, r)
+        step_py(py, &self.inner, y, r)
     }
 
     /// Forget the previous measurement and the filtered rates.
-    fn reset(&mut self) {
-        self.inner.reset();
+    fn reset(&self, py: Python<'_>) {
+        self.inner.lock(py).reset();
     }
 
     /// State-feedback gain (1x4).
     #[getter(K)]
     fn k<'py>(&self, py: Python<'py>) -> Py2<'py> {
-        mat_to_py(py, &self.inner.gain())
+        mat_to_py(py, &self.inner.lock(py).gain())
     }
 
     /// Sample time (s).
     #[getter(Ts)]
-    fn ts(&self) -> f64 {
-        self.inner.ts()
+    fn ts(&self, py: Python<'_>) -> f64 {
+        self.inner.lock(py).ts()
     }
 
     /// Rate-filter cut-off (Hz).
     #[getter]
-    fn rate_cutoff(&self) -> f64 {
-        self.inner.rate_cutoff_hz()
+    fn rate_cutoff(&self, py: Python<'_>) -> f64 {
+        self.inner.lock(py).rate_cutoff_hz()
     }
 
     /// Lower input bound (V).
     #[getter]
-    fn u_min(&self) -> f64 {
-        self.inner.input_bounds().0
+    fn u_min(&self, py: Python<'_>) -> f64 {
+        self.inner.lock(py).input_bounds().0
     }
 
     /// Upper input bound (V).
     #[getter]
-    fn u_max(&self) -> f64 {
-        self.inner.input_bounds().1
+    fn u_max(&self, py: Python<'_>) -> f64 {
+        self.inner.lock(py).input_bounds().1
     }
 
     /// The state used by the last step, ``[theta, rate, alpha, rate]``.
@@ -213,16 +249,17 @@ impl PyLqr {
         estimate_py(py, &self.inner)
     }
 
-    fn __repr__(&self) -> String {
-        let k = self.inner.gain();
+    fn __repr__(&self, py: Python<'_>) -> String {
+        let c = self.inner.lock(py);
+        let k = c.gain();
         format!(
             "Lqr(K=[{:.4}, {:.4}, {:.4}, {:.4}], Ts={}, rate_cutoff={})",
             k[0],
             k[1],
             k[2],
             k[3],
-            self.inner.ts(),
-            self.inner.rate_cutoff_hz()
+            c.ts(),
+            c.rate_cutoff_hz()
         )
     }
 }
@@ -253,10 +290,9 @@ impl PyLqr {
 ///     Predictor and innovation gains, e.g. from :func:`riprs.kalman`.
 /// Ts : float
 /// u_min, u_max : float
-#[pyclass(name = "Lqg", module = "riprs._riprs")]
-#[derive(Clone)]
+#[pyclass(name = "Lqg", module = "riprs._riprs", frozen)]
 pub struct PyLqg {
-    inner: Lqg,
+    inner: Shared<Lqg>,
 }
 
 #[pymethods]
@@ -285,67 +321,69 @@ impl PyLqg {
         let inner = Lqg::new(&k, &a, &b, &c, &l, &m, Ts)
             .and_then(|c| c.with_input_bounds(u_min, u_max))
             .py()?;
-        Ok(Self { inner })
+        Ok(Self {
+            inner: Shared::new(inner),
+        })
     }
 
     /// The paper's LQG: eq. (13) gain and the eq. (11) Kalman filter on the augmented model.
     #[staticmethod]
     fn paper() -> PyResult<Self> {
         Ok(Self {
-            inner: Lqg::paper().py()?,
+            inner: Shared::new(Lqg::paper().py()?),
         })
     }
 
     /// Compute the input for measured angles ``y`` and reference ``r`` (see :class:`Lqr`).
     #[pyo3(signature = (y, r=None))]
     fn step<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         y: &Bound<'py, PyAny>,
         r: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Py1<'py>> {
-        step_py(py, &mut self.inner, y, r)
+        step_py(py, &self.inner, y, r)
     }
 
     /// Restart the estimator from zero.
-    fn reset(&mut self) {
-        self.inner.reset();
+    fn reset(&self, py: Python<'_>) {
+        self.inner.lock(py).reset();
     }
 
     /// State-feedback gain (1x4).
     #[getter(K)]
     fn k<'py>(&self, py: Python<'py>) -> Py2<'py> {
-        mat_to_py(py, &self.inner.gain())
+        mat_to_py(py, &self.inner.lock(py).gain())
     }
 
     /// Predictor gain L (n x 2).
     #[getter(L)]
     fn l<'py>(&self, py: Python<'py>) -> Py2<'py> {
-        mat_to_py(py, self.inner.predictor_gain())
+        mat_to_py(py, self.inner.lock(py).predictor_gain())
     }
 
     /// Innovation gain M (n x 2).
     #[getter(M)]
     fn m<'py>(&self, py: Python<'py>) -> Py2<'py> {
-        mat_to_py(py, self.inner.innovation_gain())
+        mat_to_py(py, self.inner.lock(py).innovation_gain())
     }
 
     /// Sample time (s).
     #[getter(Ts)]
-    fn ts(&self) -> f64 {
-        self.inner.ts()
+    fn ts(&self, py: Python<'_>) -> f64 {
+        self.inner.lock(py).ts()
     }
 
     /// Lower input bound (V).
     #[getter]
-    fn u_min(&self) -> f64 {
-        self.inner.input_bounds().0
+    fn u_min(&self, py: Python<'_>) -> f64 {
+        self.inner.lock(py).input_bounds().0
     }
 
     /// Upper input bound (V).
     #[getter]
-    fn u_max(&self) -> f64 {
-        self.inner.input_bounds().1
+    fn u_max(&self, py: Python<'_>) -> f64 {
+        self.inner.lock(py).input_bounds().1
     }
 
     /// The current estimate x[k|k] (n,).
@@ -354,12 +392,9 @@ impl PyLqg {
         estimate_py(py, &self.inner)
     }
 
-    fn __repr__(&self) -> String {
-        format!(
-            "Lqg(states={}, Ts={})",
-            self.inner.n_states(),
-            self.inner.ts()
-        )
+    fn __repr__(&self, py: Python<'_>) -> String {
+        let c = self.inner.lock(py);
+        format!("Lqg(states={}, Ts={})", c.n_states(), c.ts())
     }
 }
 

@@ -86,6 +86,8 @@ pub fn to_py(err: RipError) -> PyErr {
         RipError::NotDetectable { .. } => NotDetectableError::new_err(msg),
         RipError::NoStabilizingSolution { .. } => NoStabilizingSolutionError::new_err(msg),
         RipError::InvalidParameter { .. } => InvalidParameterError::new_err(msg),
+        // The bindings cancel only on a pending signal, whose own exception is raised instead.
+        RipError::Cancelled => pyo3::exceptions::PyKeyboardInterrupt::new_err(msg),
     }
 }
 

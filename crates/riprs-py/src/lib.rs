@@ -9,9 +9,11 @@ mod control;
 mod convert;
 mod design;
 mod errors;
+mod interrupt;
 mod mpc;
 mod paper;
 mod plant;
+mod shared;
 mod sim;
 
 #[pymodule]

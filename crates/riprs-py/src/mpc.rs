@@ -10,6 +10,7 @@ use rip_core::{Controller, Mat, RipError};
 use crate::convert::mat_to_py;
 use crate::errors::{to_py, IntoPyResult, ShapeError};
 use crate::plant::{matrix_arg, real_array};
+use crate::shared::Shared;
 
 type Py1<'py> = Bound<'py, PyArray1<f64>>;
 type Py2<'py> = Bound<'py, PyArray2<f64>>;
@@ -305,10 +306,10 @@ impl PyMpcSolution {
 /// ValueError
 ///     (a :class:`riprs.RiprsError` subclass) naming the argument, for wrong shapes, NaN,
 ///     negative weights, ``m > P``, empty or inverted bounds, or an undetectable model.
-#[pyclass(name = "Mpc", module = "riprs._riprs")]
-#[derive(Clone)]
+#[pyclass(name = "Mpc", module = "riprs._riprs", frozen)]
 pub struct PyMpc {
-    pub(crate) inner: Mpc,
+    // Shared by the Python threads that use this object (see `crate::shared`).
+    pub(crate) inner: Shared<Mpc>,
 }
 
 #[pymethods]
@@ -369,7 +370,9 @@ impl PyMpc {
         let inner = py
             .allow_threads(|| Mpc::new(&a, &b, &c, Ts, settings))
             .py()?;
-        Ok(Self { inner })
+        Ok(Self {
+            inner: Shared::new(inner),
+        })
     }
 
     /// The paper's MPC (section 3) on its model; see :func:`riprs.paper.mpc`.
@@ -378,7 +381,9 @@ impl PyMpc {
     fn paper(py: Python<'_>, solver: &str) -> PyResult<Self> {
         let solver = QpSolver::from_name(solver).py()?;
         let inner = py.allow_threads(|| paper::controller(solver)).py()?;
-        Ok(Self { inner })
+        Ok(Self {
+            inner: Shared::new(inner),
+        })
     }
 
     /// Solve the QP for a given augmented state.
@@ -401,16 +406,18 @@ impl PyMpc {
     /// the fallback.
     #[pyo3(signature = (x, u_prev, r=None))]
     fn solve(
-        &mut self,
+        &self,
         py: Python<'_>,
         x: &Bound<'_, PyAny>,
         u_prev: &Bound<'_, PyAny>,
         r: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<PyMpcSolution> {
-        let x = vec_exact(x, "x", self.inner.n_states())?;
-        let u_prev = vec_exact(u_prev, "u_prev", self.inner.n_inputs())?;
-        let r = reference_arg(r, self.inner.n_outputs(), self.inner.prediction_horizon())?;
-        let inner = &mut self.inner;
+        let mut guard = self.inner.lock(py);
+        let x = vec_exact(x, "x", guard.n_states())?;
+        let u_prev = vec_exact(u_prev, "u_prev", guard.n_inputs())?;
+        let r = reference_arg(r, guard.n_outputs(), guard.prediction_horizon())?;
+        let nu = guard.n_inputs();
+        let inner: &mut Mpc = &mut guard;
         let (sol, y_pred) = py
             .allow_threads(|| {
                 let sol = inner.solve(&x, &u_prev, &r)?.clone();
@@ -422,11 +429,7 @@ impl PyMpc {
                 Ok::<_, RipError>((sol, y))
             })
             .py()?;
-        Ok(PyMpcSolution {
-            sol,
-            nu: self.inner.n_inputs(),
-            y_pred,
-        })
+        Ok(PyMpcSolution { sol, nu, y_pred })
     }
 
     /// One controller sample with the built-in estimator.
@@ -447,30 +450,33 @@ impl PyMpc {
     ///     Always finite and within the input bounds; see :attr:`last_solution` for the status.
     #[pyo3(signature = (y, r=None))]
     fn step<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         y: &Bound<'py, PyAny>,
         r: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Py1<'py>> {
-        let y = vec_exact(y, "y", self.inner.n_outputs())?;
-        let r = reference_arg(r, self.inner.n_outputs(), self.inner.prediction_horizon())?;
-        let mut u = vec![0.0; self.inner.n_inputs()];
-        let inner = &mut self.inner;
+        let mut guard = self.inner.lock(py);
+        let y = vec_exact(y, "y", guard.n_outputs())?;
+        let r = reference_arg(r, guard.n_outputs(), guard.prediction_horizon())?;
+        let mut u = vec![0.0; guard.n_inputs()];
+        let inner: &mut Mpc = &mut guard;
         py.allow_threads(|| inner.step_preview(&y, &r, &mut u));
+        drop(guard);
         Ok(Array1::from_vec(u).into_pyarray(py))
     }
 
     /// Restart: zero estimate, zero previous move, no warm start.
-    fn reset(&mut self) {
-        self.inner.reset_state();
+    fn reset(&self, py: Python<'_>) {
+        self.inner.lock(py).reset_state();
     }
 
     /// The result of the last :meth:`solve` or :meth:`step`.
     #[getter]
-    fn last_solution(&self) -> PyMpcSolution {
+    fn last_solution(&self, py: Python<'_>) -> PyMpcSolution {
+        let c = self.inner.lock(py);
         PyMpcSolution {
-            sol: self.inner.last_solution().clone(),
-            nu: self.inner.n_inputs(),
+            sol: c.last_solution().clone(),
+            nu: c.n_inputs(),
             y_pred: None,
         }
     }
@@ -478,7 +484,8 @@ impl PyMpc {
     /// The augmented prediction model ``(A, B, C)`` (``C`` on scaled outputs).
     #[getter]
     fn model<'py>(&self, py: Python<'py>) -> (Py2<'py>, Py2<'py>, Py2<'py>) {
-        let m = self.inner.model();
+        let c = self.inner.lock(py);
+        let m = c.model();
         (
             mat_to_py(py, &m.a),
             mat_to_py(py, &m.b),
@@ -489,13 +496,13 @@ impl PyMpc {
     /// Predictor gain L of the built-in Kalman filter (nx, ny).
     #[getter(L)]
     fn l<'py>(&self, py: Python<'py>) -> Py2<'py> {
-        mat_to_py(py, &self.inner.kalman_design().l)
+        mat_to_py(py, &self.inner.lock(py).kalman_design().l)
     }
 
     /// Innovation gain M of the built-in Kalman filter (nx, ny).
     #[getter(M)]
     fn m<'py>(&self, py: Python<'py>) -> Py2<'py> {
-        mat_to_py(py, &self.inner.kalman_design().m)
+        mat_to_py(py, &self.inner.lock(py).kalman_design().m)
     }
 
     /// The condensed QP ``(H, f, A, b)`` for given data: minimise
@@ -512,10 +519,12 @@ impl PyMpc {
         u_prev: &Bound<'py, PyAny>,
         r: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<(Py2<'py>, Py1<'py>, Py2<'py>, Py1<'py>)> {
-        let x = vec_exact(x, "x", self.inner.n_states())?;
-        let u_prev = vec_exact(u_prev, "u_prev", self.inner.n_inputs())?;
-        let r = reference_arg(r, self.inner.n_outputs(), self.inner.prediction_horizon())?;
-        let (h, f, a, b) = self.inner.qp_matrices(&x, &u_prev, &r).py()?;
+        let c = self.inner.lock(py);
+        let x = vec_exact(x, "x", c.n_states())?;
+        let u_prev = vec_exact(u_prev, "u_prev", c.n_inputs())?;
+        let r = reference_arg(r, c.n_outputs(), c.prediction_horizon())?;
+        let (h, f, a, b) = c.qp_matrices(&x, &u_prev, &r).py()?;
+        drop(c);
         Ok((
             mat_to_py(py, &h),
             vec_to_py(py, f.as_slice()),
@@ -526,63 +535,67 @@ impl PyMpc {
 
     /// Sample time (s).
     #[getter(Ts)]
-    fn ts(&self) -> f64 {
-        self.inner.ts()
+    fn ts(&self, py: Python<'_>) -> f64 {
+        self.inner.lock(py).ts()
     }
 
     /// Prediction horizon P.
     #[getter]
-    fn prediction_horizon(&self) -> usize {
-        self.inner.prediction_horizon()
+    fn prediction_horizon(&self, py: Python<'_>) -> usize {
+        self.inner.lock(py).prediction_horizon()
     }
 
     /// Control horizon m.
     #[getter]
-    fn control_horizon(&self) -> usize {
-        self.inner.control_horizon()
+    fn control_horizon(&self, py: Python<'_>) -> usize {
+        self.inner.lock(py).control_horizon()
     }
 
     /// The QP backend, ``"clarabel"`` or ``"active_set"``.
     #[getter]
-    fn solver(&self) -> &'static str {
-        self.inner.settings().solver.name()
+    fn solver(&self, py: Python<'_>) -> &'static str {
+        self.inner.lock(py).settings().solver.name()
     }
 
     /// Lower input bounds (nu,), ``-inf`` where unbounded.
     #[getter]
     fn u_min<'py>(&self, py: Python<'py>) -> Py1<'py> {
-        vec_to_py(py, self.inner.input_bounds().0)
+        vec_to_py(py, self.inner.lock(py).input_bounds().0)
     }
 
     /// Upper input bounds (nu,), ``inf`` where unbounded.
     #[getter]
     fn u_max<'py>(&self, py: Python<'py>) -> Py1<'py> {
-        vec_to_py(py, self.inner.input_bounds().1)
+        vec_to_py(py, self.inner.lock(py).input_bounds().1)
     }
 
     /// The current estimate :math:`\hat x[k|k]` (nx,).
     #[getter]
     fn x_hat<'py>(&self, py: Python<'py>) -> Option<Py1<'py>> {
-        self.inner.state_estimate().map(|s| vec_to_py(py, s))
+        self.inner
+            .lock(py)
+            .state_estimate()
+            .map(|s| vec_to_py(py, s))
     }
 
     /// The previous move :math:`u(k-1)` (nu,).
     #[getter]
     fn u_prev<'py>(&self, py: Python<'py>) -> Py1<'py> {
-        vec_to_py(py, self.inner.last_input())
+        vec_to_py(py, self.inner.lock(py).last_input())
     }
 
-    fn __repr__(&self) -> String {
-        let m = self.inner.model();
+    fn __repr__(&self, py: Python<'_>) -> String {
+        let c = self.inner.lock(py);
+        let m = c.model();
         format!(
             "Mpc(states={}, inputs={}, outputs={}, P={}, m={}, solver={:?}, Ts={})",
             m.a.nrows(),
             m.b.ncols(),
             m.c.nrows(),
-            self.inner.prediction_horizon(),
-            self.inner.control_horizon(),
-            self.inner.settings().solver.name(),
-            self.inner.ts()
+            c.prediction_horizon(),
+            c.control_horizon(),
+            c.settings().solver.name(),
+            c.ts()
         )
     }
 }

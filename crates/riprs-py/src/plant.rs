@@ -17,7 +17,7 @@ type Py1<'py> = Bound<'py, PyArray1<f64>>;
 type Py2<'py> = Bound<'py, PyArray2<f64>>;
 
 /// Python names of the parameters, in `PARAM_NAMES` order (Quanser's spelling).
-const PY_NAMES: [&str; 12] = [
+pub(crate) const PY_NAMES: [&str; 12] = [
     "Rm", "kt", "km", "mr", "Lr", "Jr", "mp", "Lp", "Jp", "Dr", "Dp", "g",
 ];
 

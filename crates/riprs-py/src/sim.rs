@@ -1,19 +1,25 @@
-//! Bindings for `rip_core::sim`: one closed-loop run and a parallel batch, both with the GIL
-//! released. The public wrappers (`riprs.simulate`, `riprs.simulate_batch`) coerce the
+//! Bindings for `rip_core::sim` and `rip_core::batch`: one closed-loop run, a parallel batch of
+//! records, and a parallel batch of per-run metrics. All run on a worker thread with the GIL
+//! released while the calling thread stays responsive to Ctrl-C (`crate::interrupt`). The public
+//! wrappers (`riprs.simulate`, `riprs.simulate_batch`, `riprs.simulate_metrics`) coerce the
 //! arguments and pass them here as a configuration dict.
+
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use numpy::ndarray::{Array1, Array2};
 use numpy::IntoPyArray;
 use pyo3::exceptions::{PyKeyError, PyTypeError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
+use rip_core::batch::{simulate_metrics, MetricsOptions, MonteCarlo, RunMetrics};
 use rip_core::metrics::table1_rmse;
 use rip_core::sim::{Reference, SensorModel, StepDisturbance};
 use rip_core::{Controller, Plant, RipError, SimConfig, SimResult};
 
-use crate::control::extract_controller;
+use crate::control::{controller_factory, extract_controller};
 use crate::errors::{to_py, IntoPyResult};
-use crate::plant::{matrix_arg, vector_arg, PyPlant};
+use crate::interrupt::interruptible;
+use crate::plant::{matrix_arg, vector_arg, PyPlant, PY_NAMES};
 
 fn item<'py>(d: &Bound<'py, PyDict>, key: &str) -> PyResult<Bound<'py, PyAny>> {
     d.get_item(key)?
@@ -126,9 +132,12 @@ fn sim_run<'py>(
     let cfg = config_from_dict(config)?;
     let plant: Plant = plant.inner;
     let mut c = extract_controller(controller)?;
-    let res = py
-        .allow_threads(move || rip_core::simulate(&plant, c.as_mut(), &cfg))
-        .py()?;
+    let res = interruptible(
+        py,
+        |cancel| rip_core::sim::simulate_cancellable(&plant, c.as_mut(), &cfg, cancel),
+        |_| Ok(()),
+    )?
+    .py()?;
     result_to_dict(py, res)
 }
 
@@ -164,9 +173,14 @@ fn sim_batch<'py>(
     let controllers = (0..runs.len())
         .map(|_| extract_controller(controller))
         .collect::<PyResult<Vec<Box<dyn Controller>>>>()?;
-    let results = py
-        .allow_threads(move || rip_core::sim::simulate_runs(&plants, &runs, &cfg, controllers))
-        .py()?;
+    let results = interruptible(
+        py,
+        |cancel| {
+            rip_core::sim::simulate_runs_cancellable(&plants, &runs, &cfg, controllers, cancel)
+        },
+        |_| Ok(()),
+    )?
+    .py()?;
     let list = PyList::empty(py);
     for res in results {
         list.append(result_to_dict(py, res)?)?;
@@ -174,8 +188,114 @@ fn sim_batch<'py>(
     Ok(list)
 }
 
+/// Per-run metrics of runs `first_run .. first_run + runs` of a Monte Carlo study around
+/// `plant` (`rip_core::batch`); a dict of numpy arrays, one entry per run.
+#[pyfunction]
+#[pyo3(signature = (plant, controller, config, runs, first_run, perturbation, parameters, settle_band, progress=None))]
+#[allow(clippy::too_many_arguments)]
+fn sim_metrics<'py>(
+    py: Python<'py>,
+    plant: PyRef<'py, PyPlant>,
+    controller: &Bound<'py, PyAny>,
+    config: &Bound<'py, PyDict>,
+    runs: u64,
+    first_run: u64,
+    perturbation: f64,
+    parameters: Vec<String>,
+    settle_band: f64,
+    progress: Option<Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let cfg = config_from_dict(config)?;
+    let parameters = parameters
+        .iter()
+        .map(|name| {
+            PY_NAMES.iter().position(|n| n == name).ok_or_else(|| {
+                to_py(RipError::invalid(
+                    "parameters",
+                    format!("unknown parameter {name:?}; choose from {PY_NAMES:?}"),
+                ))
+            })
+        })
+        .collect::<PyResult<Vec<usize>>>()?;
+    let study = MonteCarlo {
+        base: *plant.inner.params(),
+        perturbation,
+        parameters,
+        seed: cfg.seed,
+    };
+    study.validate().py()?;
+    let end = first_run.checked_add(runs).ok_or_else(|| {
+        to_py(RipError::invalid(
+            "first_run",
+            format!("first_run + runs overflows ({first_run} + {runs})"),
+        ))
+    })?;
+    let options = MetricsOptions { settle_band };
+    let make = controller_factory(controller)?;
+    let done = AtomicU64::new(0);
+    let mut reported = 0;
+    let metrics = interruptible(
+        py,
+        |cancel| {
+            simulate_metrics(
+                first_run..end,
+                &cfg,
+                &options,
+                &|i| study.run(i),
+                &make,
+                &done,
+                cancel,
+            )
+        },
+        |_| {
+            let now = done.load(Ordering::Relaxed);
+            if let Some(callback) = progress.as_ref().filter(|_| now != reported) {
+                callback.call1((now, runs))?;
+                reported = now;
+            }
+            Ok(())
+        },
+    )?
+    .py()?;
+    metrics_to_dict(py, &metrics)
+}
+
+fn metrics_to_dict<'py>(py: Python<'py>, m: &[RunMetrics]) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let col = |f: fn(&RunMetrics) -> f64| Array1::from_iter(m.iter().map(f)).into_pyarray(py);
+    d.set_item(
+        "run",
+        Array1::from_iter(m.iter().map(|r| r.run)).into_pyarray(py),
+    )?;
+    d.set_item(
+        "seed",
+        Array1::from_iter(m.iter().map(|r| r.seed)).into_pyarray(py),
+    )?;
+    d.set_item(
+        "rmse",
+        Array2::from_shape_fn((m.len(), 3), |(i, j)| m[i].rmse[j]).into_pyarray(py),
+    )?;
+    d.set_item(
+        "fell",
+        Array1::from_iter(m.iter().map(|r| r.fell)).into_pyarray(py),
+    )?;
+    d.set_item("fall_time", col(|r| r.fall_time))?;
+    d.set_item("peak_voltage", col(|r| r.peak_voltage))?;
+    d.set_item("settle_time", col(|r| r.settle_time))?;
+    d.set_item(
+        "samples",
+        Array1::from_iter(m.iter().map(|r| i64::from(r.samples))).into_pyarray(py),
+    )?;
+    d.set_item(
+        "fallbacks",
+        Array1::from_iter(m.iter().map(|r| i64::from(r.fallbacks))).into_pyarray(py),
+    )?;
+    Ok(d)
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sim_run, m)?)?;
     m.add_function(wrap_pyfunction!(sim_batch, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_metrics, m)?)?;
     Ok(())
 }
