@@ -55,18 +55,15 @@ def cmd_compare(args: argparse.Namespace) -> int:
         monte_carlo=args.monte_carlo,
         plots=not args.no_plots,
         progress=not args.quiet,
+        overlays=logs,
     )
     print(result.table())
     if result.monte_carlo is not None:
         print()
         print(format_monte_carlo(result.monte_carlo))
-    if logs and not args.no_plots:
-        from riprs import plots
-
-        overlay = {**result.trajectories, **logs}
-        result.files += plots.plot_comparison(overlay, Path(args.out), suffix="_with_logs")
     print()
-    print(f"wrote {len(result.files)} files to {args.out}/")
+    where = result.files[0].parent if result.files else Path(args.out).absolute()
+    print(f"wrote {len(result.files)} files to {where}")
     return 0
 
 
@@ -168,6 +165,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (RiprsError, OSError) as exc:
         print(f"riprs: error: {exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        # Native work stops within a fraction of a second of Ctrl-C and raises this; outputs
+        # are staged, so nothing half-written is left behind. 130 = 128 + SIGINT, as shells do.
+        print("riprs: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

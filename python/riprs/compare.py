@@ -22,7 +22,10 @@ from __future__ import annotations
 
 import copy
 import csv
+import errno
 import os
+import shutil
+import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,8 +41,10 @@ from riprs.sim import BatchMetrics, SimResult, simulate, simulate_metrics
 from riprs.statespace import StateSpace
 
 __all__ = [
+    "MAX_MONTE_CARLO_RUNS",
     "CompareResult",
     "MonteCarloResult",
+    "OutputPathError",
     "Trajectory",
     "build_controllers",
     "compare",
@@ -48,6 +53,14 @@ __all__ = [
 ]
 
 PathLike = Union[str, "os.PathLike[str]"]
+
+#: Most Monte Carlo runs per controller: their metrics take about 90 bytes each.
+MAX_MONTE_CARLO_RUNS = 1_000_000
+
+
+class OutputPathError(RiprsError):
+    """The output directory cannot take the results (empty path, a file in the way, not
+    writable, too little free space); found before any simulation runs."""
 
 
 @dataclass(frozen=True)
@@ -256,6 +269,7 @@ def compare(
     monte_carlo: int | None = None,
     plots: bool = True,
     progress: bool = True,
+    overlays: Mapping[str, Trajectory] | None = None,
 ) -> CompareResult:
     """Run the paper's comparison.
 
@@ -265,6 +279,10 @@ def compare(
         Settings; the paper's by default (see :mod:`riprs.config`).
     out : path, optional
         Directory for ``summary.csv``, ``trajectories.csv`` and the figures (created if needed).
+        It is checked before anything runs (:class:`OutputPathError`: an empty path, a file in
+        the way, not writable, too little free space); the files are written to a temporary
+        directory beside it and moved into place only when all are complete, so a failure or
+        Ctrl-C never leaves a half-written result.
     seed : int
         Noise seed; equal seeds give identical results.
     monte_carlo : int, optional
@@ -274,6 +292,9 @@ def compare(
         Write PNG and SVG figures (needs ``out``).
     progress : bool
         Show progress bars.
+    overlays : mapping of str to Trajectory, optional
+        Further runs (e.g. ``rip-rt`` logs) drawn over the simulations in extra figures
+        ``*_with_logs`` (needs ``out`` and ``plots``).
 
     Returns
     -------
@@ -291,23 +312,130 @@ def compare(
         if isinstance(monte_carlo, bool) or not isinstance(monte_carlo, int) or monte_carlo < 0:
             raise ConfigError(f"monte_carlo must be a non-negative integer, got {monte_carlo!r}")
         cfg.monte_carlo.runs = monte_carlo
-    controllers = build_controllers(cfg)
-    plant = _plant(cfg)
-    options = _sim_options(cfg)
-    runs: dict[str, SimResult] = {}
-    for name in _progress(list(controllers), "simulating", progress):
-        runs[name] = simulate(
-            plant, controllers[name], cfg.reference.duration, seed=seed, **options
+    if cfg.monte_carlo.runs > MAX_MONTE_CARLO_RUNS:
+        raise ConfigError(
+            f"monte_carlo.runs must be at most {MAX_MONTE_CARLO_RUNS}, got {cfg.monte_carlo.runs}"
         )
-    trajectories = {name: Trajectory.from_sim(r) for name, r in runs.items()}
-    summary = {name: rmse(t) for name, t in trajectories.items()}
-    mc = None
-    if cfg.monte_carlo.runs > 0:
-        mc = _monte_carlo(cfg, controllers, seed, progress)
-    result = CompareResult(cfg, seed, runs, trajectories, summary, mc)
-    if out is not None:
-        result.files = write_outputs(result, Path(out), plots=plots)
+    # The output path is checked, and a staging directory made next to it, before any design or
+    # simulation: a bad --out fails at once, and a failure later leaves the old results intact.
+    staging = _Staging(out, _expected_bytes(cfg, plots)) if out is not None else None
+    try:
+        controllers = build_controllers(cfg)
+        plant = _plant(cfg)
+        options = _sim_options(cfg)
+        runs: dict[str, SimResult] = {}
+        for name in _progress(list(controllers), "simulating", progress):
+            runs[name] = simulate(
+                plant, controllers[name], cfg.reference.duration, seed=seed, **options
+            )
+        trajectories = {name: Trajectory.from_sim(r) for name, r in runs.items()}
+        summary = {name: rmse(t) for name, t in trajectories.items()}
+        mc = None
+        if cfg.monte_carlo.runs > 0:
+            mc = _monte_carlo(cfg, controllers, seed, progress)
+        result = CompareResult(cfg, seed, runs, trajectories, summary, mc)
+        if staging is not None:
+            written = write_outputs(result, staging.path, plots=plots)
+            if plots and overlays:
+                from riprs import plots as plotting
+
+                written += plotting.plot_comparison(
+                    {**trajectories, **overlays}, staging.path, suffix="_with_logs"
+                )
+            result.files = staging.commit(written)
+    except BaseException:
+        if staging is not None:
+            staging.abort()
+        raise
     return result
+
+
+def _expected_bytes(cfg: CompareConfig, plots: bool) -> int:
+    """A generous estimate of what the outputs take on disk."""
+    samples = round(cfg.reference.duration / paper.TS)
+    trajectories = samples * (24 + 4 * 24 * len(cfg.controllers))
+    monte_carlo = cfg.monte_carlo.runs * len(cfg.controllers) * 200
+    figures = 8 * 2**20 if plots else 0
+    return 4096 + trajectories + monte_carlo + figures
+
+
+class _Staging:
+    """Results are written into a temporary directory on the destination's filesystem and
+    moved into place only when all of them are complete.
+
+    A new destination is the staging directory renamed (one atomic step); into an existing
+    directory each file is moved with :func:`os.replace` (atomic per file, so no file is ever
+    half-written). On failure the staging directory is removed and the destination is as it
+    was.
+    """
+
+    def __init__(self, out: PathLike, needed: int) -> None:
+        text = os.fspath(out)
+        if not text.strip():
+            raise OutputPathError("out: the output directory is an empty path")
+        dest = Path(text).expanduser().absolute()
+        if dest.exists() and not dest.is_dir():
+            raise OutputPathError(f"out: {dest} exists and is not a directory")
+        if dest.exists():
+            base = dest
+        else:
+            # The nearest existing ancestor must be a directory we can create entries in.
+            base = dest.parent
+            while not base.exists():
+                base = base.parent
+            if not base.is_dir():
+                raise OutputPathError(f"out: {base} is not a directory")
+        if not os.access(base, os.W_OK | os.X_OK):
+            raise OutputPathError(f"out: {base} is not writable")
+        free = shutil.disk_usage(base).free
+        if free < needed:
+            raise OutputPathError(
+                f"out: {base} has {free / 2**20:.1f} MiB free; the results need about "
+                f"{needed / 2**20:.1f} MiB"
+            )
+        self.dest = dest
+        self._created: list[Path] = []
+        parent = dest if dest.exists() else dest.parent
+        missing = [p for p in [parent, *parent.parents] if not p.exists()]
+        try:
+            for p in reversed(missing):
+                p.mkdir()
+                self._created.append(p)
+            self.path = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".tmp", dir=parent))
+            # mkdtemp makes it private (0700); the renamed result gets the usual permissions.
+            umask = os.umask(0)
+            os.umask(umask)
+            self.path.chmod(0o777 & ~umask)
+        except OSError as exc:
+            self._remove_created()
+            raise OutputPathError(f"out: cannot create a directory for {dest}: {exc}") from None
+
+    def commit(self, files: list[Path]) -> list[Path]:
+        """Move the finished files into the destination; return their final paths."""
+        if not self.dest.exists():
+            os.rename(self.path, self.dest)
+            return [self.dest / f.relative_to(self.path) for f in files]
+        final = []
+        for f in files:
+            target = self.dest / f.relative_to(self.path)
+            os.replace(f, target)
+            final.append(target)
+        shutil.rmtree(self.path, ignore_errors=True)
+        return final
+
+    def abort(self) -> None:
+        """Remove the staging directory (and directories made for it); the destination is as
+        it was."""
+        shutil.rmtree(self.path, ignore_errors=True)
+        self._remove_created()
+
+    def _remove_created(self) -> None:
+        for p in reversed(self._created):
+            try:
+                p.rmdir()
+            except OSError as exc:
+                if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST, errno.ENOENT):
+                    raise
 
 
 def _monte_carlo(
