@@ -706,3 +706,86 @@ fn bad_configuration_and_arguments_exit_2_naming_the_key() {
     assert_eq!(r.status.code(), Some(1));
     assert!(r.stderr.contains("--port /nonexistent/tty"), "{}", r.stderr);
 }
+
+/// A controller that outputs k mV at its k-th step and, from its `slow_from`-th step of balancing, takes
+/// `sleep` per step: a design that passes the probe and then cannot keep up. (The loop resets
+/// the controller after the probe and again when balancing starts.)
+struct Slows {
+    resets: usize,
+    steps: usize,
+    slow_from: usize,
+    sleep: Duration,
+}
+
+impl rip_core::Controller for Slows {
+    fn n_outputs(&self) -> usize {
+        2
+    }
+    fn n_inputs(&self) -> usize {
+        1
+    }
+    fn step(&mut self, _y: &[f64], _r: &[f64], u: &mut [f64]) -> rip_core::StepStatus {
+        self.steps += 1;
+        if self.resets >= 2 && self.steps >= self.slow_from {
+            std::thread::sleep(self.sleep);
+        }
+        u[0] = self.steps as f64 * 1e-3;
+        rip_core::StepStatus::Nominal
+    }
+    fn reset(&mut self) {
+        self.resets += 1;
+        self.steps = 0;
+    }
+}
+
+/// Runs the loop in this process on `controller` against the emulator.
+fn run_in_process(name: &str, controller: Slows) -> (rip_rt::stop::StopReason, Vec<(i32, u8)>) {
+    let emu = Emulator::start(name, &["--initial-pendulum", "0.02"]);
+    let cfg = rip_rt::config::Config::default();
+    let port = rip_rt::serial::SerialPort::open(&emu.device, 115_200).unwrap();
+    let mut core = rip_rt::loop_core::LoopCore::new(Box::new(controller), &cfg).unwrap();
+    let opts = rip_rt::runner::RunOptions {
+        duration_s: Some(5.0),
+        quiet: true,
+    };
+    let report = rip_rt::runner::run(port.io(), &mut core, &cfg, &opts, None);
+    assert!(report.stop_sent);
+    (report.reason, emu.commands())
+}
+
+/// One step longer than `loop.max_step_periods` (2 × 10 ms): its command is not sent and the
+/// run stops with the overrun's exit code.
+#[test]
+fn a_step_longer_than_the_limit_is_an_overrun_and_its_command_is_not_sent() {
+    let _serial = one_at_a_time();
+    let slow = Slows {
+        resets: 0,
+        steps: 0,
+        slow_from: 10,
+        sleep: Duration::from_millis(60),
+    };
+    let (reason, commands) = run_in_process("overrun-step", slow);
+    assert_eq!(reason.exit_code(), 10, "{reason}");
+    assert!(reason.to_string().contains("was not sent"), "{reason}");
+    // The ninth step's command (9 mV) went out, the tenth's (10 mV) did not, then the stop.
+    assert!(commands.contains(&(9, 1)), "{commands:?}");
+    assert!(!commands.iter().any(|&(mv, _)| mv >= 10), "{commands:?}");
+    assert_eq!(commands.last(), Some(&(0, 0)));
+}
+
+/// Steps that each overrun the period (12 ms at 10 ms) but stay under the single-step limit:
+/// `loop.max_consecutive_misses` (5) of them in a row stop the run.
+#[test]
+fn consecutive_deadline_misses_are_an_overrun() {
+    let _serial = one_at_a_time();
+    let slow = Slows {
+        resets: 0,
+        steps: 0,
+        slow_from: 5,
+        sleep: Duration::from_millis(12),
+    };
+    let (reason, commands) = run_in_process("overrun-misses", slow);
+    assert_eq!(reason.exit_code(), 10, "{reason}");
+    assert!(reason.to_string().contains("in a row"), "{reason}");
+    assert_eq!(commands.last(), Some(&(0, 0)));
+}
