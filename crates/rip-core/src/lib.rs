@@ -18,6 +18,8 @@
 //!   [`batch`] runs Monte Carlo studies that keep only per-run metrics.
 //! - [`mpc`] — constrained MPC with soft output bounds and the disturbance-model Kalman filter
 //!   ([`Mpc`]), solved by Clarabel or a dense active-set method.
+//! - [`spec`] — the experiment file every front end reads ([`Spec`]), and the one assembly of
+//!   LQR, LQG and MPC from it.
 //!
 //! Every fallible routine returns [`RipError`], whose variants name the offending argument.
 
@@ -35,6 +37,7 @@ pub mod paper;
 pub mod plant;
 pub mod regulators;
 pub mod sim;
+pub mod spec;
 
 pub use controller::{Controller, StepStatus};
 pub use dare::{dare, DareSolution};
@@ -46,3 +49,4 @@ pub use mpc::{Mpc, MpcSettings, QpSolver, QpStatus};
 pub use plant::{FurutaParams, Plant, State};
 pub use regulators::{Lqg, Lqr};
 pub use sim::{simulate, simulate_batch, SimConfig, SimResult};
+pub use spec::{Spec, SpecError};

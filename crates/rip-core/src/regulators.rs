@@ -28,6 +28,18 @@ pub const DEFAULT_INPUT_LIMIT: f64 = 12.0;
 /// Default cut-off (Hz) of [`Lqr`]'s rate filter.
 pub const DEFAULT_RATE_CUTOFF_HZ: f64 = 20.0;
 
+/// The default spec's design at the paper's sample time.
+fn paper_design() -> Result<crate::spec::Design> {
+    crate::spec::Spec::default()
+        .design(paper::TS)
+        .map_err(spec_error)
+}
+
+/// A spec error as the [`RipError`] of the key it names.
+pub(crate) fn spec_error(e: crate::spec::SpecError) -> RipError {
+    RipError::invalid(e.key, e.reason)
+}
+
 /// Number of plant states `[θ, θ̇, α, α̇]`.
 const NX: usize = 4;
 
@@ -144,19 +156,11 @@ impl Lqr {
         Self::new(&design.k, ts, rate_cutoff_hz)
     }
 
-    /// The paper's LQR: eq. (13) weights on [`paper::discrete_model`], `Ts = 0.01 s`, default
-    /// rate filter and ±12 V.
+    /// The paper's LQR: the controller assembly ([`crate::spec`]) applied to the default
+    /// spec, i.e. eq. (13) weights on [`paper::discrete_model`], `Ts = 0.01 s`, default rate
+    /// filter and ±12 V.
     pub fn paper() -> Result<Self> {
-        let plant = paper::discrete_model();
-        let (q, r) = paper::lqr_weights();
-        Self::design(
-            &plant.a,
-            &plant.b,
-            &q,
-            &r,
-            paper::TS,
-            DEFAULT_RATE_CUTOFF_HZ,
-        )
+        paper_design()?.lqr().map_err(spec_error)
     }
 
     /// Replaces the input bounds (must be finite with `u_min < u_max`).
@@ -338,20 +342,13 @@ impl Lqg {
         })
     }
 
-    /// The paper's LQG: the eq. (13) gain on [`paper::discrete_model`] and the Kalman filter of
+    /// The paper's LQG: the controller assembly ([`crate::spec`]) applied to the default
+    /// spec, i.e. the eq. (13) gain on [`paper::discrete_model`] and the Kalman filter of
     /// eq. (11) on the augmented model of eq. (3). The estimator predicts with the unscaled
     /// `B_u = [B_d; 0]` (the `L_su` scaling of [`paper::augmented_model`] belongs to the noise
     /// model only).
     pub fn paper() -> Result<Self> {
-        let plant = paper::discrete_model();
-        let (q, r) = paper::lqr_weights();
-        let lqr = dlqr(&plant.a, &plant.b, &q, &r, None)?;
-        let aug = paper::augmented_model();
-        let kf = paper::kalman_design()?;
-        let n = aug.a.nrows();
-        let mut b_u = Mat::zeros(n, 1);
-        b_u.view_mut((0, 0), (NX, 1)).copy_from(&plant.b);
-        Self::new(&lqr.k, &aug.a, &b_u, &aug.c, &kf.l, &kf.m, paper::TS)
+        paper_design()?.lqg().map_err(spec_error)
     }
 
     /// Replaces the input bounds (must be finite with `u_min < u_max`).

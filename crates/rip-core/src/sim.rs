@@ -36,6 +36,9 @@ use crate::plant::{Plant, State};
 /// allocations, e.g. a duration in ms passed as s).
 pub const MAX_SAMPLES: usize = 10_000_000;
 
+/// Most RK4 substeps per control period.
+pub const MAX_SUBSTEPS: usize = 100_000;
+
 /// The reference `r[k] = [θ_ref, α_ref]`.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Reference {
@@ -152,10 +155,13 @@ impl SimConfig {
             ));
         }
         let n = samples as usize;
-        if self.substeps == 0 || self.substeps > 100_000 {
+        if self.substeps == 0 || self.substeps > MAX_SUBSTEPS {
             return Err(RipError::invalid(
                 "substeps",
-                format!("must be between 1 and 100000, got {}", self.substeps),
+                format!(
+                    "must be between 1 and {MAX_SUBSTEPS}, got {}",
+                    self.substeps
+                ),
             ));
         }
         if self.x0.iter().any(|v| !v.is_finite()) {

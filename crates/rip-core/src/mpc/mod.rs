@@ -77,6 +77,7 @@ mod active_set;
 mod backend;
 mod clarabel_backend;
 mod condense;
+mod estimator;
 mod model;
 pub mod paper;
 mod settings;
@@ -89,13 +90,13 @@ use nalgebra::DVector;
 
 use crate::controller::{Controller, StepStatus};
 use crate::error::{Result, RipError};
-use crate::kalman::{kalman, CurrentEstimator, KalmanDesign};
-use crate::linalg::{check_finite, check_shape, check_square, Mat};
+use crate::kalman::{CurrentEstimator, KalmanDesign};
+use crate::linalg::Mat;
 
 use backend::Backend;
 pub use backend::{QpSolver, QpStatus};
 use condense::{CondenseInput, Condensed};
-use model::augment;
+pub use estimator::EstimatorDesign;
 pub use model::AugmentedModel;
 use settings::{check_condensed_size, fill_bounds, fill_default};
 pub use settings::{
@@ -172,21 +173,22 @@ impl Mpc {
     /// `ts`: the augmented model, the Kalman gains, the condensed QP and the solver.
     pub fn new(a: &Mat, b: &Mat, c: &Mat, ts: f64, settings: MpcSettings) -> Result<Self> {
         settings.validate()?;
-        let n = check_square("A", a)?;
-        let nu = b.ncols();
-        let ny = c.nrows();
-        if nu == 0 {
-            return Err(RipError::invalid("B", "needs at least one input column"));
-        }
-        if ny == 0 {
-            return Err(RipError::invalid("C", "needs at least one output row"));
-        }
-        check_shape("B", b, n, nu)?;
-        check_shape("C", c, ny, n)?;
-        check_finite("A", a)?;
-        check_finite("B", b)?;
-        check_finite("C", c)?;
+        let estimator = EstimatorDesign::new(a, b, c, &settings)?;
+        Self::with_estimator(&estimator, ts, settings)
+    }
+
+    /// Builds the controller on an existing Kalman design (the one a controller assembly
+    /// shares with an LQG), designed by [`EstimatorDesign::new`] with the same scales,
+    /// disturbance and measurement-noise settings as `settings`.
+    pub fn with_estimator(
+        design: &EstimatorDesign,
+        ts: f64,
+        settings: MpcSettings,
+    ) -> Result<Self> {
+        settings.validate()?;
         crate::linalg::check_sample_time("Ts", ts)?;
+        design.check_settings(&settings)?;
+        let (nu, ny) = (design.n_inputs(), design.n_outputs());
         let wy = fill_default("output_weights", &settings.output_weights, ny, 1.0)?;
         let wu = fill_default("input_weights", &settings.input_weights, nu, 0.0)?;
         let wdu = fill_default("input_rate_weights", &settings.input_rate_weights, nu, 0.1)?;
@@ -195,55 +197,10 @@ impl Mpc {
         let sy = fill_default("output_scales", &settings.output_scales, ny, 1.0)?;
         let ub = fill_bounds("input_bounds", &settings.input_bounds, nu)?;
         let yb = fill_bounds("output_bounds", &settings.output_bounds, ny)?;
-        if let Some(od) = &settings.output_disturbance {
-            check_shape("C_od", &od.c, ny, od.a.nrows())?;
-        }
-        let dn = match &settings.measurement_noise {
-            Some(dn) => {
-                if dn.nrows() != ny || dn.ncols() == 0 {
-                    return Err(RipError::Shape {
-                        name: "measurement_noise".into(),
-                        expected: format!("({ny}, nv) with nv ≥ 1"),
-                        rows: dn.nrows(),
-                        cols: dn.ncols(),
-                    });
-                }
-                if (dn * dn.transpose()).cholesky().is_none() {
-                    return Err(RipError::NotPositiveDefinite {
-                        name: "measurement_noise D_n D_nᵀ".into(),
-                    });
-                }
-                dn.clone()
-            }
-            None => Mat::identity(ny, ny),
-        };
-
-        let model = augment(a, b, c, &su, &sy, settings.output_disturbance.as_ref(), &dn);
+        let model = design.model().clone();
+        let kalman = design.kalman().clone();
         let nx = model.a.nrows();
         check_condensed_size(&settings, nx, nu, ny)?;
-        let q = &model.b_noise * model.b_noise.transpose();
-        let r = &model.d_noise * model.d_noise.transpose();
-        let nn = &model.b_noise * model.d_noise.transpose();
-        let kalman = kalman(
-            &model.a,
-            &Mat::identity(nx, nx),
-            &model.c,
-            &q,
-            &r,
-            Some(&nn),
-            None,
-        )
-        .map_err(|e| match e {
-            RipError::NotDetectable {
-                re, im, modulus, ..
-            } => RipError::NotDetectable {
-                pair: "(A_aug, C_aug) of the plant with its output disturbance model".into(),
-                re,
-                im,
-                modulus,
-            },
-            other => other,
-        })?;
         let estimator = CurrentEstimator::new(
             model.a.clone(),
             model.b.clone(),

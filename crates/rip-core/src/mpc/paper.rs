@@ -14,7 +14,7 @@
 
 use super::{Mpc, MpcSettings, OutputDisturbance, QpSolver};
 use crate::error::Result;
-use crate::paper::{discrete_model, INPUT_SCALE, TS};
+use crate::paper::{INPUT_SCALE, TS};
 
 /// Prediction horizon `P`.
 pub const PREDICTION_HORIZON: usize = 50;
@@ -68,8 +68,15 @@ pub fn settings(solver: QpSolver) -> MpcSettings {
     settings_with_bounded_output(1, solver)
 }
 
-/// The paper's MPC on [`crate::paper::discrete_model`].
+/// The paper's MPC: the controller assembly ([`crate::spec`]) applied to the default spec
+/// with the given solver, i.e. [`settings`] on [`crate::paper::discrete_model`].
 pub fn controller(solver: QpSolver) -> Result<Mpc> {
-    let plant = discrete_model();
-    Mpc::new(&plant.a, &plant.b, &plant.c, TS, settings(solver))
+    let mut spec = crate::spec::Spec::default();
+    spec.mpc.solver = match solver {
+        QpSolver::ActiveSet => crate::spec::Solver::ActiveSet,
+        QpSolver::Clarabel => crate::spec::Solver::Clarabel,
+    };
+    spec.design(TS)
+        .and_then(|d| d.mpc())
+        .map_err(crate::regulators::spec_error)
 }

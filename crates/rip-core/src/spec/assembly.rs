@@ -1,0 +1,307 @@
+//! The one controller assembly: LQR, LQG and MPC built from a [`Spec`] at a sample time.
+//!
+//! ```text
+//! design model   (A_d, B_d) = c2d(A_c, B_c, Ts), C picks θ and α
+//!                A_c, B_c: the paper's recovered model for the unchanged `paper` preset,
+//!                otherwise the [plant] parameters' linearisation about upright
+//! gain           K = dlqr(A_d, B_d, diag(lqr.Q), lqr.R)                          eq. (13)
+//! estimator      one Kalman design on the augmented model (mpc::EstimatorDesign):
+//!                plant + [kalman] disturbance, MPC scales, eqs. (1)–(11)
+//! LQR            K, lqr.rate_cutoff, clamp to mpc.input_bounds
+//! LQG            K on the estimator (no MPC is built for it)
+//! MPC            [mpc] settings on the same estimator
+//! ```
+//!
+//! Every failure is a [`SpecError`] naming the key that caused it, so a file whose values are
+//! each valid but fail together in a design is refused before any simulation work.
+
+use nalgebra::DVector;
+
+use super::{ControllerKind, Spec, SpecError};
+use crate::controller::Controller;
+use crate::error::RipError;
+use crate::linalg::{c2d, Mat};
+use crate::lqr::dlqr;
+use crate::mpc::{EstimatorDesign, Mpc, MpcSettings, OutputDisturbance};
+use crate::paper;
+use crate::plant::Plant;
+use crate::regulators::{Lqg, Lqr};
+use crate::sim::{Reference, SensorModel, SimConfig};
+
+/// A built controller and its kind.
+pub type Built = (ControllerKind, Box<dyn Controller>);
+
+/// The designed pieces every controller of a spec is built from: the design model, the LQR
+/// gain and the one Kalman design LQG and MPC share (module docs).
+#[derive(Debug, Clone)]
+pub struct Design {
+    spec: Spec,
+    ts: f64,
+    /// `A_d` of the design model.
+    pub a: Mat,
+    /// `B_d` of the design model.
+    pub b: Mat,
+    /// `C`: the two angles.
+    pub c: Mat,
+    /// `K = dlqr(A_d, B_d, diag(Q), R)` (1×4).
+    pub k: Mat,
+    /// The shared Kalman design.
+    pub estimator: EstimatorDesign,
+}
+
+fn plant_key(e: &RipError) -> String {
+    if let RipError::InvalidParameter { name, .. } = e {
+        if let Some(p) = super::Param::ALL
+            .into_iter()
+            .find(|p| p.name().eq_ignore_ascii_case(name))
+        {
+            return format!("plant.{}", p.name());
+        }
+    }
+    "plant".into()
+}
+
+/// The weight an LQR design failure is blamed on: `R` when it is named, or when it is so
+/// small against `Q` (below 1e-12 of its largest entry) that the Riccati equation is
+/// ill-conditioned; `Q` otherwise.
+fn lqr_key(e: &RipError, spec: &super::LqrSpec) -> &'static str {
+    let q_max = spec.Q.iter().copied().fold(0.0, f64::max);
+    if spec.R < 1e-12 * q_max {
+        return "lqr.R";
+    }
+    let name = match e {
+        RipError::InvalidParameter { name, .. }
+        | RipError::NotPositiveDefinite { name }
+        | RipError::NonFinite { name }
+        | RipError::NotSymmetric { name, .. }
+        | RipError::NotPositiveSemidefinite { name, .. }
+        | RipError::Singular { name } => name.as_str(),
+        _ => "",
+    };
+    if name.starts_with('R') {
+        "lqr.R"
+    } else {
+        "lqr.Q"
+    }
+}
+
+/// Maps an MPC construction error onto the `[mpc]` (or `[kalman]`) key it names.
+fn mpc_key(e: &RipError) -> String {
+    let name = match e {
+        RipError::InvalidParameter { name, .. } | RipError::NonFinite { name } => name.as_str(),
+        RipError::Shape { name, .. } => name.as_str(),
+        _ => "",
+    };
+    let name = name.split('[').next().unwrap_or("");
+    match name {
+        "measurement_noise" => "kalman.measurement_noise".into(),
+        "A_od" | "B_od" | "C_od" => "kalman.disturbance_gain".into(),
+        n if !n.is_empty() && n.chars().all(|c| c.is_ascii_lowercase() || c == '_') => {
+            format!("mpc.{n}")
+        }
+        _ => "mpc".into(),
+    }
+}
+
+impl Spec {
+    /// The nonlinear plant of `[plant]`.
+    pub fn plant(&self) -> Result<Plant, SpecError> {
+        Plant::new(self.plant.params()).map_err(|e| SpecError::new(plant_key(&e), e.to_string()))
+    }
+
+    /// The continuous-time design model `(A_c, B_c)` (module docs).
+    pub fn continuous_design_model(&self) -> Result<(Mat, Mat), SpecError> {
+        if self.plant.is_paper_model() {
+            Ok(paper::continuous_model())
+        } else {
+            Ok(self.plant()?.linearize_upright())
+        }
+    }
+
+    /// The MPC settings of `[mpc]` and `[kalman]`.
+    pub fn mpc_settings(&self) -> MpcSettings {
+        let m = &self.mpc;
+        let k = &self.kalman;
+        let pair = |b: [f64; 2]| (b[0], b[1]);
+        MpcSettings {
+            prediction_horizon: m.prediction_horizon,
+            control_horizon: m.control_horizon,
+            output_weights: m.output_weights.to_vec(),
+            input_weights: m.input_weights.to_vec(),
+            input_rate_weights: m.input_rate_weights.to_vec(),
+            input_target: vec![0.0],
+            input_scales: m.input_scales.to_vec(),
+            output_scales: m.output_scales.to_vec(),
+            input_bounds: m.input_bounds.iter().copied().map(pair).collect(),
+            output_bounds: m.output_bounds.iter().copied().map(pair).collect(),
+            ecr_weight: m.ecr_weight,
+            output_disturbance: Some(OutputDisturbance::integrated_white_noise(
+                2,
+                k.disturbance_gain,
+            )),
+            measurement_noise: if k.measurement_noise == [1.0, 1.0] {
+                None
+            } else {
+                Some(Mat::from_diagonal(&DVector::from_row_slice(
+                    &k.measurement_noise,
+                )))
+            },
+            solver: m.solver.into(),
+            max_iterations: m.max_iterations,
+        }
+    }
+
+    /// The simulation of `[plant]`, `[sensor]` and `[reference]` at sample time `ts`.
+    pub fn sim_config(&self, ts: f64, seed: u64) -> SimConfig {
+        let [lo, hi] = self.mpc.input_bounds[0];
+        SimConfig {
+            duration: self.reference.duration,
+            ts,
+            substeps: self.plant.substeps,
+            x0: self.plant.initial_state,
+            reference: Reference::Step {
+                time: self.reference.step_time,
+                value: [self.reference.arm_step, 0.0],
+            },
+            sensor: SensorModel {
+                counts_per_rev: Some(self.sensor.encoder_counts.map(f64::from)),
+                noise_std: self.sensor.noise_std,
+            },
+            output_disturbance: None,
+            torque_disturbance: None,
+            u_limit: lo.abs().max(hi.abs()),
+            fall_limit: self.plant.fall_limit,
+            seed,
+        }
+    }
+
+    /// Designs the model, the gain and the shared Kalman filter at sample time `ts` (s).
+    pub fn design(&self, ts: f64) -> Result<Design, SpecError> {
+        if !(ts.is_finite() && ts > 0.0) {
+            return Err(SpecError::new(
+                "Ts",
+                format!("must be positive and finite, got {ts}"),
+            ));
+        }
+        self.validate()?;
+        let (ac, bc) = self.continuous_design_model()?;
+        let (a, b) = c2d(&ac, &bc, ts)
+            .map_err(|e| SpecError::new("plant", format!("discretisation at Ts = {ts} s: {e}")))?;
+        let c = paper::output_matrix();
+        let q = Mat::from_diagonal(&DVector::from_row_slice(&self.lqr.Q));
+        let r = Mat::from_element(1, 1, self.lqr.R);
+        let k = match dlqr(&a, &b, &q, &r, None) {
+            Ok(d) => d.k,
+            Err(e @ RipError::NotStabilizable { .. }) => {
+                return Err(SpecError::new("plant", format!("the design model: {e}")))
+            }
+            Err(e) => {
+                return Err(SpecError::new(
+                    lqr_key(&e, &self.lqr),
+                    format!(
+                        "the LQR design with Q = {:?}, R = {} fails: {e}",
+                        self.lqr.Q, self.lqr.R
+                    ),
+                ))
+            }
+        };
+        if !k.iter().all(|v| v.is_finite()) {
+            return Err(SpecError::new(
+                "lqr.R",
+                format!("the LQR gain is not finite with R = {}", self.lqr.R),
+            ));
+        }
+        let estimator = EstimatorDesign::new(&a, &b, &c, &self.mpc_settings()).map_err(|e| {
+            let key = match e {
+                RipError::NotDetectable { .. } => "plant".to_string(),
+                ref e => match mpc_key(e).as_str() {
+                    "mpc" => "kalman".to_string(),
+                    other => other.to_string(),
+                },
+            };
+            SpecError::new(key, format!("the Kalman design fails: {e}"))
+        })?;
+        Ok(Design {
+            spec: self.clone(),
+            ts,
+            a,
+            b,
+            c,
+            k,
+            estimator,
+        })
+    }
+}
+
+impl Design {
+    /// The sample time (s) of every controller of this design.
+    pub fn ts(&self) -> f64 {
+        self.ts
+    }
+
+    fn bounds(&self) -> (f64, f64) {
+        let [lo, hi] = self.spec.mpc.input_bounds[0];
+        (lo, hi)
+    }
+
+    /// LQR: `K` on measured angles and filtered-difference rates, clamped to the input bounds.
+    pub fn lqr(&self) -> Result<Lqr, SpecError> {
+        let (lo, hi) = self.bounds();
+        Lqr::new(&self.k, self.ts, self.spec.lqr.rate_cutoff)
+            .and_then(|c| c.with_input_bounds(lo, hi))
+            .map_err(|e| SpecError::new("lqr.rate_cutoff", e.to_string()))
+    }
+
+    /// LQG: `K` on the shared Kalman filter's estimate.
+    ///
+    /// The filter is designed on the MPC's scaled outputs `y/s_y`; LQG reads engineering
+    /// units, so it runs the same filter with `C' = S_y C_aug`, `L' = L S_y⁻¹`,
+    /// `M' = M S_y⁻¹`, whose innovation `y − C' x̂ = S_y (y/s_y − C_aug x̂)` gives the same
+    /// corrections.
+    pub fn lqg(&self) -> Result<Lqg, SpecError> {
+        let (lo, hi) = self.bounds();
+        let model = self.estimator.model();
+        let kf = self.estimator.kalman();
+        let sy = &self.spec.mpc.output_scales;
+        let mut c = model.c.clone();
+        let mut l = kf.l.clone();
+        let mut m = kf.m.clone();
+        for (i, &s) in sy.iter().enumerate() {
+            c.row_mut(i).scale_mut(s);
+            l.column_mut(i).scale_mut(1.0 / s);
+            m.column_mut(i).scale_mut(1.0 / s);
+        }
+        Lqg::new(&self.k, &model.a, &model.b, &c, &l, &m, self.ts)
+            .and_then(|g| g.with_input_bounds(lo, hi))
+            .map_err(|e| SpecError::new("kalman", format!("the LQG estimator: {e}")))
+    }
+
+    /// The MPC of `[mpc]` on the shared Kalman filter.
+    pub fn mpc(&self) -> Result<Mpc, SpecError> {
+        Mpc::with_estimator(&self.estimator, self.ts, self.spec.mpc_settings())
+            .map_err(|e| SpecError::new(mpc_key(&e), format!("the MPC design fails: {e}")))
+    }
+
+    /// The controller `kind`.
+    pub fn controller(&self, kind: ControllerKind) -> Result<Box<dyn Controller>, SpecError> {
+        Ok(match kind {
+            ControllerKind::Lqr => Box::new(self.lqr()?),
+            ControllerKind::Lqg => Box::new(self.lqg()?),
+            ControllerKind::Mpc => Box::new(self.mpc()?),
+        })
+    }
+
+    /// Builds every controller kind once, so that a file that cannot be designed is refused
+    /// before any run; returns the spec's `controllers`, in order.
+    pub fn controllers(&self) -> Result<Vec<Built>, SpecError> {
+        let mut out = Vec::new();
+        for kind in ControllerKind::ALL {
+            let c = self.controller(kind)?;
+            if self.spec.controllers.contains(&kind) {
+                out.push((kind, c));
+            }
+        }
+        out.sort_by_key(|(k, _)| self.spec.controllers.iter().position(|c| c == k));
+        Ok(out)
+    }
+}

@@ -1,0 +1,221 @@
+//! The experiment spec: one TOML file, read by `riprs compare`, `riprs.load_config`,
+//! `rip-rt run` and `rip-rt emulate`, defined here once.
+//!
+//! ```toml
+//! controllers = ["LQR", "LQG", "MPC"]   # what riprs compare runs
+//! [plant]        # preset and physical parameters, simulation settings   (PlantSpec)
+//! [sensor]       # encoders and measurement noise                        (SensorSpec)
+//! [reference]    # the arm step and the run length                       (ReferenceSpec)
+//! [lqr]          # eq. (13) weights shared by LQR and LQG, rate filter   (LqrSpec)
+//! [kalman]       # the estimator LQG and MPC share                       (KalmanSpec)
+//! [mpc]          # section 3's MPC                                       (MpcSpec)
+//! [monte_carlo]  # runs over seeds and parameter perturbations           (MonteCarloSpec)
+//! ```
+//!
+//! Every key is optional; each default is declared once, in its section's `Default`, and is
+//! the paper's setting. Unknown keys, wrong types and out-of-range values are errors naming
+//! the key path and the file, e.g. `cfg.toml: mpc.prediction_horizon: must be in 1..=10000,
+//! got 0`. The sections [`RUNTIME_SECTIONS`] belong to `rip-rt` (`[loop]`, `[device]`,
+//! `[safety]`), which checks them; this crate passes them through untouched
+//! ([`Spec::parse_with_runtime`]).
+//!
+//! [`Spec::to_toml`] prints the resolved spec (every default and every plant parameter filled
+//! in); parsing that text gives the same spec back. [`Spec::design`](Spec::design) builds the
+//! controllers from it (module `assembly`).
+
+mod assembly;
+mod sections;
+
+use std::fmt;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+pub use assembly::Design;
+pub use sections::{
+    ControllerKind, KalmanSpec, LqrSpec, MonteCarloSpec, MpcSpec, Param, PlantSpec, Preset,
+    ReferenceSpec, SensorSpec, Solver, MAX_DURATION, MAX_MONTE_CARLO_RUNS,
+};
+
+/// Top-level tables that belong to `rip-rt` and are not checked here.
+pub const RUNTIME_SECTIONS: [&str; 3] = ["loop", "device", "safety"];
+
+/// A bad file, key or value. Displays as `FILE: KEY: REASON` (`FILE: REASON` when no single
+/// key is at fault, e.g. a TOML syntax error).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SpecError {
+    /// The file, when the spec came from one.
+    pub file: Option<String>,
+    /// The key path (`mpc.prediction_horizon`, `sensor.noise_std[1]`), empty for the file.
+    pub key: String,
+    /// What is wrong.
+    pub reason: String,
+}
+
+impl SpecError {
+    /// An error at `key`.
+    pub fn new(key: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self {
+            file: None,
+            key: key.into(),
+            reason: reason.into(),
+        }
+    }
+
+    /// The same error, located in `file`.
+    pub fn in_file(mut self, file: &Path) -> Self {
+        self.file = Some(file.display().to_string());
+        self
+    }
+}
+
+impl fmt::Display for SpecError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if let Some(file) = &self.file {
+            write!(f, "{file}: ")?;
+        }
+        if !self.key.is_empty() {
+            write!(f, "{}: ", self.key)?;
+        }
+        f.write_str(&self.reason)
+    }
+}
+
+impl std::error::Error for SpecError {}
+
+/// The whole experiment (module docs). `Default` is the paper's setting.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Spec {
+    /// The controllers `riprs compare` runs, in this order.
+    pub controllers: Vec<ControllerKind>,
+    /// `[plant]`
+    pub plant: PlantSpec,
+    /// `[sensor]`
+    pub sensor: SensorSpec,
+    /// `[reference]`
+    pub reference: ReferenceSpec,
+    /// `[lqr]`
+    pub lqr: LqrSpec,
+    /// `[kalman]`
+    pub kalman: KalmanSpec,
+    /// `[mpc]`
+    pub mpc: MpcSpec,
+    /// `[monte_carlo]`
+    pub monte_carlo: MonteCarloSpec,
+}
+
+impl Default for Spec {
+    fn default() -> Self {
+        Self {
+            controllers: ControllerKind::ALL.to_vec(),
+            plant: PlantSpec::default(),
+            sensor: SensorSpec::default(),
+            reference: ReferenceSpec::default(),
+            lqr: LqrSpec::default(),
+            kalman: KalmanSpec::default(),
+            mpc: MpcSpec::default(),
+            monte_carlo: MonteCarloSpec::default(),
+        }
+    }
+}
+
+/// Deserialises `value` into `T`, naming the key path of any failure under `prefix`.
+pub fn from_value<T: serde::de::DeserializeOwned>(
+    value: toml::Value,
+    prefix: &str,
+) -> Result<T, SpecError> {
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let mut key = e.path().to_string();
+        let reason = e.inner().to_string().trim_end().to_string();
+        // An unknown key fails before the path reaches it; name it all the same.
+        if let Some(name) = reason
+            .strip_prefix("unknown field `")
+            .and_then(|r| r.split('`').next())
+        {
+            if key == "." || key.is_empty() {
+                key = name.to_string();
+            } else if !(key == name || key.ends_with(&format!(".{name}"))) {
+                key = format!("{key}.{name}");
+            }
+        }
+        if key == "." {
+            key.clear();
+        }
+        let key = match (prefix.is_empty(), key.is_empty()) {
+            (true, _) => key,
+            (false, true) => prefix.to_string(),
+            (false, false) => format!("{prefix}.{key}"),
+        };
+        SpecError::new(key, reason)
+    })
+}
+
+/// Parses TOML text into a table; a syntax error names no key.
+pub fn parse_table(text: &str) -> Result<toml::Table, SpecError> {
+    text.parse::<toml::Table>()
+        .map_err(|e| SpecError::new("", format!("invalid TOML: {}", e.to_string().trim_end())))
+}
+
+impl Spec {
+    /// Parses and checks TOML text; the sections of [`RUNTIME_SECTIONS`] are ignored.
+    pub fn parse(text: &str) -> Result<Self, SpecError> {
+        Self::parse_with_runtime(text).map(|(spec, _)| spec)
+    }
+
+    /// Parses and checks TOML text, returning the spec and the untouched runtime sections
+    /// ([`RUNTIME_SECTIONS`]) for `rip-rt` to read.
+    pub fn parse_with_runtime(text: &str) -> Result<(Self, toml::Table), SpecError> {
+        let mut table = parse_table(text)?;
+        let mut runtime = toml::Table::new();
+        for name in RUNTIME_SECTIONS {
+            if let Some(v) = table.remove(name) {
+                runtime.insert(name.to_string(), v);
+            }
+        }
+        let spec = Self::from_table(table)?;
+        Ok((spec, runtime))
+    }
+
+    /// Builds and checks a spec from a TOML table holding only its own sections.
+    pub fn from_table(table: toml::Table) -> Result<Self, SpecError> {
+        let spec: Spec = from_value(toml::Value::Table(table), "")?;
+        spec.validate()?;
+        Ok(spec)
+    }
+
+    /// Reads, parses and checks a file; errors name it.
+    pub fn load(path: &Path) -> Result<Self, SpecError> {
+        Self::load_with_runtime(path).map(|(spec, _)| spec)
+    }
+
+    /// [`load`](Self::load), also returning the runtime sections.
+    pub fn load_with_runtime(path: &Path) -> Result<(Self, toml::Table), SpecError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| SpecError::new("", format!("cannot read: {e}")).in_file(path))?;
+        Self::parse_with_runtime(&text).map_err(|e| e.in_file(path))
+    }
+
+    /// Checks every value; the error names the first bad key. Values that are valid alone but
+    /// fail together in a design are found by [`design`](Self::design).
+    pub fn validate(&self) -> Result<(), SpecError> {
+        sections::validate_sections(self)
+    }
+
+    /// The resolved spec: every plant parameter written out.
+    pub fn resolved(&self) -> Self {
+        Self {
+            plant: self.plant.resolved(),
+            ..self.clone()
+        }
+    }
+
+    /// The resolved spec as TOML (every default filled in); [`parse`](Self::parse) reads it
+    /// back to an equal spec.
+    pub fn to_toml(&self) -> String {
+        toml::to_string(&self.resolved()).expect("every spec value has a TOML form")
+    }
+}
+
+#[cfg(test)]
+mod tests;

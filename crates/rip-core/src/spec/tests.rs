@@ -1,0 +1,290 @@
+use super::*;
+use crate::controller::Controller;
+use crate::linalg::c2d;
+use crate::lqr::dlqr;
+use crate::paper;
+use crate::plant::{FurutaParams, Plant};
+
+fn key_of(text: &str) -> String {
+    match Spec::parse(text) {
+        Ok(_) => panic!("{text:?} was accepted"),
+        Err(e) => e.key,
+    }
+}
+
+#[test]
+fn empty_file_is_the_paper_setting() {
+    let spec = Spec::parse("").unwrap();
+    assert_eq!(spec, Spec::default());
+    assert_eq!(spec.mpc.prediction_horizon, 50);
+    assert_eq!(spec.mpc.control_horizon, 3);
+    assert_eq!(spec.lqr.Q, [25.0, 0.0, 50.0, 0.0]);
+    assert_eq!(spec.plant.params(), FurutaParams::paper());
+    assert!(spec.plant.is_paper_model());
+}
+
+#[test]
+fn printed_spec_reads_back_equal_and_names_every_key() {
+    let mut spec = Spec::default();
+    spec.plant.preset = Preset::QubeServo2;
+    spec.plant.Lp = Some(0.2);
+    spec.mpc.solver = Solver::Clarabel;
+    spec.monte_carlo.parameters = vec![Param::Mp, Param::Lp];
+    let text = spec.to_toml();
+    let back = Spec::parse(&text).unwrap();
+    assert_eq!(back, spec.resolved());
+    assert_eq!(back.to_toml(), text);
+    assert_eq!(back.plant.params(), spec.plant.params());
+    for key in [
+        "controllers",
+        "[plant]",
+        "preset = \"qube_servo2\"",
+        "Lp = 0.2",
+        "Rm = 8.4",
+        "substeps",
+        "initial_state",
+        "fall_limit",
+        "[sensor]",
+        "encoder_counts",
+        "noise_std",
+        "[reference]",
+        "[lqr]",
+        "Q = ",
+        "R = ",
+        "rate_cutoff",
+        "[kalman]",
+        "disturbance_gain",
+        "measurement_noise",
+        "[mpc]",
+        "prediction_horizon",
+        "input_rate_weights",
+        "ecr_weight",
+        "output_bounds = [[-inf, inf], ",
+        "solver = \"clarabel\"",
+        "[monte_carlo]",
+        "parameters = [\"mp\", \"Lp\"]",
+    ] {
+        assert!(text.contains(key), "{key} missing from\n{text}");
+    }
+}
+
+#[test]
+fn unknown_keys_and_sections_are_named() {
+    assert_eq!(
+        key_of("[mpc]\nprediction_horizn = 10\n"),
+        "mpc.prediction_horizn"
+    );
+    assert_eq!(key_of("[sefety]\nx = 1\n"), "sefety");
+    assert_eq!(key_of("horizon = 1\n"), "horizon");
+    // The old names of the runtime's own file are gone.
+    assert_eq!(key_of("[mpc]\nhorizon = 20\n"), "mpc.horizon");
+    assert_eq!(key_of("[lqg]\nR = 1\n"), "lqg");
+}
+
+#[test]
+fn bad_values_are_named() {
+    for (text, key) in [
+        ("[plant]\npreset = 'pendulum9000'\n", "plant.preset"),
+        ("[plant]\npreset = 'qube'\n", "plant.preset"),
+        ("[plant]\nJr = 0.0\n", "plant.Jr"),
+        ("[plant]\nDp = -1.0\n", "plant.Dp"),
+        ("[plant]\nsubsteps = 100001\n", "plant.substeps"),
+        ("[plant]\nsubsteps = 0\n", "plant.substeps"),
+        (
+            "[plant]\ninitial_state = [0.0, 0.0, 2.0, 0.0]\n",
+            "plant.initial_state[2]",
+        ),
+        (
+            "[plant]\ninitial_state = [0.0, 0.0, nan, 0.0]\n",
+            "plant.initial_state[2]",
+        ),
+        (
+            "[plant]\ninitial_state = [0.0, 0.0]\n",
+            "plant.initial_state",
+        ),
+        ("[mpc]\ncontrol_horizon = 80\n", "mpc.control_horizon"),
+        ("[mpc]\nprediction_horizon = 0\n", "mpc.prediction_horizon"),
+        (
+            "[mpc]\nprediction_horizon = 100000\n",
+            "mpc.prediction_horizon",
+        ),
+        ("[mpc]\necr_weight = 0.0\n", "mpc.ecr_weight"),
+        (
+            "[mpc]\ninput_bounds = [[-inf, inf]]\n",
+            "mpc.input_bounds[0]",
+        ),
+        (
+            "[mpc]\noutput_bounds = [[-inf, inf], [0.5, -0.5]]\n",
+            "mpc.output_bounds[1]",
+        ),
+        ("[mpc]\nsolver = 'osqp'\n", "mpc.solver"),
+        (
+            "[mpc]\noutput_weights = [1.0, -1.0]\n",
+            "mpc.output_weights[1]",
+        ),
+        (
+            "[sensor]\nnoise_std = [0.001, -1.0]\n",
+            "sensor.noise_std[1]",
+        ),
+        (
+            "[sensor]\nencoder_counts = [0.5, 2048]\n",
+            "sensor.encoder_counts[0]",
+        ),
+        (
+            "[sensor]\nencoder_counts = [0, 2048]\n",
+            "sensor.encoder_counts[0]",
+        ),
+        ("[reference]\nduration = 'long'\n", "reference.duration"),
+        ("[reference]\nduration = 0.001\n", "reference.duration"),
+        ("[reference]\nduration = 1e6\n", "reference.duration"),
+        ("[reference]\narm_step = 1e300\n", "reference.arm_step"),
+        (
+            "[kalman]\ndisturbance_gain = -0.01\n",
+            "kalman.disturbance_gain",
+        ),
+        ("[lqr]\nrate_cutoff = 0.0\n", "lqr.rate_cutoff"),
+        ("[lqr]\nR = 0\n", "lqr.R"),
+        ("[lqr]\nQ = [1, 2, -3, 4]\n", "lqr.Q[2]"),
+        ("[lqr]\nQ = [0, 2, 3, 4]\n", "lqr.Q[0]"),
+        ("controllers = ['LQR', 'PID']\n", "controllers[1]"),
+        ("controllers = ['LQR', 'LQR']\n", "controllers[1]"),
+        ("controllers = []\n", "controllers"),
+        (
+            "[monte_carlo]\nperturbation = 1.0\n",
+            "monte_carlo.perturbation",
+        ),
+        (
+            "[monte_carlo]\nparameters = ['g']\n",
+            "monte_carlo.parameters[0]",
+        ),
+        ("[monte_carlo]\nruns = -1\n", "monte_carlo.runs"),
+    ] {
+        assert_eq!(key_of(text), key, "{text}");
+    }
+}
+
+#[test]
+fn the_message_names_the_key_the_value_and_the_file() {
+    let e = Spec::parse("[mpc]\nprediction_horizon = 0\n").unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "mpc.prediction_horizon: must be in 1..=10000, got 0"
+    );
+    let e = e.in_file(std::path::Path::new("cfg.toml"));
+    assert_eq!(
+        e.to_string(),
+        "cfg.toml: mpc.prediction_horizon: must be in 1..=10000, got 0"
+    );
+    let e = Spec::parse("[reference\n").unwrap_err();
+    assert!(e.to_string().starts_with("invalid TOML"), "{e}");
+}
+
+#[test]
+fn runtime_sections_pass_through_unchecked() {
+    let (spec, runtime) =
+        Spec::parse_with_runtime("[loop]\nperiod_ms = 5\n[safety]\nvoltage_limit = 6\n").unwrap();
+    assert_eq!(spec, Spec::default());
+    assert_eq!(runtime["loop"]["period_ms"].as_integer(), Some(5));
+    assert!(runtime.contains_key("safety") && !runtime.contains_key("device"));
+}
+
+#[test]
+fn parameters_override_the_preset() {
+    let spec = Spec::parse("[plant]\npreset = 'qube_servo2'\nLp = 0.3\nkm = 0.05\n").unwrap();
+    let p = spec.plant.params();
+    let q = FurutaParams::qube_servo2();
+    assert_eq!(p.lp, 0.3);
+    assert_eq!(p.km, 0.05);
+    assert_eq!(p.mr, q.mr);
+    assert_eq!(p.jp, q.jp);
+    // The paper preset with its own values written out is still the paper's model.
+    let written = Spec::default().to_toml();
+    assert!(Spec::parse(&written).unwrap().plant.is_paper_model());
+    assert!(!Spec::parse("[plant]\nDp = 0.001\n")
+        .unwrap()
+        .plant
+        .is_paper_model());
+}
+
+#[test]
+fn default_design_is_the_papers() {
+    let design = Spec::default().design(paper::TS).unwrap();
+    let model = paper::discrete_model();
+    assert_eq!(design.a, model.a);
+    assert_eq!(design.b, model.b);
+    let (q, r) = paper::lqr_weights();
+    let k = dlqr(&model.a, &model.b, &q, &r, None).unwrap().k;
+    assert_eq!(design.k, k);
+    let reference = paper::kalman_design().unwrap();
+    let kf = design.estimator.kalman();
+    assert!((&kf.l - &reference.l).amax() < 1e-12);
+    assert!((&kf.m - &reference.m).amax() < 1e-12);
+    let lqg = design.lqg().unwrap();
+    assert!((lqg.predictor_gain() - &reference.l).amax() < 1e-12);
+    assert_eq!(lqg.gain(), k);
+    let mpc = design.mpc().unwrap();
+    assert!((&mpc.kalman_design().l - &reference.l).amax() < 1e-12);
+    assert_eq!(mpc.prediction_horizon(), 50);
+}
+
+#[test]
+fn other_plants_are_designed_on_their_own_linearisation_at_the_loop_period() {
+    let spec = Spec::parse("[plant]\npreset = 'qube_servo2'\nDp = 0.0007\n").unwrap();
+    let ts = 0.005;
+    let design = spec.design(ts).unwrap();
+    let plant = Plant::new(FurutaParams {
+        dp: 0.0007,
+        ..FurutaParams::qube_servo2()
+    })
+    .unwrap();
+    let (ac, bc) = plant.linearize_upright();
+    let (a, b) = c2d(&ac, &bc, ts).unwrap();
+    assert!((&design.a - &a).amax() < 1e-14);
+    assert!((&design.b - &b).amax() < 1e-14);
+    assert_eq!(design.lqr().unwrap().ts(), ts);
+    assert_eq!(design.mpc().unwrap().ts(), ts);
+}
+
+#[test]
+fn lqg_with_output_scales_runs_the_mpcs_filter() {
+    // The MPC's filter works on y/s_y; the LQG's, on y. Fed the same measurements, both must
+    // hold the same estimate.
+    let spec = Spec::parse("[mpc]\noutput_scales = [2.0, 0.5]\n").unwrap();
+    let design = spec.design(paper::TS).unwrap();
+    let (mut u, mut u_mpc) = ([0.0], [0.0]);
+    let mut lqg = design.lqg().unwrap();
+    let mut mpc = design.mpc().unwrap();
+    let y = [0.1, -0.05];
+    lqg.step(&y, &[0.0, 0.0], &mut u);
+    mpc.step(&y, &[0.0, 0.0], &mut u_mpc);
+    let a = lqg.state_estimate().unwrap().to_vec();
+    let b = mpc.state_estimate().unwrap().to_vec();
+    for (x, z) in a.iter().zip(&b) {
+        assert!((x - z).abs() < 1e-12, "{a:?} vs {b:?}");
+    }
+}
+
+#[test]
+fn designs_that_fail_name_the_key() {
+    let fails = |text: &str| {
+        Spec::parse(text)
+            .unwrap()
+            .design(paper::TS)
+            .and_then(|d| d.controllers().map(|_| ()))
+            .unwrap_err()
+    };
+    let e = Spec::parse("[lqr]\nQ = [0.0, 0.0, 0.0, 0.0]\n").unwrap_err();
+    assert_eq!(e.key, "lqr.Q[0]", "{e}");
+    let e = fails("[lqr]\nR = 1e-300\n");
+    assert_eq!(e.key, "lqr.R", "{e}");
+    let e = fails("[mpc]\noutput_weights = [1e308, 1e308]\n");
+    assert!(e.key.starts_with("mpc."), "{e}");
+}
+
+#[test]
+fn controllers_come_in_the_files_order() {
+    let spec = Spec::parse("controllers = ['MPC', 'LQR']\n").unwrap();
+    let built = spec.design(paper::TS).unwrap().controllers().unwrap();
+    let kinds: Vec<_> = built.iter().map(|(k, _)| *k).collect();
+    assert_eq!(kinds, [ControllerKind::Mpc, ControllerKind::Lqr]);
+}
