@@ -333,7 +333,7 @@ pub fn requested_stop() -> Option<StopReason> {
 
 /// Asks the running loop to stop at its next period with [`StopReason::Signal`]`(sig)`.
 /// Async-signal-safe.
-pub fn request_stop(sig: i32) {
+pub(crate) fn request_stop(sig: i32) {
     // The first request wins: its signal is the one reported.
     let _ = STOP_REQUEST.compare_exchange(0, sig as usize, Ordering::Relaxed, Ordering::Relaxed);
 }
@@ -417,7 +417,7 @@ static STOP_FD: AtomicI32 = AtomicI32::new(-1);
 static TX_SEQ: AtomicU16 = AtomicU16::new(0);
 
 /// The next host sequence number (shared by the loop and the emergency stop).
-pub fn next_seq() -> u16 {
+pub(crate) fn next_seq() -> u16 {
     TX_SEQ.fetch_add(1, Ordering::Relaxed)
 }
 
