@@ -60,18 +60,18 @@ pub struct RunReport {
 pub struct Probe {
     /// Steps timed (after a warm-up step, which is timed only when nothing else could be).
     pub steps: usize,
-    /// Their median (ms).
-    pub median_ms: f64,
-    /// The longest (ms).
-    pub max_ms: f64,
+    /// Their median (µs).
+    pub median_us: f64,
+    /// The longest (µs).
+    pub max_us: f64,
 }
 
 impl std::fmt::Display for Probe {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "steps={} step_ms(median/max)={:.3}/{:.3}",
-            self.steps, self.median_ms, self.max_ms
+            "steps={} step_us(median/max)={:.1}/{:.1}",
+            self.steps, self.median_us, self.max_us
         )
     }
 }
@@ -117,15 +117,15 @@ pub fn probe(core: &mut LoopCore, cfg: &Config) -> Result<Probe, StopReason> {
     let n = n.max(1);
     let times = &mut times[..n];
     times.sort_unstable();
-    let ms = |ns: u64| ns as f64 * 1e-6;
+    let us = |ns: u64| ns as f64 * 1e-3;
     let probe = Probe {
         steps: n,
-        median_ms: ms(times[n / 2]),
-        max_ms: ms(times[n - 1]),
+        median_us: us(times[n / 2]),
+        max_us: us(times[n - 1]),
     };
     if times[n / 2] as f64 > budget_ns {
         return Err(StopReason::TooSlow {
-            median_ms: probe.median_ms,
+            median_ms: probe.median_us * 1e-3,
             budget_ms: budget_ns * 1e-6,
             steps: n,
         });

@@ -138,7 +138,7 @@ pub enum StopReason {
     #[error("compute overrun: {0}")]
     Overrun(#[source] Overrun),
     /// Before enabling the motor, timed controller steps did not fit the period.
-    #[error("refusing to start: the controller needs {median_ms:.3} ms per step (median of {steps} timed steps), the period leaves {budget_ms:.3} ms after the reply timeout")]
+    #[error("refusing to start: the controller needs {median_ms:.3} ms per step (median of {steps} timed step(s)), the period leaves {budget_ms:.3} ms after the reply timeout")]
     TooSlow {
         /// Median step time (ms).
         median_ms: f64,
