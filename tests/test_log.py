@@ -5,6 +5,7 @@ from __future__ import annotations
 import pathlib
 import signal
 import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -114,3 +115,99 @@ def test_reads_a_log_written_by_rip_rt(tmp_path: pathlib.Path) -> None:
     assert log.xhat.shape[1] == 5  # the LQG's augmented estimate
     assert np.abs(log.alpha).max() < 0.25
     assert np.abs(log.u).max() <= 12.0
+
+
+def _write_bytes(tmp_path: pathlib.Path, data: bytes) -> pathlib.Path:
+    path = tmp_path / "log.csv"
+    path.write_bytes(data)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "match"),
+    [
+        ("xhat_1", "xhat_a", r"line 4: column 'xhat_a': state-estimate columns are named xhat_0"),
+        ("xhat_1", "xhat_2", r"line 4: column 'xhat_2'"),
+        (",u,", ",u,u,", r"line 4: column 'u' appears twice"),
+        ("0.0100,11,", "0.0100,nan,", r"line 6: column 'seq': not an integer .*'nan'"),
+        ("0.0100,11,", "0.0100,1e30,", r"line 6: column 'seq': not an integer .*'1e30'"),
+        ("0.0100,11,", "0.0100,99999999999999999999,", r"line 6: column 'seq'"),
+        ("75.5,1\n", "75.5,nan\n", r"line 6: column 'status': not an integer .*'nan'"),
+        ("75.5,1\n", "75.5,1.0\n", r"line 6: column 'status'"),
+        ("75.5,1\n", "75.5,\n", r"line 6: column 'status'"),
+        ("0.3,0.4", "0.3,zero", r"line 6: column 'xhat_1': not a number: 'zero'"),
+    ],
+)
+def test_bad_columns_and_cells_name_file_line_and_column(tmp_path, old, new, match) -> None:
+    assert old in SAMPLE
+    path = _write_bytes(tmp_path, SAMPLE.replace(old, new, 1).encode())
+    with pytest.raises(riprs.LogError, match=match) as info:
+        riprs.load_log(path)
+    assert str(path) in str(info.value)
+
+
+def test_a_byte_order_mark_and_crlf_line_ends_are_accepted(tmp_path) -> None:
+    plain = riprs.load_log(_write_bytes(tmp_path, SAMPLE.encode()))
+    text = b"\xef\xbb\xbf" + SAMPLE.replace("\n", "\r\n").encode()
+    marked = riprs.load_log(_write_bytes(tmp_path, text))
+    assert marked.meta == plain.meta and marked.meta["rip-rt"] == "0.1.0"
+    for name in ("t", "seq", "theta", "u", "status"):
+        np.testing.assert_array_equal(getattr(marked, name), getattr(plain, name))
+    np.testing.assert_array_equal(marked.xhat, plain.xhat)
+
+
+def _big_log(rows: int) -> bytes:
+    """A log of `rows` rows with five estimate columns, written with numpy's formatter."""
+    header = "# rip-rt: 0.1.0\nt,seq,theta,alpha,theta_ref,u,xhat_0,xhat_1,xhat_2,xhat_3,xhat_4,"
+    header += "compute_us,jitter_us,status\n"
+    k = np.arange(rows)
+    table = np.column_stack(
+        [k * 0.01, k, np.sin(k * 1e-3), 0.01 * np.cos(k * 1e-2), np.ones(rows), 0.5 * np.ones(rows)]
+        + [np.full(rows, 0.125 * i) for i in range(5)]
+        + [np.full(rows, 31.5), np.full(rows, 80.0), k % 4096]
+    )
+    import io
+
+    buf = io.StringIO()
+    fmt = ["%.4f", "%d"] + ["%.6f"] * 9 + ["%.1f", "%.1f", "%d"]
+    np.savetxt(buf, table, fmt=fmt, delimiter=",")
+    return (header + buf.getvalue() + "# stop: finished\n").encode()
+
+
+def test_a_bad_row_deep_in_a_large_log_is_named_by_its_line(tmp_path) -> None:
+    data = _big_log(50_000).splitlines(keepends=True)
+    # Line 2 is the column row, so data row i is line i + 3.
+    data[40_000 + 2] = data[40_000 + 2].replace(b",", b",x", 1)
+    with pytest.raises(riprs.LogError, match=r"line 40003: column 'seq'"):
+        riprs.load_log(_write_bytes(tmp_path, b"".join(data)))
+    log = riprs.load_log(_write_bytes(tmp_path, _big_log(50_000)))
+    assert len(log.t) == 50_000 and log.xhat.shape == (50_000, 5)
+    np.testing.assert_array_equal(log.seq, np.arange(50_000))
+    np.testing.assert_array_equal(log.status, np.arange(50_000) % 4096)
+    np.testing.assert_array_equal(log.xhat[-1], [0.0, 0.125, 0.25, 0.375, 0.5])
+    np.testing.assert_allclose(log.theta, np.round(np.sin(np.arange(50_000) * 1e-3), 6))
+    assert log.meta["stop"] == "finished"
+
+
+PEAK_SCRIPT = """
+import resource, sys
+import riprs
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+log = riprs.load_log(sys.argv[1])
+after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+arrays = sum(a.nbytes for a in (log.t, log.seq, log.theta, log.alpha, log.theta_ref, log.u,
+                                 log.xhat, log.compute_us, log.jitter_us, log.status))
+print(len(log.t), (after - before) * 1024, arrays)
+"""
+
+
+def test_a_large_log_loads_in_memory_close_to_its_arrays(tmp_path) -> None:
+    path = _write_bytes(tmp_path, _big_log(300_000))
+    done = subprocess.run(
+        [sys.executable, "-c", PEAK_SCRIPT, str(path)], capture_output=True, text=True, check=True
+    )
+    rows, growth, arrays = map(int, done.stdout.split())
+    assert rows == 300_000
+    # Python floats per cell (the old reader) took about 30 times the arrays; the arrays, one
+    # parsing block and the file's size in the counting pass are what may remain.
+    assert growth < 2 * arrays + 32 * 2**20, (growth, arrays)
