@@ -62,8 +62,8 @@ pub struct LoopConfig {
     /// is a compute overrun: the command is not sent and the loop stops. In
     /// [`MAX_STEP_PERIODS`].
     pub max_step_periods: f64,
-    /// This many periods in a row that overran their deadline are a compute overrun. In
-    /// [`MAX_CONSECUTIVE_MISSES`].
+    /// This many periods in a row whose work (wake-up to command sent) took longer than a
+    /// period are a compute overrun. In [`MAX_CONSECUTIVE_MISSES`].
     pub max_consecutive_misses: u32,
 }
 

@@ -33,7 +33,7 @@ Exit codes (docs/rip-rt.md has the safety rules behind each):
     8    the device reported a driver fault
     9    log fault: the log could not be written (disk full, file-size limit, storage stalled)
     10   compute overrun: a step over loop.max_step_periods, loop.max_consecutive_misses
-         overrun periods in a row, or the loop stalled (suspended) for 100 ms
+         periods in a row longer than a period, or the loop stalled (suspended) for 100 ms
     11   refused to start: timed controller steps do not fit the period (motor never enabled)
     101  internal error (panic)
     128+N  stopped by signal N: 129 SIGHUP, 130 SIGINT (Ctrl-C), 131 SIGQUIT, 138 SIGUSR1,

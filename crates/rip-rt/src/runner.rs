@@ -16,7 +16,7 @@
 //! every period of balancing: no enabling command from a measurement older than
 //! `loop.max_step_periods` (compute overrun) and no repeated enabling command more than
 //! `loop.watchdog_periods` (and never more than [`MAX_BLIND_MS`]) after the last measurement;
-//! `loop.max_consecutive_misses` overrun periods in a row, or a loop that did not run for
+//! `loop.max_consecutive_misses` periods in a row longer than a period, or a loop that did not run for
 //! [`MAX_BLIND_MS`] (suspended, starved), stop it.
 
 use crate::config::{Config, MAX_BLIND_MS};
@@ -234,14 +234,6 @@ impl Runner<'_> {
                 ms: absent_ns as f64 * 1e-6,
             }));
         }
-        if tick.skipped > 0 {
-            self.misses_in_row += 1;
-            if self.misses_in_row >= self.max_misses {
-                return Err(StopReason::Overrun(Overrun::Misses(self.misses_in_row)));
-            }
-        } else {
-            self.misses_in_row = 0;
-        }
         self.balanced_ns = tick.deadline_ns - start_ns;
         if self.duration_ns.is_some_and(|d| self.balanced_ns >= d) {
             return Err(StopReason::Finished);
@@ -381,9 +373,28 @@ impl Runner<'_> {
         let phase = self.arm(tick, &reply, phase)?;
         match phase {
             Phase::Arming { .. } => {}
-            Phase::Balancing { start_ns } => self.balance(tick, seq, &reply, start_ns)?,
+            Phase::Balancing { start_ns } => {
+                self.balance(tick, seq, &reply, start_ns)?;
+                self.count_overrun(tick)?;
+            }
         }
         Ok(phase)
+    }
+
+    /// Counts periods whose own work (wake-up to command sent) took longer than a period.
+    /// A late wake-up alone is the scheduler's doing, not the controller's, and is left to the
+    /// stall rule.
+    fn count_overrun(&mut self, tick: &Tick) -> Result<(), StopReason> {
+        let woke_ns = tick.deadline_ns + tick.lateness_ns;
+        if now_ns().saturating_sub(woke_ns) > self.period_ns {
+            self.misses_in_row += 1;
+            if self.misses_in_row >= self.max_misses {
+                return Err(StopReason::Overrun(Overrun::Misses(self.misses_in_row)));
+            }
+        } else {
+            self.misses_in_row = 0;
+        }
+        Ok(())
     }
 }
 

@@ -75,8 +75,9 @@ pub enum Overrun {
         /// The limit (ms).
         limit_ms: f64,
     },
-    /// `loop.max_consecutive_misses` periods in a row overran their deadline.
-    #[error("{0} periods in a row overran their deadline (loop.max_consecutive_misses)")]
+    /// `loop.max_consecutive_misses` periods in a row took longer than a period from wake-up
+    /// to command.
+    #[error("{0} periods in a row took longer than a period from wake-up to command (loop.max_consecutive_misses)")]
     Misses(u32),
     /// The loop did not run (suspended, or starved of the CPU) for
     /// [`MAX_BLIND_MS`](crate::config::MAX_BLIND_MS) or longer.

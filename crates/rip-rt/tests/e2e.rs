@@ -135,9 +135,15 @@ fn spawn_run(device: &Path, controller: &str, extra: &[&str]) -> Child {
         .expect("spawn run")
 }
 
-/// `rip-rt run` with a file-size limit of `bytes` (`ulimit -f`): the kernel sends SIGXFSZ on
-/// the write that crosses it.
-fn spawn_run_with_file_limit(device: &Path, controller: &str, extra: &[&str], bytes: u64) -> Child {
+/// `rip-rt run` with the resource limit `resource` set to `value` (e.g. `ulimit -f`: the
+/// kernel sends SIGXFSZ on the write that crosses it).
+fn spawn_run_with_limit(
+    device: &Path,
+    controller: &str,
+    extra: &[&str],
+    resource: libc::__rlimit_resource_t,
+    value: u64,
+) -> Child {
     let mut cmd = Command::new(BIN);
     cmd.arg("run")
         .arg("--port")
@@ -150,10 +156,10 @@ fn spawn_run_with_file_limit(device: &Path, controller: &str, extra: &[&str], by
     unsafe {
         cmd.pre_exec(move || {
             let lim = libc::rlimit {
-                rlim_cur: bytes,
-                rlim_max: bytes,
+                rlim_cur: value,
+                rlim_max: value,
             };
-            if libc::setrlimit(libc::RLIMIT_FSIZE, &lim) != 0 {
+            if libc::setrlimit(resource, &lim) != 0 {
                 return Err(std::io::Error::last_os_error());
             }
             Ok(())
@@ -374,7 +380,8 @@ fn vanished_device_is_a_safe_stop_with_exit_code_3() {
 /// the device received.
 fn signal_a_balancing_run(sig: i32, name: &str) -> (RunResult, Vec<(i32, u8)>) {
     let emu = Emulator::start(&format!("signal-{sig}"), &["--noise", "0.3"]);
-    let child = spawn_run(&emu.device, "lqr", &[]);
+    // No core file from the fatal signals' default action.
+    let child = spawn_run_with_limit(&emu.device, "lqr", &[], libc::RLIMIT_CORE, 0);
     std::thread::sleep(Duration::from_millis(1500));
     unsafe { libc::kill(child.id() as i32, sig) };
     let r = wait_with_timeout(child, Duration::from_secs(10));
@@ -461,10 +468,11 @@ fn a_log_over_the_file_size_limit_is_a_log_fault() {
     let emu = Emulator::start("xfsz", &["--noise", "0.3", "--seed", "6"]);
     let log = scratch("xfsz.csv");
     // About 200 rows of the LQR's log: two seconds of balancing.
-    let child = spawn_run_with_file_limit(
+    let child = spawn_run_with_limit(
         &emu.device,
         "lqr",
         &["--duration", "10", "--log", log.to_str().unwrap()],
+        libc::RLIMIT_FSIZE,
         20 * 1024,
     );
     let r = wait_with_timeout(child, Duration::from_secs(20));
