@@ -9,7 +9,7 @@ A campaign spec is an experiment spec (``[plant]``, ``[sensor]``, ``[reference]`
     duration = 10.0         # s per run (default: reference.duration)
     seed = 0                # first noise seed
     chunk_size = 256        # runs per unit of work (default: automatic; no result depends on it)
-    settle_band = 0.05      # settling band, a fraction of the arm step
+    settle_band = 0.02      # rad: the arm counts as settled within this of its reference
 
     [[campaign.axis]]
     name = "mp"             # a FurutaParams name: the true plant's value, design unchanged

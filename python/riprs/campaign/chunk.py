@@ -1,104 +1,51 @@
-"""One chunk of runs through the Rust batch API, and the per-run metrics."""
+"""One chunk of runs through the Rust batch API (:func:`riprs.simulate_metrics`)."""
 
 from __future__ import annotations
 
 import copy
-import os
-import sys
-from collections.abc import Mapping, Sequence
-from typing import Any, Union
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
 from riprs import __version__
-from riprs._riprs import Plant
+from riprs._riprs import FurutaParams
 from riprs.campaign.spec import METRICS, Campaign, CampaignError, _design, _parse, _sim_setup
-
-if sys.version_info >= (3, 11):
-    pass
-else:  # pragma: no cover
-    pass
 
 __all__ = ["compute_chunk"]
 
-PathLike = Union[str, "os.PathLike[str]"]
 
-EXAMPLE_SPEC = """\
-# riprs campaign: LQR vs LQG vs MPC when the pendulum mass and the arm length are not what the
-# controllers were designed for (the paper's robustness question, as a map).
-# Every section of the experiment spec ([plant], [sensor], [reference], [lqr], [mpc], ...)
-# may follow; without them the paper's setting is used.
-
-[campaign]
-controllers = ["LQR", "LQG", "MPC"]
-seeds = 20                 # noise seeds per grid point
-duration = 10.0            # s per run
-
-[[campaign.axis]]
-name = "mp"                # pendulum mass: a scale factor on the base plant's value
-scale = [0.7, 1.3]
-points = 13
-
-[[campaign.axis]]
-name = "Lr"                # arm length
-scale = [0.8, 1.2]
-points = 9
-"""
-
-
-# -- the batch runner ---------------------------------------------------------------------------
-
-
-def _simulate_metrics(
-    plants: Sequence[Plant],
+def _segment_metrics(
+    params: FurutaParams,
     controller: Any,
-    seeds: Sequence[int],
+    noise_seed: int,
+    first: int,
+    count: int,
     duration: float,
     options: Mapping[str, Any],
-    settle_band: float,
+    settle_band: float | None,
 ) -> dict[str, np.ndarray]:
-    """Run ``(plants[i], seeds[i])`` in parallel through the Rust batch API; one value of each
-    of :data:`METRICS` per run.
+    """Seeds ``first .. first + count - 1`` of one grid point, in parallel on all cores: seed
+    index ``s`` uses noise seed ``noise_seed + s``. Only metrics come back (no trajectories, no
+    Python per run)."""
+    from riprs.sim import simulate_metrics
 
-    Settling time: the first time after the reference step from which the true arm angle stays
-    within ``settle_band * |arm_step|`` (or ``settle_band`` rad for a zero step) of its
-    reference until the end of the run, measured from the step; NaN for a run that falls or is
-    outside the band at its end.
-    """
-    from riprs.sim import simulate_batch
-
-    results = simulate_batch(
-        list(plants), controller, list(seeds), duration, paired=True, **options
+    # The batch API's own default band, unless the spec names one.
+    band = {} if settle_band is None else {"settle_band": settle_band}
+    m = simulate_metrics(
+        params, controller, count, duration, seed=noise_seed, first_run=first, **band, **options
     )
-    n = len(results)
-    out = {
-        "rmse_arm": np.empty(n),
-        "rmse_pendulum": np.empty(n),
-        "rmse_voltage": np.empty(n),
-        "fell": np.empty(n, dtype=bool),
-        "fall_time": np.full(n, np.nan),
-        "peak_voltage": np.empty(n),
-        "settle_time": np.full(n, np.nan),
+    return {
+        "rmse_arm": m.rmse[:, 0],
+        "rmse_pendulum": m.rmse[:, 1],
+        "rmse_voltage": m.rmse[:, 2],
+        "fell": m.fell,
+        "fall_time": m.fall_time,
+        "peak_voltage": m.peak_voltage,
+        "settle_time": m.settle_time,
+        "seed": m.seed,
     }
-    step = float(options.get("reference") or 0.0)
-    step_time = float(options.get("reference_time", 0.0))
-    band = settle_band * abs(step) if step else settle_band
-    for i, r in enumerate(results):
-        out["rmse_arm"][i], out["rmse_pendulum"][i], out["rmse_voltage"][i] = r.rmse
-        out["fell"][i] = r.fell
-        if r.fell and r.fall_time is not None:
-            out["fall_time"][i] = r.fall_time
-        out["peak_voltage"][i] = float(np.max(np.abs(r.u))) if len(r.u) else 0.0
-        if not r.fell:
-            outside = np.flatnonzero(np.abs(r.x[:, 0] - r.r[:, 0]) > band)
-            if not len(outside):
-                out["settle_time"][i] = 0.0
-            elif outside[-1] + 1 < len(r.t):
-                out["settle_time"][i] = max(float(r.t[outside[-1] + 1]) - step_time, 0.0)
-    return out
 
-
-# -- one chunk ----------------------------------------------------------------------------------
 
 _CAMPAIGNS: dict[str, Campaign] = {}
 
@@ -127,9 +74,9 @@ def _run_payload_chunk(payload: Mapping[str, Any], start: int, stop: int) -> dic
 def compute_chunk(campaign: Campaign, start: int, stop: int) -> dict[str, np.ndarray]:
     """Runs ``start .. stop-1`` of ``campaign``: the result columns as numpy arrays.
 
-    Runs that share a controller and the setting-axis values go to the Rust batch API in one
-    call (a plant variant and a noise seed per run), so a chunk costs a few Python calls, not
-    one per run.
+    The seeds of one grid point and controller are consecutive runs; each such segment is one
+    call of the Rust batch API, which runs its seeds in parallel and returns metrics only.
+    A controller is designed once per chunk for each combination of setting axes it meets.
     """
     if not 0 <= start < stop <= campaign.runs:
         raise CampaignError(f"chunk {start}..{stop} is outside 0..{campaign.runs}")
@@ -150,33 +97,38 @@ def compute_chunk(campaign: Campaign, start: int, stop: int) -> dict[str, np.nda
 
     settings = campaign.setting_axes()
     plant_axes = [a for a in campaign.axes if a.parameter is not None]
-    keys = np.column_stack([idx["controller"], *(idx[f"axis:{a.name}"] for a in settings)]).astype(
-        np.int64
-    )
-    groups: dict[tuple[int, ...], list[int]] = {}
-    for i, key in enumerate(map(tuple, keys.tolist())):
-        groups.setdefault(key, []).append(i)
-    for key, members in groups.items():
-        config = campaign.config_for(tuple(key[1:]))
-        controller = _design(config, campaign.controllers[key[0]])
-        params, options = _sim_setup(config)
-        nominal = params.to_dict()
-        plants = []
-        for i in members:
+    designs: dict[tuple[int, ...], tuple[Any, FurutaParams, dict[str, Any]]] = {}
+    # Segment boundaries: where the controller or the grid point changes.
+    cut = np.flatnonzero((np.diff(idx["controller"]) != 0) | (np.diff(idx["point"]) != 0)) + 1
+    for a, b in zip(np.r_[0, cut], np.r_[cut, n], strict=True):
+        c = int(idx["controller"][a])
+        key = (c, *(int(idx[f"axis:{ax.name}"][a]) for ax in settings))
+        if key not in designs:
+            config = campaign.config_for(key[1:])
+            params, options = _sim_setup(config)
+            designs[key] = (_design(config, campaign.controllers[c]), params, options)
+        controller, params, options = designs[key]
+        if plant_axes:
+            nominal = params.to_dict()
             changes = {}
-            for a in plant_axes:
-                v = float(a.values[idx[f"axis:{a.name}"][i]])
-                assert a.parameter is not None
-                changes[a.parameter] = nominal[a.parameter] * v if a.relative else v
-            plants.append(Plant(params.replace(**changes)) if changes else Plant(params))
-        metrics = _simulate_metrics(
-            plants,
+            for ax in plant_axes:
+                v = float(ax.values[idx[f"axis:{ax.name}"][a]])
+                assert ax.parameter is not None
+                changes[ax.parameter] = nominal[ax.parameter] * v if ax.relative else v
+            params = params.replace(**changes)
+        point = int(idx["point"][a])
+        metrics = _segment_metrics(
+            params,
             controller,
-            [int(s) for s in idx["noise_seed"][members]],
+            campaign.seed + point * campaign.seeds,
+            int(idx["seed_index"][a]),
+            int(b - a),
             campaign.duration,
             options,
             campaign.settle_band,
         )
+        if not np.array_equal(metrics["seed"], idx["noise_seed"][a:b]):
+            raise CampaignError("the batch API numbered the seeds differently")  # pragma: no cover
         for name in METRICS:
-            columns[name][members] = metrics[name]
+            columns[name][a:b] = metrics[name]
     return columns

@@ -93,17 +93,24 @@ class CampaignResult:
 ChunkResult = tuple[tuple[int, int], dict[str, Any]]
 
 
+def _local_threads() -> int:
+    """Threads of the in-process engine: one per core (at least two). A chunk's native calls
+    release the GIL and spread their seeds over the cores; several threads keep the cores busy
+    when a grid point has few seeds, and overlap one chunk's Python with another's runs."""
+    return max(2, os.cpu_count() or 1)
+
+
 def _in_process(campaign: Campaign, chunks: Sequence[tuple[int, int]]) -> Iterator[ChunkResult]:
-    """Chunks on local threads; each goes through the Rust batch API on all cores (rayon), and
-    a second thread overlaps one chunk's Python bookkeeping with another's native runs."""
+    """Chunks on a local thread pool, each through the Rust batch API."""
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
-    pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="riprs-campaign")
+    threads = _local_threads()
+    pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="riprs-campaign")
     todo = list(chunks)[::-1]
     running: dict[Any, tuple[int, int]] = {}
     try:
         while todo or running:
-            while todo and len(running) < 4:
+            while todo and len(running) < threads:
                 c = todo.pop()
                 running[pool.submit(compute_chunk, campaign, *c)] = c
             done, _ = wait(list(running), return_when=FIRST_COMPLETED)
@@ -111,6 +118,7 @@ def _in_process(campaign: Campaign, chunks: Sequence[tuple[int, int]]) -> Iterat
                 c = running.pop(fut)
                 yield c, fut.result()
     finally:
+        # Ctrl-C or an error: queued chunks never start; running ones end with their segment.
         for fut in running:
             fut.cancel()
         pool.shutdown(wait=True, cancel_futures=True)
@@ -218,8 +226,7 @@ def run(
         Start a local Dask cluster of that many worker processes.
     chunk_size : int, optional
         Runs per chunk; results do not depend on it. Default: ``[campaign] chunk_size``, or
-        :data:`DEFAULT_CHUNK_SIZE` runs, fewer when needed for four chunks per worker thread
-        (one thread in process, where each chunk is spread over all cores).
+        :data:`DEFAULT_CHUNK_SIZE` runs, fewer when needed for four chunks per worker thread.
     progress : bool
         Show a progress bar (runs done, runs/s, time left).
     plots : bool
@@ -286,7 +293,7 @@ def run(
     if missing and engine != "in-process":
         client, cluster = _connect(scheduler, workers, connect_timeout)
     if size is None:
-        slots = 1
+        slots = _local_threads()
         if client is not None:
             slots = sum(w["nthreads"] for w in client.scheduler_info()["workers"].values())
         size = _auto_chunk_size(missing, slots)

@@ -155,7 +155,7 @@ class Campaign:
     duration: float
     seed: int
     chunk_size: int | None
-    settle_band: float
+    settle_band: float | None
     axes: list[Axis]
     spec_hash: str
     _configs: dict[tuple[int, ...], Any] = field(default_factory=dict, repr=False)
@@ -277,9 +277,11 @@ def _parse(data: dict[str, Any]) -> Campaign:
             f"campaign.duration must be between one sample ({paper.TS} s) and 3600 s, "
             f"got {duration}"
         )
-    settle_band = _number(section.get("settle_band", 0.05), "campaign.settle_band")
-    if not settle_band > 0:
-        raise CampaignError(f"campaign.settle_band must be positive, got {settle_band}")
+    settle_band = section.get("settle_band")
+    if settle_band is not None:
+        settle_band = _number(settle_band, "campaign.settle_band")
+        if not settle_band > 0:
+            raise CampaignError(f"campaign.settle_band must be positive, got {settle_band}")
 
     raw_axes = section.get("axis", [])
     if not isinstance(raw_axes, list):
