@@ -27,9 +27,9 @@ use crate::protocol::{encode, Event, Frame, Message, Parser, MAX_FRAME, SYNC0};
 use crate::serial::{Fd, Pty, Readiness};
 use crate::timing::now_ns;
 
-/// Compare range of the firmware's PWM timer (84 MHz timer clock, 20 kHz PWM: 4200 steps);
-/// the emulated bridge applies the same quantised voltage as the real one.
-pub const PWM_MAX_DUTY: u16 = 4199;
+/// Full-scale compare value of the firmware's PWM timer (TIM1 at 168 MHz, 20 kHz PWM: 8400
+/// steps); the emulated bridge applies the same quantised voltage as the real one.
+pub const PWM_MAX_DUTY: u16 = 8400;
 
 /// Settings of the emulated device and of the faults it injects.
 #[derive(Debug, Clone, PartialEq)]
@@ -491,7 +491,7 @@ mod tests {
         });
         assert_eq!(dev.handle(enable, &mut out), Reply::None);
         dev.advance(1_000_000);
-        // 24 V over 4199 steps: within half a step of the command.
+        // 24 V over 8400 steps: within half a step of the command.
         let step = 24.0 / PWM_MAX_DUTY as f64;
         assert!((dev.applied_voltage() + 5.0).abs() <= step / 2.0);
         let m = measure(&mut dev);
