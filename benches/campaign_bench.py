@@ -57,7 +57,7 @@ def main() -> None:
         n_workers=cores,
         threads_per_worker=1,
         processes=True,
-        dashboard_address=None,
+        dashboard_address=":0",  # its HTTP server on a free port, never a taken one
         env={"RAYON_NUM_THREADS": "1"},
     )
     address = cluster.scheduler_address

@@ -387,6 +387,16 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def test_a_local_dask_cluster_gives_the_in_process_results(tmp_path):
+    pytest.importorskip("distributed")
+    c = campaign.load_spec(tomllib.loads(SMALL))
+    on_cluster = campaign.run(c, tmp_path / "out", workers=2, progress=False, plots=False)
+    assert on_cluster.engine == "dask local cluster, 2 workers"
+    manifest = (tmp_path / "out" / "manifest.json").read_text()
+    assert '"distributed"' in manifest and c.spec_hash in manifest
+    assert on_cluster.table.equals(campaign.run(c, progress=False, plots=False).table)
+
+
 def test_an_unreachable_scheduler_fails_before_any_work(tmp_path):
     spec = _spec(tmp_path, SMALL)
     address = f"tcp://127.0.0.1:{_free_port()}"

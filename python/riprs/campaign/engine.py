@@ -158,7 +158,7 @@ def _connect(scheduler: str | None, workers: int | None, timeout: float) -> tupl
         n_workers=workers,
         threads_per_worker=1,
         processes=True,
-        dashboard_address=None,
+        dashboard_address=":0",  # its HTTP server on a free port, never a taken one
         env={"RAYON_NUM_THREADS": threads},
     )
     return Client(cluster, set_as_default=False), cluster
