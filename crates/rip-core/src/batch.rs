@@ -187,8 +187,11 @@ impl Recorder for Accumulator {
     }
 }
 
-/// One run of the batch: its own clone of the controller, metrics only.
-fn one_run(
+/// Run `index` of a study on the calling thread: its own controller from `controller()`, its
+/// plant and seed from `variant(index)`, metrics only. [`simulate_metrics`] runs these in
+/// parallel. Allocates only what `variant` and `controller` do (and, for the Clarabel MPC, its
+/// solver per step); nothing per sample.
+pub fn run_metrics(
     index: u64,
     variant: &(dyn Fn(u64) -> Result<(Plant, u64)> + Sync),
     controller: &(dyn Fn() -> Box<dyn Controller> + Sync),
@@ -265,7 +268,7 @@ pub fn simulate_metrics(
     prepare(controller().as_ref(), config)?;
     runs.into_par_iter()
         .map(|i| {
-            let m = one_run(i, variant, controller, config, options, cancel);
+            let m = run_metrics(i, variant, controller, config, options, cancel);
             done.fetch_add(1, Ordering::Relaxed);
             m
         })

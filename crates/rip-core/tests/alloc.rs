@@ -5,8 +5,12 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
+use std::sync::atomic::AtomicBool;
+
+use rip_core::batch::{run_metrics, MetricsOptions, MonteCarlo};
 use rip_core::mpc::paper::controller;
-use rip_core::{Controller, Lqg, Lqr, Plant, QpSolver, State};
+use rip_core::sim::{Reference, SensorModel};
+use rip_core::{Controller, FurutaParams, Lqg, Lqr, Plant, QpSolver, SimConfig, State};
 
 struct Counting;
 
@@ -81,4 +85,46 @@ fn rk4_step_does_not_allocate() {
         }
     });
     assert_eq!(n, 0, "Plant::rk4_step");
+}
+
+#[test]
+fn a_metrics_run_allocates_the_same_however_long_it_is() {
+    let study = MonteCarlo {
+        base: FurutaParams::paper(),
+        perturbation: 0.05,
+        parameters: vec![3, 4, 6, 7],
+        seed: 1,
+    };
+    let lqg = Lqg::paper().unwrap();
+    let mpc = controller(QpSolver::ActiveSet).unwrap();
+    let never = AtomicBool::new(false);
+    let count = |duration: f64, make: &(dyn Fn() -> Box<dyn Controller> + Sync)| {
+        let config = SimConfig {
+            duration,
+            x0: [0.0, 0.0, 0.05, 0.0],
+            reference: Reference::Step {
+                time: 0.5,
+                value: [1.0, 0.0],
+            },
+            sensor: SensorModel {
+                counts_per_rev: Some([2048.0, 2048.0]),
+                noise_std: [1e-3, 1e-3],
+            },
+            ..Default::default()
+        };
+        let options = MetricsOptions::default();
+        allocations_during(|| {
+            let m = run_metrics(3, &|i| study.run(i), make, &config, &options, &never).unwrap();
+            assert!(!m.fell);
+        })
+    };
+    let make_lqg = || Box::new(lqg.clone()) as Box<dyn Controller>;
+    let make_mpc = || Box::new(mpc.clone()) as Box<dyn Controller>;
+    // 100 and 1000 samples: whatever a run allocates (its controller clone) is per run.
+    assert_eq!(count(1.0, &make_lqg), count(10.0, &make_lqg), "Lqg");
+    assert_eq!(
+        count(1.0, &make_mpc),
+        count(10.0, &make_mpc),
+        "Mpc (active set)"
+    );
 }
