@@ -124,3 +124,20 @@ def test_results_replace_earlier_ones_and_the_report_names_the_directory(
         "summary.csv",
         "trajectories.csv",
     ]
+
+
+def test_log_overlays_are_written_with_the_rest(tmp_path, config, capsys) -> None:
+    rows = "\n".join(
+        f"{k * 0.01:.2f},{k},{0.001 * k:.4f},0.01,1.0,0.5,30,80,0" for k in range(50)
+    )
+    log = tmp_path / "run.csv"
+    log.write_text(
+        "# rip-rt: 0.1.0\nt,seq,theta,alpha,theta_ref,u,compute_us,jitter_us,status\n"
+        + rows
+        + "\n"
+    )
+    out = tmp_path / "out"
+    assert main(["compare", "--config", str(config), "--out", str(out), "--log", str(log)]) == 0
+    names = sorted(p.name for p in out.iterdir())
+    assert "arm_angle_with_logs.png" in names and "control_voltage_with_logs.svg" in names
+    assert capsys.readouterr().out.strip().endswith(f"wrote {len(names)} files to {out}")
