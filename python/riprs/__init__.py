@@ -6,6 +6,7 @@ names, argument and return orders; :func:`kalman` follows MATLAB and returns bot
 
 from riprs import paper
 from riprs._riprs import (
+    DivergedError,
     InvalidParameterError,
     NonFiniteError,
     NoStabilizingSolutionError,
@@ -29,6 +30,7 @@ from riprs.statespace import StateSpace
 
 __all__ = [
     "BatchMetrics",
+    "DivergedError",
     "FurutaParams",
     "InvalidParameterError",
     "KalmanDesign",

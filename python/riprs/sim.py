@@ -5,7 +5,9 @@ is sampled every ``Ts`` and its input held (zero-order hold) and saturated at ``
 The sensor quantises each angle to its encoder's counts (``q * round(angle / q)``,
 ``q = 2 pi / counts``), adds seeded Gaussian noise and an optional output step. A run stops,
 flagged, when ``|alpha|`` exceeds ``fall_limit``; its arrays then end at the fall and never hold
-NaN. The native loop runs with the GIL released; :func:`simulate_batch` spreads runs over all
+NaN. A run whose integration diverges (the state overflows, e.g. for absurd plant parameters) is
+not a fall: it stops with ``diverged=True`` and ``fell=False``, and ``x_final`` is the last finite
+state. The native loop runs with the GIL released; :func:`simulate_batch` spreads runs over all
 cores, and :func:`simulate_metrics` does so for studies too large to keep every record (it keeps
 a few numbers per run). Ctrl-C stops any of them within a fraction of a second
 (``KeyboardInterrupt``), and a controller object may be used from several threads at once: the
@@ -52,6 +54,10 @@ class SimResult:
         Wall-clock time of each controller step (s).
     fell : bool
         Whether the pendulum passed ``fall_limit`` (the arrays then end at the fall).
+    diverged : bool
+        Whether the integration diverged numerically (the state overflowed to NaN or Inf): a
+        failure of the model or its parameters, not a fall. The arrays then end at the last
+        finite state, ``fell`` is false and ``fall_time`` is ``None``.
     fall_time : float or None
         Time of the fall (s), to the integration substep.
     fallbacks : int
@@ -71,6 +77,7 @@ class SimResult:
     x_hat: FloatArray | None
     compute_time: FloatArray
     fell: bool
+    diverged: bool
     fall_time: float | None
     fallbacks: int
     x_final: FloatArray
@@ -87,6 +94,7 @@ class SimResult:
             x_hat=d["x_hat"],
             compute_time=d["compute_time"],
             fell=bool(d["fell"]),
+            diverged=bool(d["diverged"]),
             fall_time=d["fall_time"],
             fallbacks=int(d["fallbacks"]),
             x_final=d["x_final"],

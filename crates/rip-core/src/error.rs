@@ -51,6 +51,10 @@ pub enum RipError {
     /// weights on the unit circle), or the solver could not reach it to the required accuracy.
     #[error("no stabilizing solution: {reason}")]
     NoStabilizingSolution { reason: String },
+    /// A computation from finite inputs overflowed to NaN or Inf (for example an integration
+    /// step far too long for the dynamics); the reason says which inputs were involved.
+    #[error("the computation diverged: {reason}")]
+    Diverged { reason: String },
     /// A scalar setting or parameter is out of its valid range.
     #[error("invalid {name}: {reason}")]
     InvalidParameter { name: String, reason: String },

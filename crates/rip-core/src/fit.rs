@@ -45,6 +45,10 @@ use crate::plant::{FurutaParams, Plant};
 /// Names of the parameters the fit solves for; all others are taken from the base set.
 pub const FREE_PARAMETERS: [&str; 6] = ["lr", "lp", "jr", "jp", "dr", "dp"];
 
+/// Largest accepted [`FitOptions::max_iterations`]: the fit converges in tens of iterations
+/// when it converges at all, and each iteration costs up to 42 discretisations.
+pub const MAX_FIT_ITERATIONS: usize = 1000;
+
 /// Settings of [`fit_params`].
 #[derive(Debug, Clone)]
 pub struct FitOptions {
@@ -53,7 +57,7 @@ pub struct FitOptions {
     pub base: FurutaParams,
     /// Weight of each entry of `[A_d B_d]` (4×5); `None` for relative weights (module docs).
     pub weights: Option<Mat>,
-    /// Iteration limit of Levenberg–Marquardt.
+    /// Iteration limit of Levenberg–Marquardt, `1 ..=` [`MAX_FIT_ITERATIONS`].
     pub max_iterations: usize,
     /// Stop when the relative decrease of the cost and the relative step both fall below this.
     pub tolerance: f64,
@@ -87,7 +91,12 @@ pub struct FitReport {
     pub rms_weighted_residual: f64,
     /// Levenberg–Marquardt iterations used.
     pub iterations: usize,
-    /// Whether the tolerance was met before the iteration limit.
+    /// Whether the tolerance was met before the iteration limit: an accepted step with relative
+    /// decrease and relative step below it, a weighted cost `Σ r²` below it, or a stationary
+    /// point (no damping decreases the cost and `‖Jᵀr‖ ≤ √tol ‖J‖ ‖r‖`). `false` when the fit
+    /// stalled anywhere else or ran out of iterations. It says the optimiser stopped on its
+    /// tolerance, not that the target was reproduced: a target no pendulum can produce
+    /// converges to the nearest model, and the residuals tell how near that is.
     pub converged: bool,
 }
 
@@ -150,8 +159,14 @@ pub fn fit_params(ad: &Mat, bd: &Mat, ts: f64, options: &FitOptions) -> Result<F
     check_finite("Bd", bd)?;
     crate::linalg::check_sample_time("Ts", ts)?;
     options.base.validate()?;
-    if options.max_iterations == 0 {
-        return Err(RipError::invalid("max_iterations", "must be at least 1"));
+    if options.max_iterations == 0 || options.max_iterations > MAX_FIT_ITERATIONS {
+        return Err(RipError::invalid(
+            "max_iterations",
+            format!(
+                "must be between 1 and {MAX_FIT_ITERATIONS}, got {}",
+                options.max_iterations
+            ),
+        ));
     }
     if !(options.tolerance.is_finite() && options.tolerance > 0.0) {
         return Err(RipError::invalid(
@@ -252,9 +267,20 @@ pub fn fit_params(ad: &Mat, bd: &Mat, ts: f64, options: &FitOptions) -> Result<F
                 _ => lambda *= 4.0,
             }
         }
-        if !improved || converged || cost == 0.0 {
-            // No step along any damping reduces the cost: a stationary point to working precision.
+        if cost == 0.0 {
             converged = true;
+        }
+        if !improved {
+            // No damping gives a decrease. That is convergence only at an exact fit (cost below
+            // the tolerance) or at a stationary point, where the residual is orthogonal to the
+            // Jacobian's range to the tolerance (MINPACK's gradient test,
+            // cos∠(r, range J) ≤ √tol); anywhere else the fit has stalled.
+            let scale = jac.norm() * r.norm();
+            converged = cost <= options.tolerance
+                || (scale > 0.0 && grad.norm() <= options.tolerance.sqrt() * scale);
+            break;
+        }
+        if converged {
             break;
         }
     }

@@ -60,7 +60,17 @@ pub fn check_symmetric(name: &str, m: &Mat) -> Result<()> {
 
 /// Fails unless the symmetric matrix `m` is positive semidefinite (to a relative `1e-10`).
 pub fn check_psd(name: &str, m: &Mat) -> Result<()> {
-    let min_eigenvalue = m.clone().symmetric_eigenvalues().min();
+    // Bounded like `eigenvalues`; a matrix whose iteration fails is reported as indefinite.
+    let min_eigenvalue = m
+        .clone()
+        .try_symmetric_eigen(f64::EPSILON, 100 * m.nrows().max(1))
+        .map_or(f64::NAN, |e| e.eigenvalues.min());
+    if min_eigenvalue.is_nan() {
+        return Err(RipError::NotPositiveSemidefinite {
+            name: name.to_string(),
+            min_eigenvalue,
+        });
+    }
     if min_eigenvalue < -1e-10 * m.amax().max(1e-300) {
         return Err(RipError::NotPositiveSemidefinite {
             name: name.to_string(),
@@ -104,7 +114,12 @@ pub fn eigenvalues(m: &Mat) -> Vec<Complex<f64>> {
     if m.iter().all(|&v| v == 0.0) {
         return vec![Complex::new(0.0, 0.0); n];
     }
-    m.complex_eigenvalues().iter().copied().collect()
+    // nalgebra's `complex_eigenvalues` iterates without a limit; 100 sweeps per eigenvalue is
+    // far beyond the handful the Francis iteration needs.
+    match m.clone().try_schur(f64::EPSILON, 100 * n.max(1)) {
+        Some(schur) => schur.complex_eigenvalues().iter().copied().collect(),
+        None => vec![Complex::new(f64::NAN, f64::NAN); n],
+    }
 }
 
 /// Zero-order-hold discretisation of `ẋ = A x + B u` with period `ts`:
@@ -132,17 +147,106 @@ pub fn c2d(a: &Mat, b: &Mat, ts: f64) -> Result<(Mat, Mat)> {
     let mut block = Mat::zeros(n + m, n + m);
     block.view_mut((0, 0), (n, n)).copy_from(&(a * ts));
     block.view_mut((0, n), (n, m)).copy_from(&(b * ts));
-    let e = block.exp();
-    if e.iter().any(|v| !v.is_finite()) {
+    let Some(e) = expm(&block) else {
         return Err(RipError::invalid(
             "Ts",
-            format!("A·Ts is too large to discretise (e^(A·Ts) overflows) at Ts = {ts}"),
+            format!(
+                "A·Ts is too large to discretise at Ts = {ts}: e^(A·Ts) is not representable \
+                 in double precision (‖[A B]·Ts‖₁ = {:.3e})",
+                one_norm(&block)
+            ),
         ));
-    }
+    };
     Ok((
         e.view((0, 0), (n, n)).into_owned(),
         e.view((0, n), (n, m)).into_owned(),
     ))
+}
+
+/// Largest number of squarings [`expm`] performs. `‖A‖₁ ≤ f64::MAX < 2¹⁰²⁴` needs at most
+/// `1024 − log₂ θ₁₃ < 1022` halvings to reach `θ₁₃`, so this bound is never the limit for a
+/// finite matrix; it makes the loop's bound explicit.
+const EXPM_MAX_SQUARINGS: u32 = 1100;
+
+/// Padé [13/13] coefficients `b₀ … b₁₃` of Higham (2005), Table 2.3.
+const PADE13: [f64; 14] = [
+    64_764_752_532_480_000.0,
+    32_382_376_266_240_000.0,
+    7_771_770_303_897_600.0,
+    1_187_353_796_428_800.0,
+    129_060_195_264_000.0,
+    10_559_470_521_600.0,
+    670_442_572_800.0,
+    33_522_128_640.0,
+    1_323_241_920.0,
+    40_840_800.0,
+    960_960.0,
+    16_380.0,
+    182.0,
+    1.0,
+];
+
+/// `θ₁₃` of Higham (2005): the largest `‖A‖₁` for which the Padé [13/13] approximant of `e^A`
+/// has a backward error below the unit round-off.
+const THETA13: f64 = 5.371_920_351_148_152;
+
+/// The 1-norm (largest absolute column sum) of a matrix.
+pub fn one_norm(m: &Mat) -> f64 {
+    m.column_iter()
+        .map(|c| c.iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max)
+}
+
+/// The matrix exponential `e^A` by scaling and squaring with the Padé [13/13] approximant
+/// (Higham 2005, Algorithm 2.3, which MATLAB's `expm` implements):
+///
+/// ```text
+/// s = max(0, ⌈log₂(‖A‖₁/θ₁₃)⌉),   e^A = r₁₃(A/2ˢ)^(2ˢ),   r₁₃ = (V − U)⁻¹(V + U).
+/// ```
+///
+/// `None` when the result is not representable (an entry overflows, or `A` has a non-finite
+/// entry or 1-norm): the number of squarings is computed from a finite norm and stays below
+/// [`EXPM_MAX_SQUARINGS`], and the squaring stops at the first overflow, so huge inputs end
+/// at once instead of looping on an infinite norm estimate. `A` must be square.
+pub fn expm(a: &Mat) -> Option<Mat> {
+    let n = a.nrows();
+    let norm = one_norm(a);
+    if !norm.is_finite() {
+        return None;
+    }
+    if norm == 0.0 {
+        return Some(Mat::identity(n, n));
+    }
+    let s = (norm / THETA13).log2().ceil().max(0.0);
+    if s > f64::from(EXPM_MAX_SQUARINGS) {
+        return None;
+    }
+    let s = s as i32;
+    let a = a * 2f64.powi(-s);
+    let eye = Mat::identity(n, n);
+    let a2 = &a * &a;
+    let a4 = &a2 * &a2;
+    let a6 = &a4 * &a2;
+    let b = &PADE13;
+    let u_inner = &a6 * (&a6 * b[13] + &a4 * b[11] + &a2 * b[9])
+        + &a6 * b[7]
+        + &a4 * b[5]
+        + &a2 * b[3]
+        + &eye * b[1];
+    let u = &a * u_inner;
+    let v = &a6 * (&a6 * b[12] + &a4 * b[10] + &a2 * b[8])
+        + &a6 * b[6]
+        + &a4 * b[4]
+        + &a2 * b[2]
+        + &eye * b[0];
+    let mut x = (&v - &u).lu().solve(&(&v + &u))?;
+    for _ in 0..s {
+        if !x.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        x = &x * &x;
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 /// Fails with [`RipError::InvalidParameter`] named `name` unless `ts` is a positive, finite

@@ -58,6 +58,7 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::error::{Result, RipError};
 use crate::linalg::{c2d, Mat};
+use crate::sim::MAX_SUBSTEPS;
 
 /// State vector `[θ, θ̇, α, α̇]`.
 pub type State = SVector<f64, 4>;
@@ -210,6 +211,58 @@ impl FurutaParams {
     }
 }
 
+/// Largest number of RK4 steps one [`Plant::integrate`] call may take (about a second of
+/// computation), so that a call from Python, which cannot be interrupted while it runs,
+/// always ends soon.
+pub const MAX_INTEGRATION_STEPS: usize = 10_000_000;
+
+/// Fails unless `1 ≤ substeps ≤` [`MAX_SUBSTEPS`].
+pub fn check_substeps(substeps: usize) -> Result<()> {
+    if substeps == 0 || substeps > MAX_SUBSTEPS {
+        return Err(RipError::invalid(
+            "substeps",
+            format!("must be between 1 and {MAX_SUBSTEPS}, got {substeps}"),
+        ));
+    }
+    Ok(())
+}
+
+/// Fails unless `dt` is positive and finite and `substeps` is in range.
+pub fn check_step(dt: f64, substeps: usize) -> Result<()> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(RipError::invalid(
+            "dt",
+            format!("must be positive and finite, got {dt}"),
+        ));
+    }
+    check_substeps(substeps)
+}
+
+fn check_finite_scalar(name: &str, v: f64) -> Result<()> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(RipError::NonFinite { name: name.into() })
+    }
+}
+
+fn check_finite_state(name: &str, x: &State) -> Result<()> {
+    if x.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(RipError::NonFinite { name: name.into() })
+    }
+}
+
+fn diverged(dt: f64, substeps: usize) -> RipError {
+    RipError::Diverged {
+        reason: format!(
+            "the state overflowed integrating with dt = {dt:e} s in {substeps} substeps; the step \
+             or the input is too large for the plant"
+        ),
+    }
+}
+
 impl Default for FurutaParams {
     fn default() -> Self {
         Self::qube_servo2()
@@ -304,6 +357,63 @@ impl Plant {
         let k3 = self.derivative(&(*x + k2 * (0.5 * h)), u, tau_d);
         let k4 = self.derivative(&(*x + k3 * h), u, tau_d);
         *x += (k1 + (k2 + k3) * 2.0 + k4) * (h / 6.0);
+    }
+
+    /// [`advance`](Self::advance) with every argument checked and the work bounded: `x`, `u`,
+    /// `tau_d` finite, `dt` positive and finite, `1 ≤ substeps ≤` [`MAX_SUBSTEPS`]. A state that
+    /// overflows is [`RipError::Diverged`], never returned.
+    pub fn step_checked(
+        &self,
+        x: &State,
+        u: f64,
+        tau_d: f64,
+        dt: f64,
+        substeps: usize,
+    ) -> Result<State> {
+        check_finite_state("x", x)?;
+        check_finite_scalar("u", u)?;
+        check_finite_scalar("torque", tau_d)?;
+        check_step(dt, substeps)?;
+        let mut next = *x;
+        self.advance(&mut next, u, tau_d, dt, substeps);
+        if !next.iter().all(|v| v.is_finite()) {
+            return Err(diverged(dt, substeps));
+        }
+        Ok(next)
+    }
+
+    /// The open-loop trajectory `x(0), x(dt), …, x(N dt)` under the zero-order-held inputs
+    /// `u[0..N]` (`N + 1` states), `substeps` RK4 steps per interval. Checks as
+    /// [`step_checked`](Self::step_checked), and bounds the total work:
+    /// `N · substeps ≤` [`MAX_INTEGRATION_STEPS`].
+    pub fn integrate(&self, x0: &State, u: &[f64], dt: f64, substeps: usize) -> Result<Vec<State>> {
+        check_finite_state("x0", x0)?;
+        check_step(dt, substeps)?;
+        if u.iter().any(|v| !v.is_finite()) {
+            return Err(RipError::NonFinite { name: "u".into() });
+        }
+        let work = u.len().saturating_mul(substeps);
+        if work > MAX_INTEGRATION_STEPS {
+            return Err(RipError::invalid(
+                "u",
+                format!(
+                    "{} intervals × {substeps} substeps = {work} RK4 steps; at most \
+                     {MAX_INTEGRATION_STEPS} per call",
+                    u.len()
+                ),
+            ));
+        }
+        let mut out = Vec::with_capacity(u.len() + 1);
+        let mut x = *x0;
+        out.push(x);
+        for &uk in u {
+            self.advance(&mut x, uk, 0.0, dt, substeps);
+            if !x.iter().all(|v| v.is_finite()) {
+                return Err(diverged(dt, substeps));
+            }
+            out.push(x);
+        }
+        Ok(out)
     }
 
     /// Advances `x` by `dt` with `substeps` RK4 steps under a zero-order-held input.

@@ -16,8 +16,10 @@
 //! - the reference is a step (time, value per output) or a full sequence, one row per sample.
 //!
 //! The run stops early when the pendulum falls (`|α| > fall_limit`, checked after every RK4
-//! substep, or the state becomes non-finite); the result is then truncated to the samples
-//! taken and flagged, so it never holds NaN. Everything a run needs is preallocated before the
+//! substep) or when the integration diverges (the state overflows to NaN or Inf: a numerical
+//! failure, not a fall, so it is flagged [`SimResult::diverged`] instead of
+//! [`SimResult::fell`]); the result is then truncated to the samples taken and flagged, so it
+//! never holds NaN. Everything a run needs is preallocated before the
 //! loop. [`simulate_batch`] runs many seeds and parameter variants in parallel with rayon.
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -57,12 +59,18 @@ impl Default for Reference {
     }
 }
 
+/// Largest accepted measurement-noise standard deviation (rad): far beyond any angle (noise
+/// above π already hides the angle completely), and small enough that the squared noise in an
+/// RMSE never overflows.
+pub const MAX_NOISE_STD: f64 = 1e3;
+
 /// Encoder quantisation and white measurement noise.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct SensorModel {
     /// Encoder counts per revolution of `[θ, α]`; `None` for exact angles.
     pub counts_per_rev: Option<[f64; 2]>,
-    /// Standard deviation (rad) of the Gaussian noise added to `[θ, α]`.
+    /// Standard deviation (rad) of the Gaussian noise added to `[θ, α]`, at most
+    /// [`MAX_NOISE_STD`].
     pub noise_std: [f64; 2],
 }
 
@@ -206,10 +214,10 @@ impl SimConfig {
             }
         }
         for s in self.sensor.noise_std {
-            if !(s.is_finite() && s >= 0.0) {
+            if !(s.is_finite() && (0.0..=MAX_NOISE_STD).contains(&s)) {
                 return Err(RipError::invalid(
                     "noise_std",
-                    format!("must be non-negative and finite, got {s}"),
+                    format!("must be between 0 and {MAX_NOISE_STD:e} rad, got {s}"),
                 ));
             }
         }
@@ -248,8 +256,12 @@ pub struct SimResult {
     pub compute_time: Vec<f64>,
     /// Number of steps the controller reported as [`StepStatus::Fallback`].
     pub fallbacks: usize,
-    /// Whether the pendulum fell (or the state diverged) before the end.
+    /// Whether the pendulum fell (`|α| > fall_limit`) before the end.
     pub fell: bool,
+    /// Whether the integration diverged (the state overflowed to NaN or Inf) before the end:
+    /// a numerical failure of the model or its parameters, not a fall. [`x_final`](Self::x_final)
+    /// is then the last finite state.
+    pub diverged: bool,
     /// Time of the fall, to the RK4 substep (s).
     pub fall_time: Option<f64>,
     /// State at the end of the run (or at the fall).
@@ -269,6 +281,7 @@ impl SimResult {
             compute_time: Vec::with_capacity(n),
             fallbacks: 0,
             fell: false,
+            diverged: false,
             fall_time: None,
             x_final: [0.0; 4],
         }
@@ -461,16 +474,18 @@ pub(crate) fn run_loop(
             };
             let before = x;
             plant.rk4_step(&mut x, u_applied, tau, h);
-            if !x.iter().all(|v| v.is_finite()) || x[2].abs() > config.fall_limit {
+            if !x.iter().all(|v| v.is_finite()) {
+                out.diverged = true;
+                x = before;
+                break;
+            }
+            if x[2].abs() > config.fall_limit {
                 out.fell = true;
                 out.fall_time = Some(t_sub + h);
-                if !x.iter().all(|v| v.is_finite()) {
-                    x = before;
-                }
                 break;
             }
         }
-        if out.fell {
+        if out.fell || out.diverged {
             break;
         }
     }

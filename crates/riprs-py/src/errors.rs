@@ -67,6 +67,12 @@ create_exception!(
 );
 create_exception!(
     _riprs,
+    DivergedError,
+    RiprsError,
+    "A computation from finite inputs overflowed to NaN or Inf."
+);
+create_exception!(
+    _riprs,
     InvalidParameterError,
     RiprsError,
     "A setting or parameter is out of range."
@@ -85,6 +91,7 @@ pub fn to_py(err: RipError) -> PyErr {
         RipError::NotStabilizable { .. } => NotStabilizableError::new_err(msg),
         RipError::NotDetectable { .. } => NotDetectableError::new_err(msg),
         RipError::NoStabilizingSolution { .. } => NoStabilizingSolutionError::new_err(msg),
+        RipError::Diverged { .. } => DivergedError::new_err(msg),
         RipError::InvalidParameter { .. } => InvalidParameterError::new_err(msg),
         // The bindings cancel only on a pending signal, whose own exception is raised instead.
         RipError::Cancelled => pyo3::exceptions::PyKeyboardInterrupt::new_err(msg),
@@ -126,6 +133,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
         "NoStabilizingSolutionError",
         py.get_type::<NoStabilizingSolutionError>(),
     )?;
+    m.add("DivergedError", py.get_type::<DivergedError>())?;
     m.add(
         "InvalidParameterError",
         py.get_type::<InvalidParameterError>(),

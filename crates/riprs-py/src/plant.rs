@@ -471,10 +471,19 @@ impl PyPlant {
 
     /// Advance the state by ``dt`` with ``substeps`` classical RK4 steps, ``u`` held.
     ///
+    /// ``substeps`` is at most 100 000.
+    ///
     /// Returns
     /// -------
     /// ndarray, shape (4,)
     ///     The state at ``t + dt``.
+    ///
+    /// Raises
+    /// ------
+    /// InvalidParameterError
+    ///     ``dt`` not positive and finite, or ``substeps`` out of range.
+    /// DivergedError
+    ///     The state overflowed (a step or an input far too large for the dynamics).
     #[pyo3(signature = (x, u, dt, substeps=1, torque=0.0))]
     fn step<'py>(
         &self,
@@ -485,10 +494,8 @@ impl PyPlant {
         substeps: usize,
         torque: f64,
     ) -> PyResult<Py1<'py>> {
-        let mut x = state_arg(Some(x), "x")?;
-        let (u, torque) = (finite_scalar(u, "u")?, finite_scalar(torque, "torque")?);
-        check_step(dt, substeps)?;
-        self.inner.advance(&mut x, u, torque, dt, substeps);
+        let x = state_arg(Some(x), "x")?;
+        let x = self.inner.step_checked(&x, u, torque, dt, substeps).py()?;
         Ok(state_to_py(py, &x))
     }
 
@@ -507,6 +514,14 @@ impl PyPlant {
     /// -------
     /// ndarray, shape (N + 1, 4)
     ///     States at ``0, dt, ..., N dt``.
+    ///
+    /// Raises
+    /// ------
+    /// InvalidParameterError
+    ///     ``dt`` not positive and finite, ``substeps`` above 100 000, or more than 10 million
+    ///     RK4 steps in all (``N * substeps``).
+    /// DivergedError
+    ///     The state overflowed (a step or an input far too large for the dynamics).
     #[pyo3(signature = (x0, u, dt, substeps=1))]
     fn integrate<'py>(
         &self,
@@ -526,23 +541,13 @@ impl PyPlant {
                 cols: shape[1..].iter().product(),
             }));
         }
-        check_step(dt, substeps)?;
         let plant = self.inner;
-        let traj = py.allow_threads(|| {
-            let mut out = Array2::<f64>::zeros((u.len() + 1, 4));
-            let mut x = x0;
-            for (k, &uk) in u.iter().enumerate() {
-                for i in 0..4 {
-                    out[[k, i]] = x[i];
-                }
-                plant.advance(&mut x, uk, 0.0, dt, substeps);
-            }
-            for i in 0..4 {
-                out[[u.len(), i]] = x[i];
-            }
-            out
-        });
-        Ok(traj.into_pyarray(py))
+        let traj = py
+            .allow_threads(|| plant.integrate(&x0, &u, dt, substeps))
+            .py()?;
+        let flat: Vec<f64> = traj.iter().flat_map(|x| x.iter().copied()).collect();
+        let out = Array2::from_shape_vec((traj.len(), 4), flat).expect("one row of four per state");
+        Ok(out.into_pyarray(py))
     }
 
     /// Total mechanical energy ``T + V`` (J), with ``V = G cos(alpha)``.
@@ -588,19 +593,6 @@ impl PyPlant {
     fn __repr__(&self) -> String {
         format!("Plant({})", self.params().__repr__())
     }
-}
-
-fn check_step(dt: f64, substeps: usize) -> PyResult<()> {
-    if !(dt.is_finite() && dt > 0.0) {
-        return Err(to_py(RipError::invalid(
-            "dt",
-            format!("must be positive and finite, got {dt}"),
-        )));
-    }
-    if substeps == 0 {
-        return Err(to_py(RipError::invalid("substeps", "must be at least 1")));
-    }
-    Ok(())
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

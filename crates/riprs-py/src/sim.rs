@@ -112,6 +112,7 @@ fn result_to_dict<'py>(py: Python<'py>, res: SimResult) -> PyResult<Bound<'py, P
         Array1::from_vec(res.compute_time).into_pyarray(py),
     )?;
     d.set_item("fell", res.fell)?;
+    d.set_item("diverged", res.diverged)?;
     d.set_item("fall_time", res.fall_time)?;
     d.set_item("fallbacks", res.fallbacks)?;
     d.set_item(

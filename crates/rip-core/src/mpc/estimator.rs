@@ -65,6 +65,7 @@ impl EstimatorDesign {
         };
         let model = augment(a, b, c, &su, &sy, settings.output_disturbance.as_ref(), &dn);
         let nx = model.a.nrows();
+        super::model::check_noise_model(&model, settings.output_disturbance.as_ref(), &dn)?;
         let q = &model.b_noise * model.b_noise.transpose();
         let r = &model.d_noise * model.d_noise.transpose();
         let nn = &model.b_noise * model.d_noise.transpose();
@@ -77,17 +78,7 @@ impl EstimatorDesign {
             Some(&nn),
             None,
         )
-        .map_err(|e| match e {
-            RipError::NotDetectable {
-                re, im, modulus, ..
-            } => RipError::NotDetectable {
-                pair: "(A_aug, C_aug) of the plant with its output disturbance model".into(),
-                re,
-                im,
-                modulus,
-            },
-            other => other,
-        })?;
+        .map_err(|e| super::model::explain_estimator_failure(e, c, &sy))?;
         Ok(Self {
             model,
             kalman,

@@ -227,20 +227,7 @@ impl Mpc {
             output_bounds: &yb,
             ecr_weight: settings.ecr_weight,
         });
-        if qp.h.iter().chain(qp.a.iter()).any(|v| !v.is_finite()) {
-            return Err(RipError::invalid(
-                "output_weights",
-                "the weights and scales overflow the condensed QP (entries beyond 1e308); \
-                 scale them down",
-            ));
-        }
-        if qp.h.clone().cholesky().is_none() {
-            return Err(RipError::invalid(
-                "input_rate_weights",
-                "the QP Hessian is singular: the outputs do not determine every move; \
-                 give positive input_rate_weights (or input_weights)",
-            ));
-        }
+        model::check_condensed(&qp, &model, &settings, &wdu, &wu)?;
         let backend = Backend::new(settings.solver, &qp, settings.max_iterations)?;
         let (nz, ncon, m) = (qp.nz, qp.ncon, qp.m);
         Ok(Self {
