@@ -368,6 +368,9 @@ class BatchMetrics:
         pendulum angles against their references (rad) and RMS of the voltage (V).
     fell : ndarray of bool, shape (N,)
         Whether the pendulum fell.
+    diverged : ndarray of bool, shape (N,)
+        Whether the integration diverged numerically (as :attr:`SimResult.diverged`); such a
+        run is not a fall.
     fall_time : ndarray, shape (N,)
         Time of the fall (s); NaN for runs that stayed up.
     peak_voltage : ndarray, shape (N,)
@@ -385,6 +388,7 @@ class BatchMetrics:
     seed: np.ndarray
     rmse: FloatArray
     fell: np.ndarray
+    diverged: np.ndarray
     fall_time: FloatArray
     peak_voltage: FloatArray
     settle_time: FloatArray

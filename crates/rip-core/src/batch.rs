@@ -48,8 +48,11 @@ pub struct RunMetrics {
     pub seed: u64,
     /// The paper's Tab. 1 indices `[arm (rad), pendulum (rad), voltage (V)]`.
     pub rmse: [f64; 3],
-    /// Whether the pendulum fell (or the state stopped being finite) before the end.
+    /// Whether the pendulum fell before the end.
     pub fell: bool,
+    /// Whether the integration diverged (the state overflowed) before the end: a numerical
+    /// failure, not a fall ([`SimResult::diverged`](crate::SimResult::diverged)).
+    pub diverged: bool,
     /// Time of the fall (s); `NaN` if it stayed up.
     pub fall_time: f64,
     /// Largest applied `|u|` (V).
@@ -218,12 +221,13 @@ pub fn run_metrics(
         settled_at: f64::NAN,
     };
     let end = run_loop(&plant, ctrl.as_mut(), &cfg, n, &mut acc, cancel)?;
-    let settled = !end.fell && acc.settled_from < acc.samples;
+    let settled = !end.fell && !end.diverged && acc.settled_from < acc.samples;
     Ok(RunMetrics {
         run: index,
         seed,
         rmse: acc.table1.finish(),
         fell: end.fell,
+        diverged: end.diverged,
         fall_time: end.fall_time.unwrap_or(f64::NAN),
         peak_voltage: acc.peak,
         settle_time: if settled { acc.settled_at } else { f64::NAN },

@@ -329,6 +329,7 @@ pub(crate) trait Recorder {
 pub(crate) struct Outcome {
     pub fallbacks: usize,
     pub fell: bool,
+    pub diverged: bool,
     pub fall_time: Option<f64>,
     pub x_final: [f64; 4],
 }
@@ -407,6 +408,7 @@ pub(crate) fn run_loop(
     let mut out = Outcome {
         fallbacks: 0,
         fell: false,
+        diverged: false,
         fall_time: None,
         x_final: [0.0; 4],
     };
@@ -517,6 +519,7 @@ pub fn simulate_cancellable(
     let end = run_loop(plant, controller, config, n, &mut out, cancel)?;
     out.fallbacks = end.fallbacks;
     out.fell = end.fell;
+    out.diverged = end.diverged;
     out.fall_time = end.fall_time;
     out.x_final = end.x_final;
     Ok(out)

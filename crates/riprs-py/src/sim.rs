@@ -280,6 +280,10 @@ fn metrics_to_dict<'py>(py: Python<'py>, m: &[RunMetrics]) -> PyResult<Bound<'py
         "fell",
         Array1::from_iter(m.iter().map(|r| r.fell)).into_pyarray(py),
     )?;
+    d.set_item(
+        "diverged",
+        Array1::from_iter(m.iter().map(|r| r.diverged)).into_pyarray(py),
+    )?;
     d.set_item("fall_time", col(|r| r.fall_time))?;
     d.set_item("peak_voltage", col(|r| r.peak_voltage))?;
     d.set_item("settle_time", col(|r| r.settle_time))?;
