@@ -9,7 +9,11 @@ replies, sequence numbers, resynchronisation, RX_ERROR and the disabled driver.
 
 The frames are built and checked with this file's own CRC, independent of the Rust code.
 
-Usage: python3 firmware/qemu_test.py firmware/target/thumbv7em-none-eabihf/release/rip-firmware
+With ``--rip-rt PATH``, the PC's real control loop then runs against a freshly booted image:
+the pendulum counter reads 0, which is hanging down, so ``rip-rt run`` must decode the
+firmware's measurements and refuse to balance at π rad from upright, sending its stop command.
+
+Usage: python3 firmware/qemu_test.py IMAGE [--rip-rt target/release/rip-rt]
 """
 
 from __future__ import annotations
@@ -111,6 +115,7 @@ class Qemu:
 
 def main() -> int:
     image = sys.argv[1]
+    rip_rt = sys.argv[3] if len(sys.argv) > 3 and sys.argv[2] == "--rip-rt" else None
     qemu = Qemu(image)
     passed = failed = 0
 
@@ -157,6 +162,25 @@ def main() -> int:
         check("no request went unanswered", m6["seq"] == base + 7, m6)
     finally:
         qemu.close()
+
+    if rip_rt:
+        qemu = Qemu(image)
+        try:
+            qemu.wait_ready()
+            port = os.ttyname(qemu.fd)
+            run = subprocess.run(
+                [rip_rt, "run", "--port", port, "--controller", "lqr", "--duration", "1"],
+                capture_output=True, text=True, timeout=60,
+            )
+        finally:
+            qemu.close()
+        check("rip-rt run decodes the firmware's measurements: pendulum hanging down",
+              run.returncode != 0 and "pendulum at 3.142 rad from upright" in run.stderr,
+              run.stderr.strip().splitlines()[:2])
+        link = re.search(r"frames=(\d+) crc_errors=(\d+)", run.stderr)
+        check("and its link saw frames and no CRC error",
+              link is not None and int(link.group(1)) > 0 and link.group(2) == "0",
+              link.group(0) if link else run.stderr)
     print(f"{passed} passed, {failed} failed")
     return 1 if failed else 0
 
