@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import re
 import sys
@@ -160,6 +161,8 @@ def _connect(scheduler: str | None, workers: int | None, timeout: float) -> tupl
         processes=True,
         dashboard_address=":0",  # its HTTP server on a free port, never a taken one
         env={"RAYON_NUM_THREADS": threads},
+        # Its workers' warnings about tasks cancelled by Ctrl-C are not the user's concern.
+        silence_logs=logging.ERROR,
     )
     return Client(cluster, set_as_default=False), cluster
 
