@@ -127,6 +127,7 @@ def test_each_run_is_the_simulation_its_index_names():
             ref.rmse,
         )
         assert cols["fell"][run] == ref.fell
+        assert cols["diverged"][run] == ref.diverged
         assert cols["peak_voltage"][run] == np.max(np.abs(ref.u))
         expected = _settle_time(ref.t, ref.x[:, 0], ref.r[:, 0], 0.02)
         if ref.fell or expected is None:

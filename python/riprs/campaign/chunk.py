@@ -40,6 +40,7 @@ def _segment_metrics(
         "rmse_pendulum": m.rmse[:, 1],
         "rmse_voltage": m.rmse[:, 2],
         "fell": m.fell,
+        "diverged": m.diverged,
         "fall_time": m.fall_time,
         "peak_voltage": m.peak_voltage,
         "settle_time": m.settle_time,
@@ -93,7 +94,7 @@ def compute_chunk(campaign: Campaign, start: int, stop: int) -> dict[str, np.nda
     for axis in campaign.axes:
         columns[axis.name] = axis.values[idx[f"axis:{axis.name}"]]
     for name in METRICS:
-        columns[name] = np.empty(n, dtype=bool if name == "fell" else np.float64)
+        columns[name] = np.empty(n, dtype=bool if name in ("fell", "diverged") else np.float64)
 
     settings = campaign.setting_axes()
     plant_axes = [a for a in campaign.axes if a.parameter is not None]

@@ -46,9 +46,10 @@ def aggregate(
 ) -> tuple[list[str], list[np.ndarray], np.ndarray]:
     """Per controller, the mean of ``metric`` over each cell of ``axes``.
 
-    ``metric`` is ``"fall_rate"`` (mean of ``fell`` over every run) or a result column
-    (mean over the runs that did not fall). Returns the controllers, the sorted values of each
-    axis and an array of shape ``(controllers, len(values[0]), len(values[1]), ...)``.
+    ``metric`` is ``"fall_rate"`` (mean of ``fell`` over every run) or a result column (mean
+    over the runs that neither fell nor diverged and have a value). Returns the controllers,
+    the sorted values of each axis and an array of shape
+    ``(controllers, len(values[0]), len(values[1]), ...)``.
     """
     controllers = list(dict.fromkeys(_column(table, "controller").tolist()))
     ctrl = np.array([controllers.index(c) for c in _column(table, "controller").tolist()])
@@ -65,10 +66,12 @@ def aggregate(
         weight = np.ones(len(fell))
         data = fell.astype(float)
     else:
-        weight = (~fell).astype(float)
-        data = np.where(fell, 0.0, _column(table, metric))
-        data = np.where(np.isfinite(data), data, 0.0)
-        weight = np.where(np.isfinite(_column(table, metric)) | fell, weight, 0.0)
+        column = _column(table, metric).astype(float)
+        up = ~fell
+        if "diverged" in table.column_names:
+            up &= ~_column(table, "diverged").astype(bool)
+        weight = (up & np.isfinite(column)).astype(float)
+        data = np.where(weight > 0, column, 0.0)
     size = int(np.prod(shape))
     total = np.bincount(flat, weights=data * weight, minlength=size)
     count = np.bincount(flat, weights=weight, minlength=size)

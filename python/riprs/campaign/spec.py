@@ -71,6 +71,7 @@ METRICS = (
     "rmse_pendulum",
     "rmse_voltage",
     "fell",
+    "diverged",
     "fall_time",
     "peak_voltage",
     "settle_time",
