@@ -23,9 +23,13 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 import riprs
+import riprs.config
 from riprs import campaign
 from riprs.compare import build_controllers
-from riprs.config import CompareConfig
+
+# The experiment file as riprs.compare reads it: the core's typed spec, or the dataclasses.
+_experiment = getattr(riprs.config, "Spec", None) or riprs.config.CompareConfig
+_experiment = _experiment.from_dict
 
 SMALL = """
 [campaign]
@@ -99,14 +103,14 @@ def test_each_run_is_the_simulation_its_index_names():
         mp = [0.6, 1.0, 1.4][i_mp]
         noise = [0.001, 0.004][i_noise]
         R = [0.05, 0.2][i_r]
-        cfg = CompareConfig.from_dict(
+        name = ["LQR", "MPC"][ctrl]
+        cfg = _experiment(
             {
+                "controllers": [name],
                 "sensor": {"encoder_counts": [4096, 4096], "noise_std": [noise, noise]},
                 "lqr": {"R": R},
             }
         )
-        name = ["LQR", "MPC"][ctrl]
-        cfg.controllers = [name]
         controller = build_controllers(cfg)[name]
         ref = riprs.simulate(
             riprs.FurutaParams.paper().replace(mp=mp0 * mp),

@@ -88,19 +88,26 @@ class CampaignError(RiprsError):
 
 # -- the base experiment spec -------------------------------------------------------------------
 # The three functions below are the only place that knows how the base sections are parsed.
+# They take the core's typed spec (``riprs.config.Spec``) where the package has it and the
+# Python dataclasses (``CompareConfig``) otherwise.
 
 
 def _load_base(data: Mapping[str, Any]) -> Any:
     """The validated base experiment from its TOML tables (everything except ``[campaign]``)."""
-    from riprs.config import CompareConfig
+    from riprs import config
 
-    return CompareConfig.from_dict(dict(data))
+    spec = getattr(config, "Spec", None)
+    if spec is not None:
+        return spec.from_dict(dict(data))
+    return config.CompareConfig.from_dict(dict(data))  # type: ignore[attr-defined]
 
 
 def _design(config: Any, controller: str) -> Any:
     """The controller named ``controller``, designed from ``config``."""
     from riprs.compare import build_controllers
 
+    if hasattr(config, "updated"):
+        return build_controllers(config.updated({"controllers": [controller]}))[controller]
     cfg = copy.copy(config)
     cfg.controllers = [controller]
     return build_controllers(cfg)[controller]
@@ -108,9 +115,10 @@ def _design(config: Any, controller: str) -> Any:
 
 def _sim_setup(config: Any) -> tuple[FurutaParams, dict[str, Any]]:
     """The base plant's parameters and the options of :func:`riprs.simulate` for ``config``."""
-    from riprs.compare import _params, _sim_options
+    from riprs import compare
 
-    return _params(config), _sim_options(config)
+    params = config.params if hasattr(config, "params") else compare._params(config)
+    return params, compare._sim_options(config)
 
 
 # -- the spec -----------------------------------------------------------------------------------
@@ -417,7 +425,7 @@ def _resolve(base: Any, path: str, key: str) -> Any:
         )
     section, name, idx = m.group(1), m.group(2), m.group(3)
     holder = getattr(base, section, None)
-    value = getattr(holder, name, None) if holder is not None else None
+    value = _plain(getattr(holder, name, None)) if holder is not None else None
     if idx is not None:
         if not isinstance(value, list) or int(idx) >= len(value):
             raise CampaignError(f"{key}: {path} does not name an entry of a list setting")
@@ -438,7 +446,7 @@ def _config_with(campaign: Campaign, at: Mapping[Axis, int]) -> Any:
         m = _PATH.match(axis.path)
         assert m is not None
         section, name, idx = m.group(1), m.group(2), m.group(3)
-        base_value = getattr(getattr(campaign.base, section), name)
+        base_value = _plain(getattr(getattr(campaign.base, section), name))
         v = float(axis.values[i])
 
         def new(old: Any, v: float = v, relative: bool = axis.relative) -> Any:
@@ -461,6 +469,17 @@ def _config_with(campaign: Campaign, at: Mapping[Axis, int]) -> Any:
     except RiprsError as exc:
         where = ", ".join(f"{a.name} = {a.values[i]:g}" for a, i in at.items())
         raise type(exc)(f"at {where}: {exc}") from None
+
+
+def _plain(v: Any) -> Any:
+    """A setting as plain Python numbers and lists, however the spec object returns it."""
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
 
 
 def _is_number(v: Any) -> bool:
