@@ -295,6 +295,7 @@ def test_a_changed_spec_is_refused_and_nothing_is_touched(tmp_path):
     ("text", "key"),
     [
         ("[campaign]\nseeds = 0\n", "campaign.seeds"),
+        ("[campaign]\nseed = 9223372036854775807\n", "campaign.seed"),
         ("[campaign]\nsneeds = 2\n", "campaign.sneeds"),
         ('[campaign]\ncontrollers = ["LQR", "PID"]\n', "campaign.controllers[1]"),
         ("[campaign]\nduration = -1.0\n", "campaign.duration"),

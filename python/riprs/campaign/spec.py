@@ -321,8 +321,10 @@ def _parse(data: dict[str, Any]) -> Campaign:
     )
     if campaign.runs > MAX_RUNS:
         raise CampaignError(f"the campaign has {campaign.runs} runs; at most {MAX_RUNS}")
-    if seed + campaign.points * seeds >= 2**64:
-        raise CampaignError(f"campaign.seed is too large: {seed}")
+    if seed + campaign.points * seeds >= 2**63:
+        raise CampaignError(
+            f"campaign.seed must leave every run's noise seed below 2**63, got {seed}"
+        )
     # Every combination of setting values is checked now, so that no chunk fails on one later.
     settings = campaign.setting_axes()
     combos = int(np.prod([len(a) for a in settings], dtype=np.int64)) if settings else 1
