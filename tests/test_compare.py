@@ -11,7 +11,7 @@ import pytest
 
 from riprs.cli import main
 from riprs.compare import compare
-from riprs.config import CompareConfig, ConfigError, load_config
+from riprs.config import ConfigError, Spec, load_config
 
 SHORT = """
 [reference]
@@ -98,7 +98,7 @@ def test_default_run_balances_and_tracks():
 
 
 def test_seed_determinism():
-    cfg = CompareConfig.from_dict({"reference": {"duration": 1.0}})
+    cfg = Spec.from_dict({"reference": {"duration": 1.0}})
     a = compare(cfg, seed=5, progress=False).summary
     b = compare(cfg, seed=5, progress=False).summary
     c = compare(cfg, seed=6, progress=False).summary
@@ -131,18 +131,26 @@ def test_monte_carlo_small(tmp_path):
         ("[mpc]\ncontrol_horizon = 80\n", "mpc.control_horizon"),
         ("[sensor]\nnoise_std = [0.001, -1.0]\n", "sensor.noise_std[1]"),
         ("[reference]\nduration = 'long'\n", "reference.duration"),
-        ("[mpc]\noutput_bounds = [[], [0.5, -0.5]]\n", "mpc.output_bounds[1]"),
+        ("[mpc]\noutput_bounds = [[-inf, inf], [0.5, -0.5]]\n", "mpc.output_bounds[1]"),
         ("controllers = ['LQR', 'PID']\n", "controllers[1]"),
         ("[reference\n", "invalid TOML"),
         ("[plant]\ninitial_state = [0.0, 0.0, nan, 0.0]\n", "plant.initial_state[2]"),
-        ("[mpc]\ninput_bounds = [-inf, inf]\n", "mpc.input_bounds"),
+        ("[mpc]\ninput_bounds = [[-inf, inf]]\n", "mpc.input_bounds[0]"),
         ("[reference]\nduration = 0.001\n", "reference.duration"),
         ("[reference]\nduration = 1e6\n", "reference.duration"),
         ("[mpc]\nprediction_horizon = 100000\n", "mpc.prediction_horizon"),
         ("[mpc]\necr_weight = 0.0\n", "mpc.ecr_weight"),
-        ("[mpc]\ndisturbance_gain = -0.01\n", "mpc.disturbance_gain"),
+        ("[kalman]\ndisturbance_gain = -0.01\n", "kalman.disturbance_gain"),
         ("[lqr]\nrate_cutoff = 0.0\n", "lqr.rate_cutoff"),
-        ("[lqg]\nrate_cutoff = 10.0\n", "lqg.rate_cutoff"),
+        ("[lqg]\nrate_cutoff = 10.0\n", "lqg"),
+        # Values valid alone that fail in a design, and bounds of the simulation: all named
+        # by their key before any run.
+        ("[lqr]\nQ = [0, 0, 0, 0]\n", "lqr.Q"),
+        ("[lqr]\nR = 1e-300\n", "lqr.R"),
+        ("[plant]\nsubsteps = 100001\n", "plant.substeps"),
+        ("[plant]\ninitial_state = [0.0, 0.0, 2.0, 0.0]\n", "plant.initial_state[2]"),
+        ("[mpc]\noutput_weights = [1e308, 1e308]\n", "mpc.output_weights"),
+        ("[plant]\nJp = 0.0\n", "plant.Jp"),
         ("[sensor]\nencoder_counts = [0.5, 2048]\n", "sensor.encoder_counts[0]"),
         ("[reference]\narm_step = 1e300\n", "reference.arm_step"),
     ],
@@ -157,13 +165,25 @@ def test_bad_config_fails_clearly(tmp_path, capsys, text, needle):
     assert not (tmp_path / "o").exists()  # nothing written on a bad config
 
 
-def test_values_that_fail_together_name_the_section(tmp_path, capsys):
-    # Each weight is a valid number; together they overflow the condensed QP in the core.
-    cfg = _write(tmp_path, "[mpc]\noutput_weights = [1e308, 1e308]\n")
+def test_errors_name_the_file_and_the_key(tmp_path, capsys):
+    cfg = _write(tmp_path, "[mpc]\nprediction_horizon = 0\n")
+    with pytest.raises(ConfigError) as info:
+        load_config(cfg)
+    assert str(info.value) == f"{cfg}: mpc.prediction_horizon: must be in 1..=10000, got 0"
+
+
+def test_a_design_failure_is_found_before_any_simulation(tmp_path, monkeypatch, capsys):
+    import riprs.compare as compare_module
+
+    def refuse(*_args, **_kwargs):
+        raise AssertionError("a simulation ran on a file whose designs fail")
+
+    monkeypatch.setattr(compare_module, "simulate", refuse)
+    cfg = _write(tmp_path, "[lqr]\nR = 1e-300\n")
     code = main(["compare", "--config", str(cfg), "--out", str(tmp_path / "o"), "--quiet"])
     assert code == 1
     err = capsys.readouterr().err
-    assert "[mpc]" in err and "output_weights" in err and "Traceback" not in err
+    assert "lqr.R" in err and str(cfg) in err and "Traceback" not in err
 
 
 def test_undecodable_config_is_a_config_error(tmp_path):
@@ -184,16 +204,17 @@ def test_a_bad_log_fails_before_the_runs(tmp_path, capsys):
 
 
 def test_compare_leaves_the_callers_config_alone():
-    cfg = CompareConfig.from_dict({"reference": {"duration": 0.5}})
+    cfg = Spec.from_dict({"reference": {"duration": 0.5}})
     compare(cfg, monte_carlo=2, progress=False)
     assert cfg.monte_carlo.runs == 0
+    assert cfg == Spec.from_dict({"reference": {"duration": 0.5}})
 
 
 def test_lqr_rate_cutoff_reaches_the_controller():
     # A plain difference (no filter) passes the quantisation noise to the voltage.
     base = {"reference": {"duration": 3.0}, "controllers": ["LQR"]}
-    filtered = compare(CompareConfig.from_dict(base), progress=False).summary["LQR"]
+    filtered = compare(Spec.from_dict(base), progress=False).summary["LQR"]
     raw = compare(
-        CompareConfig.from_dict({**base, "lqr": {"rate_cutoff": float("inf")}}), progress=False
+        Spec.from_dict({**base, "lqr": {"rate_cutoff": float("inf")}}), progress=False
     ).summary["LQR"]
     assert raw[2] > 1.15 * filtered[2]

@@ -14,7 +14,7 @@ import pytest
 import riprs.compare as compare_module
 from riprs.cli import main
 from riprs.compare import OutputPathError, compare
-from riprs.config import CompareConfig
+from riprs.config import Spec
 
 SHORT = "[reference]\nduration = 0.5\n"
 
@@ -69,14 +69,14 @@ def test_an_unwritable_place_is_refused(tmp_path, no_simulation) -> None:
     locked = tmp_path / "locked"
     locked.mkdir(mode=0o500)
     with pytest.raises(OutputPathError, match="not writable"):
-        compare(CompareConfig(), out=locked / "out", progress=False)
+        compare(Spec(), out=locked / "out", progress=False)
 
 
 def test_too_little_free_space_is_refused(tmp_path, monkeypatch, no_simulation) -> None:
     usage = namedtuple("usage", "total used free")
     monkeypatch.setattr(compare_module.shutil, "disk_usage", lambda _p: usage(10**6, 10**6, 4096))
     with pytest.raises(OutputPathError, match="free"):
-        compare(CompareConfig(), out=tmp_path / "out", progress=False)
+        compare(Spec(), out=tmp_path / "out", progress=False)
     assert list(tmp_path.iterdir()) == []
 
 

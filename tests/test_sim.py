@@ -48,8 +48,8 @@ def test_balances_from_a_tilt_and_tracks_the_1_rad_step(make) -> None:
     np.testing.assert_allclose(
         res.rmse,
         [
-            np.sqrt(np.mean((res.x[:, 0] - res.r[:, 0]) ** 2)),
-            np.sqrt(np.mean((res.x[:, 2] - res.r[:, 1]) ** 2)),
+            np.sqrt(np.mean((res.y[:, 0] - res.r[:, 0]) ** 2)),
+            np.sqrt(np.mean((res.y[:, 1] - res.r[:, 1]) ** 2)),
             np.sqrt(np.mean(res.u**2)),
         ],
         rtol=1e-12,

@@ -20,7 +20,8 @@ from riprs._riprs import (
     SingularMatrixError,
     __version__,
 )
-from riprs.control import Lqg, Lqr
+from riprs.config import ConfigError, Spec, load_config
+from riprs.control import Controller, Lqg, Lqr
 from riprs.design import KalmanDesign, c2d, dare, dlqe, dlqr, kalman
 from riprs.log import LogError, RtLog, load_log
 from riprs.mpc import Mpc, MpcSolution
@@ -30,6 +31,8 @@ from riprs.statespace import StateSpace
 
 __all__ = [
     "BatchMetrics",
+    "ConfigError",
+    "Controller",
     "DivergedError",
     "FurutaParams",
     "InvalidParameterError",
@@ -52,6 +55,7 @@ __all__ = [
     "ShapeError",
     "SimResult",
     "SingularMatrixError",
+    "Spec",
     "StateSpace",
     "__version__",
     "c2d",
@@ -59,6 +63,7 @@ __all__ = [
     "dlqe",
     "dlqr",
     "kalman",
+    "load_config",
     "load_log",
     "paper",
     "simulate",

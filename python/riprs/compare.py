@@ -20,7 +20,6 @@ over every sample of the run (a run that falls is cut at the fall and flagged).
 
 from __future__ import annotations
 
-import copy
 import csv
 import errno
 import os
@@ -34,11 +33,9 @@ from typing import Any, Union
 import numpy as np
 
 from riprs import paper
-from riprs._riprs import FurutaParams, Lqg, Lqr, Plant, RiprsError
-from riprs.config import CompareConfig, ConfigError, load_config
-from riprs.design import dlqr
+from riprs._riprs import RiprsError, table1_rmse
+from riprs.config import ConfigError, Spec, load_config
 from riprs.sim import BatchMetrics, SimResult, simulate, simulate_metrics
-from riprs.statespace import StateSpace
 
 __all__ = [
     "MAX_MONTE_CARLO_RUNS",
@@ -94,14 +91,13 @@ class Trajectory:
 
 
 def rmse(traj: Trajectory) -> tuple[float, float, float]:
-    """The Tab. 1 indices ``(arm, pendulum, voltage)`` of a run (module docs)."""
-    ok = np.isfinite(traj.arm) & np.isfinite(traj.pendulum) & np.isfinite(traj.voltage)
-    if not ok.any():
-        return (float("nan"),) * 3
-    return (
-        float(np.sqrt(np.mean((traj.reference[ok] - traj.arm[ok]) ** 2))),
-        float(np.sqrt(np.mean(traj.pendulum[ok] ** 2))),
-        float(np.sqrt(np.mean(traj.voltage[ok] ** 2))),
+    """The Tab. 1 indices ``(arm, pendulum, voltage)`` of a run or a log: ``rip-core``'s one
+    definition (module docs), the same as :attr:`riprs.SimResult.rmse`."""
+    return table1_rmse(
+        np.ascontiguousarray(traj.arm, dtype=float),
+        np.ascontiguousarray(traj.pendulum, dtype=float),
+        np.ascontiguousarray(traj.voltage, dtype=float),
+        np.ascontiguousarray(traj.reference, dtype=float),
     )
 
 
@@ -145,7 +141,7 @@ class MonteCarloResult:
 class CompareResult:
     """Everything :func:`compare` produced."""
 
-    config: CompareConfig
+    config: Spec
     seed: int
     runs: dict[str, SimResult]
     trajectories: dict[str, Trajectory]
@@ -158,88 +154,13 @@ class CompareResult:
         return format_table(self.summary, self.runs)
 
 
-def _design_model(config: CompareConfig) -> StateSpace:
-    """The linear model the controllers are designed on.
-
-    For the ``paper`` preset this is the paper's own ``A_d``, ``B_d`` (the recovered unrounded
-    model, so the Kalman gains are eq. (12)); for other presets the plant's linearisation about
-    upright, discretised by zero-order hold.
-    """
-    if config.plant.preset == "paper":
-        return paper.discrete_model()
-    plant = _plant(config)
-    A, B = plant.linearize_discrete(paper.TS)
-    ref = paper.discrete_model()
-    return StateSpace(A, B, ref.C, ref.D, paper.TS)
+def build_controllers(config: Spec | None = None) -> dict[str, Any]:
+    """The configured controllers by name, from ``rip-core``'s one assembly
+    (:meth:`riprs.config.Spec.build_controllers` at the paper's sample time)."""
+    return (config or Spec()).build_controllers(paper.TS)
 
 
-def _params(config: CompareConfig) -> FurutaParams:
-    return FurutaParams.paper() if config.plant.preset == "paper" else FurutaParams.qube_servo2()
-
-
-def _plant(config: CompareConfig) -> Plant:
-    return Plant(_params(config))
-
-
-def _mpc(config: CompareConfig, model: StateSpace) -> Any:
-    from riprs._riprs import Mpc
-
-    m = config.mpc
-    return Mpc(
-        model.A,
-        model.B,
-        model.C,
-        model.Ts,
-        prediction_horizon=m.prediction_horizon,
-        control_horizon=m.control_horizon,
-        output_weights=m.output_weights,
-        input_rate_weights=m.input_rate_weights,
-        input_weights=m.input_weights,
-        input_bounds=[tuple(m.input_bounds)],
-        output_bounds=[tuple(b) if b else None for b in m.output_bounds],
-        ecr_weight=m.ecr_weight,
-        input_scales=m.input_scales,
-        output_scales=m.output_scales,
-        output_disturbance=(np.eye(1), m.disturbance_gain * np.eye(1), np.ones((2, 1))),
-        solver=m.solver,
-    )
-
-
-def build_controllers(config: CompareConfig | None = None) -> dict[str, Any]:
-    """The configured controllers, designed with identical weights.
-
-    LQR and LQG share the gain ``K = dlqr(A_d, B_d, diag(Q), R)``; LQG and MPC share the MPC's
-    built-in Kalman filter (the augmented model of eq. (3) and the gains of eq. (11)), as in the
-    paper.
-    """
-    config = (config or CompareConfig()).validate()
-    model = _design_model(config)
-    u_min, u_max = config.mpc.input_bounds
-    controllers: dict[str, Any] = {}
-    try:
-        mpc = _mpc(config, model)
-    except RiprsError as exc:
-        # Values that pass the per-key checks can still fail together (say, weights whose
-        # Hessian overflows); the core's message names the argument, this adds the section.
-        raise ConfigError(f"[mpc]: {exc}") from None
-    for name in config.controllers:
-        if name == "LQR":
-            K, _, _ = dlqr(model.A, model.B, np.diag(config.lqr.Q), [[config.lqr.R]])
-            controllers[name] = Lqr(
-                K, model.Ts, rate_cutoff=config.lqr.rate_cutoff, u_min=u_min, u_max=u_max
-            )
-        elif name == "LQG":
-            K, _, _ = dlqr(model.A, model.B, np.diag(config.lqg.Q), [[config.lqg.R]])
-            A_aug, B_aug, C_aug = mpc.model
-            controllers[name] = Lqg(
-                K, A_aug, B_aug, C_aug, mpc.L, mpc.M, model.Ts, u_min=u_min, u_max=u_max
-            )
-        else:
-            controllers[name] = mpc
-    return controllers
-
-
-def _sim_options(config: CompareConfig) -> dict[str, Any]:
+def _sim_options(config: Spec) -> dict[str, Any]:
     return {
         "reference": config.reference.arm_step,
         "reference_time": config.reference.step_time,
@@ -248,7 +169,7 @@ def _sim_options(config: CompareConfig) -> dict[str, Any]:
         "x0": config.plant.initial_state,
         "encoder_counts": config.sensor.encoder_counts,
         "noise_std": config.sensor.noise_std,
-        "u_limit": max(abs(b) for b in config.mpc.input_bounds),
+        "u_limit": max(abs(b) for b in config.mpc.input_bounds[0]),
         "fall_limit": config.plant.fall_limit,
     }
 
@@ -262,7 +183,7 @@ def _progress(iterable: Sequence[Any], desc: str, enabled: bool) -> Any:
 
 
 def compare(
-    config: CompareConfig | PathLike | None = None,
+    config: Spec | PathLike | None = None,
     out: PathLike | None = None,
     seed: int = 0,
     *,
@@ -275,8 +196,9 @@ def compare(
 
     Parameters
     ----------
-    config : CompareConfig, path to a TOML file, or None
-        Settings; the paper's by default (see :mod:`riprs.config`).
+    config : Spec, path to a TOML file, or None
+        Settings; the paper's by default (see :mod:`riprs.config`). The whole file is checked,
+        including that every controller can be designed, before any simulation.
     out : path, optional
         Directory for ``summary.csv``, ``trajectories.csv`` and the figures (created if needed).
         It is checked before anything runs (:class:`OutputPathError`: an empty path, a file in
@@ -301,17 +223,20 @@ def compare(
     CompareResult
     """
     if config is None:
-        cfg = CompareConfig()
-    elif isinstance(config, CompareConfig):
-        # The caller's object stays as it was, whatever ``monte_carlo`` overrides.
-        cfg = copy.deepcopy(config)
+        cfg = Spec()
+    elif isinstance(config, Spec):
+        # A Spec is immutable: overrides below make a new one, the caller's stays as it was.
+        cfg = config
     else:
         cfg = load_config(config)
-    cfg.validate()
     if monte_carlo is not None:
         if isinstance(monte_carlo, bool) or not isinstance(monte_carlo, int) or monte_carlo < 0:
             raise ConfigError(f"monte_carlo must be a non-negative integer, got {monte_carlo!r}")
-        cfg.monte_carlo.runs = monte_carlo
+        if monte_carlo > MAX_MONTE_CARLO_RUNS:
+            raise ConfigError(
+                f"monte_carlo.runs must be at most {MAX_MONTE_CARLO_RUNS}, got {monte_carlo}"
+            )
+        cfg = cfg.updated({"monte_carlo": {"runs": monte_carlo}})
     if cfg.monte_carlo.runs > MAX_MONTE_CARLO_RUNS:
         raise ConfigError(
             f"monte_carlo.runs must be at most {MAX_MONTE_CARLO_RUNS}, got {cfg.monte_carlo.runs}"
@@ -320,8 +245,9 @@ def compare(
     # simulation: a bad --out fails at once, and a failure later leaves the old results intact.
     staging = _Staging(out, _expected_bytes(cfg, plots)) if out is not None else None
     try:
+        # Every design is made, and a failure named by its key, before anything is simulated.
         controllers = build_controllers(cfg)
-        plant = _plant(cfg)
+        plant = cfg.build_plant()
         options = _sim_options(cfg)
         runs: dict[str, SimResult] = {}
         for name in _progress(list(controllers), "simulating", progress):
@@ -350,7 +276,7 @@ def compare(
     return result
 
 
-def _expected_bytes(cfg: CompareConfig, plots: bool) -> int:
+def _expected_bytes(cfg: Spec, plots: bool) -> int:
     """A generous estimate of what the outputs take on disk."""
     samples = round(cfg.reference.duration / paper.TS)
     trajectories = samples * (24 + 4 * 24 * len(cfg.controllers))
@@ -439,7 +365,7 @@ class _Staging:
 
 
 def _monte_carlo(
-    cfg: CompareConfig, controllers: Mapping[str, Any], seed: int, progress: bool
+    cfg: Spec, controllers: Mapping[str, Any], seed: int, progress: bool
 ) -> MonteCarloResult:
     """Run ``i`` uses noise seed ``seed + 1 + i`` and its own parameter draw (see
     :func:`riprs.simulate_metrics`); only per-run metrics are kept."""
@@ -451,7 +377,7 @@ def _monte_carlo(
         report = None if bar is None else (lambda done, _total, b=bar: b.update(done - b.n))
         try:
             results[name] = simulate_metrics(
-                _plant(cfg),
+                cfg.build_plant(),
                 controller,
                 runs,
                 cfg.reference.duration,

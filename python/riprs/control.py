@@ -18,6 +18,30 @@ Both clamp their input to ``[u_min, u_max]`` (default +-12 V). ``Lqr.paper()`` a
 
 from __future__ import annotations
 
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
 from riprs._riprs import Lqg, Lqr
 
-__all__ = ["Lqg", "Lqr"]
+__all__ = ["Controller", "Lqg", "Lqr"]
+
+
+@runtime_checkable
+class Controller(Protocol):
+    """What :func:`riprs.simulate` and ``riprs compare`` accept as a controller:
+    :class:`Lqr`, :class:`Lqg` and :class:`riprs.Mpc` all satisfy it."""
+
+    def step(self, y: ArrayLike, r: ArrayLike | None = None) -> NDArray[np.float64]:
+        """The input ``u[k]`` for the measured angles ``y[k]`` and reference ``r[k]``."""
+        ...
+
+    def reset(self) -> None:
+        """Return to the state right after construction."""
+        ...
+
+    @property
+    def Ts(self) -> float:
+        """The sample time (s) the controller was designed for."""
+        ...

@@ -58,7 +58,7 @@ __all__ = [
 
 _printed = _riprs.paper_printed()
 
-TS: float = 0.01
+TS: float = _riprs.TS
 """Sample time of the study (s)."""
 
 INPUT_SCALE: float = float(_printed["input_scale"])

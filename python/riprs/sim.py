@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike
 from riprs import _riprs
 from riprs._riprs import FurutaParams, InvalidParameterError, Plant, ShapeError
 from riprs._validation import FloatArray, as_matrix, as_vector
+from riprs.control import Controller
 
 __all__ = ["BatchMetrics", "SimResult", "simulate", "simulate_batch", "simulate_metrics"]
 
@@ -65,8 +66,9 @@ class SimResult:
     x_final : ndarray, shape (4,)
         State at the end of the run (or at the fall).
     rmse : tuple of float
-        The paper's Tab. 1 indices: RMSE of ``theta - theta_ref`` and ``alpha - alpha_ref`` (rad,
-        true angles) and RMS of ``u`` (V).
+        The paper's Tab. 1 indices, ``rip-core``'s one definition (``riprs.compare.rmse`` and
+        Monte Carlo use the same): RMSE of the measured ``theta - theta_ref`` and
+        ``alpha - alpha_ref`` (rad) and RMS of ``u`` (V), over every sample of the run.
     """
 
     t: FloatArray
@@ -187,7 +189,7 @@ def _seed(seed: Any, name: str) -> int:
 _DEFAULTS: dict[str, Any] = {
     "reference": None,
     "reference_time": 0.0,
-    "Ts": 0.01,
+    "Ts": _riprs.TS,
     "substeps": 10,
     "x0": None,
     "encoder_counts": None,
@@ -201,12 +203,12 @@ _DEFAULTS: dict[str, Any] = {
 
 def simulate(
     plant: PlantLike,
-    controller: Any,
+    controller: Controller,
     duration: float = 10.0,
     *,
     reference: ArrayLike | None = None,
     reference_time: float = 0.0,
-    Ts: float = 0.01,
+    Ts: float = _riprs.TS,
     substeps: int = 10,
     x0: ArrayLike | None = None,
     encoder_counts: ArrayLike | None = None,
@@ -297,7 +299,7 @@ def simulate(
 
 def simulate_batch(
     plants: PlantLike | Sequence[PlantLike],
-    controller: Any,
+    controller: Controller,
     seeds: Sequence[int] | int = 1,
     duration: float = 10.0,
     *,
@@ -401,7 +403,7 @@ class BatchMetrics:
 
 def simulate_metrics(
     plant: PlantLike,
-    controller: Any,
+    controller: Controller,
     runs: int,
     duration: float = 10.0,
     *,

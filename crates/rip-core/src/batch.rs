@@ -178,7 +178,7 @@ impl Recorder for Accumulator {
         _estimate: Option<&[f64]>,
         _elapsed: f64,
     ) {
-        self.table1.push(x, y, u, r);
+        self.table1.push(y, u, r);
         self.peak = self.peak.max(u.abs());
         let inside = (x[0] - r[0]).abs() <= self.band;
         if !inside {

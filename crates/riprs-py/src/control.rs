@@ -9,7 +9,8 @@ use numpy::ndarray::Array1;
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
-use rip_core::regulators::DEFAULT_RATE_CUTOFF_HZ;
+use rip_core::paper::TS;
+use rip_core::regulators::{DEFAULT_INPUT_LIMIT, DEFAULT_RATE_CUTOFF_HZ};
 use rip_core::{Controller, Lqg, Lqr};
 
 use crate::convert::mat_to_py;
@@ -121,10 +122,19 @@ pub struct PyLqr {
     inner: Shared<Lqr>,
 }
 
+impl PyLqr {
+    /// Wraps a core regulator (from the controller assembly).
+    pub(crate) fn from_core(inner: Lqr) -> Self {
+        Self {
+            inner: Shared::new(inner),
+        }
+    }
+}
+
 #[pymethods]
 impl PyLqr {
     #[new]
-    #[pyo3(signature = (K, Ts=0.01, *, rate_cutoff=DEFAULT_RATE_CUTOFF_HZ, u_min=-12.0, u_max=12.0))]
+    #[pyo3(signature = (K, Ts=TS, *, rate_cutoff=DEFAULT_RATE_CUTOFF_HZ, u_min=-DEFAULT_INPUT_LIMIT, u_max=DEFAULT_INPUT_LIMIT))]
     #[allow(non_snake_case)]
     fn new(
         K: &Bound<'_, PyAny>,
@@ -153,7 +163,7 @@ impl PyLqr {
     /// Ts, rate_cutoff, u_min, u_max
     ///     As for the constructor.
     #[staticmethod]
-    #[pyo3(signature = (A, B, Q, R, Ts=0.01, *, rate_cutoff=DEFAULT_RATE_CUTOFF_HZ, u_min=-12.0, u_max=12.0))]
+    #[pyo3(signature = (A, B, Q, R, Ts=TS, *, rate_cutoff=DEFAULT_RATE_CUTOFF_HZ, u_min=-DEFAULT_INPUT_LIMIT, u_max=DEFAULT_INPUT_LIMIT))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn design(
         py: Python<'_>,
@@ -295,10 +305,19 @@ pub struct PyLqg {
     inner: Shared<Lqg>,
 }
 
+impl PyLqg {
+    /// Wraps a core regulator (from the controller assembly).
+    pub(crate) fn from_core(inner: Lqg) -> Self {
+        Self {
+            inner: Shared::new(inner),
+        }
+    }
+}
+
 #[pymethods]
 impl PyLqg {
     #[new]
-    #[pyo3(signature = (K, A, B, C, L, M, Ts=0.01, *, u_min=-12.0, u_max=12.0))]
+    #[pyo3(signature = (K, A, B, C, L, M, Ts=TS, *, u_min=-DEFAULT_INPUT_LIMIT, u_max=DEFAULT_INPUT_LIMIT))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
         K: &Bound<'_, PyAny>,

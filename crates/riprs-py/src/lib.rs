@@ -15,6 +15,7 @@ mod paper;
 mod plant;
 mod shared;
 mod sim;
+mod spec;
 
 #[pymodule]
 fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -26,5 +27,6 @@ fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     control::register(m)?;
     sim::register(m)?;
     mpc::register(m)?;
+    spec::register(m)?;
     Ok(())
 }

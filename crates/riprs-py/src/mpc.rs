@@ -316,10 +316,12 @@ pub struct PyMpc {
 impl PyMpc {
     #[new]
     #[pyo3(signature = (
-        A, B, C, Ts, *, prediction_horizon=10, control_horizon=2, output_weights=None,
+        A, B, C, Ts, *, prediction_horizon=rip_core::mpc::DEFAULT_PREDICTION_HORIZON as i64,
+        control_horizon=rip_core::mpc::DEFAULT_CONTROL_HORIZON as i64, output_weights=None,
         input_rate_weights=None, input_weights=None, input_target=None, input_bounds=None,
-        output_bounds=None, ecr_weight=1e5, input_scales=None, output_scales=None,
-        output_disturbance=None, measurement_noise=None, solver="clarabel", max_iterations=200
+        output_bounds=None, ecr_weight=rip_core::mpc::DEFAULT_ECR_WEIGHT, input_scales=None,
+        output_scales=None, output_disturbance=None, measurement_noise=None, solver="clarabel",
+        max_iterations=rip_core::mpc::DEFAULT_MAX_ITERATIONS as i64
     ))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(

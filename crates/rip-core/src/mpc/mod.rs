@@ -100,7 +100,8 @@ pub use estimator::EstimatorDesign;
 pub use model::AugmentedModel;
 use settings::{check_condensed_size, fill_bounds, fill_default};
 pub use settings::{
-    MpcSettings, MpcSettingsBuilder, OutputDisturbance, MAX_CONDENSED_ENTRIES,
+    MpcSettings, MpcSettingsBuilder, OutputDisturbance, DEFAULT_CONTROL_HORIZON,
+    DEFAULT_ECR_WEIGHT, DEFAULT_MAX_ITERATIONS, DEFAULT_PREDICTION_HORIZON, MAX_CONDENSED_ENTRIES,
     MAX_PREDICTION_HORIZON,
 };
 

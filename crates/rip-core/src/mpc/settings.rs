@@ -76,11 +76,20 @@ pub struct MpcSettings {
     pub max_iterations: usize,
 }
 
+/// MATLAB's default prediction horizon `P`.
+pub const DEFAULT_PREDICTION_HORIZON: usize = 10;
+/// MATLAB's default control horizon `m`.
+pub const DEFAULT_CONTROL_HORIZON: usize = 2;
+/// MATLAB's default slack weight `ρ_ε` (`Weights.ECR`).
+pub const DEFAULT_ECR_WEIGHT: f64 = 1e5;
+/// Default iteration limit of the QP solver.
+pub const DEFAULT_MAX_ITERATIONS: usize = 200;
+
 impl Default for MpcSettings {
     fn default() -> Self {
         Self {
-            prediction_horizon: 10,
-            control_horizon: 2,
+            prediction_horizon: DEFAULT_PREDICTION_HORIZON,
+            control_horizon: DEFAULT_CONTROL_HORIZON,
             output_weights: Vec::new(),
             input_weights: Vec::new(),
             input_rate_weights: Vec::new(),
@@ -89,11 +98,11 @@ impl Default for MpcSettings {
             output_scales: Vec::new(),
             input_bounds: Vec::new(),
             output_bounds: Vec::new(),
-            ecr_weight: 1e5,
+            ecr_weight: DEFAULT_ECR_WEIGHT,
             output_disturbance: None,
             measurement_noise: None,
             solver: QpSolver::Clarabel,
-            max_iterations: 200,
+            max_iterations: DEFAULT_MAX_ITERATIONS,
         }
     }
 }

@@ -191,9 +191,14 @@ impl Spec {
 
     /// [`load`](Self::load), also returning the runtime sections.
     pub fn load_with_runtime(path: &Path) -> Result<(Self, toml::Table), SpecError> {
-        let text = std::fs::read_to_string(path)
+        let bytes = std::fs::read(path)
             .map_err(|e| SpecError::new("", format!("cannot read: {e}")).in_file(path))?;
-        Self::parse_with_runtime(&text).map_err(|e| e.in_file(path))
+        let text = std::str::from_utf8(&bytes).map_err(|e| {
+            SpecError::new("", format!("invalid TOML: not UTF-8 text ({e})")).in_file(path)
+        })?;
+        // Editors on some systems start a UTF-8 file with a byte-order mark.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        Self::parse_with_runtime(text).map_err(|e| e.in_file(path))
     }
 
     /// Checks every value; the error names the first bad key. Values that are valid alone but

@@ -1,0 +1,502 @@
+//! Bindings for `rip_core::spec`: the experiment file as a typed, read-only object, the one
+//! controller assembly, and the one Tab. 1 RMSE. Parsing, defaults, validation and design all
+//! happen in the core; this module converts.
+
+use std::path::PathBuf;
+
+use numpy::PyReadonlyArray1;
+use pyo3::create_exception;
+use pyo3::exceptions::PyTypeError;
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
+use rip_core::metrics::table1_rmse_of;
+use rip_core::spec::{ControllerKind, Param, Spec, SpecError};
+
+use crate::control::{PyLqg, PyLqr};
+use crate::errors::RiprsError;
+use crate::mpc::PyMpc;
+use crate::plant::{PyFurutaParams, PyPlant};
+use crate::shared::Shared;
+
+create_exception!(
+    _riprs,
+    ConfigError,
+    RiprsError,
+    "A configuration file, key or value is invalid; the message names the file and the key."
+);
+
+fn config_err(e: SpecError) -> PyErr {
+    ConfigError::new_err(e.to_string())
+}
+
+/// Converts nested Python dicts, lists and scalars into a TOML value.
+fn to_toml(obj: &Bound<'_, PyAny>, key: &str) -> PyResult<toml::Value> {
+    if obj.is_instance_of::<PyBool>() {
+        return Ok(toml::Value::Boolean(obj.extract()?));
+    }
+    if obj.is_instance_of::<PyInt>() {
+        return match obj.extract::<i64>() {
+            Ok(v) => Ok(toml::Value::Integer(v)),
+            Err(_) => Err(ConfigError::new_err(format!(
+                "{key}: the integer {obj} is out of range"
+            ))),
+        };
+    }
+    if obj.is_instance_of::<PyFloat>() {
+        return Ok(toml::Value::Float(obj.extract()?));
+    }
+    if obj.is_instance_of::<PyString>() {
+        return Ok(toml::Value::String(obj.extract()?));
+    }
+    if let Ok(d) = obj.downcast::<PyDict>() {
+        let mut table = toml::Table::new();
+        for (k, v) in d.iter() {
+            let name: String = k
+                .extract()
+                .map_err(|_| ConfigError::new_err(format!("{key}: keys must be strings")))?;
+            let path = if key.is_empty() {
+                name.clone()
+            } else {
+                format!("{key}.{name}")
+            };
+            table.insert(name, to_toml(&v, &path)?);
+        }
+        return Ok(toml::Value::Table(table));
+    }
+    if obj.is_instance_of::<PyList>() || obj.is_instance_of::<PyTuple>() {
+        let mut out = Vec::new();
+        for (i, v) in obj.try_iter()?.enumerate() {
+            out.push(to_toml(&v?, &format!("{key}[{i}]"))?);
+        }
+        return Ok(toml::Value::Array(out));
+    }
+    if let Ok(v) = obj.extract::<f64>() {
+        // numpy scalars and other numbers.
+        return Ok(toml::Value::Float(v));
+    }
+    Err(ConfigError::new_err(format!(
+        "{}: cannot be {} in a configuration",
+        if key.is_empty() { "configuration" } else { key },
+        obj.get_type().name()?
+    )))
+}
+
+fn merge(base: &mut toml::Table, changes: toml::Table) {
+    for (k, v) in changes {
+        match (base.get_mut(&k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(c)) => merge(b, c),
+            (_, v) => {
+                base.insert(k, v);
+            }
+        }
+    }
+}
+
+/// `[plant]` (read-only; every parameter resolved from the preset).
+#[pyclass(name = "PlantSpec", module = "riprs._riprs", frozen, get_all)]
+#[allow(non_snake_case)]
+pub struct PyPlantSpec {
+    preset: String,
+    mr: f64,
+    Lr: f64,
+    Jr: f64,
+    mp: f64,
+    Lp: f64,
+    Jp: f64,
+    Dr: f64,
+    Dp: f64,
+    Rm: f64,
+    kt: f64,
+    km: f64,
+    substeps: usize,
+    initial_state: Vec<f64>,
+    fall_limit: f64,
+}
+
+/// `[sensor]` (read-only).
+#[pyclass(name = "SensorSpec", module = "riprs._riprs", frozen, get_all)]
+pub struct PySensorSpec {
+    encoder_counts: Vec<u32>,
+    noise_std: Vec<f64>,
+}
+
+/// `[reference]` (read-only).
+#[pyclass(name = "ReferenceSpec", module = "riprs._riprs", frozen, get_all)]
+pub struct PyReferenceSpec {
+    arm_step: f64,
+    step_time: f64,
+    duration: f64,
+}
+
+/// `[lqr]` (read-only).
+#[pyclass(name = "LqrSpec", module = "riprs._riprs", frozen, get_all)]
+#[allow(non_snake_case)]
+pub struct PyLqrSpec {
+    Q: Vec<f64>,
+    R: f64,
+    rate_cutoff: f64,
+}
+
+/// `[kalman]` (read-only).
+#[pyclass(name = "KalmanSpec", module = "riprs._riprs", frozen, get_all)]
+pub struct PyKalmanSpec {
+    disturbance_gain: f64,
+    measurement_noise: Vec<f64>,
+}
+
+/// `[mpc]` (read-only).
+#[pyclass(name = "MpcSpec", module = "riprs._riprs", frozen, get_all)]
+pub struct PyMpcSpec {
+    prediction_horizon: usize,
+    control_horizon: usize,
+    output_weights: Vec<f64>,
+    input_rate_weights: Vec<f64>,
+    input_weights: Vec<f64>,
+    input_bounds: Vec<(f64, f64)>,
+    output_bounds: Vec<(f64, f64)>,
+    ecr_weight: f64,
+    input_scales: Vec<f64>,
+    output_scales: Vec<f64>,
+    solver: String,
+    max_iterations: usize,
+}
+
+/// `[monte_carlo]` (read-only).
+#[pyclass(name = "MonteCarloSpec", module = "riprs._riprs", frozen, get_all)]
+pub struct PyMonteCarloSpec {
+    runs: usize,
+    perturbation: f64,
+    parameters: Vec<String>,
+}
+
+/// The experiment file: every setting of ``riprs compare``, ``rip-rt run`` and
+/// ``rip-rt emulate``, with the paper's defaults.
+///
+/// Read a file with :func:`riprs.load_config`; ``Spec()`` is the default. The sections are
+/// read-only attributes; :meth:`updated` returns a changed copy, checked like a file.
+/// See ``docs/configuration.md`` for every key.
+#[pyclass(name = "Spec", module = "riprs._riprs", frozen, eq)]
+#[derive(Clone, PartialEq)]
+pub struct PySpec {
+    pub(crate) inner: Spec,
+}
+
+impl PySpec {
+    fn design(&self, py: Python<'_>, ts: f64) -> PyResult<rip_core::spec::Design> {
+        let spec = self.inner.clone();
+        py.allow_threads(move || spec.design(ts))
+            .map_err(config_err)
+    }
+}
+
+#[pymethods]
+impl PySpec {
+    #[new]
+    fn new() -> Self {
+        Self {
+            inner: Spec::default(),
+        }
+    }
+
+    /// Parse and check TOML text.
+    ///
+    /// Parameters
+    /// ----------
+    /// text : str
+    ///     The file's contents.
+    ///
+    /// Raises
+    /// ------
+    /// ConfigError
+    ///     Unknown key, wrong type or out-of-range value; the message names the key.
+    #[staticmethod]
+    fn from_toml(text: &str) -> PyResult<Self> {
+        Ok(Self {
+            inner: Spec::parse(text).map_err(config_err)?,
+        })
+    }
+
+    /// Build from nested dicts as a parsed TOML document would hold them.
+    #[staticmethod]
+    fn from_dict(data: &Bound<'_, PyDict>) -> PyResult<Self> {
+        let toml::Value::Table(table) = to_toml(data.as_any(), "")? else {
+            unreachable!("a dict converts to a table")
+        };
+        Ok(Self {
+            inner: Spec::from_table(table).map_err(config_err)?,
+        })
+    }
+
+    /// A copy with ``changes`` (nested dicts, e.g. ``{"monte_carlo": {"runs": 10}}``)
+    /// applied and checked as in a file.
+    fn updated(&self, changes: &Bound<'_, PyDict>) -> PyResult<Self> {
+        let toml::Value::Table(changes) = to_toml(changes.as_any(), "")? else {
+            unreachable!("a dict converts to a table")
+        };
+        let mut base = self
+            .inner
+            .to_toml()
+            .parse::<toml::Table>()
+            .expect("a printed spec parses");
+        merge(&mut base, changes);
+        Ok(Self {
+            inner: Spec::from_table(base).map_err(config_err)?,
+        })
+    }
+
+    /// The resolved configuration as TOML, every default filled in (what ``riprs config``
+    /// prints).
+    fn to_toml(&self) -> String {
+        self.inner.to_toml()
+    }
+
+    /// Check that every controller can be designed at sample time ``Ts`` (s).
+    ///
+    /// Raises
+    /// ------
+    /// ConfigError
+    ///     Naming the key whose value makes a design fail.
+    #[pyo3(signature = (Ts = rip_core::paper::TS))]
+    #[allow(non_snake_case)]
+    fn check(&self, py: Python<'_>, Ts: f64) -> PyResult<()> {
+        let d = self.design(py, Ts)?;
+        py.allow_threads(|| d.controllers().map(|_| ()))
+            .map_err(config_err)
+    }
+
+    /// The configured controllers (``controllers``), designed at ``Ts`` by the one assembly
+    /// (LQR and LQG share the gain, LQG and MPC share one Kalman design), by name in the
+    /// file's order.
+    ///
+    /// Raises
+    /// ------
+    /// ConfigError
+    ///     Naming the key whose value makes a design fail.
+    #[pyo3(signature = (Ts = rip_core::paper::TS))]
+    #[allow(non_snake_case)]
+    fn build_controllers<'py>(&self, py: Python<'py>, Ts: f64) -> PyResult<Bound<'py, PyDict>> {
+        let d = self.design(py, Ts)?;
+        let out = PyDict::new(py);
+        for &kind in &self.inner.controllers {
+            let obj: Bound<'py, PyAny> = match kind {
+                ControllerKind::Lqr => {
+                    let c = py.allow_threads(|| d.lqr()).map_err(config_err)?;
+                    Bound::new(py, PyLqr::from_core(c))?.into_any()
+                }
+                ControllerKind::Lqg => {
+                    let c = py.allow_threads(|| d.lqg()).map_err(config_err)?;
+                    Bound::new(py, PyLqg::from_core(c))?.into_any()
+                }
+                ControllerKind::Mpc => {
+                    let c = py.allow_threads(|| d.mpc()).map_err(config_err)?;
+                    let inner = Shared::new(c);
+                    Bound::new(py, PyMpc { inner })?.into_any()
+                }
+            };
+            out.set_item(kind.name(), obj)?;
+        }
+        Ok(out)
+    }
+
+    /// The nonlinear plant of ``[plant]``.
+    fn build_plant(&self) -> PyResult<PyPlant> {
+        Ok(PyPlant {
+            inner: self.inner.plant().map_err(config_err)?,
+        })
+    }
+
+    /// The controllers ``riprs compare`` runs (``"LQR"``, ``"LQG"``, ``"MPC"``).
+    #[getter]
+    fn controllers(&self) -> Vec<&'static str> {
+        self.inner.controllers.iter().map(|k| k.name()).collect()
+    }
+
+    /// ``[plant]``.
+    #[getter]
+    fn plant(&self) -> PyPlantSpec {
+        let p = &self.inner.plant;
+        let v = p.params();
+        PyPlantSpec {
+            preset: p.preset.name().into(),
+            mr: v.mr,
+            Lr: v.lr,
+            Jr: v.jr,
+            mp: v.mp,
+            Lp: v.lp,
+            Jp: v.jp,
+            Dr: v.dr,
+            Dp: v.dp,
+            Rm: v.rm,
+            kt: v.kt,
+            km: v.km,
+            substeps: p.substeps,
+            initial_state: p.initial_state.to_vec(),
+            fall_limit: p.fall_limit,
+        }
+    }
+
+    /// The physical parameters of ``[plant]``.
+    #[getter]
+    fn params(&self) -> PyFurutaParams {
+        PyFurutaParams {
+            inner: self.inner.plant.params(),
+        }
+    }
+
+    /// ``[sensor]``.
+    #[getter]
+    fn sensor(&self) -> PySensorSpec {
+        let s = &self.inner.sensor;
+        PySensorSpec {
+            encoder_counts: s.encoder_counts.to_vec(),
+            noise_std: s.noise_std.to_vec(),
+        }
+    }
+
+    /// ``[reference]``.
+    #[getter]
+    fn reference(&self) -> PyReferenceSpec {
+        let r = &self.inner.reference;
+        PyReferenceSpec {
+            arm_step: r.arm_step,
+            step_time: r.step_time,
+            duration: r.duration,
+        }
+    }
+
+    /// ``[lqr]``.
+    #[getter]
+    fn lqr(&self) -> PyLqrSpec {
+        let l = &self.inner.lqr;
+        PyLqrSpec {
+            Q: l.Q.to_vec(),
+            R: l.R,
+            rate_cutoff: l.rate_cutoff,
+        }
+    }
+
+    /// ``[kalman]``.
+    #[getter]
+    fn kalman(&self) -> PyKalmanSpec {
+        let k = &self.inner.kalman;
+        PyKalmanSpec {
+            disturbance_gain: k.disturbance_gain,
+            measurement_noise: k.measurement_noise.to_vec(),
+        }
+    }
+
+    /// ``[mpc]``.
+    #[getter]
+    fn mpc(&self) -> PyMpcSpec {
+        let m = &self.inner.mpc;
+        let pair = |b: &[f64; 2]| (b[0], b[1]);
+        PyMpcSpec {
+            prediction_horizon: m.prediction_horizon,
+            control_horizon: m.control_horizon,
+            output_weights: m.output_weights.to_vec(),
+            input_rate_weights: m.input_rate_weights.to_vec(),
+            input_weights: m.input_weights.to_vec(),
+            input_bounds: m.input_bounds.iter().map(pair).collect(),
+            output_bounds: m.output_bounds.iter().map(pair).collect(),
+            ecr_weight: m.ecr_weight,
+            input_scales: m.input_scales.to_vec(),
+            output_scales: m.output_scales.to_vec(),
+            solver: rip_core::mpc::QpSolver::from(m.solver).name().into(),
+            max_iterations: m.max_iterations,
+        }
+    }
+
+    /// ``[monte_carlo]``.
+    #[getter]
+    fn monte_carlo(&self) -> PyMonteCarloSpec {
+        let m = &self.inner.monte_carlo;
+        PyMonteCarloSpec {
+            runs: m.runs,
+            perturbation: m.perturbation,
+            parameters: m.parameters.iter().map(|p| p.name().into()).collect(),
+        }
+    }
+
+    fn __repr__(&self) -> String {
+        format!("Spec.from_toml('''\n{}''')", self.inner.to_toml())
+    }
+}
+
+/// Read, parse and check a configuration file, including that every controller can be
+/// designed at the paper's sample time.
+///
+/// Parameters
+/// ----------
+/// path : str or os.PathLike
+///     The TOML file. ``[loop]``, ``[device]`` and ``[safety]`` belong to ``rip-rt`` and are
+///     not checked here.
+///
+/// Returns
+/// -------
+/// Spec
+///
+/// Raises
+/// ------
+/// ConfigError
+///     Unreadable file, TOML syntax, unknown key, wrong type, out-of-range value, or values
+///     that fail together in a design; the message names the file and the key.
+#[pyfunction]
+fn load_config(py: Python<'_>, path: PathBuf) -> PyResult<PySpec> {
+    let spec = Spec::load(&path).map_err(config_err)?;
+    let out = PySpec { inner: spec };
+    out.check(py, rip_core::paper::TS)
+        .map_err(|e| ConfigError::new_err(format!("{}: {}", path.display(), e.value(py))))?;
+    Ok(out)
+}
+
+/// The paper's Tab. 1 indices ``(arm, pendulum, voltage)`` of recorded signals: RMSE of the
+/// measured arm angle against its reference, RMS of the measured pendulum angle and of the
+/// voltage, over every sample (samples with NaN left out). The same definition as
+/// ``SimResult.rmse`` (``rip_core::metrics::table1_rmse``).
+#[pyfunction]
+fn table1_rmse(
+    arm: PyReadonlyArray1<'_, f64>,
+    pendulum: PyReadonlyArray1<'_, f64>,
+    voltage: PyReadonlyArray1<'_, f64>,
+    arm_reference: PyReadonlyArray1<'_, f64>,
+) -> PyResult<(f64, f64, f64)> {
+    let (a, p, u, r) = (
+        arm.as_slice()?,
+        pendulum.as_slice()?,
+        voltage.as_slice()?,
+        arm_reference.as_slice()?,
+    );
+    if p.len() != a.len() || u.len() != a.len() || r.len() != a.len() {
+        return Err(PyTypeError::new_err(format!(
+            "arm, pendulum, voltage and arm_reference must have equal lengths, got {}, {}, {}, {}",
+            a.len(),
+            p.len(),
+            u.len(),
+            r.len()
+        )));
+    }
+    let [x, y, z] = table1_rmse_of(a, p, u, r);
+    Ok((x, y, z))
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("ConfigError", py.get_type::<ConfigError>())?;
+    m.add(
+        "PRESETS",
+        rip_core::spec::Preset::ALL.map(|p| p.name()).to_vec(),
+    )?;
+    m.add("PARAMETERS", Param::ALL.map(|p| p.name()).to_vec())?;
+    m.add("TS", rip_core::paper::TS)?;
+    m.add_class::<PySpec>()?;
+    m.add_class::<PyPlantSpec>()?;
+    m.add_class::<PySensorSpec>()?;
+    m.add_class::<PyReferenceSpec>()?;
+    m.add_class::<PyLqrSpec>()?;
+    m.add_class::<PyKalmanSpec>()?;
+    m.add_class::<PyMpcSpec>()?;
+    m.add_class::<PyMonteCarloSpec>()?;
+    m.add_function(wrap_pyfunction!(load_config, m)?)?;
+    m.add_function(wrap_pyfunction!(table1_rmse, m)?)?;
+    Ok(())
+}
