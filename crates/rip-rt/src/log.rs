@@ -23,6 +23,12 @@ pub const MAX_ESTIMATES: usize = 32;
 /// Rows the loop may be ahead of the writer (5 s at 100 Hz) before that is a log fault.
 pub const QUEUE_ROWS: usize = 512;
 
+/// How long [`LogWriter::finish`] waits for the writer to drain the queue. The loop has
+/// stopped the motor by then; what is left is to exit, and a write blocked on stalled storage
+/// (a pipe nobody reads, a hung network mount) must not hold the process forever, where no
+/// signal but SIGKILL could end it.
+pub const FINISH_WAIT: std::time::Duration = std::time::Duration::from_secs(5);
+
 /// A log that cannot be written.
 #[derive(Debug, thiserror::Error)]
 pub enum LogError {
@@ -55,6 +61,12 @@ pub enum LogError {
     /// The writer thread is gone without reporting an error.
     #[error("the log writer thread stopped")]
     WriterGone,
+    /// The writer did not drain its queue within [`FINISH_WAIT`] at the end of the run.
+    #[error("writing {} did not complete within {} s (the storage stalled)", path.display(), FINISH_WAIT.as_secs())]
+    Stalled {
+        /// The file.
+        path: PathBuf,
+    },
 }
 
 /// One period's row.
@@ -155,6 +167,39 @@ fn writer_thread(
     out
 }
 
+/// Creates (truncates) `path` for writing without blocking in `open`: a FIFO nobody reads
+/// would otherwise hold the start-up there, port already taken, where the stop signals
+/// (handled, and restarting the call) cannot end it. Such a FIFO is refused (ENXIO); the
+/// descriptor is made blocking again for the writer thread.
+fn open_for_writing(path: &Path) -> io::Result<File> {
+    use std::os::unix::fs::OpenOptionsExt;
+    use std::os::unix::io::AsRawFd;
+    let file = std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(path)
+        .map_err(|e| match e.raw_os_error() {
+            Some(libc::ENXIO) => io::Error::new(e.kind(), format!("{e}: a FIFO nobody reads")),
+            _ => e,
+        })?;
+    let fd = file.as_raw_fd();
+    // SAFETY: plain fcntl calls on a descriptor this function owns.
+    let rc = unsafe {
+        let flags = libc::fcntl(fd, libc::F_GETFL);
+        if flags < 0 {
+            flags
+        } else {
+            libc::fcntl(fd, libc::F_SETFL, flags & !libc::O_NONBLOCK)
+        }
+    };
+    if rc < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    Ok(file)
+}
+
 impl LogWriter {
     /// Creates `path`, writes the header (comment lines `# key: value`, then the columns),
     /// flushes it and starts the writer thread. Any failure here is a start-up error.
@@ -170,7 +215,7 @@ impl LogWriter {
             path: path.to_path_buf(),
             source,
         };
-        let file = File::create(path).map_err(create_err)?;
+        let file = open_for_writing(path).map_err(create_err)?;
         let mut out = BufWriter::with_capacity(1 << 16, file);
         let mut header = || -> io::Result<()> {
             for (k, v) in header {
@@ -253,6 +298,16 @@ impl LogWriter {
         let Some(thread) = self.thread.take() else {
             return Err(LogError::WriterGone);
         };
+        let waited = std::time::Instant::now();
+        while !thread.is_finished() {
+            if waited.elapsed() >= FINISH_WAIT {
+                // The thread stays blocked in its write; the process exits without it.
+                return Err(LogError::Stalled {
+                    path: self.path.clone(),
+                });
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
         let mut out = thread.join().map_err(|_| LogError::WriterGone)?;
         self.check()?;
         let mut write = || -> io::Result<()> {

@@ -162,11 +162,14 @@ struct Runner<'a> {
     misses_in_row: u32,
     last_step: Option<StepOutput>,
     balanced_ns: u64,
+    // When the request was sent whose measurement the last enabling command rests on.
+    based_on_ns: u64,
 }
 
-/// A measurement and when its bytes were read.
+/// A measurement, when its request was sent and when its bytes were read.
 struct Reply {
     m: Measurement,
+    req_ns: u64,
     rx_ns: u64,
 }
 
@@ -180,6 +183,7 @@ impl Runner<'_> {
     /// Sends the sample request and waits for its answer until the reply timeout.
     fn sample(&mut self, tick: &Tick) -> Result<(u16, Option<Reply>), StopReason> {
         let (seq, n) = self.core.encode_request(&mut self.tx);
+        let req_ns = now_ns();
         self.send(n)?;
         // Counted from the request, so a late wake-up does not cost a measurement the device
         // answers at once; capped at the next deadline, which the next request must keep.
@@ -201,9 +205,23 @@ impl Runner<'_> {
                 .map_err(StopReason::DeviceLost)?;
             let rx_ns = now_ns();
             if let Some(m) = self.core.receive(&self.rx[..got], seq) {
-                return Ok((seq, Some(Reply { m, rx_ns })));
+                return Ok((seq, Some(Reply { m, req_ns, rx_ns })));
             }
         }
+    }
+
+    /// Refuses an enabling command resting on a measurement requested at `req_ns` when that
+    /// is [`MAX_BLIND_MS`] or more ago. The period-counting bounds cannot see a loop that was
+    /// suspended (or starved) inside a period, between the request and the command: without
+    /// this, its first act on resuming is to drive on a measurement as old as the suspension.
+    fn check_fresh(&self, req_ns: u64) -> Result<(), StopReason> {
+        let age_ns = now_ns().saturating_sub(req_ns);
+        if age_ns as f64 >= MAX_BLIND_MS * 1e6 {
+            return Err(StopReason::Overrun(Overrun::Stall {
+                ms: age_ns as f64 * 1e-6,
+            }));
+        }
+        Ok(())
     }
 
     fn log_row(&mut self, row: Row) -> Result<(), StopReason> {
@@ -250,6 +268,9 @@ impl Runner<'_> {
             return Err(StopReason::Watchdog(self.missing_in_row));
         }
         let n = self.core.encode_held(&mut self.tx)?;
+        if self.core.held_voltage() != 0.0 {
+            self.check_fresh(self.based_on_ns)?;
+        }
         self.send(n)?;
         let Phase::Balancing { start_ns } = phase else {
             return Ok(());
@@ -329,6 +350,8 @@ impl Runner<'_> {
                 limit_ms: self.max_step_ns as f64 * 1e-6,
             }));
         }
+        self.check_fresh(reply.req_ns)?;
+        self.based_on_ns = reply.req_ns;
         self.send(step.len)?;
         self.compute.record(compute_ns);
         if tick.skipped > 0 {
@@ -431,6 +454,7 @@ pub fn run(
         misses_in_row: 0,
         last_step: None,
         balanced_ns: 0,
+        based_on_ns: 0,
     };
     let mut periodic = Periodic::new(period_ns, now_ns() + period_ns);
     let (reason, probe) = match probe(runner.core, cfg) {

@@ -797,3 +797,119 @@ fn consecutive_deadline_misses_are_an_overrun() {
     assert!(reason.to_string().contains("in a row"), "{reason}");
     assert_eq!(commands.last(), Some(&(0, 0)));
 }
+
+/// The system call `pid`'s main thread is in (`/proc/PID/syscall`'s first field), if any.
+#[cfg(all(target_os = "linux", target_arch = "x86_64"))]
+fn syscall_of(pid: u32) -> Option<i64> {
+    let text = std::fs::read_to_string(format!("/proc/{pid}/syscall")).ok()?;
+    text.split_whitespace().next()?.parse().ok()
+}
+
+/// A loop suspended between a sample request and its command (here while it waits for the
+/// reply) must not, on resuming, send an enabling command resting on the measurement of before
+/// the suspension, held or freshly computed: the stall stops it first.
+#[cfg(all(target_os = "linux", target_arch = "x86_64"))]
+#[test]
+fn a_loop_suspended_while_waiting_for_a_reply_sends_nothing_stale() {
+    let _serial = one_at_a_time();
+    let cfg = scratch("stall-reply.toml");
+    // Most of each period spent waiting for a reply, and many replies dropped (held commands).
+    std::fs::write(&cfg, "[loop]\nreply_timeout_ms = 9.5\n").unwrap();
+    let emu = Emulator::start(
+        "stall-reply",
+        &["--noise", "0.3", "--drop-rate", "0.25", "--seed", "8"],
+    );
+    let child = spawn_run(
+        &emu.device,
+        "lqr",
+        &["--duration", "10", "--config", cfg.to_str().unwrap()],
+    );
+    std::thread::sleep(Duration::from_millis(1500));
+    let pid = child.id();
+    // Suspend it inside ppoll (the reply wait; the period's sleep is clock_nanosleep).
+    let waited = Instant::now();
+    while syscall_of(pid) != Some(libc::SYS_ppoll) {
+        assert!(waited.elapsed() < Duration::from_secs(5), "never in ppoll");
+    }
+    unsafe { libc::kill(pid as i32, libc::SIGSTOP) };
+    let stopped_in = syscall_of(pid);
+    std::thread::sleep(Duration::from_millis(400));
+    unsafe { libc::kill(pid as i32, libc::SIGCONT) };
+    let r = wait_with_timeout(child, Duration::from_secs(15));
+    assert_eq!(r.status.code(), Some(10), "{}", r.stderr);
+    assert!(r.stderr.contains("stalled"), "{}", r.stderr);
+    // The record's times: every command after the 400 ms gap is the stop.
+    let text = std::fs::read_to_string(&emu.record).unwrap();
+    let _ = emu.commands(); // waits for the record to settle
+    let text = std::fs::read_to_string(&emu.record).unwrap_or(text);
+    let rows: Vec<(f64, i32, u8)> = text
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (
+                f[0].parse().unwrap(),
+                f[2].parse().unwrap(),
+                f[3].parse().unwrap(),
+            )
+        })
+        .collect();
+    let gap = rows
+        .windows(2)
+        .position(|w| w[1].0 - w[0].0 > 0.2)
+        .unwrap_or_else(|| panic!("no gap in the record (stopped in {stopped_in:?})"));
+    assert!(
+        rows[..=gap].iter().any(|&(_, mv, f)| f == 1 && mv != 0),
+        "never balanced"
+    );
+    let after: Vec<_> = rows[gap + 1..].iter().map(|&(_, mv, f)| (mv, f)).collect();
+    assert!(
+        after.iter().all(|&c| c == (0, 0)),
+        "commands after the stall: {after:?}"
+    );
+}
+
+/// A log the loop cannot get rid of its rows to (a FIFO nobody reads, storage that hangs):
+/// with no reader at all, the start fails at once, before any enabling command; with a reader
+/// that stops reading, a stop ends the process (0 V sent) instead of waiting for the writer
+/// forever.
+#[test]
+fn a_log_that_blocks_cannot_hold_the_process() {
+    let _serial = one_at_a_time();
+    let fifo = scratch("blocked-log.fifo");
+    let _ = std::fs::remove_file(&fifo);
+    let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    let emu = Emulator::start("blocked-log", &["--noise", "0.3", "--seed", "9"]);
+    let log_arg = ["--duration", "10", "--log", fifo.to_str().unwrap()];
+    let r = run(&emu.device, "lqr", &log_arg);
+    assert_eq!(r.status.code(), Some(1), "{}", r.stderr);
+    assert!(r.stderr.contains("FIFO nobody reads"), "{}", r.stderr);
+    assert!(
+        emu.commands().iter().all(|&(_, f)| f == 0),
+        "motor was enabled"
+    );
+
+    // A reader that never reads, with the smallest pipe buffer: the writer blocks for good
+    // within the first second.
+    let reader = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(&fifo)
+        .unwrap();
+    use std::os::unix::io::AsRawFd;
+    unsafe { libc::fcntl(reader.as_raw_fd(), libc::F_SETPIPE_SZ, 4096) };
+    let child = spawn_run(&emu.device, "lqr", &log_arg);
+    std::thread::sleep(Duration::from_millis(2000));
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let r = wait_with_timeout(child, Duration::from_secs(20));
+    assert_eq!(r.status.code(), Some(130), "{}", r.stderr);
+    assert!(r.stderr.contains("did not complete"), "{}", r.stderr);
+    let commands = emu.commands();
+    assert!(
+        commands.iter().any(|&(mv, f)| f == 1 && mv != 0),
+        "never balanced"
+    );
+    assert_eq!(commands.last(), Some(&(0, 0)));
+    drop(reader);
+}
