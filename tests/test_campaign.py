@@ -27,9 +27,7 @@ import riprs.config
 from riprs import campaign
 from riprs.compare import build_controllers
 
-# The experiment file as riprs.compare reads it: the core's typed spec, or the dataclasses.
-_experiment = getattr(riprs.config, "Spec", None) or riprs.config.CompareConfig
-_experiment = _experiment.from_dict
+_experiment = riprs.config.Spec.from_dict
 
 SMALL = """
 [campaign]
@@ -140,6 +138,45 @@ def test_each_run_is_the_simulation_its_index_names():
             assert cols["settle_time"][run] == pytest.approx(expected, abs=1e-12)
     # The LQR design sees lqr.R: the two weights give different runs on equal inputs.
     assert cols["rmse_voltage"][0] != cols["rmse_voltage"][2]
+
+
+def test_plant_axes_scale_the_base_plant_and_leave_the_design_alone():
+    c = campaign.load_spec(
+        tomllib.loads(
+            """
+[campaign]
+controllers = ["LQG"]
+duration = 2.0
+[[campaign.axis]]
+name = "mp"
+scale = [0.5, 1.5]
+points = 2
+[plant]
+preset = "qube_servo2"
+mp = 0.03
+"""
+        )
+    )
+    cols = campaign.compute_chunk(c, 0, 2)
+    spec = _experiment({"controllers": ["LQG"], "plant": {"preset": "qube_servo2", "mp": 0.03}})
+    controller = build_controllers(spec)["LQG"]
+    for run, factor in ((0, 0.5), (1, 1.5)):
+        ref = riprs.simulate(
+            riprs.FurutaParams.qube_servo2().replace(mp=0.03 * factor),
+            controller,
+            2.0,
+            reference=1.0,
+            reference_time=1.0,
+            encoder_counts=2048,
+            noise_std=1e-3,
+            x0=[0.0, 0.0, 0.05, 0.0],
+            seed=run,
+        )
+        assert cols["mp"][run] == factor
+        np.testing.assert_array_equal(
+            [cols["rmse_arm"][run], cols["rmse_pendulum"][run], cols["rmse_voltage"][run]],
+            ref.rmse,
+        )
 
 
 def test_chunking_and_engine_order_do_not_change_results(tmp_path):
@@ -338,6 +375,15 @@ def test_a_changed_spec_is_refused_and_nothing_is_touched(tmp_path):
         ),
         ("[campaign]\n[mpc]\nprediction_horizn = 10\n", "mpc.prediction_horizn"),
         ("[mpc]\nprediction_horizon = 10\n", "[campaign]"),
+        (
+            '[campaign]\n[[campaign.axis]]\nname = "sensor.encoder_counts"\n'
+            "values = [512, 4096.5]\n",
+            "campaign.axis[0].values",
+        ),
+        (
+            '[campaign]\n[[campaign.axis]]\nname = "Dp"\nrange = [-1.0, 0.0]\npoints = 2\n',
+            "campaign.axis[0]",
+        ),
     ],
 )
 def test_bad_specs_name_the_key(tmp_path, text, key):

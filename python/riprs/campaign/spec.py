@@ -17,6 +17,7 @@ import numpy as np
 
 from riprs import paper
 from riprs._riprs import FurutaParams, RiprsError
+from riprs.config import PARAMETERS
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -59,10 +60,10 @@ name = "Lr"                # arm length
 scale = [0.8, 1.2]
 points = 9
 """
-PLANT_PARAMETERS = ("mr", "Lr", "Jr", "mp", "Lp", "Jp", "Dr", "Dp", "Rm", "kt", "km")
+PLANT_PARAMETERS = tuple(PARAMETERS)  # the FurutaParams names, as the spec's [plant] has them
 ALIASES = {"noise_std": "sensor.noise_std", "initial_tilt": "plant.initial_state[2]"}
 # Sections whose settings may span an axis; the controller sections change the design.
-AXIS_SECTIONS = ("plant", "sensor", "reference", "lqr", "lqg", "kalman", "mpc")
+AXIS_SECTIONS = ("plant", "sensor", "reference", "lqr", "kalman", "mpc")
 CONTROLLERS = ("LQR", "LQG", "MPC")
 DEFAULT_CHUNK_SIZE = 256
 MAX_RUNS = 10**9
@@ -87,38 +88,29 @@ class CampaignError(RiprsError):
 
 
 # -- the base experiment spec -------------------------------------------------------------------
-# The three functions below are the only place that knows how the base sections are parsed.
-# They take the core's typed spec (``riprs.config.Spec``) where the package has it and the
-# Python dataclasses (``CompareConfig``) otherwise.
+# The three functions below are the only place that knows how the base sections are read: as
+# the core's one experiment spec (``riprs.config.Spec``).
 
 
 def _load_base(data: Mapping[str, Any]) -> Any:
     """The validated base experiment from its TOML tables (everything except ``[campaign]``)."""
-    from riprs import config
+    from riprs.config import Spec
 
-    spec = getattr(config, "Spec", None)
-    if spec is not None:
-        return spec.from_dict(dict(data))
-    return config.CompareConfig.from_dict(dict(data))  # type: ignore[attr-defined]
+    return Spec.from_dict(dict(data))
 
 
 def _design(config: Any, controller: str) -> Any:
-    """The controller named ``controller``, designed from ``config``."""
+    """The controller named ``controller``, designed from ``config`` by the core's assembly."""
     from riprs.compare import build_controllers
 
-    if hasattr(config, "updated"):
-        return build_controllers(config.updated({"controllers": [controller]}))[controller]
-    cfg = copy.copy(config)
-    cfg.controllers = [controller]
-    return build_controllers(cfg)[controller]
+    return build_controllers(config.updated({"controllers": [controller]}))[controller]
 
 
 def _sim_setup(config: Any) -> tuple[FurutaParams, dict[str, Any]]:
     """The base plant's parameters and the options of :func:`riprs.simulate` for ``config``."""
-    from riprs import compare
+    from riprs.compare import _sim_options
 
-    params = config.params if hasattr(config, "params") else compare._params(config)
-    return params, compare._sim_options(config)
+    return config.params, _sim_options(config)
 
 
 # -- the spec -----------------------------------------------------------------------------------
@@ -393,21 +385,29 @@ def _parse_axis(raw: Any, key: str, index: int, seed: int, base: Any) -> Axis:
     relative = kind == "scale"
     if relative and np.any(array <= 0):
         raise CampaignError(f"{key}.{kind}: scale factors must be positive")
-    if _is_int(base_value):
-        absolute = array * base_value if relative else array
-        if np.any(absolute != np.round(absolute)):
-            rounded = np.round(absolute)
-            if len(np.unique(rounded)) != len(rounded):
-                raise CampaignError(
-                    f"{key}: {path} takes whole numbers and the axis values round to "
-                    f"duplicates ({rounded.tolist()}); give integer values"
-                )
-            array = rounded / base_value if relative else rounded
+    whole = _is_int(base_value) or (
+        isinstance(base_value, list) and all(_is_int(v) for v in base_value)
+    )
+    if whole:
+        if kind == "values" and np.any(array != np.round(array)):
+            raise CampaignError(f"{key}.values: {path} takes whole numbers, got {raw['values']}")
+        # A grid over a whole-number setting lands on whole numbers (a scale on a list of them
+        # rounds each entry when the setting is made).
+        if not (relative and isinstance(base_value, list)):
+            factor = base_value if relative else 1
+            rounded = np.round(array * factor)
+            if np.any(array * factor != rounded):
+                if len(np.unique(rounded)) != len(rounded):
+                    raise CampaignError(
+                        f"{key}: {path} takes whole numbers and the axis values round to "
+                        f"duplicates ({rounded.tolist()}); give integer values"
+                    )
+                array = rounded / factor
     if parameter is not None:
-        nominal = getattr(FurutaParams.paper(), parameter)
+        nominal = getattr(base.params, parameter)
         for v in (array.min(), array.max()):
             try:
-                FurutaParams.paper().replace(**{parameter: nominal * v if relative else v})
+                base.params.replace(**{parameter: nominal * v if relative else v})
             except RiprsError as exc:
                 raise CampaignError(f"{key}: {exc}") from None
     return Axis(name=name, path=path, parameter=parameter, relative=relative, values=array)
