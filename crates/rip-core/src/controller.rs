@@ -23,6 +23,64 @@ pub enum StepStatus {
     Fallback,
 }
 
+/// Which part of its task a controller is in, for the loop that runs it and the record it
+/// keeps.
+///
+/// A balance controller is always in [`Phase::Balance`]; the swing-up supervisor
+/// ([`SwingUp`](crate::swingup::SwingUp)) moves between all three.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Phase {
+    /// Pumping energy into the hanging pendulum; the pendulum is expected far from upright.
+    SwingUp,
+    /// Balancing near upright: leaving the balance region is a fall.
+    #[default]
+    Balance,
+    /// Given up; the controller writes 0 V from now on, for the given reason.
+    Stopped(StopCause),
+}
+
+/// Why a controller gave up ([`Phase::Stopped`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopCause {
+    /// The swing-up did not bring the pendulum into the catch region within its maximum time.
+    SwingUpTimeout,
+    /// The pendulum left the balance region after the catch and the supervisor is set not to
+    /// retry.
+    LeftBalanceRegion,
+}
+
+impl Phase {
+    /// Snake-case name (`"swing_up"`, `"balance"`, `"stopped"`), as logs write it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::SwingUp => "swing_up",
+            Self::Balance => "balance",
+            Self::Stopped(_) => "stopped",
+        }
+    }
+}
+
+impl StopCause {
+    /// Snake-case name (`"swing_up_timeout"`, `"left_balance_region"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::SwingUpTimeout => "swing_up_timeout",
+            Self::LeftBalanceRegion => "left_balance_region",
+        }
+    }
+}
+
+impl std::fmt::Display for StopCause {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::SwingUpTimeout => {
+                "the swing-up did not reach the catch region in its maximum time"
+            }
+            Self::LeftBalanceRegion => "the pendulum left the balance region after the catch",
+        })
+    }
+}
+
 /// A discrete-time output-feedback controller.
 ///
 /// [`step`](Self::step) and [`hold`](Self::hold) are allocation-free for [`Lqr`](crate::Lqr),
@@ -53,6 +111,34 @@ pub trait Controller: Send {
         let _ = u;
     }
 
+    /// A sample whose input someone else chose (a supervisor running another law): the
+    /// controller updates its estimator with the measurement `y` and the applied input `u`
+    /// exactly as [`step`](Self::step) would have with its own move, and computes no move, so
+    /// that it is ready to take over from the next sample on.
+    ///
+    /// The default treats the sample as [held](Self::hold) with `u`.
+    fn observe(&mut self, y: &[f64], u: &[f64]) {
+        let _ = y;
+        self.hold(u);
+    }
+
+    /// Restarts the estimator from a known plant state: `x = [θ, θ̇, α, α̇]` is the state at
+    /// this sample (further estimator states, such as a disturbance integrator, start at zero)
+    /// and `u` is applied over the coming period, as after an [`observe`](Self::observe).
+    ///
+    /// A supervisor uses it far from upright, where the linear model the estimator predicts
+    /// with does not hold. The default treats the sample as [held](Self::hold) with `u`.
+    fn seed(&mut self, x: &[f64], u: &[f64]) {
+        let _ = x;
+        self.hold(u);
+    }
+
+    /// Which part of its task the controller is in; [`Phase::Balance`] unless it supervises a
+    /// swing-up.
+    fn phase(&self) -> Phase {
+        Phase::Balance
+    }
+
     /// Returns to the state right after construction (estimator, previous input, filters).
     fn reset(&mut self);
 
@@ -67,3 +153,53 @@ pub trait Controller: Send {
         None
     }
 }
+
+/// Forwards every method to the controller behind a pointer, so supervisors and loops can hold
+/// a boxed or borrowed controller of any kind.
+macro_rules! forward_controller {
+    ($($ty:ty),*) => {$(
+        impl<C: Controller + ?Sized> Controller for $ty {
+            fn n_outputs(&self) -> usize {
+                (**self).n_outputs()
+            }
+
+            fn n_inputs(&self) -> usize {
+                (**self).n_inputs()
+            }
+
+            fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
+                (**self).step(y, r, u)
+            }
+
+            fn hold(&mut self, u: &[f64]) {
+                (**self).hold(u);
+            }
+
+            fn observe(&mut self, y: &[f64], u: &[f64]) {
+                (**self).observe(y, u);
+            }
+
+            fn seed(&mut self, x: &[f64], u: &[f64]) {
+                (**self).seed(x, u);
+            }
+
+            fn phase(&self) -> Phase {
+                (**self).phase()
+            }
+
+            fn reset(&mut self) {
+                (**self).reset();
+            }
+
+            fn state_estimate(&self) -> Option<&[f64]> {
+                (**self).state_estimate()
+            }
+
+            fn sample_time(&self) -> Option<f64> {
+                (**self).sample_time()
+            }
+        }
+    )*};
+}
+
+forward_controller!(Box<C>, &mut C);

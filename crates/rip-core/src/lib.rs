@@ -20,6 +20,8 @@
 //!   ([`Mpc`]), solved by Clarabel or a dense active-set method.
 //! - [`spec`] — the experiment file every front end reads ([`Spec`]), and the one assembly of
 //!   LQR, LQG and MPC from it.
+//! - [`swingup`] — energy swing-up from rest with an arm-limit barrier, and the [`SwingUp`]
+//!   supervisor that catches with any balance controller.
 //!
 //! Every fallible routine returns [`RipError`], whose variants name the offending argument.
 
@@ -38,8 +40,9 @@ pub mod plant;
 pub mod regulators;
 pub mod sim;
 pub mod spec;
+pub mod swingup;
 
-pub use controller::{Controller, StepStatus};
+pub use controller::{Controller, Phase, StepStatus, StopCause};
 pub use dare::{dare, DareSolution};
 pub use error::{Result, RipError};
 pub use kalman::{dlqe, kalman, CurrentEstimator, KalmanDesign};
@@ -50,3 +53,4 @@ pub use plant::{FurutaParams, Plant, State};
 pub use regulators::{Lqg, Lqr};
 pub use sim::{simulate, simulate_batch, SimConfig, SimResult};
 pub use spec::{Spec, SpecError};
+pub use swingup::{OnFall, SwingUp, SwingUpSettings};

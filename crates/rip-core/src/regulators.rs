@@ -196,6 +196,39 @@ impl Lqr {
         }
     }
 
+    /// Updates `x̂` from the angles `y` (type docs); `false`, with `x̂` untouched, when the
+    /// sample is unusable.
+    fn update_estimate(&mut self, y: &[f64]) -> bool {
+        // A sample whose angles or rates are not finite is discarded as if it had not arrived:
+        // one bad reading must not leave NaN in the filter for good.
+        if !(y[0].is_finite() && y[1].is_finite()) {
+            return false;
+        }
+        if self.started {
+            let periods = self.held.saturating_add(1);
+            let dt = f64::from(periods) * self.ts;
+            let a = self.a.powi(i32::try_from(periods).unwrap_or(i32::MAX));
+            let mut rates = [0.0; 2];
+            for (i, (q, rate)) in [(0usize, 1usize), (2, 3)].into_iter().enumerate() {
+                let d = (y[q / 2] - self.x_hat[q]) / dt;
+                rates[i] = a * self.x_hat[rate] + (1.0 - a) * d;
+            }
+            if !rates.iter().all(|v| v.is_finite()) {
+                return false;
+            }
+            self.x_hat[1] = rates[0];
+            self.x_hat[3] = rates[1];
+        } else {
+            self.x_hat[1] = 0.0;
+            self.x_hat[3] = 0.0;
+            self.started = true;
+        }
+        self.held = 0;
+        self.x_hat[0] = y[0];
+        self.x_hat[2] = y[1];
+        true
+    }
+
     /// The step for an unusable sample: `x̂` stays, the period counts as held, and the move is
     /// the feedback on the kept estimate (zero before the first usable sample).
     fn discard_sample(&mut self, r: &[f64], u: &mut [f64]) -> StepStatus {
@@ -215,36 +248,31 @@ impl Controller for Lqr {
     }
 
     fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
-        // A sample whose angles or rates are not finite is discarded as if it had not arrived:
-        // one bad reading must not leave NaN in the filter for good.
-        if !(y[0].is_finite() && y[1].is_finite()) {
+        if !self.update_estimate(y) {
             return self.discard_sample(r, u);
         }
-        if self.started {
-            let periods = self.held.saturating_add(1);
-            let dt = f64::from(periods) * self.ts;
-            let a = self.a.powi(i32::try_from(periods).unwrap_or(i32::MAX));
-            let mut rates = [0.0; 2];
-            for (i, (q, rate)) in [(0usize, 1usize), (2, 3)].into_iter().enumerate() {
-                let d = (y[q / 2] - self.x_hat[q]) / dt;
-                rates[i] = a * self.x_hat[rate] + (1.0 - a) * d;
-            }
-            if !rates.iter().all(|v| v.is_finite()) {
-                return self.discard_sample(r, u);
-            }
-            self.x_hat[1] = rates[0];
-            self.x_hat[3] = rates[1];
-        } else {
-            self.x_hat[1] = 0.0;
-            self.x_hat[3] = 0.0;
-            self.started = true;
-        }
-        self.held = 0;
-        self.x_hat[0] = y[0];
-        self.x_hat[2] = y[1];
         let (value, status) = feedback(&self.k, &self.x_hat, r, self.bounds);
         u[0] = value;
         status
+    }
+
+    /// The estimate update of [`step`](Controller::step) (an unusable sample counts as held);
+    /// the input plays no part in it.
+    fn observe(&mut self, y: &[f64], _u: &[f64]) {
+        if !self.update_estimate(y) {
+            self.count_held_period();
+        }
+    }
+
+    /// `x̂ = x`, the next rate difference taken from this sample's angles.
+    fn seed(&mut self, x: &[f64], _u: &[f64]) {
+        if x.len() >= NX && x[..NX].iter().all(|v| v.is_finite()) {
+            self.x_hat.copy_from_slice(&x[..NX]);
+            self.started = true;
+            self.held = 0;
+        } else {
+            self.count_held_period();
+        }
     }
 
     /// Counts the period, so that the next rate difference spans it (type docs).
@@ -298,6 +326,8 @@ pub struct Lqg {
     bounds: (f64, f64),
     plant_estimate: SVector<f64, NX>,
     u_buf: [f64; 1],
+    /// The full estimator state written by [`Controller::seed`].
+    seed_buf: Vec<f64>,
 }
 
 impl Lqg {
@@ -339,6 +369,7 @@ impl Lqg {
             bounds: (-DEFAULT_INPUT_LIMIT, DEFAULT_INPUT_LIMIT),
             plant_estimate: SVector::zeros(),
             u_buf: [0.0],
+            seed_buf: vec![0.0; n],
         })
     }
 
@@ -387,18 +418,10 @@ impl Lqg {
     pub fn input_bounds(&self) -> (f64, f64) {
         self.bounds
     }
-}
 
-impl Controller for Lqg {
-    fn n_outputs(&self) -> usize {
-        2
-    }
-
-    fn n_inputs(&self) -> usize {
-        1
-    }
-
-    fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
+    /// The measurement update of a step; `false` when `y` was unusable and the sample was
+    /// taken as having no measurement (type docs).
+    fn correct(&mut self, y: &[f64]) -> bool {
         let mut usable = y.iter().all(|v| v.is_finite());
         if usable {
             let posterior = self.estimator.correct(y, &self.u_buf);
@@ -413,6 +436,29 @@ impl Controller for Lqg {
         for i in 0..NX {
             self.plant_estimate[i] = posterior[i];
         }
+        usable
+    }
+
+    /// Records `u` as the applied input. A non-finite one would poison the estimator for
+    /// good; the last applied input is the best remaining guess of what the plant received.
+    fn set_applied(&mut self, u: &[f64]) {
+        if let Some(&applied) = u.first().filter(|v| v.is_finite()) {
+            self.u_buf[0] = applied;
+        }
+    }
+}
+
+impl Controller for Lqg {
+    fn n_outputs(&self) -> usize {
+        2
+    }
+
+    fn n_inputs(&self) -> usize {
+        1
+    }
+
+    fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
+        let usable = self.correct(y);
         let (value, status) = feedback(&self.k, &self.plant_estimate, r, self.bounds);
         self.u_buf[0] = value;
         u[0] = value;
@@ -424,13 +470,33 @@ impl Controller for Lqg {
         }
     }
 
+    /// The correction of [`step`](Controller::step) with `y`, then the prediction with the
+    /// applied `u` (a non-finite `u` keeps the last applied input, as in
+    /// [`hold`](Controller::hold)).
+    fn observe(&mut self, y: &[f64], u: &[f64]) {
+        self.correct(y);
+        self.set_applied(u);
+        self.estimator.predict(&self.u_buf);
+    }
+
+    /// `x̂[k|k] = [x; 0]`, then `x̂[k+1|k] = A x̂[k|k] + B_u u`.
+    fn seed(&mut self, x: &[f64], u: &[f64]) {
+        if x.len() < NX || !x[..NX].iter().all(|v| v.is_finite()) {
+            self.hold(u);
+            return;
+        }
+        self.seed_buf.fill(0.0);
+        self.seed_buf[..NX].copy_from_slice(&x[..NX]);
+        self.estimator.set_prior(&self.seed_buf);
+        self.estimator.correct_without_measurement();
+        self.plant_estimate.copy_from_slice(&x[..NX]);
+        self.set_applied(u);
+        self.estimator.predict(&self.u_buf);
+    }
+
     /// Advances the estimator over the period with `u` and no innovation (type docs).
     fn hold(&mut self, u: &[f64]) {
-        // A non-finite held input would poison the estimator for good; the last applied one is
-        // the best remaining guess of what the plant received.
-        if let Some(&held) = u.first().filter(|v| v.is_finite()) {
-            self.u_buf[0] = held;
-        }
+        self.set_applied(u);
         self.estimator.predict_without_measurement(&self.u_buf);
         let posterior = self.estimator.posterior();
         for i in 0..NX {

@@ -15,11 +15,14 @@
 //! - `τ_d`: an optional step torque on the arm (N·m) from a given time;
 //! - the reference is a step (time, value per output) or a full sequence, one row per sample.
 //!
-//! The run stops early when the pendulum falls (`|α| > fall_limit`, checked after every RK4
-//! substep) or when the integration diverges (the state overflows to NaN or Inf: a numerical
+//! The run stops early when the pendulum falls (`|α| > fall_limit`, α wrapped to (−π, π],
+//! checked after every RK4 substep while the controller is in [`Phase::Balance`]) or when the integration diverges (the state overflows to NaN or Inf: a numerical
 //! failure, not a fall, so it is flagged [`SimResult::diverged`] instead of
 //! [`SimResult::fell`]); the result is then truncated to the samples taken and flagged, so it
-//! never holds NaN. Everything a run needs is preallocated before the
+//! never holds NaN. A swing-up supervisor ([`crate::swingup::SwingUp`]) starts in
+//! [`Phase::SwingUp`], so a run may start hanging; its catch is recorded
+//! ([`SimResult::catch_time`]), leaving [`Phase::Balance`] after it is a fall, and a
+//! [`Phase::Stopped`] controller ends the run ([`SimResult::stop_cause`]). Everything a run needs is preallocated before the
 //! loop. [`simulate_batch`] runs many seeds and parameter variants in parallel with rayon.
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -30,9 +33,10 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
-use crate::controller::{Controller, StepStatus};
+use crate::controller::{Controller, Phase, StepStatus, StopCause};
 use crate::error::{Result, RipError};
 use crate::plant::{Plant, State};
+use crate::swingup::wrap_angle;
 
 /// Largest number of control samples one run may have (guards against accidental huge
 /// allocations, e.g. a duration in ms passed as s).
@@ -104,7 +108,8 @@ pub struct SimConfig {
     pub torque_disturbance: Option<StepDisturbance<f64>>,
     /// Actuator saturation: the plant receives `clamp(u, −u_limit, u_limit)` (V).
     pub u_limit: f64,
-    /// The run stops, flagged as a fall, when `|α|` exceeds this (rad).
+    /// The run stops, flagged as a fall, when `|α|` (wrapped) exceeds this (rad) while the
+    /// controller balances.
     pub fall_limit: f64,
     /// Seed of the measurement noise.
     pub seed: u64,
@@ -176,15 +181,6 @@ impl SimConfig {
             return Err(RipError::NonFinite { name: "x0".into() });
         }
         positive("fall_limit", self.fall_limit)?;
-        if self.x0[2].abs() > self.fall_limit {
-            return Err(RipError::invalid(
-                "x0",
-                format!(
-                    "pendulum angle {} is already beyond fall_limit {}",
-                    self.x0[2], self.fall_limit
-                ),
-            ));
-        }
         positive("u_limit", self.u_limit)?;
         match &self.reference {
             Reference::Step { time, value } => {
@@ -256,7 +252,16 @@ pub struct SimResult {
     pub compute_time: Vec<f64>,
     /// Number of steps the controller reported as [`StepStatus::Fallback`].
     pub fallbacks: usize,
-    /// Whether the pendulum fell (`|α| > fall_limit`) before the end.
+    /// The controller's [`Phase`] after each step (always [`Phase::Balance`] for a balance
+    /// controller).
+    pub phase: Vec<Phase>,
+    /// Time of the first sample balanced after a swing-up (the catch; time to upright), when
+    /// the controller swung up and caught.
+    pub catch_time: Option<f64>,
+    /// Why the controller gave up, when it did (the run ends at that sample).
+    pub stop_cause: Option<StopCause>,
+    /// Whether the pendulum fell (`|α| > fall_limit` while balancing, or the supervisor left
+    /// its balance region after the catch) before the end.
     pub fell: bool,
     /// Whether the integration diverged (the state overflowed to NaN or Inf) before the end:
     /// a numerical failure of the model or its parameters, not a fall. [`x_final`](Self::x_final)
@@ -280,6 +285,9 @@ impl SimResult {
             n_estimate,
             compute_time: Vec::with_capacity(n),
             fallbacks: 0,
+            phase: Vec::with_capacity(n),
+            catch_time: None,
+            stop_cause: None,
             fell: false,
             diverged: false,
             fall_time: None,
@@ -322,6 +330,12 @@ pub(crate) trait Recorder {
         estimate: Option<&[f64]>,
         elapsed: f64,
     );
+
+    /// The controller's phase after the step of the sample just recorded.
+    #[inline]
+    fn phase(&mut self, phase: Phase) {
+        let _ = phase;
+    }
 }
 
 /// How a run ended.
@@ -331,6 +345,8 @@ pub(crate) struct Outcome {
     pub fell: bool,
     pub diverged: bool,
     pub fall_time: Option<f64>,
+    pub catch_time: Option<f64>,
+    pub stop_cause: Option<StopCause>,
     pub x_final: [f64; 4],
 }
 
@@ -356,6 +372,11 @@ impl Recorder for SimResult {
             self.x_hat
                 .extend_from_slice(&est[..self.n_estimate.min(est.len())]);
         }
+    }
+
+    #[inline]
+    fn phase(&mut self, phase: Phase) {
+        self.phase.push(phase);
     }
 }
 
@@ -399,6 +420,18 @@ pub(crate) fn run_loop(
     cancel: &AtomicBool,
 ) -> Result<Outcome> {
     controller.reset();
+    // A controller that starts by swinging up expects the pendulum anywhere; a balance
+    // controller started beyond the fall limit would fall at once.
+    let mut was = controller.phase();
+    if was == Phase::Balance && wrap_angle(config.x0[2]).abs() > config.fall_limit {
+        return Err(RipError::invalid(
+            "x0",
+            format!(
+                "pendulum angle {} is already beyond fall_limit {}",
+                config.x0[2], config.fall_limit
+            ),
+        ));
+    }
     let mut rng = StdRng::seed_from_u64(config.seed);
     let mut x = State::from_row_slice(&config.x0);
     let (ts, substeps) = (config.ts, config.substeps);
@@ -410,6 +443,8 @@ pub(crate) fn run_loop(
         fell: false,
         diverged: false,
         fall_time: None,
+        catch_time: None,
+        stop_cause: None,
         x_final: [0.0; 4],
     };
 
@@ -467,6 +502,23 @@ pub(crate) fn run_loop(
             controller.state_estimate(),
             elapsed,
         );
+        let phase = controller.phase();
+        record.phase(phase);
+        if phase == Phase::Balance && was == Phase::SwingUp && out.catch_time.is_none() {
+            out.catch_time = Some(t);
+        }
+        if was == Phase::Balance && phase != Phase::Balance {
+            // The supervisor's own balance region ends before the fall limit: a fall.
+            out.fell = true;
+            out.fall_time = Some(t);
+        }
+        if let Phase::Stopped(cause) = phase {
+            out.stop_cause = Some(cause);
+        }
+        if out.fell || out.stop_cause.is_some() {
+            break;
+        }
+        was = phase;
 
         for j in 0..substeps {
             let t_sub = t + j as f64 * h;
@@ -481,7 +533,7 @@ pub(crate) fn run_loop(
                 x = before;
                 break;
             }
-            if x[2].abs() > config.fall_limit {
+            if phase == Phase::Balance && wrap_angle(x[2]).abs() > config.fall_limit {
                 out.fell = true;
                 out.fall_time = Some(t_sub + h);
                 break;
@@ -521,6 +573,8 @@ pub fn simulate_cancellable(
     out.fell = end.fell;
     out.diverged = end.diverged;
     out.fall_time = end.fall_time;
+    out.catch_time = end.catch_time;
+    out.stop_cause = end.stop_cause;
     out.x_final = end.x_final;
     Ok(out)
 }

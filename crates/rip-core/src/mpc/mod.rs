@@ -463,6 +463,68 @@ impl Mpc {
         }
     }
 
+    /// A sample whose input `u` someone else chose ([`Controller::observe`]): the estimator's
+    /// correction with `y` (discarded as in a step when unusable), `u` as the next step's
+    /// `u(k−1)` and as every move of the plan the fallback would use, then the time update with
+    /// `u`. No QP is solved; [`last_solution`](Self::last_solution) is left as it was.
+    pub fn observe_input(&mut self, y: &[f64], u: &[f64]) {
+        let ny = self.qp.ny;
+        let mut measured = y.len() == ny && y.iter().all(|v| v.is_finite());
+        if measured {
+            for ((ys, &yi), &s) in self.y_scaled.iter_mut().zip(y).zip(&self.output_scales) {
+                *ys = yi / s;
+            }
+            let posterior = self
+                .estimator
+                .correct(self.y_scaled.as_slice(), &self.u_prev);
+            measured = all_finite(posterior.as_slice())
+                && all_finite(self.estimator.innovation().as_slice());
+        }
+        if !measured {
+            self.estimator.correct_without_measurement();
+        }
+        self.x
+            .copy_from_slice(self.estimator.posterior().as_slice());
+        self.take_applied_input(u);
+        self.prior_backup.copy_from(self.estimator.prior());
+        self.estimator.predict(&self.u_prev);
+        if !all_finite(self.estimator.prior().as_slice()) {
+            self.estimator.set_prior(self.prior_backup.as_slice());
+            self.estimator.predict_without_measurement(&self.u_prev);
+        }
+    }
+
+    /// Restarts the estimator at the plant state `x_plant` ([`Controller::seed`]): `x̂[k|k]` is
+    /// `x_plant` with the disturbance states at zero, `u` becomes `u(k−1)` and the plan, and
+    /// `x̂[k+1|k] = A x̂[k|k] + B u`. A non-finite or short `x_plant` is a held period instead.
+    pub fn seed_state(&mut self, x_plant: &[f64], u: &[f64]) {
+        let n = self.model.n_plant;
+        if x_plant.len() < n || !all_finite(&x_plant[..n]) {
+            self.hold_input(u);
+            return;
+        }
+        self.x.fill(0.0);
+        self.x[..n].copy_from_slice(&x_plant[..n]);
+        self.estimator.set_prior(&self.x);
+        self.estimator.correct_without_measurement();
+        self.take_applied_input(u);
+        self.estimator.predict(&self.u_prev);
+    }
+
+    /// `u` (finite entries) as the previous move and as every planned move, clamped.
+    fn take_applied_input(&mut self, u: &[f64]) {
+        for (prev, &applied) in self.u_prev.iter_mut().zip(u) {
+            if applied.is_finite() {
+                *prev = applied;
+            }
+        }
+        let nu = self.qp.nu;
+        for (j, slot) in self.plan.iter_mut().enumerate() {
+            let c = j % nu;
+            *slot = self.u_prev[c].max(self.u_lo[c]).min(self.u_hi[c]);
+        }
+    }
+
     /// Solves from `self.x`, writes `self.solution`, shifts the plan. `pre_status` other than
     /// `Solved` skips the QP and applies the fallback. `filled`: `f` and `b` already hold the
     /// data for `self.x`, `u_prev` and `r`.
@@ -580,6 +642,14 @@ impl Controller for Mpc {
 
     fn hold(&mut self, u: &[f64]) {
         self.hold_input(u);
+    }
+
+    fn observe(&mut self, y: &[f64], u: &[f64]) {
+        self.observe_input(y, u);
+    }
+
+    fn seed(&mut self, x: &[f64], u: &[f64]) {
+        self.seed_state(x, u);
     }
 
     fn reset(&mut self) {

@@ -1,0 +1,193 @@
+//! The energy-pumping law with its arm-limit barrier, and the rate estimator it runs on.
+//! The derivation is in the [module docs](super).
+
+use crate::plant::{Plant, State};
+
+use super::settings::SwingUpSettings;
+use super::wrap_angle;
+
+/// Angles and filtered-difference rates `[θ, θ̇, α, α̇]`, α wrapped to (−π, π].
+///
+/// The same filter as the LQR's (`q̇̂[k] = a q̇̂[k−1] + (1 − a)(q[k] − q[k−n])/(n Ts)`,
+/// `a = e^{−2π f_c Ts}`), except that the pendulum's difference is wrapped, so a measurement
+/// that jumps by 2π (a wrapped encoder) changes nothing.
+#[derive(Debug, Clone)]
+pub(crate) struct RateEstimator {
+    ts: f64,
+    a: f64,
+    x: State,
+    started: bool,
+    held: u32,
+}
+
+impl RateEstimator {
+    pub(crate) fn new(ts: f64, cutoff_hz: f64) -> Self {
+        Self {
+            ts,
+            a: (-2.0 * std::f64::consts::PI * cutoff_hz * ts).exp(),
+            x: State::zeros(),
+            started: false,
+            held: 0,
+        }
+    }
+
+    /// Takes the angles `y = [θ, α]`; `false` (estimate kept, the period counted as held)
+    /// when they are unusable.
+    pub(crate) fn update(&mut self, y: &[f64]) -> bool {
+        if !(y[0].is_finite() && y[1].is_finite()) {
+            self.hold();
+            return false;
+        }
+        let alpha = wrap_angle(y[1]);
+        if self.started {
+            let periods = self.held.saturating_add(1);
+            let dt = f64::from(periods) * self.ts;
+            let a = self.a.powi(i32::try_from(periods).unwrap_or(i32::MAX));
+            let d_theta = (y[0] - self.x[0]) / dt;
+            let d_alpha = wrap_angle(alpha - self.x[2]) / dt;
+            self.x[1] = a * self.x[1] + (1.0 - a) * d_theta;
+            self.x[3] = a * self.x[3] + (1.0 - a) * d_alpha;
+        } else {
+            self.started = true;
+        }
+        self.held = 0;
+        self.x[0] = y[0];
+        self.x[2] = alpha;
+        true
+    }
+
+    pub(crate) fn hold(&mut self) {
+        if self.started {
+            self.held = self.held.saturating_add(1);
+        }
+    }
+
+    pub(crate) fn started(&self) -> bool {
+        self.started
+    }
+
+    pub(crate) fn state(&self) -> &State {
+        &self.x
+    }
+
+    pub(crate) fn reset(&mut self) {
+        self.x = State::zeros();
+        self.started = false;
+        self.held = 0;
+    }
+}
+
+/// How far inside `arm_limit` (rad) the braking envelope ends: the continuous-time argument of
+/// the module docs holds for the nominal model, while the loop samples every `Ts` and the rig
+/// differs from the model by some percent; 0.05 rad covers one period at the envelope's top
+/// speeds and ±10 % parameter error in the simulation tests.
+const ENVELOPE_MARGIN: f64 = 0.05;
+
+/// The swing-up law's constants, computed once from the nominal plant and the settings.
+#[derive(Debug, Clone)]
+pub(crate) struct EnergyLaw {
+    plant: Plant,
+    /// `J_α`, the pendulum's inertia about its joint.
+    ja: f64,
+    /// `G = m_p g l_p / 2`.
+    grav: f64,
+    /// Target energy `δ G`.
+    target: f64,
+    pump: f64,
+    brake: f64,
+    gain: f64,
+    width: f64,
+    wc: f64,
+    lambda: f64,
+    arm_limit: f64,
+    u_max: f64,
+}
+
+impl EnergyLaw {
+    pub(crate) fn new(plant: &Plant, s: &SwingUpSettings) -> Self {
+        let p = plant.params();
+        let ja = p.jp + p.mp * p.lp * p.lp / 4.0;
+        let j0 = p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr;
+        let grav = p.mp * p.g * p.lp / 2.0;
+        let stall = p.kt / p.rm * s.max_voltage / (j0 + ja);
+        Self {
+            plant: *plant,
+            ja,
+            grav,
+            target: s.energy_margin * grav,
+            pump: s.pump_fraction * grav / ja,
+            brake: s.brake_fraction * stall,
+            gain: s.energy_gain,
+            width: s.pump_width,
+            wc: s.arm_centering,
+            lambda: s.barrier_rate,
+            arm_limit: s.arm_limit - ENVELOPE_MARGIN.min(0.5 * s.arm_limit),
+            u_max: s.max_voltage,
+        }
+    }
+
+    /// The pendulum's own energy relative to upright rest, `E = ½ J_α α̇² + G (cos α − 1)`.
+    pub(crate) fn energy(&self, x: &State) -> f64 {
+        0.5 * self.ja * x[3] * x[3] + self.grav * (x[2].cos() - 1.0)
+    }
+
+    /// The braking deceleration `a_b` (rad/s²).
+    pub(crate) fn brake(&self) -> f64 {
+        self.brake
+    }
+
+    /// The arm acceleration the law asks for at `x` (module docs, steps 1–3).
+    pub(crate) fn acceleration(&self, x: &State) -> f64 {
+        let (theta, theta_dot, alpha, alpha_dot) = (x[0], x[1], x[2], x[3]);
+        let eps = (self.target - self.energy(x)) / self.grav;
+        let v = alpha_dot * alpha.cos();
+        // At exact rest (a quantised, noise-free reading of a still pendulum) v is 0 and a
+        // smoothed sign would never start the swing: push one way until it moves.
+        let sign = if v == 0.0 {
+            1.0
+        } else {
+            (v / self.width).clamp(-1.0, 1.0)
+        };
+        let pump = self.pump * (self.gain * eps).clamp(-1.0, 1.0) * sign;
+        let centre = -self.wc * self.wc * theta - 2.0 * self.wc * theta_dot;
+        let wanted = pump + centre;
+        let b = self.brake;
+        let v_up = (2.0 * b * (self.arm_limit - theta).max(0.0)).sqrt();
+        let v_down = (2.0 * b * (self.arm_limit + theta).max(0.0)).sqrt();
+        let hi = self.lambda * (v_up - theta_dot) - b * toward(theta_dot, v_up);
+        let lo = -self.lambda * (v_down + theta_dot) + b * toward(-theta_dot, v_down);
+        if lo <= hi {
+            wanted.clamp(lo, hi)
+        } else {
+            // Outside the envelope on both sides at once: only possible beyond a limit tighter
+            // than one braking distance; split the difference.
+            0.5 * (lo + hi)
+        }
+    }
+
+    /// The voltage that gives the arm acceleration `a` at `x` on the nominal model, clamped to
+    /// `±U`. `θ̈` is affine in `u`, so two evaluations of the equations of motion invert it.
+    pub(crate) fn voltage(&self, x: &State, a: f64) -> f64 {
+        let at_zero = self.plant.derivative(x, 0.0, 0.0)[1];
+        let per_volt = self.plant.derivative(x, 1.0, 0.0)[1] - at_zero;
+        let u = (a - at_zero) / per_volt;
+        if u.is_finite() {
+            u.clamp(-self.u_max, self.u_max)
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The share `clamp(v / v_env, 0, 1)` of the braking deceleration the envelope's boundary
+/// needs at speed `v` towards a limit whose envelope speed is `v_env` (module docs).
+#[inline]
+fn toward(v: f64, v_env: f64) -> f64 {
+    if v <= 0.0 {
+        0.0
+    } else if v >= v_env {
+        1.0
+    } else {
+        v / v_env
+    }
+}

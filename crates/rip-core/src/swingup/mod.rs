@@ -1,0 +1,344 @@
+//! Swing-up from rest and catch: an energy-pumping law (Åström & Furuta, "Swinging up a
+//! pendulum by energy control", Automatica 36(2), 2000) that keeps the arm inside its limit,
+//! and a supervisor, [`SwingUp`], that hands over to a balance controller (LQR, LQG or MPC,
+//! unchanged) inside a catch region, bumplessly.
+//!
+//! Conventions are the [`plant`](crate::plant)'s: `x = [θ, θ̇, α, α̇]`, α = 0 upright and ±π
+//! hanging. Measured angles may be unwrapped or wrapped; the pendulum angle is wrapped to
+//! (−π, π] ([`wrap_angle`]) wherever its value, not only its sine and cosine, matters.
+//!
+//! # Energy pumping (Åström & Furuta, section 3)
+//!
+//! The pendulum's own energy relative to upright rest is
+//!
+//! ```text
+//! E = ½ J_α α̇² + G (cos α − 1),          J_α = J_p + m_p l_p²/4,   G = m_p g l_p/2
+//! ```
+//!
+//! (`E = 0` upright at rest, `−2G` hanging at rest). From the pendulum's equation of motion
+//! (plant module: `J_α α̈ = m₁₂ cos α θ̈ + J_α sin α cos α θ̇² + G sin α − d_p α̇`),
+//!
+//! ```text
+//! dE/dt = m₁₂ cos α α̇ θ̈ + J_α sin α cos α α̇ θ̇² − d_p α̇²
+//! ```
+//!
+//! so the arm acceleration `θ̈` drives the energy with the sign of `α̇ cos α`; the other two terms
+//! are second order while the arm moves slowly, and friction is made up for by the feedback.
+//! The pumping law (their eq. (8) with a saturated gain) is
+//!
+//! ```text
+//! ε = (E_t − E)/G,   E_t = δ G                                                          (1)
+//! a_pump = a_p · sat(k_E ε) · s(α̇ cos α),   s(v) = sat(v / 0.5 rad/s), s(0) = 1
+//! ```
+//!
+//! With `a_pump` in place of `θ̈`, `dE/dt = m₁₂ a_p sat(k_E ε) |α̇ cos α| s(·)/… ≥ 0` while
+//! `E < E_t` and `≤ 0` above it: `E → E_t`, the homoclinic orbit through upright (raised by a
+//! small margin `δ` so that the pendulum reaches upright in finite time). `s(0) = 1` starts a
+//! pendulum that hangs perfectly still. `a_p` is a fraction of the stall acceleration
+//! `a_s = (k_t/R_m) U / (J₀ + J_α)` ([`SwingUpSettings`]).
+//!
+//! # Keeping the arm centred and inside its limit
+//!
+//! A critically damped spring pulls the arm towards 0 (the middle of its travel):
+//! `a_c = −ω_c² θ − 2 ω_c θ̇`, and `a_w = a_pump + a_c` is the wanted acceleration.
+//!
+//! The arm limit `θ_L` is enforced by a braking envelope (a control-barrier function). With a
+//! deceleration `a_b` kept in reserve, the arm can still stop before `+θ_L` exactly when
+//!
+//! ```text
+//! h⁺ = v⁺(θ) − θ̇ ≥ 0,     v⁺(θ) = √(2 a_b (θ_L − θ)⁺)                                  (2)
+//! ```
+//!
+//! (`v⁺` is the speed from which braking at `a_b` stops at `θ_L`). Along the boundary
+//! `θ̇ = v⁺`, `dv⁺/dt = −a_b θ̇ / v⁺ = −a_b`. Requiring `dh⁺/dt ≥ −λ h⁺` gives the upper bound
+//!
+//! ```text
+//! θ̈ ≤ a_hi = λ (v⁺ − θ̇) − a_b · clamp(θ̇ / v⁺, 0, 1)                                    (3)
+//! ```
+//!
+//! (the factor is `θ̇/v⁺` inside the envelope, where it is exact, and capped at 1 outside, where
+//! the `λ` term already brakes harder; it is 0 while the arm moves away from the limit). The
+//! mirror image gives `θ̈ ≥ a_lo = −λ (v⁻ + θ̇) + a_b · clamp(−θ̇ / v⁻, 0, 1)`,
+//! `v⁻ = √(2 a_b (θ_L + θ)⁺)`. The law applies `a = clamp(a_w, a_lo, a_hi)`. Far from the
+//! limits the bounds are loose and the pumping acts unchanged; near one they dominate.
+//! If `θ̈ = a` is achieved, `h⁺ ≥ 0` and `h⁻ ≥ 0` are invariant (Nagumo / comparison lemma on
+//! `ḣ ≥ −λh`) and, as `v^± → 0` at `±θ_L`, `|θ| ≤ θ_L` for all time from any start inside the
+//! envelope (an arm at rest inside the limit is inside it).
+//!
+//! `θ̈ = a` is achieved as long as the voltage it needs stays within `±U`: the law inverts the
+//! nominal equations of motion, which are affine in `u`,
+//!
+//! ```text
+//! u = (a − θ̈(x, 0)) / (θ̈(x, 1) − θ̈(x, 0)),   clamped to ±U                                (4)
+//! ```
+//!
+//! and at the boundary `a = −a_b` with `a_b = 0.5 a_s` by default: half the stall acceleration is
+//! kept for back-EMF at the envelope's top speed `√(4 a_b θ_L)`, the pendulum's reaction on the
+//! arm and ±10 % model error. The simulation tests check `|θ| ≤ θ_L` over perturbed plants.
+//!
+//! # Supervisor and catch
+//!
+//! [`SwingUp`] wraps a balance controller `C` and moves through [`Phase`]s:
+//!
+//! - **SwingUp**: applies (1)–(4) on its own estimate (angles and filtered differences,
+//!   [`SwingUpSettings::rate_cutoff`]). The balance controller follows along: within
+//!   [`SwingUpSettings::estimator_window`] of upright its estimator runs on the measurements
+//!   and the applied voltage ([`Controller::observe`]); further out, where its linear model does
+//!   not hold, it is restarted every sample from the swing-up's estimate
+//!   ([`Controller::seed`]). The MPC's previous move is therefore the swing-up's last voltage.
+//! - **catch** when `|α| ≤ catch_angle`, `|α̇| ≤ catch_rate` and `|θ̇| ≤ catch_arm_rate`: the
+//!   balance controller computes the move of that same sample. The arm reference is held at the
+//!   arm's angle at the catch, `θ_c`, until the external arm reference changes from the value
+//!   it had then; from that change on the external reference is passed through (so a later
+//!   0 → 1 rad step is tracked as given).
+//! - **Balance**: the balance controller runs on `[θ, wrap(α)]`. Leaving the balance region
+//!   (`|α| > balance_angle` or `|θ| > arm_limit`) is a fall: swing up again or stop
+//!   ([`OnFall`]).
+//! - **Stopped** ([`StopCause`]): after [`SwingUpSettings::max_time`] in the swing-up, or a fall
+//!   with [`OnFall::Stop`]. The output is 0 V from then on.
+//!
+//! Every step is allocation-free when the balance controller's is.
+
+mod law;
+mod settings;
+
+pub use settings::{OnFall, SwingUpSettings};
+
+use crate::controller::{Controller, Phase, StepStatus, StopCause};
+use crate::error::{Result, RipError};
+use crate::plant::Plant;
+
+use law::{EnergyLaw, RateEstimator};
+
+/// `a` wrapped to (−π, π].
+#[inline]
+pub fn wrap_angle(a: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    let w = a - TAU * (a / TAU).round();
+    if w <= -PI {
+        w + TAU
+    } else {
+        w
+    }
+}
+
+/// The swing-up supervisor around the balance controller `C` (module docs).
+#[derive(Debug, Clone)]
+pub struct SwingUp<C> {
+    balance: C,
+    settings: SwingUpSettings,
+    law: EnergyLaw,
+    ts: f64,
+    rates: RateEstimator,
+    phase: Phase,
+    /// Samples spent in the current swing-up.
+    swing_samples: u64,
+    /// The arm reference held since the catch, and the external one at the catch.
+    hold_reference: Option<(f64, f64)>,
+    /// The last voltage the swing-up applied.
+    u_swing: [f64; 1],
+}
+
+impl<C: Controller> SwingUp<C> {
+    /// The supervisor around `balance`, with the swing-up designed on `plant` (the nominal
+    /// model of the rig; the simulated or real plant may differ). `balance` must have 2
+    /// outputs, 1 input and a sample time.
+    pub fn new(balance: C, plant: &Plant, settings: SwingUpSettings) -> Result<Self> {
+        settings.validate()?;
+        if balance.n_outputs() != 2 || balance.n_inputs() != 1 {
+            return Err(RipError::invalid(
+                "balance",
+                format!(
+                    "must have 2 outputs and 1 input, has {} and {}",
+                    balance.n_outputs(),
+                    balance.n_inputs()
+                ),
+            ));
+        }
+        let ts = balance
+            .sample_time()
+            .ok_or_else(|| RipError::invalid("balance", "needs a sample time to be supervised"))?;
+        let mut out = Self {
+            law: EnergyLaw::new(plant, &settings),
+            rates: RateEstimator::new(ts, settings.rate_cutoff),
+            balance,
+            settings,
+            ts,
+            phase: Phase::SwingUp,
+            swing_samples: 0,
+            hold_reference: None,
+            u_swing: [0.0],
+        };
+        out.reset();
+        Ok(out)
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &SwingUpSettings {
+        &self.settings
+    }
+
+    /// The balance controller.
+    pub fn balance(&self) -> &C {
+        &self.balance
+    }
+
+    /// Sample time (s), the balance controller's.
+    pub fn ts(&self) -> f64 {
+        self.ts
+    }
+
+    /// The swing-up's own estimate `[θ, θ̇, α, α̇]` (α wrapped).
+    pub fn swing_estimate(&self) -> [f64; 4] {
+        let x = self.rates.state();
+        [x[0], x[1], x[2], x[3]]
+    }
+
+    /// The pendulum energy `E` (J, 0 upright at rest) of the swing-up's estimate.
+    pub fn energy(&self) -> f64 {
+        self.law.energy(self.rates.state())
+    }
+
+    /// The braking deceleration `a_b` (rad/s²) the arm-limit envelope reserves.
+    pub fn brake_deceleration(&self) -> f64 {
+        self.law.brake()
+    }
+
+    fn in_catch_region(&self) -> bool {
+        let x = self.rates.state();
+        let s = &self.settings;
+        let arm_stop = x[0] + x[1] * x[1].abs() / (2.0 * self.law.brake());
+        x[2].abs() <= s.catch_angle
+            && (x[2] + x[3] * s.catch_lookahead).abs() <= s.catch_angle
+            && x[3].abs() <= s.catch_rate
+            && x[1].abs() <= s.catch_arm_rate
+            && arm_stop.abs() <= s.catch_arm_angle
+    }
+
+    fn in_balance_region(&self) -> bool {
+        let x = self.rates.state();
+        x[2].abs() <= self.settings.balance_angle && x[0].abs() <= self.settings.arm_limit
+    }
+
+    /// One swing-up sample: the law's voltage, the balance estimator kept in step, the clock.
+    fn swing(&mut self, y: &[f64], usable: bool, u: &mut [f64]) -> StepStatus {
+        self.swing_samples += 1;
+        if self.swing_samples as f64 * self.ts > self.settings.max_time {
+            return self.stop(StopCause::SwingUpTimeout, u);
+        }
+        let x = *self.rates.state();
+        let value = if self.rates.started() {
+            self.law.voltage(&x, self.law.acceleration(&x))
+        } else {
+            0.0
+        };
+        self.u_swing[0] = value;
+        u[0] = value;
+        if !usable {
+            self.balance.hold(&self.u_swing);
+            return StepStatus::Fallback;
+        }
+        if x[2].abs() <= self.settings.estimator_window {
+            let y_b = [y[0], wrap_angle(y[1])];
+            self.balance.observe(&y_b, &self.u_swing);
+        } else {
+            let seed = [x[0], x[1], x[2], x[3]];
+            self.balance.seed(&seed, &self.u_swing);
+        }
+        StepStatus::Nominal
+    }
+
+    fn stop(&mut self, cause: StopCause, u: &mut [f64]) -> StepStatus {
+        self.phase = Phase::Stopped(cause);
+        u[0] = 0.0;
+        StepStatus::Nominal
+    }
+
+    fn balance_step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
+        let theta_ref = match self.hold_reference {
+            Some((held, at_catch)) if r[0] == at_catch => held,
+            Some(_) => {
+                self.hold_reference = None;
+                r[0]
+            }
+            None => r[0],
+        };
+        let y_b = [y[0], wrap_angle(y[1])];
+        self.balance.step(&y_b, &[theta_ref, r[1]], u)
+    }
+}
+
+impl<C: Controller> Controller for SwingUp<C> {
+    fn n_outputs(&self) -> usize {
+        2
+    }
+
+    fn n_inputs(&self) -> usize {
+        1
+    }
+
+    fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
+        let usable = self.rates.update(y);
+        match self.phase {
+            Phase::Stopped(_) => {
+                u[0] = 0.0;
+                StepStatus::Nominal
+            }
+            Phase::SwingUp => {
+                if usable && self.in_catch_region() {
+                    self.phase = Phase::Balance;
+                    self.hold_reference = Some((self.rates.state()[0], r[0]));
+                    self.balance_step(y, r, u)
+                } else {
+                    self.swing(y, usable, u)
+                }
+            }
+            Phase::Balance => {
+                if !usable || self.in_balance_region() {
+                    return self.balance_step(y, r, u);
+                }
+                match self.settings.on_fall {
+                    OnFall::Stop => self.stop(StopCause::LeftBalanceRegion, u),
+                    OnFall::Retry => {
+                        self.phase = Phase::SwingUp;
+                        self.swing_samples = 0;
+                        self.hold_reference = None;
+                        self.swing(y, usable, u)
+                    }
+                }
+            }
+        }
+    }
+
+    fn hold(&mut self, u: &[f64]) {
+        self.rates.hold();
+        if self.phase == Phase::SwingUp {
+            self.swing_samples += 1;
+        }
+        self.balance.hold(u);
+    }
+
+    fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    fn reset(&mut self) {
+        self.balance.reset();
+        self.rates.reset();
+        self.phase = Phase::SwingUp;
+        self.swing_samples = 0;
+        self.hold_reference = None;
+        self.u_swing = [0.0];
+    }
+
+    fn state_estimate(&self) -> Option<&[f64]> {
+        self.balance.state_estimate()
+    }
+
+    fn sample_time(&self) -> Option<f64> {
+        Some(self.ts)
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,258 @@
+//! The `[swing_up]` settings: every default declared once, here.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Result, RipError};
+
+/// What the supervisor does when the pendulum leaves the balance region after a catch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OnFall {
+    /// Swing up again (the swing-up clock restarts).
+    #[default]
+    Retry,
+    /// Stop with [`StopCause::LeftBalanceRegion`](crate::controller::StopCause) and 0 V.
+    Stop,
+}
+
+impl OnFall {
+    /// Parses `"retry"` or `"stop"`.
+    pub fn from_name(name: &str) -> Result<Self> {
+        match name {
+            "retry" => Ok(Self::Retry),
+            "stop" => Ok(Self::Stop),
+            _ => Err(RipError::invalid(
+                "swing_up.on_fall",
+                format!("must be 'retry' or 'stop', got {name:?}"),
+            )),
+        }
+    }
+
+    /// The name accepted by [`from_name`](Self::from_name).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Retry => "retry",
+            Self::Stop => "stop",
+        }
+    }
+}
+
+/// Settings of the energy swing-up and of its supervisor (the `[swing_up]` section).
+///
+/// Accelerations are given as fractions of the *stall acceleration*
+/// `a_s = (k_t/R_m) U / (J₀ + J_α)`: the arm acceleration that the full swing-up voltage `U`
+/// produces at standstill with the largest arm-axis inertia (pendulum horizontal), computed
+/// from the nominal plant. That keeps the defaults meaningful on any rig: both presets swing up
+/// with them. The law they enter is derived in the [module docs](super).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SwingUpSettings {
+    /// Largest voltage the swing-up applies, `U` (V); default 10 V (the QUBE-Servo's recommended
+    /// limit, inside the paper's 12 V).
+    pub max_voltage: f64,
+    /// The arm stays within `±arm_limit` (rad) during the swing-up, by the law itself; default
+    /// 1.5 rad, inside the ±π/2 that many rigs' cables allow. The balance region ends there
+    /// too.
+    pub arm_limit: f64,
+    /// Braking deceleration `a_b` reserved for the arm limit, as a fraction of `a_s`;
+    /// default 0.5 (half the stall acceleration is kept in hand for model errors, back-EMF and
+    /// the pendulum's reaction on the arm).
+    pub brake_fraction: f64,
+    /// Largest pumping acceleration `a_p`, as a fraction of `a_s`; default 0.5.
+    pub pump_fraction: f64,
+    /// Width `w` (rad/s) of the pumping direction `clamp(α̇ cos α / w, −1, 1)`.
+    pub pump_width: f64,
+    /// Gain `k_E` from the normalised energy error to the pumping acceleration (saturates at
+    /// `|k_E ε| = 1`); default 10, so pumping is at full strength until the energy is within
+    /// 10 % of `G` of its target (Åström & Furuta's large-gain, near bang-bang case).
+    pub energy_gain: f64,
+    /// Target energy above the upright rest energy, as a fraction `δ` of the gravity
+    /// stiffness `G = m_p g l_p/2`; default 0.05: the pendulum reaches upright still moving
+    /// slowly instead of creeping towards it for ever.
+    pub energy_margin: f64,
+    /// Natural frequency `ω_c` (rad/s) of the critically damped spring that keeps the arm
+    /// centred around 0 while pumping; default 2.5 rad/s.
+    pub arm_centering: f64,
+    /// Rate `λ` (1/s) at which the arm's velocity is pulled back inside the braking envelope;
+    /// default 20 /s.
+    pub barrier_rate: f64,
+    /// Cut-off (Hz) of the filtered differences the swing-up estimates both rates with;
+    /// default 20 Hz (the LQR's).
+    pub rate_cutoff: f64,
+    /// Catch region: `|α|` below this (rad from upright); default 0.3 rad.
+    pub catch_angle: f64,
+    /// Catch region: the pendulum angle predicted this far ahead, `α + α̇ τ` (τ in s), is also
+    /// within `catch_angle`, so a pendulum that is falling away from upright is not caught;
+    /// default 0.1 s.
+    pub catch_lookahead: f64,
+    /// Catch region: `|α̇|` below this (rad/s); default 7 rad/s.
+    pub catch_rate: f64,
+    /// Catch region: `|θ̇|` below this (rad/s); default 9 rad/s.
+    pub catch_arm_rate: f64,
+    /// Catch region: the arm's stopping point `θ + θ̇|θ̇|/(2 a_b)` (where braking at the
+    /// envelope's deceleration `a_b` would stop it) within `±catch_arm_angle` (rad), so that the
+    /// balance controller takes over with room to stop the arm inside `arm_limit`; default
+    /// 1.0 rad.
+    pub catch_arm_angle: f64,
+    /// Balance region: `|α|` up to this (rad from upright); leaving it (or the arm limit) after
+    /// a catch is a fall. Default 0.6 rad (`rip-rt`'s default pendulum limit).
+    pub balance_angle: f64,
+    /// Within this `|α|` (rad from upright) the balance controller's estimator runs on the
+    /// measurements and the swing-up's voltage ([`Controller::observe`]); outside it is
+    /// restarted every sample from the swing-up's own estimate ([`Controller::seed`]), because
+    /// its linear model does not hold far from upright. Default 1.0 rad.
+    ///
+    /// [`Controller::observe`]: crate::Controller::observe
+    /// [`Controller::seed`]: crate::Controller::seed
+    pub estimator_window: f64,
+    /// Longest swing-up (s) before giving up with
+    /// [`StopCause::SwingUpTimeout`](crate::controller::StopCause); default 20 s.
+    pub max_time: f64,
+    /// What to do after a fall; default [`OnFall::Retry`].
+    pub on_fall: OnFall,
+}
+
+impl Default for SwingUpSettings {
+    fn default() -> Self {
+        Self {
+            max_voltage: 12.0,
+            arm_limit: 1.5,
+            brake_fraction: 0.5,
+            pump_fraction: 3.0,
+            pump_width: 2.0,
+            energy_gain: 5.0,
+            energy_margin: 0.3,
+            arm_centering: 1.5,
+            barrier_rate: 20.0,
+            rate_cutoff: 20.0,
+            catch_angle: 0.3,
+            catch_lookahead: 0.1,
+            catch_rate: 7.0,
+            catch_arm_rate: 9.0,
+            catch_arm_angle: 1.0,
+            balance_angle: 0.6,
+            estimator_window: 0.6,
+            max_time: 20.0,
+            on_fall: OnFall::Retry,
+        }
+    }
+}
+
+fn in_range(key: &str, v: f64, lo: f64, hi: f64, lo_open: bool, hi_open: bool) -> Result<()> {
+    let above = if lo_open { v > lo } else { v >= lo };
+    let below = if hi_open { v < hi } else { v <= hi };
+    if v.is_finite() && above && below {
+        return Ok(());
+    }
+    let (l, r) = (
+        if lo_open { '(' } else { '[' },
+        if hi_open { ')' } else { ']' },
+    );
+    let hi_text = if hi.is_infinite() {
+        "∞".to_string()
+    } else {
+        format!("{hi}")
+    };
+    Err(RipError::invalid(
+        format!("swing_up.{key}"),
+        format!("must be in {l}{lo}, {hi_text}{r}, got {v}"),
+    ))
+}
+
+impl SwingUpSettings {
+    /// Checks every value; the error names the first bad key as `swing_up.<key>`.
+    pub fn validate(&self) -> Result<()> {
+        use std::f64::consts::PI;
+        let inf = f64::INFINITY;
+        in_range("max_voltage", self.max_voltage, 0.0, inf, true, true)?;
+        in_range("arm_limit", self.arm_limit, 0.0, PI, true, false)?;
+        in_range("brake_fraction", self.brake_fraction, 0.0, 1.0, true, false)?;
+        in_range("pump_fraction", self.pump_fraction, 0.0, 10.0, true, false)?;
+        in_range("pump_width", self.pump_width, 0.0, inf, true, true)?;
+        in_range("energy_gain", self.energy_gain, 0.0, inf, true, true)?;
+        in_range("energy_margin", self.energy_margin, 0.0, 1.0, false, false)?;
+        in_range("arm_centering", self.arm_centering, 0.0, inf, false, true)?;
+        in_range("barrier_rate", self.barrier_rate, 0.0, inf, true, true)?;
+        in_range("rate_cutoff", self.rate_cutoff, 0.0, inf, true, false)?;
+        in_range("catch_angle", self.catch_angle, 0.0, PI / 2.0, true, false)?;
+        in_range(
+            "catch_lookahead",
+            self.catch_lookahead,
+            0.0,
+            1.0,
+            false,
+            false,
+        )?;
+        in_range("catch_rate", self.catch_rate, 0.0, inf, true, true)?;
+        in_range("catch_arm_rate", self.catch_arm_rate, 0.0, inf, true, true)?;
+        in_range(
+            "catch_arm_angle",
+            self.catch_arm_angle,
+            0.0,
+            self.arm_limit,
+            true,
+            false,
+        )?;
+        in_range("balance_angle", self.balance_angle, 0.0, PI, true, false)?;
+        if self.balance_angle < self.catch_angle {
+            return Err(RipError::invalid(
+                "swing_up.balance_angle",
+                format!(
+                    "must be at least swing_up.catch_angle ({}), got {}",
+                    self.catch_angle, self.balance_angle
+                ),
+            ));
+        }
+        in_range(
+            "estimator_window",
+            self.estimator_window,
+            0.0,
+            PI,
+            false,
+            true,
+        )?;
+        in_range("max_time", self.max_time, 0.0, inf, true, true)?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_key_is_named_when_bad() {
+        type Spoil = fn(&mut SwingUpSettings);
+        let cases: [(&str, Spoil); 6] = [
+            ("swing_up.max_time", |s| s.max_time = 0.0),
+            ("swing_up.max_voltage", |s| s.max_voltage = f64::NAN),
+            ("swing_up.arm_limit", |s| s.arm_limit = 4.0),
+            ("swing_up.balance_angle", |s| s.balance_angle = 0.1),
+            ("swing_up.brake_fraction", |s| s.brake_fraction = 1.5),
+            ("swing_up.rate_cutoff", |s| s.rate_cutoff = -1.0),
+        ];
+        for (key, spoil) in cases {
+            let mut s = SwingUpSettings::default();
+            s.validate().unwrap();
+            spoil(&mut s);
+            let err = s.validate().unwrap_err().to_string();
+            assert!(err.contains(key), "{key}: {err}");
+        }
+        assert!(OnFall::from_name("again")
+            .unwrap_err()
+            .to_string()
+            .contains("swing_up.on_fall"));
+    }
+
+    #[test]
+    fn a_toml_section_round_trips_and_rejects_unknown_keys() {
+        let s: SwingUpSettings = toml::from_str("max_time = 12.5\non_fall = \"stop\"\n").unwrap();
+        assert_eq!(s.max_time, 12.5);
+        assert_eq!(s.on_fall, OnFall::Stop);
+        assert_eq!(s.catch_angle, SwingUpSettings::default().catch_angle);
+        let text = toml::to_string(&s).unwrap();
+        assert_eq!(toml::from_str::<SwingUpSettings>(&text).unwrap(), s);
+        let err = toml::from_str::<SwingUpSettings>("max_tme = 3.0\n").unwrap_err();
+        assert!(err.to_string().contains("max_tme"), "{err}");
+    }
+}

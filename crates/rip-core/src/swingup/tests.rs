@@ -1,0 +1,328 @@
+use super::*;
+use crate::mpc::{self, Mpc, QpSolver};
+use crate::paper;
+use crate::plant::{FurutaParams, State};
+use crate::regulators::{Lqg, Lqr, DEFAULT_RATE_CUTOFF_HZ};
+use crate::sim::{simulate, Reference, SensorModel, SimConfig, SimResult};
+use std::f64::consts::PI;
+
+/// The paper's three designs on `plant`'s model: the printed model for the `paper` preset,
+/// the linearisation about upright otherwise (as `riprs compare` designs them).
+type Named = Vec<(&'static str, Box<dyn Controller>)>;
+
+fn designs(preset: &str) -> (Plant, Named) {
+    let plant = if preset == "paper" {
+        Plant::paper()
+    } else {
+        Plant::qube_servo2()
+    };
+    let (ad, bd) = if preset == "paper" {
+        let m = paper::discrete_model();
+        (m.a, m.b)
+    } else {
+        plant
+            .linearize_discrete(&State::zeros(), 0.0, paper::TS)
+            .unwrap()
+    };
+    let (q, r) = paper::lqr_weights();
+    let lqr = Lqr::design(&ad, &bd, &q, &r, paper::TS, DEFAULT_RATE_CUTOFF_HZ).unwrap();
+    let mpc = Mpc::new(
+        &ad,
+        &bd,
+        &paper::output_matrix(),
+        paper::TS,
+        mpc::paper::settings(QpSolver::ActiveSet),
+    )
+    .unwrap();
+    let model = mpc.model();
+    let kf = mpc.kalman_design();
+    let lqg = Lqg::new(
+        &lqr.gain(),
+        &model.a,
+        &model.b,
+        &model.c,
+        &kf.l,
+        &kf.m,
+        paper::TS,
+    )
+    .unwrap();
+    (
+        plant,
+        vec![
+            ("LQR", Box::new(lqr) as Box<dyn Controller>),
+            ("LQG", Box::new(lqg)),
+            ("MPC", Box::new(mpc)),
+        ],
+    )
+}
+
+fn hanging_run(duration: f64, step_time: f64, seed: u64) -> SimConfig {
+    SimConfig {
+        duration,
+        x0: [0.0, 0.0, PI, 0.0],
+        reference: Reference::Step {
+            time: step_time,
+            value: [1.0, 0.0],
+        },
+        sensor: SensorModel {
+            counts_per_rev: Some([2048.0, 2048.0]),
+            noise_std: [1e-3, 1e-3],
+        },
+        seed,
+        ..Default::default()
+    }
+}
+
+fn max_arm(res: &SimResult) -> f64 {
+    res.x.iter().map(|x| x[0].abs()).fold(0.0, f64::max)
+}
+
+#[test]
+fn every_balance_controller_catches_from_hanging_and_tracks_the_step() {
+    let (plant, controllers) = designs("paper");
+    let limit = SwingUpSettings::default().arm_limit;
+    for (name, balance) in controllers {
+        let mut sup = SwingUp::new(balance, &plant, SwingUpSettings::default()).unwrap();
+        for seed in [1, 2] {
+            let res = simulate(&plant, &mut sup, &hanging_run(15.0, 8.0, seed)).unwrap();
+            let caught = res
+                .catch_time
+                .unwrap_or_else(|| panic!("{name}/{seed}: no catch"));
+            assert!(!res.fell, "{name}/{seed}: fell at {:?}", res.fall_time);
+            assert!(res.stop_cause.is_none());
+            assert!(caught < 8.0, "{name}/{seed}: caught at {caught}");
+            assert_eq!(res.len(), 1500, "{name}/{seed}");
+            // Swing-up before the catch, balance from it on.
+            let k = res.t.iter().position(|&t| t == caught).unwrap();
+            assert!(res.phase[..k].iter().all(|&p| p == Phase::SwingUp));
+            assert!(res.phase[k..].iter().all(|&p| p == Phase::Balance));
+            assert!(
+                max_arm(&res) <= limit,
+                "{name}/{seed}: |θ| reached {}",
+                max_arm(&res)
+            );
+            assert!(res.u.iter().all(|u| u.abs() <= 12.0));
+            let last = res.x.last().unwrap();
+            assert!(
+                (last[0] - 1.0).abs() < 0.05,
+                "{name}/{seed}: θ = {}",
+                last[0]
+            );
+            assert!(
+                wrap_angle(last[2]).abs() < 0.02,
+                "{name}/{seed}: α = {}",
+                last[2]
+            );
+            // The arm reference is held where the arm was caught until the step.
+            let before_step = res.t.iter().position(|&t| t >= 7.9).unwrap();
+            assert!((res.r[before_step][0] - 0.0).abs() < 1e-12);
+        }
+    }
+}
+
+#[test]
+fn the_estimator_has_converged_at_the_catch() {
+    let (plant, controllers) = designs("paper");
+    for (name, balance) in controllers.into_iter().skip(1) {
+        let mut sup = SwingUp::new(balance, &plant, SwingUpSettings::default()).unwrap();
+        let res = simulate(&plant, &mut sup, &hanging_run(6.0, 8.0, 3)).unwrap();
+        let k = res
+            .t
+            .iter()
+            .position(|&t| Some(t) == res.catch_time)
+            .unwrap();
+        // The estimate recorded after the sample before the catch is x̂[k−1|k−1]; compare with
+        // the true state at that sample.
+        let n = res.n_estimate;
+        let est = &res.x_hat[(k - 1) * n..k * n];
+        let truth = res.x[k - 1];
+        assert!(
+            (est[2] - wrap_angle(truth[2])).abs() < 0.02,
+            "{name}: α̂ {} vs {}",
+            est[2],
+            truth[2]
+        );
+        assert!(
+            (est[3] - truth[3]).abs() < 0.5,
+            "{name}: α̇̂ {} vs {}",
+            est[3],
+            truth[3]
+        );
+        assert!(
+            (est[1] - truth[1]).abs() < 0.5,
+            "{name}: θ̇̂ {} vs {}",
+            est[1],
+            truth[1]
+        );
+    }
+}
+
+#[test]
+fn the_law_keeps_the_arm_inside_its_limit_on_perturbed_plants() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+    for arm_limit in [0.8, 1.5] {
+        let settings = SwingUpSettings {
+            arm_limit,
+            catch_arm_angle: 0.5 * arm_limit,
+            // Never catch: the swing-up runs for the whole 20 s.
+            catch_angle: 1e-9,
+            max_time: 100.0,
+            ..SwingUpSettings::default()
+        };
+        for _ in 0..10 {
+            let mut p = FurutaParams::paper().to_array();
+            for v in p.iter_mut().take(11) {
+                *v *= rng.gen_range(0.9..1.1);
+            }
+            let truth = Plant::new(FurutaParams::from_array(p)).unwrap();
+            let mut sup =
+                SwingUp::new(Lqr::paper().unwrap(), &Plant::paper(), settings.clone()).unwrap();
+            let res = simulate(&truth, &mut sup, &hanging_run(20.0, 30.0, rng.gen())).unwrap();
+            assert_eq!(res.len(), 2000);
+            assert!(res.phase.iter().all(|&p| p == Phase::SwingUp));
+            assert!(
+                max_arm(&res) <= arm_limit,
+                "limit {arm_limit}: {}",
+                max_arm(&res)
+            );
+            assert!(res.u.iter().all(|u| u.abs() <= 12.0));
+        }
+    }
+}
+
+#[test]
+fn pumping_raises_the_energy_below_its_target_and_lowers_it_above() {
+    // Away from the arm limit the applied acceleration has the sign that makes
+    // dE/dt = m12 cos α α̇ θ̈ (the controllable part) push E towards E_t.
+    let plant = Plant::paper();
+    let s = SwingUpSettings::default();
+    let law = law::EnergyLaw::new(&plant, &s);
+    let p = plant.params();
+    let m12 = p.mp * p.lr * p.lp / 2.0;
+    let target = s.energy_margin * p.mp * p.g * p.lp / 2.0;
+    let mut checked = 0;
+    for i in 0..400 {
+        let alpha = -PI + 2.0 * PI * (f64::from(i) + 0.5) / 400.0;
+        for alpha_dot in [-6.0, -2.5, 2.5, 6.0] {
+            let x = State::new(0.0, 0.0, alpha, alpha_dot);
+            let v = alpha_dot * alpha.cos();
+            if v.abs() < s.pump_width {
+                continue;
+            }
+            let a = law.acceleration(&x);
+            let de = m12 * v * a;
+            let e = law.energy(&x);
+            if e < target - 0.05 * target.abs() {
+                assert!(de > 0.0, "α {alpha} α̇ {alpha_dot}: E {e}, dE {de}");
+            } else if e > target * 1.05 {
+                assert!(de < 0.0, "α {alpha} α̇ {alpha_dot}: E {e}, dE {de}");
+            }
+            checked += 1;
+        }
+    }
+    assert!(checked > 500, "{checked}");
+}
+
+#[test]
+fn a_swing_up_that_takes_too_long_gives_up_with_0_v() {
+    let settings = SwingUpSettings {
+        max_voltage: 0.5,
+        max_time: 2.0,
+        ..SwingUpSettings::default()
+    };
+    let mut sup = SwingUp::new(Lqr::paper().unwrap(), &Plant::paper(), settings).unwrap();
+    let res = simulate(&Plant::paper(), &mut sup, &hanging_run(5.0, 8.0, 0)).unwrap();
+    assert_eq!(res.stop_cause, Some(StopCause::SwingUpTimeout));
+    assert!(!res.fell);
+    assert_eq!(
+        *res.phase.last().unwrap(),
+        Phase::Stopped(StopCause::SwingUpTimeout)
+    );
+    assert_eq!(*res.u.last().unwrap(), 0.0);
+    assert!(
+        (res.t.last().unwrap() - 2.0).abs() < 0.011,
+        "{}",
+        res.t.last().unwrap()
+    );
+    let mut u = [1.0];
+    sup.step(&[0.0, PI], &[0.0, 0.0], &mut u);
+    assert_eq!(u[0], 0.0);
+}
+
+#[test]
+fn leaving_the_balance_region_is_a_fall_then_retry_or_stop() {
+    for on_fall in [OnFall::Stop, OnFall::Retry] {
+        let settings = SwingUpSettings {
+            on_fall,
+            ..SwingUpSettings::default()
+        };
+        let mut sup = SwingUp::new(Lqr::paper().unwrap(), &Plant::paper(), settings).unwrap();
+        let config = SimConfig {
+            torque_disturbance: Some(crate::sim::StepDisturbance {
+                time: 9.0,
+                value: 0.2,
+            }),
+            ..hanging_run(15.0, 30.0, 0)
+        };
+        let res = simulate(&Plant::paper(), &mut sup, &config).unwrap();
+        assert!(res.catch_time.unwrap() < 9.0);
+        assert!(res.fell, "{on_fall:?}");
+        let fall = res.fall_time.unwrap();
+        assert!(fall > 9.0, "{fall}");
+        let last = *res.phase.last().unwrap();
+        match on_fall {
+            OnFall::Stop => {
+                assert_eq!(last, Phase::Stopped(StopCause::LeftBalanceRegion));
+                assert_eq!(res.stop_cause, Some(StopCause::LeftBalanceRegion));
+                assert_eq!(*res.u.last().unwrap(), 0.0);
+            }
+            OnFall::Retry => {
+                assert_eq!(last, Phase::SwingUp);
+                assert!(res.stop_cause.is_none());
+            }
+        }
+    }
+}
+
+#[test]
+fn a_run_that_starts_upright_is_caught_at_once() {
+    let mut sup = SwingUp::new(
+        Lqr::paper().unwrap(),
+        &Plant::paper(),
+        SwingUpSettings::default(),
+    )
+    .unwrap();
+    let config = SimConfig {
+        x0: [0.0, 0.0, 0.05, 0.0],
+        ..hanging_run(3.0, 1.0, 0)
+    };
+    let res = simulate(&Plant::paper(), &mut sup, &config).unwrap();
+    assert_eq!(res.catch_time, Some(0.0));
+    assert!(!res.fell);
+    assert!(res.phase.iter().all(|&p| p == Phase::Balance));
+}
+
+#[test]
+fn bad_balance_controllers_and_settings_are_named() {
+    let bad = SwingUpSettings {
+        max_time: -1.0,
+        ..SwingUpSettings::default()
+    };
+    let err = SwingUp::new(Lqr::paper().unwrap(), &Plant::paper(), bad).unwrap_err();
+    assert!(err.to_string().contains("swing_up.max_time"), "{err}");
+}
+
+#[test]
+fn wrap_angle_lands_in_the_half_open_interval() {
+    for (a, w) in [
+        (0.0, 0.0),
+        (PI, PI),
+        (-PI, PI),
+        (3.0 * PI, PI),
+        (2.0 * PI + 0.1, 0.1),
+        (-2.0 * PI - 0.1, -0.1),
+    ] {
+        assert!((wrap_angle(a) - w).abs() < 1e-12, "{a}: {}", wrap_angle(a));
+    }
+}
