@@ -21,7 +21,7 @@ from riprs._riprs import (
     __version__,
 )
 from riprs.config import ConfigError, Spec, load_config
-from riprs.control import Controller, Lqg, Lqr
+from riprs.control import Controller, Lqg, Lqr, SwingUp
 from riprs.design import KalmanDesign, c2d, dare, dlqe, dlqr, kalman
 from riprs.log import LogError, RtLog, load_log
 from riprs.mpc import Mpc, MpcSolution
@@ -57,6 +57,7 @@ __all__ = [
     "SingularMatrixError",
     "Spec",
     "StateSpace",
+    "SwingUp",
     "__version__",
     "c2d",
     "dare",

@@ -14,6 +14,13 @@ any of them.
 
 Both clamp their input to ``[u_min, u_max]`` (default +-12 V). ``Lqr.paper()`` and
 ``Lqg.paper()`` build the study's designs.
+
+:class:`SwingUp`
+    Swing-up from rest and catch around any balance controller: energy pumping (Astrom &
+    Furuta, 2000) that keeps the arm inside its limit, then the balance controller inside a
+    catch region, bumplessly. ``riprs.simulate(plant, riprs.SwingUp(balance=riprs.Lqr.paper()),
+    15.0, x0=[0, 0, math.pi, 0])`` swings up the hanging pendulum; the result's ``catch_time``
+    is the time to upright.
 """
 
 from __future__ import annotations
@@ -23,15 +30,15 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from riprs._riprs import Lqg, Lqr
+from riprs._riprs import Lqg, Lqr, SwingUp
 
-__all__ = ["Controller", "Lqg", "Lqr"]
+__all__ = ["Controller", "Lqg", "Lqr", "SwingUp"]
 
 
 @runtime_checkable
 class Controller(Protocol):
     """What :func:`riprs.simulate` and ``riprs compare`` accept as a controller:
-    :class:`Lqr`, :class:`Lqg` and :class:`riprs.Mpc` all satisfy it."""
+    :class:`Lqr`, :class:`Lqg`, :class:`riprs.Mpc` and :class:`SwingUp` all satisfy it."""
 
     def step(self, y: ArrayLike, r: ArrayLike | None = None) -> NDArray[np.float64]:
         """The input ``u[k]`` for the measured angles ``y[k]`` and reference ``r[k]``."""

@@ -69,6 +69,14 @@ class SimResult:
         The paper's Tab. 1 indices, ``rip-core``'s one definition (``riprs.compare.rmse`` and
         Monte Carlo use the same): RMSE of the measured ``theta - theta_ref`` and
         ``alpha - alpha_ref`` (rad) and RMS of ``u`` (V), over every sample of the run.
+    phase : ndarray of int8, shape (N,) or None
+        The controller's phase after each step: 0 swinging up, 1 balancing, 2 stopped (see
+        :class:`riprs.SwingUp`; always 1 for a balance controller).
+    catch_time : float or None
+        Time (s) of the first balanced sample after a swing-up: the time to upright.
+    stop_cause : str or None
+        Why a :class:`riprs.SwingUp` gave up (``"swing_up_timeout"`` or
+        ``"left_balance_region"``); the arrays then end at that sample.
     """
 
     t: FloatArray
@@ -84,6 +92,9 @@ class SimResult:
     fallbacks: int
     x_final: FloatArray
     rmse: tuple[float, float, float]
+    phase: np.ndarray | None = None
+    catch_time: float | None = None
+    stop_cause: str | None = None
 
     @classmethod
     def _from_native(cls, d: dict[str, Any]) -> SimResult:
@@ -101,6 +112,9 @@ class SimResult:
             fallbacks=int(d["fallbacks"]),
             x_final=d["x_final"],
             rmse=(float(d["rmse"][0]), float(d["rmse"][1]), float(d["rmse"][2])),
+            phase=d["phase"],
+            catch_time=d["catch_time"],
+            stop_cause=d["stop_cause"],
         )
 
 
@@ -237,7 +251,7 @@ def simulate(
     ----------
     plant : Plant or FurutaParams
         The nonlinear plant.
-    controller : Lqr, Lqg or another riprs controller
+    controller : Lqr, Lqg, Mpc or SwingUp
     duration : float
         Length of the run (s); ``round(duration / Ts)`` samples.
     reference : float or array_like, optional
@@ -263,7 +277,9 @@ def simulate(
     u_limit : float
         Actuator saturation (V).
     fall_limit : float
-        The run stops, flagged, when ``|alpha|`` exceeds this (rad).
+        The run stops, flagged, when ``|alpha|`` (wrapped to (-pi, pi]) exceeds this (rad) while
+        the controller balances. A :class:`riprs.SwingUp` may start anywhere (e.g. hanging,
+        ``x0=[0, 0, pi, 0]``); for it a fall is leaving its balance region after the catch.
     seed : int
         Seed of the measurement noise; equal seeds give identical runs.
 

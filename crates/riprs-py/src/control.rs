@@ -53,8 +53,11 @@ pub fn controller_factory(obj: &Bound<'_, PyAny>) -> PyResult<ControllerFactory>
     if let Ok(c) = obj.downcast::<crate::mpc::PyMpc>() {
         return Ok(factory_of(c.get().inner.lock(py).clone()));
     }
+    if let Ok(c) = obj.downcast::<crate::swingup::PySwingUp>() {
+        return Ok(factory_of(c.get().inner.lock(py).clone()));
+    }
     Err(PyTypeError::new_err(format!(
-        "controller must be a riprs controller (Lqr, Lqg, Mpc), got {}",
+        "controller must be a riprs controller (Lqr, Lqg, Mpc, SwingUp), got {}",
         obj.get_type().name()?
     )))
 }
@@ -119,7 +122,7 @@ fn estimate_py<'py, C: Controller>(py: Python<'py>, c: &Shared<C>) -> Option<Py1
 ///     Input bounds (V).
 #[pyclass(name = "Lqr", module = "riprs._riprs", frozen)]
 pub struct PyLqr {
-    inner: Shared<Lqr>,
+    pub(crate) inner: Shared<Lqr>,
 }
 
 impl PyLqr {
@@ -302,7 +305,7 @@ impl PyLqr {
 /// u_min, u_max : float
 #[pyclass(name = "Lqg", module = "riprs._riprs", frozen)]
 pub struct PyLqg {
-    inner: Shared<Lqg>,
+    pub(crate) inner: Shared<Lqg>,
 }
 
 impl PyLqg {

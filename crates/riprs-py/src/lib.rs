@@ -16,6 +16,7 @@ mod plant;
 mod shared;
 mod sim;
 mod spec;
+mod swingup;
 
 #[pymodule]
 fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -28,5 +29,6 @@ fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     sim::register(m)?;
     mpc::register(m)?;
     spec::register(m)?;
+    swingup::register(m)?;
     Ok(())
 }

@@ -111,6 +111,18 @@ fn result_to_dict<'py>(py: Python<'py>, res: SimResult) -> PyResult<Bound<'py, P
         "compute_time",
         Array1::from_vec(res.compute_time).into_pyarray(py),
     )?;
+    let phase: Vec<i8> = res
+        .phase
+        .iter()
+        .map(|p| match p {
+            rip_core::Phase::SwingUp => 0,
+            rip_core::Phase::Balance => 1,
+            rip_core::Phase::Stopped(_) => 2,
+        })
+        .collect();
+    d.set_item("phase", Array1::from_vec(phase).into_pyarray(py))?;
+    d.set_item("catch_time", res.catch_time)?;
+    d.set_item("stop_cause", res.stop_cause.map(|c| c.name()))?;
     d.set_item("fell", res.fell)?;
     d.set_item("diverged", res.diverged)?;
     d.set_item("fall_time", res.fall_time)?;

@@ -1,0 +1,365 @@
+//! Binding for `rip_core::swingup`: `riprs.SwingUp`, the swing-up supervisor around any of the
+//! balance controllers.
+
+use numpy::ndarray::Array1;
+use numpy::{IntoPyArray, PyArray1};
+use pyo3::exceptions::PyTypeError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use rip_core::{
+    Controller, Lqg, Lqr, Mpc, OnFall, Phase, Plant, StepStatus, SwingUp, SwingUpSettings,
+};
+
+use crate::control::{PyLqg, PyLqr};
+use crate::errors::IntoPyResult;
+use crate::mpc::PyMpc;
+use crate::plant::{vector_arg, PyFurutaParams, PyPlant};
+use crate::shared::Shared;
+
+/// The balance controllers a supervisor can hold, as one cloneable type.
+#[derive(Clone)]
+pub enum Balance {
+    Lqr(Lqr),
+    Lqg(Box<Lqg>),
+    Mpc(Box<Mpc>),
+}
+
+impl Balance {
+    fn extract(obj: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let py = obj.py();
+        if let Ok(c) = obj.downcast::<PyLqr>() {
+            return Ok(Self::Lqr(c.get().inner.lock(py).clone()));
+        }
+        if let Ok(c) = obj.downcast::<PyLqg>() {
+            return Ok(Self::Lqg(Box::new(c.get().inner.lock(py).clone())));
+        }
+        if let Ok(c) = obj.downcast::<PyMpc>() {
+            return Ok(Self::Mpc(Box::new(c.get().inner.lock(py).clone())));
+        }
+        Err(PyTypeError::new_err(format!(
+            "balance must be a riprs balance controller (Lqr, Lqg, Mpc), got {}",
+            obj.get_type().name()?
+        )))
+    }
+
+    fn get(&self) -> &dyn Controller {
+        match self {
+            Self::Lqr(c) => c,
+            Self::Lqg(c) => c.as_ref(),
+            Self::Mpc(c) => c.as_ref(),
+        }
+    }
+
+    fn get_mut(&mut self) -> &mut dyn Controller {
+        match self {
+            Self::Lqr(c) => c,
+            Self::Lqg(c) => c.as_mut(),
+            Self::Mpc(c) => c.as_mut(),
+        }
+    }
+
+    fn name(&self) -> &'static str {
+        match self {
+            Self::Lqr(_) => "Lqr",
+            Self::Lqg(_) => "Lqg",
+            Self::Mpc(_) => "Mpc",
+        }
+    }
+}
+
+impl Controller for Balance {
+    fn n_outputs(&self) -> usize {
+        self.get().n_outputs()
+    }
+
+    fn n_inputs(&self) -> usize {
+        self.get().n_inputs()
+    }
+
+    fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
+        self.get_mut().step(y, r, u)
+    }
+
+    fn hold(&mut self, u: &[f64]) {
+        self.get_mut().hold(u);
+    }
+
+    fn observe(&mut self, y: &[f64], u: &[f64]) {
+        self.get_mut().observe(y, u);
+    }
+
+    fn seed(&mut self, x: &[f64], u: &[f64]) {
+        self.get_mut().seed(x, u);
+    }
+
+    fn reset(&mut self) {
+        self.get_mut().reset();
+    }
+
+    fn state_estimate(&self) -> Option<&[f64]> {
+        self.get().state_estimate()
+    }
+
+    fn sample_time(&self) -> Option<f64> {
+        self.get().sample_time()
+    }
+}
+
+/// Swing-up from rest and catch: energy pumping (Åström & Furuta, Automatica 36(2), 2000) with
+/// the arm kept inside ``arm_limit`` by a braking envelope, and a supervisor that hands over to
+/// ``balance`` (the paper's LQR, LQG or MPC, unchanged) inside a catch region.
+///
+/// The pendulum energy relative to upright rest,
+///
+/// .. math::
+///
+///     E = \tfrac12 J_\alpha \dot\alpha^2 + G(\cos\alpha - 1),
+///
+/// is driven to :math:`E_t = \delta G` by the arm acceleration
+/// :math:`a = a_p\,\mathrm{sat}(k_E (E_t - E)/G)\,\mathrm{sat}(\dot\alpha\cos\alpha / w)`
+/// plus a centring spring, clipped to the braking envelope
+/// :math:`|\dot\theta| \le \sqrt{2 a_b(\theta_L \mp \theta)}` that keeps :math:`|\theta| \le
+/// \theta_L`, and turned into a voltage (at most ``max_voltage``) by inverting the nominal
+/// model. Inside the catch region (``catch_angle``, ``catch_rate``, ``catch_arm_rate``,
+/// ``catch_arm_angle``, ``catch_lookahead``) the balance controller takes over: its estimator
+/// has run on the measurements and the swing-up's voltage (``estimator_window``), the MPC's
+/// previous move is the swing-up's last voltage, and the arm reference is held where the arm
+/// was caught until the external arm reference changes. Leaving the balance region
+/// (``balance_angle``, ``arm_limit``) swings up again (``on_fall="retry"``) or stops with 0 V
+/// (``"stop"``); after ``max_time`` s of swinging it stops with 0 V. The full derivation is in
+/// the ``rip_core::swingup`` documentation.
+///
+/// Parameters
+/// ----------
+/// balance : Lqr, Lqg or Mpc
+///     The balance controller (copied).
+/// plant : Plant or FurutaParams, optional
+///     The nominal model the swing-up is designed on; the paper's fitted plant by default.
+/// **settings
+///     Any of the settings (keyword only; omitted ones take their defaults, listed in
+///     :attr:`settings`): ``max_voltage`` (V), ``arm_limit`` (rad), ``brake_fraction``,
+///     ``pump_fraction``, ``pump_width`` (rad/s), ``energy_gain``, ``energy_margin``,
+///     ``arm_centering`` (rad/s), ``barrier_rate`` (1/s), ``rate_cutoff`` (Hz),
+///     ``catch_angle`` (rad), ``catch_lookahead`` (s), ``catch_rate`` (rad/s),
+///     ``catch_arm_rate`` (rad/s), ``catch_arm_angle`` (rad), ``balance_angle`` (rad),
+///     ``estimator_window`` (rad), ``max_time`` (s), ``on_fall`` (``"retry"`` or ``"stop"``).
+///
+/// Raises
+/// ------
+/// InvalidParameterError
+///     A setting is out of range; the message names it as ``swing_up.<key>``.
+/// TypeError
+///     ``balance`` or ``plant`` is not a riprs object, or a setting is unknown.
+#[pyclass(name = "SwingUp", module = "riprs._riprs", frozen)]
+pub struct PySwingUp {
+    pub(crate) inner: Shared<SwingUp<Balance>>,
+    balance_kind: &'static str,
+}
+
+fn apply_setting(s: &mut SwingUpSettings, key: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
+    if key == "on_fall" {
+        let name: String = value
+            .extract()
+            .map_err(|_| PyTypeError::new_err("on_fall must be 'retry' or 'stop'"))?;
+        s.on_fall = OnFall::from_name(&name).py()?;
+        return Ok(());
+    }
+    let slot = match key {
+        "max_voltage" => &mut s.max_voltage,
+        "arm_limit" => &mut s.arm_limit,
+        "brake_fraction" => &mut s.brake_fraction,
+        "pump_fraction" => &mut s.pump_fraction,
+        "pump_width" => &mut s.pump_width,
+        "energy_gain" => &mut s.energy_gain,
+        "energy_margin" => &mut s.energy_margin,
+        "arm_centering" => &mut s.arm_centering,
+        "barrier_rate" => &mut s.barrier_rate,
+        "rate_cutoff" => &mut s.rate_cutoff,
+        "catch_angle" => &mut s.catch_angle,
+        "catch_lookahead" => &mut s.catch_lookahead,
+        "catch_rate" => &mut s.catch_rate,
+        "catch_arm_rate" => &mut s.catch_arm_rate,
+        "catch_arm_angle" => &mut s.catch_arm_angle,
+        "balance_angle" => &mut s.balance_angle,
+        "estimator_window" => &mut s.estimator_window,
+        "max_time" => &mut s.max_time,
+        _ => {
+            return Err(PyTypeError::new_err(format!(
+                "SwingUp got an unexpected keyword argument {key:?}"
+            )))
+        }
+    };
+    if value.is_instance_of::<pyo3::types::PyBool>() {
+        return Err(PyTypeError::new_err(format!(
+            "{key} must be a number, got a bool"
+        )));
+    }
+    *slot = value
+        .extract()
+        .map_err(|_| PyTypeError::new_err(format!("{key} must be a number")))?;
+    Ok(())
+}
+
+fn settings_dict<'py>(py: Python<'py>, s: &SwingUpSettings) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    for (key, value) in [
+        ("max_voltage", s.max_voltage),
+        ("arm_limit", s.arm_limit),
+        ("brake_fraction", s.brake_fraction),
+        ("pump_fraction", s.pump_fraction),
+        ("pump_width", s.pump_width),
+        ("energy_gain", s.energy_gain),
+        ("energy_margin", s.energy_margin),
+        ("arm_centering", s.arm_centering),
+        ("barrier_rate", s.barrier_rate),
+        ("rate_cutoff", s.rate_cutoff),
+        ("catch_angle", s.catch_angle),
+        ("catch_lookahead", s.catch_lookahead),
+        ("catch_rate", s.catch_rate),
+        ("catch_arm_rate", s.catch_arm_rate),
+        ("catch_arm_angle", s.catch_arm_angle),
+        ("balance_angle", s.balance_angle),
+        ("estimator_window", s.estimator_window),
+        ("max_time", s.max_time),
+    ] {
+        d.set_item(key, value)?;
+    }
+    d.set_item("on_fall", s.on_fall.name())?;
+    Ok(d)
+}
+
+fn phase_name(p: Phase) -> &'static str {
+    p.name()
+}
+
+#[pymethods]
+impl PySwingUp {
+    #[new]
+    #[pyo3(signature = (balance, plant=None, **settings))]
+    fn new(
+        balance: &Bound<'_, PyAny>,
+        plant: Option<&Bound<'_, PyAny>>,
+        settings: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let balance = Balance::extract(balance)?;
+        let plant = match plant {
+            None => Plant::paper(),
+            Some(p) if p.is_none() => Plant::paper(),
+            Some(p) => {
+                if let Ok(p) = p.downcast::<PyPlant>() {
+                    p.get().inner
+                } else if let Ok(p) = p.downcast::<PyFurutaParams>() {
+                    Plant::new(p.get().inner).py()?
+                } else {
+                    return Err(PyTypeError::new_err(format!(
+                        "plant must be a riprs.Plant or riprs.FurutaParams, got {}",
+                        p.get_type().name()?
+                    )));
+                }
+            }
+        };
+        let mut s = SwingUpSettings::default();
+        if let Some(kw) = settings {
+            for (key, value) in kw.iter() {
+                let key: String = key.extract()?;
+                apply_setting(&mut s, &key, &value)?;
+            }
+        }
+        let balance_kind = balance.name();
+        let inner = SwingUp::new(balance, &plant, s).py()?;
+        Ok(Self {
+            inner: Shared::new(inner),
+            balance_kind,
+        })
+    }
+
+    /// Compute the input for measured angles ``y = [theta, alpha]`` (alpha 0 upright, +-pi
+    /// hanging; wrapped or not) and reference ``r``.
+    ///
+    /// Returns
+    /// -------
+    /// u : ndarray, shape (1,)
+    #[pyo3(signature = (y, r=None))]
+    fn step<'py>(
+        &self,
+        py: Python<'py>,
+        y: &Bound<'py, PyAny>,
+        r: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let y = vector_arg::<2>(y, "y")?;
+        let r = match r {
+            Some(r) if !r.is_none() => vector_arg::<2>(r, "r")?,
+            _ => [0.0; 2],
+        };
+        let mut u = [0.0];
+        let mut guard = self.inner.lock(py);
+        let inner: &mut SwingUp<Balance> = &mut guard;
+        py.allow_threads(|| inner.step(&y, &r, &mut u));
+        drop(guard);
+        Ok(Array1::from_vec(u.to_vec()).into_pyarray(py))
+    }
+
+    /// Start over: swing-up phase, estimators and clock reset.
+    fn reset(&self, py: Python<'_>) {
+        self.inner.lock(py).reset();
+    }
+
+    /// ``"swing_up"``, ``"balance"`` or ``"stopped"``.
+    #[getter]
+    fn phase(&self, py: Python<'_>) -> &'static str {
+        phase_name(self.inner.lock(py).phase())
+    }
+
+    /// Why the supervisor stopped (``"swing_up_timeout"`` or ``"left_balance_region"``), or
+    /// ``None``.
+    #[getter]
+    fn stop_cause(&self, py: Python<'_>) -> Option<&'static str> {
+        match self.inner.lock(py).phase() {
+            Phase::Stopped(cause) => Some(cause.name()),
+            _ => None,
+        }
+    }
+
+    /// The settings in use, every default filled in.
+    #[getter]
+    fn settings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let s = self.inner.lock(py).settings().clone();
+        settings_dict(py, &s)
+    }
+
+    /// Sample time (s), the balance controller's.
+    #[getter(Ts)]
+    fn ts(&self, py: Python<'_>) -> f64 {
+        self.inner.lock(py).ts()
+    }
+
+    /// The pendulum energy ``E`` (J, 0 upright at rest) of the swing-up's own estimate.
+    #[getter]
+    fn energy(&self, py: Python<'_>) -> f64 {
+        self.inner.lock(py).energy()
+    }
+
+    /// The balance controller's estimate (``None`` for one without).
+    #[getter]
+    fn x_hat<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
+        let estimate = self.inner.lock(py).state_estimate().map(<[f64]>::to_vec);
+        estimate.map(|s| Array1::from_vec(s).into_pyarray(py))
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> String {
+        let s = self.inner.lock(py).settings().clone();
+        format!(
+            "SwingUp(balance={}, max_voltage={}, arm_limit={}, max_time={}, on_fall={:?})",
+            self.balance_kind,
+            s.max_voltage,
+            s.arm_limit,
+            s.max_time,
+            s.on_fall.name()
+        )
+    }
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PySwingUp>()?;
+    Ok(())
+}

@@ -1,0 +1,113 @@
+"""riprs.SwingUp: swing-up from hanging at rest, catch and balance, in the simulator."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import riprs
+
+HANGING = [0.0, 0.0, math.pi, 0.0]
+
+
+def _gravity_stiffness(params: riprs.FurutaParams) -> float:
+    p = params.to_dict()
+    return float(p["mp"] * p["g"] * p["Lp"] / 2)
+
+
+def _energy(params: riprs.FurutaParams, x: np.ndarray) -> np.ndarray:
+    """Pendulum energy relative to upright rest, computed here from the parameters."""
+    p = params.to_dict()
+    ja = p["Jp"] + p["mp"] * p["Lp"] ** 2 / 4
+    return 0.5 * ja * x[:, 3] ** 2 + _gravity_stiffness(params) * (np.cos(x[:, 2]) - 1)
+
+
+def test_the_documented_call_swings_up_and_catches() -> None:
+    plant = riprs.Plant(riprs.FurutaParams.paper())
+    run = riprs.simulate(plant, riprs.SwingUp(balance=riprs.Lqr.paper()), 15.0, x0=HANGING)
+    assert not run.fell
+    assert run.stop_cause is None
+    assert run.catch_time is not None and 0.5 < run.catch_time < 10.0
+    assert len(run.t) == 1500
+    k = int(np.searchsorted(run.t, run.catch_time))
+    assert set(run.phase[:k]) == {0} and set(run.phase[k:]) == {1}
+    # Upright and still at the end, every voltage within the bound, the arm inside its limit.
+    assert abs(math.remainder(run.x[-1, 2], 2 * math.pi)) < 0.02
+    assert np.all(np.abs(run.u) <= 12.0)
+    limit = riprs.SwingUp(riprs.Lqr.paper()).settings["arm_limit"]
+    assert np.max(np.abs(run.x[:, 0])) <= limit
+    # The swing pumped the pendulum from -2G to about its upright energy.
+    params = riprs.FurutaParams.paper()
+    energy = _energy(params, run.x)
+    g = _gravity_stiffness(params)
+    assert energy[0] == pytest.approx(-2 * g, rel=1e-9)
+    assert abs(energy[k]) < 0.5 * g
+
+
+@pytest.mark.parametrize("balance", ["lqg", "mpc"])
+def test_estimating_controllers_catch_and_track_the_step(balance: str) -> None:
+    ctrl = riprs.Lqg.paper() if balance == "lqg" else riprs.paper.mpc(solver="active_set")
+    run = riprs.simulate(
+        riprs.paper.plant(),
+        riprs.SwingUp(ctrl),
+        15.0,
+        x0=HANGING,
+        reference=1.0,
+        reference_time=8.0,
+        encoder_counts=2048,
+        noise_std=1e-3,
+        seed=2,
+    )
+    assert run.catch_time is not None and run.catch_time < 8.0
+    assert not run.fell
+    assert run.x[-1, 0] == pytest.approx(1.0, abs=0.05)
+    assert np.all(np.abs(run.u) <= 12.0)
+
+
+def test_settings_have_defaults_and_bad_ones_are_named() -> None:
+    s = riprs.SwingUp(riprs.Lqr.paper(), max_time=7.5, on_fall="stop").settings
+    assert s["max_time"] == 7.5 and s["on_fall"] == "stop"
+    assert s["arm_limit"] == riprs.SwingUp(riprs.Lqr.paper()).settings["arm_limit"]
+    with pytest.raises(riprs.InvalidParameterError, match=r"swing_up\.max_time"):
+        riprs.SwingUp(riprs.Lqr.paper(), max_time=0.0)
+    with pytest.raises(riprs.InvalidParameterError, match=r"swing_up\.on_fall"):
+        riprs.SwingUp(riprs.Lqr.paper(), on_fall="again")
+    with pytest.raises(TypeError, match="max_tme"):
+        riprs.SwingUp(riprs.Lqr.paper(), max_tme=3.0)
+    with pytest.raises(TypeError, match="balance"):
+        riprs.SwingUp("lqr")
+    with pytest.raises(TypeError, match="plant"):
+        riprs.SwingUp(riprs.Lqr.paper(), plant=3)
+
+
+def test_a_balance_controller_cannot_start_hanging() -> None:
+    with pytest.raises(riprs.InvalidParameterError, match="x0"):
+        riprs.simulate(riprs.paper.plant(), riprs.Lqr.paper(), 1.0, x0=HANGING)
+
+
+def test_a_swing_up_that_takes_too_long_stops_with_0_v() -> None:
+    sup = riprs.SwingUp(riprs.Lqr.paper(), max_voltage=0.5, max_time=2.0)
+    run = riprs.simulate(riprs.paper.plant(), sup, 5.0, x0=HANGING)
+    assert run.stop_cause == "swing_up_timeout"
+    assert not run.fell
+    assert run.u[-1] == 0.0 and run.phase[-1] == 2
+    assert run.t[-1] == pytest.approx(2.0, abs=0.011)
+    # The object passed in is untouched; stepping it by hand runs the same law.
+    assert sup.phase == "swing_up"
+    u = sup.step([0.0, math.pi])
+    assert u.shape == (1,) and abs(u[0]) <= 0.5
+
+
+def test_batch_runs_each_get_their_own_supervisor() -> None:
+    runs = riprs.simulate_batch(
+        riprs.paper.plant(),
+        riprs.SwingUp(riprs.Lqr.paper()),
+        [1, 2],
+        6.0,
+        x0=HANGING,
+        noise_std=1e-3,
+    )
+    assert [r.catch_time is not None for r in runs] == [True, True]
+    assert runs[0].catch_time != runs[1].catch_time or not np.array_equal(runs[0].y, runs[1].y)
