@@ -15,7 +15,7 @@ _ControllerName = Literal["LQR", "LQG", "MPC"]
 _ParameterName = Literal["mr", "Lr", "Jr", "mp", "Lp", "Jp", "Dr", "Dp", "Rm", "kt", "km"]
 
 class _Controller(Protocol):
-    """What the simulators accept as a controller: ``Lqr``, ``Lqg`` or ``Mpc``."""
+    """What the simulators accept as a controller: ``Lqr``, ``Lqg``, ``Mpc`` or ``SwingUp``."""
 
     def step(self, y: ArrayLike, r: ArrayLike | None = None) -> _F: ...
     def reset(self) -> None: ...
