@@ -23,8 +23,9 @@ R = np.array([[1.0]])
         ({"A": np.array([[np.nan, 0], [0, 1]])}, riprs.NonFiniteError, "A"),
         ({"B": np.array([[np.inf], [1.0]])}, riprs.NonFiniteError, "B"),
         ({"Q": np.array([[1.0, 0.5], [0.0, 1.0]])}, riprs.NotSymmetricError, "Q"),
-        ({"R": np.array([[-1.0]])}, riprs.NotPositiveDefiniteError, "R"),
-        ({"R": np.array([[0.0]])}, riprs.NotPositiveDefiniteError, "R"),
+        # A singular R is solved where R + B'XB is invertible (test_dare_scipy.py); an
+        # indefinite one is refused.
+        ({"R": np.array([[-1.0]])}, riprs.NotPositiveSemidefiniteError, "R"),
         (
             {"A": np.diag([1.5, 0.5]), "B": np.array([[0.0], [1.0]])},
             riprs.NotStabilizableError,

@@ -74,3 +74,56 @@ def test_mpc_design_errors_name_the_cause() -> None:
         riprs.Mpc(
             A, B, C, 0.01, output_disturbance=(np.eye(1), np.array([[1e300]]), np.ones((2, 1)))
         )
+
+
+def test_ragged_and_overflowing_arguments_are_named() -> None:
+    eye = np.eye(2)
+    with pytest.raises(riprs.ShapeError, match="B"):
+        riprs.dare(eye, [[1.0, 2.0], [3.0]], eye, [[1.0]])
+    plant = riprs.Plant()
+    with pytest.raises(riprs.InvalidParameterError, match="substeps"):
+        plant.step([0, 0, 0.1, 0], 0.0, 0.01, -1)
+    with pytest.raises(riprs.InvalidParameterError, match="max_iter"):
+        riprs.FurutaParams.fit(np.eye(4), np.ones((4, 1)), 0.01, max_iter=-1)
+    A, B = plant.linearize_discrete(0.01)
+    C = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
+    with pytest.raises(riprs.InvalidParameterError, match="prediction_horizon"):
+        riprs.Mpc(A, B, C, 0.01, prediction_horizon=2**64)
+    with pytest.raises(riprs.InvalidParameterError, match="Ts"):
+        riprs.Mpc(A, B, C, 10**400)
+    with pytest.raises(riprs.InvalidParameterError, match="Ts"):
+        riprs.c2d(np.eye(2), np.ones((2, 1)), 10**400)
+    with pytest.raises(riprs.InvalidParameterError, match="substeps"):
+        riprs.simulate(plant, riprs.Lqr(np.zeros((1, 4))), duration=0.1, substeps=-1)
+
+
+def test_empty_weights_are_not_the_default() -> None:
+    A, B = riprs.Plant().linearize_discrete(0.01)
+    C = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
+    with pytest.raises(riprs.ShapeError, match="input_rate_weights"):
+        riprs.Mpc(A, B, C, 0.01, input_rate_weights=[])
+    with pytest.raises(riprs.ShapeError, match="input_bounds"):
+        riprs.Mpc(A, B, C, 0.01, input_bounds=[])
+
+
+def test_wrongly_shaped_a_is_named() -> None:
+    B, Q, R = np.ones((2, 1)), np.eye(2), np.eye(1)
+    for call in (riprs.dare, riprs.dlqr):
+        with pytest.raises(riprs.ShapeError, match=r"^A"):
+            call(np.eye(3), B, Q, R)
+
+
+def test_dlqr_refuses_a_continuous_time_system() -> None:
+    control = pytest.importorskip("control")
+    sys = control.ss(np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]]), np.eye(2), 0, 0)
+    with pytest.raises(riprs.InvalidParameterError, match="discrete"):
+        riprs.dlqr(sys, np.eye(2), np.eye(1))
+    ct = riprs.StateSpace(np.eye(2), np.ones((2, 1)), np.eye(2), np.zeros((2, 1)), 0.0)
+    with pytest.raises(riprs.InvalidParameterError, match="discrete"):
+        riprs.dlqr(ct, np.eye(2), np.eye(1))
+    # A discrete system (and python-control's unspecified dt=None or True) is accepted.
+    A_d, B_d = np.array([[1.0, 0.1], [0.0, 1.0]]), np.array([[0.0], [0.1]])
+    dsys = control.ss(A_d, B_d, np.eye(2), np.zeros((2, 1)), 0.1)
+    K, _, _ = riprs.dlqr(dsys, np.eye(2), np.eye(1))
+    K_ref, _, _ = control.dlqr(dsys, np.eye(2), np.eye(1))
+    np.testing.assert_allclose(K, K_ref, rtol=1e-10)

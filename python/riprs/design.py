@@ -12,8 +12,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from riprs import _riprs
-from riprs._riprs import KalmanDesign
-from riprs._validation import FloatArray, as_matrix, as_optional_matrix
+from riprs._riprs import InvalidParameterError, KalmanDesign
+from riprs._typing import FloatArray
 
 __all__ = ["KalmanDesign", "c2d", "dare", "dlqe", "dlqr", "kalman"]
 
@@ -46,7 +46,9 @@ def dare(
     Q : array_like, shape (n, n)
         Symmetric state weight.
     R : array_like, shape (m, m)
-        Symmetric positive definite input weight.
+        Symmetric positive semidefinite input weight. A singular ``R`` is allowed wherever
+        ``R + B^T X B`` is invertible (the doubling runs on ``R + dI`` to find a stabilizing
+        gain, Newton's method finishes on the true ``R``).
     S : array_like, shape (n, m), optional
         Cross weight; zero by default.
     E : array_like, shape (n, n), optional
@@ -71,12 +73,12 @@ def dare(
         No stabilizing solution exists (e.g. an unobservable mode of ``Q`` on the unit circle).
     """
     return _riprs.dare(
-        as_matrix(A, "A"),
-        as_matrix(B, "B"),
-        as_matrix(Q, "Q"),
-        as_matrix(R, "R"),
-        as_optional_matrix(S, "S"),
-        as_optional_matrix(E, "E"),
+        A,
+        B,
+        Q,
+        R,
+        S,
+        E,
     )
 
 
@@ -113,6 +115,13 @@ def dlqr(
         Closed-loop eigenvalues ``eig(A - B K)``.
     """
     if args and hasattr(args[0], "A") and hasattr(args[0], "B"):
+        # As python-control: a continuous-time system (dt == 0) has no discrete LQR.
+        dt = getattr(args[0], "dt", getattr(args[0], "Ts", None))
+        if dt is not None and not isinstance(dt, bool) and dt == 0:
+            raise InvalidParameterError(
+                "invalid sys: dlqr needs a discrete-time system (dt != 0), got a continuous-time "
+                "one (dt = 0); discretise it first, e.g. with riprs.c2d"
+            )
         args = (args[0].A, args[0].B, *args[1:])
     if len(args) == 5 and N is None:
         *args, N = args
@@ -120,11 +129,11 @@ def dlqr(
         raise TypeError("dlqr takes (A, B, Q, R[, N]) or (sys, Q, R[, N])")
     A, B, Q, R = args
     return _riprs.dlqr(
-        as_matrix(A, "A"),
-        as_matrix(B, "B"),
-        as_matrix(Q, "Q"),
-        as_matrix(R, "R"),
-        as_optional_matrix(N, "N"),
+        A,
+        B,
+        Q,
+        R,
+        N,
     )
 
 
@@ -153,12 +162,12 @@ def dlqe(
         Estimator poles ``eig(A - L C)``.
     """
     return _riprs.dlqe(
-        as_matrix(A, "A"),
-        as_matrix(G, "G"),
-        as_matrix(C, "C"),
-        as_matrix(QN, "QN"),
-        as_matrix(RN, "RN"),
-        as_optional_matrix(NN, "NN"),
+        A,
+        G,
+        C,
+        QN,
+        RN,
+        NN,
     )
 
 
@@ -211,13 +220,13 @@ def kalman(
         covariance), ``Z`` (posterior covariance) and ``E`` (poles of ``A - L C``).
     """
     return _riprs.kalman(
-        as_matrix(A, "A"),
-        as_matrix(G, "G"),
-        as_matrix(C, "C"),
-        as_matrix(Qn, "Qn"),
-        as_matrix(Rn, "Rn"),
-        as_optional_matrix(Nn, "Nn"),
-        as_optional_matrix(H, "H"),
+        A,
+        G,
+        C,
+        Qn,
+        Rn,
+        Nn,
+        H,
     )
 
 
@@ -226,4 +235,4 @@ def c2d(A: ArrayLike, B: ArrayLike, Ts: float) -> tuple[FloatArray, FloatArray]:
 
     Returns :math:`A_d = e^{A T_s}` and :math:`B_d = \int_0^{T_s} e^{A\tau}\,d\tau\, B`.
     """
-    return _riprs.c2d(as_matrix(A, "A"), as_matrix(B, "B"), float(Ts))
+    return _riprs.c2d(A, B, Ts)

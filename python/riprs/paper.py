@@ -37,7 +37,7 @@ from typing import Mapping
 import numpy as np
 
 from riprs import _riprs
-from riprs._validation import FloatArray
+from riprs._typing import FloatArray
 from riprs.statespace import StateSpace
 
 __all__ = [

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riprs._validation import FloatArray
+from riprs._typing import FloatArray
 
 
 @dataclass(frozen=True)

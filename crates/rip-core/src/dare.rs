@@ -26,6 +26,13 @@
 //! failure is diagnosed (an unstable mode the input cannot reach, by the PBH test, or no
 //! stabilizing solution) instead of returning a wrong matrix.
 //!
+//! `R` need only be positive semidefinite: the equation needs `BᵀXB + R` invertible, not `R`
+//! (SLICOT's and scipy's DAREX examples 3 and 4 have `R = 0` and a singular `R`). For a
+//! singular `R` the doubling runs on `R + δI` (`δ = 10⁻⁶` of the problem's scale) only to find
+//! a stabilizing gain, and Newton's method (Hewer 1971), whose steps need `BᵀX_kB + R`
+//! invertible but never `R⁻¹`, converges from it to the solution of the true equation; the
+//! same closed-loop and residual checks then apply.
+//!
 //! State dimensions up to 8 run the iteration on stack-allocated `SMatrix` types.
 
 use nalgebra::{
@@ -34,8 +41,8 @@ use nalgebra::{
 
 use crate::error::{Result, RipError};
 use crate::linalg::{
-    check_finite, check_pd, check_shape, check_square, check_symmetric, eigenvalues, symmetrize,
-    Mat,
+    check_finite, check_psd, check_shape, check_state_matrix, check_symmetric, eigenvalues,
+    symmetrize, Mat,
 };
 
 /// Relative residual above which a DARE solution is rejected.
@@ -109,7 +116,11 @@ pub fn dare(
     s: Option<&Mat>,
     e: Option<&Mat>,
 ) -> Result<DareSolution> {
-    let n = check_square("A", a)?;
+    let n = check_state_matrix(
+        "A",
+        a,
+        &[("B", b.nrows()), ("Q", q.nrows()), ("Q", q.ncols())],
+    )?;
     let m = b.ncols();
     check_shape("B", b, n, m)?;
     if m == 0 {
@@ -139,7 +150,7 @@ pub fn dare(
     }
     check_symmetric("Q", q)?;
     check_symmetric("R", r)?;
-    check_pd("R", r)?;
+    check_psd("R", &symmetrize(r))?;
     solve_dare_validated(a, b, &symmetrize(q), &symmetrize(r), s, e)
         .map_err(|f| f.into_error("(A, B)", false))
 }
@@ -164,10 +175,26 @@ pub(crate) fn solve_dare_validated(
         }
         None => (a.clone(), b.clone(), None),
     };
+    // A singular R (scipy's and SLICOT's DAREX examples 3 and 4) has no R⁻¹ for the doubling.
+    // The doubling then runs on R + δI, only to find a stabilizing gain; Newton's method,
+    // which needs BᵀXB + R invertible but never R⁻¹, finishes on the true R.
+    let r_true = r;
+    let regularised;
+    let r = match r.clone().cholesky() {
+        Some(_) => {
+            regularised = None;
+            r
+        }
+        None => {
+            let scale = r.norm().max(b_hat.norm_squared() * q.norm()).max(1e-12);
+            regularised = Some(r + Mat::identity(r.nrows(), r.nrows()) * (1e-6 * scale));
+            regularised.as_ref().expect("just set")
+        }
+    };
     let r_chol = r
         .clone()
         .cholesky()
-        .ok_or_else(|| DareFailure::NoSolution("R is not positive definite".into()))?;
+        .ok_or_else(|| DareFailure::NoSolution("R + δI is not positive definite".into()))?;
     let r_inv_bt = r_chol.solve(&b_hat.transpose());
     let g0 = symmetrize(&(&b_hat * &r_inv_bt));
     let (a0, h0) = match s {
@@ -208,11 +235,12 @@ pub(crate) fn solve_dare_validated(
             iterations,
         })
     };
-    let with_residual = |candidate: Candidate| {
+    let with_residual_for = |candidate: Candidate, r: &Mat| {
         let x = unreduce(&candidate.y, e_inv.as_ref());
         let residual = dare_relative_residual(a, b, q, r, s, e, &x);
         (candidate, x, residual)
     };
+    let with_residual = |candidate: Candidate| with_residual_for(candidate, r);
     let doubled = doubling(&h0)
         .filter(|c| c.closed_loop.radius < 1.0 - UNIT_CIRCLE_MARGIN)
         .map(with_residual);
@@ -245,6 +273,33 @@ pub(crate) fn solve_dare_validated(
                 closed_loop,
                 iterations: start.iterations + newton_steps,
             })
+        }
+    };
+    let (solution, x, relative_residual) = if regularised.is_none() {
+        (solution, x, relative_residual)
+    } else {
+        {
+            let exact = StandardDare {
+                r: r_true,
+                ..problem
+            };
+            let (y, newton_steps) = exact.newton(solution.closed_loop.gain).ok_or_else(|| {
+                diagnose(
+                    "Newton's method on the singular R did not converge to a stabilizing solution"
+                        .into(),
+                )
+            })?;
+            let closed_loop = exact.closed_loop(&y).ok_or_else(|| {
+                diagnose("BᵀXB + R is not positive definite at the solution".into())
+            })?;
+            with_residual_for(
+                Candidate {
+                    y,
+                    closed_loop,
+                    iterations: solution.iterations + newton_steps,
+                },
+                r_true,
+            )
         }
     };
     let ClosedLoop {

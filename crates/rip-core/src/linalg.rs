@@ -34,6 +34,25 @@ pub fn check_square(name: &str, m: &Mat) -> Result<usize> {
     Ok(m.nrows())
 }
 
+/// Checks that `a` is square and returns its size `n`, naming `a` (not the others) when it is
+/// the odd one out: if every dimension in `others` (each `(argument, size)` a dimension that
+/// must equal `n`) agrees on another size, `a` is the wrongly shaped argument.
+pub fn check_state_matrix(name: &str, a: &Mat, others: &[(&str, usize)]) -> Result<usize> {
+    let n = check_square(name, a)?;
+    if let Some(&(_, m)) = others.first() {
+        if m != n && others.iter().all(|&(_, d)| d == m) {
+            let names: Vec<&str> = others.iter().map(|&(o, _)| o).collect();
+            return Err(RipError::Shape {
+                name: name.to_string(),
+                expected: format!("({m}, {m}) to match {}", names.join(", ")),
+                rows: a.nrows(),
+                cols: a.ncols(),
+            });
+        }
+    }
+    Ok(n)
+}
+
 /// Fails with [`RipError::NonFinite`] if `m` holds NaN or ±Inf.
 pub fn check_finite(name: &str, m: &Mat) -> Result<()> {
     if m.iter().all(|v| v.is_finite()) {

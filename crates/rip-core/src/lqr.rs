@@ -8,7 +8,7 @@ use nalgebra::Complex;
 use crate::dare::dare;
 use crate::error::Result;
 use crate::linalg::{
-    check_finite, check_joint_psd, check_psd, check_shape, check_square, check_symmetric,
+    check_finite, check_joint_psd, check_psd, check_shape, check_state_matrix, check_symmetric,
     symmetrize, Mat,
 };
 
@@ -28,7 +28,11 @@ pub struct LqrDesign {
 /// Besides the checks of [`dare`], the joint weight `[[Q, N], [Nᵀ, R]]` must be positive
 /// semidefinite, as MATLAB requires, so that the cost is bounded below.
 pub fn dlqr(a: &Mat, b: &Mat, q: &Mat, r: &Mat, n: Option<&Mat>) -> Result<LqrDesign> {
-    let nx = check_square("A", a)?;
+    let nx = check_state_matrix(
+        "A",
+        a,
+        &[("B", b.nrows()), ("Q", q.nrows()), ("Q", q.ncols())],
+    )?;
     let nu = b.ncols();
     check_shape("B", b, nx, nu)?;
     check_shape("Q", q, nx, nx)?;

@@ -338,8 +338,14 @@ impl Lqg {
     pub fn new(k: &Mat, a: &Mat, b_u: &Mat, c: &Mat, l: &Mat, m: &Mat, ts: f64) -> Result<Self> {
         let k = gain_row(k)?;
         crate::linalg::check_sample_time("Ts", ts)?;
-        let n = a.nrows();
-        if n < NX || a.ncols() != n {
+        let others = [
+            ("B", b_u.nrows()),
+            ("C", c.ncols()),
+            ("L", l.nrows()),
+            ("M", m.nrows()),
+        ];
+        let n = crate::linalg::check_state_matrix("A", a, &others)?;
+        if n < NX {
             return Err(RipError::Shape {
                 name: "A".into(),
                 expected: "(n, n) with n >= 4".into(),

@@ -180,3 +180,42 @@ fn mpc_design_errors_name_the_cause() {
     .unwrap_err();
     assert_eq!(invalid_name(&err), "input_rate_weights", "{err}");
 }
+
+/// DAREX examples 3 and 4 (Benner, Laub, Mehrmann 1995; scipy's `test_solve_discrete_are`
+/// cases 6 and 7): `R = 0` and a singular `R`, solvable because `R + BᵀXB` is invertible.
+/// Published solutions: `X = I` and `X = Q = [[−4, −4], [−4, 7]]/11`.
+#[test]
+fn dare_with_singular_r_is_solved() {
+    let a = Mat::from_row_slice(2, 2, &[2.0, -1.0, 1.0, 0.0]);
+    let b = Mat::from_row_slice(2, 1, &[1.0, 0.0]);
+    let q = Mat::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1.0]);
+    let sol = rip_core::dare(&a, &b, &q, &Mat::zeros(1, 1), None, None).unwrap();
+    assert!((&sol.x - Mat::identity(2, 2)).amax() < 1e-12, "{}", sol.x);
+    assert!(sol.closed_loop_eigenvalues.iter().all(|z| z.norm() < 1.0));
+
+    let a = Mat::from_row_slice(2, 2, &[0.0, 1.0, 0.0, -1.0]);
+    let b = Mat::from_row_slice(2, 2, &[1.0, 0.0, 2.0, 1.0]);
+    let q = Mat::from_row_slice(2, 2, &[-4.0, -4.0, -4.0, 7.0]) * (1.0 / 11.0);
+    let r = Mat::from_row_slice(2, 2, &[9.0, 3.0, 3.0, 1.0]);
+    let sol = rip_core::dare(&a, &b, &q, &r, None, None).unwrap();
+    assert!((&sol.x - &q).amax() < 1e-12, "{}", sol.x);
+    assert!(sol.closed_loop_eigenvalues.iter().all(|z| z.norm() < 1.0));
+
+    // Singular R and no stabilizing solution: still refused, naming the pair.
+    let a = Mat::from_row_slice(2, 2, &[1.5, 0.0, 0.0, 0.5]);
+    let b = Mat::from_row_slice(2, 1, &[0.0, 1.0]);
+    let err =
+        rip_core::dare(&a, &b, &Mat::identity(2, 2), &Mat::zeros(1, 1), None, None).unwrap_err();
+    assert!(matches!(err, RipError::NotStabilizable { .. }), "{err}");
+    // An indefinite R is refused by name.
+    let err = rip_core::dare(
+        &a,
+        &b,
+        &Mat::identity(2, 2),
+        &Mat::from_element(1, 1, -1.0),
+        None,
+        None,
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains('R'), "{err}");
+}

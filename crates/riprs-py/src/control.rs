@@ -14,8 +14,8 @@ use rip_core::regulators::{DEFAULT_INPUT_LIMIT, DEFAULT_RATE_CUTOFF_HZ};
 use rip_core::{Controller, Lqg, Lqr};
 
 use crate::convert::mat_to_py;
+use crate::convert::{matrix_arg, vector_arg, Real};
 use crate::errors::IntoPyResult;
-use crate::plant::{matrix_arg, vector_arg};
 use crate::shared::Shared;
 
 type Py1<'py> = Bound<'py, PyArray1<f64>>;
@@ -137,15 +137,16 @@ impl PyLqr {
 #[pymethods]
 impl PyLqr {
     #[new]
-    #[pyo3(signature = (K, Ts=TS, *, rate_cutoff=DEFAULT_RATE_CUTOFF_HZ, u_min=-DEFAULT_INPUT_LIMIT, u_max=DEFAULT_INPUT_LIMIT))]
+    #[pyo3(signature = (K, Ts=Real(TS), *, rate_cutoff=Real(DEFAULT_RATE_CUTOFF_HZ), u_min=Real(-DEFAULT_INPUT_LIMIT), u_max=Real(DEFAULT_INPUT_LIMIT)))]
     #[allow(non_snake_case)]
     fn new(
         K: &Bound<'_, PyAny>,
-        Ts: f64,
-        rate_cutoff: f64,
-        u_min: f64,
-        u_max: f64,
+        Ts: Real,
+        rate_cutoff: Real,
+        u_min: Real,
+        u_max: Real,
     ) -> PyResult<Self> {
+        let (Ts, rate_cutoff, u_min, u_max) = (Ts.0, rate_cutoff.0, u_min.0, u_max.0);
         let k = matrix_arg(K, "K", Some(1), Some(4))?;
         let inner = Lqr::new(&k, Ts, rate_cutoff)
             .and_then(|c| c.with_input_bounds(u_min, u_max))
@@ -166,7 +167,7 @@ impl PyLqr {
     /// Ts, rate_cutoff, u_min, u_max
     ///     As for the constructor.
     #[staticmethod]
-    #[pyo3(signature = (A, B, Q, R, Ts=TS, *, rate_cutoff=DEFAULT_RATE_CUTOFF_HZ, u_min=-DEFAULT_INPUT_LIMIT, u_max=DEFAULT_INPUT_LIMIT))]
+    #[pyo3(signature = (A, B, Q, R, Ts=Real(TS), *, rate_cutoff=Real(DEFAULT_RATE_CUTOFF_HZ), u_min=Real(-DEFAULT_INPUT_LIMIT), u_max=Real(DEFAULT_INPUT_LIMIT)))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn design(
         py: Python<'_>,
@@ -174,11 +175,12 @@ impl PyLqr {
         B: &Bound<'_, PyAny>,
         Q: &Bound<'_, PyAny>,
         R: &Bound<'_, PyAny>,
-        Ts: f64,
-        rate_cutoff: f64,
-        u_min: f64,
-        u_max: f64,
+        Ts: Real,
+        rate_cutoff: Real,
+        u_min: Real,
+        u_max: Real,
     ) -> PyResult<Self> {
+        let (Ts, rate_cutoff, u_min, u_max) = (Ts.0, rate_cutoff.0, u_min.0, u_max.0);
         let a = matrix_arg(A, "A", Some(4), Some(4))?;
         let b = matrix_arg(B, "B", Some(4), Some(1))?;
         let q = matrix_arg(Q, "Q", Some(4), Some(4))?;
@@ -320,7 +322,7 @@ impl PyLqg {
 #[pymethods]
 impl PyLqg {
     #[new]
-    #[pyo3(signature = (K, A, B, C, L, M, Ts=TS, *, u_min=-DEFAULT_INPUT_LIMIT, u_max=DEFAULT_INPUT_LIMIT))]
+    #[pyo3(signature = (K, A, B, C, L, M, Ts=Real(TS), *, u_min=Real(-DEFAULT_INPUT_LIMIT), u_max=Real(DEFAULT_INPUT_LIMIT)))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
         K: &Bound<'_, PyAny>,
@@ -329,17 +331,18 @@ impl PyLqg {
         C: &Bound<'_, PyAny>,
         L: &Bound<'_, PyAny>,
         M: &Bound<'_, PyAny>,
-        Ts: f64,
-        u_min: f64,
-        u_max: f64,
+        Ts: Real,
+        u_min: Real,
+        u_max: Real,
     ) -> PyResult<Self> {
         let k = matrix_arg(K, "K", Some(1), Some(4))?;
+        let (Ts, u_min, u_max) = (Ts.0, u_min.0, u_max.0);
+        // Shapes are checked by the core, which names the argument that disagrees with the rest.
         let a = matrix_arg(A, "A", None, None)?;
-        let n = a.nrows();
-        let b = matrix_arg(B, "B", Some(n), Some(1))?;
-        let c = matrix_arg(C, "C", Some(2), Some(n))?;
-        let l = matrix_arg(L, "L", Some(n), Some(2))?;
-        let m = matrix_arg(M, "M", Some(n), Some(2))?;
+        let b = matrix_arg(B, "B", None, None)?;
+        let c = matrix_arg(C, "C", None, None)?;
+        let l = matrix_arg(L, "L", None, None)?;
+        let m = matrix_arg(M, "M", None, None)?;
         let inner = Lqg::new(&k, &a, &b, &c, &l, &m, Ts)
             .and_then(|c| c.with_input_bounds(u_min, u_max))
             .py()?;

@@ -1,9 +1,9 @@
 //! Bindings for the design routines: `dare`, `dlqr`, `dlqe`, `kalman`, `c2d`.
 
-use numpy::{PyArray1, PyArray2, PyReadonlyArray2};
+use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
 
-use crate::convert::{eig_to_py, mat_to_py, to_mat, to_mat_opt};
+use crate::convert::{eig_to_py, mat_to_py, matrix_arg, matrix_opt, Real};
 use crate::errors::IntoPyResult;
 
 type Py2<'py> = Bound<'py, PyArray2<f64>>;
@@ -13,19 +13,19 @@ type PyEig<'py> = Bound<'py, PyArray1<numpy::Complex64>>;
 #[pyo3(signature = (a, b, q, r, s=None, e=None))]
 fn dare<'py>(
     py: Python<'py>,
-    a: PyReadonlyArray2<'py, f64>,
-    b: PyReadonlyArray2<'py, f64>,
-    q: PyReadonlyArray2<'py, f64>,
-    r: PyReadonlyArray2<'py, f64>,
-    s: Option<PyReadonlyArray2<'py, f64>>,
-    e: Option<PyReadonlyArray2<'py, f64>>,
+    a: &Bound<'py, PyAny>,
+    b: &Bound<'py, PyAny>,
+    q: &Bound<'py, PyAny>,
+    r: &Bound<'py, PyAny>,
+    s: Option<&Bound<'py, PyAny>>,
+    e: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<(Py2<'py>, PyEig<'py>, Py2<'py>)> {
-    let (s, e) = (to_mat_opt(&s), to_mat_opt(&e));
+    let (s, e) = (matrix_opt(s, "S")?, matrix_opt(e, "E")?);
     let sol = rip_core::dare(
-        &to_mat(&a),
-        &to_mat(&b),
-        &to_mat(&q),
-        &to_mat(&r),
+        &matrix_arg(a, "A", None, None)?,
+        &matrix_arg(b, "B", None, None)?,
+        &matrix_arg(q, "Q", None, None)?,
+        &matrix_arg(r, "R", None, None)?,
         s.as_ref(),
         e.as_ref(),
     )
@@ -41,18 +41,18 @@ fn dare<'py>(
 #[pyo3(signature = (a, b, q, r, n=None))]
 fn dlqr<'py>(
     py: Python<'py>,
-    a: PyReadonlyArray2<'py, f64>,
-    b: PyReadonlyArray2<'py, f64>,
-    q: PyReadonlyArray2<'py, f64>,
-    r: PyReadonlyArray2<'py, f64>,
-    n: Option<PyReadonlyArray2<'py, f64>>,
+    a: &Bound<'py, PyAny>,
+    b: &Bound<'py, PyAny>,
+    q: &Bound<'py, PyAny>,
+    r: &Bound<'py, PyAny>,
+    n: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<(Py2<'py>, Py2<'py>, PyEig<'py>)> {
-    let n = to_mat_opt(&n);
+    let n = matrix_opt(n, "N")?;
     let d = rip_core::dlqr(
-        &to_mat(&a),
-        &to_mat(&b),
-        &to_mat(&q),
-        &to_mat(&r),
+        &matrix_arg(a, "A", None, None)?,
+        &matrix_arg(b, "B", None, None)?,
+        &matrix_arg(q, "Q", None, None)?,
+        &matrix_arg(r, "R", None, None)?,
         n.as_ref(),
     )
     .py()?;
@@ -67,20 +67,20 @@ fn dlqr<'py>(
 #[pyo3(signature = (a, g, c, qn, rn, nn=None))]
 fn dlqe<'py>(
     py: Python<'py>,
-    a: PyReadonlyArray2<'py, f64>,
-    g: PyReadonlyArray2<'py, f64>,
-    c: PyReadonlyArray2<'py, f64>,
-    qn: PyReadonlyArray2<'py, f64>,
-    rn: PyReadonlyArray2<'py, f64>,
-    nn: Option<PyReadonlyArray2<'py, f64>>,
+    a: &Bound<'py, PyAny>,
+    g: &Bound<'py, PyAny>,
+    c: &Bound<'py, PyAny>,
+    qn: &Bound<'py, PyAny>,
+    rn: &Bound<'py, PyAny>,
+    nn: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<(Py2<'py>, Py2<'py>, PyEig<'py>)> {
-    let nn = to_mat_opt(&nn);
+    let nn = matrix_opt(nn, "NN")?;
     let (l, p, e) = rip_core::dlqe(
-        &to_mat(&a),
-        &to_mat(&g),
-        &to_mat(&c),
-        &to_mat(&qn),
-        &to_mat(&rn),
+        &matrix_arg(a, "A", None, None)?,
+        &matrix_arg(g, "G", None, None)?,
+        &matrix_arg(c, "C", None, None)?,
+        &matrix_arg(qn, "QN", None, None)?,
+        &matrix_arg(rn, "RN", None, None)?,
         nn.as_ref(),
     )
     .py()?;
@@ -133,21 +133,21 @@ impl PyKalmanDesign {
 #[pyo3(signature = (a, g, c, qn, rn, nn=None, h=None))]
 #[allow(clippy::too_many_arguments)]
 fn kalman<'py>(
-    a: PyReadonlyArray2<'py, f64>,
-    g: PyReadonlyArray2<'py, f64>,
-    c: PyReadonlyArray2<'py, f64>,
-    qn: PyReadonlyArray2<'py, f64>,
-    rn: PyReadonlyArray2<'py, f64>,
-    nn: Option<PyReadonlyArray2<'py, f64>>,
-    h: Option<PyReadonlyArray2<'py, f64>>,
+    a: &Bound<'py, PyAny>,
+    g: &Bound<'py, PyAny>,
+    c: &Bound<'py, PyAny>,
+    qn: &Bound<'py, PyAny>,
+    rn: &Bound<'py, PyAny>,
+    nn: Option<&Bound<'py, PyAny>>,
+    h: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<PyKalmanDesign> {
-    let (nn, h) = (to_mat_opt(&nn), to_mat_opt(&h));
+    let (nn, h) = (matrix_opt(nn, "Nn")?, matrix_opt(h, "H")?);
     let inner = rip_core::kalman(
-        &to_mat(&a),
-        &to_mat(&g),
-        &to_mat(&c),
-        &to_mat(&qn),
-        &to_mat(&rn),
+        &matrix_arg(a, "A", None, None)?,
+        &matrix_arg(g, "G", None, None)?,
+        &matrix_arg(c, "C", None, None)?,
+        &matrix_arg(qn, "Qn", None, None)?,
+        &matrix_arg(rn, "Rn", None, None)?,
         nn.as_ref(),
         h.as_ref(),
     )
@@ -158,11 +158,17 @@ fn kalman<'py>(
 #[pyfunction]
 fn c2d<'py>(
     py: Python<'py>,
-    a: PyReadonlyArray2<'py, f64>,
-    b: PyReadonlyArray2<'py, f64>,
-    ts: f64,
+    a: &Bound<'py, PyAny>,
+    b: &Bound<'py, PyAny>,
+    ts: Real,
 ) -> PyResult<(Py2<'py>, Py2<'py>)> {
-    let (ad, bd) = rip_core::c2d(&to_mat(&a), &to_mat(&b), ts).py()?;
+    let ts = ts.0;
+    let (ad, bd) = rip_core::c2d(
+        &matrix_arg(a, "A", None, None)?,
+        &matrix_arg(b, "B", None, None)?,
+        ts,
+    )
+    .py()?;
     Ok((mat_to_py(py, &ad), mat_to_py(py, &bd)))
 }
 

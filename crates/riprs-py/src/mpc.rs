@@ -8,8 +8,8 @@ use rip_core::mpc::{paper, Mpc, MpcSettings, MpcSolution, OutputDisturbance, QpS
 use rip_core::{Controller, Mat, RipError};
 
 use crate::convert::mat_to_py;
+use crate::convert::{matrix_arg, real_array, Count, Real};
 use crate::errors::{to_py, IntoPyResult, ShapeError};
-use crate::plant::{matrix_arg, real_array};
 use crate::shared::Shared;
 
 type Py1<'py> = Bound<'py, PyArray1<f64>>;
@@ -36,12 +36,20 @@ fn numpy_shape(shape: &[usize]) -> String {
 }
 
 /// A scalar or 1-D array-like as a vector; `None` gives an empty vector (the core's default).
+/// An explicitly empty sequence is an error: it is not a request for the default.
 fn vec_arg(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Vec<f64>> {
     match obj {
         Some(o) if !o.is_none() => {
             let (shape, values) = real_array(o, name)?;
             if shape.len() > 1 {
                 return Err(shape_err(name, "a 1-D array", &shape));
+            }
+            if values.is_empty() {
+                return Err(shape_err(
+                    name,
+                    "one entry per input or output (None for the default)",
+                    &shape,
+                ));
             }
             Ok(values)
         }
@@ -103,7 +111,9 @@ fn bounds_arg(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Vec<(f64, 
         ))
     };
     let mut out = Vec::new();
+    let mut given = 0usize;
     for item in obj.try_iter().map_err(|_| type_err())? {
+        given += 1;
         let item = item?;
         if item.is_none() {
             out.push((f64::NEG_INFINITY, f64::INFINITY));
@@ -121,6 +131,13 @@ fn bounds_arg(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Vec<(f64, 
         out.push((
             pair[0].unwrap_or(f64::NEG_INFINITY),
             pair[1].unwrap_or(f64::INFINITY),
+        ));
+    }
+    if given == 0 {
+        return Err(shape_err(
+            name,
+            "one item per input or output (None for no bounds)",
+            &[0],
         ));
     }
     Ok(out)
@@ -316,12 +333,12 @@ pub struct PyMpc {
 impl PyMpc {
     #[new]
     #[pyo3(signature = (
-        A, B, C, Ts, *, prediction_horizon=rip_core::mpc::DEFAULT_PREDICTION_HORIZON as i64,
-        control_horizon=rip_core::mpc::DEFAULT_CONTROL_HORIZON as i64, output_weights=None,
+        A, B, C, Ts, *, prediction_horizon=Count::of(rip_core::mpc::DEFAULT_PREDICTION_HORIZON as i64),
+        control_horizon=Count::of(rip_core::mpc::DEFAULT_CONTROL_HORIZON as i64), output_weights=None,
         input_rate_weights=None, input_weights=None, input_target=None, input_bounds=None,
-        output_bounds=None, ecr_weight=rip_core::mpc::DEFAULT_ECR_WEIGHT, input_scales=None,
+        output_bounds=None, ecr_weight=Real(rip_core::mpc::DEFAULT_ECR_WEIGHT), input_scales=None,
         output_scales=None, output_disturbance=None, measurement_noise=None, solver="clarabel",
-        max_iterations=rip_core::mpc::DEFAULT_MAX_ITERATIONS as i64
+        max_iterations=Count::of(rip_core::mpc::DEFAULT_MAX_ITERATIONS as i64)
     ))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
@@ -329,29 +346,30 @@ impl PyMpc {
         A: &Bound<'_, PyAny>,
         B: &Bound<'_, PyAny>,
         C: &Bound<'_, PyAny>,
-        Ts: f64,
-        prediction_horizon: i64,
-        control_horizon: i64,
+        Ts: Real,
+        prediction_horizon: Count,
+        control_horizon: Count,
         output_weights: Option<&Bound<'_, PyAny>>,
         input_rate_weights: Option<&Bound<'_, PyAny>>,
         input_weights: Option<&Bound<'_, PyAny>>,
         input_target: Option<&Bound<'_, PyAny>>,
         input_bounds: Option<&Bound<'_, PyAny>>,
         output_bounds: Option<&Bound<'_, PyAny>>,
-        ecr_weight: f64,
+        ecr_weight: Real,
         input_scales: Option<&Bound<'_, PyAny>>,
         output_scales: Option<&Bound<'_, PyAny>>,
         output_disturbance: Option<&Bound<'_, PyAny>>,
         measurement_noise: Option<&Bound<'_, PyAny>>,
         solver: &str,
-        max_iterations: i64,
+        max_iterations: Count,
     ) -> PyResult<Self> {
+        let (Ts, ecr_weight) = (Ts.0, ecr_weight.0);
         let a = matrix_arg(A, "A", None, None)?;
         let b = matrix_arg(B, "B", None, None)?;
         let c = matrix_arg(C, "C", None, None)?;
         let settings = MpcSettings {
-            prediction_horizon: count_arg(prediction_horizon, "prediction_horizon")?,
-            control_horizon: count_arg(control_horizon, "control_horizon")?,
+            prediction_horizon: prediction_horizon.get("prediction_horizon")?,
+            control_horizon: control_horizon.get("control_horizon")?,
             output_weights: vec_arg(output_weights, "output_weights")?,
             input_weights: vec_arg(input_weights, "input_weights")?,
             input_rate_weights: vec_arg(input_rate_weights, "input_rate_weights")?,
@@ -367,7 +385,7 @@ impl PyMpc {
                 None => None,
             },
             solver: QpSolver::from_name(solver).py()?,
-            max_iterations: count_arg(max_iterations, "max_iterations")?,
+            max_iterations: max_iterations.get("max_iterations")?,
         };
         let inner = py
             .allow_threads(|| Mpc::new(&a, &b, &c, Ts, settings))
@@ -610,12 +628,4 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyMpc>()?;
     m.add_class::<PyMpcSolution>()?;
     Ok(())
-}
-
-/// A count from Python: negative values get the same named error as zero, not an
-/// `OverflowError` from the conversion to `usize`.
-fn count_arg(value: i64, name: &str) -> PyResult<usize> {
-    usize::try_from(value)
-        .map_err(|_| RipError::invalid(name, format!("must be a positive integer, got {value}")))
-        .py()
 }

@@ -2,7 +2,7 @@
 //! array-like coercion the controller and simulator bindings share.
 
 use numpy::ndarray::{Array1, Array2};
-use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLikeDyn};
+use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -10,7 +10,7 @@ use rip_core::fit::{fit_params, FitOptions};
 use rip_core::plant::PARAM_NAMES;
 use rip_core::{FurutaParams, Mat, Plant, RipError, State};
 
-use crate::convert::mat_to_py;
+use crate::convert::{array_like, mat_to_py, matrix_arg, vector_arg, Count, Real};
 use crate::errors::{to_py, IntoPyResult};
 
 type Py1<'py> = Bound<'py, PyArray1<f64>>;
@@ -37,90 +37,6 @@ fn param_err(err: RipError) -> PyErr {
         }),
         other => to_py(other),
     }
-}
-
-/// Any array-like of reals as `(shape, row-major values)`; the error names `name`.
-fn array_like(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<usize>, Vec<f64>)> {
-    let (shape, values) = real_array(obj, name)?;
-    if values.iter().any(|v| !v.is_finite()) {
-        return Err(to_py(RipError::NonFinite { name: name.into() }));
-    }
-    Ok((shape, values))
-}
-
-/// The shape and the row-major values of an array-like of real numbers. A complex array is a
-/// `TypeError`: numpy's cast to float64 would drop its imaginary part without a word.
-pub(crate) fn real_array(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<usize>, Vec<f64>)> {
-    let complex = obj
-        .getattr("dtype")
-        .and_then(|dtype| dtype.getattr("kind"))
-        .and_then(|kind| kind.extract::<String>())
-        .is_ok_and(|kind| kind == "c");
-    if complex {
-        return Err(PyTypeError::new_err(format!(
-            "{name} must be an array of real numbers, got a complex array"
-        )));
-    }
-    let arr: PyArrayLikeDyn<'_, f64, AllowTypeChange> = obj.extract().map_err(|e| {
-        PyTypeError::new_err(format!("{name} must be an array of real numbers: {e}"))
-    })?;
-    let view = arr.as_array();
-    Ok((view.shape().to_vec(), view.iter().copied().collect()))
-}
-
-/// A matrix of the given shape from an array-like (a 1-D input counts as one row, a scalar as
-/// 1×1, as in python-control); `None` for a dimension accepts any size.
-pub(crate) fn matrix_arg(
-    obj: &Bound<'_, PyAny>,
-    name: &str,
-    rows: Option<usize>,
-    cols: Option<usize>,
-) -> PyResult<Mat> {
-    let (shape, values) = array_like(obj, name)?;
-    let (r, c) = match shape.as_slice() {
-        [] => (1, 1),
-        [n] => (1, *n),
-        [r, c] => (*r, *c),
-        _ => {
-            return Err(to_py(RipError::Shape {
-                name: name.into(),
-                expected: "a 2-D array".into(),
-                rows: shape[0],
-                cols: shape[1..].iter().product(),
-            }))
-        }
-    };
-    if rows.is_some_and(|n| n != r) || cols.is_some_and(|n| n != c) {
-        let show = |d: Option<usize>| d.map_or("n".to_string(), |v| v.to_string());
-        return Err(to_py(RipError::Shape {
-            name: name.into(),
-            expected: format!("({}, {})", show(rows), show(cols)),
-            rows: r,
-            cols: c,
-        }));
-    }
-    Ok(Mat::from_row_slice(r, c, &values))
-}
-
-/// A vector of exactly `len` finite entries from a scalar or 1-D array-like.
-pub(crate) fn vector_arg<const N: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; N]> {
-    let (shape, values) = array_like(obj, name)?;
-    if shape.len() > 1 || values.len() != N {
-        let (rows, cols) = match shape.as_slice() {
-            [] => (1, 1),
-            [n] => (*n, 1),
-            s => (s[0], s[1..].iter().product()),
-        };
-        return Err(to_py(RipError::Shape {
-            name: name.into(),
-            expected: format!("({N},)"),
-            rows,
-            cols,
-        }));
-    }
-    let mut out = [0.0; N];
-    out.copy_from_slice(&values);
-    Ok(out)
 }
 
 fn finite_scalar(v: f64, name: &str) -> PyResult<f64> {
@@ -191,8 +107,9 @@ fn params_from_kwargs(
                 )));
             };
             values[i] = value
-                .extract::<f64>()
-                .map_err(|_| PyTypeError::new_err(format!("{key} must be a real number")))?;
+                .extract::<Real>()
+                .map_err(|_| PyTypeError::new_err(format!("{key} must be a real number")))?
+                .0;
         }
     }
     let params = FurutaParams::from_array(values);
@@ -275,17 +192,19 @@ impl PyFurutaParams {
     ///     ``Ad``, ``Bd`` of the fit, ``max_weighted_residual``, ``max_abs_residual``,
     ///     ``rms_weighted_residual``, ``iterations``, ``converged``.
     #[staticmethod]
-    #[pyo3(signature = (Ad, Bd, Ts, *, base=None, weights=None, max_iter=200))]
+    #[pyo3(signature = (Ad, Bd, Ts, *, base=None, weights=None, max_iter=Count::of(200)))]
+    #[pyo3(text_signature = "(Ad, Bd, Ts, *, base=None, weights=None, max_iter=200)")]
     #[allow(non_snake_case)]
     fn fit<'py>(
         py: Python<'py>,
         Ad: &Bound<'py, PyAny>,
         Bd: &Bound<'py, PyAny>,
-        Ts: f64,
+        Ts: Real,
         base: Option<PyFurutaParams>,
         weights: Option<&Bound<'py, PyAny>>,
-        max_iter: usize,
+        max_iter: Count,
     ) -> PyResult<(Self, Bound<'py, PyDict>)> {
+        let (Ts, max_iter) = (Ts.0, max_iter.get("max_iter")?);
         let ad = matrix_arg(Ad, "Ad", Some(4), Some(4))?;
         let bd = match matrix_arg(Bd, "Bd", Some(4), Some(1)) {
             Ok(b) => b,
@@ -456,16 +375,17 @@ impl PyPlant {
     /// Returns
     /// -------
     /// ndarray, shape (4,)
-    #[pyo3(signature = (x, u=0.0, torque=0.0))]
+    #[pyo3(signature = (x, u=Real(0.0), torque=Real(0.0)))]
+    #[pyo3(text_signature = "(self, x, u=0.0, torque=0.0)")]
     fn derivative<'py>(
         &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
-        u: f64,
-        torque: f64,
+        u: Real,
+        torque: Real,
     ) -> PyResult<Py1<'py>> {
         let x = state_arg(Some(x), "x")?;
-        let (u, torque) = (finite_scalar(u, "u")?, finite_scalar(torque, "torque")?);
+        let (u, torque) = (finite_scalar(u.0, "u")?, finite_scalar(torque.0, "torque")?);
         Ok(state_to_py(py, &self.inner.derivative(&x, u, torque)))
     }
 
@@ -484,18 +404,23 @@ impl PyPlant {
     ///     ``dt`` not positive and finite, or ``substeps`` out of range.
     /// DivergedError
     ///     The state overflowed (a step or an input far too large for the dynamics).
-    #[pyo3(signature = (x, u, dt, substeps=1, torque=0.0))]
+    #[pyo3(signature = (x, u, dt, substeps=Count::of(1), torque=Real(0.0)))]
+    #[pyo3(text_signature = "(self, x, u, dt, substeps=1, torque=0.0)")]
     fn step<'py>(
         &self,
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
-        u: f64,
-        dt: f64,
-        substeps: usize,
-        torque: f64,
+        u: Real,
+        dt: Real,
+        substeps: Count,
+        torque: Real,
     ) -> PyResult<Py1<'py>> {
         let x = state_arg(Some(x), "x")?;
-        let x = self.inner.step_checked(&x, u, torque, dt, substeps).py()?;
+        let substeps = substeps.get("substeps")?;
+        let x = self
+            .inner
+            .step_checked(&x, u.0, torque.0, dt.0, substeps)
+            .py()?;
         Ok(state_to_py(py, &x))
     }
 
@@ -522,15 +447,17 @@ impl PyPlant {
     ///     RK4 steps in all (``N * substeps``).
     /// DivergedError
     ///     The state overflowed (a step or an input far too large for the dynamics).
-    #[pyo3(signature = (x0, u, dt, substeps=1))]
+    #[pyo3(signature = (x0, u, dt, substeps=Count::of(1)))]
+    #[pyo3(text_signature = "(self, x0, u, dt, substeps=1)")]
     fn integrate<'py>(
         &self,
         py: Python<'py>,
         x0: &Bound<'py, PyAny>,
         u: &Bound<'py, PyAny>,
-        dt: f64,
-        substeps: usize,
+        dt: Real,
+        substeps: Count,
     ) -> PyResult<Py2<'py>> {
+        let (dt, substeps) = (dt.0, substeps.get("substeps")?);
         let x0 = state_arg(Some(x0), "x0")?;
         let (shape, u) = array_like(u, "u")?;
         if shape.len() > 1 {
@@ -557,15 +484,16 @@ impl PyPlant {
 
     /// Analytic Jacobians of ``f`` at ``(x, u)``: ``(A, B)`` with ``A = df/dx`` (4x4) and
     /// ``B = df/du`` (4x1). ``x`` defaults to upright at rest.
-    #[pyo3(signature = (x=None, u=0.0))]
+    #[pyo3(signature = (x=None, u=Real(0.0)))]
+    #[pyo3(text_signature = "(self, x=None, u=0.0)")]
     fn linearize<'py>(
         &self,
         py: Python<'py>,
         x: Option<&Bound<'py, PyAny>>,
-        u: f64,
+        u: Real,
     ) -> PyResult<(Py2<'py>, Py2<'py>)> {
         let x = state_arg(x, "x")?;
-        let (a, b) = self.inner.linearize(&x, finite_scalar(u, "u")?);
+        let (a, b) = self.inner.linearize(&x, finite_scalar(u.0, "u")?);
         Ok((
             mat_to_py(py, &Mat::from_fn(4, 4, |i, j| a[(i, j)])),
             mat_to_py(py, &Mat::from_fn(4, 1, |i, _| b[i])),
@@ -573,19 +501,20 @@ impl PyPlant {
     }
 
     /// Zero-order-hold discretisation (period ``Ts``) of :meth:`linearize`: ``(Ad, Bd)``.
-    #[pyo3(signature = (Ts, x=None, u=0.0))]
+    #[pyo3(signature = (Ts, x=None, u=Real(0.0)))]
+    #[pyo3(text_signature = "(self, Ts, x=None, u=0.0)")]
     #[allow(non_snake_case)]
     fn linearize_discrete<'py>(
         &self,
         py: Python<'py>,
-        Ts: f64,
+        Ts: Real,
         x: Option<&Bound<'py, PyAny>>,
-        u: f64,
+        u: Real,
     ) -> PyResult<(Py2<'py>, Py2<'py>)> {
         let x = state_arg(x, "x")?;
         let (ad, bd) = self
             .inner
-            .linearize_discrete(&x, finite_scalar(u, "u")?, Ts)
+            .linearize_discrete(&x, finite_scalar(u.0, "u")?, Ts.0)
             .py()?;
         Ok((mat_to_py(py, &ad), mat_to_py(py, &bd)))
     }

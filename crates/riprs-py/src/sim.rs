@@ -17,9 +17,10 @@ use rip_core::sim::{Reference, SensorModel, StepDisturbance};
 use rip_core::{Controller, Plant, RipError, SimConfig, SimResult};
 
 use crate::control::{controller_factory, extract_controller};
+use crate::convert::{matrix_arg, pair_arg, vector_arg, Count, Real};
 use crate::errors::{to_py, IntoPyResult};
 use crate::interrupt::interruptible;
-use crate::plant::{matrix_arg, vector_arg, PyPlant, PY_NAMES};
+use crate::plant::{PyPlant, PY_NAMES};
 
 fn item<'py>(d: &Bound<'py, PyDict>, key: &str) -> PyResult<Bound<'py, PyAny>> {
     d.get_item(key)?
@@ -36,6 +37,16 @@ fn scalar<T: for<'a> FromPyObject<'a>>(d: &Bound<'_, PyDict>, key: &str) -> PyRe
         .map_err(|e| PyTypeError::new_err(format!("{key}: {e}")))
 }
 
+/// A real-number setting (the coercion policy of `crate::convert`).
+fn real(d: &Bound<'_, PyDict>, key: &str) -> PyResult<f64> {
+    scalar::<Real>(d, key).map(|r| r.0)
+}
+
+/// A count setting, named in the error when negative or huge.
+fn count(d: &Bound<'_, PyDict>, key: &str) -> PyResult<u64> {
+    scalar::<Count>(d, key)?.get_u64(key)
+}
+
 /// Builds the core configuration from the wrapper's dict.
 fn config_from_dict(d: &Bound<'_, PyDict>) -> PyResult<SimConfig> {
     let reference = match opt_item(d, "reference_sequence")? {
@@ -44,46 +55,49 @@ fn config_from_dict(d: &Bound<'_, PyDict>) -> PyResult<SimConfig> {
             Reference::Sequence((0..m.nrows()).map(|i| [m[(i, 0)], m[(i, 1)]]).collect())
         }
         None => Reference::Step {
-            time: scalar(d, "reference_time")?,
+            time: real(d, "reference_time")?,
             value: vector_arg::<2>(&item(d, "reference_value")?, "reference")?,
         },
     };
     let counts_per_rev = match opt_item(d, "encoder_counts")? {
-        Some(c) => Some(vector_arg::<2>(&c, "encoder_counts")?),
+        Some(c) => Some(pair_arg(&c, "encoder_counts")?),
         None => None,
     };
     let output_disturbance = match opt_item(d, "output_disturbance")? {
         Some(v) => {
-            let (time, value): (f64, Bound<'_, PyAny>) = v.extract()?;
+            let (time, value): (Real, Bound<'_, PyAny>) = v.extract()?;
             Some(StepDisturbance {
-                time,
-                value: vector_arg::<2>(&value, "output_disturbance")?,
+                time: time.0,
+                value: pair_arg(&value, "output_disturbance")?,
             })
         }
         None => None,
     };
     let torque_disturbance = match opt_item(d, "torque_disturbance")? {
         Some(v) => {
-            let (time, value): (f64, f64) = v.extract()?;
-            Some(StepDisturbance { time, value })
+            let (time, value): (Real, Real) = v.extract()?;
+            Some(StepDisturbance {
+                time: time.0,
+                value: value.0,
+            })
         }
         None => None,
     };
     Ok(SimConfig {
-        duration: scalar(d, "duration")?,
-        ts: scalar(d, "Ts")?,
-        substeps: scalar(d, "substeps")?,
+        duration: real(d, "duration")?,
+        ts: real(d, "Ts")?,
+        substeps: count(d, "substeps")? as usize,
         x0: vector_arg::<4>(&item(d, "x0")?, "x0")?,
         reference,
         sensor: SensorModel {
             counts_per_rev,
-            noise_std: vector_arg::<2>(&item(d, "noise_std")?, "noise_std")?,
+            noise_std: pair_arg(&item(d, "noise_std")?, "noise_std")?,
         },
         output_disturbance,
         torque_disturbance,
-        u_limit: scalar(d, "u_limit")?,
-        fall_limit: scalar(d, "fall_limit")?,
-        seed: scalar(d, "seed")?,
+        u_limit: real(d, "u_limit")?,
+        fall_limit: real(d, "fall_limit")?,
+        seed: count(d, "seed")?,
     })
 }
 
