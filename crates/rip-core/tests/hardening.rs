@@ -219,3 +219,9 @@ fn dare_with_singular_r_is_solved() {
     .unwrap_err();
     assert!(err.to_string().contains('R'), "{err}");
 }
+
+#[test]
+fn qp_iteration_limit_is_bounded() {
+    let err = paper_mpc_with(|s| s.max_iterations = usize::MAX).unwrap_err();
+    assert_eq!(invalid_name(&err), "max_iterations", "{err}");
+}

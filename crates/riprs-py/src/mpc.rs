@@ -316,7 +316,7 @@ impl PyMpcSolution {
 /// solver : {"clarabel", "active_set"}
 ///     QP backend: Clarabel (interior point) or the dense active-set method with warm start.
 /// max_iterations : int
-///     Iteration limit of the QP solver.
+///     Iteration limit of the QP solver, at most 10 000.
 ///
 /// Raises
 /// ------

@@ -13,7 +13,8 @@ use rip_core::{
 use crate::control::{PyLqg, PyLqr};
 use crate::errors::IntoPyResult;
 use crate::mpc::PyMpc;
-use crate::plant::{vector_arg, PyFurutaParams, PyPlant};
+use crate::convert::vector_arg;
+use crate::plant::{PyFurutaParams, PyPlant};
 use crate::shared::Shared;
 
 /// The balance controllers a supervisor can hold, as one cloneable type.

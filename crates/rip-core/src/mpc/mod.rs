@@ -102,7 +102,7 @@ use settings::{check_condensed_size, fill_bounds, fill_default};
 pub use settings::{
     MpcSettings, MpcSettingsBuilder, OutputDisturbance, DEFAULT_CONTROL_HORIZON,
     DEFAULT_ECR_WEIGHT, DEFAULT_MAX_ITERATIONS, DEFAULT_PREDICTION_HORIZON, MAX_CONDENSED_ENTRIES,
-    MAX_PREDICTION_HORIZON,
+    MAX_PREDICTION_HORIZON, MAX_QP_ITERATIONS,
 };
 
 /// The result of one MPC solve.

@@ -10,6 +10,11 @@ use super::QpSolver;
 /// horizon, while keeping the memory of the condensed problem bounded.
 pub const MAX_PREDICTION_HORIZON: usize = 10_000;
 
+/// Largest accepted QP iteration limit: Clarabel converges in tens of iterations and the
+/// active-set method in at most a few hundred working-set changes on these problems; the bound
+/// keeps one step, which runs without the GIL and cannot be interrupted, short.
+pub const MAX_QP_ITERATIONS: usize = 10_000;
+
 /// Largest accepted number of entries (`f64`) in one condensed matrix (80 MB), estimated as
 /// `(P·(ny + nu) + 2·m·nu + 1) · (m·nu + 1 + nx + nu)`: the prediction, constraint and
 /// linear-term matrices all fit in that many rows and columns.
@@ -72,7 +77,7 @@ pub struct MpcSettings {
     pub measurement_noise: Option<Mat>,
     /// QP solver.
     pub solver: QpSolver,
-    /// Iteration limit of the QP solver.
+    /// Iteration limit of the QP solver, at most [`MAX_QP_ITERATIONS`].
     pub max_iterations: usize,
 }
 
@@ -154,8 +159,14 @@ impl MpcSettings {
                 format!("must be positive and finite, got {}", self.ecr_weight),
             ));
         }
-        if self.max_iterations == 0 {
-            return Err(RipError::invalid("max_iterations", "must be at least 1"));
+        if self.max_iterations == 0 || self.max_iterations > MAX_QP_ITERATIONS {
+            return Err(RipError::invalid(
+                "max_iterations",
+                format!(
+                    "must be between 1 and {MAX_QP_ITERATIONS}, got {}",
+                    self.max_iterations
+                ),
+            ));
         }
         if let Some(od) = &self.output_disturbance {
             let nd = check_square("A_od", &od.a)?;
