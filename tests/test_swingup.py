@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -111,3 +112,16 @@ def test_batch_runs_each_get_their_own_supervisor() -> None:
     )
     assert [r.catch_time is not None for r in runs] == [True, True]
     assert runs[0].catch_time != runs[1].catch_time or not np.array_equal(runs[0].y, runs[1].y)
+
+
+def test_the_spec_has_a_swing_up_section(tmp_path: Path) -> None:
+    path = tmp_path / "rig.toml"
+    path.write_text('[swing_up]\nmax_time = 9.0\non_fall = "stop"\n')
+    spec = riprs.load_config(path)
+    assert spec.swing_up["max_time"] == 9.0 and spec.swing_up["on_fall"] == "stop"
+    assert spec.swing_up == {**riprs.SwingUp(riprs.Lqr.paper()).settings, **spec.swing_up}
+    sup = riprs.SwingUp(riprs.Lqr.paper(), **spec.swing_up)
+    assert sup.settings == spec.swing_up
+    path.write_text("[swing_up]\nmax_time = -1.0\n")
+    with pytest.raises(riprs.ConfigError, match=r"swing_up\.max_time"):
+        riprs.load_config(path)

@@ -417,6 +417,12 @@ impl PySpec {
         }
     }
 
+    /// ``[swing_up]`` as a dict of every setting (the keywords of :class:`riprs.SwingUp`).
+    #[getter]
+    fn swing_up<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        crate::swingup::settings_dict(py, &self.inner.swing_up)
+    }
+
     fn __repr__(&self) -> String {
         format!("Spec.from_toml('''\n{}''')", self.inner.to_toml())
     }

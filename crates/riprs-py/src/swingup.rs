@@ -201,7 +201,10 @@ fn apply_setting(s: &mut SwingUpSettings, key: &str, value: &Bound<'_, PyAny>) -
     Ok(())
 }
 
-fn settings_dict<'py>(py: Python<'py>, s: &SwingUpSettings) -> PyResult<Bound<'py, PyDict>> {
+pub(crate) fn settings_dict<'py>(
+    py: Python<'py>,
+    s: &SwingUpSettings,
+) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     for (key, value) in [
         ("max_voltage", s.max_voltage),

@@ -10,6 +10,7 @@
 //! [kalman]       # the estimator LQG and MPC share                       (KalmanSpec)
 //! [mpc]          # section 3's MPC                                       (MpcSpec)
 //! [monte_carlo]  # runs over seeds and parameter perturbations           (MonteCarloSpec)
+//! [swing_up]     # swing-up from rest and catch                          (SwingUpSettings)
 //! ```
 //!
 //! Every key is optional; each default is declared once, in its section's `Default`, and is
@@ -103,6 +104,10 @@ pub struct Spec {
     pub mpc: MpcSpec,
     /// `[monte_carlo]`
     pub monte_carlo: MonteCarloSpec,
+    /// `[swing_up]`: the swing-up and its supervisor
+    /// ([`SwingUpSettings`](crate::swingup::SwingUpSettings), whose `Default` declares each
+    /// default).
+    pub swing_up: crate::swingup::SwingUpSettings,
 }
 
 impl Default for Spec {
@@ -116,6 +121,7 @@ impl Default for Spec {
             kalman: KalmanSpec::default(),
             mpc: MpcSpec::default(),
             monte_carlo: MonteCarloSpec::default(),
+            swing_up: crate::swingup::SwingUpSettings::default(),
         }
     }
 }

@@ -740,5 +740,10 @@ pub(super) fn validate_sections(spec: &super::Spec) -> Result<(), SpecError> {
     spec.lqr.validate()?;
     spec.kalman.validate()?;
     spec.mpc.validate()?;
-    spec.monte_carlo.validate()
+    spec.monte_carlo.validate()?;
+    spec.swing_up.validate().map_err(|e| match e {
+        // The key is already `swing_up.<key>`.
+        crate::error::RipError::InvalidParameter { name, reason } => bad(name, reason),
+        other => bad("swing_up", other.to_string()),
+    })
 }

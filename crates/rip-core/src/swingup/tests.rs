@@ -326,3 +326,22 @@ fn wrap_angle_lands_in_the_half_open_interval() {
         assert!((wrap_angle(a) - w).abs() < 1e-12, "{a}: {}", wrap_angle(a));
     }
 }
+
+#[test]
+fn the_swing_up_section_of_the_spec() {
+    let spec = crate::Spec::parse("[swing_up]\nmax_time = 9.0\non_fall = \"stop\"\n").unwrap();
+    assert_eq!(spec.swing_up.max_time, 9.0);
+    assert_eq!(spec.swing_up.on_fall, OnFall::Stop);
+    assert_eq!(
+        spec.swing_up.arm_limit,
+        SwingUpSettings::default().arm_limit
+    );
+    assert_eq!(
+        crate::Spec::parse(&spec.to_toml()).unwrap(),
+        spec.resolved()
+    );
+    let err = crate::Spec::parse("[swing_up]\nmax_time = -1.0\n").unwrap_err();
+    assert_eq!(err.key, "swing_up.max_time", "{err}");
+    let err = crate::Spec::parse("[swing_up]\ncatch_speed = 1.0\n").unwrap_err();
+    assert_eq!(err.key, "swing_up.catch_speed", "{err}");
+}
