@@ -104,6 +104,60 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     return 0
 
 
+REFERENCE_HEADER = """# Configuration reference
+
+One TOML file drives `riprs compare --config FILE`, `riprs.load_config(FILE)`,
+`rip-rt run --config FILE` and `rip-rt emulate --config FILE`. Its sections are defined once,
+in `rip-core` (`crates/rip-core/src/spec/`), with every default and every check; each key is
+documented there (`cargo doc -p rip-core`, module `spec`). A key that does not exist, or a
+value of the wrong type or range, is an error naming the file and the key path, e.g.
+`cfg.toml: mpc.prediction_horizon: must be in 1..=10000, got 0`, from `riprs` and `rip-rt`
+alike.
+
+Every key is optional. Below is the complete file with every default (the paper's settings),
+as `riprs config` prints it; `riprs config FILE` prints a file resolved the same way.
+`rip-rt` adds its own `[loop]`, `[device]` and `[safety]` sections
+([rip-rt.md](rip-rt.md)); `rip-rt config FILE` prints them after these.
+
+- `controllers`: what `riprs compare` runs.
+- `[plant]`: `preset` (`paper` or `qube_servo2`) and the physical parameters
+  `mr, Lr, Jr, mp, Lp, Jp, Dr, Dp, Rm, kt, km` (SI units), each overriding the preset, so an
+  identified rig is a file; the controllers are designed on this plant's linearisation at the
+  loop period (the unchanged `paper` preset keeps the paper's recovered model). `substeps`,
+  `initial_state`, `fall_limit` set up a simulated run.
+- `[sensor]`: encoder counts per revolution and white-noise standard deviation (rad).
+- `[reference]`: the arm step (rad), its time (s) and the run length (s).
+- `[lqr]`: `Q` (diagonal) and `R` of eq. (13), shared by LQR and LQG; LQR's rate-filter
+  cut-off (Hz, `inf` for none).
+- `[kalman]`: the one Kalman filter LQG and MPC share: the output-disturbance gain of eq. (1)
+  and the measurement-noise diagonal of eq. (2).
+- `[mpc]`: section 3's MPC with Python's `riprs.Mpc` names; `input_bounds` (V) also clamps LQR
+  and LQG; `output_bounds` per output, `[-inf, inf]` for none.
+- `[monte_carlo]`: runs over noise seeds and uniform perturbations of the named parameters.
+
+```toml
+"""
+
+
+def reference() -> str:
+    """The configuration reference (``docs/configuration.md``), generated from the spec."""
+    from riprs.config import Spec
+
+    return REFERENCE_HEADER + Spec().to_toml() + "```\n"
+
+
+def cmd_config(args: argparse.Namespace) -> int:
+    """Print the resolved configuration (every default filled in) as TOML."""
+    from riprs.config import Spec, load_config
+
+    if args.reference:
+        print(reference(), end="")
+        return 0
+    spec = load_config(args.file) if args.file else Spec()
+    print(spec.to_toml(), end="")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="riprs",
@@ -134,6 +188,17 @@ def build_parser() -> argparse.ArgumentParser:
     comp.add_argument("--no-plots", action="store_true", help="skip the figures")
     comp.add_argument("--quiet", action="store_true", help="no progress bars")
     comp.set_defaults(func=cmd_compare)
+    conf = sub.add_parser(
+        "config",
+        help="print a configuration file resolved, every default filled in",
+        description="Checks FILE as riprs compare does (designs included) and prints it as "
+        "TOML with every default filled in; without FILE, the defaults.",
+    )
+    conf.add_argument("file", nargs="?", metavar="FILE.toml", help="configuration file")
+    conf.add_argument(
+        "--reference", action="store_true", help="print docs/configuration.md instead"
+    )
+    conf.set_defaults(func=cmd_config)
     camp = sub.add_parser(
         "campaign",
         help="many runs over a grid of plant errors and settings (robustness maps)",

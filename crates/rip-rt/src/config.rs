@@ -1,40 +1,28 @@
-//! The TOML configuration of `rip-rt run`. Every key is optional; the defaults are the paper's
-//! settings (Ts = 10 ms, |u| ≤ 12 V, LQR weights Q = diag(25, 0, 50, 0), R = 0.1, MPC P = 50,
-//! m = 3) and the encoders of the reference rig (2048 counts per revolution each).
+//! The configuration of `rip-rt run`, `rip-rt emulate` and `rip-rt config`: the experiment
+//! file of `rip_core::spec` (`[plant]`, `[sensor]`, `[reference]`, `[lqr]`, `[kalman]`,
+//! `[mpc]`, ... read, defaulted and checked by rip-core, exactly as `riprs compare` reads
+//! them) plus rip-rt's own sections `[loop]`, `[device]` and `[safety]`, defined here. Every
+//! key is optional; the defaults are the paper's settings (Ts = 10 ms, |u| ≤ 12 V) and the
+//! encoders of the reference rig (2048 counts per revolution each).
 //!
-//! Unknown keys are rejected, and every value is checked; errors name the key, e.g.
-//! `safety.pendulum_limit: must be in (0, π], got 4`.
+//! Unknown keys are rejected, and every value is checked; errors name the file and the key,
+//! e.g. `cfg.toml: safety.pendulum_limit: must be in (0, 1.5] rad, got 4`.
 
 use std::path::Path;
 
-use serde::Deserialize;
+use rip_core::spec::{from_value, Spec, SpecError};
+use serde::{Deserialize, Serialize};
 
-/// A configuration problem, naming the key (or the file).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ConfigError {
-    /// The offending key (`section.key`) or file.
-    pub key: String,
-    /// What is wrong.
-    pub reason: String,
-}
-
-impl std::fmt::Display for ConfigError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}: {}", self.key, self.reason)
-    }
-}
-
-impl std::error::Error for ConfigError {}
+/// A configuration problem, naming the file and the key: the experiment file's one error type,
+/// so `rip-rt` and `riprs` report a bad key alike.
+pub type ConfigError = SpecError;
 
 fn err(key: &str, reason: impl Into<String>) -> ConfigError {
-    ConfigError {
-        key: key.into(),
-        reason: reason.into(),
-    }
+    SpecError::new(key, reason)
 }
 
 /// Where the pendulum encoder reads zero.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, Default)]
 #[serde(rename_all = "lowercase")]
 pub enum PendulumZero {
     /// Zero counts with the pendulum hanging down (an encoder reset at power-up); the loop
@@ -46,7 +34,7 @@ pub enum PendulumZero {
 }
 
 /// `[loop]`: timing of the control loop and its overrun rules.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LoopConfig {
     /// Control period (ms), in [`PERIOD_MS`]. The controllers are designed for this sample
@@ -97,7 +85,7 @@ impl Default for LoopConfig {
 }
 
 /// `[device]`: how encoder counts map to angles.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DeviceConfig {
     /// Arm encoder counts per revolution (after quadrature decoding), in [`COUNTS_PER_REV`].
@@ -138,7 +126,7 @@ pub const MAX_ARM_LIMIT: f64 = std::f64::consts::TAU;
 pub const MAX_WAIT_UPRIGHT_S: f64 = 600.0;
 
 /// `[safety]`: limits that stop the motor.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SafetyConfig {
     /// Every command is clamped to ±this (V), in (0, [`MAX_VOLTAGE_LIMIT`]].
@@ -167,101 +155,10 @@ impl Default for SafetyConfig {
     }
 }
 
-/// `[reference]`: the arm-angle reference, a step as in the paper's experiment (0 → 1 rad).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+/// rip-rt's own sections of the file.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize, Default)]
 #[serde(deny_unknown_fields, default)]
-pub struct ReferenceConfig {
-    /// Step height (rad).
-    pub arm_step: f64,
-    /// Time of the step after balancing starts (s).
-    pub step_time: f64,
-}
-
-impl Default for ReferenceConfig {
-    fn default() -> Self {
-        Self {
-            arm_step: 1.0,
-            step_time: 1.0,
-        }
-    }
-}
-
-/// `[lqr]`: weights shared by LQR and LQG (eq. (13)).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct LqrConfig {
-    /// Diagonal of Q over (θ, θ̇, α, α̇).
-    pub q: [f64; 4],
-    /// R.
-    pub r: f64,
-    /// Cut-off (Hz) of the LQR's filtered-difference rate estimate (LQR only).
-    pub rate_cutoff_hz: f64,
-}
-
-impl Default for LqrConfig {
-    fn default() -> Self {
-        Self {
-            q: [25.0, 0.0, 50.0, 0.0],
-            r: 0.1,
-            rate_cutoff_hz: 20.0,
-        }
-    }
-}
-
-/// `[mpc]`: the MPC of section 3.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct MpcConfig {
-    /// Prediction horizon P.
-    pub horizon: usize,
-    /// Control horizon m.
-    pub control_horizon: usize,
-    /// Output weights (arm, pendulum).
-    pub output_weights: [f64; 2],
-    /// Weight on input moves Δu.
-    pub rate_weight: f64,
-    /// Soft bound on the pendulum angle (rad); the paper's ±π/6.
-    pub soft_bound: f64,
-    /// Penalty ρ_ε on the slack of the soft bound.
-    pub slack_weight: f64,
-    /// Which output carries the soft bound: `"pendulum"` or `"arm"` (the paper's "α" is
-    /// ambiguous; the pendulum is the angle whose excursion the bound is meant to limit).
-    pub bounded_output: BoundedOutput,
-    /// QP solver: `"active_set"` (dense, warm-started, ~2 µs per step; the default in the loop)
-    /// or `"clarabel"` (interior point, the reference, ~200 µs).
-    pub solver: String,
-}
-
-/// The output that carries the MPC's soft bound.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "lowercase")]
-pub enum BoundedOutput {
-    /// The pendulum angle.
-    #[default]
-    Pendulum,
-    /// The arm angle.
-    Arm,
-}
-
-impl Default for MpcConfig {
-    fn default() -> Self {
-        Self {
-            horizon: 50,
-            control_horizon: 3,
-            output_weights: [25.0, 50.0],
-            rate_weight: 1.0,
-            soft_bound: std::f64::consts::PI / 6.0,
-            slack_weight: 100.0,
-            bounded_output: BoundedOutput::Pendulum,
-            solver: "active_set".into(),
-        }
-    }
-}
-
-/// The whole file.
-#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
-#[serde(deny_unknown_fields, default)]
-pub struct Config {
+pub struct RuntimeSections {
     /// `[loop]`
     #[serde(rename = "loop")]
     pub loop_: LoopConfig,
@@ -269,12 +166,20 @@ pub struct Config {
     pub device: DeviceConfig,
     /// `[safety]`
     pub safety: SafetyConfig,
-    /// `[reference]`
-    pub reference: ReferenceConfig,
-    /// `[lqr]`
-    pub lqr: LqrConfig,
-    /// `[mpc]`
-    pub mpc: MpcConfig,
+}
+
+/// The whole file.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Config {
+    /// `[loop]`
+    pub loop_: LoopConfig,
+    /// `[device]`
+    pub device: DeviceConfig,
+    /// `[safety]`
+    pub safety: SafetyConfig,
+    /// The experiment sections, rip-core's (`[plant]`, `[reference]`, `[lqr]`, `[kalman]`,
+    /// `[mpc]`, ...).
+    pub spec: Spec,
 }
 
 fn positive(key: &str, v: f64) -> Result<(), ConfigError> {
@@ -282,14 +187,6 @@ fn positive(key: &str, v: f64) -> Result<(), ConfigError> {
         Ok(())
     } else {
         Err(err(key, format!("must be a positive number, got {v}")))
-    }
-}
-
-fn nonnegative(key: &str, v: f64) -> Result<(), ConfigError> {
-    if v.is_finite() && v >= 0.0 {
-        Ok(())
-    } else {
-        Err(err(key, format!("must be a non-negative number, got {v}")))
     }
 }
 
@@ -332,26 +229,38 @@ fn sign(key: &str, v: f64) -> Result<(), ConfigError> {
 impl Config {
     /// Parses and validates TOML text.
     pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
-        let cfg: Config = toml::from_str(text).map_err(|e| {
-            // toml's message names the key or table and the position.
-            err("config", e.to_string().trim_end().to_string())
-        })?;
+        let (spec, runtime) = Spec::parse_with_runtime(text)?;
+        let own: RuntimeSections = from_value(toml::Value::Table(runtime), "")?;
+        let cfg = Config {
+            loop_: own.loop_,
+            device: own.device,
+            safety: own.safety,
+            spec,
+        };
         cfg.validate()?;
         Ok(cfg)
     }
 
-    /// Reads, parses and validates a file.
+    /// Reads, parses and validates a file; errors name it.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| err(&format!("--config {}", path.display()), e.to_string()))?;
-        Self::from_toml(&text).map_err(|e| ConfigError {
-            key: if e.key == "config" {
-                format!("--config {}", path.display())
-            } else {
-                e.key
-            },
-            reason: e.reason,
-        })
+        let bytes =
+            std::fs::read(path).map_err(|e| err("", format!("cannot read: {e}")).in_file(path))?;
+        let text = std::str::from_utf8(&bytes)
+            .map_err(|e| err("", format!("invalid TOML: not UTF-8 text ({e})")).in_file(path))?;
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        Self::from_toml(text).map_err(|e| e.in_file(path))
+    }
+
+    /// The resolved configuration as TOML, every default filled in: the experiment sections
+    /// exactly as `riprs config` prints them, then `[loop]`, `[device]` and `[safety]`.
+    pub fn to_toml(&self) -> String {
+        let own = RuntimeSections {
+            loop_: self.loop_.clone(),
+            device: self.device.clone(),
+            safety: self.safety.clone(),
+        };
+        let own = toml::to_string(&own).expect("every setting has a TOML form");
+        format!("{}\n{}", self.spec.to_toml(), own)
     }
 
     /// Checks every value; the error names the first bad key.
@@ -360,50 +269,14 @@ impl Config {
         self.validate_device()?;
         self.validate_safety()?;
         let s = &self.safety;
-        let r = &self.reference;
-        if !r.arm_step.is_finite() || r.arm_step.abs() >= s.arm_limit {
+        let r = &self.spec.reference;
+        if r.arm_step.abs() >= s.arm_limit {
             return Err(err(
                 "reference.arm_step",
                 format!(
-                    "must be finite and inside safety.arm_limit ({}), got {}",
+                    "must be inside safety.arm_limit ({}), got {}",
                     s.arm_limit, r.arm_step
                 ),
-            ));
-        }
-        nonnegative("reference.step_time", r.step_time)?;
-        for (i, &q) in self.lqr.q.iter().enumerate() {
-            nonnegative(&format!("lqr.q[{i}]"), q)?;
-        }
-        positive("lqr.r", self.lqr.r)?;
-        if self.lqr.rate_cutoff_hz.is_nan() || self.lqr.rate_cutoff_hz <= 0.0 {
-            return Err(err(
-                "lqr.rate_cutoff_hz",
-                format!("must be positive (or inf), got {}", self.lqr.rate_cutoff_hz),
-            ));
-        }
-        let m = &self.mpc;
-        if m.horizon == 0 {
-            return Err(err("mpc.horizon", "must be at least 1"));
-        }
-        if m.control_horizon == 0 || m.control_horizon > m.horizon {
-            return Err(err(
-                "mpc.control_horizon",
-                format!(
-                    "must be in 1..=mpc.horizon ({}), got {}",
-                    m.horizon, m.control_horizon
-                ),
-            ));
-        }
-        for (i, &w) in m.output_weights.iter().enumerate() {
-            nonnegative(&format!("mpc.output_weights[{i}]"), w)?;
-        }
-        nonnegative("mpc.rate_weight", m.rate_weight)?;
-        positive("mpc.soft_bound", m.soft_bound)?;
-        positive("mpc.slack_weight", m.slack_weight)?;
-        if !matches!(m.solver.as_str(), "clarabel" | "active_set") {
-            return Err(err(
-                "mpc.solver",
-                format!("must be \"clarabel\" or \"active_set\", got {:?}", m.solver),
             ));
         }
         Ok(())
@@ -541,7 +414,7 @@ mod tests {
         let cfg = Config::from_toml("").unwrap();
         assert_eq!(cfg, Config::default());
         assert_eq!(cfg.period_ns(), 10_000_000);
-        assert_eq!(cfg.lqr.q, [25.0, 0.0, 50.0, 0.0]);
+        assert_eq!(cfg.spec.lqr.Q, [25.0, 0.0, 50.0, 0.0]);
         assert_eq!(cfg.safety.voltage_limit, 12.0);
     }
 
@@ -549,14 +422,14 @@ mod tests {
     fn values_are_read() {
         let cfg = Config::from_toml(
             "[loop]\nperiod_ms = 5\nreply_timeout_ms = 2\n[device]\npendulum_zero = \"up\"\n\
-             arm_sign = -1\n[mpc]\nhorizon = 20\n",
+             arm_sign = -1\n[mpc]\nprediction_horizon = 20\n",
         )
         .unwrap();
         assert_eq!(cfg.period_ns(), 5_000_000);
         assert_eq!(cfg.device.pendulum_zero, PendulumZero::Up);
         assert_eq!(cfg.device.arm_sign, -1.0);
-        assert_eq!(cfg.mpc.horizon, 20);
-        assert_eq!(cfg.mpc.control_horizon, 3);
+        assert_eq!(cfg.spec.mpc.prediction_horizon, 20);
+        assert_eq!(cfg.spec.mpc.control_horizon, 3);
     }
 
     #[test]
@@ -614,17 +487,41 @@ mod tests {
                 "loop.period_ms",
             ),
             ("[device]\narm_sign = 2\n", "device.arm_sign"),
-            ("[lqr]\nr = 0\n", "lqr.r"),
-            ("[lqr]\nq = [1, 2, -3, 4]\n", "lqr.q[2]"),
+            ("[lqr]\nR = 0\n", "lqr.R"),
+            ("[lqr]\nQ = [1, 2, -3, 4]\n", "lqr.Q[2]"),
             ("[mpc]\ncontrol_horizon = 60\n", "mpc.control_horizon"),
             ("[reference]\narm_step = 5\n", "reference.arm_step"),
             ("[mpc]\nsolver = \"osqp\"\n", "mpc.solver"),
-            ("[lqr]\nrate_cutoff_hz = -1\n", "lqr.rate_cutoff_hz"),
+            ("[lqr]\nrate_cutoff = -1\n", "lqr.rate_cutoff"),
+            // The old names of this file are gone.
+            ("[mpc]\nhorizon = 20\n", "mpc.horizon"),
+            ("[lqr]\nq = [1, 2, 3, 4]\n", "lqr.q"),
         ] {
             let e = Config::from_toml(text).unwrap_err();
             assert_eq!(e.key, key, "{text}: {e}");
         }
         let e = Config::from_toml("[loop]\nperiod_ms = \"fast\"\n").unwrap_err();
-        assert!(e.to_string().contains("period_ms"), "{e}");
+        assert_eq!(e.key, "loop.period_ms", "{e}");
+    }
+
+    #[test]
+    fn experiment_sections_get_riprs_messages_and_round_trip() {
+        // The same text, the same message as rip-core's (and so riprs's) reader gives.
+        for text in [
+            "[mpc]\nprediction_horizon = 0\n",
+            "[plant]\npreset = \"qube\"\n",
+            "[kalman]\nnoise = 1\n",
+        ] {
+            let ours = Config::from_toml(text).unwrap_err();
+            let core = Spec::parse(text).unwrap_err();
+            assert_eq!(ours, core, "{text}");
+        }
+        let text =
+            "[loop]\nperiod_ms = 5\nreply_timeout_ms = 2\n[plant]\npreset = \"qube_servo2\"\n";
+        let cfg = Config::from_toml(text).unwrap();
+        let back = Config::from_toml(&cfg.to_toml()).unwrap();
+        assert_eq!(back.to_toml(), cfg.to_toml());
+        assert_eq!(back.loop_, cfg.loop_);
+        assert!(cfg.to_toml().starts_with(&cfg.spec.to_toml()));
     }
 }

@@ -60,6 +60,41 @@ enum Command {
     Run(RunArgs),
     /// Emulate the device on a new pseudo-terminal (prints its path).
     Emulate(EmulateArgs),
+    /// Print the resolved configuration (every default filled in) as TOML; its experiment
+    /// sections are exactly what `riprs config` prints for the same file.
+    Config(ConfigArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct ConfigArgs {
+    /// The configuration file (default: the built-in defaults).
+    #[arg(value_name = "FILE.toml")]
+    file: Option<PathBuf>,
+}
+
+fn cmd_config(args: ConfigArgs) -> ExitCode {
+    let cfg = match &args.file {
+        Some(path) => Config::load(path),
+        None => Ok(Config::default()),
+    };
+    // The designs are part of the check, as in `rip-rt run` and `riprs config`.
+    let checked = cfg.and_then(|cfg| {
+        cfg.spec
+            .design(cfg.period_s())
+            .and_then(|d| d.controllers().map(|_| ()))
+            .map_err(|e| match &args.file {
+                Some(path) => e.in_file(path),
+                None => e,
+            })?;
+        Ok(cfg)
+    });
+    match checked {
+        Ok(cfg) => {
+            print!("{}", cfg.to_toml());
+            ExitCode::SUCCESS
+        }
+        Err(e) => fail(exit_code::USAGE, e),
+    }
 }
 
 fn positive_seconds(s: &str) -> Result<f64, String> {
@@ -120,10 +155,10 @@ fn baud(s: &str) -> Result<u32, String> {
 }
 
 fn model(s: &str) -> Result<Model, String> {
-    match s {
-        "paper" => Ok(Model::Paper),
-        "qube" | "qube-servo2" => Ok(Model::QubeServo2),
-        _ => Err(format!("must be paper or qube, got {s:?}")),
+    match rip_core::spec::Preset::from_name(s) {
+        Some(rip_core::spec::Preset::Paper) => Ok(Model::Paper),
+        Some(rip_core::spec::Preset::QubeServo2) => Ok(Model::QubeServo2),
+        None => Err(format!("must be paper or qube_servo2, got {s:?}")),
     }
 }
 
@@ -163,9 +198,13 @@ struct EmulateArgs {
     /// Also make a symbolic link at PATH to the device (removed on exit).
     #[arg(long, value_name = "PATH")]
     link: Option<PathBuf>,
-    /// Simulated pendulum: paper (fitted to the paper's model) or qube (QUBE-Servo 2).
-    #[arg(long, value_name = "NAME", default_value = "paper", value_parser = model)]
+    /// Simulated pendulum: paper (fitted to the paper's model) or qube_servo2 (QUBE-Servo 2).
+    #[arg(long, value_name = "NAME", default_value = "paper", value_parser = model, conflicts_with = "config")]
     model: Model,
+    /// Simulate the `[plant]` of this configuration file (preset and parameters), the same
+    /// file `rip-rt run --config` and `riprs compare --config` read.
+    #[arg(long, value_name = "FILE.toml")]
+    config: Option<PathBuf>,
     /// Gaussian noise on each encoder reading, standard deviation in counts.
     #[arg(long, allow_negative_numbers = true, value_name = "COUNTS", default_value_t = 0.0, value_parser = nonnegative)]
     noise: f64,
@@ -362,8 +401,15 @@ fn make_link(link: &Path, target: &Path) -> std::io::Result<()> {
 }
 
 fn cmd_emulate(args: EmulateArgs) -> ExitCode {
+    let model = match &args.config {
+        Some(path) => match Config::load(path) {
+            Ok(c) => Model::Params(c.spec.plant.params()),
+            Err(e) => return fail(exit_code::USAGE, e),
+        },
+        None => args.model,
+    };
     let cfg = EmulatorConfig {
-        model: args.model,
+        model,
         sim_rate_hz: args.sim_rate,
         initial_arm: args.initial_arm,
         initial_pendulum: args.initial_pendulum,
@@ -428,5 +474,6 @@ fn main() -> ExitCode {
     match cli.command {
         Command::Run(args) => cmd_run(args),
         Command::Emulate(args) => cmd_emulate(args),
+        Command::Config(args) => cmd_config(args),
     }
 }

@@ -1,15 +1,17 @@
 //! The emulator's physics: rip-core's nonlinear Furuta pendulum, integrated with RK4.
 
-use rip_core::plant::{Plant, State};
+use rip_core::plant::{FurutaParams, Plant, State};
 
 /// Which physical parameter set the emulator simulates.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum Model {
     /// Parameters fitted to the paper's linear model (the controllers' design model).
     #[default]
     Paper,
     /// The Quanser QUBE-Servo 2 published parameters (a model mismatch for the paper's gains).
     QubeServo2,
+    /// The parameters of a configuration file's `[plant]` section.
+    Params(FurutaParams),
 }
 
 /// A simulated pendulum: the nonlinear plant and its state.
@@ -25,6 +27,8 @@ impl PlantSim {
         let plant = match model {
             Model::Paper => Plant::paper(),
             Model::QubeServo2 => Plant::qube_servo2(),
+            // Checked when the file was read (rip_core::spec).
+            Model::Params(p) => Plant::new(p).expect("validated [plant] parameters"),
         };
         Self {
             plant,

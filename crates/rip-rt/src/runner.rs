@@ -91,7 +91,7 @@ pub const PROBE_TIME_NS: u64 = 1_000_000_000;
 pub fn probe(core: &mut LoopCore, cfg: &Config) -> Result<Probe, StopReason> {
     let budget_ns = cfg.period_ns() as f64 - cfg.loop_.reply_timeout_ms * 1e6;
     let wobble = 0.5 * cfg.safety.start_tolerance;
-    let target = [cfg.reference.arm_step, 0.0];
+    let target = [cfg.spec.reference.arm_step, 0.0];
     let mut times = [0u64; PROBE_STEPS];
     let mut n = 0;
     let start = now_ns();

@@ -518,7 +518,7 @@ fn a_controller_too_slow_for_the_period_is_refused_before_enabling() {
     let cfg = scratch("slow.toml");
     std::fs::write(
         &cfg,
-        "[mpc]\nhorizon = 200\ncontrol_horizon = 200\nsolver = \"clarabel\"\n",
+        "[mpc]\nprediction_horizon = 200\ncontrol_horizon = 200\nsolver = \"clarabel\"\n",
     )
     .unwrap();
     let emu = Emulator::start("slow", &[]);

@@ -178,6 +178,7 @@ pub struct PyMonteCarloSpec {
 #[pyclass(name = "Spec", module = "riprs._riprs", frozen, eq)]
 #[derive(Clone, PartialEq)]
 pub struct PySpec {
+    // Always resolved (every plant parameter written out), so equal files compare equal.
     pub(crate) inner: Spec,
 }
 
@@ -194,7 +195,7 @@ impl PySpec {
     #[new]
     fn new() -> Self {
         Self {
-            inner: Spec::default(),
+            inner: Spec::default().resolved(),
         }
     }
 
@@ -212,7 +213,7 @@ impl PySpec {
     #[staticmethod]
     fn from_toml(text: &str) -> PyResult<Self> {
         Ok(Self {
-            inner: Spec::parse(text).map_err(config_err)?,
+            inner: Spec::parse(text).map_err(config_err)?.resolved(),
         })
     }
 
@@ -223,7 +224,7 @@ impl PySpec {
             unreachable!("a dict converts to a table")
         };
         Ok(Self {
-            inner: Spec::from_table(table).map_err(config_err)?,
+            inner: Spec::from_table(table).map_err(config_err)?.resolved(),
         })
     }
 
@@ -240,7 +241,7 @@ impl PySpec {
             .expect("a printed spec parses");
         merge(&mut base, changes);
         Ok(Self {
-            inner: Spec::from_table(base).map_err(config_err)?,
+            inner: Spec::from_table(base).map_err(config_err)?.resolved(),
         })
     }
 
@@ -449,7 +450,9 @@ impl PySpec {
 #[pyfunction]
 fn load_config(py: Python<'_>, path: PathBuf) -> PyResult<PySpec> {
     let spec = Spec::load(&path).map_err(config_err)?;
-    let out = PySpec { inner: spec };
+    let out = PySpec {
+        inner: spec.resolved(),
+    };
     out.check(py, rip_core::paper::TS)
         .map_err(|e| ConfigError::new_err(format!("{}: {}", path.display(), e.value(py))))?;
     Ok(out)

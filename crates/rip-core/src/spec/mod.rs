@@ -133,7 +133,14 @@ pub fn from_value<T: serde::de::DeserializeOwned>(
 ) -> Result<T, SpecError> {
     serde_path_to_error::deserialize(value).map_err(|e| {
         let mut key = e.path().to_string();
-        let reason = e.inner().to_string().trim_end().to_string();
+        let full = e.inner().to_string();
+        // The TOML deserialiser appends "in `section`"; the key path already says where.
+        let reason = full
+            .split("\nin `")
+            .next()
+            .unwrap_or(&full)
+            .trim_end()
+            .to_string();
         // An unknown key fails before the path reaches it; name it all the same.
         if let Some(name) = reason
             .strip_prefix("unknown field `")

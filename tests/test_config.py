@@ -1,0 +1,96 @@
+"""One experiment file for riprs and rip-rt: the same resolved sections, the same errors."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import pytest
+
+import riprs
+from riprs.cli import main, reference
+
+ROOT = Path(__file__).resolve().parents[1]
+RIP_RT = ROOT / "target" / "release" / "rip-rt"
+
+RIG = """
+controllers = ["MPC", "LQR"]
+[plant]
+preset = "qube_servo2"
+Lp = 0.13
+[lqr]
+R = 0.2
+[kalman]
+disturbance_gain = 0.02
+[mpc]
+prediction_horizon = 30
+solver = "clarabel"
+[loop]
+period_ms = 10
+[safety]
+voltage_limit = 10
+"""
+
+
+@pytest.fixture(scope="module")
+def rip_rt() -> Path:
+    if not RIP_RT.exists():
+        subprocess.run(
+            ["cargo", "build", "--release", "-p", "rip-rt"], cwd=ROOT, check=True, timeout=1800
+        )
+    return RIP_RT
+
+
+def _riprs_config(capsys, *args: str) -> tuple[int, str, str]:
+    code = main(["config", *args])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_both_tools_print_the_same_experiment_sections(tmp_path, capsys, rip_rt):
+    path = tmp_path / "rig.toml"
+    path.write_text(RIG)
+    code, ours, _ = _riprs_config(capsys, str(path))
+    assert code == 0
+    rt = subprocess.run([str(rip_rt), "config", str(path)], capture_output=True, text=True)
+    assert rt.returncode == 0, rt.stderr
+    # rip-rt prints the experiment sections first, then its own.
+    assert rt.stdout.startswith(ours)
+    rest = rt.stdout[len(ours) :]
+    assert "[loop]" in rest and "[device]" in rest and "[safety]" in rest
+    assert "[loop]" not in ours
+    # Resolved: every default is there, and the given values.
+    for needle in ('preset = "qube_servo2"', "Lp = 0.13", "Rm = 8.4", "R = 0.2", "ecr_weight"):
+        assert needle in ours, needle
+    # And it reads back to the same spec.
+    assert riprs.Spec.from_toml(ours) == riprs.load_config(path)
+
+
+@pytest.mark.parametrize(
+    ("text", "key"),
+    [
+        ("[mpc]\nprediction_horizn = 10\n", "mpc.prediction_horizn"),
+        ("[mpc]\nprediction_horizon = 0\n", "mpc.prediction_horizon"),
+        ("[plant]\npreset = 'qube'\n", "plant.preset"),
+        ("[sensor]\nnoise_std = [0.001, -1.0]\n", "sensor.noise_std[1]"),
+        ("[lqr]\nR = 1e-300\n", "lqr.R"),
+        ("[plant]\nsubsteps = 100001\n", "plant.substeps"),
+    ],
+)
+def test_both_tools_give_the_same_message(tmp_path, capsys, rip_rt, text, key):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    code, _, err = _riprs_config(capsys, str(path))
+    assert code == 1
+    rt = subprocess.run([str(rip_rt), "config", str(path)], capture_output=True, text=True)
+    assert rt.returncode != 0
+    ours = err.strip().removeprefix("riprs: error: ")
+    theirs = rt.stderr.strip().removeprefix("rip-rt: error: ")
+    assert ours == theirs
+    assert ours.startswith(f"{path}: {key}:"), ours
+
+
+def test_configuration_reference_is_generated_from_the_spec():
+    # docs/configuration.md is `riprs config --reference`; regenerate it after changing the
+    # spec.
+    assert (ROOT / "docs" / "configuration.md").read_text() == reference()
