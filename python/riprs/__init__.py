@@ -17,7 +17,6 @@ from riprs._riprs import (
     NotSymmetricError,
     RiprsError,
     ShapeError,
-    SingularMatrixError,
     __version__,
 )
 from riprs.config import ConfigError, Spec, load_config
@@ -54,7 +53,6 @@ __all__ = [
     "RtLog",
     "ShapeError",
     "SimResult",
-    "SingularMatrixError",
     "Spec",
     "StateSpace",
     "SwingUp",

@@ -28,9 +28,6 @@ pub enum RipError {
     /// A matrix that must be positive semidefinite is not.
     #[error("{name} must be positive semidefinite (smallest eigenvalue {min_eigenvalue:.3e})")]
     NotPositiveSemidefinite { name: String, min_eigenvalue: f64 },
-    /// A matrix that must be invertible is singular.
-    #[error("{name} is singular")]
-    Singular { name: String },
     /// The pair (A, B) has an unstable mode that the input cannot reach.
     #[error("{pair} is not stabilizable: mode {re:.6}{im:+.6}i (|λ| = {modulus:.6}) cannot be reached from the input")]
     NotStabilizable {

@@ -43,12 +43,6 @@ create_exception!(
 );
 create_exception!(
     _riprs,
-    SingularMatrixError,
-    RiprsError,
-    "A matrix that must be invertible is singular."
-);
-create_exception!(
-    _riprs,
     NotStabilizableError,
     RiprsError,
     "(A, B) has an unstable mode the input cannot reach."
@@ -87,7 +81,6 @@ pub fn to_py(err: RipError) -> PyErr {
         RipError::NotSymmetric { .. } => NotSymmetricError::new_err(msg),
         RipError::NotPositiveDefinite { .. } => NotPositiveDefiniteError::new_err(msg),
         RipError::NotPositiveSemidefinite { .. } => NotPositiveSemidefiniteError::new_err(msg),
-        RipError::Singular { .. } => SingularMatrixError::new_err(msg),
         RipError::NotStabilizable { .. } => NotStabilizableError::new_err(msg),
         RipError::NotDetectable { .. } => NotDetectableError::new_err(msg),
         RipError::NoStabilizingSolution { .. } => NoStabilizingSolutionError::new_err(msg),
@@ -123,7 +116,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
         "NotPositiveSemidefiniteError",
         py.get_type::<NotPositiveSemidefiniteError>(),
     )?;
-    m.add("SingularMatrixError", py.get_type::<SingularMatrixError>())?;
     m.add(
         "NotStabilizableError",
         py.get_type::<NotStabilizableError>(),

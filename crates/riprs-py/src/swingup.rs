@@ -11,9 +11,9 @@ use rip_core::{
 };
 
 use crate::control::{PyLqg, PyLqr};
+use crate::convert::vector_arg;
 use crate::errors::IntoPyResult;
 use crate::mpc::PyMpc;
-use crate::convert::vector_arg;
 use crate::plant::{PyFurutaParams, PyPlant};
 use crate::shared::Shared;
 

@@ -74,8 +74,7 @@ fn lqr_key(e: &RipError, spec: &super::LqrSpec) -> &'static str {
         | RipError::NotPositiveDefinite { name }
         | RipError::NonFinite { name }
         | RipError::NotSymmetric { name, .. }
-        | RipError::NotPositiveSemidefinite { name, .. }
-        | RipError::Singular { name } => name.as_str(),
+        | RipError::NotPositiveSemidefinite { name, .. } => name.as_str(),
         _ => "",
     };
     if name.starts_with('R') {
