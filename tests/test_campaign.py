@@ -264,6 +264,45 @@ points = 50
     np.testing.assert_array_equal(_column(partial, "rmse_arm")[:20], fresh["rmse_arm"])
 
 
+def test_ctrl_c_stops_long_chunks_on_pool_threads_promptly(tmp_path):
+    # Hour-long runs: every chunk is still inside its native batch when SIGINT arrives, on a
+    # pool thread that never sees the signal itself. Uninterrupted, this takes minutes.
+    spec = _spec(
+        tmp_path,
+        """
+[campaign]
+controllers = ["LQR"]
+seeds = 240
+duration = 3600.0
+chunk_size = 12
+""",
+    )
+    out = tmp_path / "out"
+    proc = _run_cli([str(spec), "--out", str(out), "--quiet", "--no-plots"])
+    try:
+        deadline = time.monotonic() + 300
+        while not list((out / "runs").glob("part-*.parquet")):
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "no chunk written in 300 s"
+            time.sleep(0.05)
+        before = len(list((out / "runs").glob("part-*.parquet")))
+        proc.send_signal(signal.SIGINT)
+        try:
+            _, err = proc.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            pytest.fail("Ctrl-C did not end the campaign within 10 s")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=30)
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "Traceback" not in err
+    parts = list((out / "runs").glob("part-*.parquet"))
+    assert len(parts) >= before
+    assert 0 < campaign.load(out).num_rows < 240
+    assert not [p for p in (out / "runs").iterdir() if not p.name.startswith("part-")]
+
+
 def test_interrupt_from_python_then_resume_equals_one_uninterrupted_run(tmp_path):
     c = campaign.load_spec(tomllib.loads(SMALL))
     out = tmp_path / "out"

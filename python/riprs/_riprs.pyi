@@ -22,6 +22,11 @@ class _Controller(Protocol):
     @property
     def Ts(self) -> float: ...
 
+class _CancelToken(Protocol):
+    """What a batch polls to be stopped from another thread, e.g. ``threading.Event``."""
+
+    def is_set(self) -> bool: ...
+
 __version__: str
 MAX_PREDICTION_HORIZON: int
 TS: float
@@ -257,6 +262,7 @@ def sim_metrics(
     parameters: list[str],
     settle_band: float,
     progress: Callable[[int, int], object] | None = None,
+    cancel: _CancelToken | None = None,
 ) -> dict[str, Any]: ...
 
 @final

@@ -17,6 +17,7 @@ simulations run on their own copies of it.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence, Union
 
@@ -417,6 +418,7 @@ def simulate_metrics(
     parameters: Sequence[str] = (),
     settle_band: float = 0.02,
     progress: Callable[[int, int], object] | None = None,
+    cancel: threading.Event | None = None,
     **options: Any,
 ) -> BatchMetrics:
     r"""Monte Carlo study that keeps a few metrics per run instead of the trajectories.
@@ -450,6 +452,9 @@ def simulate_metrics(
         Half-width of the arm-error band that counts as settled (rad).
     progress : callable, optional
         Called as ``progress(done, runs)`` from the calling thread while the runs proceed.
+    cancel : threading.Event, optional
+        Setting it from another thread stops the runs like Ctrl-C does (``KeyboardInterrupt``).
+        Needed when the call runs off the main thread, where signals are never seen.
     **options
         Any keyword of :func:`simulate` except ``seed``.
 
@@ -484,5 +489,6 @@ def simulate_metrics(
         [str(p) for p in parameters],
         float(settle_band),
         progress,
+        cancel,
     )
     return BatchMetrics(**native)

@@ -217,8 +217,12 @@ fn sim_batch<'py>(
 
 /// Per-run metrics of runs `first_run .. first_run + runs` of a Monte Carlo study around
 /// `plant` (`rip_core::batch`); a dict of numpy arrays, one entry per run.
+///
+/// `cancel` (anything with `is_set()`, e.g. `threading.Event`) lets another thread stop the
+/// batch: signal handlers run on Python's main thread only, so a batch called from a pool
+/// thread would otherwise not see Ctrl-C. It is polled like a signal, with the same effect.
 #[pyfunction]
-#[pyo3(signature = (plant, controller, config, runs, first_run, perturbation, parameters, settle_band, progress=None))]
+#[pyo3(signature = (plant, controller, config, runs, first_run, perturbation, parameters, settle_band, progress=None, cancel=None))]
 #[allow(clippy::too_many_arguments)]
 fn sim_metrics<'py>(
     py: Python<'py>,
@@ -231,6 +235,7 @@ fn sim_metrics<'py>(
     parameters: Vec<String>,
     settle_band: f64,
     progress: Option<Bound<'py, PyAny>>,
+    cancel: Option<Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let cfg = config_from_dict(config)?;
     let parameters = parameters
@@ -275,6 +280,13 @@ fn sim_metrics<'py>(
             )
         },
         |_| {
+            if let Some(token) = cancel.as_ref() {
+                if token.call_method0("is_set")?.is_truthy()? {
+                    return Err(pyo3::exceptions::PyKeyboardInterrupt::new_err(
+                        "the batch was cancelled",
+                    ));
+                }
+            }
             let now = done.load(Ordering::Relaxed);
             if let Some(callback) = progress.as_ref().filter(|_| now != reported) {
                 callback.call1((now, runs))?;

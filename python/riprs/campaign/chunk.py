@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import threading
 from collections.abc import Mapping
 from typing import Any
 
@@ -24,6 +25,7 @@ def _segment_metrics(
     duration: float,
     options: Mapping[str, Any],
     settle_band: float | None,
+    cancel: threading.Event | None,
 ) -> dict[str, np.ndarray]:
     """Seeds ``first .. first + count - 1`` of one grid point, in parallel on all cores: seed
     index ``s`` uses noise seed ``noise_seed + s``. Only metrics come back (no trajectories, no
@@ -32,8 +34,18 @@ def _segment_metrics(
 
     # The batch API's own default band, unless the spec names one.
     band = {} if settle_band is None else {"settle_band": settle_band}
+    if cancel is not None and cancel.is_set():
+        raise KeyboardInterrupt
     m = simulate_metrics(
-        params, controller, count, duration, seed=noise_seed, first_run=first, **band, **options
+        params,
+        controller,
+        count,
+        duration,
+        seed=noise_seed,
+        first_run=first,
+        cancel=cancel,
+        **band,
+        **options,
     )
     return {
         "rmse_arm": m.rmse[:, 0],
@@ -72,8 +84,13 @@ def _run_payload_chunk(payload: Mapping[str, Any], start: int, stop: int) -> dic
     return compute_chunk(_campaign_from_payload(payload), start, stop)
 
 
-def compute_chunk(campaign: Campaign, start: int, stop: int) -> dict[str, np.ndarray]:
+def compute_chunk(
+    campaign: Campaign, start: int, stop: int, cancel: threading.Event | None = None
+) -> dict[str, np.ndarray]:
     """Runs ``start .. stop-1`` of ``campaign``: the result columns as numpy arrays.
+
+    Setting ``cancel`` from another thread stops the chunk with ``KeyboardInterrupt`` within a
+    control sample.
 
     The seeds of one grid point and controller are consecutive runs; each such segment is one
     call of the Rust batch API, which runs its seeds in parallel and returns metrics only.
@@ -127,6 +144,7 @@ def compute_chunk(campaign: Campaign, start: int, stop: int) -> dict[str, np.nda
             campaign.duration,
             options,
             campaign.settle_band,
+            cancel,
         )
         if not np.array_equal(metrics["seed"], idx["noise_seed"][a:b]):
             raise CampaignError("the batch API numbered the seeds differently")  # pragma: no cover

@@ -102,27 +102,43 @@ def _local_threads() -> int:
 
 
 def _in_process(campaign: Campaign, chunks: Sequence[tuple[int, int]]) -> Iterator[ChunkResult]:
-    """Chunks on a local thread pool, each through the Rust batch API."""
+    """Chunks on a local thread pool, each through the Rust batch API.
+
+    Signals reach only the main thread, so it waits here in short slices; on Ctrl-C it sets
+    the chunks' cancel event (their native batches stop within a control sample), yields the
+    chunks that finished meanwhile so they are written, and re-raises.
+    """
+    import threading
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
     threads = _local_threads()
+    cancel = threading.Event()
     pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="riprs-campaign")
     todo = list(chunks)[::-1]
     running: dict[Any, tuple[int, int]] = {}
+    interrupted: KeyboardInterrupt | None = None
     try:
         while todo or running:
             while todo and len(running) < threads:
                 c = todo.pop()
-                running[pool.submit(compute_chunk, campaign, *c)] = c
-            done, _ = wait(list(running), return_when=FIRST_COMPLETED)
+                running[pool.submit(compute_chunk, campaign, *c, cancel)] = c
+            try:
+                done, _ = wait(list(running), timeout=0.2, return_when=FIRST_COMPLETED)
+            except KeyboardInterrupt as exc:
+                interrupted = exc
+                break
             for fut in done:
                 c = running.pop(fut)
                 yield c, fut.result()
     finally:
-        # Ctrl-C or an error: queued chunks never start; running ones end with their segment.
-        for fut in running:
-            fut.cancel()
+        # Ctrl-C or an error: queued chunks never start, running ones stop within a sample.
+        cancel.set()
         pool.shutdown(wait=True, cancel_futures=True)
+    if interrupted is not None:
+        for fut, c in running.items():
+            if not fut.cancelled() and fut.exception() is None:
+                yield c, fut.result()
+        raise interrupted
 
 
 def _connect(scheduler: str | None, workers: int | None, timeout: float) -> tuple[Any, Any]:
