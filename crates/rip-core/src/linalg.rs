@@ -176,10 +176,42 @@ pub fn c2d(a: &Mat, b: &Mat, ts: f64) -> Result<(Mat, Mat)> {
             ),
         ));
     };
-    Ok((
-        e.view((0, 0), (n, n)).into_owned(),
-        e.view((0, n), (n, m)).into_owned(),
-    ))
+    let ad = e.view((0, 0), (n, n)).into_owned();
+    check_liouville(a, &ad, ts)?;
+    Ok((ad, e.view((0, n), (n, m)).into_owned()))
+}
+
+/// Largest accepted `|ln det e^(A·Ts) − tr(A·Ts)|`. The identity `det e^(A·Ts) = e^(tr A·Ts)`
+/// (Liouville's formula) holds exactly; a result that misses it by more than a factor of two
+/// has lost every digit. That happens when `‖A·Ts‖` is so large that the argument of an
+/// oscillatory mode is below double precision's resolution (a rotation by 10²⁰ rad squared 67
+/// times comes out as the zero matrix), not for ordinary stiff or ill-conditioned models,
+/// whose determinants stay accurate far below this bound.
+const LIOUVILLE_TOLERANCE: f64 = std::f64::consts::LN_2;
+
+/// Fails, naming `Ts`, unless `ad = e^(A·Ts)` satisfies Liouville's formula
+/// `det e^(A·Ts) = e^(tr A·Ts)` to [`LIOUVILLE_TOLERANCE`]. Skipped where `e^(tr A·Ts)` is not a
+/// normal double (|tr A·Ts| > 700), where the formula cannot be evaluated.
+fn check_liouville(a: &Mat, ad: &Mat, ts: f64) -> Result<()> {
+    let trace = a.trace() * ts;
+    if !(trace.abs() <= 700.0) {
+        return Ok(());
+    }
+    let det = ad.clone().lu().determinant();
+    let lost = !(det > 0.0) || (det.ln() - trace).abs() > LIOUVILLE_TOLERANCE;
+    if lost {
+        return Err(RipError::invalid(
+            "Ts",
+            format!(
+                "A·Ts is too large to discretise accurately at Ts = {ts}: e^(A·Ts) has lost \
+                 every digit in double precision (det e^(A·Ts) = {det:.3e}, e^(tr A·Ts) = \
+                 {:.3e}; ‖A·Ts‖₁ = {:.3e})",
+                trace.exp(),
+                one_norm(a) * ts
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Largest number of squarings [`expm`] performs. `‖A‖₁ ≤ f64::MAX < 2¹⁰²⁴` needs at most
@@ -306,6 +338,34 @@ mod tests {
         let a = mat(1, 1, &[1e300]);
         let err = c2d(&a, &mat(1, 1, &[1.0]), 0.1).unwrap_err();
         assert!(matches!(err, RipError::InvalidParameter { .. }), "{err}");
+    }
+
+    #[test]
+    fn c2d_of_a_rotation_beyond_double_precision_is_refused_not_zero() {
+        // e^(A·Ts) is a rotation (det 1) for every s; above ~1e15 rad its angle has no
+        // significant digit left, and the squarings returned the zero matrix.
+        for s in [1e20, 1e30, 1e45] {
+            let a = mat(2, 2, &[0.0, s, -s, 0.0]);
+            let err = c2d(&a, &mat(2, 1, &[0.0, 1.0]), 1.0).unwrap_err();
+            assert!(
+                matches!(err, RipError::InvalidParameter { ref name, .. } if name == "Ts"),
+                "{s}: {err}"
+            );
+        }
+        // Below that the rotation is still one: det 1 to rounding.
+        let a = mat(2, 2, &[0.0, 1e3, -1e3, 0.0]);
+        let (ad, _) = c2d(&a, &mat(2, 1, &[0.0, 1.0]), 1.0).unwrap();
+        assert!((ad.clone().lu().determinant() - 1.0).abs() < 1e-9);
+        assert!((ad[(0, 0)] - 1e3f64.cos()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn c2d_of_a_stiff_ill_conditioned_model_is_accepted() {
+        // Modes e^(±30): condition number e^60, det exactly 1.
+        let a = mat(2, 2, &[30.0, 0.0, 0.0, -30.0]);
+        let (ad, _) = c2d(&a, &mat(2, 1, &[1.0, 1.0]), 1.0).unwrap();
+        assert!((ad[(0, 0)] / 30f64.exp() - 1.0).abs() < 1e-12);
+        assert!((ad[(1, 1)] / (-30f64).exp() - 1.0).abs() < 1e-12);
     }
 
     #[test]

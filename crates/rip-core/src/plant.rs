@@ -57,8 +57,13 @@
 use nalgebra::{SMatrix, SVector};
 
 use crate::error::{Result, RipError};
+use crate::linalg::spectral_radius;
 use crate::linalg::{c2d, Mat};
 use crate::sim::MAX_SUBSTEPS;
+
+/// Extent of classical RK4's stability region along the negative real axis (`|h λ| ≤ 2.785`),
+/// rounded down.
+const RK4_STABILITY_LIMIT: f64 = 2.78;
 
 /// State vector `[θ, θ̇, α, α̇]`.
 pub type State = SVector<f64, 4>;
@@ -374,6 +379,7 @@ impl Plant {
         check_finite_scalar("u", u)?;
         check_finite_scalar("torque", tau_d)?;
         check_step(dt, substeps)?;
+        self.check_rk4_stability(dt, substeps)?;
         let mut next = *x;
         self.advance(&mut next, u, tau_d, dt, substeps);
         if !next.iter().all(|v| v.is_finite()) {
@@ -389,6 +395,7 @@ impl Plant {
     pub fn integrate(&self, x0: &State, u: &[f64], dt: f64, substeps: usize) -> Result<Vec<State>> {
         check_finite_state("x0", x0)?;
         check_step(dt, substeps)?;
+        self.check_rk4_stability(dt, substeps)?;
         if u.iter().any(|v| !v.is_finite()) {
             return Err(RipError::NonFinite { name: "u".into() });
         }
@@ -414,6 +421,40 @@ impl Plant {
             out.push(x);
         }
         Ok(out)
+    }
+
+    /// Longest RK4 substep (s) inside classical RK4's stability region for this plant:
+    /// `h · ρ(A_c) ≤ 2.78`, the region's extent along the negative real axis, with `ρ(A_c)` the
+    /// largest spectral radius of the linearisations about upright and hanging. A longer substep
+    /// does not approximate the pendulum at all: the fastest (damping and back-EMF) mode is
+    /// amplified by the integrator itself, and the state grows to finite nonsense before it
+    /// overflows.
+    pub fn max_rk4_substep(&self) -> f64 {
+        let hanging = State::new(0.0, 0.0, std::f64::consts::PI, 0.0);
+        let rho = [State::zeros(), hanging]
+            .iter()
+            .map(|x| {
+                let (a, _) = self.linearize(x, 0.0);
+                spectral_radius(&Mat::from_fn(4, 4, |i, j| a[(i, j)]))
+            })
+            .fold(0.0, f64::max);
+        RK4_STABILITY_LIMIT / rho
+    }
+
+    /// Fails, naming `dt`, when `dt / substeps` exceeds [`max_rk4_substep`](Self::max_rk4_substep).
+    fn check_rk4_stability(&self, dt: f64, substeps: usize) -> Result<()> {
+        let h = dt / substeps as f64;
+        let h_max = self.max_rk4_substep();
+        if h > h_max {
+            return Err(RipError::invalid(
+                "dt",
+                format!(
+                    "dt / substeps = {h:.3e} s is beyond RK4's stability limit for this plant \
+                     ({h_max:.3e} s); use more substeps or a shorter dt"
+                ),
+            ));
+        }
+        Ok(())
     }
 
     /// Advances `x` by `dt` with `substeps` RK4 steps under a zero-order-held input.
@@ -511,6 +552,29 @@ impl Plant {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_substep_beyond_rk4_stability_is_refused_and_the_limit_is_real() {
+        for plant in [Plant::paper(), Plant::qube_servo2()] {
+            let h_max = plant.max_rk4_substep();
+            let x = State::new(0.0, 0.0, std::f64::consts::PI, 0.0);
+            let err = plant.step_checked(&x, 0.0, 0.0, 1e10, 1).unwrap_err();
+            assert!(matches!(err, RipError::InvalidParameter { ref name, .. } if name == "dt"));
+            assert!(plant.step_checked(&x, 0.0, 0.0, 0.01, 10).is_ok());
+            // Inside the bound the integration of the hanging pendulum stays near rest, and on
+            // the upright linearisation's fastest mode (real, λ = −ρ) RK4's amplification
+            // R(z) = 1 + z + z²/2 + z³/6 + z⁴/24 crosses 1 at the bound.
+            let mut z = x + State::new(0.0, 1e-3, 0.0, 1e-3);
+            for _ in 0..2000 {
+                plant.rk4_step(&mut z, 0.0, 0.0, 0.9 * h_max);
+            }
+            assert!((z - x).norm() < 1e-2);
+            let amplification = |z: f64| 1.0 + z + z * z / 2.0 + z.powi(3) / 6.0 + z.powi(4) / 24.0;
+            let rho = RK4_STABILITY_LIMIT / h_max;
+            assert!(amplification(-0.99 * rho * h_max).abs() < 1.0);
+            assert!(amplification(-1.01 * 2.785 / rho * rho).abs() > 1.0);
+        }
+    }
 
     #[test]
     fn linearization_matches_central_differences() {
