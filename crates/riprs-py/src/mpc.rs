@@ -178,8 +178,9 @@ fn vec_to_py<'py>(py: Python<'py>, v: &[f64]) -> Py1<'py> {
 ///     The move :math:`u(k)`; the fallback move when ``fallback`` is true.
 /// du : ndarray, shape (m, nu)
 ///     Moves :math:`\Delta u(k), \dots, \Delta u(k+m-1)` of the applied plan.
-/// slack : float
-///     :math:`\varepsilon \ge 0` in scaled output units; ``nan`` when the QP failed.
+/// slack : float or None
+///     :math:`\varepsilon \ge 0` in scaled output units; ``None`` when the QP was not solved
+///     (``fallback`` is true): there is no optimal slack to report.
 /// status : str
 ///     ``"solved"``, ``"almost_solved"``, ``"max_iterations"``, ``"numerical_trouble"``,
 ///     ``"infeasible"`` or ``"invalid_input"``.
@@ -213,8 +214,8 @@ impl PyMpcSolution {
     }
 
     #[getter]
-    fn slack(&self) -> f64 {
-        self.sol.slack
+    fn slack(&self) -> Option<f64> {
+        (!self.sol.fallback && self.sol.slack.is_finite()).then_some(self.sol.slack)
     }
 
     #[getter]
@@ -244,9 +245,9 @@ impl PyMpcSolution {
 
     fn __repr__(&self) -> String {
         format!(
-            "MpcSolution(u={:?}, slack={:.3e}, status={:?}, iterations={}, solve_time={:.1e})",
+            "MpcSolution(u={:?}, slack={:?}, status={:?}, iterations={}, solve_time={:.1e})",
             self.sol.u.as_slice(),
-            self.sol.slack,
+            self.slack(),
             self.sol.status.name(),
             self.sol.iterations,
             self.sol.solve_time
