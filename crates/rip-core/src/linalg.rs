@@ -194,11 +194,12 @@ const LIOUVILLE_TOLERANCE: f64 = std::f64::consts::LN_2;
 /// normal double (|tr A·Ts| > 700), where the formula cannot be evaluated.
 fn check_liouville(a: &Mat, ad: &Mat, ts: f64) -> Result<()> {
     let trace = a.trace() * ts;
-    if !(trace.abs() <= 700.0) {
+    // A NaN trace cannot occur (A is checked finite); an infinite one is out of range too.
+    if trace.abs() > 700.0 || trace.is_nan() {
         return Ok(());
     }
     let det = ad.clone().lu().determinant();
-    let lost = !(det > 0.0) || (det.ln() - trace).abs() > LIOUVILLE_TOLERANCE;
+    let lost = det.is_nan() || det <= 0.0 || (det.ln() - trace).abs() > LIOUVILLE_TOLERANCE;
     if lost {
         return Err(RipError::invalid(
             "Ts",
