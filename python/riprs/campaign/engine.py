@@ -6,7 +6,6 @@ import contextlib
 import logging
 import os
 import re
-import sys
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,36 +27,10 @@ from riprs.campaign.store import (
     load,
 )
 
-if sys.version_info >= (3, 11):
-    pass
-else:  # pragma: no cover
-    pass
-
 __all__ = ["CampaignResult", "run", "summary"]
 
 PathLike = Union[str, "os.PathLike[str]"]
 
-EXAMPLE_SPEC = """\
-# riprs campaign: LQR vs LQG vs MPC when the pendulum mass and the arm length are not what the
-# controllers were designed for (the paper's robustness question, as a map).
-# Every section of the experiment spec ([plant], [sensor], [reference], [lqr], [mpc], ...)
-# may follow; without them the paper's setting is used.
-
-[campaign]
-controllers = ["LQR", "LQG", "MPC"]
-seeds = 20                 # noise seeds per grid point
-duration = 10.0            # s per run
-
-[[campaign.axis]]
-name = "mp"                # pendulum mass: a scale factor on the base plant's value
-scale = [0.7, 1.3]
-points = 13
-
-[[campaign.axis]]
-name = "Lr"                # arm length
-scale = [0.8, 1.2]
-points = 9
-"""
 
 
 # -- engines ------------------------------------------------------------------------------------

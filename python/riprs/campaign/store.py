@@ -8,7 +8,6 @@ import json
 import os
 import platform
 import re
-import sys
 import time
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
@@ -19,36 +18,10 @@ import numpy as np
 from riprs import __version__
 from riprs.campaign.spec import Campaign, CampaignError
 
-if sys.version_info >= (3, 11):
-    pass
-else:  # pragma: no cover
-    pass
-
 __all__ = ["load"]
 
 PathLike = Union[str, "os.PathLike[str]"]
 
-EXAMPLE_SPEC = """\
-# riprs campaign: LQR vs LQG vs MPC when the pendulum mass and the arm length are not what the
-# controllers were designed for (the paper's robustness question, as a map).
-# Every section of the experiment spec ([plant], [sensor], [reference], [lqr], [mpc], ...)
-# may follow; without them the paper's setting is used.
-
-[campaign]
-controllers = ["LQR", "LQG", "MPC"]
-seeds = 20                 # noise seeds per grid point
-duration = 10.0            # s per run
-
-[[campaign.axis]]
-name = "mp"                # pendulum mass: a scale factor on the base plant's value
-scale = [0.7, 1.3]
-points = 13
-
-[[campaign.axis]]
-name = "Lr"                # arm length
-scale = [0.8, 1.2]
-points = 9
-"""
 
 
 _EXTRA = "pip install 'riprs[campaign]'"
