@@ -627,3 +627,24 @@ def test_a_worker_killed_mid_campaign_costs_no_run(tmp_path, dask_cluster):
     assert table.equals(in_process.table)
     assert result.table.equals(table)
     assert "dask" in result.engine
+
+
+def test_a_setting_that_cannot_be_designed_fails_before_any_run_naming_axis_and_value(tmp_path):
+    spec = _spec(
+        tmp_path,
+        """
+[campaign]
+controllers = ["MPC"]
+seeds = 10
+duration = 1.0
+chunk_size = 10
+
+[[campaign.axis]]
+name = "mpc.output_weights"
+values = [25.0, 1e300]
+""",
+    )
+    out = tmp_path / "out"
+    with pytest.raises(campaign.CampaignError, match=r"mpc\.output_weights = 1e\+?300"):
+        campaign.run(spec, out, progress=False, plots=False)
+    assert not list(out.glob("runs/part-*"))

@@ -11,7 +11,7 @@ import numpy as np
 
 from riprs import __version__
 from riprs._riprs import FurutaParams
-from riprs.campaign.spec import METRICS, Campaign, CampaignError, _design, _parse, _sim_setup
+from riprs.campaign.spec import METRICS, Campaign, CampaignError, _parse, _sim_setup
 
 __all__ = ["compute_chunk"]
 
@@ -124,7 +124,7 @@ def compute_chunk(
         if key not in designs:
             config = campaign.config_for(key[1:])
             params, options = _sim_setup(config)
-            designs[key] = (_design(config, campaign.controllers[c]), params, options)
+            designs[key] = (campaign.design(c, key[1:]), params, options)
         controller, params, options = designs[key]
         if plant_axes:
             nominal = params.to_dict()

@@ -281,6 +281,8 @@ def run(
     missing = campaign.runs - sum(b - a for a, b in done)
 
     # Everything that can fail before the runs does so before anything is written.
+    if missing:
+        campaign.design_all()
     client = cluster = None
     if missing and engine != "in-process":
         client, cluster = _connect(scheduler, workers, connect_timeout)

@@ -160,6 +160,7 @@ class Campaign:
     axes: list[Axis]
     spec_hash: str
     _configs: dict[tuple[int, ...], Any] = field(default_factory=dict, repr=False)
+    _designs: dict[tuple[int, ...], Any] = field(default_factory=dict, repr=False)
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -203,6 +204,34 @@ class Campaign:
             if len(self._configs) < 4096:
                 self._configs[setting_index] = cached
         return cached
+
+    def design(self, controller: int, setting_index: tuple[int, ...]) -> Any:
+        """Controller ``controller`` designed for the setting axes at ``setting_index``: once
+        per distinct combination (cached). A failure names the axes and their values."""
+        key = (controller, *setting_index)
+        cached = self._designs.get(key)
+        if cached is None:
+            try:
+                cached = _design(self.config_for(setting_index), self.controllers[controller])
+            except (RiprsError, ValueError, ArithmeticError) as exc:
+                where = ", ".join(
+                    f"{a.name} = {np.asarray(a.values[i]).item()!r}"
+                    for a, i in zip(self.setting_axes(), setting_index, strict=True)
+                )
+                at = f" at {where}" if where else ""
+                raise CampaignError(
+                    f"cannot design {self.controllers[controller]}{at}: {exc}"
+                ) from None
+            if len(self._designs) < 4096:
+                self._designs[key] = cached
+        return cached
+
+    def design_all(self) -> None:
+        """Designs every controller for every combination of setting axes, so that a setting
+        that cannot be designed fails before any run."""
+        for combo in np.ndindex(*(len(a) for a in self.setting_axes())):
+            for c in range(len(self.controllers)):
+                self.design(c, tuple(int(i) for i in combo))
 
     def setting_axes(self) -> list[Axis]:
         """The axes that change a setting (not a plant parameter)."""
