@@ -648,3 +648,18 @@ values = [25.0, 1e300]
     with pytest.raises(campaign.CampaignError, match=r"mpc\.output_weights = 1e\+?300"):
         campaign.run(spec, out, progress=False, plots=False)
     assert not list(out.glob("runs/part-*"))
+
+
+def test_a_huge_grid_is_refused_with_its_true_run_count():
+    axes = [{"name": n, "range": [0.1, 0.2], "points": 65536} for n in ("lqr.R", "noise_std")]
+    axes += [{"name": n, "scale": [0.9, 1.1], "points": 65536} for n in ("mp", "Lr")]
+    spec = {"campaign": {"controllers": ["LQR"], "seeds": 1, "duration": 1.0, "axis": axes}}
+    with pytest.raises(campaign.CampaignError, match=f"has {65536**4} runs"):
+        campaign.load_spec(spec)
+
+
+def test_a_spec_file_that_is_not_utf8_is_one_named_error(tmp_path):
+    path = tmp_path / "latin1.toml"
+    path.write_bytes(b'[campaign]\ncontrollers = ["LQR"] # \xe9\n')
+    with pytest.raises(campaign.CampaignError, match="invalid TOML"):
+        campaign.run(path, tmp_path / "out", progress=False, plots=False)

@@ -246,9 +246,10 @@ def run(
     if isinstance(spec, Campaign):
         campaign = spec
     else:
+        # Parsed first: load_spec names a file that is not UTF-8 TOML in one line.
+        campaign = load_spec(spec)
         if not isinstance(spec, Mapping):
             spec_text = Path(spec).read_text(encoding="utf-8")
-        campaign = load_spec(spec)
     size = _int(chunk_size, "chunk_size", 1) if chunk_size is not None else campaign.chunk_size
     if scheduler is not None and workers is not None:
         raise CampaignError("give scheduler or workers, not both")

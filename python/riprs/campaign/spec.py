@@ -170,7 +170,7 @@ class Campaign:
     @property
     def points(self) -> int:
         """Grid points (the product of :attr:`shape`; 1 without axes)."""
-        return int(np.prod(self.shape, dtype=np.int64)) if self.axes else 1
+        return math.prod(self.shape)  # Python ints: a huge grid is counted, never wrapped
 
     @property
     def runs(self) -> int:
@@ -348,7 +348,7 @@ def _parse(data: dict[str, Any]) -> Campaign:
         )
     # Every combination of setting values is checked now, so that no chunk fails on one later.
     settings = campaign.setting_axes()
-    combos = int(np.prod([len(a) for a in settings], dtype=np.int64)) if settings else 1
+    combos = math.prod(len(a) for a in settings)
     if combos > 100_000:
         raise CampaignError(
             f"the setting axes span {combos} combinations (each a separate design); at most 100000"
