@@ -6,7 +6,7 @@
 //! the timings average over active and inactive constraint sets, not just the trivial
 //! steady state. Each benchmark iteration is one sample of that trajectory.
 
-use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use criterion::{black_box, criterion_main, Criterion};
 use nalgebra::DVector;
 use rip_core::mpc::{paper, QpSolver};
 use rip_core::Controller;
@@ -90,5 +90,9 @@ fn mpc(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, mpc);
-criterion_main!(benches);
+// criterion_group! expands to an undocumented `pub fn`; inside a private module it is not
+// public API, so it needs no doc comment.
+mod group {
+    criterion::criterion_group!(benches, super::mpc);
+}
+criterion_main!(group::benches);

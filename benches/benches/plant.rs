@@ -2,7 +2,7 @@
 //! closed-loop run per controller (1000 control periods, 10 RK4 substeps each, encoder and
 //! noise model; the MPC once per QP backend).
 
-use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use criterion::{black_box, criterion_main, Criterion};
 use rip_core::mpc::QpSolver;
 use rip_core::sim::{Reference, SensorModel};
 use rip_core::{simulate, Controller, Lqg, Lqr, Plant, SimConfig, State};
@@ -67,5 +67,9 @@ fn plant(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, plant);
-criterion_main!(benches);
+// criterion_group! expands to an undocumented `pub fn`; inside a private module it is not
+// public API, so it needs no doc comment.
+mod group {
+    criterion::criterion_group!(benches, super::plant);
+}
+criterion_main!(group::benches);

@@ -1,7 +1,7 @@
 //! One iteration of the real-time loop without I/O: decode a measurement frame, step the
 //! controller, clamp and encode the command (`rip_rt::loop_core::LoopCore::iterate`).
 
-use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use criterion::{black_box, criterion_main, Criterion};
 use rip_rt::config::Config;
 use rip_rt::controllers::{build, ControllerKind};
 use rip_rt::loop_core::LoopCore;
@@ -47,5 +47,9 @@ fn rt_loop(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, rt_loop);
-criterion_main!(benches);
+// criterion_group! expands to an undocumented `pub fn`; inside a private module it is not
+// public API, so it needs no doc comment.
+mod group {
+    criterion::criterion_group!(benches, super::rt_loop);
+}
+criterion_main!(group::benches);

@@ -11,50 +11,90 @@ pub enum RipError {
     /// An argument does not have the shape the routine needs.
     #[error("{name}: expected shape {expected}, got ({rows}, {cols})")]
     Shape {
+        /// The argument's name as the caller spells it (e.g. `"Q"`).
         name: String,
+        /// The shape the routine needs, in words or as `(rows, cols)` (e.g. `"(4, 4)"`).
         expected: String,
+        /// Number of rows the argument has.
         rows: usize,
+        /// Number of columns the argument has.
         cols: usize,
     },
     /// An argument holds NaN or an infinity.
     #[error("{name} contains NaN or Inf")]
-    NonFinite { name: String },
+    NonFinite {
+        /// The argument's name as the caller spells it.
+        name: String,
+    },
     /// A weight or covariance that must be symmetric is not.
     #[error("{name} must be symmetric (max |{name} - {name}ᵀ| = {asymmetry:.3e})")]
-    NotSymmetric { name: String, asymmetry: f64 },
+    NotSymmetric {
+        /// The argument's name as the caller spells it.
+        name: String,
+        /// The largest absolute entry of `X − Xᵀ`, in the argument's own units.
+        asymmetry: f64,
+    },
     /// A matrix that must be positive definite is not.
     #[error("{name} must be positive definite")]
-    NotPositiveDefinite { name: String },
+    NotPositiveDefinite {
+        /// The argument's name as the caller spells it.
+        name: String,
+    },
     /// A matrix that must be positive semidefinite is not.
     #[error("{name} must be positive semidefinite (smallest eigenvalue {min_eigenvalue:.3e})")]
-    NotPositiveSemidefinite { name: String, min_eigenvalue: f64 },
+    NotPositiveSemidefinite {
+        /// The argument's name as the caller spells it.
+        name: String,
+        /// The smallest eigenvalue of the (symmetric) argument; negative beyond the tolerance.
+        min_eigenvalue: f64,
+    },
     /// The pair (A, B) has an unstable mode that the input cannot reach.
     #[error("{pair} is not stabilizable: mode {re:.6}{im:+.6}i (|λ| = {modulus:.6}) cannot be reached from the input")]
     NotStabilizable {
+        /// Which pair was checked, e.g. `"(A, B)"` or a description of the augmented model.
         pair: String,
+        /// Real part of the unreachable eigenvalue λ of `A`.
         re: f64,
+        /// Imaginary part of the unreachable eigenvalue λ of `A`.
         im: f64,
+        /// `|λ|`; at least 1 (on or outside the unit circle) for a discrete-time `A`.
         modulus: f64,
     },
     /// The pair (A, C) has an unstable mode that the output cannot see.
     #[error("{pair} is not detectable: mode {re:.6}{im:+.6}i (|λ| = {modulus:.6}) is invisible to the output")]
     NotDetectable {
+        /// Which pair was checked, e.g. `"(A, C)"` or a description of the augmented model.
         pair: String,
+        /// Real part of the unobservable eigenvalue λ of `A`.
         re: f64,
+        /// Imaginary part of the unobservable eigenvalue λ of `A`.
         im: f64,
+        /// `|λ|`; at least 1 (on or outside the unit circle) for a discrete-time `A`.
         modulus: f64,
     },
     /// The Riccati equation has no stabilizing solution (for example an unobservable mode of the
     /// weights on the unit circle), or the solver could not reach it to the required accuracy.
     #[error("no stabilizing solution: {reason}")]
-    NoStabilizingSolution { reason: String },
+    NoStabilizingSolution {
+        /// What failed, in words (which check and by how much).
+        reason: String,
+    },
     /// A computation from finite inputs overflowed to NaN or Inf (for example an integration
     /// step far too long for the dynamics); the reason says which inputs were involved.
     #[error("the computation diverged: {reason}")]
-    Diverged { reason: String },
+    Diverged {
+        /// Which computation overflowed and from which inputs.
+        reason: String,
+    },
     /// A scalar setting or parameter is out of its valid range.
     #[error("invalid {name}: {reason}")]
-    InvalidParameter { name: String, reason: String },
+    InvalidParameter {
+        /// The setting's or parameter's name as the caller spells it (a config key where there
+        /// is one).
+        name: String,
+        /// Why the value is not accepted (the valid range, or what it conflicts with).
+        reason: String,
+    },
     /// The caller asked a long computation to stop (for example on Ctrl-C) before it finished.
     #[error("cancelled before the computation finished")]
     Cancelled,

@@ -85,9 +85,13 @@ pub const TABLE1: [(&str, [f64; 3]); 3] = [
 /// A discrete-time state-space model `x[k+1] = A x + B u`, `y = C x + D u`.
 #[derive(Debug, Clone)]
 pub struct StateSpace {
+    /// State matrix `A` (`n × n`).
     pub a: Mat,
+    /// Input matrix `B` (`n × m`), one column per input.
     pub b: Mat,
+    /// Output matrix `C` (`p × n`), one row per output.
     pub c: Mat,
+    /// Feedthrough matrix `D` (`p × m`).
     pub d: Mat,
     /// Sample time (s); `0` for a continuous-time model.
     pub ts: f64,
@@ -96,8 +100,11 @@ pub struct StateSpace {
 /// The noise model of eqs. (8)–(10): `Q = BBᵀ`, `R = DDᵀ`, `N = BDᵀ` for the augmented model.
 #[derive(Debug, Clone)]
 pub struct NoiseModel {
+    /// Process-noise covariance `Q = B Bᵀ` (eq. (8)), `5 × 5` on the augmented state.
     pub q: Mat,
+    /// Measurement-noise covariance `R = D Dᵀ` (eq. (9)), `2 × 2` on the outputs (θ, α).
     pub r: Mat,
+    /// Cross-covariance `N = B Dᵀ` (eq. (10)), `5 × 2`, between process and measurement noise.
     pub n: Mat,
 }
 

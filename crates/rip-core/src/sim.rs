@@ -49,7 +49,12 @@ pub const MAX_SUBSTEPS: usize = 100_000;
 #[derive(Debug, Clone, PartialEq)]
 pub enum Reference {
     /// `r = 0` before `time`, `value` from `time` on.
-    Step { time: f64, value: [f64; 2] },
+    Step {
+        /// Switching time (s) from the start of the run.
+        time: f64,
+        /// `[θ_ref, α_ref]` (rad) held from `time` on.
+        value: [f64; 2],
+    },
     /// One row per control sample; its length must equal the number of samples.
     Sequence(Vec<[f64; 2]>),
 }

@@ -44,7 +44,11 @@ fn plant_step_bounds_its_work_and_refuses_overflow() {
         .step_checked(&x, 0.0, 0.0, 0.01, 200_000_000)
         .unwrap_err();
     assert_eq!(invalid_name(&err), "substeps");
+    // A substep beyond RK4's stability region is refused before integrating.
     let err = plant.step_checked(&x, 0.0, 0.0, 1e300, 1).unwrap_err();
+    assert_eq!(invalid_name(&err), "dt");
+    // A legal substep whose result overflows is reported as divergence.
+    let err = plant.step_checked(&x, 1e300, 0.0, 0.01, 1).unwrap_err();
     assert!(matches!(err, RipError::Diverged { .. }), "{err}");
     let err = plant
         .integrate(&x, &[1000.0; 1000], 0.01, 1)

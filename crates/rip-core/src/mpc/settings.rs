@@ -24,8 +24,12 @@ pub const MAX_CONDENSED_ENTRIES: usize = 10_000_000;
 /// added to the scaled outputs.
 #[derive(Debug, Clone)]
 pub struct OutputDisturbance {
+    /// `A_od` (`nd × nd`): the disturbance states' dynamics (`1` for integrated white noise).
     pub a: Mat,
+    /// `B_od` (`nd × nw`): how the unit-variance white noise `w_od` drives the disturbance
+    /// states.
     pub b: Mat,
+    /// `C_od` (`ny × nd`): how the disturbance states add to the scaled outputs.
     pub c: Mat,
 }
 
