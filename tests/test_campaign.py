@@ -663,3 +663,19 @@ def test_a_spec_file_that_is_not_utf8_is_one_named_error(tmp_path):
     path.write_bytes(b'[campaign]\ncontrollers = ["LQR"] # \xe9\n')
     with pytest.raises(campaign.CampaignError, match="invalid TOML"):
         campaign.run(path, tmp_path / "out", progress=False, plots=False)
+
+
+@pytest.mark.parametrize(
+    ("args", "flag"),
+    [
+        (["--chunk-size", "0"], "--chunk-size"),
+        (["--workers", "0"], "--workers"),
+        (["--map", "mp"], "--map"),
+    ],
+)
+def test_cli_errors_name_the_option(tmp_path, args, flag):
+    spec = _spec(tmp_path, SMALL)
+    proc = _run_cli([str(spec), "--out", str(tmp_path / "out"), "--quiet", *args])
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 1, err
+    assert err.startswith(f"riprs: error: {flag} ") and "Traceback" not in err, err

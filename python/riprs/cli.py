@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from typing import Sequence
 
@@ -88,6 +89,11 @@ def cmd_campaign(args: argparse.Namespace) -> int:
             plots=not args.no_plots,
             map_axes=args.map.split(",") if args.map else None,
         )
+    except campaign.CampaignError as exc:
+        # run() names its keyword arguments; here they are options.
+        flag = {"chunk_size": "--chunk-size", "workers": "--workers", "map_axes": "--map"}
+        message = re.sub(r"^(chunk_size|workers|map_axes)\b", lambda m: flag[m[1]], str(exc))
+        raise campaign.CampaignError(message) from None
     except KeyboardInterrupt:
         print(
             f"riprs: interrupted; finished chunks are in {args.out}/runs, "
