@@ -30,6 +30,10 @@ class _CancelToken(Protocol):
 __version__: str
 MAX_PREDICTION_HORIZON: int
 TS: float
+DEFAULT_DURATION: float
+DEFAULT_SUBSTEPS: int
+DEFAULT_U_LIMIT: float
+DEFAULT_FALL_LIMIT: float
 PRESETS: list[_PresetName]
 PARAMETERS: list[_ParameterName]
 

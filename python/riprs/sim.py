@@ -16,7 +16,6 @@ simulations run on their own copies of it.
 
 from __future__ import annotations
 
-import math
 import threading
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence, Union
@@ -193,33 +192,33 @@ _DEFAULTS: dict[str, Any] = {
     "reference": None,
     "reference_time": 0.0,
     "Ts": _riprs.TS,
-    "substeps": 10,
+    "substeps": _riprs.DEFAULT_SUBSTEPS,
     "x0": None,
     "encoder_counts": None,
     "noise_std": 0.0,
     "output_disturbance": None,
     "torque_disturbance": None,
-    "u_limit": 12.0,
-    "fall_limit": math.pi / 2,
+    "u_limit": _riprs.DEFAULT_U_LIMIT,
+    "fall_limit": _riprs.DEFAULT_FALL_LIMIT,
 }
 
 
 def simulate(
     plant: PlantLike,
     controller: Controller,
-    duration: float = 10.0,
+    duration: float = _riprs.DEFAULT_DURATION,
     *,
     reference: ArrayLike | None = None,
     reference_time: float = 0.0,
     Ts: float = _riprs.TS,
-    substeps: int = 10,
+    substeps: int = _riprs.DEFAULT_SUBSTEPS,
     x0: ArrayLike | None = None,
     encoder_counts: ArrayLike | None = None,
     noise_std: ArrayLike = 0.0,
     output_disturbance: tuple[float, ArrayLike] | None = None,
     torque_disturbance: tuple[float, float] | None = None,
-    u_limit: float = 12.0,
-    fall_limit: float = math.pi / 2,
+    u_limit: float = _riprs.DEFAULT_U_LIMIT,
+    fall_limit: float = _riprs.DEFAULT_FALL_LIMIT,
     seed: int = 0,
 ) -> SimResult:
     r"""Run a controller in closed loop with the nonlinear plant.
@@ -306,7 +305,7 @@ def simulate_batch(
     plants: PlantLike | Sequence[PlantLike],
     controller: Controller,
     seeds: Sequence[int] | int = 1,
-    duration: float = 10.0,
+    duration: float = _riprs.DEFAULT_DURATION,
     *,
     paired: bool = False,
     **options: Any,
@@ -410,7 +409,7 @@ def simulate_metrics(
     plant: PlantLike,
     controller: Controller,
     runs: int,
-    duration: float = 10.0,
+    duration: float = _riprs.DEFAULT_DURATION,
     *,
     seed: int = 0,
     first_run: int = 0,

@@ -45,6 +45,19 @@ pub const MAX_SAMPLES: usize = 10_000_000;
 /// Most RK4 substeps per control period.
 pub const MAX_SUBSTEPS: usize = 100_000;
 
+/// Default length of a run (s): the span of the paper's step-response figures.
+pub const DEFAULT_DURATION: f64 = 10.0;
+
+/// Default RK4 substeps per control period: 1 ms steps at `Ts = 0.01 s`, well inside RK4's
+/// stability limit for the pendulum's fastest mode.
+pub const DEFAULT_SUBSTEPS: usize = 10;
+
+/// Default actuator saturation (V): the motor's rated ±12 V, the paper's input bound.
+pub const DEFAULT_U_LIMIT: f64 = 12.0;
+
+/// Default fall limit on `|α|` (rad): past horizontal the pendulum cannot be balanced.
+pub const DEFAULT_FALL_LIMIT: f64 = std::f64::consts::FRAC_PI_2;
+
 /// The reference `r[k] = [θ_ref, α_ref]`.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Reference {
@@ -123,16 +136,16 @@ pub struct SimConfig {
 impl Default for SimConfig {
     fn default() -> Self {
         Self {
-            duration: 10.0,
-            ts: 0.01,
-            substeps: 10,
+            duration: DEFAULT_DURATION,
+            ts: crate::paper::TS,
+            substeps: DEFAULT_SUBSTEPS,
             x0: [0.0; 4],
             reference: Reference::default(),
             sensor: SensorModel::default(),
             output_disturbance: None,
             torque_disturbance: None,
-            u_limit: 12.0,
-            fall_limit: std::f64::consts::FRAC_PI_2,
+            u_limit: DEFAULT_U_LIMIT,
+            fall_limit: DEFAULT_FALL_LIMIT,
             seed: 0,
         }
     }

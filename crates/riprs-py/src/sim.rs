@@ -337,6 +337,10 @@ fn metrics_to_dict<'py>(py: Python<'py>, m: &[RunMetrics]) -> PyResult<Bound<'py
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("DEFAULT_DURATION", rip_core::sim::DEFAULT_DURATION)?;
+    m.add("DEFAULT_SUBSTEPS", rip_core::sim::DEFAULT_SUBSTEPS)?;
+    m.add("DEFAULT_U_LIMIT", rip_core::sim::DEFAULT_U_LIMIT)?;
+    m.add("DEFAULT_FALL_LIMIT", rip_core::sim::DEFAULT_FALL_LIMIT)?;
     m.add_function(wrap_pyfunction!(sim_run, m)?)?;
     m.add_function(wrap_pyfunction!(sim_batch, m)?)?;
     m.add_function(wrap_pyfunction!(sim_metrics, m)?)?;

@@ -1,7 +1,7 @@
 //! The sections of the experiment file, each with its defaults (declared once, in its
 //! `Default`) and its value checks (in its `validate`, which names the key path).
 
-use std::f64::consts::{FRAC_PI_2, FRAC_PI_6, PI};
+use std::f64::consts::{FRAC_PI_6, PI};
 
 use serde::{Deserialize, Serialize};
 
@@ -10,7 +10,7 @@ use crate::mpc::{QpSolver, MAX_PREDICTION_HORIZON};
 use crate::paper;
 use crate::plant::FurutaParams;
 use crate::regulators::{DEFAULT_INPUT_LIMIT, DEFAULT_RATE_CUTOFF_HZ};
-use crate::sim::MAX_SUBSTEPS;
+use crate::sim::{DEFAULT_DURATION, DEFAULT_FALL_LIMIT, DEFAULT_SUBSTEPS, MAX_SUBSTEPS};
 
 /// Longest simulated run (s): an hour of the paper's 100 Hz loop.
 pub const MAX_DURATION: f64 = 3600.0;
@@ -284,9 +284,9 @@ impl Default for PlantSpec {
             Rm: None,
             kt: None,
             km: None,
-            substeps: 10,
+            substeps: DEFAULT_SUBSTEPS,
             initial_state: [0.0, 0.0, 0.05, 0.0],
-            fall_limit: FRAC_PI_2,
+            fall_limit: DEFAULT_FALL_LIMIT,
         }
     }
 }
@@ -442,7 +442,7 @@ impl Default for ReferenceSpec {
         Self {
             arm_step: 1.0,
             step_time: 1.0,
-            duration: 10.0,
+            duration: DEFAULT_DURATION,
         }
     }
 }
