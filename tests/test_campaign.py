@@ -615,9 +615,20 @@ def test_a_worker_killed_mid_campaign_costs_no_run(tmp_path, dask_cluster):
             killed_at.append(done)
 
     out = tmp_path / "out"
-    result = campaign.run(
-        spec, out, scheduler=address, progress=False, plots=False, on_chunk=kill_one_worker
-    )
+
+    def hung(signum, frame):
+        raise TimeoutError("the campaign did not end within 600 s of a worker's death")
+
+    # A hang must fail this test, not stall the whole run (the handler runs on this thread).
+    previous = signal.signal(signal.SIGALRM, hung)
+    signal.alarm(600)
+    try:
+        result = campaign.run(
+            spec, out, scheduler=address, progress=False, plots=False, on_chunk=kill_one_worker
+        )
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
     assert killed_at and killed_at[0] < c.runs, "the worker was not killed mid-way"
     assert workers[1].returncode is not None
     table = campaign.load(out)
