@@ -597,6 +597,44 @@ pub fn simulate_cancellable(
     Ok(out)
 }
 
+/// How a batch combines its plant variants with its noise seeds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pairing {
+    /// Every `(plant, seed)` combination, plant-major:
+    /// `plants[0]×seeds[0], plants[0]×seeds[1], …, plants[1]×seeds[0], …`.
+    Product,
+    /// Run `i` is `plants[i]` with `seeds[i]` (one fresh plant variant and noise seed per run);
+    /// both lists must have the same length.
+    OneToOne,
+}
+
+/// The `(plant index, seed)` runs of a batch of `n_plants` plant variants and `seeds`, in run
+/// order, as [`simulate_runs`] takes them.
+///
+/// Fails, naming the argument, without plants (`plants`), without seeds (`seeds`), or for
+/// [`Pairing::OneToOne`] when the counts differ (`seeds`).
+pub fn batch_runs(n_plants: usize, seeds: &[u64], pairing: Pairing) -> Result<Vec<(usize, u64)>> {
+    if n_plants == 0 {
+        return Err(RipError::invalid("plants", "need at least one plant"));
+    }
+    if seeds.is_empty() {
+        return Err(RipError::invalid("seeds", "need at least one seed"));
+    }
+    match pairing {
+        Pairing::Product => Ok((0..n_plants)
+            .flat_map(|p| seeds.iter().map(move |&s| (p, s)))
+            .collect()),
+        Pairing::OneToOne if n_plants != seeds.len() => Err(RipError::invalid(
+            "seeds",
+            format!(
+                "paired runs need one seed per plant ({n_plants} plants, {} seeds)",
+                seeds.len()
+            ),
+        )),
+        Pairing::OneToOne => Ok(seeds.iter().copied().enumerate().collect()),
+    }
+}
+
 /// Runs every `(plant variant, seed)` pair in parallel on all cores (rayon).
 ///
 /// `controllers` holds one independent controller per run, in the order
@@ -610,28 +648,19 @@ pub fn simulate_batch(
     controllers: Vec<Box<dyn Controller>>,
 ) -> Result<Vec<SimResult>> {
     config.validate()?;
-    if plants.is_empty() {
-        return Err(RipError::invalid("plants", "need at least one plant"));
-    }
-    if seeds.is_empty() {
-        return Err(RipError::invalid("seeds", "need at least one seed"));
-    }
-    let runs = plants.len() * seeds.len();
-    if controllers.len() != runs {
+    let runs = batch_runs(plants.len(), seeds, Pairing::Product)?;
+    if controllers.len() != runs.len() {
         return Err(RipError::invalid(
             "controllers",
             format!(
-                "need one per run ({} plants × {} seeds = {runs}), got {}",
+                "need one per run ({} plants × {} seeds = {}), got {}",
                 plants.len(),
                 seeds.len(),
+                runs.len(),
                 controllers.len()
             ),
         ));
     }
-    let n_seeds = seeds.len();
-    let runs: Vec<(usize, u64)> = (0..runs)
-        .map(|i| (i / n_seeds, seeds[i % n_seeds]))
-        .collect();
     simulate_runs(plants, &runs, config, controllers)
 }
 
@@ -824,5 +853,32 @@ mod tests {
             let err = simulate(&plant, &mut c, cfg).unwrap_err();
             assert!(err.to_string().contains(name), "{err}");
         }
+    }
+
+    #[test]
+    fn batch_runs_pair_plants_and_seeds_and_name_the_bad_argument() {
+        assert_eq!(
+            batch_runs(2, &[7, 9], Pairing::Product).unwrap(),
+            [(0, 7), (0, 9), (1, 7), (1, 9)]
+        );
+        assert_eq!(
+            batch_runs(2, &[7, 9], Pairing::OneToOne).unwrap(),
+            [(0, 7), (1, 9)]
+        );
+        let name = |e: RipError| match e {
+            RipError::InvalidParameter { name, .. } => name,
+            other => panic!("{other}"),
+        };
+        assert_eq!(
+            name(batch_runs(0, &[1], Pairing::Product).unwrap_err()),
+            "plants"
+        );
+        assert_eq!(
+            name(batch_runs(1, &[], Pairing::OneToOne).unwrap_err()),
+            "seeds"
+        );
+        let err = batch_runs(2, &[1, 2, 3], Pairing::OneToOne).unwrap_err();
+        assert!(err.to_string().contains("2 plants, 3 seeds"), "{err}");
+        assert_eq!(name(err), "seeds");
     }
 }

@@ -13,7 +13,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use rip_core::batch::{simulate_metrics, MetricsOptions, MonteCarlo, RunMetrics};
 use rip_core::metrics::table1_rmse;
-use rip_core::sim::{Reference, SensorModel, StepDisturbance};
+use rip_core::sim::{batch_runs, Pairing, Reference, SensorModel, StepDisturbance};
 use rip_core::{Controller, Plant, RipError, SimConfig, SimResult};
 
 use crate::control::{controller_factory, extract_controller};
@@ -180,23 +180,12 @@ fn sim_batch<'py>(
 ) -> PyResult<Bound<'py, PyList>> {
     let cfg = config_from_dict(config)?;
     let plants: Vec<Plant> = plants.iter().map(|p| p.inner).collect();
-    let runs: Vec<(usize, u64)> = if paired {
-        if plants.len() != seeds.len() {
-            return Err(to_py(RipError::invalid(
-                "seeds",
-                format!(
-                    "paired runs need one seed per plant ({} plants, {} seeds)",
-                    plants.len(),
-                    seeds.len()
-                ),
-            )));
-        }
-        seeds.iter().copied().enumerate().collect()
+    let pairing = if paired {
+        Pairing::OneToOne
     } else {
-        (0..plants.len())
-            .flat_map(|p| seeds.iter().map(move |&s| (p, s)))
-            .collect()
+        Pairing::Product
     };
+    let runs = batch_runs(plants.len(), &seeds, pairing).py()?;
     let controllers = (0..runs.len())
         .map(|_| extract_controller(controller))
         .collect::<PyResult<Vec<Box<dyn Controller>>>>()?;
