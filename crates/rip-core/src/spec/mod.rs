@@ -25,6 +25,7 @@
 //! controllers from it (module `assembly`).
 
 mod assembly;
+mod controllers;
 mod sections;
 
 use std::fmt;
@@ -33,9 +34,10 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 pub use assembly::Design;
+pub use controllers::{KalmanSpec, LqrSpec, MpcSpec, Solver};
 pub use sections::{
-    ControllerKind, KalmanSpec, LqrSpec, MonteCarloSpec, MpcSpec, Param, PlantSpec, Preset,
-    ReferenceSpec, SensorSpec, Solver, MAX_DURATION, MAX_MONTE_CARLO_RUNS,
+    ControllerKind, MonteCarloSpec, Param, PlantSpec, Preset, ReferenceSpec, SensorSpec,
+    MAX_DURATION, MAX_MONTE_CARLO_RUNS,
 };
 
 /// Top-level tables that belong to `rip-rt` and are not checked here.
