@@ -95,50 +95,78 @@ impl Default for EmulatorConfig {
     }
 }
 
+/// An emulator setting out of range, naming the command-line option (or setting) at fault.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{option}: {reason}")]
+pub struct EmulatorConfigError {
+    /// The option, e.g. `--drop-rate`.
+    pub option: String,
+    /// What is wrong with its value.
+    pub reason: String,
+}
+
+impl EmulatorConfigError {
+    fn new(option: &str, reason: impl Into<String>) -> Self {
+        Self {
+            option: option.into(),
+            reason: reason.into(),
+        }
+    }
+}
+
 impl EmulatorConfig {
     /// Checks the values; the error names the command-line flag.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), EmulatorConfigError> {
         let prob = |name: &str, p: f64| {
             if (0.0..=1.0).contains(&p) {
                 Ok(())
             } else {
-                Err(format!("{name}: must be a probability in [0, 1], got {p}"))
+                Err(EmulatorConfigError::new(
+                    name,
+                    format!("must be a probability in [0, 1], got {p}"),
+                ))
             }
         };
         prob("--drop-rate", self.drop_rate)?;
         prob("--corrupt-rate", self.corrupt_rate)?;
         if !(self.noise_counts.is_finite() && self.noise_counts >= 0.0) {
-            return Err(format!(
-                "--noise: must be a non-negative number of counts, got {}",
-                self.noise_counts
+            return Err(EmulatorConfigError::new(
+                "--noise",
+                format!(
+                    "must be a non-negative number of counts, got {}",
+                    self.noise_counts
+                ),
             ));
         }
         if !(self.sim_rate_hz.is_finite() && (100.0..=100_000.0).contains(&self.sim_rate_hz)) {
-            return Err(format!(
-                "--sim-rate: must be in [100, 100000] Hz, got {}",
-                self.sim_rate_hz
+            return Err(EmulatorConfigError::new(
+                "--sim-rate",
+                format!("must be in [100, 100000] Hz, got {}", self.sim_rate_hz),
             ));
         }
         if !(self.voltage_limit.is_finite()
             && self.voltage_limit > 0.0
             && self.voltage_limit <= 32.767)
         {
-            return Err(format!(
-                "voltage limit: must be in (0, 32.767] V, got {}",
-                self.voltage_limit
+            return Err(EmulatorConfigError::new(
+                "voltage limit",
+                format!("must be in (0, 32.767] V, got {}", self.voltage_limit),
             ));
         }
         if !(self.supply.is_finite() && self.supply >= self.voltage_limit && self.supply <= 65.535)
         {
-            return Err(format!(
-                "supply: must be between the voltage limit and 65.535 V, got {}",
-                self.supply
+            return Err(EmulatorConfigError::new(
+                "supply",
+                format!(
+                    "must be between the voltage limit and 65.535 V, got {}",
+                    self.supply
+                ),
             ));
         }
         if !(self.command_timeout_s.is_finite() && self.command_timeout_s > 0.0) {
-            return Err(format!(
-                "--command-timeout: must be positive, got {}",
-                self.command_timeout_s
+            return Err(EmulatorConfigError::new(
+                "--command-timeout",
+                format!("must be positive, got {}", self.command_timeout_s),
             ));
         }
         for (name, v) in [
@@ -146,7 +174,10 @@ impl EmulatorConfig {
             ("--initial-pendulum", self.initial_pendulum),
         ] {
             if !v.is_finite() {
-                return Err(format!("{name}: must be finite, got {v}"));
+                return Err(EmulatorConfigError::new(
+                    name,
+                    format!("must be finite, got {v}"),
+                ));
             }
         }
         for (name, v) in [
@@ -155,14 +186,18 @@ impl EmulatorConfig {
         ] {
             if let Some(v) = v {
                 if !(v.is_finite() && v >= 0.0) {
-                    return Err(format!(
-                        "{name}: must be a non-negative number of seconds, got {v}"
+                    return Err(EmulatorConfigError::new(
+                        name,
+                        format!("must be a non-negative number of seconds, got {v}"),
                     ));
                 }
             }
         }
         if self.arm_counts_per_rev == 0 || self.pendulum_counts_per_rev == 0 {
-            return Err("--counts-per-rev: must be positive".into());
+            return Err(EmulatorConfigError::new(
+                "--counts-per-rev",
+                "must be positive",
+            ));
         }
         Ok(())
     }
