@@ -1,5 +1,5 @@
 //! Dense linear algebra for control design: argument validation, eigenvalues and
-//! zero-order-hold discretisation. The Riccati solver is in [`crate::dare`].
+//! zero-order-hold discretisation. The Riccati solver is in [`crate::dare`](mod@crate::dare).
 
 use nalgebra::{Complex, DMatrix};
 
@@ -258,7 +258,7 @@ pub fn one_norm(m: &Mat) -> f64 {
 ///
 /// `None` when the result is not representable (an entry overflows, or `A` has a non-finite
 /// entry or 1-norm): the number of squarings is computed from a finite norm and stays below
-/// [`EXPM_MAX_SQUARINGS`], and the squaring stops at the first overflow, so huge inputs end
+/// `EXPM_MAX_SQUARINGS`, and the squaring stops at the first overflow, so huge inputs end
 /// at once instead of looping on an infinite norm estimate. `A` must be square.
 pub fn expm(a: &Mat) -> Option<Mat> {
     let n = a.nrows();

@@ -47,7 +47,7 @@ impl OutputDisturbance {
 
 /// MPC settings (MATLAB names in brackets). Empty vectors take MATLAB's defaults; otherwise
 /// they have one entry per input or output of the plant. Validated by
-/// [`validate`](Self::validate) (intrinsic checks) and [`Mpc::new`] (sizes).
+/// [`validate`](Self::validate) (intrinsic checks) and [`Mpc::new`](super::Mpc::new) (sizes).
 #[derive(Debug, Clone)]
 pub struct MpcSettings {
     /// Prediction horizon `P`, at most [`MAX_PREDICTION_HORIZON`] \[`PredictionHorizon`\];
@@ -126,7 +126,7 @@ impl MpcSettings {
 
     /// Checks everything that does not depend on the plant's sizes, including
     /// `1 ≤ P ≤` [`MAX_PREDICTION_HORIZON`]. The bound on the condensed problem's size, which
-    /// does, is checked by [`Mpc::new`].
+    /// does, is checked by [`Mpc::new`](super::Mpc::new).
     pub fn validate(&self) -> Result<()> {
         let (p, m) = (self.prediction_horizon, self.control_horizon);
         if p == 0 || p > MAX_PREDICTION_HORIZON {
