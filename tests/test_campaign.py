@@ -430,6 +430,29 @@ def test_a_changed_spec_is_refused_and_nothing_is_touched(tmp_path):
             '[campaign]\n[[campaign.axis]]\nname = "Dp"\nrange = [-1.0, 0.0]\npoints = 2\n',
             "campaign.axis[0]",
         ),
+        # Axes over one setting (a list and its entry, an alias and the list it indexes).
+        (
+            '[campaign]\n[[campaign.axis]]\nname = "sensor.noise_std"\nscale = [0.5, 2.0]\n'
+            'points = 2\n[[campaign.axis]]\nname = "sensor.noise_std[0]"\nvalues = [0.0, 0.01]\n',
+            "campaign.axis[1].name",
+        ),
+        (
+            '[campaign]\n[[campaign.axis]]\nname = "initial_tilt"\nvalues = [0.05, 0.1]\n'
+            '[[campaign.axis]]\nname = "plant.initial_state"\nscale = [0.5, 2.0]\npoints = 2\n',
+            "campaign.axis[1].name",
+        ),
+        (
+            '[campaign]\n[[campaign.axis]]\nname = "plant.initial_state[2]"\nvalues = [0.05]\n'
+            '[[campaign.axis]]\nname = "initial_tilt"\nvalues = [0.1]\n',
+            "campaign.axis[1].name",
+        ),
+        # Settings the runs never read.
+        (
+            '[campaign]\n[[campaign.axis]]\nname = "reference.duration"\nvalues = [5.0, 10.0]\n',
+            "campaign.duration",
+        ),
+        ('controllers = ["LQR"]\n[campaign]\n', "campaign.controllers"),
+        ("[campaign]\n[monte_carlo]\nruns = 10\n", "'monte_carlo'"),
     ],
 )
 def test_bad_specs_name_the_key(tmp_path, text, key):
@@ -502,6 +525,47 @@ def test_an_unreachable_scheduler_fails_before_any_work(tmp_path):
     assert not (tmp_path / "out").exists()
     with pytest.raises(campaign.CampaignError, match="tcp://HOST:PORT"):
         campaign.run(spec, tmp_path / "out", scheduler="127.0.0.1:8786")
+
+
+@pytest.mark.parametrize(
+    "address",
+    [
+        "tcp://127.0.0.1",
+        "tcp://127.0.0.1:notaport",
+        "tcp://127.0.0.1:0",
+        "tcp://127.0.0.1:65536",
+        "tcp://:8786",
+        "http://127.0.0.1:8786",
+    ],
+)
+def test_a_malformed_scheduler_address_is_named_before_any_work(tmp_path, address):
+    spec = _spec(tmp_path, SMALL)
+    with pytest.raises(campaign.CampaignError, match="tcp://HOST:PORT") as info:
+        campaign.run(spec, tmp_path / "out", scheduler=address)
+    assert repr(address) in str(info.value)
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    ("address", "expected"),
+    [
+        ("tcp://127.0.0.1", "--scheduler must be an address like tcp://HOST:PORT"),
+        ("tcp://127.0.0.1:notaport", "--scheduler must be an address like tcp://HOST:PORT"),
+        (None, "cannot reach the Dask scheduler"),
+    ],
+)
+def test_the_cli_names_a_bad_scheduler_and_exits_cleanly(tmp_path, address, expected):
+    """One line, no traceback from a half-built client at exit (None: a closed local port)."""
+    address = address or f"tcp://127.0.0.1:{_free_port()}"
+    spec = _spec(tmp_path, SMALL)
+    proc = _run_cli([str(spec), "--out", str(tmp_path / "out"), "--scheduler", address])
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode != 0
+    assert "Traceback" not in err, err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1, err
+    assert expected in lines[0] and address in lines[0]
+    assert not (tmp_path / "out").exists()
 
 
 DASK_SPEC = """

@@ -91,8 +91,15 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         )
     except campaign.CampaignError as exc:
         # run() names its keyword arguments; here they are options.
-        flag = {"chunk_size": "--chunk-size", "workers": "--workers", "map_axes": "--map"}
-        message = re.sub(r"^(chunk_size|workers|map_axes)\b", lambda m: flag[m[1]], str(exc))
+        flag = {
+            "chunk_size": "--chunk-size",
+            "workers": "--workers",
+            "map_axes": "--map",
+            "scheduler": "--scheduler",
+        }
+        message = re.sub(
+            r"^(chunk_size|workers|map_axes|scheduler)\b", lambda m: flag[m[1]], str(exc)
+        )
         raise campaign.CampaignError(message) from None
     except KeyboardInterrupt:
         print(

@@ -6,6 +6,7 @@ import contextlib
 import logging
 import os
 import re
+import socket
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -114,6 +115,40 @@ def _in_process(campaign: Campaign, chunks: Sequence[tuple[int, int]]) -> Iterat
         raise interrupted
 
 
+_ADDRESS = re.compile(r"^(tcp|tls)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+):(\d{1,5})$")
+
+
+def _scheduler_address(scheduler: str) -> tuple[str, int]:
+    """Host and port of a ``tcp://HOST:PORT`` (or ``tls://``) scheduler address; refuses any
+    other form."""
+    m = _ADDRESS.match(scheduler) if isinstance(scheduler, str) else None
+    if m is None or not 1 <= int(m.group(3)) <= 65535:
+        raise CampaignError(
+            f"scheduler must be an address like tcp://HOST:PORT (port 1..65535), "
+            f"got {scheduler!r}"
+        )
+    return m.group(2).strip("[]"), int(m.group(3))
+
+
+def _client_class(client: type) -> type:
+    """``distributed.Client`` that, when it fails to connect, shuts itself down at once: a
+    half-started client otherwise waits 2 x timeout in its finaliser and prints a traceback."""
+
+    class _Client(client):  # type: ignore[misc, valid-type]
+        def start(self, **kwargs: Any) -> Any:
+            try:
+                return super().start(**kwargs)
+            except BaseException:
+                with contextlib.suppress(Exception):
+                    self.close(timeout=1)
+                self.status = "closed"  # leaves the finaliser nothing to wait for
+                with contextlib.suppress(Exception):
+                    self._loop_runner.stop()
+                raise
+
+    return _Client
+
+
 def _connect(scheduler: str | None, workers: int | None, timeout: float) -> tuple[Any, Any]:
     """A Dask client (and the local cluster it owns, if any); errors before any work."""
     try:
@@ -123,14 +158,27 @@ def _connect(scheduler: str | None, workers: int | None, timeout: float) -> tupl
             f"running on a Dask cluster needs dask.distributed, which is not installed: {_EXTRA}"
         ) from None
     if scheduler is not None:
-        if not re.match(r"^(tcp|tls|inproc|ucx)://\S+$", scheduler):
-            raise CampaignError(
-                f"scheduler must be an address like tcp://HOST:PORT, got {scheduler!r}"
-            )
+        host, port = _scheduler_address(scheduler)
+        # A bounded plain connection first: a Client that fails to connect stalls in its
+        # finaliser and prints a traceback at exit, so it is only built for a listening port.
         try:
-            client = Client(scheduler, timeout=timeout, set_as_default=False)
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise CampaignError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+            socket.create_connection((host, port), timeout=timeout).close()
+        except OSError as exc:
+            reason = "timed out" if isinstance(exc, TimeoutError) else str(exc)
+            raise CampaignError(
+                f"cannot reach the Dask scheduler at {scheduler}: {reason}"
+            ) from None
+        try:
+            client = _client_class(Client)(scheduler, timeout=timeout, set_as_default=False)
+        except Exception as exc:  # whatever the peer sent: it is not a usable scheduler
+            reason = (
+                str(exc)
+                if isinstance(exc, (OSError, ValueError))
+                else f"it does not answer as a Dask scheduler ({type(exc).__name__})"
+            )
+            raise CampaignError(
+                f"cannot reach the Dask scheduler at {scheduler}: {reason}"
+            ) from None
         try:
             client.wait_for_workers(1, timeout=timeout)
         except (OSError, TimeoutError) as exc:
@@ -253,6 +301,8 @@ def run(
     size = _int(chunk_size, "chunk_size", 1) if chunk_size is not None else campaign.chunk_size
     if scheduler is not None and workers is not None:
         raise CampaignError("give scheduler or workers, not both")
+    if scheduler is not None:
+        _scheduler_address(scheduler)
     if workers is not None:
         _int(workers, "workers", 1)
     pair = None

@@ -265,6 +265,13 @@ def load_spec(spec: PathLike | Mapping[str, Any]) -> Campaign:
         raise type(exc)(f"{path}: {exc}") from None
 
 
+_IGNORED_TOP = {
+    "controllers": "set the controllers in [campaign] as campaign.controllers",
+    "monte_carlo": "a campaign's runs are set in [campaign] (campaign.seeds, campaign.seed)",
+}
+# Settings that the runs never read (each run's length is campaign.duration): an axis over one
+# would label columns with values that change nothing.
+_NO_EFFECT = {"reference.duration": "set the run length with campaign.duration"}
 _CAMPAIGN_KEYS = ("axis", "chunk_size", "controllers", "duration", "seed", "seeds", "settle_band")
 _AXIS_KEYS = ("name", "points", "range", "samples", "scale", "values")
 
@@ -280,6 +287,11 @@ def _parse(data: dict[str, Any]) -> Campaign:
         raise CampaignError(
             f"unknown key 'campaign.{unknown[0]}'; valid keys: {', '.join(_CAMPAIGN_KEYS)}"
         )
+    # Settings of `riprs compare` that a campaign would silently ignore: refused, with the place
+    # the campaign takes them from.
+    for k, instead in _IGNORED_TOP.items():
+        if k in data:
+            raise CampaignError(f"'{k}' is not used by a campaign; {instead}")
     base_data = {k: v for k, v in data.items() if k != "campaign"}
     base = _load_base(base_data)
 
@@ -318,8 +330,13 @@ def _parse(data: dict[str, Any]) -> Campaign:
         raise CampaignError("campaign.axis must be an array of tables ([[campaign.axis]])")
     axes = [_parse_axis(a, f"campaign.axis[{i}]", i, seed, base) for i, a in enumerate(raw_axes)]
     for i, axis in enumerate(axes):
-        if any((a.path or a.name) == (axis.path or axis.name) for a in axes[:i]):
-            raise CampaignError(f"campaign.axis[{i}].name: {axis.name!r} is already an axis")
+        for a in axes[:i]:
+            if _overlap(a, axis):
+                same = a.name if a.name == axis.name else f"{a.name!r} ({a.path or a.name})"
+                raise CampaignError(
+                    f"campaign.axis[{i}].name: {axis.name!r} ({axis.path or axis.name}) "
+                    f"overlaps the axis {same}; a setting can span one axis only"
+                )
         if axis.name in COLUMNS or axis.name in METRICS:
             raise CampaignError(f"campaign.axis[{i}].name: {axis.name!r} is a result column")
 
@@ -372,6 +389,8 @@ def _parse_axis(raw: Any, key: str, index: int, seed: int, base: Any) -> Axis:
     parameter = name if name in PLANT_PARAMETERS else None
     path = None if parameter else ALIASES.get(name, name)
     base_value: Any = None
+    if path in _NO_EFFECT:
+        raise CampaignError(f"{key}.name: {path} has no effect on the runs; {_NO_EFFECT[path]}")
     if path is not None:
         base_value = _resolve(base, path, f"{key}.name")
 
@@ -467,6 +486,18 @@ def _resolve(base: Any, path: str, key: str) -> Any:
     if not numeric:
         raise CampaignError(f"{key}: {path} is not a numeric setting of the base spec")
     return value
+
+
+def _overlap(a: Axis, b: Axis) -> bool:
+    """Whether two axes change the same setting (a list setting and one of its entries, or the
+    same entry) or the same plant parameter."""
+    if a.path is None or b.path is None:
+        return a.parameter is not None and a.parameter == b.parameter
+    ma, mb = _PATH.match(a.path), _PATH.match(b.path)
+    assert ma is not None and mb is not None
+    if ma.group(1, 2) != mb.group(1, 2):
+        return False
+    return ma.group(3) is None or mb.group(3) is None or ma.group(3) == mb.group(3)
 
 
 def _config_with(campaign: Campaign, at: Mapping[Axis, int]) -> Any:
