@@ -1,0 +1,89 @@
+"""MkDocs hook: every figure and printed result on the site is produced by riprs at build time.
+
+Before the pages are rendered, each script in ``examples/`` listed in ``EXAMPLES`` runs in a
+subprocess with ``--out`` pointing into a temporary directory. What it prints becomes
+``output/NAME.txt`` and the figures it writes become ``generated/NAME/*.svg``: pages include
+the former with ``--8<-- "output/NAME.txt"`` (pymdownx.snippets, whose search path gets the
+temporary directory) and link the latter as site files. An example that fails, or a page that
+names an output no example made, fails the build.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from mkdocs.exceptions import PluginError
+from mkdocs.structure.files import File, Files
+
+ROOT = Path(__file__).resolve().parents[2]
+
+# Scripts run for the site, in this order, with extra arguments. The test suite runs every
+# script in examples/ (tests/test_examples.py) in its small size; the site runs them full size.
+EXAMPLES: dict[str, list[str]] = {
+    "getting_started": [],
+    "paper_model": [],
+    "design_controllers": [],
+    "matlab_conventions": [],
+    "swing_up": [],
+    "rig_emulator": [],
+    "campaign": [],
+    "performance": [],
+}
+
+_state: dict[str, Any] = {}
+
+
+def on_config(config: Any) -> Any:
+    work = Path(tempfile.mkdtemp(prefix="riprs-site-"))
+    _state["work"] = work
+    snippets = config.mdx_configs.setdefault("pymdownx.snippets", {})
+    snippets["base_path"] = [*snippets.get("base_path", ["."]), str(work)]
+    return config
+
+
+def _run_examples(work: Path) -> None:
+    env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONUNBUFFERED": "1"}
+    env.pop("RIPRS_EXAMPLES_SMALL", None)
+    (work / "output").mkdir(exist_ok=True)
+    for name, extra in EXAMPLES.items():
+        script = ROOT / "examples" / f"{name}.py"
+        out = work / "generated" / name
+        out.mkdir(parents=True)
+        start = time.perf_counter()
+        proc = subprocess.run(
+            [sys.executable, str(script), "--out", str(out), *extra],
+            cwd=ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        if proc.returncode != 0:
+            raise PluginError(
+                f"examples/{name}.py failed (exit {proc.returncode}):\n{proc.stdout}\n{proc.stderr}"
+            )
+        (work / "output" / f"{name}.txt").write_text(proc.stdout)
+        print(f"INFO    -  examples/{name}.py ran in {time.perf_counter() - start:.1f} s")
+
+
+def on_pre_build(config: Any) -> None:
+    _run_examples(_state["work"])
+
+
+def on_files(files: Files, config: Any) -> Files:
+    generated = _state["work"] / "generated"
+    for path in sorted(generated.rglob("*.svg")):
+        uri = "generated/" + path.relative_to(generated).as_posix()
+        files.append(File.generated(config, uri, abs_src_path=str(path)))
+    return files
+
+
+def on_post_build(config: Any) -> None:
+    shutil.rmtree(_state.pop("work"), ignore_errors=True)
