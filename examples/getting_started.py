@@ -16,7 +16,7 @@ import os
 
 # --8<-- [start:imports]
 import riprs
-from riprs.compare import compare
+from riprs.compare import compare, format_monte_carlo
 
 # --8<-- [end:imports]
 
@@ -37,6 +37,19 @@ for name, run in result.runs.items():
     print(f"{name}: fell={run.fell}, {len(run.t)} samples, peak |u| = {abs(run.u).max():.2f} V")
 print("files:", ", ".join(sorted(p.name for p in result.files)))
 # --8<-- [end:compare]
+
+# --8<-- [start:monte_carlo]
+# 50 more runs per controller over noise seeds and +-10 % errors of every physical parameter
+# (`riprs compare --monte-carlo 50`): metrics only, computed in parallel.
+runs = 50
+# --8<-- [end:monte_carlo]
+if small:
+    runs = 5
+# --8<-- [start:monte_carlo_run]
+mc = compare(config, seed=0, monte_carlo=runs, plots=False, progress=False).monte_carlo
+print()
+print(format_monte_carlo(mc))
+# --8<-- [end:monte_carlo_run]
 
 # Every controller balances the nominal plant: the check that keeps this example honest.
 assert not any(run.fell for run in result.runs.values())

@@ -75,3 +75,11 @@ def test_example_sections_are_unique() -> None:
     for script in (ROOT / "examples").glob("*.py"):
         names = marker.findall(script.read_text())
         assert len(names) == len(set(names)), f"{script.name}: repeated sections {names}"
+
+
+def test_readme_links_point_at_files_that_exist() -> None:
+    link = re.compile(r"\]\(([^)#]+)(?:#[^)]*)?\)")
+    targets = [t for t in link.findall((ROOT / "README.md").read_text()) if "://" not in t]
+    assert targets
+    missing = [t for t in targets if not (ROOT / t).exists()]
+    assert not missing, missing

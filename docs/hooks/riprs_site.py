@@ -87,3 +87,9 @@ def on_files(files: Files, config: Any) -> Files:
 
 def on_post_build(config: Any) -> None:
     shutil.rmtree(_state.pop("work"), ignore_errors=True)
+
+
+def on_build_error(error: Exception) -> None:
+    work = _state.pop("work", None)
+    if work is not None:
+        shutil.rmtree(work, ignore_errors=True)
