@@ -22,6 +22,7 @@ from riprs._riprs import (
 from riprs.config import ConfigError, Spec, load_config
 from riprs.control import Controller, Lqg, Lqr, SwingUp
 from riprs.design import KalmanDesign, c2d, dare, dlqe, dlqr, kalman
+from riprs.excitation import excitation, excitation_defaults
 from riprs.log import LogError, RtLog, load_log
 from riprs.mpc import Mpc, MpcSolution
 from riprs.plant import FurutaParams, Plant
@@ -61,6 +62,8 @@ __all__ = [
     "dare",
     "dlqe",
     "dlqr",
+    "excitation",
+    "excitation_defaults",
     "kalman",
     "load_config",
     "load_log",

@@ -484,3 +484,23 @@ def load_config(path: str | os.PathLike[str]) -> Spec: ...
 def table1_rmse(
     arm: _F, pendulum: _F, voltage: _F, arm_reference: _F
 ) -> tuple[float, float, float]: ...
+
+_SignalName = Literal["chirp", "prbs", "steps", "free-swing", "free_swing"]
+
+def excitation(
+    signal: _SignalName,
+    *,
+    dt: float = ...,
+    t: ArrayLike | None = ...,
+    duration: float | None = ...,
+    amplitude: float | None = ...,
+    f_start: float | None = ...,
+    f_end: float | None = ...,
+    sweep: Literal["linear", "log", "logarithmic"] | None = ...,
+    prbs_bits: int | None = ...,
+    prbs_clock: float | None = ...,
+    seed: int | None = ...,
+    step_hold: float | None = ...,
+    kick: float | None = ...,
+) -> _F: ...
+def excitation_defaults(signal: _SignalName) -> dict[str, float | int | str]: ...

@@ -20,6 +20,8 @@
 //!   ([`Mpc`]), solved by Clarabel or a dense active-set method.
 //! - [`spec`] — the experiment file every front end reads ([`Spec`]), and the one assembly of
 //!   LQR, LQG and MPC from it.
+//! - [`excitation`] — chirp, PRBS, steps and free-swing signals for identification runs, and
+//!   the arm-centring law that keeps them inside the arm's travel.
 //! - [`swingup`] — energy swing-up from rest with an arm-limit barrier, and the [`SwingUp`]
 //!   supervisor that catches with any balance controller.
 //!
@@ -29,6 +31,7 @@ pub mod batch;
 pub mod controller;
 pub mod dare;
 pub mod error;
+pub mod excitation;
 pub mod fit;
 pub mod kalman;
 pub mod linalg;

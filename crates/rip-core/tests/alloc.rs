@@ -157,3 +157,23 @@ fn swing_up_supervisor_does_not_allocate() {
         assert_eq!(sup.phase(), rip_core::Phase::Balance, "caught within 6 s");
     }
 }
+
+#[test]
+fn excitation_signals_allocate_nothing_per_sample() {
+    use rip_core::excitation::{Excitation, ExcitationSettings, Signal};
+    for signal in Signal::ALL {
+        let mut x = Excitation::new(ExcitationSettings::new(signal), 0.01).unwrap();
+        let mut sum = 0.0;
+        let n = allocations_during(|| {
+            for k in 0..3000 {
+                let t = k as f64 * 0.01;
+                let e = x.value(t);
+                sum += x.command(e, 0.3 * (0.5 * t).sin(), 3.0);
+            }
+            // Back in time: the PRBS restarts its register, still without allocating.
+            sum += x.value(1.0);
+        });
+        assert_eq!(n, 0, "{signal}");
+        assert!(sum.is_finite());
+    }
+}

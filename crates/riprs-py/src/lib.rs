@@ -9,6 +9,7 @@ mod control;
 mod convert;
 mod design;
 mod errors;
+mod excitation;
 mod interrupt;
 mod mpc;
 mod paper;
@@ -30,5 +31,6 @@ fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     mpc::register(m)?;
     spec::register(m)?;
     swingup::register(m)?;
+    excitation::register(m)?;
     Ok(())
 }
