@@ -129,7 +129,7 @@ alike.
 
 Every key is optional. Below is the complete file with every default (the paper's settings),
 as `riprs config` prints it; `riprs config FILE` prints a file resolved the same way.
-`rip-rt` adds its own `[loop]`, `[device]` and `[safety]` sections
+`rip-rt` adds its own `[loop]`, `[device]`, `[safety]` and `[calibration]` sections
 ([rip-rt.md](rip-rt.md)); `rip-rt config FILE` prints them after these.
 
 - `controllers`: what `riprs compare` runs.

@@ -1,7 +1,8 @@
 //! The configuration of `rip-rt run`, `rip-rt emulate` and `rip-rt config`: the experiment
 //! file of `rip_core::spec` (`[plant]`, `[sensor]`, `[reference]`, `[lqr]`, `[kalman]`,
 //! `[mpc]`, ... read, defaulted and checked by rip-core, exactly as `riprs compare` reads
-//! them) plus rip-rt's own sections `[loop]`, `[device]` and `[safety]`, defined here. Every
+//! them) plus rip-rt's own sections `[loop]`, `[device]` and `[safety]`, defined here, and
+//! `[calibration]`, defined with the rest check in [`crate::calibrate`]. Every
 //! key is optional; the defaults are the paper's settings (Ts = 10 ms, |u| ≤ 12 V) and the
 //! encoders of the reference rig (2048 counts per revolution each).
 //!
@@ -11,6 +12,8 @@
 use std::path::Path;
 
 use rip_core::spec::{from_value, Spec, SpecError};
+
+pub use crate::calibrate::CalibrationConfig;
 use serde::{Deserialize, Serialize};
 
 /// A configuration problem, naming the file and the key: the experiment file's one error type,
@@ -166,6 +169,8 @@ pub struct RuntimeSections {
     pub device: DeviceConfig,
     /// `[safety]`
     pub safety: SafetyConfig,
+    /// `[calibration]`
+    pub calibration: CalibrationConfig,
 }
 
 /// The whole file.
@@ -177,6 +182,9 @@ pub struct Config {
     pub device: DeviceConfig,
     /// `[safety]`
     pub safety: SafetyConfig,
+    /// `[calibration]`: the rest check and the hanging-down calibration
+    /// ([`crate::calibrate`]).
+    pub calibration: CalibrationConfig,
     /// The experiment sections, rip-core's (`[plant]`, `[reference]`, `[lqr]`, `[kalman]`,
     /// `[mpc]`, ...).
     pub spec: Spec,
@@ -235,6 +243,7 @@ impl Config {
             loop_: own.loop_,
             device: own.device,
             safety: own.safety,
+            calibration: own.calibration,
             spec,
         };
         cfg.validate()?;
@@ -258,6 +267,7 @@ impl Config {
             loop_: self.loop_.clone(),
             device: self.device.clone(),
             safety: self.safety.clone(),
+            calibration: self.calibration.clone(),
         };
         let own = toml::to_string(&own).expect("every setting has a TOML form");
         format!("{}\n{}", self.spec.to_toml(), own)
@@ -268,6 +278,7 @@ impl Config {
         self.validate_loop()?;
         self.validate_device()?;
         self.validate_safety()?;
+        self.calibration.validate(&self.device)?;
         let s = &self.safety;
         let r = &self.spec.reference;
         if r.arm_step.abs() >= s.arm_limit {

@@ -11,12 +11,14 @@
 //! - [`stop`] — stop reasons and exit codes, the stop frame on every exit path, signals.
 //! - [`log`] — the CSV log and its writer thread.
 //! - [`timing`] — absolute-deadline scheduling, latency histograms, real-time settings.
+//! - [`calibrate`] — the rest check and the encoder zeros taken hanging down.
 //! - [`config`] — the TOML configuration.
 //! - [`serial`] — raw termios serial I/O and pseudo-terminals.
 //!
 //! `docs/protocol.md` specifies the protocol for firmware authors and `docs/rip-rt.md` the
 //! command line, the safety rules, the exit codes and the log format.
 
+pub mod calibrate;
 pub mod config;
 pub mod controllers;
 pub mod emulator;

@@ -6,6 +6,7 @@ use std::fmt;
 
 use rip_core::{Controller, StepStatus};
 
+use crate::calibrate::Calibration;
 use crate::config::{Config, PendulumZero, MAX_BLIND_MS, MAX_VOLTAGE_LIMIT};
 use crate::protocol::{
     encode, Command, Frame, Measurement, Message, Parser, ParserStats, COMMAND_ENABLE, MAX_FRAME,
@@ -49,6 +50,8 @@ pub struct LoopCore {
     parser: Parser,
     arm_rad_per_count: f64,
     pendulum_rad_per_count: f64,
+    // Subtracted from the scaled counts: θ = 0 and α = 0 (upright).
+    arm_offset: f64,
     pendulum_offset: f64,
     pendulum_limit: f64,
     arm_limit: f64,
@@ -114,6 +117,7 @@ impl LoopCore {
             parser: Parser::new(),
             arm_rad_per_count: d.arm_sign * tau / d.arm_counts_per_rev as f64,
             pendulum_rad_per_count: d.pendulum_sign * tau / d.pendulum_counts_per_rev as f64,
+            arm_offset: 0.0,
             pendulum_offset: match d.pendulum_zero {
                 PendulumZero::Down => std::f64::consts::PI,
                 PendulumZero::Up => 0.0,
@@ -227,9 +231,17 @@ impl LoopCore {
         found
     }
 
+    /// Takes the encoder zeros from `cal` (a rest window hanging down, [`crate::calibrate`])
+    /// instead of `[device]`: the arm's rest count is θ = 0, the pendulum's is α = π.
+    pub fn calibrate(&mut self, cal: &Calibration) {
+        self.arm_offset = cal.arm_zero_counts * self.arm_rad_per_count;
+        self.pendulum_offset =
+            cal.pendulum_hanging_counts * self.pendulum_rad_per_count - std::f64::consts::PI;
+    }
+
     /// Arm and pendulum angles (rad; pendulum wrapped to (−π, π], 0 upright) of a measurement.
     pub fn angles(&self, m: &Measurement) -> (f64, f64) {
-        let theta = m.arm_counts as f64 * self.arm_rad_per_count;
+        let theta = m.arm_counts as f64 * self.arm_rad_per_count - self.arm_offset;
         let alpha = wrap_angle(
             m.pendulum_counts as f64 * self.pendulum_rad_per_count - self.pendulum_offset,
         );
@@ -446,6 +458,28 @@ mod tests {
         assert!((alpha - 10.0 * std::f64::consts::TAU / 2048.0).abs() < 1e-9);
         let (_, alpha) = c.angles(&measurement(0, 0, 0));
         assert!((alpha - std::f64::consts::PI).abs() < 1e-12);
+    }
+
+    #[test]
+    fn calibration_moves_both_zeros() {
+        let mut c = core(1.0);
+        let cal = Calibration {
+            arm_zero_counts: 100.0,
+            pendulum_hanging_counts: -7.5,
+            pendulum_offset: 0.0,
+            spread_counts: [0, 0],
+            max_rates: [0.0, 0.0],
+            after_s: 1.0,
+        };
+        c.calibrate(&cal);
+        let count = std::f64::consts::TAU / 2048.0;
+        // The rest pose reads θ = 0, α = π (hanging); half a turn on is upright.
+        let (theta, alpha) = c.angles(&measurement(0, 100, -7));
+        assert!(theta.abs() < 1e-12);
+        assert!((alpha.abs() - (std::f64::consts::PI - 0.5 * count)).abs() < 1e-12);
+        let (theta, alpha) = c.angles(&measurement(0, 612, -7 + 1024));
+        assert!((theta - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        assert!((alpha - 0.5 * count).abs() < 1e-12);
     }
 
     #[test]

@@ -35,6 +35,7 @@ Exit codes (docs/rip-rt.md has the safety rules behind each):
     10   compute overrun: a step over loop.max_step_periods, loop.max_consecutive_misses
          periods in a row longer than a period, or the loop stalled (suspended) for 100 ms
     11   refused to start: timed controller steps do not fit the period (motor never enabled)
+    12   refused to start: the rig is not at rest hanging down (rest check; motor never enabled)
     101  internal error (panic)
     128+N  stopped by signal N: 129 SIGHUP, 130 SIGINT (Ctrl-C), 131 SIGQUIT, 138 SIGUSR1,
          143 SIGTERM, 148 SIGTSTP (Ctrl-Z ends the run), ...; a fatal signal (SIGSEGV,

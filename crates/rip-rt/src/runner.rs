@@ -167,10 +167,51 @@ struct Runner<'a> {
 }
 
 /// A measurement, when its request was sent and when its bytes were read.
-struct Reply {
-    m: Measurement,
-    req_ns: u64,
-    rx_ns: u64,
+#[derive(Debug, Clone, Copy)]
+pub struct Reply {
+    /// The measurement.
+    pub m: Measurement,
+    /// When its sample request was sent (ns, `CLOCK_MONOTONIC`).
+    pub req_ns: u64,
+    /// When its bytes were read.
+    pub rx_ns: u64,
+}
+
+/// Sends a sample request on `io` and waits for the measurement answering it, up to
+/// `reply_timeout_ns` after the request and never past `cap_ns` (the next deadline, which
+/// the next request must keep). `None` when none arrived in time; bytes that are not the
+/// answer (stale replies, garbage) are consumed by `core`'s parser.
+pub fn exchange(
+    io: &Fd,
+    core: &mut LoopCore,
+    tx: &mut [u8; MAX_FRAME],
+    rx: &mut [u8],
+    reply_timeout_ns: u64,
+    cap_ns: u64,
+) -> Result<(u16, Option<Reply>), StopReason> {
+    let (seq, n) = core.encode_request(tx);
+    let req_ns = now_ns();
+    io.write_all(&tx[..n]).map_err(StopReason::DeviceLost)?;
+    // Counted from the request, so a late wake-up does not cost a measurement the device
+    // answers at once.
+    let deadline = (now_ns() + reply_timeout_ns).min(cap_ns);
+    loop {
+        let now = now_ns();
+        if now >= deadline {
+            return Ok((seq, None));
+        }
+        match io.wait_readable(deadline - now) {
+            Ok(Readiness::Readable) => {}
+            Ok(Readiness::Timeout) => return Ok((seq, None)),
+            Ok(Readiness::Interrupted) => continue,
+            Err(e) => return Err(StopReason::DeviceLost(e)),
+        }
+        let got = io.read_available(rx).map_err(StopReason::DeviceLost)?;
+        let rx_ns = now_ns();
+        if let Some(m) = core.receive(&rx[..got], seq) {
+            return Ok((seq, Some(Reply { m, req_ns, rx_ns })));
+        }
+    }
 }
 
 impl Runner<'_> {
@@ -182,32 +223,15 @@ impl Runner<'_> {
 
     /// Sends the sample request and waits for its answer until the reply timeout.
     fn sample(&mut self, tick: &Tick) -> Result<(u16, Option<Reply>), StopReason> {
-        let (seq, n) = self.core.encode_request(&mut self.tx);
-        let req_ns = now_ns();
-        self.send(n)?;
-        // Counted from the request, so a late wake-up does not cost a measurement the device
-        // answers at once; capped at the next deadline, which the next request must keep.
-        let deadline = (now_ns() + self.reply_timeout_ns).min(tick.deadline_ns + self.period_ns);
-        loop {
-            let now = now_ns();
-            if now >= deadline {
-                return Ok((seq, None));
-            }
-            match self.io.wait_readable(deadline - now) {
-                Ok(Readiness::Readable) => {}
-                Ok(Readiness::Timeout) => return Ok((seq, None)),
-                Ok(Readiness::Interrupted) => continue,
-                Err(e) => return Err(StopReason::DeviceLost(e)),
-            }
-            let got = self
-                .io
-                .read_available(&mut self.rx)
-                .map_err(StopReason::DeviceLost)?;
-            let rx_ns = now_ns();
-            if let Some(m) = self.core.receive(&self.rx[..got], seq) {
-                return Ok((seq, Some(Reply { m, req_ns, rx_ns })));
-            }
-        }
+        let cap_ns = tick.deadline_ns + self.period_ns;
+        exchange(
+            self.io,
+            self.core,
+            &mut self.tx,
+            &mut self.rx,
+            self.reply_timeout_ns,
+            cap_ns,
+        )
     }
 
     /// Refuses an enabling command resting on a measurement requested at `req_ns` when that

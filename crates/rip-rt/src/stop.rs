@@ -58,6 +58,9 @@ pub mod exit_code {
     pub const OVERRUN: i32 = 10;
     /// Refused to start: timed steps of the controller do not fit the period.
     pub const TOO_SLOW: i32 = 11;
+    /// Refused to start: the rig was not at rest hanging down (the rest check before a run
+    /// that starts hanging); the motor was never enabled.
+    pub const NOT_AT_REST: i32 = 12;
     /// A panic (Rust's own exit code for one).
     pub const PANIC: i32 = 101;
     /// Stopped by a signal: 128 + its number (130 SIGINT, 143 SIGTERM, 129 SIGHUP, …).
@@ -148,6 +151,10 @@ pub enum StopReason {
         /// Steps timed.
         steps: usize,
     },
+    /// The rest check before a run that starts hanging found the rig moving, or resting away
+    /// from hanging; the motor was never enabled.
+    #[error("refusing to start: the rig is not at rest hanging down: {0}")]
+    NotAtRest(#[source] crate::calibrate::RestFault),
     /// A thread other than the loop panicked (the panic hook already sent the stop frame).
     #[error("internal error: a panic outside the loop")]
     Panic,
@@ -168,6 +175,7 @@ impl StopReason {
             StopReason::LogError(_) => exit_code::LOG_ERROR,
             StopReason::Overrun(_) => exit_code::OVERRUN,
             StopReason::TooSlow { .. } => exit_code::TOO_SLOW,
+            StopReason::NotAtRest(_) => exit_code::NOT_AT_REST,
             StopReason::Panic => exit_code::PANIC,
         }
     }
@@ -186,6 +194,7 @@ impl StopReason {
             StopReason::LogError(_) => "log_error",
             StopReason::Overrun(_) => "overrun",
             StopReason::TooSlow { .. } => "too_slow",
+            StopReason::NotAtRest(_) => "not_at_rest",
             StopReason::Panic => "panic",
         }
     }
@@ -516,6 +525,10 @@ mod tests {
                 budget_ms: 0.5,
                 steps: 3,
             },
+            StopReason::NotAtRest(crate::calibrate::RestFault::NotHanging {
+                offset: 1.0,
+                max: 0.5,
+            }),
             StopReason::Panic,
         ];
         let mut codes: Vec<i32> = reasons.iter().map(|r| r.exit_code()).collect();

@@ -435,8 +435,8 @@ impl PySpec {
 /// Parameters
 /// ----------
 /// path : str or os.PathLike
-///     The TOML file. ``[loop]``, ``[device]`` and ``[safety]`` belong to ``rip-rt`` and are
-///     not checked here.
+///     The TOML file. ``[loop]``, ``[device]``, ``[safety]`` and ``[calibration]`` belong to
+///     ``rip-rt`` and are not checked here.
 ///
 /// Returns
 /// -------

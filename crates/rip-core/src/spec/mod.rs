@@ -17,7 +17,7 @@
 //! the paper's setting. Unknown keys, wrong types and out-of-range values are errors naming
 //! the key path and the file, e.g. `cfg.toml: mpc.prediction_horizon: must be in 1..=10000,
 //! got 0`. The sections [`RUNTIME_SECTIONS`] belong to `rip-rt` (`[loop]`, `[device]`,
-//! `[safety]`), which checks them; this crate passes them through untouched
+//! `[safety]`, `[calibration]`), which checks them; this crate passes them through untouched
 //! ([`Spec::parse_with_runtime`]).
 //!
 //! [`Spec::to_toml`] prints the resolved spec (every default and every plant parameter filled
@@ -41,7 +41,7 @@ pub use sections::{
 };
 
 /// Top-level tables that belong to `rip-rt` and are not checked here.
-pub const RUNTIME_SECTIONS: [&str; 3] = ["loop", "device", "safety"];
+pub const RUNTIME_SECTIONS: [&str; 4] = ["loop", "device", "safety", "calibration"];
 
 /// A bad file, key or value. Displays as `FILE: KEY: REASON` (`FILE: REASON` when no single
 /// key is at fault, e.g. a TOML syntax error).

@@ -1,0 +1,734 @@
+//! The rest check and the hanging-down calibration: before a run that starts with the
+//! pendulum hanging (`rip-rt run --swing-up`, excitation runs), the loop samples the rig with
+//! the motor disabled (0 V, driver off, every period) until both joints have been still for
+//! `calibration.rest_window_s`, and then takes its encoder zeros from that window:
+//!
+//! - the **pendulum**: hanging at rest it is exactly π from upright, so its mean count over the
+//!   window becomes the count of α = π (the configured `device.pendulum_zero` is only used to
+//!   check that the rest pose is near hanging, within `calibration.max_pendulum_offset`: a
+//!   pendulum held still at another angle, or a wrong encoder setting, is refused);
+//! - the **arm**: its mean count over the window becomes θ = 0, so `safety.arm_limit` and
+//!   `swing_up.arm_limit` count from where the arm was at start.
+//!
+//! # When the rig counts as at rest
+//!
+//! Over the last `rest_window_s` of measurements (the last `round(rest_window_s / Ts)` that
+//! arrived), for each joint:
+//!
+//! ```text
+//! max c − min c ≤ rest_counts                                   (quantisation and noise only)
+//! |c[k] − c[k−n]| · 2π / (N_rev (t[k] − t[k−n])) ≤ rest_<joint>_rate   for every k in the window
+//! ```
+//!
+//! with `n` the samples in [`RATE_SPAN_S`] (0.1 s): a difference over a tenth of a second
+//! resolves a rate of one count per 0.1 s (0.031 rad/s at 2048 counts per revolution), which a
+//! difference over one period (one count per 10 ms: 0.31 rad/s) could not. The first criterion
+//! catches a small swing or a creeping arm, the second a motion that the spread of the window
+//! would only show later. A window that fails is slid on by one sample; the check refuses
+//! ([`RestFault`]) when no window has passed `rest_timeout_s` after it started. The rate
+//! thresholds must exceed two counts per span, or quantisation alone could fail them.
+//!
+//! [`RestCheck`] is the logic without I/O; [`check_rest`] runs it on the device with the
+//! loop's safety rules (stop signals, watchdog, driver faults), sending the stop command every
+//! period. The caller owns the [`StopGuard`](crate::stop::StopGuard) that sends 0 V on exit.
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::{Config, ConfigError, DeviceConfig, PendulumZero};
+use crate::loop_core::LoopCore;
+use crate::protocol::{MAX_FRAME, STATUS_FAULT};
+use crate::runner::{exchange, Reply};
+use crate::serial::Fd;
+use crate::stop::{requested_stop, StopReason};
+use crate::timing::Periodic;
+
+/// The span (s) over which rates are taken from encoder differences (module docs).
+pub const RATE_SPAN_S: f64 = 0.1;
+/// Allowed `calibration.rest_window_s` (s): at least a few rate spans, at most a patient wait.
+pub const REST_WINDOW_S: std::ops::RangeInclusive<f64> = 0.2..=10.0;
+/// Longest `calibration.rest_timeout_s` (s); the motor stays disabled while waiting.
+pub const MAX_REST_TIMEOUT_S: f64 = 600.0;
+/// Largest rate threshold (rad/s): above it a gently swinging pendulum would pass.
+pub const MAX_REST_RATE: f64 = 1.0;
+/// Allowed `calibration.rest_counts`.
+pub const REST_COUNTS: std::ops::RangeInclusive<u32> = 1..=64;
+
+/// `[calibration]`: when the rig counts as at rest, and how far from hanging its rest pose may
+/// be (module docs). Every key is optional.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CalibrationConfig {
+    /// Both joints must be still for this long (s), in [`REST_WINDOW_S`]; the encoder zeros
+    /// are the means over this window. Default 1 s.
+    pub rest_window_s: f64,
+    /// The check refuses when no window was still this long (s) after it started, in
+    /// [`rest_window_s`, [`MAX_REST_TIMEOUT_S`]]. Default 3 s.
+    ///
+    /// [`rest_window_s`]: Self::rest_window_s
+    pub rest_timeout_s: f64,
+    /// Largest arm rate (rad/s) over any [`RATE_SPAN_S`] of the window, in
+    /// (2 counts per span, [`MAX_REST_RATE`]]. Default 0.2 rad/s.
+    pub rest_arm_rate: f64,
+    /// Largest pendulum rate (rad/s), as [`rest_arm_rate`](Self::rest_arm_rate). Default
+    /// 0.2 rad/s.
+    pub rest_pendulum_rate: f64,
+    /// Largest spread (max − min, counts) of either encoder over the window, in
+    /// [`REST_COUNTS`]. Default 6 counts (2048 counts per revolution: 18 mrad).
+    pub rest_counts: u32,
+    /// Largest distance (rad) of the pendulum's rest pose from hanging as `[device]` reads it
+    /// (`pendulum_zero`, `pendulum_sign`), in (0, π]. Default 0.5 rad; π accepts any pose.
+    pub max_pendulum_offset: f64,
+}
+
+impl Default for CalibrationConfig {
+    fn default() -> Self {
+        Self {
+            rest_window_s: 1.0,
+            rest_timeout_s: 3.0,
+            rest_arm_rate: 0.2,
+            rest_pendulum_rate: 0.2,
+            rest_counts: 6,
+            max_pendulum_offset: 0.5,
+        }
+    }
+}
+
+impl CalibrationConfig {
+    /// Checks every value against its range (and the rate thresholds against the encoders'
+    /// resolution in `device`); the error names the key.
+    pub fn validate(&self, device: &DeviceConfig) -> Result<(), ConfigError> {
+        let bad = |key: &str, reason: String| Err(ConfigError::new(key, reason));
+        if !REST_WINDOW_S.contains(&self.rest_window_s) {
+            return bad(
+                "calibration.rest_window_s",
+                format!(
+                    "must be in [{}, {}] s, got {}",
+                    REST_WINDOW_S.start(),
+                    REST_WINDOW_S.end(),
+                    self.rest_window_s
+                ),
+            );
+        }
+        if !(self.rest_timeout_s >= self.rest_window_s && self.rest_timeout_s <= MAX_REST_TIMEOUT_S)
+        {
+            return bad(
+                "calibration.rest_timeout_s",
+                format!(
+                    "must be in [calibration.rest_window_s ({}), {MAX_REST_TIMEOUT_S}] s, got {}",
+                    self.rest_window_s, self.rest_timeout_s
+                ),
+            );
+        }
+        for (key, rate, counts) in [
+            (
+                "calibration.rest_arm_rate",
+                self.rest_arm_rate,
+                device.arm_counts_per_rev,
+            ),
+            (
+                "calibration.rest_pendulum_rate",
+                self.rest_pendulum_rate,
+                device.pendulum_counts_per_rev,
+            ),
+        ] {
+            let floor = 2.0 * std::f64::consts::TAU / f64::from(counts.max(1)) / RATE_SPAN_S;
+            if !(rate > floor && rate <= MAX_REST_RATE) {
+                return bad(
+                    key,
+                    format!(
+                        "must be in ({floor:.4}, {MAX_REST_RATE}] rad/s (above 2 counts per \
+                         {RATE_SPAN_S} s at {counts} counts/rev), got {rate}"
+                    ),
+                );
+            }
+        }
+        if !REST_COUNTS.contains(&self.rest_counts) {
+            return bad(
+                "calibration.rest_counts",
+                format!(
+                    "must be in {}..={}, got {}",
+                    REST_COUNTS.start(),
+                    REST_COUNTS.end(),
+                    self.rest_counts
+                ),
+            );
+        }
+        let pi = std::f64::consts::PI;
+        if !(self.max_pendulum_offset > 0.0 && self.max_pendulum_offset <= pi) {
+            return bad(
+                "calibration.max_pendulum_offset",
+                format!("must be in (0, π] rad, got {}", self.max_pendulum_offset),
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The encoder zeros taken from a window at rest, and what that window measured.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Calibration {
+    /// Mean arm count over the window: θ = 0 from now on.
+    pub arm_zero_counts: f64,
+    /// Mean pendulum count over the window: α = π (hanging) from now on.
+    pub pendulum_hanging_counts: f64,
+    /// How far (rad) the rest pose was from hanging as `[device]` reads it.
+    pub pendulum_offset: f64,
+    /// Spread (max − min, counts) of the arm and pendulum counts over the window.
+    pub spread_counts: [i64; 2],
+    /// Largest arm and pendulum rates (rad/s) over the window.
+    pub max_rates: [f64; 2],
+    /// Seconds from the start of the check to the end of the window.
+    pub after_s: f64,
+}
+
+impl std::fmt::Display for Calibration {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "arm_zero_counts={:.2} pendulum_hanging_counts={:.2} pendulum_offset_rad={:.4} \
+             spread_counts={}/{} max_rate_rad_s={:.3}/{:.3} after_s={:.2}",
+            self.arm_zero_counts,
+            self.pendulum_hanging_counts,
+            self.pendulum_offset,
+            self.spread_counts[0],
+            self.spread_counts[1],
+            self.max_rates[0],
+            self.max_rates[1],
+            self.after_s
+        )
+    }
+}
+
+/// Why the rig was not found at rest hanging down ([`StopReason::NotAtRest`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RestFault {
+    /// A joint moved in every window up to the timeout; the figures are the last window's.
+    #[error(
+        "the {joint} is moving: over the last {window_s} s it spanned {spread} counts \
+         (calibration.rest_counts = {max_spread}) at up to {rate:.3} rad/s \
+         (calibration.rest_{joint}_rate = {max_rate}); still not at rest after {timeout_s} s \
+         (calibration.rest_timeout_s)"
+    )]
+    Moving {
+        /// `"arm"` or `"pendulum"`.
+        joint: &'static str,
+        /// Its spread over the window (counts).
+        spread: i64,
+        /// `calibration.rest_counts`.
+        max_spread: u32,
+        /// Its largest rate over the window (rad/s).
+        rate: f64,
+        /// The rate threshold (rad/s).
+        max_rate: f64,
+        /// `calibration.rest_window_s`.
+        window_s: f64,
+        /// `calibration.rest_timeout_s`.
+        timeout_s: f64,
+    },
+    /// Too few measurements arrived to fill a window before the timeout.
+    #[error(
+        "only {got} of the {needed} measurements of a {window_s} s window arrived within \
+         {timeout_s} s (calibration.rest_timeout_s)"
+    )]
+    NoWindow {
+        /// Measurements received.
+        got: usize,
+        /// Measurements a window needs.
+        needed: usize,
+        /// `calibration.rest_window_s`.
+        window_s: f64,
+        /// `calibration.rest_timeout_s`.
+        timeout_s: f64,
+    },
+    /// The pendulum rests away from hanging: held, or `[device]` does not describe its encoder.
+    #[error(
+        "the pendulum rests {offset:.3} rad from hanging down as [device] reads it, more than \
+         calibration.max_pendulum_offset ({max:.3} rad): is it held, or are \
+         device.pendulum_zero and device.pendulum_sign right?"
+    )]
+    NotHanging {
+        /// Distance from hanging (rad).
+        offset: f64,
+        /// `calibration.max_pendulum_offset`.
+        max: f64,
+    },
+}
+
+/// What [`RestCheck::push`] concluded.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RestVerdict {
+    /// No still window yet; keep sampling.
+    Waiting,
+    /// A still window, hanging: the calibration.
+    AtRest(Calibration),
+}
+
+/// One sample of the window: time (s since the check started) and the two counts.
+#[derive(Debug, Clone, Copy, Default)]
+struct Sample {
+    t: f64,
+    counts: [i32; 2],
+}
+
+/// The rest check without I/O (module docs): fed one measurement per period, it finds the
+/// first still window. Allocation-free after construction.
+#[derive(Debug, Clone)]
+pub struct RestCheck {
+    cfg: CalibrationConfig,
+    rad_per_count: [f64; 2],
+    // The α (rad, 0 upright) that `[device]` reads at zero counts, before calibration.
+    configured_offset: f64,
+    ring: Vec<Sample>,
+    // Samples received (the newest is at (received − 1) % len).
+    received: usize,
+    span: usize,
+    last_window: Option<Stats>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Stats {
+    spread: [i64; 2],
+    rate: [f64; 2],
+    mean: [f64; 2],
+}
+
+impl RestCheck {
+    /// The check for `cfg` (assumed valid) at the loop period `period_s`.
+    pub fn new(cfg: &Config) -> Self {
+        let c = &cfg.calibration;
+        let period_s = cfg.period_s();
+        let window = (c.rest_window_s / period_s).round().max(2.0) as usize;
+        let span = ((RATE_SPAN_S / period_s).round() as usize).clamp(1, window - 1);
+        let tau = std::f64::consts::TAU;
+        let d = &cfg.device;
+        Self {
+            cfg: c.clone(),
+            rad_per_count: [
+                d.arm_sign * tau / f64::from(d.arm_counts_per_rev),
+                d.pendulum_sign * tau / f64::from(d.pendulum_counts_per_rev),
+            ],
+            configured_offset: match d.pendulum_zero {
+                PendulumZero::Down => std::f64::consts::PI,
+                PendulumZero::Up => 0.0,
+            },
+            ring: vec![Sample::default(); window],
+            received: 0,
+            span,
+            last_window: None,
+        }
+    }
+
+    /// Measurements a window holds.
+    pub fn window_len(&self) -> usize {
+        self.ring.len()
+    }
+
+    fn at(&self, back: usize) -> &Sample {
+        let n = self.ring.len();
+        &self.ring[(self.received - 1 - back) % n]
+    }
+
+    fn window_stats(&self) -> Stats {
+        let n = self.ring.len();
+        let mut lo = [i32::MAX; 2];
+        let mut hi = [i32::MIN; 2];
+        let mut sum = [0i64; 2];
+        let mut rate = [0.0f64; 2];
+        for back in 0..n {
+            let s = self.at(back);
+            for j in 0..2 {
+                lo[j] = lo[j].min(s.counts[j]);
+                hi[j] = hi[j].max(s.counts[j]);
+                sum[j] += i64::from(s.counts[j]);
+            }
+            if back + self.span < n {
+                let earlier = self.at(back + self.span);
+                let dt = s.t - earlier.t;
+                if dt > 0.0 {
+                    for j in 0..2 {
+                        let d = f64::from(s.counts[j]) - f64::from(earlier.counts[j]);
+                        rate[j] = rate[j].max((d * self.rad_per_count[j] / dt).abs());
+                    }
+                }
+            }
+        }
+        Stats {
+            spread: [
+                i64::from(hi[0]) - i64::from(lo[0]),
+                i64::from(hi[1]) - i64::from(lo[1]),
+            ],
+            rate,
+            mean: [sum[0] as f64 / n as f64, sum[1] as f64 / n as f64],
+        }
+    }
+
+    fn still(&self, s: &Stats) -> bool {
+        let max_spread = i64::from(self.cfg.rest_counts);
+        s.spread[0] <= max_spread
+            && s.spread[1] <= max_spread
+            && s.rate[0] <= self.cfg.rest_arm_rate
+            && s.rate[1] <= self.cfg.rest_pendulum_rate
+    }
+
+    /// Takes the counts measured `t` seconds after the check started; a still window ends the
+    /// check, hanging ([`RestVerdict::AtRest`]) or not ([`RestFault::NotHanging`]).
+    pub fn push(
+        &mut self,
+        t: f64,
+        arm_counts: i32,
+        pendulum_counts: i32,
+    ) -> Result<RestVerdict, RestFault> {
+        let n = self.ring.len();
+        self.ring[self.received % n] = Sample {
+            t,
+            counts: [arm_counts, pendulum_counts],
+        };
+        self.received += 1;
+        if self.received < n {
+            return Ok(RestVerdict::Waiting);
+        }
+        let stats = self.window_stats();
+        self.last_window = Some(stats);
+        if !self.still(&stats) {
+            return Ok(RestVerdict::Waiting);
+        }
+        let pi = std::f64::consts::PI;
+        let alpha = wrap_angle(stats.mean[1] * self.rad_per_count[1] - self.configured_offset);
+        let offset = pi - alpha.abs();
+        if offset > self.cfg.max_pendulum_offset {
+            return Err(RestFault::NotHanging {
+                offset,
+                max: self.cfg.max_pendulum_offset,
+            });
+        }
+        Ok(RestVerdict::AtRest(Calibration {
+            arm_zero_counts: stats.mean[0],
+            pendulum_hanging_counts: stats.mean[1],
+            pendulum_offset: offset,
+            spread_counts: stats.spread,
+            max_rates: stats.rate,
+            after_s: t,
+        }))
+    }
+
+    /// The refusal at the timeout: the joint that failed the last window (the one furthest
+    /// over its limits), or too few measurements for a window.
+    pub fn timeout_fault(&self) -> RestFault {
+        let c = &self.cfg;
+        let Some(s) = self.last_window else {
+            return RestFault::NoWindow {
+                got: self.received,
+                needed: self.ring.len(),
+                window_s: c.rest_window_s,
+                timeout_s: c.rest_timeout_s,
+            };
+        };
+        let max_rate = [c.rest_arm_rate, c.rest_pendulum_rate];
+        let excess =
+            |j: usize| (s.spread[j] as f64 / f64::from(c.rest_counts)).max(s.rate[j] / max_rate[j]);
+        let j = if excess(1) >= excess(0) { 1 } else { 0 };
+        RestFault::Moving {
+            joint: ["arm", "pendulum"][j],
+            spread: s.spread[j],
+            max_spread: c.rest_counts,
+            rate: s.rate[j],
+            max_rate: max_rate[j],
+            window_s: c.rest_window_s,
+            timeout_s: c.rest_timeout_s,
+        }
+    }
+}
+
+fn wrap_angle(a: f64) -> f64 {
+    rip_core::swingup::wrap_angle(a)
+}
+
+/// Runs the rest check on the device behind `io` on the grid `periodic` (module docs): every
+/// period a sample request and the stop command (0 V, driver disabled), until a still window
+/// hanging down gives the [`Calibration`] (not yet applied to `core`: see
+/// [`LoopCore::calibrate`]). Stops, with the motor never enabled, on a stop signal, a driver
+/// fault, `loop.watchdog_periods` periods in a row without a measurement, a rest pose away from
+/// hanging, or `calibration.rest_timeout_s` without a still window ([`StopReason::NotAtRest`]).
+/// The caller holds the [`StopGuard`](crate::stop::StopGuard).
+pub fn check_rest(
+    io: &Fd,
+    core: &mut LoopCore,
+    cfg: &Config,
+    periodic: &mut Periodic,
+    quiet: bool,
+) -> Result<Calibration, StopReason> {
+    let mut check = RestCheck::new(cfg);
+    let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
+    let period_ns = periodic.period_ns();
+    let timeout_ns = (cfg.calibration.rest_timeout_s * 1e9) as u64;
+    let mut tx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; 512];
+    let mut missing_in_row = 0u32;
+    let start_ns = periodic.next_deadline_ns();
+    if !quiet {
+        crate::say!(
+            "rip-rt: checking that the rig is at rest hanging down ({} s still, motor disabled)",
+            cfg.calibration.rest_window_s
+        );
+    }
+    loop {
+        let tick = periodic.wait();
+        if let Some(reason) = requested_stop() {
+            return Err(reason);
+        }
+        let elapsed_ns = tick.deadline_ns - start_ns;
+        if elapsed_ns >= timeout_ns {
+            return Err(StopReason::NotAtRest(check.timeout_fault()));
+        }
+        let cap_ns = tick.deadline_ns + period_ns;
+        let (_, reply) = exchange(io, core, &mut tx, &mut rx, reply_timeout_ns, cap_ns)?;
+        let n = core.encode_stop(&mut tx);
+        io.write_all(&tx[..n]).map_err(StopReason::DeviceLost)?;
+        let Some(Reply { m, .. }) = reply else {
+            missing_in_row += 1;
+            if missing_in_row >= cfg.loop_.watchdog_periods {
+                return Err(StopReason::Watchdog(missing_in_row));
+            }
+            continue;
+        };
+        missing_in_row = 0;
+        if m.status & STATUS_FAULT != 0 {
+            return Err(StopReason::DeviceFault(m.status));
+        }
+        let t = elapsed_ns as f64 * 1e-9;
+        match check.push(t, m.arm_counts, m.pendulum_counts) {
+            Ok(RestVerdict::Waiting) => {}
+            Ok(RestVerdict::AtRest(cal)) => {
+                if !quiet {
+                    crate::say!("rip-rt: at rest, calibrated: {cal}");
+                }
+                return Ok(cal);
+            }
+            Err(fault) => return Err(StopReason::NotAtRest(fault)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::{PI, TAU};
+
+    fn cfg() -> Config {
+        Config::default()
+    }
+
+    /// Feeds `f(t) = (arm counts, pendulum counts)` every 10 ms for up to `secs`.
+    fn feed(
+        check: &mut RestCheck,
+        secs: f64,
+        f: impl Fn(f64) -> (i32, i32),
+    ) -> Result<RestVerdict, RestFault> {
+        let n = (secs / 0.01).round() as usize;
+        for k in 0..n {
+            let t = k as f64 * 0.01;
+            let (a, p) = f(t);
+            match check.push(t, a, p)? {
+                RestVerdict::Waiting => {}
+                done => return Ok(done),
+            }
+        }
+        Ok(RestVerdict::Waiting)
+    }
+
+    fn counts(rad: f64) -> f64 {
+        rad * 2048.0 / TAU
+    }
+
+    #[test]
+    fn a_still_rig_calibrates_to_the_window_means() {
+        let mut check = RestCheck::new(&cfg());
+        assert_eq!(check.window_len(), 100);
+        // Arm parked 37 counts off the encoder's zero; the pendulum hangs 5 counts off the
+        // configured zero and one count of dither alternates on both.
+        let v = feed(&mut check, 3.0, |t| {
+            let k = (t / 0.01).round() as i32;
+            (37 + (k % 2), 5 + (k % 2))
+        })
+        .unwrap();
+        let RestVerdict::AtRest(cal) = v else {
+            panic!("{v:?}")
+        };
+        assert_eq!(cal.arm_zero_counts, 37.5);
+        assert_eq!(cal.pendulum_hanging_counts, 5.5);
+        assert!((cal.pendulum_offset - 5.5 * TAU / 2048.0).abs() < 1e-12);
+        assert_eq!(cal.spread_counts, [1, 1]);
+        // The first full window: samples 0 to 99.
+        assert!((cal.after_s - 0.99).abs() < 1e-9, "{}", cal.after_s);
+        assert!(cal.max_rates[0] <= TAU / 2048.0 / 0.1 + 1e-12);
+    }
+
+    #[test]
+    fn a_swinging_pendulum_is_refused_naming_it() {
+        let c = cfg();
+        let mut check = RestCheck::new(&c);
+        // 0.05 rad of swing at the hanging pendulum's few rad/s: far more than 6 counts.
+        let v = feed(&mut check, c.calibration.rest_timeout_s, |t| {
+            (0, counts(0.05 * (6.0 * t).sin()).round() as i32)
+        })
+        .unwrap();
+        assert_eq!(v, RestVerdict::Waiting);
+        let fault = check.timeout_fault();
+        let RestFault::Moving {
+            joint,
+            spread,
+            rate,
+            ..
+        } = fault
+        else {
+            panic!("{fault:?}")
+        };
+        assert_eq!(joint, "pendulum");
+        // 0.1 rad peak to peak is 32.6 counts; the rate up to 0.3 rad/s.
+        assert!((31..=34).contains(&spread), "{spread}");
+        assert!(rate > 0.2 && rate < 0.31, "{rate}");
+        assert!(
+            fault.to_string().contains("calibration.rest_counts"),
+            "{fault}"
+        );
+    }
+
+    #[test]
+    fn a_creeping_arm_fails_the_rate_before_the_spread() {
+        let mut c = cfg();
+        c.calibration.rest_counts = 64;
+        c.calibration.rest_arm_rate = 0.1;
+        let mut check = RestCheck::new(&c);
+        // 0.15 rad/s of drift: 4.9 counts per 0.1 s, 48 counts over the window (inside 64).
+        feed(&mut check, 3.0, |t| (counts(0.15 * t).round() as i32, 0)).unwrap();
+        let RestFault::Moving {
+            joint,
+            spread,
+            rate,
+            ..
+        } = check.timeout_fault()
+        else {
+            panic!()
+        };
+        assert_eq!(joint, "arm");
+        assert!(spread <= 64);
+        assert!((rate - 0.15).abs() < 0.04, "{rate}");
+    }
+
+    #[test]
+    fn a_rig_that_comes_to_rest_is_calibrated_after_its_last_motion() {
+        let mut check = RestCheck::new(&cfg());
+        // Moving for 1.5 s, then still at pendulum count 3.
+        let v = feed(&mut check, 3.0, |t| {
+            if t < 1.5 {
+                (0, counts(0.2 * (6.0 * t).sin()).round() as i32 + 3)
+            } else {
+                (0, 3)
+            }
+        })
+        .unwrap();
+        let RestVerdict::AtRest(cal) = v else {
+            panic!("{v:?}")
+        };
+        assert!(cal.after_s >= 2.49 && cal.after_s < 2.6, "{}", cal.after_s);
+        assert_eq!(cal.pendulum_hanging_counts, 3.0);
+    }
+
+    #[test]
+    fn a_pendulum_resting_away_from_hanging_is_refused() {
+        let mut check = RestCheck::new(&cfg());
+        // Held still 0.6 rad from hanging (0.5 allowed).
+        let e = feed(&mut check, 2.0, |_| (0, counts(0.6).round() as i32)).unwrap_err();
+        let RestFault::NotHanging { offset, .. } = e else {
+            panic!("{e:?}")
+        };
+        assert!((offset - 0.6).abs() < 0.01, "{offset}");
+        // The same rest with the encoder's zero upright: far from hanging.
+        let mut c = cfg();
+        c.device.pendulum_zero = PendulumZero::Up;
+        let mut check = RestCheck::new(&c);
+        let e = feed(&mut check, 2.0, |_| (0, 0)).unwrap_err();
+        assert!(matches!(e, RestFault::NotHanging { offset, .. } if (offset - PI).abs() < 1e-9));
+        // ... and hanging is half a turn on.
+        let mut check = RestCheck::new(&c);
+        let v = feed(&mut check, 2.0, |_| (0, 1024)).unwrap();
+        assert!(matches!(v, RestVerdict::AtRest(cal) if cal.pendulum_offset.abs() < 1e-12));
+    }
+
+    #[test]
+    fn too_few_measurements_for_a_window_are_reported() {
+        let mut check = RestCheck::new(&cfg());
+        for k in 0..50 {
+            assert_eq!(check.push(k as f64 * 0.01, 0, 0), Ok(RestVerdict::Waiting));
+        }
+        let e = check.timeout_fault();
+        assert!(
+            matches!(
+                e,
+                RestFault::NoWindow {
+                    got: 50,
+                    needed: 100,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+    }
+
+    #[test]
+    fn bad_settings_are_named() {
+        for (text, key) in [
+            (
+                "[calibration]\nrest_window_s = 0.05\n",
+                "calibration.rest_window_s",
+            ),
+            (
+                "[calibration]\nrest_window_s = nan\n",
+                "calibration.rest_window_s",
+            ),
+            (
+                "[calibration]\nrest_timeout_s = 0.5\n",
+                "calibration.rest_timeout_s",
+            ),
+            (
+                "[calibration]\nrest_timeout_s = 1e9\n",
+                "calibration.rest_timeout_s",
+            ),
+            // Below two counts per 0.1 s at 2048 counts/rev (0.061 rad/s).
+            (
+                "[calibration]\nrest_arm_rate = 0.05\n",
+                "calibration.rest_arm_rate",
+            ),
+            (
+                "[calibration]\nrest_pendulum_rate = 2\n",
+                "calibration.rest_pendulum_rate",
+            ),
+            (
+                "[device]\npendulum_counts_per_rev = 64\n[calibration]\nrest_pendulum_rate = 0.5\n",
+                "calibration.rest_pendulum_rate",
+            ),
+            (
+                "[calibration]\nrest_counts = 0\n",
+                "calibration.rest_counts",
+            ),
+            (
+                "[calibration]\nmax_pendulum_offset = 4\n",
+                "calibration.max_pendulum_offset",
+            ),
+            (
+                "[calibration]\nrest_windw_s = 1\n",
+                "calibration.rest_windw_s",
+            ),
+        ] {
+            let e = Config::from_toml(text).unwrap_err();
+            assert!(e.to_string().contains(key), "{text}: {e}");
+        }
+        let c =
+            Config::from_toml("[calibration]\nrest_window_s = 0.5\nrest_timeout_s = 2\n").unwrap();
+        assert_eq!(c.calibration.rest_window_s, 0.5);
+        assert_eq!(
+            c.calibration.rest_counts,
+            CalibrationConfig::default().rest_counts
+        );
+    }
+}

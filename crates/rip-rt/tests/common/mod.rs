@@ -1,0 +1,243 @@
+//! Helpers of the end-to-end tests: `rip-rt emulate` on a pseudo-terminal, `rip-rt run`
+//! against it, and readers of their records and logs.
+//!
+//! Each test holds [`one_at_a_time`]: every run is a 100 Hz loop against a 1 kHz emulator, and
+//! the default test threads would otherwise run several such pairs on two cores at once, so
+//! that scheduling delays (skipped periods, watchdog stops) rather than the code decide the
+//! outcome.
+
+// Each test binary uses its own share of these.
+#![allow(dead_code)]
+
+use std::io::{BufRead, BufReader, Read};
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+pub const BIN: &str = env!("CARGO_BIN_EXE_rip-rt");
+
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Serialises the tests of this file (module docs); a failed test does not block the others.
+pub fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+pub fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("rip-rt-e2e-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+/// A running emulator; killed (SIGTERM) on drop.
+pub struct Emulator {
+    pub child: Child,
+    pub device: PathBuf,
+    pub record: PathBuf,
+}
+
+impl Emulator {
+    pub fn start(name: &str, extra: &[&str]) -> Self {
+        let record = scratch(&format!("{name}-record.csv"));
+        let mut child = Command::new(BIN)
+            .arg("emulate")
+            .arg("--record")
+            .arg(&record)
+            .args(extra)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawn emulator");
+        let mut line = String::new();
+        BufReader::new(child.stdout.as_mut().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let device = PathBuf::from(
+            line.trim()
+                .strip_prefix("device: ")
+                .unwrap_or_else(|| panic!("unexpected emulator output {line:?}")),
+        );
+        assert!(device.exists(), "{device:?}");
+        Emulator {
+            child,
+            device,
+            record,
+        }
+    }
+
+    /// The commands the device received: (voltage_mv, flags). The last frames a run wrote
+    /// before exiting may still be in the emulator's input, so this waits until the record
+    /// stops growing.
+    pub fn commands(&self) -> Vec<(i32, u8)> {
+        let mut text = std::fs::read_to_string(&self.record).unwrap();
+        for _ in 0..40 {
+            std::thread::sleep(Duration::from_millis(50));
+            let again = std::fs::read_to_string(&self.record).unwrap();
+            if again == text {
+                break;
+            }
+            text = again;
+        }
+        text.lines()
+            .skip(1)
+            .map(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                (f[2].parse().unwrap(), f[3].parse().unwrap())
+            })
+            .collect()
+    }
+}
+
+impl Drop for Emulator {
+    fn drop(&mut self) {
+        unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
+        let _ = self.child.wait();
+    }
+}
+
+pub struct RunResult {
+    pub status: ExitStatus,
+    pub stderr: String,
+}
+
+pub fn wait_with_timeout(mut child: Child, timeout: Duration) -> RunResult {
+    let start = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            let mut stderr = String::new();
+            child
+                .stderr
+                .take()
+                .unwrap()
+                .read_to_string(&mut stderr)
+                .unwrap();
+            return RunResult { status, stderr };
+        }
+        if start.elapsed() > timeout {
+            let _ = child.kill();
+            panic!("rip-rt run did not finish within {timeout:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+pub fn spawn_run(device: &Path, controller: &str, extra: &[&str]) -> Child {
+    Command::new(BIN)
+        .arg("run")
+        .arg("--port")
+        .arg(device)
+        .args(["--controller", controller])
+        .args(extra)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn run")
+}
+
+/// `rip-rt run` with the resource limit `resource` set to `value` (e.g. `ulimit -f`: the
+/// kernel sends SIGXFSZ on the write that crosses it).
+pub fn spawn_run_with_limit(
+    device: &Path,
+    controller: &str,
+    extra: &[&str],
+    resource: libc::__rlimit_resource_t,
+    value: u64,
+) -> Child {
+    let mut cmd = Command::new(BIN);
+    cmd.arg("run")
+        .arg("--port")
+        .arg(device)
+        .args(["--controller", controller])
+        .args(extra)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped());
+    // SAFETY: setrlimit is async-signal-safe and touches only the child.
+    unsafe {
+        cmd.pre_exec(move || {
+            let lim = libc::rlimit {
+                rlim_cur: value,
+                rlim_max: value,
+            };
+            if libc::setrlimit(resource, &lim) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    cmd.spawn().expect("spawn run")
+}
+
+pub fn run(device: &Path, controller: &str, extra: &[&str]) -> RunResult {
+    wait_with_timeout(
+        spawn_run(device, controller, extra),
+        Duration::from_secs(30),
+    )
+}
+
+/// A `rip-rt run` log: its columns, its rows as text cells, and its comment lines.
+pub struct Log {
+    pub columns: Vec<String>,
+    pub rows: Vec<Vec<String>>,
+    pub comments: Vec<String>,
+}
+
+impl Log {
+    pub fn read(path: &Path) -> Log {
+        let text = std::fs::read_to_string(path).unwrap();
+        let mut columns = Vec::new();
+        let mut rows = Vec::new();
+        let mut comments = Vec::new();
+        for line in text.lines() {
+            if let Some(c) = line.strip_prefix("# ") {
+                comments.push(c.to_string());
+            } else if columns.is_empty() {
+                columns = line.split(',').map(str::to_string).collect();
+            } else {
+                rows.push(line.split(',').map(str::to_string).collect());
+            }
+        }
+        Log {
+            columns,
+            rows,
+            comments,
+        }
+    }
+
+    fn index(&self, name: &str) -> usize {
+        self.columns
+            .iter()
+            .position(|c| c == name)
+            .unwrap_or_else(|| panic!("no column {name:?} in {:?}", self.columns))
+    }
+
+    /// A numeric column; empty cells are NaN.
+    pub fn col(&self, name: &str) -> Vec<f64> {
+        let i = self.index(name);
+        self.rows
+            .iter()
+            .map(|r| {
+                if r[i].is_empty() {
+                    f64::NAN
+                } else {
+                    r[i].parse()
+                        .unwrap_or_else(|_| panic!("{name}: not a number: {:?}", r[i]))
+                }
+            })
+            .collect()
+    }
+
+    /// A text column.
+    pub fn text(&self, name: &str) -> Vec<String> {
+        let i = self.index(name);
+        self.rows.iter().map(|r| r[i].clone()).collect()
+    }
+
+    /// The value of the comment line `key: value`.
+    pub fn meta(&self, key: &str) -> Option<&str> {
+        let prefix = format!("{key}: ");
+        self.comments.iter().find_map(|c| c.strip_prefix(&prefix))
+    }
+}
