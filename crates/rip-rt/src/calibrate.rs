@@ -345,9 +345,9 @@ impl RestCheck {
                 let earlier = self.at(back + self.span);
                 let dt = s.t - earlier.t;
                 if dt > 0.0 {
-                    for j in 0..2 {
+                    for (j, r) in rate.iter_mut().enumerate() {
                         let d = f64::from(s.counts[j]) - f64::from(earlier.counts[j]);
-                        rate[j] = rate[j].max((d * self.rad_per_count[j] / dt).abs());
+                        *r = r.max((d * self.rad_per_count[j] / dt).abs());
                     }
                 }
             }

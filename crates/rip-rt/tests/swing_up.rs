@@ -14,18 +14,16 @@ use rip_rt::serial::SerialPort;
 use rip_rt::stop::{StopGuard, StopReason};
 use rip_rt::timing::{now_ns, Periodic};
 
-/// Runs the rest check of `cfg_text` against an emulator started with `emulator_args`; returns
-/// its outcome, the measured angles of the rest pose after calibration, and the commands the
-/// device received.
-fn rest_check(
-    name: &str,
-    emulator_args: &[&str],
-    cfg_text: &str,
-) -> (
+/// What [`rest_check`] saw: the check's outcome, the rest pose's angles after calibration, and
+/// the commands the device received.
+type RestOutcome = (
     Result<calibrate::Calibration, StopReason>,
     Option<(f64, f64)>,
     Vec<(i32, u8)>,
-) {
+);
+
+/// Runs the rest check of `cfg_text` against an emulator started with `emulator_args`.
+fn rest_check(name: &str, emulator_args: &[&str], cfg_text: &str) -> RestOutcome {
     let emu = Emulator::start(name, emulator_args);
     let cfg = Config::from_toml(cfg_text).unwrap();
     let port = SerialPort::open(&emu.device, 115_200).unwrap();
