@@ -65,8 +65,10 @@ def excitation(
         Length of the signal (s); 0 V from then on.
     amplitude : float, optional
         ``A`` (V).
-    f_start, f_end : float, optional
-        Chirp frequencies (Hz).
+    f_start : float, optional
+        Chirp start frequency (Hz).
+    f_end : float, optional
+        Chirp end frequency (Hz), below the Nyquist frequency ``1 / (2 dt)``.
     sweep : {"log", "linear"}, optional
         Chirp sweep law.
     prbs_bits : int, optional
@@ -110,8 +112,18 @@ def excitation(
 
 
 def excitation_defaults(signal: SignalName) -> dict[str, float | int | str]:
-    """The default settings of ``signal`` (the keyword arguments of :func:`excitation`, and
-    ``centering``, the rig's arm-centring gain in V/rad).
+    """The default settings of ``signal``.
+
+    Parameters
+    ----------
+    signal : {"chirp", "prbs", "steps", "free-swing"}
+        The signal.
+
+    Returns
+    -------
+    dict
+        The keyword arguments of :func:`excitation` with their defaults, and ``centering``,
+        the rig's arm-centring gain (V/rad).
 
     Raises
     ------
