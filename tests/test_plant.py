@@ -254,3 +254,21 @@ def test_bad_inputs_raise_naming_the_argument() -> None:
         FurutaParams.fit(np.eye(4), np.ones(4), 0.0)
     with pytest.raises(TypeError, match="x"):
         plant.energy("upright")
+
+
+def test_coulomb_friction_and_dead_zone_are_parameters_named_on_error():
+    p = riprs.FurutaParams(Cr=0.003, Cp=2e-5, Vd=0.4)
+    assert (p.Cr, p.Cp, p.Vd) == (0.003, 2e-5, 0.4)
+    assert p.to_dict()["Vd"] == 0.4
+    assert riprs.FurutaParams.qube_servo2().Cr == 0.0
+    for key in ("Cr", "Cp", "Vd"):
+        with pytest.raises(riprs.InvalidParameterError, match=key):
+            riprs.FurutaParams(**{key: -1.0})
+    # Inside the dead zone the voltage does nothing; beyond it, it is reduced by Vd.
+    plant = riprs.Plant(p)
+    free = riprs.Plant(p.replace(Vd=0.0))
+    x = [0.0, 0.5, 0.2, -0.1]
+    np.testing.assert_array_equal(plant.derivative(x, 0.3), free.derivative(x, 0.0))
+    np.testing.assert_allclose(plant.derivative(x, -2.0), free.derivative(x, -1.6), rtol=1e-12)
+    # The linearisation leaves both out, like the controller designs.
+    np.testing.assert_array_equal(plant.linearize()[1], free.linearize()[1])

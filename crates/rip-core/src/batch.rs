@@ -297,6 +297,7 @@ mod tests {
             sensor: SensorModel {
                 counts_per_rev: Some([2048.0, 2048.0]),
                 noise_std: [1e-3, 1e-3],
+                offsets: [0.0; 2],
             },
             ..Default::default()
         }

@@ -29,18 +29,45 @@
 //! T = ½ (J₀ + Jα sin²α) θ̇² − m₁₂ cos α θ̇ α̇ + ½ Jα α̇²,      V = G cos α
 //! ```
 //!
-//! and Lagrange's equations with viscous friction `dr`, `dp` and the motor torque give
+//! and Lagrange's equations with viscous friction `dr`, `dp`, Coulomb friction `cr`, `cp` and
+//! the motor torque give
 //!
 //! ```text
-//! (J₀ + Jα sin²α) θ̈ − m₁₂ cos α α̈ + 2 Jα sin α cos α θ̇ α̇ + m₁₂ sin α α̇² = τ − dr θ̇ + τ_d
-//! −m₁₂ cos α θ̈ + Jα α̈ − Jα sin α cos α θ̇² − G sin α = −dp α̇
-//! τ = kt (u − km θ̇) / rm
+//! (J₀ + Jα sin²α) θ̈ − m₁₂ cos α α̈ + 2 Jα sin α cos α θ̇ α̇ + m₁₂ sin α α̇²
+//!                                            = τ − dr θ̇ − cr sgnₛ(θ̇) + τ_d
+//! −m₁₂ cos α θ̈ + Jα α̈ − Jα sin α cos α θ̇² − G sin α = −dp α̇ − cp sgnₛ(α̇)
+//! τ = kt (z(u) − km θ̇) / rm
 //! ```
 //!
 //! (`τ_d`: an external torque disturbance on the arm). These are the equations of the Quanser
 //! QUBE-Servo 2 workbook and of Cazzolato & Prime, "On the dynamics of the Furuta pendulum"
 //! (J. Control Sci. Eng., 2011), with the pendulum's `sin²α` inertia term kept and the arm's
 //! parallel-axis term included (see [`FurutaParams::qube_servo2`]).
+//!
+//! # Coulomb friction and the voltage dead zone
+//!
+//! Coulomb friction is a torque of constant size `cr` (arm) or `cp` (pendulum) against the
+//! joint's motion. Its sign function is smoothed,
+//!
+//! ```text
+//! sgnₛ(v) = tanh(v / v_c),   v_c = COULOMB_VELOCITY_SCALE = 0.05 rad/s
+//! ```
+//!
+//! so that the right-hand side stays smooth: RK4 keeps its order, and the sensitivities an
+//! identification differentiates exist everywhere. Below `v_c` the friction acts as a viscous
+//! damping of slope `c/v_c` (holding a joint nearly still, like stiction); from `2 v_c` on it is
+//! within 4 % of its full size. That slope is the stiffest term of the model, and
+//! [`Plant::max_rk4_substep`] accounts for it.
+//!
+//! The motor driver does not move the motor below a threshold voltage `vd` (the QUBE-Servo 3's
+//! default dead band is 0.65 V); the applied voltage is the dead-zone function
+//!
+//! ```text
+//! z(u) = u − clamp(u, −vd, vd)  =  0 for |u| ≤ vd,   u − vd sgn(u) beyond.
+//! ```
+//!
+//! With `cr = cp = vd = 0` (every preset) both terms vanish exactly and the model is the
+//! smooth one above, bit for bit.
 //!
 //! # Linearisation about upright
 //!
@@ -52,7 +79,12 @@
 //!
 //! which is the structure `ẋ = [0 1 0 0; 0 a₁₁ a₁₂ a₁₃; 0 0 0 1; 0 a₃₁ a₃₂ a₃₃] x + [0 b₁ 0 b₃]ᵀu`
 //! of [`crate::paper::continuous_model`]. [`Plant::linearize`] returns the exact Jacobian at
-//! any state and input, of which this is the special case.
+//! any state and input of the plant *without* its Coulomb friction and dead zone, of which
+//! this is the special case. Those two are left out on purpose: at rest they are not
+//! differentiable (the smoothing slope `c/v_c` is a numerical device, not a damping the
+//! controller can rely on, and `z′(0) = 0` inside the dead zone would say that the motor
+//! cannot move the arm at all). The controllers are designed on this smooth part; friction and
+//! dead zone act on them as the disturbances they are.
 
 use nalgebra::{SMatrix, SVector};
 
@@ -65,14 +97,25 @@ use crate::sim::MAX_SUBSTEPS;
 /// rounded down.
 const RK4_STABILITY_LIMIT: f64 = 2.78;
 
+/// Velocity scale `v_c` (rad/s) of the smoothed sign `tanh(v / v_c)` of the Coulomb friction
+/// (module docs).
+pub const COULOMB_VELOCITY_SCALE: f64 = 0.05;
+
+/// The dead-zone function `z(u) = u − clamp(u, −vd, vd)` (module docs); `z(u) = u` exactly
+/// when `vd = 0`.
+#[inline]
+pub fn dead_zone(u: f64, vd: f64) -> f64 {
+    u - u.clamp(-vd, vd)
+}
+
 /// State vector `[θ, θ̇, α, α̇]`.
 pub type State = SVector<f64, 4>;
 
 /// Physical parameters of the pendulum and its motor (SI units).
 ///
-/// Masses, lengths, inertias, `rm`, `kt` and `g` must be positive; `km`, `dr`, `dp` may be zero
-/// (zero back-EMF and friction give the conservative plant). See the module docs for how each
-/// enters the equations of motion.
+/// Masses, lengths, inertias, `rm`, `kt` and `g` must be positive; `km`, `dr`, `dp`, `cr`,
+/// `cp`, `vd` may be zero (zero back-EMF and friction give the conservative plant). See the
+/// module docs for how each enters the equations of motion.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FurutaParams {
     /// Motor terminal resistance (Ω).
@@ -99,12 +142,24 @@ pub struct FurutaParams {
     pub dp: f64,
     /// Gravitational acceleration (m/s²).
     pub g: f64,
+    /// Coulomb friction torque of the arm joint (N·m), smoothed (module docs).
+    pub cr: f64,
+    /// Coulomb friction torque of the pendulum joint (N·m), smoothed (module docs).
+    pub cp: f64,
+    /// Voltage dead zone of the motor drive (V): `|u| ≤ vd` does not move the motor.
+    pub vd: f64,
 }
 
+/// Number of fields of [`FurutaParams`].
+pub const N_PARAMS: usize = 15;
+
 /// The fields of [`FurutaParams`] in declaration order, as they are named in errors.
-pub const PARAM_NAMES: [&str; 12] = [
-    "rm", "kt", "km", "mr", "lr", "jr", "mp", "lp", "jp", "dr", "dp", "g",
+pub const PARAM_NAMES: [&str; N_PARAMS] = [
+    "rm", "kt", "km", "mr", "lr", "jr", "mp", "lp", "jp", "dr", "dp", "g", "cr", "cp", "vd",
 ];
+
+/// The fields of [`FurutaParams`] that may be zero (the others must be positive).
+pub const MAY_BE_ZERO: [&str; 6] = ["km", "dr", "dp", "cr", "cp", "vd"];
 
 impl FurutaParams {
     /// Quanser QUBE-Servo 2 with the rotary-pendulum module.
@@ -137,6 +192,9 @@ impl FurutaParams {
             dr: 0.0015,
             dp: 0.0005,
             g: 9.81,
+            cr: 0.0,
+            cp: 0.0,
+            vd: 0.0,
         }
     }
 
@@ -163,16 +221,16 @@ impl FurutaParams {
     }
 
     /// The parameters as an array in [`PARAM_NAMES`] order.
-    pub fn to_array(&self) -> [f64; 12] {
+    pub fn to_array(&self) -> [f64; N_PARAMS] {
         [
             self.rm, self.kt, self.km, self.mr, self.lr, self.jr, self.mp, self.lp, self.jp,
-            self.dr, self.dp, self.g,
+            self.dr, self.dp, self.g, self.cr, self.cp, self.vd,
         ]
     }
 
     /// Builds parameters from an array in [`PARAM_NAMES`] order (not validated).
-    pub fn from_array(v: [f64; 12]) -> Self {
-        let [rm, kt, km, mr, lr, jr, mp, lp, jp, dr, dp, g] = v;
+    pub fn from_array(v: [f64; N_PARAMS]) -> Self {
+        let [rm, kt, km, mr, lr, jr, mp, lp, jp, dr, dp, g, cr, cp, vd] = v;
         Self {
             rm,
             kt,
@@ -186,13 +244,16 @@ impl FurutaParams {
             dr,
             dp,
             g,
+            cr,
+            cp,
+            vd,
         }
     }
 
     /// Checks every field; the error names the first bad one.
     pub fn validate(&self) -> Result<()> {
         for (name, value) in PARAM_NAMES.iter().zip(self.to_array()) {
-            let may_be_zero = matches!(*name, "km" | "dr" | "dp");
+            let may_be_zero = MAY_BE_ZERO.contains(name);
             if !value.is_finite() {
                 return Err(RipError::invalid(
                     *name,
@@ -289,6 +350,9 @@ pub struct Plant {
     /// Arm damping including back-EMF, `dr + kt km/rm`.
     c_arm: f64,
     dp: f64,
+    /// Coulomb friction of arm and pendulum, `cr`, `cp`.
+    coulomb: [f64; 2],
+    vd: f64,
 }
 
 impl Plant {
@@ -305,6 +369,8 @@ impl Plant {
             b: p.kt / p.rm,
             c_arm: p.dr + p.kt * p.km / p.rm,
             dp: p.dp,
+            coulomb: [p.cr, p.cp],
+            vd: p.vd,
         })
     }
 
@@ -323,14 +389,15 @@ impl Plant {
         &self.params
     }
 
-    /// Motor torque `τ = kt (u − km θ̇) / rm` (N·m) at state `x` and voltage `u`.
+    /// Motor torque `τ = kt (z(u) − km θ̇) / rm` (N·m) at state `x` and voltage `u`, `z` the
+    /// dead zone.
     #[inline]
     pub fn motor_torque(&self, x: &State, u: f64) -> f64 {
-        self.params.kt * (u - self.params.km * x[1]) / self.params.rm
+        self.params.kt * (dead_zone(u, self.vd) - self.params.km * x[1]) / self.params.rm
     }
 
     /// Mass matrix entries `(M₁₁, M₁₂, M₂₂)` and the generalized forces `(f₁, f₂)` such that
-    /// `M [θ̈; α̈] = [f₁; f₂]`.
+    /// `M [θ̈; α̈] = [f₁; f₂]`, without Coulomb friction and dead zone.
     #[inline]
     fn mass_and_forces(&self, x: &State, u: f64, tau_d: f64) -> ([f64; 3], [f64; 2]) {
         let (s, c) = x[2].sin_cos();
@@ -343,15 +410,36 @@ impl Plant {
         (m, [f1, f2])
     }
 
-    /// `ẋ = f(x, u, τ_d)`: the equations of motion of the module docs, `τ_d` (N·m) being an
-    /// external torque on the arm.
+    /// `M q̈ = f` solved for `ẋ`.
     #[inline]
-    pub fn derivative(&self, x: &State, u: f64, tau_d: f64) -> State {
-        let ([m11, m12, m22], [f1, f2]) = self.mass_and_forces(x, u, tau_d);
+    fn solve(x: &State, [m11, m12, m22]: [f64; 3], [f1, f2]: [f64; 2]) -> State {
         let det = m11 * m22 - m12 * m12;
         let thdd = (m22 * f1 - m12 * f2) / det;
         let addd = (m11 * f2 - m12 * f1) / det;
         State::new(x[1], thdd, x[3], addd)
+    }
+
+    /// `ẋ = f(x, u, τ_d)`: the equations of motion of the module docs, `τ_d` (N·m) being an
+    /// external torque on the arm.
+    #[inline]
+    pub fn derivative(&self, x: &State, u: f64, tau_d: f64) -> State {
+        let (m, [mut f1, mut f2]) = self.mass_and_forces(x, dead_zone(u, self.vd), tau_d);
+        // Skipped at zero so that the frictionless presets cost (and compute) what they did.
+        if self.coulomb[0] != 0.0 {
+            f1 -= self.coulomb[0] * (x[1] / COULOMB_VELOCITY_SCALE).tanh();
+        }
+        if self.coulomb[1] != 0.0 {
+            f2 -= self.coulomb[1] * (x[3] / COULOMB_VELOCITY_SCALE).tanh();
+        }
+        Self::solve(x, m, [f1, f2])
+    }
+
+    /// `ẋ` of the smooth part of the model (no Coulomb friction, no dead zone), which
+    /// [`linearize`](Self::linearize) differentiates.
+    #[inline]
+    fn smooth_derivative(&self, x: &State, u: f64) -> State {
+        let (m, f) = self.mass_and_forces(x, u, 0.0);
+        Self::solve(x, m, f)
     }
 
     /// One classical fourth-order Runge–Kutta step of length `h` with `u`, `τ_d` held.
@@ -429,12 +517,23 @@ impl Plant {
     /// does not approximate the pendulum at all: the fastest (damping and back-EMF) mode is
     /// amplified by the integrator itself, and the state grows to finite nonsense before it
     /// overflows.
+    ///
+    /// At rest the smoothed Coulomb friction adds the damping slopes `cr/v_c`, `cp/v_c` (module
+    /// docs), usually the stiffest terms of a plant that has them; they are included.
     pub fn max_rk4_substep(&self) -> f64 {
         let hanging = State::new(0.0, 0.0, std::f64::consts::PI, 0.0);
         let rho = [State::zeros(), hanging]
             .iter()
             .map(|x| {
-                let (a, _) = self.linearize(x, 0.0);
+                let (mut a, _) = self.linearize(x, 0.0);
+                let ([m11, m12, m22], _) = self.mass_and_forces(x, 0.0, 0.0);
+                let det = m11 * m22 - m12 * m12;
+                let minv = [[m22 / det, -m12 / det], [-m12 / det, m11 / det]];
+                let slope = self.coulomb.map(|c| c / COULOMB_VELOCITY_SCALE);
+                for (row, i) in [(1usize, 0usize), (3, 1)] {
+                    a[(row, 1)] -= minv[i][0] * slope[0];
+                    a[(row, 3)] -= minv[i][1] * slope[1];
+                }
                 spectral_radius(&Mat::from_fn(4, 4, |i, j| a[(i, j)]))
             })
             .fold(0.0, f64::max);
@@ -468,7 +567,7 @@ impl Plant {
     }
 
     /// Total mechanical energy `T + V` (J), with `V = G cos α` (module docs). Conserved when
-    /// `km = dr = dp = 0` and `u = τ_d = 0`.
+    /// `km = dr = dp = cr = cp = 0` and `u = τ_d = 0`.
     pub fn energy(&self, x: &State) -> f64 {
         let (s, c) = x[2].sin_cos();
         let (td, ad) = (x[1], x[3]);
@@ -477,7 +576,9 @@ impl Plant {
             + self.grav * c
     }
 
-    /// Exact Jacobians `A = ∂f/∂x`, `B = ∂f/∂u` at `(x, u)` (with `τ_d = 0`).
+    /// Exact Jacobians `A = ∂f/∂x`, `B = ∂f/∂u` at `(x, u)` (with `τ_d = 0`) of the plant
+    /// without Coulomb friction and dead zone (module docs: those are left to act on the
+    /// controllers as disturbances).
     ///
     /// With `q̈ = M(α)⁻¹ F(x, u)`, the derivative is `∂q̈/∂z = M⁻¹ (∂F/∂z − (∂M/∂z) q̈)`, where
     /// only α enters `M`: `∂M₁₁/∂α = 2 Jα sin α cos α`, `∂M₁₂/∂α = m₁₂ sin α`. At an equilibrium
@@ -489,7 +590,7 @@ impl Plant {
         let ([m11, m12, m22], _) = self.mass_and_forces(x, u, 0.0);
         let det = m11 * m22 - m12 * m12;
         let minv = [[m22 / det, -m12 / det], [-m12 / det, m11 / det]];
-        let acc = self.derivative(x, u, 0.0);
+        let acc = self.smooth_derivative(x, u);
         let (thdd, addd) = (acc[1], acc[3]);
         let c2 = c * c - s * s;
         // ∂F/∂z for z = (θ̇, α, α̇, u); F does not depend on θ.
@@ -638,6 +739,99 @@ mod tests {
         }
         // RK4 is not symplectic; its O(h⁵) local drift over 2 s at h = 1 ms is ~2·10⁻⁹ relative.
         assert!((plant.energy(&x) - e0).abs() < 1e-8 * e0.abs());
+    }
+
+    fn rough_params() -> FurutaParams {
+        FurutaParams {
+            cr: 3e-3,
+            cp: 2e-5,
+            vd: 0.4,
+            ..FurutaParams::qube_servo2()
+        }
+    }
+
+    #[test]
+    fn the_dead_zone_removes_the_threshold_voltage() {
+        assert_eq!(dead_zone(0.3, 0.4), 0.0);
+        assert_eq!(dead_zone(-0.4, 0.4), 0.0);
+        assert!((dead_zone(1.5, 0.4) - 1.1).abs() < 1e-15);
+        assert!((dead_zone(-1.5, 0.4) + 1.1).abs() < 1e-15);
+        for u in [-3.0, -1e-9, 0.0, 2.5] {
+            assert_eq!(dead_zone(u, 0.0), u);
+        }
+        // On the plant: a voltage inside the dead zone is no voltage, one beyond it is reduced.
+        let rough = Plant::new(rough_params()).unwrap();
+        let smooth = Plant::new(FurutaParams {
+            vd: 0.0,
+            ..rough_params()
+        })
+        .unwrap();
+        let x = State::new(0.0, 0.7, 0.4, -0.3);
+        assert_eq!(
+            rough.derivative(&x, 0.35, 0.0),
+            smooth.derivative(&x, 0.0, 0.0)
+        );
+        let d = rough.derivative(&x, 2.0, 0.0) - smooth.derivative(&x, 1.6, 0.0);
+        assert!(d.norm() < 1e-12, "{d}");
+    }
+
+    #[test]
+    fn coulomb_friction_opposes_motion_and_dissipates_energy() {
+        // No viscous friction nor back-EMF: Coulomb friction alone must bring the swinging
+        // pendulum and the spinning arm to rest, monotonically losing energy.
+        let p = FurutaParams {
+            km: 0.0,
+            dr: 0.0,
+            dp: 0.0,
+            cp: 2e-4,
+            ..rough_params()
+        };
+        let plant = Plant::new(p).unwrap();
+        let mut x = State::new(0.0, 2.0, std::f64::consts::PI - 0.5, 0.0);
+        let mut e = plant.energy(&x);
+        for _ in 0..20_000 {
+            plant.advance(&mut x, 0.0, 0.0, 1e-3, 1);
+            let e_next = plant.energy(&x);
+            assert!(e_next <= e + 1e-12, "energy rose from {e} to {e_next}");
+            e = e_next;
+        }
+        assert!(x[1].abs() < 0.05 && x[3].abs() < 0.05, "{x}");
+        // The torque has the size cr away from rest, against the motion.
+        let smooth = Plant::new(FurutaParams {
+            cr: 0.0,
+            cp: 0.0,
+            ..p
+        })
+        .unwrap();
+        let x = State::new(0.0, 1.0, 0.0, 0.0);
+        let (a, b) = (
+            plant.derivative(&x, 0.0, 0.0),
+            smooth.derivative(&x, 0.0, 0.0),
+        );
+        let with_torque =
+            smooth.derivative(&x, 0.0, -p.cr * (1.0f64 / COULOMB_VELOCITY_SCALE).tanh());
+        assert!((a - with_torque).norm() < 1e-9 * a.norm());
+        assert!(a[1] < b[1]);
+    }
+
+    #[test]
+    fn stiff_coulomb_friction_shortens_the_stable_substep_and_the_bound_holds() {
+        let rough = Plant::new(FurutaParams {
+            cr: 0.05,
+            ..rough_params()
+        })
+        .unwrap();
+        let smooth = Plant::qube_servo2();
+        let h = rough.max_rk4_substep();
+        assert!(h < 0.5 * smooth.max_rk4_substep());
+        // Inside the bound a slowly moving arm creeps to rest; far beyond it RK4 blows up.
+        for (factor, stable) in [(0.9, true), (1.5, false)] {
+            let mut x = State::new(0.0, 0.01, std::f64::consts::PI, 0.0);
+            for _ in 0..500 {
+                rough.rk4_step(&mut x, 0.0, 0.0, factor * h);
+            }
+            assert_eq!(x[1].abs() < 0.01, stable, "{factor}: {x}");
+        }
     }
 
     #[test]

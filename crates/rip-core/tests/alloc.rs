@@ -109,6 +109,7 @@ fn a_metrics_run_allocates_the_same_however_long_it_is() {
             sensor: SensorModel {
                 counts_per_rev: Some([2048.0, 2048.0]),
                 noise_std: [1e-3, 1e-3],
+                offsets: [0.0; 2],
             },
             ..Default::default()
         };

@@ -92,6 +92,7 @@ fn simulator_refuses_noise_whose_square_overflows() {
         sensor: SensorModel {
             counts_per_rev: None,
             noise_std: [1e300, 1e300],
+            offsets: [0.0; 2],
         },
         ..Default::default()
     };

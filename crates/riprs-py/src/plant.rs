@@ -7,7 +7,7 @@ use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rip_core::fit::{fit_params, FitOptions};
-use rip_core::plant::PARAM_NAMES;
+use rip_core::plant::{N_PARAMS, PARAM_NAMES};
 use rip_core::{FurutaParams, Mat, Plant, RipError, State};
 
 use crate::convert::{array_like, mat_to_py, matrix_arg, vector_arg, Count, Real};
@@ -17,8 +17,8 @@ type Py1<'py> = Bound<'py, PyArray1<f64>>;
 type Py2<'py> = Bound<'py, PyArray2<f64>>;
 
 /// Python names of the parameters, in `PARAM_NAMES` order (Quanser's spelling).
-pub(crate) const PY_NAMES: [&str; 12] = [
-    "Rm", "kt", "km", "mr", "Lr", "Jr", "mp", "Lp", "Jp", "Dr", "Dp", "g",
+pub(crate) const PY_NAMES: [&str; N_PARAMS] = [
+    "Rm", "kt", "km", "mr", "Lr", "Jr", "mp", "Lp", "Jp", "Dr", "Dp", "g", "Cr", "Cp", "Vd",
 ];
 
 fn py_name(core: &str) -> String {
@@ -81,6 +81,12 @@ fn state_to_py<'py>(py: Python<'py>, x: &State) -> Py1<'py> {
 ///     Viscous friction of the arm and pendulum joints (N m s/rad), >= 0.
 /// g : float
 ///     Gravitational acceleration (m/s^2), > 0.
+/// Cr, Cp : float
+///     Coulomb friction torque of the arm and pendulum joints (N m), >= 0; 0 by default. The
+///     sign of the joint rate is smoothed, ``tanh(rate / 0.05 rad/s)``.
+/// Vd : float
+///     Voltage dead zone of the motor drive (V), >= 0; 0 by default: the applied voltage is
+///     ``u - clip(u, -Vd, Vd)``.
 ///
 /// Raises
 /// ------
@@ -287,6 +293,18 @@ impl PyFurutaParams {
     fn g(&self) -> f64 {
         self.inner.g
     }
+    #[getter(Cr)]
+    fn cr(&self) -> f64 {
+        self.inner.cr
+    }
+    #[getter(Cp)]
+    fn cp(&self) -> f64 {
+        self.inner.cp
+    }
+    #[getter(Vd)]
+    fn vd(&self) -> f64 {
+        self.inner.vd
+    }
 
     fn __repr__(&self) -> String {
         let body: Vec<String> = PY_NAMES
@@ -315,7 +333,11 @@ impl PyFurutaParams {
 ///
 /// with :math:`J_0 = J_r + m_r L_r^2/4 + m_p L_r^2`, :math:`J_\alpha = J_p + m_p L_p^2/4`,
 /// :math:`m_{12} = m_p L_r L_p/2`, :math:`G = m_p g L_p/2` and the motor torque
-/// :math:`\tau = k_t (u - k_m\dot\theta)/R_m`.
+/// :math:`\tau = k_t (u - k_m\dot\theta)/R_m`. Coulomb friction adds
+/// :math:`-C_r \tanh(\dot\theta/v_c)` and :math:`-C_p \tanh(\dot\alpha/v_c)`
+/// (:math:`v_c` = 0.05 rad/s) to the right-hand sides, and the dead zone replaces ``u`` by
+/// ``u - clip(u, -Vd, Vd)``; :meth:`linearize` leaves both out (they are not differentiable at
+/// rest), as the controller designs do.
 ///
 /// Parameters
 /// ----------

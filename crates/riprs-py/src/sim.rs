@@ -92,6 +92,7 @@ fn config_from_dict(d: &Bound<'_, PyDict>) -> PyResult<SimConfig> {
         sensor: SensorModel {
             counts_per_rev,
             noise_std: pair_arg(&item(d, "noise_std")?, "noise_std")?,
+            offsets: [0.0; 2],
         },
         output_disturbance,
         torque_disturbance,

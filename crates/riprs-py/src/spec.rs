@@ -108,6 +108,9 @@ pub struct PyPlantSpec {
     Rm: f64,
     kt: f64,
     km: f64,
+    Cr: f64,
+    Cp: f64,
+    Vd: f64,
     substeps: usize,
     initial_state: Vec<f64>,
     fall_limit: f64,
@@ -118,6 +121,7 @@ pub struct PyPlantSpec {
 pub struct PySensorSpec {
     encoder_counts: Vec<u32>,
     noise_std: Vec<f64>,
+    encoder_offsets: Vec<f64>,
 }
 
 /// `[reference]` (read-only).
@@ -330,6 +334,9 @@ impl PySpec {
             Rm: v.rm,
             kt: v.kt,
             km: v.km,
+            Cr: v.cr,
+            Cp: v.cp,
+            Vd: v.vd,
             substeps: p.substeps,
             initial_state: p.initial_state.to_vec(),
             fall_limit: p.fall_limit,
@@ -351,6 +358,7 @@ impl PySpec {
         PySensorSpec {
             encoder_counts: s.encoder_counts.to_vec(),
             noise_std: s.noise_std.to_vec(),
+            encoder_offsets: s.encoder_offsets.to_vec(),
         }
     }
 

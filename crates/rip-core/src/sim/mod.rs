@@ -99,6 +99,8 @@ pub struct SensorModel {
     /// Standard deviation (rad) of the Gaussian noise added to `[θ, α]`, at most
     /// [`MAX_NOISE_STD`].
     pub noise_std: [f64; 2],
+    /// Encoder zero offsets (rad): the encoders read `[θ + o₀, α + o₁]` before quantisation.
+    pub offsets: [f64; 2],
 }
 
 /// A step that starts at `time`.
@@ -231,6 +233,11 @@ impl SimConfig {
             for c in cpr {
                 positive("encoder_counts", c)?;
             }
+        }
+        if self.sensor.offsets.iter().any(|o| !o.is_finite()) {
+            return Err(RipError::NonFinite {
+                name: "offsets".into(),
+            });
         }
         for s in self.sensor.noise_std {
             if !(s.is_finite() && (0.0..=MAX_NOISE_STD).contains(&s)) {
@@ -477,7 +484,7 @@ pub(crate) fn run_loop(
         }
         let t = k as f64 * ts;
         for (i, yi) in y.iter_mut().enumerate() {
-            let angle = x[2 * i];
+            let angle = x[2 * i] + config.sensor.offsets[i];
             let mut v = match config.sensor.counts_per_rev {
                 Some(cpr) => quantise(angle, cpr[i]),
                 None => angle,
@@ -627,6 +634,7 @@ mod tests {
             sensor: SensorModel {
                 counts_per_rev: Some([2048.0, 2048.0]),
                 noise_std: [1e-3, 1e-3],
+                offsets: [0.0; 2],
             },
             ..tilted(step)
         };
@@ -669,6 +677,7 @@ mod tests {
             sensor: SensorModel {
                 counts_per_rev: None,
                 noise_std: [2e-3, 2e-3],
+                offsets: [0.0; 2],
             },
             ..tilted(Reference::default())
         };
@@ -712,6 +721,7 @@ mod tests {
                 sensor: SensorModel {
                     counts_per_rev: None,
                     noise_std: [-1.0, 0.0],
+                    offsets: [0.0; 2],
                 },
                 ..Default::default()
             },

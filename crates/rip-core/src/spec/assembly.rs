@@ -165,6 +165,7 @@ impl Spec {
             sensor: SensorModel {
                 counts_per_rev: Some(self.sensor.encoder_counts.map(f64::from)),
                 noise_std: self.sensor.noise_std,
+                offsets: self.sensor.encoder_offsets,
             },
             output_disturbance: None,
             torque_disturbance: None,

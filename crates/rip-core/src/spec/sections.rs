@@ -161,11 +161,20 @@ pub enum Param {
     /// Motor back-EMF constant (V·s/rad).
     #[serde(rename = "km")]
     Km,
+    /// Arm Coulomb friction (N·m).
+    #[serde(rename = "Cr")]
+    Cr,
+    /// Pendulum Coulomb friction (N·m).
+    #[serde(rename = "Cp")]
+    Cp,
+    /// Voltage dead zone of the motor drive (V).
+    #[serde(rename = "Vd")]
+    Vd,
 }
 
 impl Param {
     /// Every parameter, in the order of the `[plant]` section.
-    pub const ALL: [Param; 11] = [
+    pub const ALL: [Param; 14] = [
         Self::Mr,
         Self::Lr,
         Self::Jr,
@@ -177,6 +186,9 @@ impl Param {
         Self::Rm,
         Self::Kt,
         Self::Km,
+        Self::Cr,
+        Self::Cp,
+        Self::Vd,
     ];
 
     /// The name as spelled in files and in Python.
@@ -193,6 +205,9 @@ impl Param {
             Self::Rm => "Rm",
             Self::Kt => "kt",
             Self::Km => "km",
+            Self::Cr => "Cr",
+            Self::Cp => "Cp",
+            Self::Vd => "Vd",
         }
     }
 
@@ -210,14 +225,28 @@ impl Param {
             Self::Rm => &mut p.rm,
             Self::Kt => &mut p.kt,
             Self::Km => &mut p.km,
+            Self::Cr => &mut p.cr,
+            Self::Cp => &mut p.cp,
+            Self::Vd => &mut p.vd,
         }
+    }
+
+    /// Whether the parameter may be zero (friction, back-EMF, dead zone); the others must be
+    /// positive.
+    pub fn may_be_zero(self) -> bool {
+        matches!(
+            self,
+            Self::Km | Self::Dr | Self::Dp | Self::Cr | Self::Cp | Self::Vd
+        )
     }
 }
 
 /// `[plant]`: the simulated (or emulated) nonlinear plant, and through it the design model.
 ///
-/// `preset` names a parameter set; each of `mr, Lr, Jr, mp, Lp, Jp, Dr, Dp, Rm, kt, km` given
-/// overrides the preset's value, so an identified rig is a file of its own. The controllers
+/// `preset` names a parameter set; each of `mr, Lr, Jr, mp, Lp, Jp, Dr, Dp, Rm, kt, km, Cr, Cp,
+/// Vd` given overrides the preset's value, so an identified rig is a file of its own. `Cr`,
+/// `Cp` (Coulomb friction) and `Vd` (dead zone) are 0 in both presets; they act on the
+/// simulated plant but not on the design model ([`crate::plant`] explains why). The controllers
 /// are designed on this plant's linearisation about upright, discretised at the loop period;
 /// the `paper` preset without changed parameters keeps the paper's recovered model
 /// ([`paper::continuous_model`]) so that the paper's numbers do not move.
@@ -260,6 +289,15 @@ pub struct PlantSpec {
     /// Motor back-EMF constant (V·s/rad).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub km: Option<f64>,
+    /// Coulomb friction torque of the arm joint (N·m), `cr` of [`crate::plant`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub Cr: Option<f64>,
+    /// Coulomb friction torque of the pendulum joint (N·m), `cp` of [`crate::plant`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub Cp: Option<f64>,
+    /// Voltage dead zone of the motor drive (V), `vd` of [`crate::plant`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub Vd: Option<f64>,
     /// RK4 steps per control period in simulation.
     pub substeps: usize,
     /// Initial state `[θ, θ̇, α, α̇]` of a simulated run (rad, rad/s; α = 0 upright).
@@ -283,6 +321,9 @@ impl Default for PlantSpec {
             Rm: None,
             kt: None,
             km: None,
+            Cr: None,
+            Cp: None,
+            Vd: None,
             substeps: DEFAULT_SUBSTEPS,
             initial_state: [0.0, 0.0, 0.05, 0.0],
             fall_limit: DEFAULT_FALL_LIMIT,
@@ -291,14 +332,14 @@ impl Default for PlantSpec {
 }
 
 impl PlantSpec {
-    fn overrides(&self) -> [Option<f64>; 11] {
+    fn overrides(&self) -> [Option<f64>; 14] {
         [
             self.mr, self.Lr, self.Jr, self.mp, self.Lp, self.Jp, self.Dr, self.Dp, self.Rm,
-            self.kt, self.km,
+            self.kt, self.km, self.Cr, self.Cp, self.Vd,
         ]
     }
 
-    fn overrides_mut(&mut self) -> [&mut Option<f64>; 11] {
+    fn overrides_mut(&mut self) -> [&mut Option<f64>; 14] {
         [
             &mut self.mr,
             &mut self.Lr,
@@ -311,6 +352,9 @@ impl PlantSpec {
             &mut self.Rm,
             &mut self.kt,
             &mut self.km,
+            &mut self.Cr,
+            &mut self.Cp,
+            &mut self.Vd,
         ]
     }
 
@@ -345,7 +389,7 @@ impl PlantSpec {
         for (param, value) in Param::ALL.into_iter().zip(self.overrides()) {
             if let Some(v) = value {
                 let key = format!("plant.{}", param.name());
-                if matches!(param, Param::Km | Param::Dr | Param::Dp) {
+                if param.may_be_zero() {
                     non_negative(&key, v)?;
                 } else {
                     positive(&key, v)?;
@@ -391,6 +435,10 @@ pub struct SensorSpec {
     pub encoder_counts: [u32; 2],
     /// Standard deviation of the noise on the arm and pendulum angles (rad).
     pub noise_std: [f64; 2],
+    /// Where each encoder's zero lies (rad): an encoder reads `angle + offset`, so a simulated
+    /// run measures `[θ + o₀, α + o₁]` and the emulator's counters count from it. 0 is a
+    /// calibrated sensor; on a rig the calibration (pendulum hanging at rest) removes it.
+    pub encoder_offsets: [f64; 2],
 }
 
 impl Default for SensorSpec {
@@ -398,6 +446,7 @@ impl Default for SensorSpec {
         Self {
             encoder_counts: [2048, 2048],
             noise_std: [1e-3, 1e-3],
+            encoder_offsets: [0.0, 0.0],
         }
     }
 }
@@ -418,6 +467,14 @@ impl SensorSpec {
             non_negative(&key, s)?;
             if s > PI {
                 return Err(bad(key, format!("must be at most π rad, got {s}")));
+            }
+        }
+        for (i, &o) in self.encoder_offsets.iter().enumerate() {
+            if !(o.is_finite() && o.abs() <= PI) {
+                return Err(bad(
+                    format!("sensor.encoder_offsets[{i}]"),
+                    format!("must be within [-π, π] rad, got {o}"),
+                ));
             }
         }
         Ok(())

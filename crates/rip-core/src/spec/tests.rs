@@ -47,6 +47,10 @@ fn printed_spec_reads_back_equal_and_names_every_key() {
         "[sensor]",
         "encoder_counts",
         "noise_std",
+        "encoder_offsets = [0.0, 0.0]",
+        "Cr = 0.0",
+        "Cp = 0.0",
+        "Vd = 0.0",
         "[reference]",
         "[lqr]",
         "Q = ",
@@ -88,6 +92,14 @@ fn bad_values_are_named() {
         ("[plant]\npreset = 'qube'\n", "plant.preset"),
         ("[plant]\nJr = 0.0\n", "plant.Jr"),
         ("[plant]\nDp = -1.0\n", "plant.Dp"),
+        ("[plant]\nCr = -0.001\n", "plant.Cr"),
+        ("[plant]\nCp = nan\n", "plant.Cp"),
+        ("[plant]\nVd = -0.5\n", "plant.Vd"),
+        ("[plant]\nVd = inf\n", "plant.Vd"),
+        (
+            "[sensor]\nencoder_offsets = [0.0, 4.0]\n",
+            "sensor.encoder_offsets[1]",
+        ),
         ("[plant]\nsubsteps = 100001\n", "plant.substeps"),
         ("[plant]\nsubsteps = 0\n", "plant.substeps"),
         (
@@ -287,4 +299,24 @@ fn controllers_come_in_the_files_order() {
     let built = spec.design(paper::TS).unwrap().controllers().unwrap();
     let kinds: Vec<_> = built.iter().map(|(k, _)| *k).collect();
     assert_eq!(kinds, [ControllerKind::Mpc, ControllerKind::Lqr]);
+}
+
+#[test]
+fn friction_dead_zone_and_offsets_reach_the_plant_and_the_simulation() {
+    let spec = Spec::parse(
+        "[plant]\npreset = 'qube_servo2'\nCr = 0.002\nCp = 1e-5\nVd = 0.3\n\
+         [sensor]\nencoder_offsets = [0.1, -0.2]\n",
+    )
+    .unwrap();
+    let p = spec.plant.params();
+    assert_eq!((p.cr, p.cp, p.vd), (0.002, 1e-5, 0.3));
+    assert!(!spec.plant.is_paper_model());
+    // The design model is the smooth part's: the same as without friction and dead zone.
+    let smooth = Spec::parse("[plant]\npreset = 'qube_servo2'\n").unwrap();
+    assert_eq!(
+        spec.design(paper::TS).unwrap().a,
+        smooth.design(paper::TS).unwrap().a
+    );
+    let cfg = spec.sim_config(paper::TS, 0);
+    assert_eq!(cfg.sensor.offsets, [0.1, -0.2]);
 }

@@ -67,6 +67,7 @@ fn hanging_run(duration: f64, step_time: f64, seed: u64) -> SimConfig {
         sensor: SensorModel {
             counts_per_rev: Some([2048.0, 2048.0]),
             noise_std: [1e-3, 1e-3],
+            offsets: [0.0; 2],
         },
         seed,
         ..Default::default()
