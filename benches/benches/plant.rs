@@ -18,6 +18,7 @@ fn paper_run() -> SimConfig {
         sensor: SensorModel {
             counts_per_rev: Some([2048.0, 2048.0]),
             noise_std: [1e-3, 1e-3],
+            offsets: [0.0; 2],
         },
         ..Default::default()
     }
