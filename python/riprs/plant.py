@@ -20,9 +20,11 @@ Presets
 :meth:`FurutaParams.qube_servo2`
     Quanser QUBE-Servo 2, published values (``qube2_rotpen_param.m`` of the rotary pendulum
     workbook): ``Rm = 8.4``, ``kt = km = 0.042``, ``mr = 0.095``, ``Lr = 0.085``,
-    ``mp = 0.024``, ``Lp = 0.129``, ``Jr = mr Lr^2/12``, ``Jp = mp Lp^2/12``, ``Dr = 0.0015``,
-    ``Dp = 0.0005``. Quanser's own model uses ``Jr`` directly as the inertia about the motor
-    axis and drops the ``Jp sin^2(alpha)`` term; riprs reads both inertias as centroidal.
+    ``mp = 0.024``, ``Lp = 0.129``, ``Jr = mr Lr^2/12``, ``Jp = mp Lp^2/12``, ``Dr = 0.001``,
+    ``Dp = 0.00005`` (other sources quote 10x the pendulum damping, which no swing-up within
+    the arm's travel can overcome: see ``rip_core::plant``). Quanser's own model uses ``Jr``
+    directly as the inertia about the motor axis and drops the ``Jp sin^2(alpha)`` term; riprs
+    reads both inertias as centroidal.
 :meth:`FurutaParams.paper`
     Fitted with :meth:`FurutaParams.fit` so that the upright linearisation, discretised at
     0.01 s, reproduces the paper's ``A_d`` and ``B_d`` to their printed precision (largest

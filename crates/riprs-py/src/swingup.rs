@@ -121,8 +121,11 @@ impl Controller for Balance {
 /// plus a centring spring, clipped to the braking envelope
 /// :math:`|\dot\theta| \le \sqrt{2 a_b(\theta_L \mp \theta)}` that keeps :math:`|\theta| \le
 /// \theta_L`, and turned into a voltage (at most ``max_voltage``) by inverting the nominal
-/// model. Inside the catch region (``catch_angle``, ``catch_rate``, ``catch_arm_rate``,
-/// ``catch_arm_angle``, ``catch_lookahead``) the balance controller takes over: its estimator
+/// model. The target energy adds the viscous loss still to come on the way up,
+/// :math:`E_t(\alpha) = \delta G + 4 d_p \sqrt{G/J_\alpha}\,(1 - \cos(\alpha/2))`. Inside the
+/// catch region (``catch_angle``, ``catch_rate``, ``catch_arm_rate``, ``catch_arm_angle``,
+/// ``catch_lookahead``, and ``catch_mode_fraction``: the upright's unstable mode small enough for
+/// the voltage bound to stop it) the balance controller takes over: its estimator
 /// has run on the measurements and the swing-up's voltage (``estimator_window``), the MPC's
 /// previous move is the swing-up's last voltage, and the arm reference is held where the arm
 /// was caught until the external arm reference changes. Leaving the balance region
@@ -141,7 +144,8 @@ impl Controller for Balance {
 ///     :attr:`settings`): ``max_voltage`` (V), ``arm_limit`` (rad), ``brake_fraction``,
 ///     ``pump_fraction``, ``pump_width`` (rad/s), ``energy_gain``, ``energy_margin``,
 ///     ``arm_centering`` (rad/s), ``barrier_rate`` (1/s), ``rate_cutoff`` (Hz),
-///     ``catch_angle`` (rad), ``catch_lookahead`` (s), ``catch_rate`` (rad/s),
+///     ``catch_angle`` (rad), ``catch_lookahead`` (s), ``catch_mode_fraction``,
+///     ``catch_rate`` (rad/s),
 ///     ``catch_arm_rate`` (rad/s), ``catch_arm_angle`` (rad), ``balance_angle`` (rad),
 ///     ``estimator_window`` (rad), ``max_time`` (s), ``on_fall`` (``"retry"`` or ``"stop"``).
 ///
@@ -178,6 +182,7 @@ fn apply_setting(s: &mut SwingUpSettings, key: &str, value: &Bound<'_, PyAny>) -
         "rate_cutoff" => &mut s.rate_cutoff,
         "catch_angle" => &mut s.catch_angle,
         "catch_lookahead" => &mut s.catch_lookahead,
+        "catch_mode_fraction" => &mut s.catch_mode_fraction,
         "catch_rate" => &mut s.catch_rate,
         "catch_arm_rate" => &mut s.catch_arm_rate,
         "catch_arm_angle" => &mut s.catch_arm_angle,
@@ -219,6 +224,7 @@ pub(crate) fn settings_dict<'py>(
         ("rate_cutoff", s.rate_cutoff),
         ("catch_angle", s.catch_angle),
         ("catch_lookahead", s.catch_lookahead),
+        ("catch_mode_fraction", s.catch_mode_fraction),
         ("catch_rate", s.catch_rate),
         ("catch_arm_rate", s.catch_arm_rate),
         ("catch_arm_angle", s.catch_arm_angle),

@@ -91,8 +91,11 @@ pub(crate) struct EnergyLaw {
     ja: f64,
     /// `G = m_p g l_p / 2`.
     grav: f64,
-    /// Target energy `δ G`.
+    /// Target energy at upright, `δ G`.
     target: f64,
+    /// `D = 4 d_p √(G/J_α)`: the viscous loss of the pendulum from hanging to upright along
+    /// the homoclinic orbit (module docs, eq. (1a)).
+    dissipation: f64,
     pump: f64,
     brake: f64,
     gain: f64,
@@ -115,6 +118,7 @@ impl EnergyLaw {
             ja,
             grav,
             target: s.energy_margin * grav,
+            dissipation: 4.0 * p.dp * (grav / ja).sqrt(),
             pump: s.pump_fraction * grav / ja,
             brake: s.brake_fraction * stall,
             gain: s.energy_gain,
@@ -131,6 +135,12 @@ impl EnergyLaw {
         0.5 * self.ja * x[3] * x[3] + self.grav * (x[2].cos() - 1.0)
     }
 
+    /// The target energy at pendulum angle `alpha` (wrapped): `δ G` plus what viscous friction
+    /// takes on the way from `alpha` to upright, `E_t(α) = δ G + D (1 − cos(α/2))`.
+    pub(crate) fn target(&self, alpha: f64) -> f64 {
+        self.target + self.dissipation * (1.0 - (0.5 * alpha).cos())
+    }
+
     /// The braking deceleration `a_b` (rad/s²).
     pub(crate) fn brake(&self) -> f64 {
         self.brake
@@ -139,7 +149,7 @@ impl EnergyLaw {
     /// The arm acceleration the law asks for at `x` (module docs, steps 1–3).
     pub(crate) fn acceleration(&self, x: &State) -> f64 {
         let (theta, theta_dot, alpha, alpha_dot) = (x[0], x[1], x[2], x[3]);
-        let eps = (self.target - self.energy(x)) / self.grav;
+        let eps = (self.target(alpha) - self.energy(x)) / self.grav;
         let v = alpha_dot * alpha.cos();
         // At exact rest (a quantised, noise-free reading of a still pendulum) v is 0 and a
         // smoothed sign would never start the swing: push one way until it moves.
@@ -189,5 +199,50 @@ fn toward(v: f64, v_env: f64) -> f64 {
         1.0
     } else {
         v / v_env
+    }
+}
+
+/// The unstable mode of the nominal model linearised about upright (module docs, "Catch"):
+/// `z = wᵀ x` with `wᵀ A = λ wᵀ`, `λ > 0`, normalised to `w_α = 1`, so that
+/// `ż = λ z + (wᵀ b) u`; with `|u| ≤ U` it can be brought back to 0 exactly while
+/// `|z| < |wᵀ b| U / λ` (`recoverable`).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct UnstableMode {
+    w: [f64; 4],
+    recoverable: f64,
+}
+
+impl UnstableMode {
+    pub(crate) fn new(plant: &Plant, u_max: f64) -> Option<Self> {
+        let (a, b) = plant.linearize_upright();
+        let lambda = crate::linalg::eigenvalues(&a)
+            .iter()
+            .filter(|e| e.im.abs() < 1e-9 * (1.0 + e.re.abs()))
+            .map(|e| e.re)
+            .fold(f64::NAN, f64::max);
+        if !(lambda.is_finite() && lambda > 0.0) {
+            return None;
+        }
+        // The left eigenvector spans the null space of Aᵀ − λI: the right singular vector of
+        // its smallest singular value.
+        let shifted = a.transpose() - crate::linalg::Mat::identity(4, 4) * lambda;
+        let svd = shifted.try_svd(false, true, f64::EPSILON, 400)?;
+        let v_t = svd.v_t?;
+        let k = svd.singular_values.imin();
+        let row = v_t.row(k);
+        if row[2].abs() < 1e-12 {
+            return None;
+        }
+        let w = [row[0] / row[2], row[1] / row[2], 1.0, row[3] / row[2]];
+        let wb: f64 = (0..4).map(|i| w[i] * b[(i, 0)]).sum();
+        let recoverable = wb.abs() * u_max / lambda;
+        recoverable.is_finite().then_some(Self { w, recoverable })
+    }
+
+    /// `|z| / (|wᵀ b| U / λ)` at `x` (α wrapped): below 1 the voltage bound can still stop the
+    /// fall.
+    pub(crate) fn load(&self, x: &State) -> f64 {
+        let z: f64 = (0..4).map(|i| self.w[i] * x[i]).sum();
+        z.abs() / self.recoverable
     }
 }

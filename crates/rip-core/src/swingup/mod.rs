@@ -27,9 +27,22 @@
 //! The pumping law (their eq. (8) with a saturated gain) is
 //!
 //! ```text
-//! ε = (E_t − E)/G,   E_t = δ G                                                          (1)
-//! a_pump = a_p · sat(k_E ε) · s(α̇ cos α),   s(v) = sat(v / 0.5 rad/s), s(0) = 1
+//! ε = (E_t(α) − E)/G                                                                   (1)
+//! a_pump = a_p · sat(k_E ε) · s(α̇ cos α),   s(v) = sat(v / w), s(0) = 1
 //! ```
+//!
+//! The target is the upright energy raised by a small margin `δ G` plus the viscous loss still
+//! to come on the way up: along the homoclinic orbit `½ J_α α̇² = G (1 − cos α)` the pendulum
+//! loses `d_p ∫ |α̇| dα` between `α` and upright, so
+//!
+//! ```text
+//! E_t(α) = δ G + D (1 − cos(α/2)),     D = 4 d_p √(G/J_α)                             (1a)
+//! ```
+//!
+//! (`D` is the loss from hanging to upright, α wrapped to (−π, π]). Without it the pendulum
+//! arrives short of upright on a damped rig, and a margin `δ` large enough to make up for that
+//! brings it over the top too fast to be caught: `D` is 0.35 G on the `paper` preset and
+//! 0.14 G on `qube_servo2`.
 //!
 //! With `a_pump` in place of `θ̈`, `dE/dt = m₁₂ a_p sat(k_E ε) |α̇ cos α| s(·)/… ≥ 0` while
 //! `E < E_t` and `≤ 0` above it: `E → E_t`, the homoclinic orbit through upright (raised by a
@@ -86,8 +99,14 @@
 //!   and the applied voltage ([`Controller::observe`]); further out, where its linear model does
 //!   not hold, it is restarted every sample from the swing-up's estimate
 //!   ([`Controller::seed`]). The MPC's previous move is therefore the swing-up's last voltage.
-//! - **catch** when `|α| ≤ catch_angle`, `|α̇| ≤ catch_rate` and `|θ̇| ≤ catch_arm_rate`: the
-//!   balance controller computes the move of that same sample. The arm reference is held at the
+//! - **catch** when `|α| ≤ catch_angle`, `|α̇| ≤ catch_rate`, `|θ̇| ≤ catch_arm_rate`, the
+//!   arm's stopping point is within `catch_arm_angle`, and the upright's unstable mode is small
+//!   enough for the voltage bound: with the nominal model linearised about upright,
+//!   `ẋ = A x + b u`, and `wᵀ A = λ wᵀ` (`λ > 0`, `w_α = 1`), `z = wᵀ x` obeys
+//!   `ż = λ z + (wᵀ b) u`, which `|u| ≤ U` can return to 0 only while `|z| < |wᵀ b| U / λ`;
+//!   the catch needs `|z| ≤ catch_mode_fraction · |wᵀ b| U / λ`. A pendulum that is close to
+//!   upright but falling away from it (or rising too fast) is not caught. The balance
+//!   controller computes the move of that same sample. The arm reference is held at the
 //!   arm's angle at the catch, `θ_c`, until the external arm reference changes from the value
 //!   it had then; from that change on the external reference is passed through (so a later
 //!   0 → 1 rad step is tracked as given).
@@ -108,7 +127,7 @@ use crate::controller::{Controller, Phase, StepStatus, StopCause};
 use crate::error::{Result, RipError};
 use crate::plant::Plant;
 
-use law::{EnergyLaw, RateEstimator};
+use law::{EnergyLaw, RateEstimator, UnstableMode};
 
 /// `a` wrapped to (−π, π].
 #[inline]
@@ -128,6 +147,7 @@ pub struct SwingUp<C> {
     balance: C,
     settings: SwingUpSettings,
     law: EnergyLaw,
+    mode: UnstableMode,
     ts: f64,
     rates: RateEstimator,
     phase: Phase,
@@ -158,8 +178,15 @@ impl<C: Controller> SwingUp<C> {
         let ts = balance
             .sample_time()
             .ok_or_else(|| RipError::invalid("balance", "needs a sample time to be supervised"))?;
+        let mode = UnstableMode::new(plant, settings.max_voltage).ok_or_else(|| {
+            RipError::invalid(
+                "plant",
+                "the nominal model has no real unstable mode about upright to catch",
+            )
+        })?;
         let mut out = Self {
             law: EnergyLaw::new(plant, &settings),
+            mode,
             rates: RateEstimator::new(ts, settings.rate_cutoff),
             balance,
             settings,
@@ -209,6 +236,7 @@ impl<C: Controller> SwingUp<C> {
         let s = &self.settings;
         let arm_stop = x[0] + x[1] * x[1].abs() / (2.0 * self.law.brake());
         x[2].abs() <= s.catch_angle
+            && self.mode.load(x) <= s.catch_mode_fraction
             && (x[2] + x[3] * s.catch_lookahead).abs() <= s.catch_angle
             && x[3].abs() <= s.catch_rate
             && x[1].abs() <= s.catch_arm_rate

@@ -67,8 +67,9 @@ pub struct SwingUpSettings {
     /// 10 % of `G` of its target (Åström & Furuta's large-gain, near bang-bang case).
     pub energy_gain: f64,
     /// Target energy above the upright rest energy, as a fraction `δ` of the gravity
-    /// stiffness `G = m_p g l_p/2`; default 0.05: the pendulum reaches upright still moving
-    /// slowly instead of creeping towards it for ever.
+    /// stiffness `G = m_p g l_p/2` (on top of the viscous loss still to come, module docs
+    /// eq. (1a)); default 0.05: the pendulum reaches upright still moving slowly instead of
+    /// creeping towards it for ever.
     pub energy_margin: f64,
     /// Natural frequency `ω_c` (rad/s) of the critically damped spring that keeps the arm
     /// centred around 0 while pumping; default 2.5 rad/s.
@@ -85,14 +86,20 @@ pub struct SwingUpSettings {
     /// within `catch_angle`, so a pendulum that is falling away from upright is not caught;
     /// default 0.1 s.
     pub catch_lookahead: f64,
+    /// Catch region: the upright's unstable mode `z = wᵀ x` of the nominal model within this
+    /// fraction of the largest `|z|` the voltage bound can still return to 0,
+    /// `|wᵀ b| U / λ` ([module docs](super), "Catch"); default 0.3, which leaves the balance
+    /// controller most of the voltage for the arm.
+    pub catch_mode_fraction: f64,
     /// Catch region: `|α̇|` below this (rad/s); default 7 rad/s.
     pub catch_rate: f64,
-    /// Catch region: `|θ̇|` below this (rad/s); default 9 rad/s.
+    /// Catch region: `|θ̇|` below this (rad/s); default 3 rad/s: a faster arm carries the
+    /// balance controller's transient into the arm limit.
     pub catch_arm_rate: f64,
     /// Catch region: the arm's stopping point `θ + θ̇|θ̇|/(2 a_b)` (where braking at the
     /// envelope's deceleration `a_b` would stop it) within `±catch_arm_angle` (rad), so that the
     /// balance controller takes over with room to stop the arm inside `arm_limit`; default
-    /// 1.0 rad.
+    /// 0.7 rad (the balance controllers' catch transients move the arm by up to about 0.8 rad).
     pub catch_arm_angle: f64,
     /// Balance region: `|α|` up to this (rad from upright); leaving it (or the arm limit) after
     /// a catch is a fall. Default 0.6 rad (`rip-rt`'s default pendulum limit).
@@ -100,7 +107,10 @@ pub struct SwingUpSettings {
     /// Within this `|α|` (rad from upright) the balance controller's estimator runs on the
     /// measurements and the swing-up's voltage ([`Controller::observe`]); outside it is
     /// restarted every sample from the swing-up's own estimate ([`Controller::seed`]), because
-    /// its linear model does not hold far from upright. Default 1.0 rad.
+    /// its linear model does not hold far from upright. Default 0.3 rad (the catch angle): the
+    /// paper's Kalman filter is slow next to the last rise of the pendulum, and started from
+    /// the swing-up's estimate it is closer to the state at the catch than after observing
+    /// the rise (its output-disturbance states would take up the model error of the rise).
     ///
     /// [`Controller::observe`]: crate::Controller::observe
     /// [`Controller::seed`]: crate::Controller::seed
@@ -121,17 +131,18 @@ impl Default for SwingUpSettings {
             pump_fraction: 3.0,
             pump_width: 2.0,
             energy_gain: 5.0,
-            energy_margin: 0.3,
+            energy_margin: 0.05,
             arm_centering: 1.5,
             barrier_rate: 20.0,
             rate_cutoff: 20.0,
             catch_angle: 0.3,
             catch_lookahead: 0.1,
+            catch_mode_fraction: 0.3,
             catch_rate: 7.0,
-            catch_arm_rate: 9.0,
-            catch_arm_angle: 1.0,
+            catch_arm_rate: 3.0,
+            catch_arm_angle: 0.7,
             balance_angle: 0.6,
-            estimator_window: 0.6,
+            estimator_window: 0.3,
             max_time: 20.0,
             on_fall: OnFall::Retry,
         }
@@ -181,6 +192,14 @@ impl SwingUpSettings {
             0.0,
             1.0,
             false,
+            false,
+        )?;
+        in_range(
+            "catch_mode_fraction",
+            self.catch_mode_fraction,
+            0.0,
+            1.0,
+            true,
             false,
         )?;
         in_range("catch_rate", self.catch_rate, 0.0, inf, true, true)?;

@@ -195,16 +195,20 @@ fn the_law_keeps_the_arm_inside_its_limit_on_perturbed_plants() {
 #[test]
 fn pumping_raises_the_energy_below_its_target_and_lowers_it_above() {
     // Away from the arm limit the applied acceleration has the sign that makes
-    // dE/dt = m12 cos α α̇ θ̈ (the controllable part) push E towards E_t.
+    // dE/dt = m12 cos α α̇ θ̈ (the controllable part) push E towards
+    // E_t(α) = δ G + 4 d_p √(G/J_α) (1 − cos(α/2)), eq. (1a).
     let plant = Plant::paper();
     let s = SwingUpSettings::default();
     let law = law::EnergyLaw::new(&plant, &s);
     let p = plant.params();
     let m12 = p.mp * p.lr * p.lp / 2.0;
-    let target = s.energy_margin * p.mp * p.g * p.lp / 2.0;
+    let grav = p.mp * p.g * p.lp / 2.0;
+    let ja = p.jp + p.mp * p.lp * p.lp / 4.0;
     let mut checked = 0;
     for i in 0..400 {
         let alpha = -PI + 2.0 * PI * (f64::from(i) + 0.5) / 400.0;
+        let target =
+            s.energy_margin * grav + 4.0 * p.dp * (grav / ja).sqrt() * (1.0 - (0.5 * alpha).cos());
         for alpha_dot in [-6.0, -2.5, 2.5, 6.0] {
             let x = State::new(0.0, 0.0, alpha, alpha_dot);
             let v = alpha_dot * alpha.cos();
