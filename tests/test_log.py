@@ -47,6 +47,61 @@ def test_parses_columns_estimates_and_metadata(tmp_path: pathlib.Path) -> None:
     assert log.stop_reason == "signal"
 
 
+SWING_UP = """\
+# controller: lqr
+# swing_up: true
+t,seq,theta,alpha,theta_ref,u,compute_us,jitter_us,status,phase
+0.0000,1,0.000000,3.141593,0.000000,12.0000,5.0,80.0,1,swing_up
+0.0100,2,0.010000,3.100000,0.000000,12.0000,5.0,80.0,1,swing_up
+0.0200,3,0.020000,0.200000,0.000000,-3.0000,5.0,80.0,1,balance
+0.0300,4,0.020000,0.100000,0.000000,-2.0000,0.0,80.0,256,balance
+0.0400,5,0.020000,0.700000,0.000000,12.0000,5.0,80.0,1,swing_up
+0.0500,6,0.020000,0.100000,0.000000,1.0000,5.0,80.0,1,balance
+# stop: finished
+# catch_s: 0.020
+"""
+
+
+def test_the_phase_of_every_row(tmp_path: pathlib.Path) -> None:
+    path = tmp_path / "swing.csv"
+    path.write_text(SWING_UP)
+    log = riprs.load_log(path)
+    assert log.phase.tolist() == [
+        "swing_up", "swing_up", "balance", "balance", "swing_up", "balance",
+    ]
+    # The first catch: the first balance row after swing-up rows.
+    assert log.catch_index == 2
+    assert log.t[log.catch_index] == pytest.approx(float(log.meta["catch_s"]))
+    assert set(log.phase.tolist()) <= set(riprs.log.PHASES)
+
+
+def test_logs_without_the_phase_column_are_balancing(tmp_path: pathlib.Path) -> None:
+    path = tmp_path / "old.csv"
+    path.write_text(SAMPLE)
+    log = riprs.load_log(path)
+    assert log.phase.tolist() == ["balance"] * 3
+    assert log.catch_index is None
+
+
+@pytest.mark.parametrize(
+    ("bad", "line"),
+    [("swinging", 6), ("", 6), ("swing_up_and_away", 6)],
+)
+def test_an_unknown_phase_is_named_with_its_line(
+    tmp_path: pathlib.Path, bad: str, line: int
+) -> None:
+    text = SWING_UP.replace("0.0200,3,0.020000,0.200000,0.000000,-3.0000,5.0,80.0,1,balance",
+                            f"0.0200,3,0.020000,0.200000,0.000000,-3.0000,5.0,80.0,1,{bad}")
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(riprs.LogError, match=f"line {line}: column 'phase'"):
+        riprs.load_log(path)
+    # A bad number in a later row is still found, past rows with valid phases.
+    path.write_text(SWING_UP.replace("0.0500,6,", "0.0500,six,"))
+    with pytest.raises(riprs.LogError, match="line 9: column 'seq'"):
+        riprs.load_log(path)
+
+
 def test_without_estimates(tmp_path: pathlib.Path) -> None:
     lines = [ln for ln in SAMPLE.splitlines() if not ln.startswith("#")]
     header = "t,seq,theta,alpha,theta_ref,u,compute_us,jitter_us,status"
@@ -110,9 +165,13 @@ def test_reads_a_log_written_by_rip_rt(tmp_path: pathlib.Path) -> None:
     log = riprs.load_log(log_path)
     assert log.meta["controller"] == "lqg"
     assert log.stop_reason == "finished"
-    assert 140 <= len(log.t) <= 151
+    # A row per period that ran: periods skipped on a loaded machine have none, so the rows
+    # are counted from above and the log must span the run.
+    assert len(log.t) <= 151
+    assert log.t[-1] >= 1.45
     assert np.all(np.diff(log.t) > 0)
     assert log.xhat.shape[1] == 5  # the LQG's augmented estimate
+    assert log.phase.tolist() == ["balance"] * len(log.t)
     assert np.abs(log.alpha).max() < 0.25
     assert np.abs(log.u).max() <= 12.0
 

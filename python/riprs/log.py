@@ -24,6 +24,12 @@ FLAG_DEADLINE_MISS = 1 << 11
 
 _REQUIRED = ("t", "seq", "theta", "alpha", "theta_ref", "u", "compute_us", "jitter_us", "status")
 
+#: The values of the ``phase`` column: the controller's phase after the period's step.
+PHASES = ("swing_up", "balance", "stopped")
+# Logs written before the column existed are of balancing runs only.
+_DEFAULT_PHASE = "balance"
+_PHASE_DTYPE = "U8"
+
 
 class LogError(RiprsError):
     """A file is not a readable ``rip-rt`` log; the message names the file, line and column."""
@@ -45,6 +51,9 @@ class RtLog:
     compute_us : decode → command encoded time (µs).
     jitter_us : wake-up lateness relative to the period's deadline (µs).
     status : device status bits | ``FLAG_*`` bits (int64).
+    phase : the controller's phase after the period's step, one of :data:`PHASES` (numpy
+        strings): ``swing_up`` until a swing-up's catch, then ``balance``. Logs written before
+        this column existed read as ``balance`` throughout.
     meta : the ``# key: value`` comment lines (header and footer).
     """
 
@@ -58,12 +67,21 @@ class RtLog:
     compute_us: np.ndarray
     jitter_us: np.ndarray
     status: np.ndarray
+    phase: np.ndarray
     meta: Dict[str, str]
 
     @property
     def y(self) -> np.ndarray:
         """Measured outputs ``[theta, alpha]``, shape (n, 2)."""
         return np.column_stack([self.theta, self.alpha])
+
+    @property
+    def catch_index(self) -> int | None:
+        """Index of the first row in the ``balance`` phase after ``swing_up`` rows (a swing-up's
+        catch), or ``None``."""
+        swinging = self.phase == "swing_up"
+        after = np.flatnonzero(~swinging[1:] & swinging[:-1] & (self.phase[1:] == "balance"))
+        return int(after[0]) + 1 if after.size else None
 
     @property
     def stop_reason(self) -> str | None:
@@ -76,7 +94,7 @@ def load_log(path: Union[str, os.PathLike[str]]) -> RtLog:
 
     The file is read in blocks of about 1 MB, each parsed by numpy's C parser straight into
     preallocated typed columns (``seq`` and ``status`` int64, the rest float64; an empty cell
-    is NaN), so memory stays close to that of the result: a 2-million-row log of an LQG run
+    is NaN; ``phase`` text), so memory stays close to that of the result: a 2-million-row log of an LQG run
     (214 MB of arrays) peaks about 12 MB above its arrays.
     A UTF-8 byte-order mark is accepted; columns not listed in :class:`RtLog` are ignored.
 
@@ -87,8 +105,9 @@ def load_log(path: Union[str, os.PathLike[str]]) -> RtLog:
     LogError
         If it is not a ``rip-rt`` log: not UTF-8 text, missing, repeated or misnamed columns
         (estimate columns are ``xhat_0``, ``xhat_1``, ...), a row with the wrong number of
-        fields, or a cell that is not a number (``seq`` and ``status``: not an integer in the
-        int64 range). The message names the file, the line and the column. A ``ValueError``.
+        fields, a cell that is not a number (``seq`` and ``status``: not an integer in the
+        int64 range), or a ``phase`` not in :data:`PHASES`. The message names the file, the line
+        and the column. A ``ValueError``.
     """
     return _Reader(os.fspath(path)).read()
 
@@ -168,7 +187,7 @@ class _Reader:
         out = self._allocate(names, capacity)
         dtype = np.dtype(
             [
-                (f"c{j}", "i8" if name in _INT_COLUMNS else "f8" if _wanted(name) else "S1")
+                (f"c{j}", _column_dtype(name))
                 for j, name in enumerate(names)
             ]
         )
@@ -204,6 +223,7 @@ class _Reader:
             compute_us=out["compute_us"],
             jitter_us=out["jitter_us"],
             status=out["status"],
+            phase=out["phase"],
             meta=self.meta,
         )
 
@@ -215,6 +235,9 @@ class _Reader:
         }
         n_est = sum(1 for c in names if c.startswith("xhat_"))
         out["xhat"] = np.empty((capacity, n_est), dtype=np.float64)
+        out["phase"] = np.empty(capacity, dtype=_PHASE_DTYPE)
+        if "phase" not in names:
+            out["phase"][:] = _DEFAULT_PHASE
         return out
 
     def _block(
@@ -267,7 +290,18 @@ class _Reader:
             raise self.fail(first_line, "unreadable rows") from None
         end = start + len(table)
         for j, name in enumerate(names):
-            if name.startswith("xhat_"):
+            if name == "phase":
+                values = table[f"c{j}"]
+                bad = np.flatnonzero(~np.isin(values, PHASES))
+                if bad.size:
+                    row = int(bad[0])
+                    lineno = first_line + row if numbers is None else numbers[row]
+                    raise self.fail(
+                        lineno,
+                        f"column 'phase': {str(values[row])!r} is not one of {list(PHASES)}",
+                    )
+                out["phase"][start:end] = values
+            elif name.startswith("xhat_"):
                 out["xhat"][start:end, int(name[len("xhat_") :])] = table[f"c{j}"]
             elif name in _REQUIRED:
                 out[name][start:end] = table[f"c{j}"]
@@ -287,6 +321,11 @@ class _Reader:
                             lineno,
                             f"column {name!r}: not an integer in the int64 range: {shown!r}",
                         )
+                elif name == "phase":
+                    if shown not in PHASES:
+                        raise self.fail(
+                            lineno, f"column 'phase': {shown!r} is not one of {list(PHASES)}"
+                        )
                 elif _wanted(name):
                     try:
                         float(value) if value.strip() else None
@@ -298,7 +337,16 @@ class _Reader:
 
 def _wanted(name: str) -> bool:
     """Columns that are read; others are skipped (but still counted per row)."""
-    return name in _REQUIRED or name.startswith("xhat_")
+    return name in _REQUIRED or name == "phase" or name.startswith("xhat_")
+
+
+def _column_dtype(name: str) -> str:
+    if name in _INT_COLUMNS:
+        return "i8"
+    if name == "phase":
+        # Longer than any phase, so that a wrong value is seen whole, not cut to a valid one.
+        return "U16"
+    return "f8" if _wanted(name) else "S1"
 
 
 def _is_int64(value: bytes) -> bool:
@@ -313,6 +361,7 @@ __all__ = [
     "FLAG_DEADLINE_MISS",
     "FLAG_FALLBACK",
     "FLAG_NO_REPLY",
+    "PHASES",
     "RtLog",
     "load_log",
 ]

@@ -405,6 +405,23 @@ impl Config {
         )
     }
 
+    /// Checks `[swing_up]` against the loop's limits for a run that swings up: the law's arm
+    /// limit inside `safety.arm_limit` (which stays a stop), so that the law, not the stop,
+    /// keeps the arm in. The error names the key.
+    pub fn validate_swing_up(&self) -> Result<(), ConfigError> {
+        let s = &self.spec.swing_up;
+        if s.arm_limit >= self.safety.arm_limit {
+            return Err(err(
+                "swing_up.arm_limit",
+                format!(
+                    "must be inside safety.arm_limit ({} rad), got {}",
+                    self.safety.arm_limit, s.arm_limit
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     /// The control period in nanoseconds.
     pub fn period_ns(&self) -> u64 {
         (self.loop_.period_ms * 1e6).round() as u64

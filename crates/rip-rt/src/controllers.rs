@@ -1,13 +1,14 @@
 //! Builds the selected controller from the configuration by rip-core's one assembly
 //! (`rip_core::spec`): designed on the `[plant]` model discretised at the loop period, LQR and
 //! LQG sharing the gain, LQG and MPC sharing one Kalman design, exactly as `riprs compare`
-//! builds them. This module only chooses and converts.
+//! builds them, and the swing-up supervisor around any of them. This module only chooses and
+//! converts.
 
 use std::fmt;
 use std::str::FromStr;
 
 use rip_core::spec::ControllerKind as Kind;
-use rip_core::Controller;
+use rip_core::{Controller, SwingUp};
 
 use crate::config::Config;
 
@@ -80,4 +81,19 @@ pub fn build(kind: ControllerKind, cfg: &Config) -> Result<Box<dyn Controller>, 
     spec.design(cfg.period_s())
         .and_then(|d| d.controller(kind.into()))
         .map_err(|e| format!("{kind} design: {e}"))
+}
+
+/// Builds the swing-up supervisor (rip-core's [`SwingUp`]) around the balance controller
+/// `kind` ([`build`]), with the `[swing_up]` settings designed on the `[plant]` model. The law's
+/// voltage is at most `safety.voltage_limit` (so that its arm-limit envelope plans with the
+/// voltage the loop sends). [`Config::validate_swing_up`] checks the settings against the
+/// loop's.
+pub fn build_swing_up(kind: ControllerKind, cfg: &Config) -> Result<Box<dyn Controller>, String> {
+    let mut settings = cfg.spec.swing_up.clone();
+    settings.max_voltage = settings.max_voltage.min(cfg.safety.voltage_limit);
+    let balance = build(kind, cfg)?;
+    let plant = cfg.spec.plant().map_err(|e| e.to_string())?;
+    SwingUp::new(balance, &plant, settings)
+        .map(|s| Box::new(s) as Box<dyn Controller>)
+        .map_err(|e| format!("swing-up around {kind}: {e}"))
 }

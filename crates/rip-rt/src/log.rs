@@ -135,8 +135,11 @@ fn write_row(out: &mut impl Write, row: &Row, n_estimates: usize) -> io::Result<
     }
     writeln!(
         out,
-        ",{:.1},{:.1},{}",
-        row.compute_us, row.jitter_us, s.flags
+        ",{:.1},{:.1},{},{}",
+        row.compute_us,
+        row.jitter_us,
+        s.flags,
+        s.phase.name()
     )
 }
 
@@ -225,7 +228,7 @@ impl LogWriter {
             for i in 0..n_estimates {
                 write!(out, ",xhat_{i}")?;
             }
-            writeln!(out, ",compute_us,jitter_us,status")?;
+            writeln!(out, ",compute_us,jitter_us,status,phase")?;
             out.flush()
         };
         header().map_err(create_err)?;
@@ -338,6 +341,7 @@ mod tests {
                 voltage: 3.0,
                 flags: 1,
                 len: 0,
+                phase: rip_core::Phase::SwingUp,
             },
             estimate: Row::estimate_from(Some(&[1.0, 2.0])),
             compute_us: 3.5,
@@ -358,11 +362,11 @@ mod tests {
         assert_eq!(lines[0], "# controller: lqr");
         assert_eq!(
             lines[1],
-            "t,seq,theta,alpha,theta_ref,u,xhat_0,xhat_1,compute_us,jitter_us,status"
+            "t,seq,theta,alpha,theta_ref,u,xhat_0,xhat_1,compute_us,jitter_us,status,phase"
         );
         assert_eq!(
             lines[2],
-            "0.0000,7,0.500000,-0.250000,1.000000,3.0000,1.000000,2.000000,3.5,12.0,1"
+            "0.0000,7,0.500000,-0.250000,1.000000,3.0000,1.000000,2.000000,3.5,12.0,1,swing_up"
         );
         assert_eq!(lines.len(), 2 + 100 + 1);
         assert_eq!(lines[102], "# stop: finished");

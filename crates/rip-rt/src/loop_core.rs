@@ -4,7 +4,7 @@
 
 use std::fmt;
 
-use rip_core::{Controller, StepStatus};
+use rip_core::{Controller, Phase, StepStatus, StopCause};
 
 use crate::calibrate::Calibration;
 use crate::config::{Config, PendulumZero, MAX_BLIND_MS, MAX_VOLTAGE_LIMIT};
@@ -41,6 +41,9 @@ pub struct StepOutput {
     pub flags: u32,
     /// Bytes of the encoded command frame.
     pub len: usize,
+    /// The controller's phase after the step: [`Phase::Balance`] for a balance controller;
+    /// a swing-up supervisor reports [`Phase::SwingUp`] until its catch.
+    pub phase: Phase,
 }
 
 /// The loop's logic without I/O or clocks: frame decoding, angle conversion, safety checks,
@@ -59,6 +62,13 @@ pub struct LoopCore {
     voltage_limit: f64,
     step_height: f64,
     step_time: f64,
+    // Where, on the loop's time axis, the reference's own time starts (the step comes
+    // `step_time` after it): 0 for a balancing run, the catch for a swing-up (+∞ before).
+    reference_origin: f64,
+    // The controller supervises a swing-up: it owns the pendulum-angle rule (module docs).
+    supervised: bool,
+    balance_angle: f64,
+    max_swing_s: f64,
     y: [f64; 2],
     r: [f64; 2],
     u: [f64; 1],
@@ -112,6 +122,9 @@ impl LoopCore {
         };
         let tau = std::f64::consts::TAU;
         let d = &cfg.device;
+        // Only a controller that itself starts in the swing-up (rip-core's supervisor) is
+        // trusted with the pendulum's fall rule.
+        let supervised = controller.phase() == Phase::SwingUp;
         Ok(Self {
             controller,
             parser: Parser::new(),
@@ -128,6 +141,10 @@ impl LoopCore {
             voltage_limit: cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT),
             step_height: cfg.spec.reference.arm_step,
             step_time: cfg.spec.reference.step_time,
+            reference_origin: if supervised { f64::INFINITY } else { 0.0 },
+            supervised,
+            balance_angle: cfg.spec.swing_up.balance_angle,
+            max_swing_s: cfg.spec.swing_up.max_time,
             y: [0.0; 2],
             r: [0.0; 2],
             u: [0.0],
@@ -268,9 +285,28 @@ impl LoopCore {
         Ok(())
     }
 
-    /// The arm reference at `t` seconds after balancing started.
+    /// Whether the controller supervises a swing-up (it started in [`Phase::SwingUp`]): the
+    /// pendulum-angle limit is then its balance region's, applied by it after the catch.
+    pub fn supervises_swing_up(&self) -> bool {
+        self.supervised
+    }
+
+    /// The controller's phase.
+    pub fn phase(&self) -> Phase {
+        self.controller.phase()
+    }
+
+    /// Starts the reference's clock at `t` (the catch of a swing-up): the arm step comes
+    /// `reference.step_time` later. Before it (a swing-up that has not caught) the reference
+    /// is 0.
+    pub fn start_reference_at(&mut self, t: f64) {
+        self.reference_origin = t;
+    }
+
+    /// The arm reference at `t` seconds on the loop's time axis (from the start of balancing;
+    /// from the start of the swing for a swing-up, whose reference starts at the catch).
     pub fn reference_at(&self, t: f64) -> f64 {
-        if t >= self.step_time {
+        if t - self.reference_origin >= self.step_time {
             self.step_height
         } else {
             0.0
@@ -291,7 +327,9 @@ impl LoopCore {
             return Err(StopReason::DeviceFault(m.status));
         }
         let (theta, alpha) = self.angles(m);
-        if alpha.abs() > self.pendulum_limit {
+        // A hanging or swinging pendulum is no fall during a swing-up, and after its catch the
+        // supervisor's balance region decides (retry or stop, below).
+        if !self.supervised && alpha.abs() > self.pendulum_limit {
             return Err(StopReason::AngleLimit {
                 which: "pendulum",
                 angle: alpha,
@@ -309,6 +347,18 @@ impl LoopCore {
         self.y = [theta, alpha];
         self.r = [reference, 0.0];
         let status = self.controller.step(&self.y, &self.r, &mut self.u);
+        let phase = self.controller.phase();
+        if let Phase::Stopped(cause) = phase {
+            return Err(match cause {
+                StopCause::SwingUpTimeout => StopReason::SwingUpFailed {
+                    max_time: self.max_swing_s,
+                },
+                StopCause::LeftBalanceRegion => StopReason::Fell {
+                    angle: alpha,
+                    limit: self.balance_angle,
+                },
+            });
+        }
         let mut flags = m.status as u32;
         if status == StepStatus::Fallback {
             flags |= FLAG_FALLBACK;
@@ -336,6 +386,7 @@ impl LoopCore {
             voltage,
             flags,
             len,
+            phase,
         })
     }
 
@@ -458,6 +509,99 @@ mod tests {
         assert!((alpha - 10.0 * std::f64::consts::TAU / 2048.0).abs() < 1e-9);
         let (_, alpha) = c.angles(&measurement(0, 0, 0));
         assert!((alpha - std::f64::consts::PI).abs() < 1e-12);
+    }
+
+    /// A stand-in for the swing-up supervisor: starts swinging, and its phase after each step is
+    /// the next of `script`.
+    struct Scripted {
+        phase: Phase,
+        script: Vec<Phase>,
+    }
+
+    impl Controller for Scripted {
+        fn n_outputs(&self) -> usize {
+            2
+        }
+        fn n_inputs(&self) -> usize {
+            1
+        }
+        fn step(&mut self, _y: &[f64], _r: &[f64], u: &mut [f64]) -> StepStatus {
+            if !self.script.is_empty() {
+                self.phase = self.script.remove(0);
+            }
+            u[0] = 2.0;
+            StepStatus::Nominal
+        }
+        fn phase(&self) -> Phase {
+            self.phase
+        }
+        fn reset(&mut self) {}
+    }
+
+    fn supervised(script: Vec<Phase>) -> LoopCore {
+        let c = Scripted {
+            phase: Phase::SwingUp,
+            script,
+        };
+        LoopCore::new(Box::new(c), &Config::default()).unwrap()
+    }
+
+    #[test]
+    fn a_swing_up_owns_the_pendulum_rule_but_not_the_arm_limit() {
+        let mut c = supervised(vec![Phase::SwingUp, Phase::Balance]);
+        assert!(c.supervises_swing_up());
+        assert!(!core(1.0).supervises_swing_up());
+        let mut out = [0u8; MAX_FRAME];
+        // Hanging (0 counts, α = π): no fall while swinging; the command goes out.
+        let s = c.control(&measurement(1, 0, 0), 0.0, &mut out).unwrap();
+        assert_eq!((s.voltage, s.phase), (2.0, Phase::SwingUp));
+        // Nor after the catch: 0.7 rad is past safety.pendulum_limit (0.6), and it is the
+        // supervisor's balance region that decides.
+        let pend = 1024 + (0.7 / std::f64::consts::TAU * 2048.0) as i32;
+        let s = c.control(&measurement(2, 0, pend), 0.01, &mut out).unwrap();
+        assert_eq!(s.phase, Phase::Balance);
+        // The arm limit (3 rad) stays a stop.
+        let e = c
+            .control(&measurement(3, 1000, 0), 0.02, &mut out)
+            .unwrap_err();
+        assert!(
+            matches!(e, StopReason::AngleLimit { which: "arm", .. }),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_supervisor_that_gives_up_stops_the_loop_without_a_command() {
+        for (cause, code) in [
+            (StopCause::SwingUpTimeout, exit_code::SWING_UP_FAILED),
+            (StopCause::LeftBalanceRegion, exit_code::ANGLE_LIMIT),
+        ] {
+            let mut c = supervised(vec![Phase::SwingUp, Phase::Stopped(cause)]);
+            let mut out = [0u8; MAX_FRAME];
+            c.control(&measurement(1, 0, 0), 0.0, &mut out).unwrap();
+            assert_eq!(c.held_voltage(), 2.0);
+            out.fill(0);
+            let e = c
+                .control(&measurement(2, 0, 0), 0.01, &mut out)
+                .unwrap_err();
+            assert_eq!(e.exit_code(), code, "{e}");
+            assert!(e.to_string().contains("swing_up."), "{e}");
+            // Nothing encoded; the loop's stop guard sends the stop frame.
+            assert!(out.iter().all(|&b| b == 0));
+        }
+    }
+
+    #[test]
+    fn a_swing_ups_reference_starts_at_the_catch() {
+        let mut c = supervised(vec![]);
+        // Before the catch the arm reference is 0 however long the swing takes.
+        assert_eq!(c.reference_at(100.0), 0.0);
+        c.start_reference_at(4.0);
+        // The step (1 rad) comes reference.step_time (1 s) after the catch.
+        assert_eq!(c.reference_at(4.99), 0.0);
+        assert_eq!(c.reference_at(5.0), 1.0);
+        // A balancing run's reference starts with it.
+        assert_eq!(core(1.0).reference_at(1.0), 1.0);
     }
 
     #[test]

@@ -27,7 +27,8 @@ Exit codes (docs/rip-rt.md has the safety rules behind each):
     2    bad command line or configuration
     3    device lost: I/O error, or the device vanished
     4    watchdog: no valid measurement for loop.watchdog_periods periods (at most 100 ms)
-    5    angle limit exceeded (safety.pendulum_limit / safety.arm_limit)
+    5    angle limit exceeded (safety.pendulum_limit / safety.arm_limit), or with --swing-up
+         the pendulum left swing_up.balance_angle after the catch with swing_up.on_fall = stop
     6    refused to start: pendulum not within safety.start_tolerance of upright
     7    controller fault: non-finite output
     8    the device reported a driver fault
@@ -36,6 +37,7 @@ Exit codes (docs/rip-rt.md has the safety rules behind each):
          periods in a row longer than a period, or the loop stalled (suspended) for 100 ms
     11   refused to start: timed controller steps do not fit the period (motor never enabled)
     12   refused to start: the rig is not at rest hanging down (rest check; motor never enabled)
+    13   swing-up failed: no catch within swing_up.max_time
     101  internal error (panic)
     128+N  stopped by signal N: 129 SIGHUP, 130 SIGINT (Ctrl-C), 131 SIGQUIT, 138 SIGUSR1,
          143 SIGTERM, 148 SIGTSTP (Ctrl-Z ends the run), ...; a fatal signal (SIGSEGV,
@@ -192,6 +194,11 @@ struct RunArgs {
     /// Only print the final summary.
     #[arg(long)]
     quiet: bool,
+    /// Start with the pendulum hanging at rest: check the rest, calibrate the encoders from it,
+    /// swing up with the `[swing_up]` settings and catch with the controller, then run the
+    /// experiment (the reference step and --duration count from the catch).
+    #[arg(long)]
+    swing_up: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -221,12 +228,17 @@ struct EmulateArgs {
     /// Exit after this many seconds.
     #[arg(long, allow_negative_numbers = true, value_name = "S", value_parser = positive_seconds)]
     duration: Option<f64>,
-    /// Initial pendulum angle from upright (rad).
-    #[arg(long, value_name = "RAD", default_value_t = 0.05, allow_negative_numbers = true, value_parser = finite)]
-    initial_pendulum: f64,
-    /// Initial arm angle (rad).
-    #[arg(long, value_name = "RAD", default_value_t = 0.0, allow_negative_numbers = true, value_parser = finite)]
-    initial_arm: f64,
+    /// Initial pose: `up` (0.05 rad from upright, held there until the first enabling command,
+    /// as by an operator) or `down` (hanging at rest). Default: the `[plant] initial_state` of
+    /// --config, else `up`.
+    #[arg(long, value_name = "POSE", value_parser = ["up", "down"], conflicts_with = "initial_pendulum")]
+    start: Option<String>,
+    /// Initial pendulum angle from upright (rad); overrides --start.
+    #[arg(long, value_name = "RAD", allow_negative_numbers = true, value_parser = finite)]
+    initial_pendulum: Option<f64>,
+    /// Initial arm angle (rad). Default: the `[plant] initial_state` of --config, else 0.
+    #[arg(long, value_name = "RAD", allow_negative_numbers = true, value_parser = finite)]
+    initial_arm: Option<f64>,
     /// Let the pendulum fall from the start instead of holding it until the first enabling
     /// command.
     #[arg(long)]
@@ -265,7 +277,13 @@ fn prepare(
         Some(path) => Config::load(path)?,
         None => Config::default(),
     };
-    let controller = controllers::build(args.controller, &cfg).map_err(SetupError::Design)?;
+    let controller = if args.swing_up {
+        cfg.validate_swing_up()?;
+        controllers::build_swing_up(args.controller, &cfg)
+    } else {
+        controllers::build(args.controller, &cfg)
+    }
+    .map_err(SetupError::Design)?;
     let core = LoopCore::new(controller, &cfg)?;
     let n_estimates = core.state_estimate().map_or(0, |x| x.len());
     stop::install_signal_handlers()?;
@@ -276,6 +294,7 @@ fn prepare(
                 ("rip-rt", env!("CARGO_PKG_VERSION").to_string()),
                 ("protocol", rip_rt::protocol::VERSION.to_string()),
                 ("controller", args.controller.to_string()),
+                ("swing_up", args.swing_up.to_string()),
                 ("port", args.port.display().to_string()),
                 ("period_ms", cfg.loop_.period_ms.to_string()),
                 ("voltage_limit", cfg.safety.voltage_limit.to_string()),
@@ -316,7 +335,8 @@ fn cmd_run(args: RunArgs) -> ExitCode {
 
     if !args.quiet {
         rip_rt::say!(
-            "rip-rt: {} on {} every {} ms; Ctrl-C stops",
+            "rip-rt: {}{} on {} every {} ms; Ctrl-C stops",
+            if args.swing_up { "swing-up and " } else { "" },
             args.controller,
             args.port.display(),
             cfg.loop_.period_ms
@@ -346,6 +366,12 @@ fn cmd_run(args: RunArgs) -> ExitCode {
     let probe_line = report
         .probe
         .map_or_else(|| "not run".to_string(), |p| p.to_string());
+    let calibration_line = report
+        .calibration
+        .map_or_else(|| "none".to_string(), |c| c.to_string());
+    let catch_line = report
+        .catch_s
+        .map_or_else(|| "none".to_string(), |t| format!("{t:.3}"));
     let mut reason = report.reason.to_string();
     if let Some(log) = log.as_mut() {
         let footer = [
@@ -357,6 +383,9 @@ fn cmd_run(args: RunArgs) -> ExitCode {
             ("timing", report.timing.to_string()),
             ("probe", probe_line.clone()),
             ("link", parser_line.clone()),
+            ("calibration", calibration_line.clone()),
+            ("catch_s", catch_line.clone()),
+            ("catches", report.catches.to_string()),
         ];
         // After a log fault the reason already says what failed; a second message about the
         // same file would only repeat it.
@@ -379,6 +408,12 @@ fn cmd_run(args: RunArgs) -> ExitCode {
     rip_rt::say!("rip-rt: {level}: {reason} — {stop_note}");
     rip_rt::say!("rip-rt: timing: {}", report.timing);
     rip_rt::say!("rip-rt: probe: {probe_line}");
+    if args.swing_up {
+        rip_rt::say!(
+            "rip-rt: swing-up: catch_s={catch_line} catches={} calibration: {calibration_line}",
+            report.catches
+        );
+    }
     rip_rt::say!("rip-rt: link: {parser_line}");
     ExitCode::from(code as u8)
 }
@@ -402,18 +437,30 @@ fn make_link(link: &Path, target: &Path) -> std::io::Result<()> {
 }
 
 fn cmd_emulate(args: EmulateArgs) -> ExitCode {
-    let model = match &args.config {
+    let defaults = EmulatorConfig::default();
+    // The pose: the flags, else the file's initial state, else the defaults (upright).
+    let (model, mut initial_arm, mut initial_pendulum) = match &args.config {
         Some(path) => match Config::load(path) {
-            Ok(c) => Model::Params(c.spec.plant.params()),
+            Ok(c) => {
+                let x0 = c.spec.plant.initial_state;
+                (Model::Params(c.spec.plant.params()), x0[0], x0[2])
+            }
             Err(e) => return fail(exit_code::USAGE, e),
         },
-        None => args.model,
+        None => (args.model, defaults.initial_arm, defaults.initial_pendulum),
     };
+    match args.start.as_deref() {
+        Some("down") => initial_pendulum = std::f64::consts::PI,
+        Some(_) => initial_pendulum = defaults.initial_pendulum,
+        None => {}
+    }
+    initial_pendulum = args.initial_pendulum.unwrap_or(initial_pendulum);
+    initial_arm = args.initial_arm.unwrap_or(initial_arm);
     let cfg = EmulatorConfig {
         model,
         sim_rate_hz: args.sim_rate,
-        initial_arm: args.initial_arm,
-        initial_pendulum: args.initial_pendulum,
+        initial_arm,
+        initial_pendulum,
         hold_until_enabled: !args.no_hold,
         command_timeout_s: args.command_timeout,
         noise_counts: args.noise,

@@ -12,6 +12,13 @@
 //! 3. **balancing**: the controller's enabling commands, until the duration, a stop signal or a
 //!    fault.
 //!
+//! A swing-up supervisor (the controller starts in [`rip_core::Phase::SwingUp`]) replaces
+//! arming by the rest check ([`crate::calibrate`]): the rig must be at rest hanging down, and
+//! its encoder zeros are taken from that rest; then its commands run from the next period, the
+//! swing-up's and, after its catch, the balance controller's. The first catch starts the
+//! reference's clock and `--duration`; the pendulum-angle rule is the supervisor's
+//! ([`LoopCore::control`]), every other rule of balancing holds throughout.
+//!
 //! Every way out of [`run`] ends with the stop frame (see [`crate::stop`]). Rules that hold in
 //! every period of balancing: no enabling command from a measurement older than
 //! `loop.max_step_periods` (compute overrun) and no repeated enabling command more than
@@ -19,6 +26,7 @@
 //! `loop.max_consecutive_misses` periods in a row longer than a period, or a loop that did not run for
 //! [`MAX_BLIND_MS`] (suspended, starved), stop it.
 
+use crate::calibrate::{self, Calibration};
 use crate::config::{Config, MAX_BLIND_MS};
 use crate::log::{LogWriter, Row};
 use crate::loop_core::{LoopCore, StepOutput, FLAG_DEADLINE_MISS, FLAG_NO_REPLY};
@@ -51,8 +59,14 @@ pub struct RunReport {
     pub parser: ParserStats,
     /// Periods without a valid measurement.
     pub missing_replies: u64,
-    /// Seconds of balancing.
+    /// Seconds of balancing (for a swing-up: since the first catch).
     pub balanced_s: f64,
+    /// The encoder zeros of a run that started hanging (the rest check passed).
+    pub calibration: Option<Calibration>,
+    /// Seconds from the start of a swing-up to its first catch.
+    pub catch_s: Option<f64>,
+    /// Catches (more than one after falls with `swing_up.on_fall = "retry"`).
+    pub catches: u32,
 }
 
 /// Controller steps timed before enabling the motor ([`probe`]).
@@ -60,7 +74,10 @@ pub struct RunReport {
 pub struct Probe {
     /// Steps timed (after a warm-up step, which is timed only when nothing else could be).
     pub steps: usize,
-    /// Their median (µs).
+    /// Of which swing-up steps (a swing-up supervisor; 0 otherwise).
+    pub swing_steps: usize,
+    /// Their median (µs); with swing-up steps, the larger of the swing-up steps' and the
+    /// balance steps' medians.
     pub median_us: f64,
     /// The longest (µs).
     pub max_us: f64,
@@ -68,66 +85,141 @@ pub struct Probe {
 
 impl std::fmt::Display for Probe {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "steps={}", self.steps)?;
+        if self.swing_steps > 0 {
+            write!(f, " ({} swing-up)", self.swing_steps)?;
+        }
         write!(
             f,
-            "steps={} step_us(median/max)={:.1}/{:.1}",
-            self.steps, self.median_us, self.max_us
+            " step_us(median/max)={:.1}/{:.1}",
+            self.median_us, self.max_us
         )
     }
 }
 
-/// Steps the probe times at most.
+/// Steps the probe times at most (swing-up steps not counted).
 pub const PROBE_STEPS: usize = 20;
+/// Swing-up steps the probe times at most, before its balance steps.
+pub const PROBE_SWING_STEPS: usize = 10;
 /// The probe stops timing once it has spent this long (ns), so that a hopeless design is
 /// refused in about a second.
 pub const PROBE_TIME_NS: u64 = 1_000_000_000;
+
+/// Step times of one kind.
+struct Timings {
+    ns: [u64; PROBE_STEPS],
+    n: usize,
+}
+
+impl Timings {
+    fn new() -> Self {
+        Self {
+            ns: [0; PROBE_STEPS],
+            n: 0,
+        }
+    }
+
+    fn time(&mut self, core: &mut LoopCore, y: [f64; 2], r: [f64; 2]) {
+        let t0 = now_ns();
+        core.probe_step(y, r);
+        self.ns[self.n] = now_ns() - t0;
+        self.n += 1;
+    }
+
+    /// Median and maximum (ns), sorting the times.
+    fn median_max(&mut self) -> Option<(u64, u64)> {
+        let times = &mut self.ns[..self.n];
+        times.sort_unstable();
+        (self.n > 0).then(|| (times[self.n / 2], times[self.n - 1]))
+    }
+}
 
 /// Times the controller of `core` on synthetic measurements before the motor is enabled, and
 /// refuses ([`StopReason::TooSlow`]) when the median step does not fit the time a period
 /// leaves after the reply timeout (`loop.period_ms − loop.reply_timeout_ms`). The inputs are
 /// the hardest the run will ask of it at once: the pendulum wobbling inside the start
 /// tolerance while the arm is a whole reference step away, which saturates the voltage (the
-/// MPC's constraints become active). The controller is reset afterwards.
+/// MPC's constraints become active).
+///
+/// A swing-up supervisor is timed first on swing-up steps (the pendulum hanging, where the
+/// balance controller's estimator is restarted every sample, and swinging through the
+/// estimator window short of the catch, where it runs on the measurements), then led into its
+/// catch by a still pendulum near upright (untimed) and timed on balance steps as above, with
+/// the reference stepping away after the catch. Both medians must fit. The controller is reset
+/// afterwards.
 pub fn probe(core: &mut LoopCore, cfg: &Config) -> Result<Probe, StopReason> {
-    let budget_ns = cfg.period_ns() as f64 - cfg.loop_.reply_timeout_ms * 1e6;
-    let wobble = 0.5 * cfg.safety.start_tolerance;
-    let target = [cfg.spec.reference.arm_step, 0.0];
-    let mut times = [0u64; PROBE_STEPS];
-    let mut n = 0;
-    let start = now_ns();
-    // The first solve may set up workspaces: it counts only when it is all there is, i.e.
-    // when it alone used up the probe's time.
-    core.probe_step([0.0, wobble], target);
-    let warm_up_ns = now_ns() - start;
-    while n < PROBE_STEPS && now_ns() - start < PROBE_TIME_NS {
-        if let Some(reason) = requested_stop() {
-            core.reset();
-            return Err(reason);
-        }
-        let alpha = wobble * ((n as f64) * 0.7).sin();
-        let t0 = now_ns();
-        core.probe_step([0.0, alpha], target);
-        times[n] = now_ns() - t0;
-        n += 1;
-    }
-    if n == 0 {
-        times[0] = warm_up_ns;
-    }
+    let result = probe_steps(core, cfg);
     core.reset();
-    let n = n.max(1);
-    let times = &mut times[..n];
-    times.sort_unstable();
+    result
+}
+
+fn probe_steps(core: &mut LoopCore, cfg: &Config) -> Result<Probe, StopReason> {
+    use std::f64::consts::PI;
+    let budget_ns = cfg.period_ns() as f64 - cfg.loop_.reply_timeout_ms * 1e6;
+    let supervised = core.supervises_swing_up();
+    let wobble = if supervised {
+        0.5 * cfg.spec.swing_up.catch_angle
+    } else {
+        0.5 * cfg.safety.start_tolerance
+    };
+    let target = [cfg.spec.reference.arm_step, 0.0];
+    let mut swing = Timings::new();
+    let mut balance = Timings::new();
+    let start = now_ns();
+    let within_time = || now_ns() - start < PROBE_TIME_NS;
+    let stop = || requested_stop().map_or(Ok(()), Err);
+    // The first step may set up workspaces: it counts only when it is all there is, i.e.
+    // when it alone used up the probe's time.
+    let first = if supervised { [0.0, PI] } else { [0.0, wobble] };
+    core.probe_step(first, if supervised { [0.0; 2] } else { target });
+    let warm_up_ns = now_ns() - start;
+    if supervised {
+        // Outside the estimator window (hanging) and inside it short of the catch region.
+        let near = 0.5 * (cfg.spec.swing_up.catch_angle + cfg.spec.swing_up.estimator_window);
+        while swing.n < PROBE_SWING_STEPS && within_time() {
+            stop()?;
+            let k = swing.n as f64;
+            let alpha = if swing.n % 2 == 0 {
+                PI - 0.5 * (0.7 * k).cos()
+            } else {
+                near * (0.9 * k).cos().signum()
+            };
+            swing.time(core, [0.2 * (0.5 * k).sin(), alpha], [0.0; 2]);
+        }
+        while core.phase() == rip_core::Phase::SwingUp && within_time() {
+            stop()?;
+            core.probe_step([0.0, wobble], [0.0; 2]);
+        }
+    }
+    while balance.n < PROBE_STEPS && within_time() {
+        stop()?;
+        let alpha = wobble * ((balance.n as f64) * 0.7).sin();
+        balance.time(core, [0.0, alpha], target);
+    }
+    let swing_steps = swing.n;
+    let mut steps = swing.n + balance.n;
+    let (mut median, mut max) = (0u64, 0u64);
+    for t in [&mut swing, &mut balance] {
+        if let Some((med, mx)) = t.median_max() {
+            median = median.max(med);
+            max = max.max(mx);
+        }
+    }
+    if steps == 0 {
+        (median, max, steps) = (warm_up_ns, warm_up_ns, 1);
+    }
     let us = |ns: u64| ns as f64 * 1e-3;
     let probe = Probe {
-        steps: n,
-        median_us: us(times[n / 2]),
-        max_us: us(times[n - 1]),
+        steps,
+        swing_steps,
+        median_us: us(median),
+        max_us: us(max),
     };
-    if times[n / 2] as f64 > budget_ns {
+    if median as f64 > budget_ns {
         return Err(StopReason::TooSlow {
             median_ms: probe.median_us * 1e-3,
             budget_ms: budget_ns * 1e-6,
-            steps: n,
+            steps,
         });
     }
     Ok(probe)
@@ -136,8 +228,15 @@ pub fn probe(core: &mut LoopCore, cfg: &Config) -> Result<Probe, StopReason> {
 /// What a phase does with a period's measurement.
 #[derive(Debug, Clone, Copy)]
 enum Phase {
-    Arming { since_ns: u64, told: bool },
-    Balancing { start_ns: u64 },
+    Arming {
+        since_ns: u64,
+        told: bool,
+    },
+    /// The controller's commands (balancing, or a swing-up supervisor's swing and balance),
+    /// from `start_ns` on.
+    Balancing {
+        start_ns: u64,
+    },
 }
 
 /// The state of one run: the device, the controller, the log and the counters.
@@ -162,6 +261,13 @@ struct Runner<'a> {
     misses_in_row: u32,
     last_step: Option<StepOutput>,
     balanced_ns: u64,
+    // When the experiment (the reference's clock, `--duration`) started: with balancing, or at
+    // a swing-up's first catch.
+    experiment_ns: Option<u64>,
+    // The controller's phase after the last step, and the swing-up's catches.
+    last_phase: rip_core::Phase,
+    catch_s: Option<f64>,
+    catches: u32,
     // When the request was sent whose measurement the last enabling command rests on.
     based_on_ns: u64,
 }
@@ -263,7 +369,7 @@ impl Runner<'_> {
         if let Some(log) = self.log.as_deref() {
             log.check().map_err(StopReason::LogError)?;
         }
-        let Phase::Balancing { start_ns } = phase else {
+        let Phase::Balancing { .. } = phase else {
             return Ok(());
         };
         // A loop that did not run (suspended with SIGSTOP, starved of the CPU) has driven
@@ -276,9 +382,11 @@ impl Runner<'_> {
                 ms: absent_ns as f64 * 1e-6,
             }));
         }
-        self.balanced_ns = tick.deadline_ns - start_ns;
-        if self.duration_ns.is_some_and(|d| self.balanced_ns >= d) {
-            return Err(StopReason::Finished);
+        if let Some(experiment_ns) = self.experiment_ns {
+            self.balanced_ns = tick.deadline_ns - experiment_ns;
+            if self.duration_ns.is_some_and(|d| self.balanced_ns >= d) {
+                return Err(StopReason::Finished);
+            }
         }
         Ok(())
     }
@@ -332,6 +440,7 @@ impl Runner<'_> {
                 if !self.quiet {
                     crate::say!("rip-rt: pendulum upright, balancing");
                 }
+                self.experiment_ns = Some(tick.deadline_ns);
                 Ok(Phase::Balancing {
                     start_ns: tick.deadline_ns,
                 })
@@ -382,6 +491,7 @@ impl Runner<'_> {
             step.flags |= FLAG_DEADLINE_MISS;
         }
         self.last_step = Some(step);
+        self.follow_phase(tick, t, step.phase);
         let estimate = Row::estimate_from(self.core.state_estimate());
         self.log_row(Row {
             t,
@@ -393,11 +503,35 @@ impl Runner<'_> {
         })
     }
 
-    fn periods(&mut self, periodic: &mut Periodic) -> StopReason {
-        let mut phase = Phase::Arming {
-            since_ns: periodic.next_deadline_ns(),
-            told: false,
-        };
+    /// A swing-up's catches and falls: the first catch starts the experiment.
+    fn follow_phase(&mut self, tick: &Tick, t: f64, phase: rip_core::Phase) {
+        use rip_core::Phase::{Balance, SwingUp};
+        match (self.last_phase, phase) {
+            (SwingUp, Balance) => {
+                self.catches += 1;
+                if self.experiment_ns.is_none() {
+                    self.experiment_ns = Some(tick.deadline_ns);
+                    self.catch_s = Some(t);
+                    self.core.start_reference_at(t);
+                }
+                if !self.quiet {
+                    crate::say!("rip-rt: caught at t = {t:.2} s, balancing");
+                }
+            }
+            (Balance, SwingUp) => {
+                if !self.quiet {
+                    crate::say!(
+                        "rip-rt: the pendulum left the balance region at t = {t:.2} s; \
+                         swinging up again"
+                    );
+                }
+            }
+            _ => {}
+        }
+        self.last_phase = phase;
+    }
+
+    fn periods(&mut self, periodic: &mut Periodic, mut phase: Phase) -> StopReason {
         loop {
             let tick = periodic.wait();
             let result = self.period(&tick, phase);
@@ -457,6 +591,7 @@ pub fn run(
 ) -> RunReport {
     let guard = StopGuard::new(io.raw());
     let period_ns = cfg.period_ns();
+    let core_phase = core.phase();
     let mut runner = Runner {
         io,
         core,
@@ -478,16 +613,45 @@ pub fn run(
         misses_in_row: 0,
         last_step: None,
         balanced_ns: 0,
+        experiment_ns: None,
+        last_phase: core_phase,
+        catch_s: None,
+        catches: 0,
         based_on_ns: 0,
     };
     let mut periodic = Periodic::new(period_ns, now_ns() + period_ns);
+    let mut calibration = None;
     let (reason, probe) = match probe(runner.core, cfg) {
         Err(reason) => (reason, None),
         Ok(probe) => {
             io.flush_input();
             // The probe may have taken longer than a period: start the grid afresh.
             periodic = Periodic::new(period_ns, now_ns() + period_ns);
-            (runner.periods(&mut periodic), Some(probe))
+            let reason = if runner.core.supervises_swing_up() {
+                // Hanging at rest first; the swing starts in the period after the check, on
+                // the same grid.
+                match calibrate::check_rest(io, runner.core, cfg, &mut periodic, opts.quiet) {
+                    Err(reason) => reason,
+                    Ok(cal) => {
+                        runner.core.calibrate(&cal);
+                        runner.core.reset();
+                        calibration = Some(cal);
+                        if !opts.quiet {
+                            crate::say!("rip-rt: swinging up");
+                        }
+                        let start_ns = periodic.next_deadline_ns();
+                        runner.periods(&mut periodic, Phase::Balancing { start_ns })
+                    }
+                }
+            } else {
+                let since_ns = periodic.next_deadline_ns();
+                let arming = Phase::Arming {
+                    since_ns,
+                    told: false,
+                };
+                runner.periods(&mut periodic, arming)
+            };
+            (reason, Some(probe))
         }
     };
     let stop_sent = guard.stop();
@@ -500,5 +664,8 @@ pub fn run(
         parser: runner.core.parser_stats(),
         missing_replies: runner.missing_total,
         balanced_s: runner.balanced_ns as f64 * 1e-9,
+        calibration,
+        catch_s: runner.catch_s,
+        catches: runner.catches,
     }
 }

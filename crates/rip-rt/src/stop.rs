@@ -61,6 +61,8 @@ pub mod exit_code {
     /// Refused to start: the rig was not at rest hanging down (the rest check before a run
     /// that starts hanging); the motor was never enabled.
     pub const NOT_AT_REST: i32 = 12;
+    /// The swing-up did not reach its catch region within `swing_up.max_time`.
+    pub const SWING_UP_FAILED: i32 = 13;
     /// A panic (Rust's own exit code for one).
     pub const PANIC: i32 = 101;
     /// Stopped by a signal: 128 + its number (130 SIGINT, 143 SIGTERM, 129 SIGHUP, …).
@@ -151,6 +153,21 @@ pub enum StopReason {
         /// Steps timed.
         steps: usize,
     },
+    /// After a swing-up's catch the pendulum left the balance region and `swing_up.on_fall`
+    /// is `stop`.
+    #[error("the pendulum fell: |{angle:.3}| rad left the balance region (swing_up.balance_angle = {limit:.3} rad) after the catch, and swing_up.on_fall is \"stop\"")]
+    Fell {
+        /// The measured pendulum angle (rad from upright).
+        angle: f64,
+        /// `swing_up.balance_angle` (rad).
+        limit: f64,
+    },
+    /// The swing-up did not bring the pendulum into its catch region in time.
+    #[error("the swing-up failed: no catch within swing_up.max_time ({max_time} s)")]
+    SwingUpFailed {
+        /// `swing_up.max_time` (s).
+        max_time: f64,
+    },
     /// The rest check before a run that starts hanging found the rig moving, or resting away
     /// from hanging; the motor was never enabled.
     #[error("refusing to start: the rig is not at rest hanging down: {0}")]
@@ -176,6 +193,8 @@ impl StopReason {
             StopReason::Overrun(_) => exit_code::OVERRUN,
             StopReason::TooSlow { .. } => exit_code::TOO_SLOW,
             StopReason::NotAtRest(_) => exit_code::NOT_AT_REST,
+            StopReason::Fell { .. } => exit_code::ANGLE_LIMIT,
+            StopReason::SwingUpFailed { .. } => exit_code::SWING_UP_FAILED,
             StopReason::Panic => exit_code::PANIC,
         }
     }
@@ -195,6 +214,8 @@ impl StopReason {
             StopReason::Overrun(_) => "overrun",
             StopReason::TooSlow { .. } => "too_slow",
             StopReason::NotAtRest(_) => "not_at_rest",
+            StopReason::Fell { .. } => "fell",
+            StopReason::SwingUpFailed { .. } => "swing_up_failed",
             StopReason::Panic => "panic",
         }
     }
@@ -529,6 +550,7 @@ mod tests {
                 offset: 1.0,
                 max: 0.5,
             }),
+            StopReason::SwingUpFailed { max_time: 20.0 },
             StopReason::Panic,
         ];
         let mut codes: Vec<i32> = reasons.iter().map(|r| r.exit_code()).collect();

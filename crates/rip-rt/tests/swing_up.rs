@@ -116,3 +116,256 @@ fn a_pendulum_held_away_from_hanging_is_refused() {
     );
     assert!(commands.iter().all(|&c| c == (0, 0)), "{commands:?}");
 }
+
+/// The swing-up's arm limit (`[swing_up] arm_limit`, default 1.5 rad).
+const SWING_ARM_LIMIT: f64 = 1.5;
+/// The balance region (`[swing_up] balance_angle`, default 0.6 rad).
+const BALANCE_ANGLE: f64 = 0.6;
+
+/// A configuration file for the swing-up runs: a half-second rest window keeps them short.
+fn config(name: &str, extra: &str) -> std::path::PathBuf {
+    let path = scratch(&format!("{name}.toml"));
+    std::fs::write(
+        &path,
+        format!("[calibration]\nrest_window_s = 0.5\nrest_timeout_s = 2.0\n{extra}"),
+    )
+    .unwrap();
+    path
+}
+
+/// The commands before the first enabling one: the rest check's stop commands.
+fn before_enabling(commands: &[(i32, u8)]) -> usize {
+    commands
+        .iter()
+        .position(|&(_, flags)| flags & 1 != 0)
+        .unwrap_or(commands.len())
+}
+
+/// From hanging at rest: the rest check, the swing, the catch, then 3 s of the experiment
+/// (the arm step 1 s after the catch). Checks the log's phases, the balance after the catch,
+/// the arm and voltage limits, and that the device was left stopped.
+fn swing_up_and_balance(controller: &str, seed: &str) {
+    let name = format!("swing-{controller}");
+    let emu = Emulator::start(
+        &name,
+        &["--start", "down", "--noise", "0.3", "--seed", seed],
+    );
+    let cfg = config(&name, "");
+    let log_path = scratch(&format!("{name}.csv"));
+    let r = run(
+        &emu.device,
+        controller,
+        &[
+            "--swing-up",
+            "--duration",
+            "3",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--log",
+            log_path.to_str().unwrap(),
+        ],
+    );
+    println!("{controller}: {}", r.stderr);
+    assert_eq!(r.status.code(), Some(0), "{}", r.stderr);
+    let log = Log::read(&log_path);
+    assert_eq!(log.meta("swing_up"), Some("true"));
+    assert_eq!(log.meta("stop"), Some("finished"));
+    let t = log.col("t");
+    let theta = log.col("theta");
+    let alpha = log.col("alpha");
+    let u = log.col("u");
+    let reference = log.col("theta_ref");
+    let phase = log.text("phase");
+    // Swinging from the first row, then one catch and balance to the end.
+    assert_eq!(phase[0], "swing_up");
+    let k = phase
+        .iter()
+        .position(|p| p == "balance")
+        .unwrap_or_else(|| panic!("{controller}: no catch: {}", r.stderr));
+    assert!(phase[..k].iter().all(|p| p == "swing_up"));
+    assert!(
+        phase[k..].iter().all(|p| p == "balance"),
+        "{controller}: fell after the catch at t = {}",
+        t[k]
+    );
+    assert_eq!(log.meta("catches"), Some("1"));
+    let catch_s: f64 = log.meta("catch_s").unwrap().parse().unwrap();
+    assert_eq!(catch_s, t[k]);
+    // Started hanging: the calibration makes the first measurement α = ±π.
+    assert!(std::f64::consts::PI - alpha[0].abs() < 0.01, "{}", alpha[0]);
+    // After the catch the pendulum stays in the balance region (measured; the phase column
+    // says the supervisor saw no fall).
+    let max_alpha = alpha[k..].iter().fold(0.0f64, |m, a| m.max(a.abs()));
+    assert!(
+        max_alpha <= BALANCE_ANGLE,
+        "{controller}: |α| up to {max_alpha}"
+    );
+    // The experiment ran from the catch: 3 s of it, the step 1 s after the catch.
+    assert!(t.last().unwrap() - catch_s >= 2.9, "log ends early");
+    for (ti, r) in t.iter().zip(&reference) {
+        // The log's times are rounded: at the step's own period either value is right.
+        let since_step = ti - catch_s - 1.0;
+        if since_step.abs() > 1e-3 {
+            let expected = if since_step > 0.0 { 1.0 } else { 0.0 };
+            assert_eq!(*r, expected, "reference at t = {ti}");
+        }
+    }
+    // The arm followed the step: over the last 0.5 s (2 s after it) it is near 1 rad.
+    for (ti, th) in t.iter().zip(&theta) {
+        if t.last().unwrap() - ti < 0.5 {
+            assert!(
+                (th - 1.0).abs() < 0.35,
+                "{controller}: arm at {th} rad at t = {ti}"
+            );
+        }
+    }
+    // The arm stayed inside the swing-up's limit all along, and the voltage inside ±12 V.
+    let max_theta = theta.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+    assert!(
+        max_theta < SWING_ARM_LIMIT,
+        "{controller}: |θ| up to {max_theta}"
+    );
+    assert!(u.iter().all(|v| v.abs() <= 12.0));
+    let commands = emu.commands();
+    // The rest check's 0.5 s of stop commands came before the first enabling command.
+    let first = before_enabling(&commands);
+    assert!(first >= 50, "{first} commands before enabling");
+    assert!(commands[..first].iter().all(|&c| c == (0, 0)));
+    assert_eq!(
+        commands.last(),
+        Some(&(0, 0)),
+        "last command must be 0 V, disabled"
+    );
+}
+
+#[test]
+fn lqr_swings_up_catches_and_balances() {
+    let _serial = one_at_a_time();
+    swing_up_and_balance("lqr", "11");
+}
+
+#[test]
+fn lqg_swings_up_catches_and_balances() {
+    let _serial = one_at_a_time();
+    swing_up_and_balance("lqg", "12");
+}
+
+#[test]
+fn mpc_swings_up_catches_and_balances() {
+    let _serial = one_at_a_time();
+    swing_up_and_balance("mpc", "13");
+}
+
+#[test]
+fn sigint_during_the_swing_leaves_zero_volts_as_the_last_command() {
+    let _serial = one_at_a_time();
+    let emu = Emulator::start("swing-sigint", &["--start", "down", "--noise", "0.3"]);
+    let cfg = config("swing-sigint", "");
+    let log_path = scratch("swing-sigint.csv");
+    let child = spawn_run(
+        &emu.device,
+        "mpc",
+        &[
+            "--swing-up",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--log",
+            log_path.to_str().unwrap(),
+        ],
+    );
+    // Wait for the swing's enabling commands, then half a second more: far from a catch.
+    let start = std::time::Instant::now();
+    while !emu.commands_so_far().iter().any(|&(_, f)| f & 1 != 0) {
+        assert!(start.elapsed().as_secs() < 10, "the swing never started");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let r = wait_with_timeout(child, std::time::Duration::from_secs(10));
+    assert_eq!(r.status.code(), Some(130), "{}", r.stderr);
+    let commands = emu.commands();
+    assert!(
+        commands.iter().any(|&(mv, f)| f == 1 && mv != 0),
+        "{}",
+        r.stderr
+    );
+    assert_eq!(commands.last(), Some(&(0, 0)));
+    let log = Log::read(&log_path);
+    assert_eq!(log.meta("stop"), Some("signal"));
+    assert_eq!(log.meta("catch_s"), Some("none"));
+    assert!(log.text("phase").iter().all(|p| p == "swing_up"));
+}
+
+#[test]
+fn a_rig_that_is_not_at_rest_is_refused_before_any_enabling_command() {
+    let _serial = one_at_a_time();
+    // Released 0.34 rad from hanging: it swings for far longer than the check waits.
+    let emu = Emulator::start(
+        "swing-not-at-rest",
+        &["--initial-pendulum", "2.8", "--no-hold"],
+    );
+    let cfg = config("swing-not-at-rest", "");
+    let log_path = scratch("swing-not-at-rest.csv");
+    let r = run(
+        &emu.device,
+        "lqr",
+        &[
+            "--swing-up",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--log",
+            log_path.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(r.status.code(), Some(12), "{}", r.stderr);
+    assert!(r.stderr.contains("not at rest"), "{}", r.stderr);
+    assert!(r.stderr.contains("the pendulum is moving"), "{}", r.stderr);
+    let commands = emu.commands();
+    assert!(!commands.is_empty());
+    assert!(
+        commands.iter().all(|&c| c == (0, 0)),
+        "an enabling command was sent: {commands:?}"
+    );
+    let log = Log::read(&log_path);
+    assert_eq!(log.meta("stop"), Some("not_at_rest"));
+    assert!(log.rows.is_empty());
+}
+
+#[test]
+fn a_swing_up_out_of_time_stops_with_exit_13_its_arm_inside_a_tight_limit() {
+    let _serial = one_at_a_time();
+    // 1 s is too short to pump a hanging pendulum up; 0.8 rad of arm holds the law in hard.
+    const LIMIT: f64 = 0.8;
+    let emu = Emulator::start("swing-timeout", &["--start", "down", "--noise", "0.3"]);
+    let cfg = config(
+        "swing-timeout",
+        &format!("[swing_up]\nmax_time = 1.0\narm_limit = {LIMIT}\ncatch_arm_angle = 0.5\n"),
+    );
+    let log_path = scratch("swing-timeout.csv");
+    let r = run(
+        &emu.device,
+        "lqg",
+        &[
+            "--swing-up",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--log",
+            log_path.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(r.status.code(), Some(13), "{}", r.stderr);
+    assert!(r.stderr.contains("swing_up.max_time"), "{}", r.stderr);
+    let log = Log::read(&log_path);
+    assert_eq!(log.meta("stop"), Some("swing_up_failed"));
+    let theta = log.col("theta");
+    let max_theta = theta.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+    // The law used its room (so the limit, not a timid swing, kept the arm in) and kept
+    // inside it.
+    assert!(max_theta > 0.5 * LIMIT, "|θ| only up to {max_theta}");
+    assert!(max_theta <= LIMIT, "|θ| up to {max_theta}");
+    // The supervisor counts its 1 s in samples (held periods included): at most 100 rows.
+    let rows = log.rows.len();
+    assert!((50..=100).contains(&rows), "{rows} rows");
+    let commands = emu.commands();
+    assert_eq!(commands.last(), Some(&(0, 0)));
+}

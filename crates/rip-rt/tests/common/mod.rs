@@ -68,6 +68,12 @@ impl Emulator {
         }
     }
 
+    /// The commands the device has received so far: (voltage_mv, flags).
+    pub fn commands_so_far(&self) -> Vec<(i32, u8)> {
+        let text = std::fs::read_to_string(&self.record).unwrap();
+        parse_record(&text)
+    }
+
     /// The commands the device received: (voltage_mv, flags). The last frames a run wrote
     /// before exiting may still be in the emulator's input, so this waits until the record
     /// stops growing.
@@ -81,14 +87,19 @@ impl Emulator {
             }
             text = again;
         }
-        text.lines()
-            .skip(1)
-            .map(|l| {
-                let f: Vec<&str> = l.split(',').collect();
-                (f[2].parse().unwrap(), f[3].parse().unwrap())
-            })
-            .collect()
+        parse_record(&text)
     }
+}
+
+/// The rows of an emulator's `--record` (`t_s,seq,voltage_mv,flags`) that are complete.
+fn parse_record(text: &str) -> Vec<(i32, u8)> {
+    text.lines()
+        .skip(1)
+        .filter_map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            Some((f.get(2)?.parse().ok()?, f.get(3)?.parse().ok()?))
+        })
+        .collect()
 }
 
 impl Drop for Emulator {
