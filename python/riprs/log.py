@@ -93,9 +93,9 @@ def load_log(path: Union[str, os.PathLike[str]]) -> RtLog:
     """Read a ``rip-rt`` CSV log.
 
     The file is read in blocks of about 1 MB, each parsed by numpy's C parser straight into
-    preallocated typed columns (``seq`` and ``status`` int64, the rest float64; an empty cell
-    is NaN; ``phase`` text), so memory stays close to that of the result: a 2-million-row log of an LQG run
-    (214 MB of arrays) peaks about 12 MB above its arrays.
+    preallocated typed columns (``seq`` and ``status`` int64, ``phase`` text, the rest float64;
+    an empty cell is NaN), so memory stays close to that of the result: a 2-million-row log of
+    an LQG run (214 MB of arrays) peaks about 12 MB above its arrays.
     A UTF-8 byte-order mark is accepted; columns not listed in :class:`RtLog` are ignored.
 
     Raises

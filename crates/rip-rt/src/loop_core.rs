@@ -297,8 +297,8 @@ impl LoopCore {
     }
 
     /// Starts the reference's clock at `t` (the catch of a swing-up): the arm step comes
-    /// `reference.step_time` later. Before it (a swing-up that has not caught) the reference
-    /// is 0.
+    /// `reference.step_time` later. Before it (a swing-up that has not caught, or
+    /// `t = +∞` after a fall) the reference is 0.
     pub fn start_reference_at(&mut self, t: f64) {
         self.reference_origin = t;
     }

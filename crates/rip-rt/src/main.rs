@@ -62,7 +62,7 @@ enum Command {
     #[command(after_help = RUN_AFTER_HELP)]
     Run(RunArgs),
     /// Emulate the device on a new pseudo-terminal (prints its path).
-    Emulate(EmulateArgs),
+    Emulate(Box<EmulateArgs>),
     /// Print the resolved configuration (every default filled in) as TOML; its experiment
     /// sections are exactly what `riprs config` prints for the same file.
     Config(ConfigArgs),
@@ -196,7 +196,8 @@ struct RunArgs {
     quiet: bool,
     /// Start with the pendulum hanging at rest: check the rest, calibrate the encoders from it,
     /// swing up with the `[swing_up]` settings and catch with the controller, then run the
-    /// experiment (the reference step and --duration count from the catch).
+    /// experiment (the reference step and --duration count from the catch; a fall, retried,
+    /// starts them again at the next catch).
     #[arg(long)]
     swing_up: bool,
 }
@@ -521,7 +522,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Command::Run(args) => cmd_run(args),
-        Command::Emulate(args) => cmd_emulate(args),
+        Command::Emulate(args) => cmd_emulate(*args),
         Command::Config(args) => cmd_config(args),
     }
 }

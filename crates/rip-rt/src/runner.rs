@@ -15,9 +15,9 @@
 //! A swing-up supervisor (the controller starts in [`rip_core::Phase::SwingUp`]) replaces
 //! arming by the rest check ([`crate::calibrate`]): the rig must be at rest hanging down, and
 //! its encoder zeros are taken from that rest; then its commands run from the next period, the
-//! swing-up's and, after its catch, the balance controller's. The first catch starts the
-//! reference's clock and `--duration`; the pendulum-angle rule is the supervisor's
-//! ([`LoopCore::control`]), every other rule of balancing holds throughout.
+//! swing-up's and, after its catch, the balance controller's. Each catch starts the
+//! reference's clock and `--duration` (a fall stops them); the pendulum-angle rule is the
+//! supervisor's ([`LoopCore::control`]), every other rule of balancing holds throughout.
 //!
 //! Every way out of [`run`] ends with the stop frame (see [`crate::stop`]). Rules that hold in
 //! every period of balancing: no enabling command from a measurement older than
@@ -59,7 +59,7 @@ pub struct RunReport {
     pub parser: ParserStats,
     /// Periods without a valid measurement.
     pub missing_replies: u64,
-    /// Seconds of balancing (for a swing-up: since the first catch).
+    /// Seconds of balancing (for a swing-up: since the latest catch).
     pub balanced_s: f64,
     /// The encoder zeros of a run that started hanging (the rest check passed).
     pub calibration: Option<Calibration>,
@@ -262,7 +262,7 @@ struct Runner<'a> {
     last_step: Option<StepOutput>,
     balanced_ns: u64,
     // When the experiment (the reference's clock, `--duration`) started: with balancing, or at
-    // a swing-up's first catch.
+    // a swing-up's latest catch (none while it swings).
     experiment_ns: Option<u64>,
     // The controller's phase after the last step, and the swing-up's catches.
     last_phase: rip_core::Phase,
@@ -503,22 +503,26 @@ impl Runner<'_> {
         })
     }
 
-    /// A swing-up's catches and falls: the first catch starts the experiment.
+    /// A swing-up's catches and falls. Each catch starts the experiment (the reference's
+    /// clock and `--duration`), so that a run that falls and swings up again (`swing_up.on_fall
+    /// = "retry"`) still ends with the whole experiment balanced; a fall stops its clock and
+    /// returns the reference to 0, so that the next catch holds the arm where it is caught
+    /// until the step.
     fn follow_phase(&mut self, tick: &Tick, t: f64, phase: rip_core::Phase) {
         use rip_core::Phase::{Balance, SwingUp};
         match (self.last_phase, phase) {
             (SwingUp, Balance) => {
                 self.catches += 1;
-                if self.experiment_ns.is_none() {
-                    self.experiment_ns = Some(tick.deadline_ns);
-                    self.catch_s = Some(t);
-                    self.core.start_reference_at(t);
-                }
+                self.catch_s.get_or_insert(t);
+                self.experiment_ns = Some(tick.deadline_ns);
+                self.core.start_reference_at(t);
                 if !self.quiet {
                     crate::say!("rip-rt: caught at t = {t:.2} s, balancing");
                 }
             }
             (Balance, SwingUp) => {
+                self.experiment_ns = None;
+                self.core.start_reference_at(f64::INFINITY);
                 if !self.quiet {
                     crate::say!(
                         "rip-rt: the pendulum left the balance region at t = {t:.2} s; \

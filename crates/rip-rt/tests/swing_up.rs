@@ -176,21 +176,32 @@ fn swing_up_and_balance(controller: &str, seed: &str) {
     let u = log.col("u");
     let reference = log.col("theta_ref");
     let phase = log.text("phase");
-    // Swinging from the first row, then one catch and balance to the end.
+    // Swinging from the first row; a catch, and after the last one balance to the end. (A
+    // fall swings up again, the default `swing_up.on_fall = "retry"`; on a machine that keeps
+    // the loop and the emulator on time there is none, but a starved emulator can make one.)
     assert_eq!(phase[0], "swing_up");
-    let k = phase
-        .iter()
-        .position(|p| p == "balance")
-        .unwrap_or_else(|| panic!("{controller}: no catch: {}", r.stderr));
-    assert!(phase[..k].iter().all(|p| p == "swing_up"));
+    let catches: Vec<usize> = (1..phase.len())
+        .filter(|&k| phase[k] == "balance" && phase[k - 1] == "swing_up")
+        .collect();
+    let (Some(&first), Some(&k)) = (catches.first(), catches.last()) else {
+        panic!("{controller}: no catch: {}", r.stderr)
+    };
+    if catches.len() > 1 {
+        println!("{controller}: {} catches (falls retried)", catches.len());
+    }
+    assert!(phase[..first].iter().all(|p| p == "swing_up"));
     assert!(
         phase[k..].iter().all(|p| p == "balance"),
-        "{controller}: fell after the catch at t = {}",
+        "{controller}: fell after the last catch at t = {}",
         t[k]
     );
-    assert_eq!(log.meta("catches"), Some("1"));
+    assert_eq!(
+        log.meta("catches"),
+        Some(catches.len().to_string().as_str())
+    );
     let catch_s: f64 = log.meta("catch_s").unwrap().parse().unwrap();
-    assert_eq!(catch_s, t[k]);
+    assert_eq!(catch_s, t[first]);
+    assert!(log.meta("probe").unwrap().contains("swing-up"));
     // Started hanging: the calibration makes the first measurement α = ±π.
     assert!(std::f64::consts::PI - alpha[0].abs() < 0.01, "{}", alpha[0]);
     // After the catch the pendulum stays in the balance region (measured; the phase column
@@ -200,14 +211,18 @@ fn swing_up_and_balance(controller: &str, seed: &str) {
         max_alpha <= BALANCE_ANGLE,
         "{controller}: |α| up to {max_alpha}"
     );
-    // The experiment ran from the catch: 3 s of it, the step 1 s after the catch.
-    assert!(t.last().unwrap() - catch_s >= 2.9, "log ends early");
-    for (ti, r) in t.iter().zip(&reference) {
+    // The experiment ran from the last catch: 3 s of it, the step 1 s after the catch; the
+    // reference is 0 whenever the pendulum swings.
+    assert!(t.last().unwrap() - t[k] >= 2.9, "log ends early");
+    for (j, (ti, r)) in t.iter().zip(&reference).enumerate() {
         // The log's times are rounded: at the step's own period either value is right.
-        let since_step = ti - catch_s - 1.0;
-        if since_step.abs() > 1e-3 {
+        let since_step = ti - t[k] - 1.0;
+        if j >= k && since_step.abs() > 1e-3 {
             let expected = if since_step > 0.0 { 1.0 } else { 0.0 };
             assert_eq!(*r, expected, "reference at t = {ti}");
+        }
+        if phase[j] == "swing_up" {
+            assert_eq!(*r, 0.0, "reference at t = {ti}");
         }
     }
     // The arm followed the step: over the last 0.5 s (2 s after it) it is near 1 rad.

@@ -70,7 +70,8 @@ impl Emulator {
 
     /// The commands the device has received so far: (voltage_mv, flags).
     pub fn commands_so_far(&self) -> Vec<(i32, u8)> {
-        let text = std::fs::read_to_string(&self.record).unwrap();
+        // The emulator creates the file once it runs, right after printing its device.
+        let text = std::fs::read_to_string(&self.record).unwrap_or_default();
         parse_record(&text)
     }
 
