@@ -384,3 +384,106 @@ fn a_swing_up_out_of_time_stops_with_exit_13_its_arm_inside_a_tight_limit() {
     let commands = emu.commands();
     assert_eq!(commands.last(), Some(&(0, 0)));
 }
+
+#[test]
+fn an_emulator_started_from_the_files_initial_state_rests_there() {
+    let _serial = one_at_a_time();
+    let file = scratch("initial-state.toml");
+    std::fs::write(
+        &file,
+        format!("[plant]\ninitial_state = [0.3, 0.0, {PI}, 0.0]\nfall_limit = 4.0\n"),
+    )
+    .unwrap();
+    let (result, _, _) = rest_check("rest-from-file", &["--config", file.to_str().unwrap()], "");
+    let cal = result.unwrap();
+    assert!(
+        (cal.arm_zero_counts - 0.3 * 2048.0 / TAU).abs() < 0.6,
+        "{cal}"
+    );
+    assert!((cal.pendulum_hanging_counts - 2048.0).abs() < 0.6, "{cal}");
+}
+
+/// A stand-in supervisor for the probe: in the swing-up (until it sees the pendulum near
+/// upright and still, as the probe's settling samples show it) each step takes `swing_sleep`.
+struct SlowSwing {
+    phase: rip_core::Phase,
+    last: f64,
+    swing_sleep: std::time::Duration,
+}
+
+impl rip_core::Controller for SlowSwing {
+    fn n_outputs(&self) -> usize {
+        2
+    }
+    fn n_inputs(&self) -> usize {
+        1
+    }
+    fn step(&mut self, y: &[f64], _r: &[f64], u: &mut [f64]) -> rip_core::StepStatus {
+        if self.phase == rip_core::Phase::SwingUp {
+            std::thread::sleep(self.swing_sleep);
+            if y[1].abs() < 0.3 && y[1] == self.last {
+                self.phase = rip_core::Phase::Balance;
+            }
+        }
+        self.last = y[1];
+        u[0] = 0.0;
+        rip_core::StepStatus::Nominal
+    }
+    fn phase(&self) -> rip_core::Phase {
+        self.phase
+    }
+    fn reset(&mut self) {
+        self.phase = rip_core::Phase::SwingUp;
+    }
+}
+
+#[test]
+fn the_probe_times_swing_up_steps_and_refuses_slow_ones() {
+    let cfg = Config::default();
+    let probe = |sleep_ms: u64| {
+        let c = SlowSwing {
+            phase: rip_core::Phase::SwingUp,
+            last: f64::NAN,
+            swing_sleep: std::time::Duration::from_millis(sleep_ms),
+        };
+        let mut core = LoopCore::new(Box::new(c), &cfg).unwrap();
+        assert!(core.supervises_swing_up());
+        let result = rip_rt::runner::probe(&mut core, &cfg);
+        // Reset afterwards: swinging again.
+        assert_eq!(core.phase(), rip_core::Phase::SwingUp);
+        result
+    };
+    // Fast swing-up steps: ten of them timed, then the balance steps after the catch.
+    let p = probe(0).unwrap();
+    assert_eq!(p.swing_steps, rip_rt::runner::PROBE_SWING_STEPS);
+    assert_eq!(p.steps, p.swing_steps + rip_rt::runner::PROBE_STEPS);
+    // Swing-up steps of 8 ms do not fit the 5 ms a period leaves after the reply timeout,
+    // however fast the balance steps are.
+    let e = probe(8).unwrap_err();
+    assert_eq!(e.exit_code(), 11, "{e}");
+}
+
+#[test]
+fn a_swing_up_arm_limit_outside_the_safety_limit_is_refused_naming_it() {
+    let file = scratch("swing-arm-limit.toml");
+    // Valid for rip-core (at most π), but not inside rip-rt's safety.arm_limit (3 rad).
+    std::fs::write(
+        &file,
+        "[swing_up]\narm_limit = 3.1\ncatch_arm_angle = 1.0\n",
+    )
+    .unwrap();
+    let r = run(
+        std::path::Path::new("/nonexistent"),
+        "lqr",
+        &["--swing-up", "--config", file.to_str().unwrap()],
+    );
+    assert_eq!(r.status.code(), Some(2), "{}", r.stderr);
+    assert!(r.stderr.contains("swing_up.arm_limit"), "{}", r.stderr);
+    // Without --swing-up the section is not used, and the file is fine.
+    let r = run(
+        std::path::Path::new("/nonexistent"),
+        "lqr",
+        &["--config", file.to_str().unwrap()],
+    );
+    assert_eq!(r.status.code(), Some(1), "{}", r.stderr);
+}
