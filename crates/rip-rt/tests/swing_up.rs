@@ -119,6 +119,8 @@ fn a_pendulum_held_away_from_hanging_is_refused() {
 
 /// The swing-up's arm limit (`[swing_up] arm_limit`, default 1.5 rad).
 const SWING_ARM_LIMIT: f64 = 1.5;
+/// `[safety] arm_limit`, default 3 rad: a stop.
+const SAFETY_ARM_LIMIT: f64 = 3.0;
 /// The balance region (`[swing_up] balance_angle`, default 0.6 rad).
 const BALANCE_ANGLE: f64 = 0.6;
 
@@ -145,12 +147,26 @@ fn before_enabling(commands: &[(i32, u8)]) -> usize {
 /// (the arm step 1 s after the catch). Checks the log's phases, the balance after the catch,
 /// the arm and voltage limits, and that the device was left stopped.
 fn swing_up_and_balance(controller: &str, seed: &str) {
-    let name = format!("swing-{controller}");
+    swing_up_and_balance_on(controller, &format!("swing-{controller}"), seed, "");
+}
+
+/// [`swing_up_and_balance`] with `spec` added to the configuration, which the emulator
+/// simulates too (its `[plant]`).
+fn swing_up_and_balance_on(controller: &str, name: &str, seed: &str, spec: &str) {
+    let cfg = config(name, spec);
     let emu = Emulator::start(
-        &name,
-        &["--start", "down", "--noise", "0.3", "--seed", seed],
+        name,
+        &[
+            "--start",
+            "down",
+            "--noise",
+            "0.3",
+            "--seed",
+            seed,
+            "--config",
+            cfg.to_str().unwrap(),
+        ],
     );
-    let cfg = config(&name, "");
     let log_path = scratch(&format!("{name}.csv"));
     let r = run(
         &emu.device,
@@ -221,7 +237,8 @@ fn swing_up_and_balance(controller: &str, seed: &str) {
             let expected = if since_step > 0.0 { 1.0 } else { 0.0 };
             assert_eq!(*r, expected, "reference at t = {ti}");
         }
-        if phase[j] == "swing_up" {
+        // (The step that falls still had the experiment's reference.)
+        if phase[j] == "swing_up" && (j == 0 || phase[j - 1] == "swing_up") {
             assert_eq!(*r, 0.0, "reference at t = {ti}");
         }
     }
@@ -234,12 +251,15 @@ fn swing_up_and_balance(controller: &str, seed: &str) {
             );
         }
     }
-    // The arm stayed inside the swing-up's limit all along, and the voltage inside ±12 V.
-    let max_theta = theta.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+    // The swing from rest kept the arm inside the swing-up's limit (the law's own doing), and
+    // nothing reached safety.arm_limit; the voltage stayed inside ±12 V.
+    let max_abs = |x: &[f64]| x.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+    let swing_theta = max_abs(&theta[..first]);
     assert!(
-        max_theta < SWING_ARM_LIMIT,
-        "{controller}: |θ| up to {max_theta}"
+        swing_theta < SWING_ARM_LIMIT,
+        "{controller}: |θ| up to {swing_theta} before the catch"
     );
+    assert!(max_abs(&theta) < SAFETY_ARM_LIMIT);
     assert!(u.iter().all(|v| v.abs() <= 12.0));
     let commands = emu.commands();
     // The rest check's 0.5 s of stop commands came before the first enabling command.
@@ -269,6 +289,17 @@ fn lqg_swings_up_catches_and_balances() {
 fn mpc_swings_up_catches_and_balances() {
     let _serial = one_at_a_time();
     swing_up_and_balance("mpc", "13");
+}
+
+#[test]
+fn the_qube_servo2_preset_swings_up_with_the_defaults() {
+    let _serial = one_at_a_time();
+    swing_up_and_balance_on(
+        "lqg",
+        "swing-qube",
+        "14",
+        "[plant]\npreset = \"qube_servo2\"\n",
+    );
 }
 
 #[test]
