@@ -176,6 +176,46 @@ def test_reads_a_log_written_by_rip_rt(tmp_path: pathlib.Path) -> None:
     assert np.abs(log.u).max() <= 12.0
 
 
+@pytest.mark.skipif(_binary() is None, reason="rip-rt is not built (cargo build -p rip-rt)")
+def test_reads_the_phases_of_a_swing_up_written_by_rip_rt(tmp_path: pathlib.Path) -> None:
+    exe = _binary()
+    assert exe is not None
+    config = tmp_path / "rig.toml"
+    config.write_text("[calibration]\nrest_window_s = 0.5\n")
+    emu = subprocess.Popen(
+        [str(exe), "emulate", "--start", "down", "--noise", "0.3"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert emu.stdout is not None
+        device = emu.stdout.readline().strip().removeprefix("device: ")
+        log_path = tmp_path / "swing.csv"
+        run = subprocess.run(
+            [str(exe), "run", "--port", device, "--controller", "lqr", "--swing-up",
+             "--config", str(config), "--duration", "1", "--log", str(log_path), "--quiet"],
+            capture_output=True,
+            text=True,
+            timeout=40,
+        )
+        assert run.returncode == 0, run.stderr
+    finally:
+        emu.send_signal(signal.SIGTERM)
+        emu.wait(timeout=10)
+    log = riprs.load_log(log_path)
+    assert log.meta["swing_up"] == "true"
+    assert log.phase[0] == "swing_up"
+    # Started hanging: α = ±π before the swing moved it.
+    assert np.pi - abs(log.alpha[0]) < 0.01
+    k = log.catch_index
+    assert k is not None
+    assert log.t[k] == pytest.approx(float(log.meta["catch_s"]), abs=1e-3)
+    # It ends balanced, near upright.
+    assert log.phase[-1] == "balance"
+    assert abs(log.alpha[-1]) < 0.3
+
+
 def _write_bytes(tmp_path: pathlib.Path, data: bytes) -> pathlib.Path:
     path = tmp_path / "log.csv"
     path.write_bytes(data)
