@@ -24,6 +24,7 @@ WRITES = {
     "design_controllers": ["controllers.svg"],
     "swing_up": ["swing_up.svg"],
     "rig_emulator": ["mpc.csv", "compare/arm_angle_with_logs.svg"],
+    "rig_swing_up": ["swing_up.csv", "swing_up.svg"],
     "campaign": ["fall_rate_map.svg", "rmse_pendulum_map.svg"],
 }
 

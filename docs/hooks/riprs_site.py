@@ -33,6 +33,7 @@ EXAMPLES: dict[str, list[str]] = {
     "matlab_conventions": [],
     "swing_up": [],
     "rig_emulator": [],
+    "rig_swing_up": [],
     "campaign": [],
     "performance": [],
 }
