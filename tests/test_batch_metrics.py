@@ -96,6 +96,10 @@ def test_progress_is_reported_and_the_controller_is_untouched() -> None:
         ({"settle_band": 0.0}, "settle_band"),
         ({"substeps": 0}, "substeps"),
         ({"first_run": -1}, "first_run"),
+        # The end of the range would wrap; the same rule as rip-core's batch::run_range.
+        ({"first_run": 2**64 - 1}, "first_run"),
+        # Only what [monte_carlo] may perturb: g is not a plant uncertainty.
+        ({"parameters": ["g"]}, "parameters"),
     ],
 )
 def test_bad_arguments_name_themselves(kwargs, needle) -> None:

@@ -446,7 +446,8 @@ def simulate_metrics(
     perturbation : float
         Relative half-width of the parameter factors, in ``[0, 1)``.
     parameters : sequence of str
-        Names of the perturbed parameters, as in :meth:`FurutaParams.to_dict`.
+        Names of the perturbed parameters, as in ``[monte_carlo] parameters`` (``mr``, ``Lr``,
+        ``Jr``, ``mp``, ``Lp``, ``Jp``, ``Dr``, ``Dp``, ``Rm``, ``kt``, ``km``).
     settle_band : float
         Half-width of the arm-error band that counts as settled (rad).
     progress : callable, optional

@@ -32,8 +32,9 @@ use rayon::prelude::*;
 use crate::controller::Controller;
 use crate::error::{Result, RipError};
 use crate::metrics::Table1;
-use crate::plant::{FurutaParams, Plant, PARAM_NAMES};
+use crate::plant::{FurutaParams, Plant};
 use crate::sim::{prepare, run_loop, Recorder, SimConfig};
+use crate::spec::Param;
 
 /// Largest number of runs one call may take (the result alone would be tens of MB beyond it;
 /// split a larger study into calls over consecutive index ranges).
@@ -104,8 +105,8 @@ pub struct MonteCarlo {
     pub base: FurutaParams,
     /// Relative half-width of the uniform factors, in `[0, 1)`.
     pub perturbation: f64,
-    /// Indices into [`PARAM_NAMES`] of the parameters that vary.
-    pub parameters: Vec<usize>,
+    /// The parameters that vary, each drawn in this order.
+    pub parameters: Vec<Param>,
     /// Noise seed of run 0; also seeds the parameter draws.
     pub seed: u64,
 }
@@ -127,32 +128,56 @@ impl MonteCarlo {
                 format!("must be in [0, 1), got {}", self.perturbation),
             ));
         }
-        if let Some(&bad) = self.parameters.iter().find(|&&p| p >= PARAM_NAMES.len()) {
-            return Err(RipError::invalid(
-                "parameters",
-                format!(
-                    "index {bad} is not a parameter (0 to {})",
-                    PARAM_NAMES.len() - 1
-                ),
-            ));
-        }
         Ok(())
+    }
+
+    /// The parameters spelled `names` ([`Param::name`], as in files and in Python); the error
+    /// names `parameters` and lists the choices.
+    pub fn parameters_named<S: AsRef<str>>(names: &[S]) -> Result<Vec<Param>> {
+        names
+            .iter()
+            .map(|name| {
+                let name = name.as_ref();
+                Param::from_name(name).ok_or_else(|| {
+                    let choices: Vec<&str> = Param::ALL.iter().map(|p| p.name()).collect();
+                    RipError::invalid(
+                        "parameters",
+                        format!(
+                            "unknown parameter {name:?}; choose from {}",
+                            choices.join(", ")
+                        ),
+                    )
+                })
+            })
+            .collect()
     }
 
     /// The plant and noise seed of run `i`.
     pub fn run(&self, i: u64) -> Result<(Plant, u64)> {
-        let mut values = self.base.to_array();
+        let mut params = self.base;
         if self.perturbation > 0.0 && !self.parameters.is_empty() {
             let stream = mix(self.seed ^ 0x5045_5254_5552_4221);
             let mut rng = StdRng::seed_from_u64(mix(stream.wrapping_add(i)));
             let p = self.perturbation;
-            for &j in &self.parameters {
-                values[j] *= rng.gen_range(1.0 - p..=1.0 + p);
+            for &param in &self.parameters {
+                *param.field(&mut params) *= rng.gen_range(1.0 - p..=1.0 + p);
             }
         }
-        let plant = Plant::new(FurutaParams::from_array(values))?;
+        let plant = Plant::new(params)?;
         Ok((plant, self.seed.wrapping_add(i)))
     }
+}
+
+/// Run indices `first_run .. first_run + runs`; the error names `first_run` when the end
+/// does not fit in a `u64`.
+pub fn run_range(first_run: u64, runs: u64) -> Result<Range<u64>> {
+    let end = first_run.checked_add(runs).ok_or_else(|| {
+        RipError::invalid(
+            "first_run",
+            format!("first_run + runs overflows ({first_run} + {runs})"),
+        )
+    })?;
+    Ok(first_run..end)
 }
 
 /// Folds the samples of one run into its metrics.
@@ -307,7 +332,7 @@ mod tests {
         MonteCarlo {
             base: FurutaParams::paper(),
             perturbation: 0.1,
-            parameters: (0..11).collect(),
+            parameters: Param::ALL.to_vec(),
             seed: 7,
         }
     }
@@ -376,6 +401,33 @@ mod tests {
     fn a_set_cancel_flag_stops_the_batch() {
         let cancel = AtomicBool::new(true);
         assert_eq!(metrics(0..4, &cancel), Err(RipError::Cancelled));
+    }
+
+    #[test]
+    fn parameters_are_named_as_in_files_and_run_ranges_do_not_wrap() {
+        let named = MonteCarlo::parameters_named(&["mp", "Lr", "km"]).unwrap();
+        assert_eq!(named, [Param::Mp, Param::Lr, Param::Km]);
+        let err = MonteCarlo::parameters_named(&["mp", "mass"]).unwrap_err();
+        let text = err.to_string();
+        assert!(
+            text.contains("parameters") && text.contains("\"mass\""),
+            "{text}"
+        );
+        assert!(text.contains("Lr") && text.contains("km"), "{text}");
+        assert_eq!(run_range(5, 3), Ok(5..8));
+        let err = run_range(u64::MAX - 1, 2).unwrap_err();
+        assert!(err.to_string().contains("first_run"), "{err}");
+        // A perturbed parameter is the named field, scaled within the band; the others stay.
+        let mc = MonteCarlo {
+            parameters: named,
+            ..study()
+        };
+        let (plant, _) = mc.run(4).unwrap();
+        let (base, got) = (FurutaParams::paper(), plant.params());
+        for (b, v) in [(base.mp, got.mp), (base.lr, got.lr), (base.km, got.km)] {
+            assert!(v != b && (v / b - 1.0).abs() <= 0.1, "{b} -> {v}");
+        }
+        assert_eq!((got.mr, got.jp, got.rm), (base.mr, base.jp, base.rm));
     }
 
     #[test]

@@ -43,6 +43,11 @@ pub const CONTINUOUS_PARAMETERS: [f64; 8] = [
     -1.691009, 16.54502, -0.2274903, -1.061153, 51.64511, -0.7087696, 4.018462, 2.520259,
 ];
 
+/// The actuator limit (V): the motor's rated ±12 V, the paper's hard input bound `|u| ≤ 12 V`
+/// (section 3). The default of every clamp on the voltage: the regulators' `[u_min, u_max]`, the
+/// MPC's input bound, the simulator's saturation and `rip-rt`'s safety limit.
+pub const INPUT_LIMIT: f64 = 12.0;
+
 /// Input scale factor `L_su` of the MPC (section 3).
 pub const INPUT_SCALE: f64 = 10.0;
 
@@ -205,6 +210,27 @@ mod tests {
     fn round_to(v: f64, decimals: i32) -> f64 {
         let s = 10f64.powi(decimals);
         (v * s).round() / s
+    }
+
+    #[test]
+    fn every_default_voltage_clamp_is_the_one_input_limit() {
+        use crate::controller::Controller;
+        // Section 3: |u| <= 12 V.
+        assert_eq!(INPUT_LIMIT, 12.0);
+        assert_eq!(crate::SimConfig::default().u_limit, INPUT_LIMIT);
+        let mpc = crate::mpc::paper::settings(crate::mpc::QpSolver::default());
+        assert_eq!(mpc.input_bounds, vec![(-INPUT_LIMIT, INPUT_LIMIT)]);
+        let spec = crate::spec::Spec::default();
+        assert_eq!(spec.mpc.input_bounds, [[-INPUT_LIMIT, INPUT_LIMIT]]);
+        // A far-off reference drives the default regulators into their clamp.
+        let mut u = [0.0];
+        for mut c in [
+            Box::new(crate::Lqr::paper().unwrap()) as Box<dyn Controller>,
+            Box::new(crate::Lqg::paper().unwrap()),
+        ] {
+            c.step(&[0.0, 0.0], &[100.0, 0.0], &mut u);
+            assert_eq!(u[0].abs(), INPUT_LIMIT);
+        }
     }
 
     #[test]

@@ -358,6 +358,9 @@ pub struct Plant {
     /// Coulomb friction of arm and pendulum, `cr`, `cp`.
     coulomb: [f64; 2],
     vd: f64,
+    /// [`max_rk4_substep`](Self::max_rk4_substep), computed once: it takes two eigenvalue
+    /// problems, far more than a checked step itself.
+    max_substep: f64,
 }
 
 impl Plant {
@@ -365,7 +368,7 @@ impl Plant {
     pub fn new(params: FurutaParams) -> Result<Self> {
         params.validate()?;
         let p = params;
-        Ok(Self {
+        let mut plant = Self {
             params,
             j0: p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr,
             ja: p.jp + p.mp * p.lp * p.lp / 4.0,
@@ -376,7 +379,10 @@ impl Plant {
             dp: p.dp,
             coulomb: [p.cr, p.cp],
             vd: p.vd,
-        })
+            max_substep: f64::INFINITY,
+        };
+        plant.max_substep = plant.rk4_stability_limit();
+        Ok(plant)
     }
 
     /// The QUBE-Servo 2 preset ([`FurutaParams::qube_servo2`]).
@@ -526,6 +532,13 @@ impl Plant {
     /// At rest the smoothed Coulomb friction adds the damping slopes `cr/v_c`, `cp/v_c` (module
     /// docs), usually the stiffest terms of a plant that has them; they are included.
     pub fn max_rk4_substep(&self) -> f64 {
+        self.max_substep
+    }
+
+    /// [`max_rk4_substep`](Self::max_rk4_substep) from the linearisations' eigenvalues.
+    fn rk4_stability_limit(&self) -> f64 {
+        #[cfg(test)]
+        tests::LIMIT_EVALUATIONS.with(|n| n.set(n.get() + 1));
         let hanging = State::new(0.0, 0.0, std::f64::consts::PI, 0.0);
         let rho = [State::zeros(), hanging]
             .iter()
@@ -658,6 +671,42 @@ impl Plant {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    thread_local! {
+        /// How often this thread computed a plant's RK4 stability limit.
+        pub(super) static LIMIT_EVALUATIONS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+    }
+
+    #[test]
+    fn the_rk4_limit_is_computed_once_per_plant_not_per_step() {
+        let before = LIMIT_EVALUATIONS.with(|n| n.get());
+        let plant = Plant::new(FurutaParams::paper()).unwrap();
+        let copy = plant;
+        assert_eq!(LIMIT_EVALUATIONS.with(|n| n.get()), before + 1);
+        let mut x = State::new(0.0, 0.0, 0.1, 0.0);
+        for _ in 0..100 {
+            x = copy.step_checked(&x, 1.0, 0.0, 0.01, 10).unwrap();
+        }
+        copy.integrate(&x, &[0.5; 10], 0.01, 10).unwrap();
+        assert!(copy.step_checked(&x, 0.0, 0.0, 1.0, 1).is_err());
+        assert_eq!(LIMIT_EVALUATIONS.with(|n| n.get()), before + 1);
+        // The stored limit is the one of the eigenvalues: ρ(A_c) at upright and hanging.
+        let rho = [
+            State::zeros(),
+            State::new(0.0, 0.0, std::f64::consts::PI, 0.0),
+        ]
+        .iter()
+        .map(|x| {
+            let (a, _) = plant.linearize(x, 0.0);
+            let a = Mat::from_fn(4, 4, |i, j| a[(i, j)]);
+            a.complex_eigenvalues()
+                .iter()
+                .map(|l| l.norm())
+                .fold(0.0, f64::max)
+        })
+        .fold(0.0, f64::max);
+        assert!((plant.max_rk4_substep() - RK4_STABILITY_LIMIT / rho).abs() < 1e-12 / rho);
+    }
 
     #[test]
     fn a_substep_beyond_rk4_stability_is_refused_and_the_limit_is_real() {

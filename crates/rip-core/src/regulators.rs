@@ -22,9 +22,6 @@ use crate::linalg::{check_finite, check_shape, Mat};
 use crate::lqr::dlqr;
 use crate::paper;
 
-/// The paper's actuator limit (V).
-pub const DEFAULT_INPUT_LIMIT: f64 = 12.0;
-
 /// Default cut-off (Hz) of [`Lqr`]'s rate filter.
 pub const DEFAULT_RATE_CUTOFF_HZ: f64 = 20.0;
 
@@ -134,7 +131,7 @@ impl Lqr {
             ts,
             cutoff_hz: rate_cutoff_hz,
             a: (-2.0 * std::f64::consts::PI * rate_cutoff_hz * ts).exp(),
-            bounds: (-DEFAULT_INPUT_LIMIT, DEFAULT_INPUT_LIMIT),
+            bounds: (-paper::INPUT_LIMIT, paper::INPUT_LIMIT),
             x_hat: SVector::zeros(),
             started: false,
             held: 0,
@@ -372,7 +369,7 @@ impl Lqg {
             l: l.clone(),
             m: m.clone(),
             ts,
-            bounds: (-DEFAULT_INPUT_LIMIT, DEFAULT_INPUT_LIMIT),
+            bounds: (-paper::INPUT_LIMIT, paper::INPUT_LIMIT),
             plant_estimate: SVector::zeros(),
             u_buf: [0.0],
             seed_buf: vec![0.0; n],

@@ -10,6 +10,7 @@ use std::sync::atomic::AtomicBool;
 use rip_core::batch::{run_metrics, MetricsOptions, MonteCarlo};
 use rip_core::mpc::paper::controller;
 use rip_core::sim::{Reference, SensorModel};
+use rip_core::spec::Param;
 use rip_core::{Controller, FurutaParams, Lqg, Lqr, Plant, QpSolver, SimConfig, State};
 
 struct Counting;
@@ -92,7 +93,7 @@ fn a_metrics_run_allocates_the_same_however_long_it_is() {
     let study = MonteCarlo {
         base: FurutaParams::paper(),
         perturbation: 0.05,
-        parameters: vec![3, 4, 6, 7],
+        parameters: vec![Param::Mr, Param::Lr, Param::Mp, Param::Lp],
         seed: 1,
     };
     let lqg = Lqg::paper().unwrap();

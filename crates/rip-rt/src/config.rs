@@ -149,7 +149,7 @@ pub struct SafetyConfig {
 impl Default for SafetyConfig {
     fn default() -> Self {
         Self {
-            voltage_limit: 12.0,
+            voltage_limit: rip_core::paper::INPUT_LIMIT,
             pendulum_limit: 0.6,
             arm_limit: 3.0,
             start_tolerance: 0.15,

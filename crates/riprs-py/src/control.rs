@@ -9,8 +9,9 @@ use numpy::ndarray::Array1;
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
+use rip_core::paper::INPUT_LIMIT;
 use rip_core::paper::TS;
-use rip_core::regulators::{DEFAULT_INPUT_LIMIT, DEFAULT_RATE_CUTOFF_HZ};
+use rip_core::regulators::DEFAULT_RATE_CUTOFF_HZ;
 use rip_core::{Controller, Lqg, Lqr};
 
 use crate::convert::mat_to_py;
@@ -137,7 +138,7 @@ impl PyLqr {
 #[pymethods]
 impl PyLqr {
     #[new]
-    #[pyo3(signature = (K, Ts=Real(TS), *, rate_cutoff=Real(DEFAULT_RATE_CUTOFF_HZ), u_min=Real(-DEFAULT_INPUT_LIMIT), u_max=Real(DEFAULT_INPUT_LIMIT)))]
+    #[pyo3(signature = (K, Ts=Real(TS), *, rate_cutoff=Real(DEFAULT_RATE_CUTOFF_HZ), u_min=Real(-INPUT_LIMIT), u_max=Real(INPUT_LIMIT)))]
     #[allow(non_snake_case)]
     fn new(
         K: &Bound<'_, PyAny>,
@@ -167,7 +168,7 @@ impl PyLqr {
     /// Ts, rate_cutoff, u_min, u_max
     ///     As for the constructor.
     #[staticmethod]
-    #[pyo3(signature = (A, B, Q, R, Ts=Real(TS), *, rate_cutoff=Real(DEFAULT_RATE_CUTOFF_HZ), u_min=Real(-DEFAULT_INPUT_LIMIT), u_max=Real(DEFAULT_INPUT_LIMIT)))]
+    #[pyo3(signature = (A, B, Q, R, Ts=Real(TS), *, rate_cutoff=Real(DEFAULT_RATE_CUTOFF_HZ), u_min=Real(-INPUT_LIMIT), u_max=Real(INPUT_LIMIT)))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn design(
         py: Python<'_>,
@@ -322,7 +323,7 @@ impl PyLqg {
 #[pymethods]
 impl PyLqg {
     #[new]
-    #[pyo3(signature = (K, A, B, C, L, M, Ts=Real(TS), *, u_min=Real(-DEFAULT_INPUT_LIMIT), u_max=Real(DEFAULT_INPUT_LIMIT)))]
+    #[pyo3(signature = (K, A, B, C, L, M, Ts=Real(TS), *, u_min=Real(-INPUT_LIMIT), u_max=Real(INPUT_LIMIT)))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
     fn new(
         K: &Bound<'_, PyAny>,

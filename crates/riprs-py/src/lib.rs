@@ -1,6 +1,7 @@
 //! `riprs._riprs`: the private native module behind the `riprs` Python package.
 //!
-//! This crate only converts: numpy arrays to `nalgebra` matrices and back, and [`RipError`]
+//! This crate only converts: numpy arrays to `nalgebra` matrices and back, and
+//! [`RipError`](rip_core::RipError)
 //! variants to Python exceptions. All numerics live in `rip-core`.
 
 use pyo3::prelude::*;

@@ -11,16 +11,16 @@ use numpy::IntoPyArray;
 use pyo3::exceptions::{PyKeyError, PyTypeError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
-use rip_core::batch::{simulate_metrics, MetricsOptions, MonteCarlo, RunMetrics};
+use rip_core::batch::{run_range, simulate_metrics, MetricsOptions, MonteCarlo, RunMetrics};
 use rip_core::metrics::table1_rmse;
 use rip_core::sim::{batch_runs, Pairing, Reference, SensorModel, StepDisturbance};
-use rip_core::{Controller, Plant, RipError, SimConfig, SimResult};
+use rip_core::{Controller, Plant, SimConfig, SimResult};
 
 use crate::control::{controller_factory, extract_controller};
 use crate::convert::{matrix_arg, pair_arg, vector_arg, Count, Real};
-use crate::errors::{to_py, IntoPyResult};
+use crate::errors::IntoPyResult;
 use crate::interrupt::interruptible;
-use crate::plant::{PyPlant, PY_NAMES};
+use crate::plant::PyPlant;
 
 fn item<'py>(d: &Bound<'py, PyDict>, key: &str) -> PyResult<Bound<'py, PyAny>> {
     d.get_item(key)?
@@ -228,30 +228,14 @@ fn sim_metrics<'py>(
     cancel: Option<Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let cfg = config_from_dict(config)?;
-    let parameters = parameters
-        .iter()
-        .map(|name| {
-            PY_NAMES.iter().position(|n| n == name).ok_or_else(|| {
-                to_py(RipError::invalid(
-                    "parameters",
-                    format!("unknown parameter {name:?}; choose from {PY_NAMES:?}"),
-                ))
-            })
-        })
-        .collect::<PyResult<Vec<usize>>>()?;
     let study = MonteCarlo {
         base: *plant.inner.params(),
         perturbation,
-        parameters,
+        parameters: MonteCarlo::parameters_named(&parameters).py()?,
         seed: cfg.seed,
     };
     study.validate().py()?;
-    let end = first_run.checked_add(runs).ok_or_else(|| {
-        to_py(RipError::invalid(
-            "first_run",
-            format!("first_run + runs overflows ({first_run} + {runs})"),
-        ))
-    })?;
+    let range = run_range(first_run, runs).py()?;
     let options = MetricsOptions { settle_band };
     let make = controller_factory(controller)?;
     let done = AtomicU64::new(0);
@@ -260,7 +244,7 @@ fn sim_metrics<'py>(
         py,
         |cancel| {
             simulate_metrics(
-                first_run..end,
+                range.clone(),
                 &cfg,
                 &options,
                 &|i| study.run(i),
@@ -329,7 +313,7 @@ fn metrics_to_dict<'py>(py: Python<'py>, m: &[RunMetrics]) -> PyResult<Bound<'py
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("DEFAULT_DURATION", rip_core::sim::DEFAULT_DURATION)?;
     m.add("DEFAULT_SUBSTEPS", rip_core::sim::DEFAULT_SUBSTEPS)?;
-    m.add("DEFAULT_U_LIMIT", rip_core::sim::DEFAULT_U_LIMIT)?;
+    m.add("DEFAULT_U_LIMIT", rip_core::paper::INPUT_LIMIT)?;
     m.add("DEFAULT_FALL_LIMIT", rip_core::sim::DEFAULT_FALL_LIMIT)?;
     m.add_function(wrap_pyfunction!(sim_run, m)?)?;
     m.add_function(wrap_pyfunction!(sim_batch, m)?)?;

@@ -14,7 +14,7 @@
 
 use super::{Mpc, MpcSettings, OutputDisturbance, QpSolver};
 use crate::error::Result;
-use crate::paper::{INPUT_SCALE, TS};
+use crate::paper::{INPUT_LIMIT, INPUT_SCALE, TS};
 
 /// Prediction horizon `P`.
 pub const PREDICTION_HORIZON: usize = 50;
@@ -24,8 +24,6 @@ pub const CONTROL_HORIZON: usize = 3;
 pub const OUTPUT_WEIGHTS: [f64; 2] = [25.0, 50.0];
 /// Input-rate weight `w^Δu`.
 pub const INPUT_RATE_WEIGHT: f64 = 1.0;
-/// Hard input bound (V).
-pub const INPUT_BOUND: f64 = 12.0;
 /// Soft output bound (rad).
 pub const OUTPUT_BOUND: f64 = std::f64::consts::FRAC_PI_6;
 /// Slack weight `ρ_ε`.
@@ -53,7 +51,7 @@ pub fn settings_with_bounded_output(bounded: usize, solver: QpSolver) -> MpcSett
         input_target: vec![0.0],
         input_scales: vec![INPUT_SCALE],
         output_scales: vec![1.0, 1.0],
-        input_bounds: vec![(-INPUT_BOUND, INPUT_BOUND)],
+        input_bounds: vec![(-INPUT_LIMIT, INPUT_LIMIT)],
         output_bounds,
         ecr_weight: ECR_WEIGHT,
         output_disturbance: Some(output_disturbance()),

@@ -57,9 +57,6 @@ pub const DEFAULT_DURATION: f64 = 10.0;
 /// stability limit for the pendulum's fastest mode.
 pub const DEFAULT_SUBSTEPS: usize = 10;
 
-/// Default actuator saturation (V): the motor's rated ±12 V, the paper's input bound.
-pub const DEFAULT_U_LIMIT: f64 = 12.0;
-
 /// Default fall limit on `|α|` (rad): past horizontal the pendulum cannot be balanced.
 pub const DEFAULT_FALL_LIMIT: f64 = std::f64::consts::FRAC_PI_2;
 
@@ -151,7 +148,7 @@ impl Default for SimConfig {
             sensor: SensorModel::default(),
             output_disturbance: None,
             torque_disturbance: None,
-            u_limit: DEFAULT_U_LIMIT,
+            u_limit: crate::paper::INPUT_LIMIT,
             fall_limit: DEFAULT_FALL_LIMIT,
             seed: 0,
         }

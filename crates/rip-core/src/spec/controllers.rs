@@ -10,7 +10,8 @@ use super::sections::{bad, each, non_negative, positive};
 use super::SpecError;
 use crate::mpc::{QpSolver, MAX_PREDICTION_HORIZON};
 use crate::paper;
-use crate::regulators::{DEFAULT_INPUT_LIMIT, DEFAULT_RATE_CUTOFF_HZ};
+use crate::paper::INPUT_LIMIT;
+use crate::regulators::DEFAULT_RATE_CUTOFF_HZ;
 
 /// `[lqr]`: the weights of eq. (13), shared by LQR and LQG (`K = dlqr(A_d, B_d, diag(Q), R)`),
 /// and LQR's rate filter.
@@ -159,7 +160,7 @@ impl Default for MpcSpec {
             output_weights: p::OUTPUT_WEIGHTS,
             input_rate_weights: [p::INPUT_RATE_WEIGHT],
             input_weights: [0.0],
-            input_bounds: [[-DEFAULT_INPUT_LIMIT, DEFAULT_INPUT_LIMIT]],
+            input_bounds: [[-INPUT_LIMIT, INPUT_LIMIT]],
             output_bounds: [free, [-FRAC_PI_6, FRAC_PI_6]],
             ecr_weight: p::ECR_WEIGHT,
             input_scales: [paper::INPUT_SCALE],

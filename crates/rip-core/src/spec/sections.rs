@@ -211,6 +211,11 @@ impl Param {
         }
     }
 
+    /// Parses a name as spelled in files and in Python.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|p| p.name() == name)
+    }
+
     /// The parameter's field of `p`.
     pub fn field(self, p: &mut FurutaParams) -> &mut f64 {
         match self {
