@@ -234,7 +234,7 @@ struct EmulateArgs {
     /// --config, else `up`.
     #[arg(long, value_name = "POSE", value_parser = ["up", "down"], conflicts_with = "initial_pendulum")]
     start: Option<String>,
-    /// Initial pendulum angle from upright (rad); overrides --start.
+    /// Initial pendulum angle from upright (rad), instead of --start.
     #[arg(long, value_name = "RAD", allow_negative_numbers = true, value_parser = finite)]
     initial_pendulum: Option<f64>,
     /// Initial arm angle (rad). Default: the `[plant] initial_state` of --config, else 0.
