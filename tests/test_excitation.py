@@ -59,7 +59,8 @@ def test_steps_and_free_swing_shapes() -> None:
     np.testing.assert_array_equal(u, expected)
     u = riprs.excitation("free-swing", amplitude=4.0, kick=0.1, duration=2.0)
     np.testing.assert_array_equal(u[:10], 4.0)
-    np.testing.assert_array_equal(u[10:], 0.0)
+    np.testing.assert_array_equal(u[10:20], -4.0)
+    np.testing.assert_array_equal(u[20:], 0.0)
 
 
 def test_defaults_are_the_documented_ones() -> None:
@@ -87,7 +88,7 @@ def test_defaults_are_the_documented_ones() -> None:
         ({"signal": "prbs", "prbs_bits": -1}, "prbs_bits"),
         ({"signal": "prbs", "seed": -3}, "seed"),
         ({"signal": "steps", "step_hold": 0.0}, "step_hold"),
-        ({"signal": "free-swing", "kick": 25.0}, "kick"),
+        ({"signal": "free-swing", "kick": 10.0}, "kick"),
         ({"signal": "chirp", "dt": 1e-9}, "dt"),
         ({"signal": "chirp", "duration": float("nan")}, "duration"),
     ],
@@ -102,3 +103,28 @@ def test_bad_times_are_refused() -> None:
         riprs.excitation("chirp", t=[0.0, float("nan")])
     with pytest.raises(riprs.ShapeError, match="t"):
         riprs.excitation("chirp", t=np.zeros((2, 2)))
+
+
+def test_an_excitation_log_reads_with_load_log(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The format of ``rip-rt excite --log`` (docs/rip-rt.md): run's columns without
+    estimates, and a last ``phase`` column."""
+    path = tmp_path / "excite.csv"
+    rows = [
+        "0.0000,0,0.000000,3.141593,0.000000,2.0000,3.1,68.0,1,sign_check",
+        "0.6000,60,0.120000,3.100000,0.000000,0.0000,3.0,50.0,1,chirp",
+        "0.6100,61,0.121000,3.099000,0.000000,0.0021,3.0,50.0,1,chirp",
+    ]
+    path.write_text(
+        "# mode: excite\n# signal: chirp\n"
+        "t,seq,theta,alpha,theta_ref,u,compute_us,jitter_us,status,phase\n"
+        + "\n".join(rows)
+        + "\n# stop: finished\n"
+    )
+    log = riprs.load_log(path)
+    np.testing.assert_array_equal(log.u, [2.0, 0.0, 0.0021])
+    np.testing.assert_array_equal(log.theta, [0.0, 0.12, 0.121])
+    assert log.xhat.shape == (3, 0)
+    assert log.meta["signal"] == "chirp"
+    assert log.stop_reason == "finished"
+    assert list(log.phase) == ["sign_check", "chirp", "chirp"]
+    assert log.catch_index is None

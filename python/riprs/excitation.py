@@ -52,8 +52,8 @@ def excitation(
         ``"linear"``). ``prbs``: a maximum-length sequence of a ``prbs_bits``-bit shift
         register, ``+A`` for a 1 and ``-A`` for a 0, one bit per ``prbs_clock`` seconds,
         started from ``seed``. ``steps``: levels ``A * (1, 0, -1, 0, 0.5, 0, -0.5, 0)``, each
-        held ``step_hold`` seconds, repeated. ``free-swing``: ``A`` for ``kick`` seconds, then
-        0 V.
+        held ``step_hold`` seconds, repeated. ``free-swing``: a kick of ``+A`` for ``kick`` seconds
+        and ``-A`` for ``kick`` seconds (the arm pushed, then braked), then 0 V.
     dt : float
         Sample time (s) the settings are checked against (``f_end`` below the Nyquist
         frequency, clocks and holds at least one sample), and the spacing of the default
@@ -80,7 +80,7 @@ def excitation(
     step_hold : float, optional
         Steps: seconds per level.
     kick : float, optional
-        Free swing: length of the kick (s).
+        Free swing: length of each half of the kick (s).
 
     Returns
     -------

@@ -24,11 +24,15 @@ FLAG_DEADLINE_MISS = 1 << 11
 
 _REQUIRED = ("t", "seq", "theta", "alpha", "theta_ref", "u", "compute_us", "jitter_us", "status")
 
-#: The values of the ``phase`` column: the controller's phase after the period's step.
-PHASES = ("swing_up", "balance", "stopped")
+#: The values of the ``phase`` column: the controller's phase after the period's step in
+#: ``rip-rt run``; the experiment's stage in ``rip-rt excite``.
+RUN_PHASES = ("swing_up", "balance", "stopped")
+#: The stages of ``rip-rt excite``: the sign check, then the signal (free swing: kick, coast).
+EXCITE_PHASES = ("sign_check", "chirp", "prbs", "steps", "kick", "coast")
+PHASES = RUN_PHASES + EXCITE_PHASES
 # Logs written before the column existed are of balancing runs only.
 _DEFAULT_PHASE = "balance"
-_PHASE_DTYPE = "U8"
+_PHASE_DTYPE = f"U{max(len(p) for p in PHASES)}"
 
 
 class LogError(RiprsError):
@@ -53,7 +57,8 @@ class RtLog:
     status : device status bits | ``FLAG_*`` bits (int64).
     phase : the controller's phase after the period's step, one of :data:`PHASES` (numpy
         strings): ``swing_up`` until a swing-up's catch, then ``balance``. Logs written before
-        this column existed read as ``balance`` throughout.
+        this column existed read as ``balance`` throughout. An excitation log
+        (``rip-rt excite``) holds its stages, :data:`EXCITE_PHASES`.
     meta : the ``# key: value`` comment lines (header and footer).
     """
 
@@ -357,11 +362,13 @@ def _is_int64(value: bytes) -> bool:
 
 
 __all__ = [
+    "EXCITE_PHASES",
     "FLAG_CLAMPED",
     "FLAG_DEADLINE_MISS",
     "FLAG_FALLBACK",
     "FLAG_NO_REPLY",
     "PHASES",
+    "RUN_PHASES",
     "RtLog",
     "load_log",
 ]

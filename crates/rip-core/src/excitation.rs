@@ -33,8 +33,11 @@
 //! `step_hold` seconds, repeated: step responses of both signs and two sizes (Coulomb friction
 //! and a dead zone show as a size-dependent response), each followed by a coast at 0 V.
 //!
-//! **Free swing**: a kick `e = A` for `kick` seconds, then 0 V: the pendulum, set swinging by the
-//! arm's reaction, coasts (its frequency and damping), and so does the arm.
+//! **Free swing**: a kick, `e = +A` for `kick` seconds then `−A` for `kick` seconds, then 0 V:
+//! the pendulum, set swinging by the arm's reaction, coasts (its frequency and damping). The
+//! kick is a doublet so that the arm, pushed and then braked, coasts from nearly at rest a
+//! short way from its start (about `b A kick²/J` rad): a single pulse would leave it turning,
+//! with nothing but friction to stop it before the arm limit.
 //!
 //! # Arm centring ([`ArmCentering`])
 //!
@@ -67,7 +70,7 @@ pub enum Signal {
     Prbs,
     /// A staircase of voltage steps ([`STEP_LEVELS`]).
     Steps,
-    /// A short kick, then 0 V.
+    /// A short kick (a doublet), then 0 V.
     FreeSwing,
 }
 
@@ -205,7 +208,8 @@ pub struct ExcitationSettings {
     pub seed: u64,
     /// Steps: how long each level is held (s), at least one sample.
     pub step_hold: f64,
-    /// Free swing: length of the kick (s), at least one sample and shorter than `duration`.
+    /// Free swing: length of each half of the kick (s), at least one sample; the whole kick
+    /// (`2 kick`) is shorter than `duration`.
     pub kick: f64,
     /// Arm-centring gain `k_c` (V/rad), in [0, [`MAX_CENTERING`]] ([`ArmCentering`]).
     pub centering: f64,
@@ -219,7 +223,7 @@ impl ExcitationSettings {
     /// | chirp | 2 V | 30 s | 0.2 → 10 Hz, logarithmic |
     /// | prbs | 1.5 V | 30 s | 9 bits (511 clocks), 0.03 s clock (15.33 s period), seed 1 |
     /// | steps | 1.5 V | 24 s | 1.5 s per level (two rounds of [`STEP_LEVELS`]) |
-    /// | free-swing | 3 V | 20 s | 0.15 s kick |
+    /// | free-swing | 3 V | 20 s | kick of 0.15 s at +3 V, 0.15 s at −3 V |
     ///
     /// and a centring gain of 1 V/rad.
     pub fn new(signal: Signal) -> Self {
@@ -325,11 +329,11 @@ impl ExcitationSettings {
             Signal::Steps => at_least_a_sample("step_hold", self.step_hold)?,
             Signal::FreeSwing => {
                 at_least_a_sample("kick", self.kick)?;
-                if self.kick >= self.duration {
+                if 2.0 * self.kick >= self.duration {
                     return Err(RipError::invalid(
                         "kick",
                         format!(
-                            "must be shorter than duration ({} s), got {}",
+                            "must be shorter than half the duration ({} s), got {}",
                             self.duration, self.kick
                         ),
                     ));
@@ -343,7 +347,7 @@ impl ExcitationSettings {
 /// Which part of an excitation a time falls in (logged per row by `rip-rt excite`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Stage {
-    /// The signal itself (for free swing: the kick).
+    /// The signal itself (for free swing: the kick, both halves).
     Signal,
     /// Free swing after the kick: 0 V.
     Coast,
@@ -425,7 +429,7 @@ impl Excitation {
         let s = &self.settings;
         if t >= s.duration {
             Stage::Done
-        } else if s.signal == Signal::FreeSwing && t >= s.kick {
+        } else if s.signal == Signal::FreeSwing && t >= 2.0 * s.kick {
             Stage::Coast
         } else {
             Stage::Signal
@@ -459,6 +463,8 @@ impl Excitation {
             Signal::FreeSwing => {
                 if t < s.kick {
                     a
+                } else if t < 2.0 * s.kick {
+                    -a
                 } else {
                     0.0
                 }
@@ -650,8 +656,10 @@ mod tests {
         let mut x = Excitation::new(s, DT).unwrap();
         let u: Vec<f64> = (0..150).map(|k| x.value(k as f64 * DT)).collect();
         assert!(u[..20].iter().all(|&v| v == 3.0));
-        assert!(u[20..].iter().all(|&v| v == 0.0));
+        assert!(u[20..40].iter().all(|&v| v == -3.0));
+        assert!(u[40..].iter().all(|&v| v == 0.0));
         assert_eq!(x.stage(0.1), Stage::Signal);
+        assert_eq!(x.stage(0.3), Stage::Signal);
         assert_eq!(x.stage(0.5), Stage::Coast);
         assert_eq!(x.stage(1.0), Stage::Done);
         // Free swing goes out unchanged, whatever the arm does.

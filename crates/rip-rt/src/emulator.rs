@@ -42,6 +42,9 @@ pub struct EmulatorConfig {
     pub arm_counts_per_rev: u32,
     /// Pendulum encoder counts per revolution (zero hanging down).
     pub pendulum_counts_per_rev: u32,
+    /// Where each encoder's zero lies (rad; `[sensor] encoder_offsets`): the arm encoder
+    /// reads `θ + o₀`, the pendulum's `α + π + o₁` (zero hanging down when `o₁ = 0`).
+    pub encoder_offsets: [f64; 2],
     /// Initial arm angle (rad).
     pub initial_arm: f64,
     /// Initial pendulum angle from upright (rad).
@@ -69,6 +72,20 @@ pub struct EmulatorConfig {
     pub duration_s: Option<f64>,
     /// CSV file receiving every command the device accepted (`t_s,seq,voltage_mv,flags`).
     pub record: Option<PathBuf>,
+    /// Wiring faults, for testing the sign check ([`crate::sign_check`]).
+    pub wiring: Wiring,
+}
+
+/// How the emulated rig is wired: the motor's leads and each encoder's direction, and
+/// encoders that do not count (a loose cable). The default is a correctly wired rig.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Wiring {
+    /// The motor's leads are swapped: a positive voltage turns the arm the negative way.
+    pub motor_reversed: bool,
+    /// The arm and the pendulum encoder count backwards.
+    pub encoder_reversed: [bool; 2],
+    /// The arm and the pendulum encoder do not count (stuck at their power-up reading).
+    pub encoder_frozen: [bool; 2],
 }
 
 impl Default for EmulatorConfig {
@@ -78,6 +95,7 @@ impl Default for EmulatorConfig {
             sim_rate_hz: 1000.0,
             arm_counts_per_rev: 2048,
             pendulum_counts_per_rev: 2048,
+            encoder_offsets: [0.0, 0.0],
             initial_arm: 0.0,
             initial_pendulum: 0.05,
             hold_until_enabled: true,
@@ -91,6 +109,7 @@ impl Default for EmulatorConfig {
             seed: 1,
             duration_s: None,
             record: None,
+            wiring: Wiring::default(),
         }
     }
 }
@@ -214,6 +233,8 @@ pub struct Device {
     released: bool,
     commands_seen: bool,
     time_ns: u64,
+    // The counts of a frozen encoder (set once constructed).
+    power_up_counts: Option<[i32; 2]>,
 }
 
 /// What the device did with a frame.
@@ -242,9 +263,11 @@ impl Device {
             released: !cfg.hold_until_enabled,
             commands_seen: false,
             time_ns: 0,
+            power_up_counts: None,
             cfg,
         };
         let [arm, pendulum] = dev.counts(false);
+        dev.power_up_counts = Some([arm, pendulum]);
         let inputs = Inputs {
             now_us: 0,
             encoders: [arm as u16, pendulum as u16],
@@ -290,17 +313,30 @@ impl Device {
     /// Encoder counts of the plant's angles (pendulum zero hanging down), with reading noise.
     fn counts(&mut self, noisy: bool) -> [i32; 2] {
         let [theta, _, alpha, _] = self.plant.state();
+        let [o_arm, o_pendulum] = self.cfg.encoder_offsets;
         let mut c = [
-            theta * self.cfg.arm_counts_per_rev as f64,
-            (alpha + std::f64::consts::PI) * self.cfg.pendulum_counts_per_rev as f64,
+            (theta + o_arm) * self.cfg.arm_counts_per_rev as f64,
+            (alpha + std::f64::consts::PI + o_pendulum) * self.cfg.pendulum_counts_per_rev as f64,
         ];
-        for v in &mut c {
+        let w = self.cfg.wiring;
+        for (j, v) in c.iter_mut().enumerate() {
             *v /= std::f64::consts::TAU;
+            if w.encoder_reversed[j] {
+                *v = -*v;
+            }
             if noisy && self.cfg.noise_counts > 0.0 {
                 *v += self.noise.sample(&mut self.rng);
             }
         }
-        c.map(|v| v.round().clamp(i32::MIN as f64, i32::MAX as f64) as i32)
+        let mut c = c.map(|v| v.round().clamp(i32::MIN as f64, i32::MAX as f64) as i32);
+        if let Some(frozen) = self.power_up_counts {
+            for (j, v) in c.iter_mut().enumerate() {
+                if w.encoder_frozen[j] {
+                    *v = frozen[j];
+                }
+            }
+        }
+        c
     }
 
     /// The hardware readings now: the microsecond clock and the 16-bit encoder counters.
@@ -319,7 +355,11 @@ impl Device {
     pub fn advance(&mut self, dt_ns: u64) {
         let inputs = self.inputs();
         self.firmware.tick(&inputs);
-        let u = self.applied_voltage();
+        let u = if self.cfg.wiring.motor_reversed {
+            -self.applied_voltage()
+        } else {
+            self.applied_voltage()
+        };
         if self.released {
             self.plant.step(u, dt_ns as f64 * 1e-9);
         }

@@ -6,6 +6,8 @@
 //!
 //! - [`protocol`] — wire protocol v1, the `rip-protocol` crate that the firmware runs too.
 //! - [`runner`] — the periodic loop and its phases (probe, arming, balancing).
+//! - [`excite`] — `rip-rt excite`: the sign check and an open-loop excitation, hanging down.
+//! - [`sign_check`] — the motor-sign / encoder-direction check pulse and its diagnosis.
 //! - [`loop_core`] — the loop's logic without I/O: decoding, limits, the controller step,
 //!   command frames.
 //! - [`stop`] — stop reasons and exit codes, the stop frame on every exit path, signals.
@@ -22,12 +24,14 @@ pub mod calibrate;
 pub mod config;
 pub mod controllers;
 pub mod emulator;
+pub mod excite;
 pub mod log;
 pub mod loop_core;
 pub mod plant;
 pub use rip_protocol as protocol;
 pub mod runner;
 pub mod serial;
+pub mod sign_check;
 pub mod stop;
 pub mod timing;
 

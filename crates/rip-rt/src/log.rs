@@ -84,6 +84,10 @@ pub struct Row {
     pub compute_us: f64,
     /// Wake-up lateness (µs).
     pub jitter_us: f64,
+    /// The `phase` column: the controller's phase after the step ([`rip_core::Phase::name`])
+    /// in `rip-rt run`, the experiment's stage in `rip-rt excite` (`sign_check`, `chirp`,
+    /// `kick`, `coast`, ...).
+    pub phase: &'static str,
 }
 
 impl Row {
@@ -136,10 +140,7 @@ fn write_row(out: &mut impl Write, row: &Row, n_estimates: usize) -> io::Result<
     writeln!(
         out,
         ",{:.1},{:.1},{},{}",
-        row.compute_us,
-        row.jitter_us,
-        s.flags,
-        s.phase.name()
+        row.compute_us, row.jitter_us, s.flags, row.phase
     )
 }
 
@@ -346,6 +347,7 @@ mod tests {
             estimate: Row::estimate_from(Some(&[1.0, 2.0])),
             compute_us: 3.5,
             jitter_us: 12.0,
+            phase: "swing_up",
         }
     }
 

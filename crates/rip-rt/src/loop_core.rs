@@ -399,6 +399,61 @@ impl LoopCore {
         self.u[0]
     }
 
+    /// A loop core for open-loop runs (`rip-rt excite`): no controller; its enabling
+    /// commands come from [`drive`](Self::drive), with the same hard bounds as
+    /// [`new`](Self::new)'s.
+    pub fn open_loop(cfg: &Config) -> Self {
+        Self::new(Box::new(OpenLoop), cfg).expect("OpenLoop has the pendulum's shape")
+    }
+
+    /// One open-loop command on measurement `m` at `t` seconds: checks the device status and
+    /// the arm limit (not the pendulum's: an open-loop run starts hanging, where it swings
+    /// freely), refuses a non-finite `voltage`, clamps it to `±safety.voltage_limit` and
+    /// encodes the enabling command into `out`. A failed check returns the stop reason and
+    /// encodes nothing.
+    pub fn drive(
+        &mut self,
+        m: &Measurement,
+        voltage: f64,
+        t: f64,
+        out: &mut [u8; MAX_FRAME],
+    ) -> Result<StepOutput, StopReason> {
+        if m.status & STATUS_FAULT != 0 {
+            return Err(StopReason::DeviceFault(m.status));
+        }
+        let (theta, alpha) = self.angles(m);
+        if theta.abs() > self.arm_limit {
+            return Err(StopReason::AngleLimit {
+                which: "arm",
+                angle: theta,
+                limit: self.arm_limit,
+            });
+        }
+        if !voltage.is_finite() {
+            return Err(StopReason::ControllerFault { voltage, t });
+        }
+        let clamped = voltage.clamp(-self.voltage_limit, self.voltage_limit);
+        let mut flags = m.status as u32;
+        if clamped.abs() >= self.voltage_limit {
+            flags |= FLAG_CLAMPED;
+        }
+        self.last_command = Command {
+            voltage_mv: (clamped * 1000.0).round() as i16,
+            flags: COMMAND_ENABLE,
+        };
+        self.blind_periods = 0;
+        let len = self.encode_repeat(out);
+        Ok(StepOutput {
+            theta,
+            alpha,
+            reference: 0.0,
+            voltage: clamped,
+            flags,
+            len,
+            phase: self.controller.phase(),
+        })
+    }
+
     /// One loop iteration without I/O: decodes `rx`, and for a measurement answering `seq`
     /// runs [`control`](Self::control). `Ok(None)` when no such measurement was in `rx`.
     pub fn iterate(
@@ -413,6 +468,24 @@ impl LoopCore {
             None => Ok(None),
         }
     }
+}
+
+/// The controller of an open-loop core: never stepped (commands come from
+/// [`LoopCore::drive`]); 0 V if it were.
+struct OpenLoop;
+
+impl Controller for OpenLoop {
+    fn n_outputs(&self) -> usize {
+        2
+    }
+    fn n_inputs(&self) -> usize {
+        1
+    }
+    fn step(&mut self, _y: &[f64], _r: &[f64], u: &mut [f64]) -> StepStatus {
+        u[0] = 0.0;
+        StepStatus::Nominal
+    }
+    fn reset(&mut self) {}
 }
 
 #[cfg(test)]
@@ -735,6 +808,35 @@ mod tests {
             .control(&measurement(3, 512, 1024), 0.0, &mut out)
             .unwrap();
         assert_eq!(s.voltage, MAX_VOLTAGE_LIMIT);
+    }
+
+    #[test]
+    fn drive_checks_the_arm_but_not_the_hanging_pendulum() {
+        let mut c = LoopCore::open_loop(&Config::default());
+        let mut out = [0u8; MAX_FRAME];
+        // Hanging down (0 counts): far outside the pendulum limit, which does not apply.
+        let s = c.drive(&measurement(1, 0, 0), 30.0, 0.0, &mut out).unwrap();
+        assert_eq!(s.voltage, 12.0);
+        assert!(s.flags & FLAG_CLAMPED != 0);
+        match decode_one(&out[..s.len]).message {
+            Message::Command(cmd) => assert_eq!((cmd.voltage_mv, cmd.enabled()), (12000, true)),
+            other => panic!("{other:?}"),
+        }
+        let e = c
+            .drive(&measurement(2, 1100, 0), 1.0, 0.0, &mut out)
+            .unwrap_err();
+        assert!(
+            matches!(e, StopReason::AngleLimit { which: "arm", .. }),
+            "{e}"
+        );
+        let e = c
+            .drive(&measurement(3, 0, 0), f64::NAN, 0.0, &mut out)
+            .unwrap_err();
+        assert_eq!(e.exit_code(), exit_code::CONTROLLER_FAULT);
+        let mut m = measurement(4, 0, 0);
+        m.status = STATUS_FAULT;
+        let e = c.drive(&m, 1.0, 0.0, &mut out).unwrap_err();
+        assert_eq!(e.exit_code(), exit_code::DEVICE_FAULT);
     }
 
     #[test]

@@ -10,7 +10,7 @@ use clap::{Parser, Subcommand};
 
 use rip_rt::config::Config;
 use rip_rt::controllers::{self, ControllerKind};
-use rip_rt::emulator::{self, EmulatorConfig, EmulatorExit};
+use rip_rt::emulator::{self, EmulatorConfig, EmulatorExit, Wiring};
 use rip_rt::log::LogWriter;
 use rip_rt::loop_core::LoopCore;
 use rip_rt::plant::Model;
@@ -18,6 +18,9 @@ use rip_rt::runner::{self, RunOptions};
 use rip_rt::serial::{Pty, SerialPort};
 use rip_rt::stop::{self, exit_code, SetupError, StopReason};
 use rip_rt::timing;
+
+mod excite_cmd;
+use excite_cmd::{ExciteArgs, EXCITE_AFTER_HELP};
 
 const RUN_AFTER_HELP: &str = "\
 Exit codes (docs/rip-rt.md has the safety rules behind each):
@@ -61,6 +64,10 @@ enum Command {
     /// Run a controller in a periodic loop against the device on PORT.
     #[command(after_help = RUN_AFTER_HELP)]
     Run(RunArgs),
+    /// Run an identification experiment (chirp, PRBS, steps or free swing) with the pendulum
+    /// hanging down: rest check, sign check, excitation; logged for `riprs identify`.
+    #[command(after_help = EXCITE_AFTER_HELP)]
+    Excite(ExciteArgs),
     /// Emulate the device on a new pseudo-terminal (prints its path).
     Emulate(Box<EmulateArgs>),
     /// Print the resolved configuration (every default filled in) as TOML; its experiment
@@ -100,7 +107,7 @@ fn cmd_config(args: ConfigArgs) -> ExitCode {
     }
 }
 
-fn positive_seconds(s: &str) -> Result<f64, String> {
+pub(crate) fn positive_seconds(s: &str) -> Result<f64, String> {
     let v: f64 = s.parse().map_err(|_| format!("not a number: {s:?}"))?;
     if v.is_finite() && v > 0.0 {
         Ok(v)
@@ -136,7 +143,7 @@ fn finite(s: &str) -> Result<f64, String> {
     }
 }
 
-fn cpu(s: &str) -> Result<usize, String> {
+pub(crate) fn cpu(s: &str) -> Result<usize, String> {
     let max = libc::CPU_SETSIZE as usize - 1;
     match s.parse::<i64>() {
         Ok(v) if (0..=max as i64).contains(&v) => Ok(v as usize),
@@ -145,7 +152,7 @@ fn cpu(s: &str) -> Result<usize, String> {
     }
 }
 
-fn baud(s: &str) -> Result<u32, String> {
+pub(crate) fn baud(s: &str) -> Result<u32, String> {
     let v: u32 = s.parse().map_err(|_| format!("not a baud rate: {s:?}"))?;
     if rip_rt::serial::SUPPORTED_BAUDS.contains(&v) {
         Ok(v)
@@ -261,9 +268,25 @@ struct EmulateArgs {
     /// Append every command the device receives to this CSV (t_s,seq,voltage_mv,flags).
     #[arg(long, value_name = "FILE.csv")]
     record: Option<PathBuf>,
+    /// Wiring fault: the motor's leads are swapped (a positive voltage turns the arm the
+    /// negative way).
+    #[arg(long)]
+    reverse_motor: bool,
+    /// Wiring fault: the arm encoder counts backwards.
+    #[arg(long)]
+    reverse_arm_encoder: bool,
+    /// Wiring fault: the pendulum encoder counts backwards.
+    #[arg(long)]
+    reverse_pendulum_encoder: bool,
+    /// Wiring fault: the arm encoder does not count.
+    #[arg(long)]
+    freeze_arm_encoder: bool,
+    /// Wiring fault: the pendulum encoder does not count.
+    #[arg(long)]
+    freeze_pendulum_encoder: bool,
 }
 
-fn fail(code: i32, msg: impl std::fmt::Display) -> ExitCode {
+pub(crate) fn fail(code: i32, msg: impl std::fmt::Display) -> ExitCode {
     rip_rt::say!("rip-rt: error: {msg}");
     ExitCode::from(code as u8)
 }
@@ -307,17 +330,9 @@ fn prepare(
     Ok((cfg, core, port, log))
 }
 
-fn cmd_run(args: RunArgs) -> ExitCode {
-    let (cfg, mut core, port, mut log) = match prepare(&args) {
-        Ok(ready) => ready,
-        Err(e) => return fail(e.exit_code(), e),
-    };
-
-    // From here on every exit path must stop the motor; a panic does it through this hook
-    // before unwinding, and again through the loop's stop guard.
-    stop::install_panic_hook();
-
-    if let Some(prio) = args.rt_priority {
+/// `--rt-priority` and `--cpu`, best effort: a refusal is a warning.
+pub(crate) fn apply_realtime(rt_priority: Option<i32>, cpu: Option<usize>) {
+    if let Some(prio) = rt_priority {
         if let Err(e) = timing::lock_memory() {
             rip_rt::say!("rip-rt: warning: cannot lock memory ({e}); continuing");
         }
@@ -328,11 +343,24 @@ fn cmd_run(args: RunArgs) -> ExitCode {
             );
         }
     }
-    if let Some(cpu) = args.cpu {
+    if let Some(cpu) = cpu {
         if let Err(e) = timing::pin_to_cpu(cpu) {
             rip_rt::say!("rip-rt: warning: cannot pin to CPU {cpu} ({e}); continuing");
         }
     }
+}
+
+fn cmd_run(args: RunArgs) -> ExitCode {
+    let (cfg, mut core, port, mut log) = match prepare(&args) {
+        Ok(ready) => ready,
+        Err(e) => return fail(e.exit_code(), e),
+    };
+
+    // From here on every exit path must stop the motor; a panic does it through this hook
+    // before unwinding, and again through the loop's stop guard.
+    stop::install_panic_hook();
+
+    apply_realtime(args.rt_priority, args.cpu);
 
     if !args.quiet {
         rip_rt::say!(
@@ -439,16 +467,27 @@ fn make_link(link: &Path, target: &Path) -> std::io::Result<()> {
 
 fn cmd_emulate(args: EmulateArgs) -> ExitCode {
     let defaults = EmulatorConfig::default();
-    // The pose: the flags, else the file's initial state, else the defaults (upright).
-    let (model, mut initial_arm, mut initial_pendulum) = match &args.config {
+    // The pose: the flags, else the file's initial state, else the defaults (upright). A file
+    // also gives the plant's sensor: encoder resolutions and zero offsets.
+    let (model, sensor, mut initial_arm, mut initial_pendulum) = match &args.config {
         Some(path) => match Config::load(path) {
             Ok(c) => {
                 let x0 = c.spec.plant.initial_state;
-                (Model::Params(c.spec.plant.params()), x0[0], x0[2])
+                (
+                    Model::Params(c.spec.plant.params()),
+                    c.spec.sensor,
+                    x0[0],
+                    x0[2],
+                )
             }
             Err(e) => return fail(exit_code::USAGE, e),
         },
-        None => (args.model, defaults.initial_arm, defaults.initial_pendulum),
+        None => (
+            args.model,
+            rip_core::spec::SensorSpec::default(),
+            defaults.initial_arm,
+            defaults.initial_pendulum,
+        ),
     };
     match args.start.as_deref() {
         Some("down") => initial_pendulum = std::f64::consts::PI,
@@ -459,6 +498,9 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
     initial_arm = args.initial_arm.unwrap_or(initial_arm);
     let cfg = EmulatorConfig {
         model,
+        arm_counts_per_rev: sensor.encoder_counts[0],
+        pendulum_counts_per_rev: sensor.encoder_counts[1],
+        encoder_offsets: sensor.encoder_offsets,
         sim_rate_hz: args.sim_rate,
         initial_arm,
         initial_pendulum,
@@ -471,6 +513,11 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
         seed: args.seed,
         duration_s: args.duration,
         record: args.record,
+        wiring: Wiring {
+            motor_reversed: args.reverse_motor,
+            encoder_reversed: [args.reverse_arm_encoder, args.reverse_pendulum_encoder],
+            encoder_frozen: [args.freeze_arm_encoder, args.freeze_pendulum_encoder],
+        },
         ..EmulatorConfig::default()
     };
     if let Err(e) = cfg.validate() {
@@ -522,6 +569,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Command::Run(args) => cmd_run(args),
+        Command::Excite(args) => excite_cmd::cmd_excite(args),
         Command::Emulate(args) => cmd_emulate(*args),
         Command::Config(args) => cmd_config(args),
     }

@@ -19,6 +19,8 @@ pub enum Model {
 pub struct PlantSim {
     plant: Plant,
     x: State,
+    // The longest RK4 step the plant's fastest mode allows (stiff Coulomb friction).
+    max_substep: f64,
 }
 
 impl PlantSim {
@@ -31,14 +33,17 @@ impl PlantSim {
             Model::Params(p) => Plant::new(p).expect("validated [plant] parameters"),
         };
         Self {
+            max_substep: plant.max_rk4_substep(),
             plant,
             x: State::new(theta, 0.0, alpha, 0.0),
         }
     }
 
-    /// Advances by `dt` seconds with the motor voltage `u` held (one RK4 step).
+    /// Advances by `dt` seconds with the motor voltage `u` held: one RK4 step, or as many as
+    /// the plant's stability limit needs (a stiff Coulomb friction).
     pub fn step(&mut self, u: f64, dt: f64) {
-        self.plant.advance(&mut self.x, u, 0.0, dt, 1);
+        let substeps = (dt / self.max_substep).ceil().clamp(1.0, 1000.0) as usize;
+        self.plant.advance(&mut self.x, u, 0.0, dt, substeps);
     }
 
     /// `[θ, θ̇, α, α̇]`.

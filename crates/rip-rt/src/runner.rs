@@ -424,6 +424,7 @@ impl Runner<'_> {
                 estimate: None,
                 compute_us: 0.0,
                 jitter_us: tick.lateness_ns as f64 / 1e3,
+                phase: step.phase.name(),
             })?;
         }
         Ok(())
@@ -500,6 +501,7 @@ impl Runner<'_> {
             estimate,
             compute_us: compute_ns as f64 / 1e3,
             jitter_us: tick.lateness_ns as f64 / 1e3,
+            phase: step.phase.name(),
         })
     }
 

@@ -63,6 +63,9 @@ pub mod exit_code {
     pub const NOT_AT_REST: i32 = 12;
     /// The swing-up did not reach its catch region within `swing_up.max_time`.
     pub const SWING_UP_FAILED: i32 = 13;
+    /// Refused the experiment: the motor-sign / encoder-direction check before it failed (the
+    /// message says what to swap); the motor had only the check's short pulse.
+    pub const SIGN_CHECK: i32 = 14;
     /// A panic (Rust's own exit code for one).
     pub const PANIC: i32 = 101;
     /// Stopped by a signal: 128 + its number (130 SIGINT, 143 SIGTERM, 129 SIGHUP, …).
@@ -172,6 +175,9 @@ pub enum StopReason {
     /// from hanging; the motor was never enabled.
     #[error("refusing to start: the rig is not at rest hanging down: {0}")]
     NotAtRest(#[source] crate::calibrate::RestFault),
+    /// The motor-sign / encoder-direction check before an experiment failed.
+    #[error("refusing to start the experiment: sign check failed: {0}")]
+    SignCheck(#[source] crate::sign_check::SignFault),
     /// A thread other than the loop panicked (the panic hook already sent the stop frame).
     #[error("internal error: a panic outside the loop")]
     Panic,
@@ -195,6 +201,7 @@ impl StopReason {
             StopReason::NotAtRest(_) => exit_code::NOT_AT_REST,
             StopReason::Fell { .. } => exit_code::ANGLE_LIMIT,
             StopReason::SwingUpFailed { .. } => exit_code::SWING_UP_FAILED,
+            StopReason::SignCheck(_) => exit_code::SIGN_CHECK,
             StopReason::Panic => exit_code::PANIC,
         }
     }
@@ -216,6 +223,7 @@ impl StopReason {
             StopReason::NotAtRest(_) => "not_at_rest",
             StopReason::Fell { .. } => "fell",
             StopReason::SwingUpFailed { .. } => "swing_up_failed",
+            StopReason::SignCheck(_) => "sign_check",
             StopReason::Panic => "panic",
         }
     }
@@ -551,6 +559,7 @@ mod tests {
                 max: 0.5,
             }),
             StopReason::SwingUpFailed { max_time: 20.0 },
+            StopReason::SignCheck(crate::sign_check::SignFault::MotorReversed { arm: -10.0 }),
             StopReason::Panic,
         ];
         let mut codes: Vec<i32> = reasons.iter().map(|r| r.exit_code()).collect();
