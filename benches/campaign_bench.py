@@ -1,13 +1,15 @@
 """Campaign throughput: runs/s per core in process vs. through a local Dask cluster, for LQR and
 MPC, and the overhead of one chunk through the cluster.
 
-    python benches/campaign_bench.py [--repeats 3] [--runs 400]
+    python benches/campaign_bench.py [--repeats 3] [--runs 400] [--chunk-size N]
 
-Each figure is the median of ``--repeats`` repetitions. A run is the paper's 10 s experiment
-(the nominal design on a plant whose pendulum mass is off by up to +-30 %). The cluster is a
-``LocalCluster`` of one worker process per core, one thread each, started once and reused, so
-its start-up is not counted. Overhead per chunk is the median round trip of a one-run chunk
-through the cluster minus the same chunk computed in process.
+Each figure is the median of ``--repeats`` repetitions. Chunks are sized as ``riprs campaign``
+sizes them (automatic: large, yet four per worker thread) unless ``--chunk-size`` is given. A
+run is the paper's 10 s experiment (the nominal design on a plant whose pendulum mass is off by
+up to +-30 %). The cluster is a ``LocalCluster`` of one worker process per core, one thread
+each, started once and reused, so its start-up is not counted. Overhead per chunk is the
+median round trip of a one-run chunk through the cluster minus the same chunk computed in
+process.
 """
 
 from __future__ import annotations
@@ -22,32 +24,33 @@ from riprs import campaign
 from riprs.campaign.chunk import _run_payload_chunk
 
 
-def spec(controller: str, runs: int, chunk_size: int) -> dict:
-    return {
-        "campaign": {
-            "controllers": [controller],
-            "seeds": 10,
-            "duration": 10.0,
-            "chunk_size": chunk_size,
-            "axis": [{"name": "mp", "scale": [0.7, 1.3], "points": max(1, runs // 10)}],
-        }
+def spec(controller: str, runs: int, chunk_size: int | None) -> dict:
+    section = {
+        "controllers": [controller],
+        "seeds": 10,
+        "duration": 10.0,
+        "axis": [{"name": "mp", "scale": [0.7, 1.3], "points": max(1, runs // 10)}],
     }
+    if chunk_size is not None:
+        section["chunk_size"] = chunk_size
+    return {"campaign": section}
 
 
-def timed(fn, repeats: int) -> float:
+def timed(fn, repeats: int):
+    """The median time of ``repeats`` calls and the last call's result."""
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        fn()
+        result = fn()
         times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return statistics.median(times), result
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--runs", type=int, default=400, help="runs per measurement")
-    parser.add_argument("--chunk-size", type=int, default=campaign.spec.DEFAULT_CHUNK_SIZE)
+    parser.add_argument("--chunk-size", type=int, default=None, help="default: automatic")
     args = parser.parse_args()
 
     from distributed import Client, LocalCluster
@@ -65,13 +68,23 @@ def main() -> None:
     try:
         for controller in ("LQR", "MPC"):
             c = campaign.load_spec(spec(controller, args.runs, args.chunk_size))
-            local = timed(lambda c=c: campaign.run(c, progress=False, plots=False), args.repeats)
-            dask = timed(
+            local, res = timed(
+                lambda c=c: campaign.run(c, progress=False, plots=False), args.repeats
+            )
+            dask, res_dask = timed(
                 lambda c=c: campaign.run(c, scheduler=address, progress=False, plots=False),
                 args.repeats,
             )
-            chunks = -(-c.runs // c.chunk_size)
-            rows.append((controller, c.runs, chunks, c.runs / local / cores, c.runs / dask / cores))
+            rows.append(
+                (
+                    controller,
+                    c.runs,
+                    f"{res.chunks} x {res.chunk_size}",
+                    f"{res_dask.chunks} x {res_dask.chunk_size}",
+                    c.runs / local / cores,
+                    c.runs / dask / cores,
+                )
+            )
 
         one = campaign.load_spec(spec("LQR", 1, 1))
         payload = {"spec": one.data, "hash": one.spec_hash, "version": riprs.__version__}
@@ -91,15 +104,17 @@ def main() -> None:
     finally:
         cluster.close()
 
-    print(f"{cores} cores; medians of {args.repeats}; chunk size {args.chunk_size}")
+    sizing = "automatic" if args.chunk_size is None else str(args.chunk_size)
+    print(f"{cores} cores; medians of {args.repeats}; chunk size {sizing}")
     print(
-        "| controller | runs (chunks) | in process, runs/s per core | local Dask cluster, "
-        "runs/s per core | cluster / in process |"
+        "| controller | runs | chunks x runs (in process / cluster) | in process, runs/s per "
+        "core | local Dask cluster, runs/s per core | cluster / in process |"
     )
-    print("| --- | ---: | ---: | ---: | ---: |")
-    for controller, runs, chunks, local, dask in rows:
+    print("| --- | ---: | ---: | ---: | ---: | ---: |")
+    for controller, runs, local_chunks, dask_chunks, local, dask in rows:
         print(
-            f"| {controller} | {runs} ({chunks}) | {local:.0f} | {dask:.0f} | {dask / local:.2f} |"
+            f"| {controller} | {runs} | {local_chunks} / {dask_chunks} | {local:.0f} | "
+            f"{dask:.0f} | {dask / local:.2f} |"
         )
     print(
         f"overhead per chunk through the cluster: {overhead * 1e3:.1f} ms "

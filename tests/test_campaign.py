@@ -4,11 +4,13 @@ real Dask cluster (a scheduler and two workers as processes) that loses a worker
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -332,6 +334,123 @@ def test_interrupt_from_python_then_resume_equals_one_uninterrupted_run(tmp_path
         assert {f"{stem}.png", f"{stem}.svg"} <= names
 
 
+def _brute_means(rows, controllers, group, metric):
+    """Per controller and combination of the values of ``group``, the mean by hand: the fall
+    rate over every run, an RMSE over the runs that neither fell nor diverged."""
+    cells: dict = {}
+    for r in rows:
+        key = (r["controller"], *(r[n] for n in group))
+        if metric == "fall_rate":
+            cells.setdefault(key, []).append(float(r["fell"]))
+        elif not (r["fell"] or r["diverged"]):
+            cells.setdefault(key, []).append(r[metric])
+    values = [sorted({r[n] for r in rows}) for n in group]
+    shape = (len(controllers), *(len(v) for v in values))
+    mean = np.full(shape, np.nan)
+    for key, xs in cells.items():
+        along = (v.index(x) for v, x in zip(values, key[1:], strict=True))
+        mean[(controllers.index(key[0]), *along)] = sum(xs) / len(xs)
+    return values, mean
+
+
+def test_a_resumed_campaign_is_summarised_chunk_by_chunk_without_loading_every_row(
+    tmp_path, monkeypatch
+):
+    from riprs.campaign import engine as campaign_engine
+
+    c = campaign.load_spec(tomllib.loads(SMALL))
+    out = tmp_path / "out"
+
+    def stop_after_two(done, total):
+        if done >= 10:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        campaign.run(c, out, progress=False, plots=False, on_chunk=stop_after_two)
+
+    def load_every_row(*args, **kwargs):
+        raise AssertionError("run() read every row into one table")
+
+    monkeypatch.setattr(campaign_engine, "load", load_every_row)
+    resumed = campaign.run(c, out, progress=False, plots=True)
+    monkeypatch.undo()
+    assert resumed.aggregates.runs == c.runs and len(resumed.files) == 6
+    rows = campaign.load(out).to_pylist()
+    for group in [(), ("mp",), ("noise_std",), ("lqr.R",), ("mp", "noise_std")]:
+        for metric in ("fall_rate", "rmse_arm", "rmse_pendulum", "rmse_voltage"):
+            names, values, mean = resumed.aggregates.aggregate(group, metric)
+            want_values, want = _brute_means(rows, ["LQR", "MPC"], group, metric)
+            assert names == ["LQR", "MPC"]
+            for v, w in zip(values, want_values, strict=True):
+                np.testing.assert_array_equal(v, w)
+            np.testing.assert_allclose(mean, want, rtol=1e-12, equal_nan=True)
+    assert campaign.summary(resumed.aggregates) == campaign.summary(campaign.load(out))
+    assert resumed.table.num_rows == c.runs  # read from disk only when asked for
+
+
+def test_a_resume_records_each_session_and_refuses_another_riprs_version(tmp_path):
+    c = campaign.load_spec(tomllib.loads(SMALL))
+    out = tmp_path / "out"
+    path = out / "manifest.json"
+    campaign.run(c, out, progress=False, plots=False)
+    first = json.loads(path.read_text())
+    assert first["versions"]["riprs"] == riprs.__version__
+    assert [s["engine"] for s in first["sessions"]] == ["in-process"]
+    # Other packages may change between sessions: each session's versions are kept.
+    first["versions"]["numpy"] = first["sessions"][0]["versions"]["numpy"] = "0.0-old"
+    path.write_text(json.dumps(first))
+    campaign.run(c, out, progress=False, plots=False)
+    second = json.loads(path.read_text())
+    assert second["versions"]["numpy"] == "0.0-old"
+    assert [s["versions"]["numpy"] for s in second["sessions"]] == ["0.0-old", np.__version__]
+    # Another riprs computed the runs on disk: refused, both versions named, nothing touched.
+    second["versions"]["riprs"] = "0.0.1-old"
+    path.write_text(json.dumps(second))
+    before = (path.read_bytes(), sorted(os.listdir(out / "runs")))
+    with pytest.raises(campaign.CampaignError) as info:
+        campaign.run(c, out, progress=False, plots=False)
+    message = str(info.value)
+    assert "riprs 0.0.1-old" in message and f"riprs {riprs.__version__}" in message
+    assert "another --out" in message and str(out) in message
+    assert (path.read_bytes(), sorted(os.listdir(out / "runs"))) == before
+
+
+def test_dask_holds_a_bounded_window_of_chunks_in_flight():
+    from distributed import Client, LocalCluster
+
+    from riprs.campaign.engine import _on_dask
+    from riprs.campaign.store import _pending
+
+    c = campaign.load_spec(tomllib.loads(SMALL))
+    chunks = _pending([], c.runs, 2)
+    assert len(chunks) == 24
+    got: dict = {}
+    most = 0
+    with (
+        LocalCluster(
+            n_workers=1, threads_per_worker=2, processes=False, dashboard_address=":0"
+        ) as cluster,
+        Client(cluster, set_as_default=False) as client,
+    ):
+        submitted = []
+        submit = client.submit
+
+        def counting_submit(*args, **kwargs):
+            submitted.append(args[2:4])
+            return submit(*args, **kwargs)
+
+        client.submit = counting_submit
+        for chunk, columns in _on_dask(c, chunks, client, 3):
+            # In flight: submitted, not finished (this one has).
+            most = max(most, len(submitted) - len(got) - 1)
+            got[chunk] = columns
+    assert 1 < most <= 3
+    assert sorted(got) == chunks and sorted(submitted) == chunks
+    whole = campaign.compute_chunk(c, 0, c.runs)
+    for (a, b), columns in got.items():
+        np.testing.assert_array_equal(columns["rmse_pendulum"], whole["rmse_pendulum"][a:b])
+
+
 def test_map_cells_average_the_runs_they_hold():
     from riprs.campaign.plots import aggregate
 
@@ -566,6 +685,86 @@ def test_the_cli_names_a_bad_scheduler_and_exits_cleanly(tmp_path, address, expe
     assert len(lines) == 1, err
     assert expected in lines[0] and address in lines[0]
     assert not (tmp_path / "out").exists()
+
+
+@contextlib.contextmanager
+def _not_a_scheduler(answer: bytes | None):
+    """A local TCP port that accepts connections and writes ``answer`` on each (None: says
+    nothing); yields its address and the list of accepted connections."""
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    server.settimeout(0.1)
+    accepted: list[socket.socket] = []
+    stop = threading.Event()
+
+    def serve():
+        while not stop.is_set():
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                continue
+            accepted.append(conn)
+            if answer is not None:
+                with contextlib.suppress(OSError):
+                    conn.sendall(answer)
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    try:
+        yield f"tcp://127.0.0.1:{server.getsockname()[1]}", accepted
+    finally:
+        stop.set()
+        thread.join()
+        for conn in accepted:
+            conn.close()
+        server.close()
+
+
+@pytest.mark.parametrize(
+    "answer",
+    [
+        # The length of a Dask message (64 kB) and then only part of it.
+        (65536).to_bytes(8, "little") + b"\x00" * 100,
+        b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n" + bytes(range(256)) * 8,
+        None,
+    ],
+    ids=["truncated-frame", "http", "silent"],
+)
+def test_a_port_that_is_not_a_scheduler_is_one_line_in_bounded_time(tmp_path, answer):
+    spec = _spec(tmp_path, SMALL)
+    with _not_a_scheduler(answer) as (address, _):
+        proc = _run_cli([str(spec), "--out", str(tmp_path / "out"), "--scheduler", address])
+        try:
+            # The default connection timeout is 10 s; a hang fails here, not the whole run.
+            _, err = proc.communicate(timeout=120)
+        finally:
+            proc.kill()
+    assert proc.returncode not in (0, None)
+    assert "Traceback" not in err, err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1, err
+    assert "cannot reach the Dask scheduler" in lines[0] and address in lines[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_ctrl_c_ends_the_wait_for_a_scheduler_that_never_answers(tmp_path):
+    spec = _spec(tmp_path, SMALL)
+    with _not_a_scheduler(None) as (address, accepted):
+        proc = _run_cli([str(spec), "--out", str(tmp_path / "out"), "--scheduler", address])
+        try:
+            deadline = time.monotonic() + 120
+            # The plain connection check, then the handshake that gets no answer.
+            while len(accepted) < 2:
+                assert proc.poll() is None and time.monotonic() < deadline, proc.stderr
+                time.sleep(0.05)
+            proc.send_signal(signal.SIGINT)
+            _, err = proc.communicate(timeout=60)
+        finally:
+            proc.kill()
+    # 130: ended by the interrupt, not by the 10 s connection timeout (exit 1, "cannot reach").
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "cannot reach" not in err, err
 
 
 DASK_SPEC = """

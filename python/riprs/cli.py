@@ -108,9 +108,9 @@ def cmd_campaign(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 130
-    print(campaign.summary(result.table))
+    print(campaign.summary(result.aggregates))
     print(
-        f"{result.table.num_rows} runs in {args.out}/runs ({result.chunks} chunks of "
+        f"{result.aggregates.runs} runs in {args.out}/runs ({result.chunks} chunks of "
         f"{result.chunk_size} runs computed now, engine: {result.engine}); "
         f"{len(result.files)} figures"
     )

@@ -37,13 +37,16 @@ are compared on the same noise). Everything a run does follows from its index an
 results are identical whatever the engine, the chunking or the order in which chunks finish.
 
 Results go to ``DIR/runs/*.parquet``, one row per run, written chunk by chunk (temporary file,
-then rename) with ``DIR/manifest.json`` (spec hash, engine, versions) and a copy of the spec.
-Running the same spec into the same ``DIR`` again skips the runs already on disk; another spec
-is refused.
+then rename) with ``DIR/manifest.json`` (spec hash, and the engine and package versions of
+each session that wrote runs) and a copy of the spec. Running the same spec into the same
+``DIR`` again skips the runs already on disk; another spec, or results of another riprs
+version, is refused. The summary and the figures are summed chunk by chunk
+(:class:`Aggregates`): memory does not grow with the number of runs.
 """
 
 from riprs.campaign.chunk import compute_chunk
 from riprs.campaign.engine import CampaignResult, run, summary
+from riprs.campaign.plots import Aggregates
 from riprs.campaign.spec import (
     COLUMNS,
     EXAMPLE_SPEC,
@@ -59,6 +62,7 @@ __all__ = [
     "COLUMNS",
     "EXAMPLE_SPEC",
     "METRICS",
+    "Aggregates",
     "Axis",
     "Campaign",
     "CampaignError",

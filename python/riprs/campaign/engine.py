@@ -14,6 +14,7 @@ from typing import Any, Union
 
 from riprs import __version__
 from riprs.campaign.chunk import _run_payload_chunk, compute_chunk
+from riprs.campaign.plots import Aggregates
 from riprs.campaign.spec import DEFAULT_CHUNK_SIZE, Campaign, CampaignError, _int, load_spec
 from riprs.campaign.store import (
     _EXTRA,
@@ -21,6 +22,7 @@ from riprs.campaign.store import (
     _done_ranges,
     _exclusive,
     _pending,
+    _read_chunk,
     _require_arrow,
     _to_table,
     _write_chunk,
@@ -44,8 +46,9 @@ class CampaignResult:
     Attributes
     ----------
     campaign : Campaign
-    table : pyarrow.Table
-        One row per run, sorted by ``run``.
+    aggregates : Aggregates
+        Fall rates and mean RMSEs per controller, per axis value and over the map's two axes:
+        what :func:`summary` and the figures show, summed chunk by chunk (bounded memory).
     out : Path or None
     engine : str
     files : list of Path
@@ -57,12 +60,21 @@ class CampaignResult:
     """
 
     campaign: Campaign
-    table: Any
+    aggregates: Aggregates
     out: Path | None
     engine: str
     files: list[Path] = field(default_factory=list)
     chunks: int = 0
     chunk_size: int = 0
+    _table: Any = field(default=None, repr=False)
+
+    @property
+    def table(self) -> Any:
+        """Every run as one ``pyarrow.Table`` sorted by ``run`` (read from ``out`` on first
+        use: all rows in memory, unlike :attr:`aggregates`)."""
+        if self._table is None and self.out is not None:
+            self._table = load(self.out)
+        return self._table
 
 
 ChunkResult = tuple[tuple[int, int], dict[str, Any]]
@@ -149,6 +161,56 @@ def _client_class(client: type) -> type:
     return _Client
 
 
+def _probe_scheduler(scheduler: str, timeout: float) -> None:
+    """Refuses, in one line and within ``timeout`` s, a peer that accepts connections but does
+    not answer Dask's handshake and ``identity`` call as a scheduler does (junk, or silence).
+
+    distributed's own connect waits for the peer's handshake without a time limit, and a
+    client's start-up cannot be interrupted, so the exchange runs on a daemon thread while
+    this thread waits in short slices: Ctrl-C ends the wait at once, and a peer that never
+    answers is left behind with the thread.
+    """
+    import asyncio
+    import threading
+    import time
+
+    from distributed.comm import connect
+    from distributed.security import Security
+
+    outcome: list[Any] = []
+
+    async def identity() -> Any:
+        args = Security().get_connection_args("client")
+        comm = await connect(scheduler, timeout=timeout, **args)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    def exchange() -> None:
+        try:
+            outcome.append(asyncio.run(asyncio.wait_for(identity(), timeout)))
+        except BaseException as exc:  # whatever the peer caused; reported below
+            outcome.append(exc)
+
+    thread = threading.Thread(target=exchange, name="riprs-scheduler-probe", daemon=True)
+    thread.start()
+    deadline = time.monotonic() + timeout
+    while thread.is_alive() and time.monotonic() < deadline:
+        thread.join(0.1)
+    answer = outcome[0] if outcome else None
+    if isinstance(answer, dict) and answer.get("type") == "Scheduler":
+        return
+    if answer is None or isinstance(answer, (TimeoutError, asyncio.TimeoutError)):
+        reason = f"no answer as a Dask scheduler within {timeout:g} s"
+    elif isinstance(answer, BaseException):
+        reason = f"it does not answer as a Dask scheduler ({type(answer).__name__})"
+    else:
+        reason = "it does not answer as a Dask scheduler"
+    raise CampaignError(f"cannot reach the Dask scheduler at {scheduler}: {reason}")
+
+
 def _connect(scheduler: str | None, workers: int | None, timeout: float) -> tuple[Any, Any]:
     """A Dask client (and the local cluster it owns, if any); errors before any work."""
     try:
@@ -168,6 +230,7 @@ def _connect(scheduler: str | None, workers: int | None, timeout: float) -> tupl
             raise CampaignError(
                 f"cannot reach the Dask scheduler at {scheduler}: {reason}"
             ) from None
+        _probe_scheduler(scheduler, timeout)
         try:
             client = _client_class(Client)(scheduler, timeout=timeout, set_as_default=False)
         except Exception as exc:  # whatever the peer sent: it is not a usable scheduler
@@ -205,33 +268,55 @@ def _connect(scheduler: str | None, workers: int | None, timeout: float) -> tupl
 
 
 def _on_dask(
-    campaign: Campaign, chunks: Sequence[tuple[int, int]], client: Any
+    campaign: Campaign, chunks: Sequence[tuple[int, int]], client: Any, window: int
 ) -> Iterator[ChunkResult]:
     """Chunks as Dask tasks; a worker that dies has its tasks recomputed elsewhere by the
-    scheduler, and every result comes back here to be written."""
+    scheduler, and every result comes back here to be written.
+
+    At most ``window`` chunks are submitted at a time, another one as each finishes: a
+    campaign of millions of chunks never holds millions of futures (nor the scheduler as many
+    tasks), while the workers always have the next chunks queued.
+    """
     from distributed import as_completed
 
     payload = {"spec": campaign.data, "hash": campaign.spec_hash, "version": __version__}
-    futures = {}
-    for start, stop in chunks:
+    todo = iter(chunks)
+    futures: dict[str, tuple[Any, tuple[int, int]]] = {}
+
+    def submit() -> Any:
+        c = next(todo, None)
+        if c is None:
+            return None
         fut = client.submit(
             _run_payload_chunk,
             payload,
-            start,
-            stop,
-            key=f"riprs-campaign-{campaign.spec_hash[:16]}-{start}-{stop}",
+            *c,
+            key=f"riprs-campaign-{campaign.spec_hash[:16]}-{c[0]}-{c[1]}",
             retries=2,
         )
-        futures[fut.key] = (fut, (start, stop))
+        futures[fut.key] = (fut, c)
+        return fut
+
+    first = [f for f in (submit() for _ in range(max(1, window))) if f is not None]
+    finished = as_completed(first, loop=client.loop)
     try:
-        for fut in as_completed([f for f, _ in futures.values()], loop=client.loop):
+        for fut in finished:
             _, c = futures.pop(fut.key)
             result = fut.result()
             fut.release()
+            nxt = submit()
+            if nxt is not None:
+                finished.add(nxt)
             yield c, result
     finally:
         if futures:
             client.cancel([f for f, _ in futures.values()])
+
+
+def _dask_window(slots: int) -> int:
+    """Chunks in flight on a cluster of ``slots`` worker threads: four each, so that a worker
+    finishing a chunk finds the next one queued while its result travels back."""
+    return 4 * max(slots, 1)
 
 
 def _auto_chunk_size(runs: int, slots: int) -> int:
@@ -305,7 +390,7 @@ def run(
         _scheduler_address(scheduler)
     if workers is not None:
         _int(workers, "workers", 1)
-    pair = None
+    pair: tuple[str, str] | None = None
     if map_axes is not None:
         names = [a.name for a in campaign.axes]
         if len(map_axes) != 2 or len(set(map_axes)) != 2:
@@ -337,12 +422,16 @@ def run(
     client = cluster = None
     if missing and engine != "in-process":
         client, cluster = _connect(scheduler, workers, connect_timeout)
+    slots = _local_threads()
+    if client is not None:
+        slots = sum(w["nthreads"] for w in client.scheduler_info()["workers"].values())
     if size is None:
-        slots = _local_threads()
-        if client is not None:
-            slots = sum(w["nthreads"] for w in client.scheduler_info()["workers"].values())
         size = _auto_chunk_size(missing, slots)
     chunks = _pending(done, campaign.runs, size)
+    names = [a.name for a in campaign.axes]
+    if pair is None and len(names) >= 2:
+        pair = (names[0], names[1])
+    aggregates = Aggregates(campaign, [(), *((n,) for n in names), *([pair] if pair else [])])
     bar = None
     computed = 0
     try:
@@ -368,13 +457,14 @@ def run(
             stream = (
                 _in_process(campaign, chunks)
                 if client is None
-                else _on_dask(campaign, chunks, client)
+                else _on_dask(campaign, chunks, client, _dask_window(slots))
             )
             for (start, stop), columns in stream:
                 if out_path is not None:
                     _write_chunk(out_path / "runs", start, stop, columns)
                 else:
                     results[(start, stop)] = columns
+                aggregates.add(columns)
                 computed += 1
                 done_runs += stop - start
                 if bar is not None:
@@ -389,31 +479,41 @@ def run(
         if cluster is not None:
             cluster.close()
 
+    table = None
     if out_path is not None:
-        table = load(out_path)
-    else:
+        # The chunks found on disk, one file at a time: memory stays that of one chunk.
+        for start, stop in done:
+            aggregates.add(_read_chunk(out_path / "runs", start, stop))
+    elif results:
         pa = _require_arrow()
-        table = (
-            pa.concat_tables([_to_table(results[c]) for c in sorted(results)]) if results else None
-        )
-    result = CampaignResult(campaign, table, out_path, engine, chunks=computed, chunk_size=size)
-    if plots and out_path is not None and table is not None:
+        table = pa.concat_tables([_to_table(results[c]) for c in sorted(results)])
+    result = CampaignResult(
+        campaign, aggregates, out_path, engine, chunks=computed, chunk_size=size, _table=table
+    )
+    if plots and out_path is not None and aggregates.runs:
         from riprs.campaign import plots as campaign_plots
 
-        result.files = campaign_plots.plot_campaign(campaign, table, out_path, pair)
+        result.files = campaign_plots.plot_campaign(campaign, aggregates, out_path, pair)
     return result
 
 
-def summary(table: Any) -> str:
-    """Per controller: runs, fall rate and the mean of each RMSE over the runs that stayed up."""
+def summary(results: Any) -> str:
+    """Per controller: runs, fall rate and the mean of each RMSE over the runs that stayed up.
+
+    ``results`` is a table of runs (:func:`load`) or a campaign's :class:`Aggregates`.
+    """
+    import numpy as np
+
     from riprs.campaign.plots import aggregate
 
     names = ("rmse_arm", "rmse_pendulum", "rmse_voltage")
-    controllers, _, falls = aggregate(table, (), "fall_rate")
-    means = [aggregate(table, (), m)[2] for m in names]
-    counts = {c: 0 for c in controllers}
-    for c in table.column("controller").to_pylist():
-        counts[c] += 1
+    controllers, _, falls = aggregate(results, (), "fall_rate")
+    means = [aggregate(results, (), m)[2] for m in names]
+    if isinstance(results, Aggregates):
+        counts = dict(zip(controllers, results.run_counts(), strict=True))
+    else:
+        column = np.asarray(results.column("controller").to_numpy(zero_copy_only=False))
+        counts = {c: int(np.count_nonzero(column == c)) for c in controllers}
     lines = [
         f"{'controller':<11}{'runs':>9}{'falls':>8}{'arm [rad]':>12}{'pendulum [rad]':>16}"
         f"{'voltage [V]':>13}   (RMSE: mean over the runs that stayed up)"

@@ -2,18 +2,19 @@
 
 Every value is an average over the runs of a cell (all seeds, and all values of the axes not
 shown): the fall rate over every run, an RMSE over the runs that stayed up (a cell where every
-run fell is blank). matplotlib runs headless (Agg).
+run fell is blank). Each figure takes a table of runs or, for a campaign of any size, its
+:class:`Aggregates` (sums kept chunk by chunk). matplotlib runs headless (Agg).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["aggregate", "plot_campaign", "plot_map", "plot_marginals"]
+__all__ = ["Aggregates", "aggregate", "plot_campaign", "plot_map", "plot_marginals"]
 
 LABELS = {
     "fall_rate": "fall rate",
@@ -41,16 +42,46 @@ def _column(table: Any, name: str) -> np.ndarray:
     return np.asarray(table.column(name).to_numpy(zero_copy_only=False))
 
 
+def _sums(
+    cells: np.ndarray, size: int, columns: Mapping[str, Any], metric: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per cell (``cells[i]`` is run ``i``'s), the sum of ``metric`` over the runs it counts
+    and their number: every run for ``"fall_rate"`` (the value is ``fell``); for a result
+    column, the runs that neither fell nor diverged and have a value."""
+    fell = np.asarray(columns["fell"]).astype(bool)
+    if metric == "fall_rate":
+        weight = np.ones(len(fell))
+        data = fell.astype(float)
+    else:
+        column = np.asarray(columns[metric]).astype(float)
+        up = ~fell
+        if "diverged" in columns:
+            up &= ~np.asarray(columns["diverged"]).astype(bool)
+        weight = (up & np.isfinite(column)).astype(float)
+        data = np.where(weight > 0, column, 0.0)
+    total = np.bincount(cells, weights=data * weight, minlength=size)
+    count = np.bincount(cells, weights=weight, minlength=size)
+    return total, count
+
+
+def _mean(total: np.ndarray, count: np.ndarray) -> np.ndarray:
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(count > 0, total / np.maximum(count, 1e-300), np.nan)
+
+
 def aggregate(
     table: Any, axes: Sequence[str], metric: str
 ) -> tuple[list[str], list[np.ndarray], np.ndarray]:
     """Per controller, the mean of ``metric`` over each cell of ``axes``.
 
     ``metric`` is ``"fall_rate"`` (mean of ``fell`` over every run) or a result column (mean
-    over the runs that neither fell nor diverged and have a value). Returns the controllers,
-    the sorted values of each axis and an array of shape
+    over the runs that neither fell nor diverged and have a value). ``table`` is a
+    ``pyarrow.Table`` of runs or the :class:`Aggregates` of a campaign. Returns the
+    controllers, the sorted values of each axis and an array of shape
     ``(controllers, len(values[0]), len(values[1]), ...)``.
     """
+    if isinstance(table, Aggregates):
+        return table.aggregate(axes, metric)
     controllers = list(dict.fromkeys(_column(table, "controller").tolist()))
     ctrl = np.array([controllers.index(c) for c in _column(table, "controller").tolist()])
     values, index = [], []
@@ -61,23 +92,78 @@ def aggregate(
         index.append(inv)
     shape = (len(controllers), *(len(v) for v in values))
     flat = np.ravel_multi_index((ctrl, *index), shape)
-    fell = _column(table, "fell").astype(bool)
-    if metric == "fall_rate":
-        weight = np.ones(len(fell))
-        data = fell.astype(float)
-    else:
-        column = _column(table, metric).astype(float)
-        up = ~fell
-        if "diverged" in table.column_names:
-            up &= ~_column(table, "diverged").astype(bool)
-        weight = (up & np.isfinite(column)).astype(float)
-        data = np.where(weight > 0, column, 0.0)
-    size = int(np.prod(shape))
-    total = np.bincount(flat, weights=data * weight, minlength=size)
-    count = np.bincount(flat, weights=weight, minlength=size)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = np.where(count > 0, total / np.maximum(count, 1e-300), np.nan)
-    return controllers, values, mean.reshape(shape)
+    names = [n for n in ("fell", "diverged", metric) if n in table.column_names]
+    columns = {name: _column(table, name) for name in names}
+    total, count = _sums(flat, int(np.prod(shape)), columns, metric)
+    return controllers, values, _mean(total, count).reshape(shape)
+
+
+class Aggregates:
+    """What the summary and the figures of a campaign show, summed chunk by chunk.
+
+    Holds, per controller and per cell of each group of axes (``()`` for the whole campaign,
+    one axis for a marginal plot, two for a map), the sum and count of each of
+    :attr:`METRICS` (:func:`aggregate`'s rule). Memory grows with the cells, never with the
+    runs: a campaign of any size is summarised while its chunks stream past.
+
+    Parameters
+    ----------
+    campaign : Campaign
+    groups : sequence of tuples of axis names
+    """
+
+    #: The means kept: the fall rate and the three RMSEs.
+    METRICS = ("fall_rate", "rmse_arm", "rmse_pendulum", "rmse_voltage")
+
+    def __init__(self, campaign: Any, groups: Sequence[tuple[str, ...]]) -> None:
+        self.campaign = campaign
+        self.controllers = list(campaign.controllers)
+        self.runs = 0
+        axes = {a.name: a for a in campaign.axes}
+        # Cells are the distinct axis values (equal values of two points share a cell).
+        self._unique = {
+            name: np.unique(a.values, return_inverse=True) for name, a in axes.items()
+        }
+        self._sums: dict[tuple[tuple[str, ...], str], list[np.ndarray]] = {}
+        self._shapes: dict[tuple[str, ...], tuple[int, ...]] = {}
+        for group in dict.fromkeys(tuple(g) for g in groups):
+            for name in group:
+                if name not in axes:
+                    raise KeyError(f"no axis {name!r}; axes: {', '.join(axes)}")
+            shape = (len(self.controllers), *(len(self._unique[n][0]) for n in group))
+            self._shapes[group] = shape
+            size = int(np.prod(shape))
+            for metric in self.METRICS:
+                self._sums[(group, metric)] = [np.zeros(size), np.zeros(size)]
+
+    def add(self, columns: Mapping[str, Any]) -> None:
+        """Fold in the result columns of some runs (a chunk, or a Parquet file of one)."""
+        runs = np.asarray(columns["run"], dtype=np.int64)
+        idx = self.campaign.index(runs)
+        for group, shape in self._shapes.items():
+            index = [self._unique[n][1][idx[f"axis:{n}"]] for n in group]
+            cells = np.ravel_multi_index((idx["controller"], *index), shape)
+            for metric in self.METRICS:
+                total, count = _sums(cells, int(np.prod(shape)), columns, metric)
+                sums = self._sums[(group, metric)]
+                sums[0] += total
+                sums[1] += count
+        self.runs += len(runs)
+
+    def run_counts(self) -> list[int]:
+        """Runs added per controller."""
+        return [int(n) for n in self._sums[((), "fall_rate")][1]]
+
+    def aggregate(
+        self, axes: Sequence[str], metric: str
+    ) -> tuple[list[str], list[np.ndarray], np.ndarray]:
+        """As :func:`aggregate` of the table of every run added."""
+        group = tuple(axes)
+        if (group, metric) not in self._sums:
+            raise KeyError(f"{metric!r} over {list(group)} was not aggregated")
+        total, count = self._sums[(group, metric)]
+        values = [self._unique[n][0] for n in group]
+        return self.controllers, values, _mean(total, count).reshape(self._shapes[group])
 
 
 def _edges(v: np.ndarray) -> np.ndarray:
@@ -184,7 +270,8 @@ def plot_campaign(
     campaign: Any, table: Any, out: Path, axes: tuple[str, str] | None = None
 ) -> list[Path]:
     """The default figures: fall-rate and pendulum-RMSE maps over ``axes`` (default: the first
-    two axes of the spec), and the marginal plots over every axis."""
+    two axes of the spec), and the marginal plots over every axis. ``table`` is a table of
+    runs or :class:`Aggregates` holding those axes."""
     names = [a.name for a in campaign.axes]
     files: list[Path] = []
     pair = axes or (tuple(names[:2]) if len(names) >= 2 else None)

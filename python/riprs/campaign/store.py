@@ -26,7 +26,9 @@ PathLike = Union[str, "os.PathLike[str]"]
 
 _EXTRA = "pip install 'riprs[campaign]'"
 _CHUNK_FILE = re.compile(r"^part-(\d{10})-(\d{10})\.parquet$")
-_MANIFEST_FORMAT = 1
+# 2: "sessions" (engine, versions and start of each call that wrote runs) in place of
+# "engines"; "versions" are those of the first session.
+_MANIFEST_FORMAT = 2
 
 
 # -- results on disk ----------------------------------------------------------------------------
@@ -78,6 +80,17 @@ def _write_chunk(runs_dir: Path, start: int, stop: int, columns: Mapping[str, An
     return path
 
 
+def _read_chunk(runs_dir: Path, start: int, stop: int) -> dict[str, np.ndarray]:
+    """The columns of one chunk file that :class:`~riprs.campaign.plots.Aggregates` sums."""
+    import pyarrow.parquet as pq
+
+    from riprs.campaign.plots import Aggregates
+
+    wanted = ["run", "fell", "diverged", *(m for m in Aggregates.METRICS if m != "fall_rate")]
+    table = pq.read_table(_chunk_path(runs_dir, start, stop), columns=wanted)
+    return {n: np.asarray(table.column(n).to_numpy(zero_copy_only=False)) for n in wanted}
+
+
 def _done_ranges(runs_dir: Path, total: int) -> list[tuple[int, int]]:
     """The run ranges of the chunk files in ``runs_dir``, sorted."""
     ranges = []
@@ -125,7 +138,9 @@ def _versions(engine: str) -> dict[str, str]:
 
 def _check_out(campaign: Campaign, out: Path) -> dict[str, Any] | None:
     """The manifest ``out`` holds for this campaign (None for a new directory); refuses a
-    directory that holds another spec's results or anything else. Changes nothing."""
+    directory that holds another spec's results, results of another riprs version (a run's
+    numbers are riprs's: two versions are never mixed in one table) or anything else.
+    Changes nothing."""
     manifest_path = out / "manifest.json"
     if manifest_path.exists():
         try:
@@ -137,6 +152,14 @@ def _check_out(campaign: Campaign, out: Path) -> dict[str, Any] | None:
             raise CampaignError(
                 f"{out} holds results of another spec (hash {old_hash[:12]}, this spec "
                 f"{campaign.spec_hash[:12]}); choose another --out or remove {out}"
+            )
+        versions = previous.get("versions")
+        old = versions.get("riprs") if isinstance(versions, dict) else None
+        if old != __version__:
+            raise CampaignError(
+                f"{out} holds results of riprs {old or '(version not recorded)'} and this is "
+                f"riprs {__version__}; runs of two versions are not mixed: finish it with riprs "
+                f"{old or 'that version'}, or start anew with another --out (or remove {out})"
             )
         return previous
     if out.exists() and (not out.is_dir() or any(p.name != ".lock" for p in out.iterdir())):
@@ -156,6 +179,14 @@ def _write_manifest(
     # Left by a process killed mid-write (SIGKILL, power loss); its chunk is run again.
     for stale in (out / "runs").glob(".part-*.tmp"):
         stale.unlink(missing_ok=True)
+    previous = previous or {}
+    session = {
+        "engine": engine,
+        "versions": _versions(engine),
+        "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+    # Format 1 kept only the engines of earlier calls.
+    earlier = previous.get("sessions", [{"engine": e} for e in previous.get("engines", [])])
     manifest = {
         "format": _MANIFEST_FORMAT,
         "spec_hash": campaign.spec_hash,
@@ -167,10 +198,10 @@ def _write_manifest(
             for a in campaign.axes
         ],
         "engine": engine,
-        "engines": [*(previous or {}).get("engines", []), engine],
-        "versions": _versions(engine),
-        "created": (previous or {}).get("created", time.strftime("%Y-%m-%dT%H:%M:%S%z")),
-        "updated": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "versions": previous.get("versions", session["versions"]),
+        "sessions": [*earlier, session],
+        "created": previous.get("created", session["started"]),
+        "updated": session["started"],
         "spec": campaign.data,
     }
     tmp = out / ".manifest.json.tmp"
