@@ -312,7 +312,9 @@ chunk_size = 12
     assert not [p for p in (out / "runs").iterdir() if not p.name.startswith("part-")]
 
 
-def test_interrupt_from_python_then_resume_equals_one_uninterrupted_run(tmp_path):
+def _interrupted_after_two_chunks(tmp_path):
+    """SMALL run into ``tmp_path/out`` and interrupted (KeyboardInterrupt from ``on_chunk``)
+    once two of its 5-run chunks are on disk."""
     c = campaign.load_spec(tomllib.loads(SMALL))
     out = tmp_path / "out"
 
@@ -322,6 +324,11 @@ def test_interrupt_from_python_then_resume_equals_one_uninterrupted_run(tmp_path
 
     with pytest.raises(KeyboardInterrupt):
         campaign.run(c, out, progress=False, plots=False, on_chunk=stop_after_two)
+    return c, out
+
+
+def test_interrupt_from_python_then_resume_equals_one_uninterrupted_run(tmp_path):
+    c, out = _interrupted_after_two_chunks(tmp_path)
     assert 0 < campaign.load(out).num_rows < c.runs
     with pytest.raises(campaign.CampaignError, match="'Lr' is not an axis"):
         campaign.run(c, out, map_axes=("mp", "Lr"))
@@ -358,15 +365,7 @@ def test_a_resumed_campaign_is_summarised_chunk_by_chunk_without_loading_every_r
 ):
     from riprs.campaign import engine as campaign_engine
 
-    c = campaign.load_spec(tomllib.loads(SMALL))
-    out = tmp_path / "out"
-
-    def stop_after_two(done, total):
-        if done >= 10:
-            raise KeyboardInterrupt
-
-    with pytest.raises(KeyboardInterrupt):
-        campaign.run(c, out, progress=False, plots=False, on_chunk=stop_after_two)
+    c, out = _interrupted_after_two_chunks(tmp_path)
 
     def load_every_row(*args, **kwargs):
         raise AssertionError("run() read every row into one table")
