@@ -23,6 +23,7 @@ from riprs.config import ConfigError, Spec, load_config
 from riprs.control import Controller, Lqg, Lqr, SwingUp
 from riprs.design import KalmanDesign, c2d, dare, dlqe, dlqr, kalman
 from riprs.excitation import excitation, excitation_defaults
+from riprs.identify import IdentifyError, IdentifyResult, IdentifyWarning, identify
 from riprs.log import LogError, RtLog, load_log
 from riprs.mpc import Mpc, MpcSolution
 from riprs.plant import FurutaParams, Plant
@@ -35,6 +36,9 @@ __all__ = [
     "Controller",
     "DivergedError",
     "FurutaParams",
+    "IdentifyError",
+    "IdentifyResult",
+    "IdentifyWarning",
     "InvalidParameterError",
     "KalmanDesign",
     "LogError",
@@ -64,6 +68,7 @@ __all__ = [
     "dlqr",
     "excitation",
     "excitation_defaults",
+    "identify",
     "kalman",
     "load_config",
     "load_log",

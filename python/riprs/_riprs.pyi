@@ -518,3 +518,12 @@ def excitation(
     kick: float | None = ...,
 ) -> _F: ...
 def excitation_defaults(signal: _SignalName) -> dict[str, float | int | str]: ...
+def identify_logs(
+    logs: list[tuple[float, ArrayLike, ArrayLike]],
+    start: FurutaParams,
+    *,
+    segment: float = 2.0,
+    holdout: float = 0.25,
+    max_iter: int = 60,
+    substeps: int = 4,
+) -> dict[str, Any]: ...

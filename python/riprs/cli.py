@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import re
 import sys
 from typing import Sequence
@@ -114,6 +115,42 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         f"{result.chunk_size} runs computed now, engine: {result.engine}); "
         f"{len(result.files)} figures"
     )
+    return 0
+
+
+def cmd_identify(args: argparse.Namespace) -> int:
+    """Fit the nonlinear model to excitation logs; report, figures and a [plant] file."""
+    import warnings
+    from pathlib import Path
+
+    from riprs.identify import IdentifyWarning, identify, plot_fit
+    from riprs.log import load_log
+
+    out = Path(args.out)
+    logs = [load_log(p) for p in args.logs]
+    names = [Path(p).stem for p in args.logs]
+    with warnings.catch_warnings():
+        # The report prints every warning once, after the numbers.
+        warnings.simplefilter("ignore", IdentifyWarning)
+        result = identify(
+            logs,
+            start=args.start,
+            holdout=args.holdout,
+            segment=args.segment,
+            max_iter=args.max_iter,
+        )
+    result = dataclasses.replace(result, names=tuple(names))
+    print(result.report())
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staged = out.with_name(out.name + ".tmp")
+    staged.write_text(result.to_toml(", ".join(Path(p).name for p in args.logs)))
+    staged.replace(out)
+    figures = []
+    if not args.no_plots:
+        for name, log in zip(names, logs, strict=True):
+            figures.append(plot_fit(result, log, name, out.with_name(f"{out.stem}-{name}.png")))
+    print()
+    print(f"wrote {out}" + (f" and {len(figures)} figures next to it" if figures else ""))
     return 0
 
 
@@ -232,6 +269,32 @@ def build_parser() -> argparse.ArgumentParser:
     camp.add_argument("--no-plots", action="store_true", help="skip the figures")
     camp.add_argument("--quiet", action="store_true", help="no progress bar")
     camp.set_defaults(func=cmd_campaign)
+    ident = sub.add_parser(
+        "identify",
+        help="fit the nonlinear model to rip-rt excite logs and write a [plant] file",
+        description="Output-error fit of the nonlinear Furuta model (rigid-body combinations, "
+        "motor constant, viscous and Coulomb friction, dead zone) to excitation logs; prints "
+        "the estimates with standard errors, the held-out fit per log and output and the "
+        "identifiability diagnostics, draws measured vs simulated for each log next to --out "
+        "and writes the [plant] file that riprs compare, rip-rt run and rip-rt emulate read.",
+    )
+    ident.add_argument("logs", nargs="+", metavar="LOG.csv", help="rip-rt excite logs")
+    ident.add_argument("--out", metavar="RIG.toml", required=True, help="[plant] file to write")
+    ident.add_argument(
+        "--start",
+        metavar="paper|qube_servo2|FILE",
+        default="qube_servo2",
+        help="start set; fixes mp, Lp, mr, Rm, km, g (default qube_servo2)",
+    )
+    ident.add_argument(
+        "--holdout", type=float, default=0.25, metavar="F", help="held-out fraction of each log"
+    )
+    ident.add_argument(
+        "--segment", type=float, default=2.0, metavar="S", help="simulated segment length (s)"
+    )
+    ident.add_argument("--max-iter", type=int, default=60, metavar="N", help="iteration limit")
+    ident.add_argument("--no-plots", action="store_true", help="skip the figures")
+    ident.set_defaults(func=cmd_identify)
     return parser
 
 

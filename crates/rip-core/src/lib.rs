@@ -12,7 +12,8 @@
 //!
 //! - [`paper`] — the study's model, its recovered unrounded matrices and printed results.
 //! - [`plant`] — the nonlinear Furuta pendulum ([`Plant`], [`FurutaParams`]) and RK4; [`fit`]
-//!   recovers physical parameters from a discrete linear model.
+//!   recovers physical parameters from a discrete linear model; [`identify`](mod@identify) fits
+//!   the nonlinear model to logged excitation runs.
 //! - [`regulators`] — [`Lqr`] and [`Lqg`] behind the [`Controller`] trait; [`sim`] runs them in
 //!   closed loop ([`simulate`], [`simulate_batch`]); [`metrics`] computes the paper's Tab. 1;
 //!   [`batch`] runs Monte Carlo studies that keep only per-run metrics.
@@ -33,6 +34,7 @@ pub mod dare;
 pub mod error;
 pub mod excitation;
 pub mod fit;
+pub mod identify;
 pub mod kalman;
 pub mod linalg;
 pub mod lqr;

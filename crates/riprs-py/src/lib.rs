@@ -11,6 +11,7 @@ mod convert;
 mod design;
 mod errors;
 mod excitation;
+mod identify;
 mod interrupt;
 mod mpc;
 mod paper;
@@ -33,5 +34,6 @@ fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     spec::register(m)?;
     swingup::register(m)?;
     excitation::register(m)?;
+    identify::register(m)?;
     Ok(())
 }

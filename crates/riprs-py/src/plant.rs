@@ -21,7 +21,7 @@ pub(crate) const PY_NAMES: [&str; N_PARAMS] = [
     "Rm", "kt", "km", "mr", "Lr", "Jr", "mp", "Lp", "Jp", "Dr", "Dp", "g", "Cr", "Cp", "Vd",
 ];
 
-fn py_name(core: &str) -> String {
+pub(crate) fn py_name(core: &str) -> String {
     PARAM_NAMES
         .iter()
         .position(|n| *n == core)

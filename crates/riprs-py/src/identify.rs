@@ -1,0 +1,106 @@
+//! Binding for `rip_core::identify`: the output-error fit of the nonlinear model to logs.
+
+use numpy::{PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use rip_core::identify::{identify, IdentifyOptions, LogData, FREE};
+use rip_core::RipError;
+
+use crate::convert::{mat_to_py, Count, Real};
+use crate::errors::{to_py, IntoPyResult};
+use crate::interrupt::interruptible;
+use crate::plant::{py_name, PyFurutaParams};
+
+/// Output-error identification of the nonlinear model (``rip_core::identify``).
+///
+/// ``logs`` is a list of ``(Ts, u, y)``: sample time (s), voltage (N,) and measured angles
+/// ``[theta, alpha]`` (N, 2; alpha continuous, 0 upright). Returns a dict with ``params``
+/// (FurutaParams), ``free`` (Python names of the estimated parameters), ``std_errors``,
+/// ``fit_percent`` and ``training_fit_percent`` (per log, ``[theta, alpha]``),
+/// ``not_identifiable``, ``at_bounds``, ``condition_number``, ``rank``, ``cost``,
+/// ``rms_residual``, ``iterations``, ``converged``, ``simulations``, ``segments``, ``Ad``,
+/// ``Bd``. Ctrl-C stops it (``KeyboardInterrupt``).
+#[pyfunction]
+#[pyo3(signature = (logs, start, *, segment=Real(2.0), holdout=Real(0.25), max_iter=Count::of(60), substeps=Count::of(4)))]
+#[pyo3(text_signature = "(logs, start, *, segment=2.0, holdout=0.25, max_iter=60, substeps=4)")]
+#[allow(clippy::type_complexity)]
+fn identify_logs<'py>(
+    py: Python<'py>,
+    logs: Vec<(Real, PyReadonlyArray1<'py, f64>, PyReadonlyArray2<'py, f64>)>,
+    start: PyFurutaParams,
+    segment: Real,
+    holdout: Real,
+    max_iter: Count,
+    substeps: Count,
+) -> PyResult<Bound<'py, PyDict>> {
+    let mut data = Vec::with_capacity(logs.len());
+    for (i, (ts, u, y)) in logs.iter().enumerate() {
+        let (u, y) = (u.as_array(), y.as_array());
+        if y.ncols() != 2 || y.nrows() != u.len() {
+            return Err(to_py(RipError::Shape {
+                name: format!("logs[{i}].y"),
+                expected: format!("({}, 2)", u.len()),
+                rows: y.nrows(),
+                cols: y.ncols(),
+            }));
+        }
+        data.push(LogData {
+            ts: ts.0,
+            u: u.iter().copied().collect(),
+            y: y.rows().into_iter().map(|r| [r[0], r[1]]).collect(),
+        });
+    }
+    let options = IdentifyOptions {
+        start: start.inner,
+        segment: segment.0,
+        holdout: holdout.0,
+        max_iterations: max_iter.get("max_iter")?,
+        substeps: substeps.get("substeps")?,
+        ..Default::default()
+    };
+    let result = interruptible(py, |cancel| identify(&data, &options, cancel), |_| Ok(()))?.py()?;
+    let names = |v: &[&str]| v.iter().map(|n| py_name(n)).collect::<Vec<_>>();
+    let d = PyDict::new(py);
+    d.set_item(
+        "params",
+        PyFurutaParams {
+            inner: result.params,
+        },
+    )?;
+    d.set_item("free", names(&FREE))?;
+    d.set_item("std_errors", result.std_errors.to_vec())?;
+    d.set_item(
+        "fit_percent",
+        result
+            .fit_percent
+            .iter()
+            .map(|f| f.to_vec())
+            .collect::<Vec<_>>(),
+    )?;
+    d.set_item(
+        "training_fit_percent",
+        result
+            .training_fit_percent
+            .iter()
+            .map(|f| f.to_vec())
+            .collect::<Vec<_>>(),
+    )?;
+    d.set_item("not_identifiable", names(&result.not_identifiable))?;
+    d.set_item("at_bounds", names(&result.at_bounds))?;
+    d.set_item("condition_number", result.condition_number)?;
+    d.set_item("rank", result.rank)?;
+    d.set_item("cost", result.cost)?;
+    d.set_item("rms_residual", result.rms_residual)?;
+    d.set_item("iterations", result.iterations)?;
+    d.set_item("converged", result.converged)?;
+    d.set_item("simulations", result.simulations)?;
+    d.set_item("segments", result.segments)?;
+    d.set_item("Ad", mat_to_py(py, &result.ad))?;
+    d.set_item("Bd", mat_to_py(py, &result.bd))?;
+    Ok(d)
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(identify_logs, m)?)?;
+    Ok(())
+}
