@@ -128,7 +128,7 @@ class IdentifyResult:
             )
         fixed = [n for n in ("mp", "Lp", "mr", "Rm", "km", "g") if n not in self.std_errors]
         lines.append(
-            "  held at the start set: "
+            "  not estimated (start set; see the warnings if one changed): "
             + ", ".join(f"{n} = {getattr(self.params, n):.5g}" for n in fixed)
         )
         lines.append("")
@@ -350,6 +350,14 @@ def identify(
             + " (relative standard error above 50 %); add excitation that moves them "
             "(chirp or PRBS for the motor and arm, free swing for the pendulum)"
         )
+    for name, what in (("mp", "Jp"), ("Lp", "Jp"), ("mr", "Jr")):
+        before, after = getattr(params0, name), getattr(raw["params"], name)
+        if after != before:
+            notes.append(
+                f"{name} changed from {before:.4g} to {after:.4g}: the start set's value leaves "
+                f"no room for a positive {what}, so that link is taken as a uniform rod (the "
+                "dynamics are the same; check the start set's masses and lengths)"
+            )
     if not raw["converged"]:
         notes.append(f"the fit did not converge in {raw['iterations']} iterations")
     for note in notes:

@@ -20,9 +20,11 @@
 //!
 //! `kt` is the motor constant the logs determine (the torque per volt `kt/rm`, with `rm` from
 //! the start set); back-EMF and the arm's viscous friction are one coefficient `c`, so `km`
-//! stays at the start set's value and `dr` takes the rest. The optimisation works on `J₀`
-//! itself; when the start's `mr` leaves no room for a positive `jr`, the arm is taken as a
-//! uniform rod and `mr` is adjusted (the dynamics depend on `J₀` alone). If a start value is
+//! stays at the start set's value and `dr` takes the rest. The optimisation works on `J₀` and
+//! `Jα` themselves; when the start's `mp`, `lp` leave no room for a positive `jp` the pendulum
+//! is taken as a uniform rod of the same `mp lp` (so `mp` and `lp` change, `G` does not), and
+//! when its `mr` leaves no room for a positive `jr` the arm is taken as a uniform rod and `mr`
+//! changes (the dynamics depend on `J₀` and `Jα` alone). If a start value is
 //! inconsistent with the rig in another way (for example `km` larger than the whole of `c`
 //! allows), the parameter that takes the difference runs into its lower bound and the result
 //! lists it in [`IdentifyResult::at_bounds`].
@@ -30,7 +32,9 @@
 //! # Criterion
 //!
 //! The training part of each log (all but its last `holdout` fraction) is cut into segments of
-//! about [`IdentifyOptions::segment`] seconds. Each segment is simulated from its own initial
+//! about [`IdentifyOptions::segment`] seconds (after a first stage with segments of
+//! [`SHORT_SEGMENT`], whose criterion has fewer local minima: a continuation that reaches the
+//! right basin from starts that the long segments alone do not). Each segment is simulated from its own initial
 //! state `x₀,ₛ` (estimated with the parameters; its angles start at the measured ones and its
 //! rates at central differences of them) under the logged, zero-order-held voltage, and the
 //! residuals are the simulated minus the measured angles, each output divided by its standard
@@ -82,13 +86,16 @@ use crate::plant::{FurutaParams, Plant, State};
 #[cfg(test)]
 mod tests;
 
-/// The parameters the fit estimates, as named in [`crate::plant::PARAM_NAMES`]. `mr` changes
-/// too when the start's value leaves no room for a positive `jr` (see `with` in the source).
+/// The parameters the fit estimates, as named in [`crate::plant::PARAM_NAMES`]. `mr`, `mp` and
+/// `lp` change too when the start's values leave no room for positive `jr`, `jp` (module docs).
 pub const FREE: [&str; 9] = ["lr", "jr", "jp", "kt", "dr", "dp", "cr", "cp", "vd"];
 const NP: usize = FREE.len();
 
 /// Relative standard error above which a parameter counts as not identifiable.
 pub const NOT_IDENTIFIABLE_RSE: f64 = 0.5;
+
+/// Segment length (s) of the first, continuation stage (module docs).
+pub const SHORT_SEGMENT: f64 = 0.5;
 
 /// Largest accepted [`IdentifyOptions::max_iterations`].
 pub const MAX_ITERATIONS: usize = 500;
@@ -119,7 +126,7 @@ pub struct IdentifyOptions {
     pub segment: f64,
     /// Fraction of each log, at its end, kept out of the fit for validation, in `[0, 0.9]`.
     pub holdout: f64,
-    /// Iteration limit, `1 ..=` [`MAX_ITERATIONS`].
+    /// Iteration limit of each stage, `1 ..=` [`MAX_ITERATIONS`].
     pub max_iterations: usize,
     /// Least RK4 steps per sample (more are taken when the plant's stability limit needs them).
     pub substeps: usize,
@@ -146,7 +153,7 @@ pub struct IdentifyResult {
     /// The identified parameters (the start set's fixed ones unchanged).
     pub params: FurutaParams,
     /// Standard error of each of [`FREE`] (same units; `inf` when not identifiable; for `jr`
-    /// that of the arm-axis inertia `J₀`, which is what the logs determine).
+    /// and `jp` those of the joint-axis inertias `J₀` and `Jα`, which the logs determine).
     pub std_errors: [f64; NP],
     /// Held-out fit (%) per log and output `[θ, α]`; NaN for a log without a held-out part.
     pub fit_percent: Vec<[f64; 2]>,
@@ -183,13 +190,19 @@ fn arm_inertia(p: &FurutaParams) -> f64 {
     p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr
 }
 
-/// The values the optimisation works on: [`FREE`] with `jr` replaced by `J₀`, on which the
-/// dynamics depend (its split into `jr` and `mr` does not matter to them).
+/// The pendulum's inertia about its joint, `Jα = jp + mp lp²/4`.
+fn pendulum_inertia(p: &FurutaParams) -> f64 {
+    p.jp + p.mp * p.lp * p.lp / 4.0
+}
+
+/// The values the optimisation works on: [`FREE`] with `jr` replaced by `J₀` and `jp` by `Jα`,
+/// on which the dynamics depend (their split into centroidal inertia, mass and length does
+/// not matter to them).
 fn get(p: &FurutaParams, k: usize) -> f64 {
     [
         p.lr,
         arm_inertia(p),
-        p.jp,
+        pendulum_inertia(p),
         p.kt,
         p.dr,
         p.dp,
@@ -199,13 +212,26 @@ fn get(p: &FurutaParams, k: usize) -> f64 {
     ][k]
 }
 
-/// The start set with the optimisation's values in place. `J₀` is split as `jr = J₀ − mr lr²/4
-/// − mp lr²` with the start's `mr` while that is positive; otherwise the arm is taken as a
-/// uniform rod (`jr = mr lr²/12`, `mr = 3 (J₀ − mp lr²)/lr²`). `J₀ ≤ mp lr²` gives an invalid
-/// set (no arm can have it), which [`Plant::new`] refuses.
+/// The start set with the optimisation's values in place.
+///
+/// `Jα` is split as `jp = Jα − mp lp²/4` with the start's `mp`, `lp` while that is positive;
+/// otherwise the pendulum is taken as a uniform rod with the same `mp lp` (so `G` and `m₁₂`
+/// keep their values): `lp = 3 Jα/(mp lp)`, `mp = (mp lp)/lp`, `jp = mp lp²/12`. Then `J₀` is
+/// split as `jr = J₀ − mr lr²/4 − mp lr²` with the start's `mr` while that is positive;
+/// otherwise the arm is taken as a uniform rod (`mr = 3 (J₀ − mp lr²)/lr²`, `jr = mr lr²/12`).
+/// `J₀ ≤ mp lr²` gives an invalid set (no arm can have it), which [`Plant::new`] refuses.
 fn with(mut p: FurutaParams, v: &[f64; NP]) -> FurutaParams {
-    let [lr, j0, jp, kt, dr, dp, cr, cp, vd] = *v;
-    [p.lr, p.jp, p.kt, p.dr, p.dp, p.cr, p.cp, p.vd] = [lr, jp, kt, dr, dp, cr, cp, vd];
+    let [lr, j0, ja, kt, dr, dp, cr, cp, vd] = *v;
+    [p.lr, p.kt, p.dr, p.dp, p.cr, p.cp, p.vd] = [lr, kt, dr, dp, cr, cp, vd];
+    let jp = ja - p.mp * p.lp * p.lp / 4.0;
+    if jp > 0.0 {
+        p.jp = jp;
+    } else {
+        let product = p.mp * p.lp;
+        p.lp = 3.0 * ja / product;
+        p.mp = product / p.lp;
+        p.jp = p.mp * p.lp * p.lp / 12.0;
+    }
     let rest = j0 - p.mp * lr * lr;
     let jr = rest - p.mr * lr * lr / 4.0;
     if jr > 0.0 {
@@ -425,181 +451,206 @@ pub fn identify(
         substeps: options.substeps,
         sims: AtomicUsize::new(0),
     };
-    let mut segments = Vec::new();
-    for (l, log) in logs.iter().enumerate() {
-        let train = ((1.0 - options.holdout) * log.u.len() as f64).floor() as usize;
-        let count = (train / seg_len).max(1);
-        for s in 0..count {
-            let k0 = s * seg_len;
-            let n = if s + 1 == count { train - k0 } else { seg_len };
-            segments.push(Segment {
-                log: l,
-                k0,
-                n,
-                x0: state_at(log, k0),
-                r: vec![0.0; 2 * n],
-                trial: vec![0.0; 2 * n],
-                jac: vec![0.0; 2 * n * (NP + 4)],
-            });
-        }
-    }
-    let n_seg = segments.len();
-    let n_unknowns = NP + 4 * n_seg;
     let p0 = initial(&options.start);
     let lower: [f64; NP] =
         std::array::from_fn(|k| p0[k] * if (4..NP).contains(&k) { 1e-4 } else { 1e-2 });
     let upper: [f64; NP] = std::array::from_fn(|k| p0[k] * 1e3);
     let mut logp: [f64; NP] = p0.map(f64::ln);
     let params_of = |logp: &[f64; NP]| with(options.start, &logp.map(f64::exp));
-
     let cancelled = || cancel.load(Ordering::Relaxed);
-    // Residuals at the start.
-    let base = problem
-        .plant(&params_of(&logp))
-        .ok_or_else(|| RipError::invalid("start", "does not give a plant that can be simulated"))?;
-    let ok = segments
-        .par_iter_mut()
-        .map(|s| !cancelled() && problem.simulate(&base, s.log, s.k0, &s.x0, &mut s.r))
-        .collect::<Vec<_>>();
-    if cancelled() {
-        return Err(RipError::Cancelled);
-    }
-    if ok.iter().any(|v| !v) {
-        return Err(RipError::invalid(
-            "start",
-            "the simulation from the start parameters diverges on these logs",
-        ));
-    }
-    let mut cost: f64 = segments
-        .iter()
-        .map(|s| s.r.iter().map(|v| v * v).sum::<f64>())
-        .sum();
-    let mut lambda = 1e-2;
+
+    // Continuation: short segments first (their criterion has fewer local minima, the
+    // simulation error has no time to pile up), then the requested length from there.
+    let short = ((SHORT_SEGMENT / ts).round() as usize).max(20);
+    let stages: Vec<usize> = if short < seg_len {
+        vec![short, seg_len]
+    } else {
+        vec![seg_len]
+    };
+    let mut segments: Vec<Segment> = Vec::new();
     let mut iterations = 0;
     let mut converged = false;
+    let mut cost = f64::INFINITY;
+    let mut n_unknowns = NP;
+    let mut normal = DMatrix::<f64>::zeros(0, 0);
+    let mut grad = DVector::<f64>::zeros(0);
     let h = 1e-6;
-    let mut normal = DMatrix::<f64>::zeros(n_unknowns, n_unknowns);
-    let mut grad = DVector::<f64>::zeros(n_unknowns);
-    while iterations < options.max_iterations {
-        iterations += 1;
-        let plants: Vec<Option<(Plant, usize)>> = (0..NP)
-            .map(|k| {
-                let mut lp = logp;
-                lp[k] += h;
-                problem.plant(&params_of(&lp))
-            })
-            .collect();
-        let base = problem
-            .plant(&params_of(&logp))
-            .expect("accepted parameters simulate");
-        let jac_ok: Vec<bool> = segments
+    for &seg_len in &stages {
+        let previous: Vec<(usize, usize, State)> =
+            segments.iter().map(|s| (s.log, s.k0, s.x0)).collect();
+        segments.clear();
+        for (l, log) in logs.iter().enumerate() {
+            let train = ((1.0 - options.holdout) * log.u.len() as f64).floor() as usize;
+            let count = (train / seg_len).max(1);
+            for s in 0..count {
+                let k0 = s * seg_len;
+                let n = if s + 1 == count { train - k0 } else { seg_len };
+                let x0 = previous
+                    .iter()
+                    .find(|p| p.0 == l && p.1 == k0)
+                    .map_or_else(|| state_at(log, k0), |p| p.2);
+                segments.push(Segment {
+                    log: l,
+                    k0,
+                    n,
+                    x0,
+                    r: vec![0.0; 2 * n],
+                    trial: vec![0.0; 2 * n],
+                    jac: vec![0.0; 2 * n * (NP + 4)],
+                });
+            }
+        }
+        n_unknowns = NP + 4 * segments.len();
+        // Residuals at the stage's start.
+        let base = problem.plant(&params_of(&logp)).ok_or_else(|| {
+            RipError::invalid("start", "does not give a plant that can be simulated")
+        })?;
+        let ok = segments
             .par_iter_mut()
-            .map(|s| {
-                let rows = 2 * s.n;
-                let (r, jac, trial) = (&s.r, &mut s.jac, &mut s.trial);
-                for (k, plant) in plants.iter().enumerate() {
-                    if cancelled() {
-                        return false;
-                    }
-                    let Some(plant) = plant else { return false };
-                    if !problem.simulate(plant, s.log, s.k0, &s.x0, trial) {
-                        return false;
-                    }
-                    for i in 0..rows {
-                        jac[k * rows + i] = (trial[i] - r[i]) / h;
-                    }
-                }
-                for c in 0..4 {
-                    if cancelled() {
-                        return false;
-                    }
-                    let hx = 1e-6 * (1.0 + s.x0[c].abs());
-                    let mut x0 = s.x0;
-                    x0[c] += hx;
-                    if !problem.simulate(&base, s.log, s.k0, &x0, trial) {
-                        return false;
-                    }
-                    for i in 0..rows {
-                        jac[(NP + c) * rows + i] = (trial[i] - r[i]) / hx;
-                    }
-                }
-                true
-            })
-            .collect();
+            .map(|s| !cancelled() && problem.simulate(&base, s.log, s.k0, &s.x0, &mut s.r))
+            .collect::<Vec<_>>();
         if cancelled() {
             return Err(RipError::Cancelled);
         }
-        if jac_ok.iter().any(|v| !v) {
+        if ok.iter().any(|v| !v) {
             return Err(RipError::invalid(
-                "logs",
-                "the simulation diverges next to the current parameters; the logs may not be \
-                 of an open-loop excitation run",
+                "start",
+                "the simulation from the start parameters diverges on these logs",
             ));
         }
-        assemble(&segments, &mut normal, &mut grad);
-        let mut improved = false;
-        for _ in 0..12 {
-            let mut lhs = normal.clone();
-            for k in 0..n_unknowns {
-                lhs[(k, k)] += lambda * normal[(k, k)].max(1e-12);
-            }
-            let Some(step) = lhs.cholesky().map(|c| c.solve(&(-&grad))) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let trial_logp: [f64; NP] =
-                std::array::from_fn(|k| (logp[k] + step[k]).clamp(lower[k].ln(), upper[k].ln()));
-            let Some(trial_plant) = problem.plant(&params_of(&trial_logp)) else {
-                lambda *= 4.0;
-                continue;
-            };
-            let trial_cost: Option<f64> = segments
-                .par_iter_mut()
-                .enumerate()
-                .map(|(si, s)| {
-                    if cancelled() {
-                        return None;
-                    }
-                    let mut x0 = s.x0;
-                    for c in 0..4 {
-                        x0[c] += step[NP + 4 * si + c];
-                    }
-                    problem
-                        .simulate(&trial_plant, s.log, s.k0, &x0, &mut s.trial)
-                        .then(|| s.trial.iter().map(|v| v * v).sum::<f64>())
+        cost = segments
+            .iter()
+            .map(|s| s.r.iter().map(|v| v * v).sum::<f64>())
+            .sum();
+        let mut lambda = 1e-2;
+        converged = false;
+        normal = DMatrix::<f64>::zeros(n_unknowns, n_unknowns);
+        grad = DVector::<f64>::zeros(n_unknowns);
+        let mut stage_iterations = 0;
+        while stage_iterations < options.max_iterations {
+            stage_iterations += 1;
+            iterations += 1;
+            let plants: Vec<Option<(Plant, usize)>> = (0..NP)
+                .map(|k| {
+                    let mut lp = logp;
+                    lp[k] += h;
+                    problem.plant(&params_of(&lp))
                 })
-                .sum();
+                .collect();
+            let base = problem
+                .plant(&params_of(&logp))
+                .expect("accepted parameters simulate");
+            let jac_ok: Vec<bool> = segments
+                .par_iter_mut()
+                .map(|s| {
+                    let rows = 2 * s.n;
+                    let (r, jac, trial) = (&s.r, &mut s.jac, &mut s.trial);
+                    for (k, plant) in plants.iter().enumerate() {
+                        if cancelled() {
+                            return false;
+                        }
+                        let Some(plant) = plant else { return false };
+                        if !problem.simulate(plant, s.log, s.k0, &s.x0, trial) {
+                            return false;
+                        }
+                        for i in 0..rows {
+                            jac[k * rows + i] = (trial[i] - r[i]) / h;
+                        }
+                    }
+                    for c in 0..4 {
+                        if cancelled() {
+                            return false;
+                        }
+                        let hx = 1e-6 * (1.0 + s.x0[c].abs());
+                        let mut x0 = s.x0;
+                        x0[c] += hx;
+                        if !problem.simulate(&base, s.log, s.k0, &x0, trial) {
+                            return false;
+                        }
+                        for i in 0..rows {
+                            jac[(NP + c) * rows + i] = (trial[i] - r[i]) / hx;
+                        }
+                    }
+                    true
+                })
+                .collect();
             if cancelled() {
                 return Err(RipError::Cancelled);
             }
-            match trial_cost {
-                Some(c) if c < cost => {
-                    let small = cost - c <= options.tolerance * cost;
-                    for (si, s) in segments.iter_mut().enumerate() {
-                        for c in 0..4 {
-                            s.x0[c] += step[NP + 4 * si + c];
-                        }
-                        std::mem::swap(&mut s.r, &mut s.trial);
-                    }
-                    logp = trial_logp;
-                    cost = c;
-                    lambda = (lambda / 3.0).max(1e-9);
-                    improved = true;
-                    converged = small;
-                    break;
+            if jac_ok.iter().any(|v| !v) {
+                return Err(RipError::invalid(
+                    "logs",
+                    "the simulation diverges next to the current parameters; the logs may not be \
+                 of an open-loop excitation run",
+                ));
+            }
+            assemble(&segments, &mut normal, &mut grad);
+            let mut improved = false;
+            for _ in 0..12 {
+                let mut lhs = normal.clone();
+                for k in 0..n_unknowns {
+                    lhs[(k, k)] += lambda * normal[(k, k)].max(1e-12);
                 }
-                _ => lambda *= 4.0,
+                let Some(step) = lhs.cholesky().map(|c| c.solve(&(-&grad))) else {
+                    lambda *= 10.0;
+                    continue;
+                };
+                let trial_logp: [f64; NP] = std::array::from_fn(|k| {
+                    (logp[k] + step[k]).clamp(lower[k].ln(), upper[k].ln())
+                });
+                let Some(trial_plant) = problem.plant(&params_of(&trial_logp)) else {
+                    lambda *= 4.0;
+                    continue;
+                };
+                let trial_cost: Option<f64> = segments
+                    .par_iter_mut()
+                    .enumerate()
+                    .map(|(si, s)| {
+                        if cancelled() {
+                            return None;
+                        }
+                        let mut x0 = s.x0;
+                        for c in 0..4 {
+                            x0[c] += step[NP + 4 * si + c];
+                        }
+                        problem
+                            .simulate(&trial_plant, s.log, s.k0, &x0, &mut s.trial)
+                            .then(|| s.trial.iter().map(|v| v * v).sum::<f64>())
+                    })
+                    .sum();
+                if cancelled() {
+                    return Err(RipError::Cancelled);
+                }
+                match trial_cost {
+                    Some(c) if c < cost => {
+                        let small = cost - c <= options.tolerance * cost;
+                        for (si, s) in segments.iter_mut().enumerate() {
+                            for c in 0..4 {
+                                s.x0[c] += step[NP + 4 * si + c];
+                            }
+                            std::mem::swap(&mut s.r, &mut s.trial);
+                        }
+                        logp = trial_logp;
+                        cost = c;
+                        lambda = (lambda / 3.0).max(1e-9);
+                        improved = true;
+                        converged = small;
+                        break;
+                    }
+                    _ => lambda *= 4.0,
+                }
+            }
+            if !improved {
+                // No damping lowers the cost: a (local) minimum to working precision.
+                converged = true;
+                break;
+            }
+            if converged {
+                break;
             }
         }
-        if !improved {
-            // No damping lowers the cost: a (local) minimum to working precision.
-            converged = true;
-            break;
-        }
-        if converged {
-            break;
-        }
     }
+    let n_seg = segments.len();
     let params = params_of(&logp);
     // Information about log p with the initial states eliminated (Schur complement).
     assemble(&segments, &mut normal, &mut grad);
