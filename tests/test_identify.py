@@ -203,3 +203,34 @@ def test_saturated_and_unexcited_logs_warn_and_name_what_is_not_identifiable(tmp
     assert "coast: the voltage is constant" in messages
     assert "not identifiable from these logs" in messages
     assert {"kt", "Vd"} <= set(result.not_identifiable) | set(result.at_bounds)
+
+
+RIP_RT = Path(__file__).resolve().parents[1] / "target" / "release" / "rip-rt"
+
+
+def test_rip_rt_run_and_emulate_accept_the_written_file(identified, tmp_path):
+    import subprocess
+
+    if not RIP_RT.exists():
+        subprocess.run(
+            ["cargo", "build", "--release", "-p", "rip-rt"],
+            cwd=RIP_RT.parents[2],
+            check=True,
+            timeout=1800,
+        )
+    rig = tmp_path / "rig.toml"
+    rig.write_text(identified.to_toml("chirp.csv, prbs.csv"))
+    # `rip-rt config` checks the file as `rip-rt run --config` does (designs included).
+    checked = subprocess.run(
+        [str(RIP_RT), "config", str(rig)], capture_output=True, text=True, timeout=60
+    )
+    assert checked.returncode == 0, checked.stderr
+    assert f"Vd = {identified.params.Vd!r}" in checked.stdout
+    # The emulator simulates it (friction and dead zone included) and exits on its own.
+    emulated = subprocess.run(
+        [str(RIP_RT), "emulate", "--config", str(rig), "--duration", "0.3"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert emulated.returncode == 0, emulated.stderr
