@@ -7,7 +7,7 @@ import logging
 import os
 import re
 import socket
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Union
@@ -87,7 +87,7 @@ def _local_threads() -> int:
     return max(2, os.cpu_count() or 1)
 
 
-def _in_process(campaign: Campaign, chunks: Sequence[tuple[int, int]]) -> Iterator[ChunkResult]:
+def _in_process(campaign: Campaign, chunks: Iterable[tuple[int, int]]) -> Iterator[ChunkResult]:
     """Chunks on a local thread pool, each through the Rust batch API.
 
     Signals reach only the main thread, so it waits here in short slices; on Ctrl-C it sets
@@ -100,14 +100,15 @@ def _in_process(campaign: Campaign, chunks: Sequence[tuple[int, int]]) -> Iterat
     threads = _local_threads()
     cancel = threading.Event()
     pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="riprs-campaign")
-    todo = list(chunks)[::-1]
+    todo = iter(chunks)
     running: dict[Any, tuple[int, int]] = {}
     interrupted: KeyboardInterrupt | None = None
     try:
-        while todo or running:
-            while todo and len(running) < threads:
-                c = todo.pop()
+        while True:
+            while len(running) < threads and (c := next(todo, None)) is not None:
                 running[pool.submit(compute_chunk, campaign, *c, cancel)] = c
+            if not running:
+                break
             try:
                 done, _ = wait(list(running), timeout=0.2, return_when=FIRST_COMPLETED)
             except KeyboardInterrupt as exc:
@@ -268,7 +269,7 @@ def _connect(scheduler: str | None, workers: int | None, timeout: float) -> tupl
 
 
 def _on_dask(
-    campaign: Campaign, chunks: Sequence[tuple[int, int]], client: Any, window: int
+    campaign: Campaign, chunks: Iterable[tuple[int, int]], client: Any, window: int
 ) -> Iterator[ChunkResult]:
     """Chunks as Dask tasks; a worker that dies has its tasks recomputed elsewhere by the
     scheduler, and every result comes back here to be written.
@@ -443,7 +444,7 @@ def run(
                 done = _done_ranges(out_path / "runs", campaign.runs)
                 chunks = _pending(done, campaign.runs, size)
             done_runs = sum(b - a for a, b in done)
-            if progress and chunks:
+            if progress and done_runs < campaign.runs:
                 from tqdm.auto import tqdm
 
                 bar = tqdm(

@@ -109,15 +109,16 @@ def _done_ranges(runs_dir: Path, total: int) -> list[tuple[int, int]]:
     return ranges
 
 
-def _pending(done: Sequence[tuple[int, int]], total: int, size: int) -> list[tuple[int, int]]:
-    """The runs not on disk, cut into chunks of at most ``size`` runs."""
-    chunks = []
+def _pending(
+    done: Sequence[tuple[int, int]], total: int, size: int
+) -> Iterator[tuple[int, int]]:
+    """The runs not on disk, cut into chunks of at most ``size`` runs, generated as they are
+    taken: a campaign of millions of chunks never lists them all."""
     cursor = 0
     for start, stop in [*done, (total, total)]:
         for a in range(cursor, start, size):
-            chunks.append((a, min(a + size, start)))
+            yield (a, min(a + size, start))
         cursor = max(cursor, stop)
-    return chunks
 
 
 def _versions(engine: str) -> dict[str, str]:
