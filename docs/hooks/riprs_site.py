@@ -34,6 +34,7 @@ EXAMPLES: dict[str, list[str]] = {
     "swing_up": [],
     "rig_emulator": [],
     "rig_swing_up": [],
+    "rig_excite": [],
     "campaign": [],
     "performance": [],
 }
