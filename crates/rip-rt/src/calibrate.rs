@@ -6,7 +6,11 @@
 //! - the **pendulum**: hanging at rest it is exactly π from upright, so its mean count over the
 //!   window becomes the count of α = π (the configured `device.pendulum_zero` is only used to
 //!   check that the rest pose is near hanging, within `calibration.max_pendulum_offset`: a
-//!   pendulum held still at another angle, or a wrong encoder setting, is refused);
+//!   pendulum held still at another angle, or a wrong `device.pendulum_zero`, is refused; a
+//!   flipped `device.pendulum_sign` reads the same at ±π and is not detected here, but by the
+//!   sign check, [`crate::sign_check`]). The tolerance is a few degrees, not more: whatever
+//!   offset is accepted shifts the upright by as much, and Coulomb friction in the pendulum's
+//!   bearing lets a free pendulum come to rest within about a degree of hanging;
 //! - the **arm**: its mean count over the window becomes θ = 0, so `safety.arm_limit` and
 //!   `swing_up.arm_limit` count from where the arm was at start.
 //!
@@ -50,6 +54,10 @@ pub const REST_WINDOW_S: std::ops::RangeInclusive<f64> = 0.2..=10.0;
 pub const MAX_REST_TIMEOUT_S: f64 = 600.0;
 /// Largest rate threshold (rad/s): above it a gently swinging pendulum would pass.
 pub const MAX_REST_RATE: f64 = 1.0;
+/// Largest `calibration.max_pendulum_offset` (rad, about 11°): the accepted offset becomes an
+/// error of the upright by as much, and already a tenth of a radian makes the balance
+/// controllers drop the pendulum they caught.
+pub const MAX_PENDULUM_OFFSET: f64 = 0.2;
 /// Allowed `calibration.rest_counts`.
 pub const REST_COUNTS: std::ops::RangeInclusive<u32> = 1..=64;
 
@@ -76,7 +84,10 @@ pub struct CalibrationConfig {
     /// [`REST_COUNTS`]. Default 6 counts (2048 counts per revolution: 18 mrad).
     pub rest_counts: u32,
     /// Largest distance (rad) of the pendulum's rest pose from hanging as `[device]` reads it
-    /// (`pendulum_zero`, `pendulum_sign`), in (0, π]. Default 0.5 rad; π accepts any pose.
+    /// (`pendulum_zero`), in (0, [`MAX_PENDULUM_OFFSET`]]. Default 0.05 rad (about 3°, 16
+    /// counts at 2048 per revolution): Coulomb friction lets a free pendulum rest within about
+    /// a degree of hanging, and a pose farther off (held, leaning on the cable) would shift the
+    /// upright by as much, since the calibration takes it as exactly π.
     pub max_pendulum_offset: f64,
 }
 
@@ -88,7 +99,7 @@ impl Default for CalibrationConfig {
             rest_arm_rate: 0.2,
             rest_pendulum_rate: 0.2,
             rest_counts: 6,
-            max_pendulum_offset: 0.5,
+            max_pendulum_offset: 0.05,
         }
     }
 }
@@ -153,11 +164,14 @@ impl CalibrationConfig {
                 ),
             );
         }
-        let pi = std::f64::consts::PI;
-        if !(self.max_pendulum_offset > 0.0 && self.max_pendulum_offset <= pi) {
+        if !(self.max_pendulum_offset > 0.0 && self.max_pendulum_offset <= MAX_PENDULUM_OFFSET) {
             return bad(
                 "calibration.max_pendulum_offset",
-                format!("must be in (0, π] rad, got {}", self.max_pendulum_offset),
+                format!(
+                    "must be in (0, {MAX_PENDULUM_OFFSET}] rad (the accepted offset shifts the \
+                     upright by as much), got {}",
+                    self.max_pendulum_offset
+                ),
             );
         }
         Ok(())
@@ -243,8 +257,8 @@ pub enum RestFault {
     /// The pendulum rests away from hanging: held, or `[device]` does not describe its encoder.
     #[error(
         "the pendulum rests {offset:.3} rad from hanging down as [device] reads it, more than \
-         calibration.max_pendulum_offset ({max:.3} rad): is it held, or are \
-         device.pendulum_zero and device.pendulum_sign right?"
+         calibration.max_pendulum_offset ({max:.3} rad): is it held or leaning on its cable, or \
+         is device.pendulum_zero right?"
     )]
     NotHanging {
         /// Distance from hanging (rad).
@@ -712,7 +726,7 @@ mod tests {
                 "calibration.rest_counts",
             ),
             (
-                "[calibration]\nmax_pendulum_offset = 4\n",
+                "[calibration]\nmax_pendulum_offset = 0.3\n",
                 "calibration.max_pendulum_offset",
             ),
             (

@@ -407,7 +407,10 @@ impl Config {
 
     /// Checks `[swing_up]` against the loop's limits for a run that swings up: the law's arm
     /// limit inside `safety.arm_limit` (which stays a stop), so that the law, not the stop,
-    /// keeps the arm in. The error names the key.
+    /// keeps the arm in; the balance region, which replaces `safety.pendulum_limit` after the
+    /// catch, within that limit, so that `[safety]` bounds the pendulum whatever `[swing_up]`
+    /// says; and the swing voltage within `safety.voltage_limit` (rather than clamped
+    /// silently). The error names both keys.
     pub fn validate_swing_up(&self) -> Result<(), ConfigError> {
         let s = &self.spec.swing_up;
         if s.arm_limit >= self.safety.arm_limit {
@@ -416,6 +419,24 @@ impl Config {
                 format!(
                     "must be inside safety.arm_limit ({} rad), got {}",
                     self.safety.arm_limit, s.arm_limit
+                ),
+            ));
+        }
+        if s.balance_angle > self.safety.pendulum_limit {
+            return Err(err(
+                "swing_up.balance_angle",
+                format!(
+                    "must be at most safety.pendulum_limit ({} rad), got {}",
+                    self.safety.pendulum_limit, s.balance_angle
+                ),
+            ));
+        }
+        if s.max_voltage > self.safety.voltage_limit {
+            return Err(err(
+                "swing_up.max_voltage",
+                format!(
+                    "must be at most safety.voltage_limit ({} V), got {}",
+                    self.safety.voltage_limit, s.max_voltage
                 ),
             ));
         }

@@ -68,6 +68,7 @@ pub struct LoopCore {
     // The controller supervises a swing-up: it owns the pendulum-angle rule (module docs).
     supervised: bool,
     balance_angle: f64,
+    swing_arm_limit: f64,
     max_swing_s: f64,
     y: [f64; 2],
     r: [f64; 2],
@@ -144,6 +145,7 @@ impl LoopCore {
             reference_origin: if supervised { f64::INFINITY } else { 0.0 },
             supervised,
             balance_angle: cfg.spec.swing_up.balance_angle,
+            swing_arm_limit: cfg.spec.swing_up.arm_limit,
             max_swing_s: cfg.spec.swing_up.max_time,
             y: [0.0; 2],
             r: [0.0; 2],
@@ -353,7 +355,19 @@ impl LoopCore {
                 StopCause::SwingUpTimeout => StopReason::SwingUpFailed {
                     max_time: self.max_swing_s,
                 },
+                // The balance region bounds both joints: name the one that left it (the arm
+                // when it is past its bound, else the pendulum).
+                StopCause::LeftBalanceRegion if theta.abs() > self.swing_arm_limit => {
+                    StopReason::Fell {
+                        part: "arm",
+                        key: "swing_up.arm_limit",
+                        angle: theta,
+                        limit: self.swing_arm_limit,
+                    }
+                }
                 StopCause::LeftBalanceRegion => StopReason::Fell {
+                    part: "pendulum",
+                    key: "swing_up.balance_angle",
                     angle: alpha,
                     limit: self.balance_angle,
                 },
@@ -662,6 +676,39 @@ mod tests {
             // Nothing encoded; the loop's stop guard sends the stop frame.
             assert!(out.iter().all(|&b| b == 0));
         }
+    }
+
+    #[test]
+    fn a_fall_names_the_part_that_left_the_balance_region() {
+        let fell = |arm: i32, pend: i32| {
+            let mut c = supervised(vec![
+                Phase::Balance,
+                Phase::Stopped(StopCause::LeftBalanceRegion),
+            ]);
+            let mut out = [0u8; MAX_FRAME];
+            c.control(&measurement(1, 0, 1024), 0.0, &mut out).unwrap();
+            c.control(&measurement(2, arm, pend), 0.01, &mut out)
+                .unwrap_err()
+        };
+        // The arm at 1.53 rad (500 counts) is past swing_up.arm_limit (1.5 rad) while the
+        // pendulum (0.3 rad) is well inside swing_up.balance_angle (0.6 rad).
+        let pend = 1024 + (0.3 / std::f64::consts::TAU * 2048.0) as i32;
+        let e = fell(500, pend);
+        assert_eq!(e.exit_code(), exit_code::ANGLE_LIMIT);
+        let text = e.to_string();
+        assert!(
+            text.contains("arm") && text.contains("swing_up.arm_limit"),
+            "{text}"
+        );
+        assert!(!text.contains("balance_angle"), "{text}");
+        // The pendulum at 0.7 rad with the arm at 0: the pendulum's bound.
+        let pend = 1024 + (0.7 / std::f64::consts::TAU * 2048.0) as i32;
+        let text = fell(0, pend).to_string();
+        assert!(
+            text.contains("pendulum") && text.contains("swing_up.balance_angle"),
+            "{text}"
+        );
+        assert!(!text.contains("arm_limit"), "{text}");
     }
 
     #[test]

@@ -31,7 +31,9 @@ Exit codes (docs/rip-rt.md has the safety rules behind each):
     3    device lost: I/O error, or the device vanished
     4    watchdog: no valid measurement for loop.watchdog_periods periods (at most 100 ms)
     5    angle limit exceeded (safety.pendulum_limit / safety.arm_limit), or with --swing-up
-         the pendulum left swing_up.balance_angle after the catch with swing_up.on_fall = stop
+         the rig left the balance region after the catch with swing_up.on_fall = stop: the
+         pendulum past swing_up.balance_angle or the arm past swing_up.arm_limit (the message
+         names which)
     6    refused to start: pendulum not within safety.start_tolerance of upright
     7    controller fault: non-finite output
     8    the device reported a driver fault
@@ -40,7 +42,9 @@ Exit codes (docs/rip-rt.md has the safety rules behind each):
          periods in a row longer than a period, or the loop stalled (suspended) for 100 ms
     11   refused to start: timed controller steps do not fit the period (motor never enabled)
     12   refused to start: the rig is not at rest hanging down (rest check; motor never enabled)
-    13   swing-up failed: no catch within swing_up.max_time
+    13   swing-up failed: no catch within swing_up.max_time; or, after falls with
+         swing_up.on_fall = retry, the swing-ups took swing_up.max_time in total, or the run
+         was not balanced for --duration within swing_up.max_time + --duration
     101  internal error (panic)
     128+N  stopped by signal N: 129 SIGHUP, 130 SIGINT (Ctrl-C), 131 SIGQUIT, 138 SIGUSR1,
          143 SIGTERM, 148 SIGTSTP (Ctrl-Z ends the run), ...; a fatal signal (SIGSEGV,

@@ -17,7 +17,10 @@
 //! its encoder zeros are taken from that rest; then its commands run from the next period, the
 //! swing-up's and, after its catch, the balance controller's. Each catch starts the
 //! reference's clock and `--duration` (a fall stops them); the pendulum-angle rule is the
-//! supervisor's ([`LoopCore::control`]), every other rule of balancing holds throughout.
+//! supervisor's ([`LoopCore::control`]), every other rule of balancing holds throughout. The
+//! whole run is bounded however often it falls and swings up again: after a fall the
+//! swing-ups together may take `swing_up.max_time`, and with `--duration` the run ends
+//! `swing_up.max_time + --duration` after the swing's start at the latest (both exit 13).
 //!
 //! Every way out of [`run`] ends with the stop frame (see [`crate::stop`]). Rules that hold in
 //! every period of balancing: no enabling command from a measurement older than
@@ -268,6 +271,12 @@ struct Runner<'a> {
     last_phase: rip_core::Phase,
     catch_s: Option<f64>,
     catches: u32,
+    // A swing-up's bounds over the whole run (H1: a catch/fall cycle must end): swing-up
+    // periods since the start, counted against `swing_up.max_time` once it has fallen, and
+    // `swing_up.max_time + --duration` for the whole run.
+    falls: u32,
+    swing_periods: u64,
+    max_swing_s: f64,
     // When the request was sent whose measurement the last enabling command rests on.
     based_on_ns: u64,
 }
@@ -386,6 +395,38 @@ impl Runner<'_> {
             self.balanced_ns = tick.deadline_ns - experiment_ns;
             if self.duration_ns.is_some_and(|d| self.balanced_ns >= d) {
                 return Err(StopReason::Finished);
+            }
+        }
+        self.check_swing_up_run(tick, phase)
+    }
+
+    /// A swing-up run as a whole: once the pendulum has fallen after a catch (and the
+    /// supervisor swings up again), the swing-ups together may take `swing_up.max_time`, and
+    /// with `--duration` the run ends `swing_up.max_time + --duration` after the swing's start
+    /// at the latest. The supervisor's own clock bounds each swing-up only.
+    fn check_swing_up_run(&self, tick: &Tick, phase: Phase) -> Result<(), StopReason> {
+        let Phase::Balancing { start_ns } = phase else {
+            return Ok(());
+        };
+        if !self.core.supervises_swing_up() {
+            return Ok(());
+        }
+        if self.falls > 0
+            && self.swing_periods as f64 * self.period_ns as f64 * 1e-9 > self.max_swing_s
+        {
+            return Err(StopReason::SwingUpRetriesExhausted {
+                falls: self.falls,
+                max_time: self.max_swing_s,
+            });
+        }
+        if let Some(d) = self.duration_ns {
+            let bound_s = self.max_swing_s + d as f64 * 1e-9;
+            if (tick.deadline_ns.saturating_sub(start_ns)) as f64 * 1e-9 >= bound_s {
+                return Err(StopReason::SwingUpRunTimeout {
+                    falls: self.falls,
+                    duration: d as f64 * 1e-9,
+                    bound: bound_s,
+                });
             }
         }
         Ok(())
@@ -523,6 +564,7 @@ impl Runner<'_> {
                 }
             }
             (Balance, SwingUp) => {
+                self.falls += 1;
                 self.experiment_ns = None;
                 self.core.start_reference_at(f64::INFINITY);
                 if !self.quiet {
@@ -533,6 +575,9 @@ impl Runner<'_> {
                 }
             }
             _ => {}
+        }
+        if phase == SwingUp {
+            self.swing_periods += 1;
         }
         self.last_phase = phase;
     }
@@ -623,6 +668,9 @@ pub fn run(
         last_phase: core_phase,
         catch_s: None,
         catches: 0,
+        falls: 0,
+        swing_periods: 0,
+        max_swing_s: cfg.spec.swing_up.max_time,
         based_on_ns: 0,
     };
     let mut periodic = Periodic::new(period_ns, now_ns() + period_ns);

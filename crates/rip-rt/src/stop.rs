@@ -61,7 +61,9 @@ pub mod exit_code {
     /// Refused to start: the rig was not at rest hanging down (the rest check before a run
     /// that starts hanging); the motor was never enabled.
     pub const NOT_AT_REST: i32 = 12;
-    /// The swing-up did not reach its catch region within `swing_up.max_time`.
+    /// The swing-up did not reach its catch region within `swing_up.max_time`; or, after
+    /// falls with `swing_up.on_fall = "retry"`, the swing-ups took `swing_up.max_time` in total,
+    /// or the run was not balanced for `--duration` within `swing_up.max_time + --duration`.
     pub const SWING_UP_FAILED: i32 = 13;
     /// Refused the experiment: the motor-sign / encoder-direction check before it failed (the
     /// message says what to swap); the motor had only the check's short pulse.
@@ -156,13 +158,18 @@ pub enum StopReason {
         /// Steps timed.
         steps: usize,
     },
-    /// After a swing-up's catch the pendulum left the balance region and `swing_up.on_fall`
+    /// After a swing-up's catch the rig left the balance region (the pendulum past
+    /// `swing_up.balance_angle`, or the arm past `swing_up.arm_limit`) and `swing_up.on_fall`
     /// is `stop`.
-    #[error("the pendulum fell: |{angle:.3}| rad left the balance region (swing_up.balance_angle = {limit:.3} rad) after the catch, and swing_up.on_fall is \"stop\"")]
+    #[error("the {part} left the balance region after the catch: |{angle:.3}| rad is past {key} ({limit:.3} rad), and swing_up.on_fall is \"stop\"")]
     Fell {
-        /// The measured pendulum angle (rad from upright).
+        /// `"pendulum"` or `"arm"`: which part left the region.
+        part: &'static str,
+        /// The key of the bound it passed: `swing_up.balance_angle` or `swing_up.arm_limit`.
+        key: &'static str,
+        /// The measured angle of that part (rad; the pendulum's from upright).
         angle: f64,
-        /// `swing_up.balance_angle` (rad).
+        /// The bound (rad).
         limit: f64,
     },
     /// The swing-up did not bring the pendulum into its catch region in time.
@@ -170,6 +177,28 @@ pub enum StopReason {
     SwingUpFailed {
         /// `swing_up.max_time` (s).
         max_time: f64,
+    },
+    /// After falls with `swing_up.on_fall = "retry"`, the swing-ups together took
+    /// `swing_up.max_time`: a rig that catches and drops the pendulum again and again (a wrong
+    /// model or calibration) is stopped instead of pumping for ever.
+    #[error("the swing-up failed: the pendulum fell {falls} time(s) after its catch, and the swing-ups took swing_up.max_time ({max_time} s) in total")]
+    SwingUpRetriesExhausted {
+        /// Falls after a catch.
+        falls: u32,
+        /// `swing_up.max_time` (s).
+        max_time: f64,
+    },
+    /// A swing-up run with `--duration` was not balanced for the duration within
+    /// `swing_up.max_time + --duration` of the swing's start (falls and new swing-ups used
+    /// up the time): the whole run is bounded.
+    #[error("the swing-up failed: the pendulum fell {falls} time(s) after its catch and was not balanced for --duration ({duration} s) within swing_up.max_time + --duration ({bound} s) of the swing's start")]
+    SwingUpRunTimeout {
+        /// Falls after a catch.
+        falls: u32,
+        /// `--duration` (s).
+        duration: f64,
+        /// `swing_up.max_time + --duration` (s).
+        bound: f64,
     },
     /// The rest check before a run that starts hanging found the rig moving, or resting away
     /// from hanging; the motor was never enabled.
@@ -200,7 +229,9 @@ impl StopReason {
             StopReason::TooSlow { .. } => exit_code::TOO_SLOW,
             StopReason::NotAtRest(_) => exit_code::NOT_AT_REST,
             StopReason::Fell { .. } => exit_code::ANGLE_LIMIT,
-            StopReason::SwingUpFailed { .. } => exit_code::SWING_UP_FAILED,
+            StopReason::SwingUpFailed { .. }
+            | StopReason::SwingUpRetriesExhausted { .. }
+            | StopReason::SwingUpRunTimeout { .. } => exit_code::SWING_UP_FAILED,
             StopReason::SignCheck(_) => exit_code::SIGN_CHECK,
             StopReason::Panic => exit_code::PANIC,
         }
@@ -222,7 +253,9 @@ impl StopReason {
             StopReason::TooSlow { .. } => "too_slow",
             StopReason::NotAtRest(_) => "not_at_rest",
             StopReason::Fell { .. } => "fell",
-            StopReason::SwingUpFailed { .. } => "swing_up_failed",
+            StopReason::SwingUpFailed { .. }
+            | StopReason::SwingUpRetriesExhausted { .. }
+            | StopReason::SwingUpRunTimeout { .. } => "swing_up_failed",
             StopReason::SignCheck(_) => "sign_check",
             StopReason::Panic => "panic",
         }

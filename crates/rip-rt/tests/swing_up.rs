@@ -518,3 +518,90 @@ fn a_swing_up_arm_limit_outside_the_safety_limit_is_refused_naming_it() {
     );
     assert_eq!(r.status.code(), Some(1), "{}", r.stderr);
 }
+
+#[test]
+fn a_swing_up_region_or_voltage_beyond_the_safety_limits_is_refused_naming_both_keys() {
+    for (name, text, key, safety) in [
+        (
+            "swing-balance-angle",
+            "[swing_up]\nbalance_angle = 1.2\n",
+            "swing_up.balance_angle",
+            "safety.pendulum_limit",
+        ),
+        (
+            "swing-max-voltage",
+            "[safety]\nvoltage_limit = 10.0\n",
+            "swing_up.max_voltage",
+            "safety.voltage_limit",
+        ),
+    ] {
+        let file = scratch(&format!("{name}.toml"));
+        std::fs::write(&file, text).unwrap();
+        let r = run(
+            std::path::Path::new("/nonexistent"),
+            "lqr",
+            &["--swing-up", "--config", file.to_str().unwrap()],
+        );
+        assert_eq!(r.status.code(), Some(2), "{name}: {}", r.stderr);
+        assert!(r.stderr.contains(key), "{name}: {}", r.stderr);
+        assert!(r.stderr.contains(safety), "{name}: {}", r.stderr);
+    }
+}
+
+#[test]
+fn a_pendulum_resting_a_tenth_of_a_radian_off_hanging_is_refused_by_default() {
+    let _serial = one_at_a_time();
+    // 0.1 rad (about 6°) from hanging: still, but held or leaning. Calibrating it as hanging
+    // would shift the upright by 0.1 rad, which the balance controllers do not survive.
+    let (result, _, commands) = rest_check("rest-off01", &["--initial-pendulum", "3.04"], "");
+    let reason = result.unwrap_err();
+    assert_eq!(reason.exit_code(), 12, "{reason}");
+    let text = reason.to_string();
+    assert!(text.contains("calibration.max_pendulum_offset"), "{text}");
+    assert!(!text.contains("pendulum_sign"), "{text}");
+    assert!(commands.iter().all(|&(_, flags)| flags & 1 == 0));
+}
+
+#[test]
+fn a_catch_and_fall_cycle_ends_the_run_with_exit_13_and_zero_volts() {
+    let _serial = one_at_a_time();
+    // The pendulum rests 0.1 rad off hanging, and the calibration is allowed to take that as
+    // hanging: the upright is 0.1 rad off, so each catch drops the pendulum again and the
+    // default `on_fall = "retry"` swings it up again. The run must still end: within
+    // swing_up.max_time + --duration (12 s) of the swing's start.
+    let emu = Emulator::start("swing-cycle", &["--initial-pendulum", "3.04"]);
+    let cfg = config(
+        "swing-cycle",
+        "max_pendulum_offset = 0.15\n[swing_up]\nmax_time = 10.0\n",
+    );
+    let log_path = scratch("swing-cycle.csv");
+    let r = run(
+        &emu.device,
+        "lqr",
+        &[
+            "--swing-up",
+            "--duration",
+            "2",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--log",
+            log_path.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(r.status.code(), Some(13), "{}", r.stderr);
+    assert!(r.stderr.contains("swing_up.max_time"), "{}", r.stderr);
+    assert!(r.stderr.contains("fell"), "{}", r.stderr);
+    let log = Log::read(&log_path);
+    assert_eq!(log.meta("stop"), Some("swing_up_failed"));
+    // It did catch and fall (else this is the single swing-up's timeout, tested elsewhere).
+    let phases = log.text("phase");
+    let catches = phases
+        .windows(2)
+        .filter(|w| w[0] == "swing_up" && w[1] == "balance")
+        .count();
+    assert!(catches >= 1, "{catches} catches");
+    let t = log.col("t");
+    let last = t.last().copied().unwrap_or(0.0);
+    assert!(last <= 12.0 + 0.05, "ran {last} s");
+    assert_eq!(emu.commands().last(), Some(&(0, 0)));
+}
