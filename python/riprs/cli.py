@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import re
 import sys
 from typing import Sequence
@@ -133,13 +132,12 @@ def cmd_identify(args: argparse.Namespace) -> int:
         # The report prints every warning once, after the numbers.
         warnings.simplefilter("ignore", IdentifyWarning)
         result = identify(
-            logs,
+            args.logs,
             start=args.start,
             holdout=args.holdout,
             segment=args.segment,
             max_iter=args.max_iter,
         )
-    result = dataclasses.replace(result, names=tuple(names))
     print(result.report())
     out.parent.mkdir(parents=True, exist_ok=True)
     staged = out.with_name(out.name + ".tmp")

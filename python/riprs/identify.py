@@ -191,10 +191,23 @@ class IdentifyResult:
         return out
 
 
+#: Longest run of missing samples (replies lost or late on the link) filled in by
+#: interpolation: 0.1 s at 100 Hz, a fraction of the pendulum's period.
+MAX_GAP = 10
+
+
 def _arrays(log: RtLog) -> Tuple[float, np.ndarray, np.ndarray]:
-    """``(Ts, u, y)`` with ``alpha`` made continuous."""
+    """``(Ts, u, y)`` on the regular grid, ``alpha`` made continuous. Samples missing from the
+    log (at most ``MAX_GAP`` in a row: replies lost on the link) are filled in, the angles
+    linearly and the voltage held, as the device held it."""
     ts = float(np.median(np.diff(log.t))) if len(log.t) > 1 else float("nan")
+    k = np.round((log.t - log.t[0]) / ts).astype(np.int64)
     y = np.column_stack([log.theta, np.unwrap(log.alpha)])
+    grid = np.arange(k[-1] + 1)
+    if len(grid) != len(k):
+        held = np.searchsorted(k, grid, side="right") - 1
+        y = np.column_stack([np.interp(grid, k, y[:, j]) for j in range(2)])
+        return ts, np.ascontiguousarray(log.u[held], dtype=np.float64), y
     return ts, np.ascontiguousarray(log.u, dtype=np.float64), np.ascontiguousarray(y)
 
 
@@ -231,10 +244,16 @@ def _check(name: str, log: RtLog, holdout: float) -> List[str]:
         )
     dt = np.diff(log.t)
     ts = float(np.median(dt))
-    if not ts > 0 or np.any(np.abs(dt - ts) > 0.25 * ts):
+    steps = dt / ts if ts > 0 else dt
+    if not ts > 0 or np.any(np.abs(steps - np.round(steps)) > 0.25) or steps.min() < 0.5:
         raise IdentifyError(
             f"{name}: the samples are not evenly spaced (median step {ts:g} s, steps from "
             f"{dt.min():g} to {dt.max():g} s)"
+        )
+    if np.round(steps).max() > MAX_GAP + 1:
+        raise IdentifyError(
+            f"{name}: {int(np.round(steps).max()) - 1} samples in a row are missing (at "
+            f"t = {log.t[int(np.argmax(steps))]:g} s); at most {MAX_GAP} are filled in"
         )
     hanging = np.abs(np.angle(np.exp(1j * log.alpha))) > math.pi / 2
     if np.mean(hanging) < 0.5:
