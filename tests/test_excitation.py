@@ -72,6 +72,7 @@ def test_defaults_are_the_documented_ones() -> None:
         10.0,
         "log",
     )
+    assert (d["centering"], d["damping"]) == (1.0, 0.2)
     u = riprs.excitation("chirp")
     assert u.size == 3000
     assert np.abs(u).max() <= 2.0

@@ -122,8 +122,8 @@ def excitation_defaults(signal: SignalName) -> dict[str, float | int | str]:
     Returns
     -------
     dict
-        The keyword arguments of :func:`excitation` with their defaults, and ``centering``,
-        the rig's arm-centring gain (V/rad).
+        The keyword arguments of :func:`excitation` with their defaults, and ``centering``
+        and ``damping``, the rig's arm-centring gains (V/rad, V s/rad).
 
     Raises
     ------

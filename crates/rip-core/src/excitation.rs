@@ -43,19 +43,22 @@
 //!
 //! With the pendulum hanging, the motor integrates voltage into arm angle (≈ 3 rad/s per volt
 //! on a QUBE-Servo 2), so an open-loop excitation with any low-frequency content walks the arm
-//! into its limit. The rig adds a weak proportional pull towards the arm's start and scales
-//! down any excitation that pushes the arm further out near the limit `θ_L`:
+//! into its limit. The rig adds a weak, damped pull towards the arm's start and scales down any
+//! excitation that pushes the arm further out near the limit `θ_L`:
 //!
 //! ```text
-//! u = g(θ, e) e − k_c θ,    g = 1 if e θ ≤ 0,
-//!                           else clamp((θ_hi − |θ|)/(θ_hi − θ_lo), 0, 1),
-//!                           θ_lo = GUARD_START θ_L,  θ_hi = GUARD_END θ_L
+//! u = g(θ, e) e − k_c θ − k_d θ̇,   g = 1 if e θ ≤ 0,
+//!                                  else clamp((θ_hi − |θ|)/(θ_hi − θ_lo), 0, 1),
+//!                                  θ_lo = GUARD_START θ_L,  θ_hi = GUARD_END θ_L
 //! ```
 //!
-//! `k_c` (`centering`, V/rad) is weak: the closed arm loop `J θ̈ + c θ̇ = b (e − k_c θ)` has its
-//! natural frequency `√(b k_c / J)` near 0.3–0.6 Hz for `k_c = 1 V/rad` on the presets, so the
-//! excitation above it passes almost unchanged, and a constant `e` leaves the arm `e/k_c` rad
-//! from its start. The identification needs no knowledge of this law: it fits the model to the
+//! (`θ̇` from the difference of the last two measurements). `k_c` (`centering`, V/rad) is weak:
+//! the closed arm loop `J θ̈ + (c + b k_d) θ̇ = b (e − k_c θ)` has its natural frequency
+//! `√(b k_c / J)` near 0.3–0.6 Hz for `k_c = 1 V/rad` on the presets, so the excitation above it
+//! passes almost unchanged, and a constant `e` leaves the arm `e/k_c` rad from its start.
+//! `k_d` (`damping`, V·s/rad) damps that loop (on a QUBE-Servo 2 `k_d = 0.2` raises its damping
+//! ratio from about 0.4 to 0.8), so that a light arm does not overshoot its guard band into the
+//! limit. The identification needs no knowledge of this law: it fits the model to the
 //! applied voltage `u`, which the log records. Free swing is left alone (the kick and the coast
 //! are the experiment); the loop's arm limit still stops it.
 
@@ -178,6 +181,9 @@ pub const MAX_DURATION: f64 = 3600.0;
 pub const MAX_AMPLITUDE: f64 = 24.0;
 /// Largest arm-centring gain (V/rad); beyond it the "weak" pull would dominate the excitation.
 pub const MAX_CENTERING: f64 = 10.0;
+/// Largest arm-centring damping (V·s/rad): beyond it the rate's quantisation noise (one count
+/// per period is 0.3 rad/s at 2048 counts per revolution and 100 Hz) would dominate.
+pub const MAX_DAMPING: f64 = 2.0;
 /// Fraction of the arm limit at which [`ArmCentering`] starts scaling down outward excitation.
 pub const GUARD_START: f64 = 0.5;
 /// Fraction of the arm limit at which outward excitation is fully suppressed.
@@ -213,6 +219,8 @@ pub struct ExcitationSettings {
     pub kick: f64,
     /// Arm-centring gain `k_c` (V/rad), in [0, [`MAX_CENTERING`]] ([`ArmCentering`]).
     pub centering: f64,
+    /// Arm-centring damping `k_d` (V·s/rad), in [0, [`MAX_DAMPING`]] ([`ArmCentering`]).
+    pub damping: f64,
 }
 
 impl ExcitationSettings {
@@ -225,7 +233,7 @@ impl ExcitationSettings {
     /// | steps | 1.5 V | 24 s | 1.5 s per level (two rounds of [`STEP_LEVELS`]) |
     /// | free-swing | 3 V | 20 s | kick of 0.15 s at +3 V, 0.15 s at −3 V |
     ///
-    /// and a centring gain of 1 V/rad.
+    /// and a centring gain of 1 V/rad with a damping of 0.2 V·s/rad.
     pub fn new(signal: Signal) -> Self {
         let (amplitude, duration) = match signal {
             Signal::Chirp => (2.0, 30.0),
@@ -246,6 +254,7 @@ impl ExcitationSettings {
             step_hold: 1.5,
             kick: 0.15,
             centering: 1.0,
+            damping: 0.2,
         }
     }
 
@@ -270,6 +279,15 @@ impl ExcitationSettings {
                 format!(
                     "must be in [{dt}, {MAX_DURATION}] s (at least one sample), got {}",
                     self.duration
+                ),
+            ));
+        }
+        if !(self.damping >= 0.0 && self.damping <= MAX_DAMPING) {
+            return Err(RipError::invalid(
+                "damping",
+                format!(
+                    "must be in [0, {MAX_DAMPING}] V·s/rad, got {}",
+                    self.damping
                 ),
             ));
         }
@@ -473,16 +491,18 @@ impl Excitation {
     }
 
     /// The voltage to apply for excitation `e` at measured arm angle `theta` (rad from its
-    /// start) with arm limit `arm_limit`: `e` through [`ArmCentering`] with this excitation's
-    /// gain, except for free swing, whose kick and coast go out unchanged.
-    pub fn command(&self, e: f64, theta: f64, arm_limit: f64) -> f64 {
+    /// start) and rate `theta_rate` (rad/s) with arm limit `arm_limit`: `e` through
+    /// [`ArmCentering`] with this excitation's gains, except for free swing, whose kick and
+    /// coast go out unchanged.
+    pub fn command(&self, e: f64, theta: f64, theta_rate: f64, arm_limit: f64) -> f64 {
         if self.settings.signal == Signal::FreeSwing {
             return e;
         }
         ArmCentering {
             gain: self.settings.centering,
+            damping: self.settings.damping,
         }
-        .command(e, theta, arm_limit)
+        .command(e, theta, theta_rate, arm_limit)
     }
 }
 
@@ -504,12 +524,14 @@ fn chirp_phase(s: &ExcitationSettings, t: f64) -> f64 {
 pub struct ArmCentering {
     /// `k_c` (V/rad).
     pub gain: f64,
+    /// `k_d` (V·s/rad).
+    pub damping: f64,
 }
 
 impl ArmCentering {
-    /// `u = g(θ, e) e − k_c θ` (module docs) for excitation `e`, arm angle `theta` and arm
-    /// limit `arm_limit` (rad).
-    pub fn command(&self, e: f64, theta: f64, arm_limit: f64) -> f64 {
+    /// `u = g(θ, e) e − k_c θ − k_d θ̇` (module docs) for excitation `e`, arm angle `theta`,
+    /// arm rate `theta_rate` and arm limit `arm_limit` (rad).
+    pub fn command(&self, e: f64, theta: f64, theta_rate: f64, arm_limit: f64) -> f64 {
         let lo = GUARD_START * arm_limit;
         let hi = GUARD_END * arm_limit;
         let g = if e * theta <= 0.0 {
@@ -517,7 +539,7 @@ impl ArmCentering {
         } else {
             ((hi - theta.abs()) / (hi - lo)).clamp(0.0, 1.0)
         };
-        g * e - self.gain * theta
+        g * e - self.gain * theta - self.damping * theta_rate
     }
 }
 
@@ -663,7 +685,7 @@ mod tests {
         assert_eq!(x.stage(0.5), Stage::Coast);
         assert_eq!(x.stage(1.0), Stage::Done);
         // Free swing goes out unchanged, whatever the arm does.
-        assert_eq!(x.command(3.0, 2.9, 3.0), 3.0);
+        assert_eq!(x.command(3.0, 2.9, 5.0, 3.0), 3.0);
     }
 
     #[test]
@@ -689,16 +711,20 @@ mod tests {
 
     #[test]
     fn centering_pulls_back_and_the_guard_stops_outward_pushes() {
-        let c = ArmCentering { gain: 1.0 };
+        let c = ArmCentering {
+            gain: 1.0,
+            damping: 0.5,
+        };
         let limit = 2.0;
-        // Inside the guard: excitation plus the pull.
-        assert_eq!(c.command(1.5, 0.5, limit), 1.5 - 0.5);
+        // Inside the guard: excitation plus the pull, and the damping against the rate.
+        assert_eq!(c.command(1.5, 0.5, 0.0, limit), 1.5 - 0.5);
+        assert_eq!(c.command(1.5, 0.5, 2.0, limit), 1.5 - 0.5 - 1.0);
         // Inward excitation is never scaled.
-        assert_eq!(c.command(-1.5, 1.8, limit), -1.5 - 1.8);
+        assert_eq!(c.command(-1.5, 1.8, 0.0, limit), -1.5 - 1.8);
         // Halfway through the guard band (θ_lo = 1, θ_hi = 1.6): half the outward push.
-        assert!((c.command(2.0, 1.3, limit) - (1.0 - 1.3)).abs() < 1e-12);
+        assert!((c.command(2.0, 1.3, 0.0, limit) - (1.0 - 1.3)).abs() < 1e-12);
         // Past θ_hi: only the pull.
-        assert_eq!(c.command(-2.0, -1.7, limit), 1.7);
+        assert_eq!(c.command(-2.0, -1.7, 0.0, limit), 1.7);
     }
 
     #[test]
@@ -747,6 +773,13 @@ mod tests {
                     ..base
                 },
                 "f_end",
+            ),
+            (
+                ExcitationSettings {
+                    damping: 10.0,
+                    ..base
+                },
+                "damping",
             ),
             (
                 ExcitationSettings {

@@ -170,7 +170,7 @@ fn excitation_signals_allocate_nothing_per_sample() {
             for k in 0..3000 {
                 let t = k as f64 * 0.01;
                 let e = x.value(t);
-                sum += x.command(e, 0.3 * (0.5 * t).sin(), 3.0);
+                sum += x.command(e, 0.3 * (0.5 * t).sin(), 0.15 * (0.5 * t).cos(), 3.0);
             }
             // Back in time: the PRBS restarts its register, still without allocating.
             sum += x.value(1.0);

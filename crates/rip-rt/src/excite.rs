@@ -105,6 +105,8 @@ struct Exciter<'a> {
     t0_ns: u64,
     excited_ns: u64,
     max_arm: f64,
+    // The last measured arm angle and its period's deadline, for the arm rate.
+    last_arm: Option<(f64, u64)>,
 }
 
 impl Exciter<'_> {
@@ -198,6 +200,13 @@ impl Exciter<'_> {
         m: &Measurement,
     ) -> Result<Option<(f64, &'static str)>, StopReason> {
         let (theta, alpha) = self.core.angles(m);
+        // The arm rate over the time since the last measurement (periods without one between).
+        let rate = match self.last_arm.replace((theta, tick.deadline_ns)) {
+            Some((before, at)) if tick.deadline_ns > at => {
+                (theta - before) / ((tick.deadline_ns - at) as f64 * 1e-9)
+            }
+            _ => 0.0,
+        };
         if let Stage::SignCheck { start_ns } = *stage {
             self.check.push(theta, alpha);
             let t = (tick.deadline_ns - start_ns) as f64 * 1e-9;
@@ -231,7 +240,7 @@ impl Exciter<'_> {
         };
         let e = self.excitation.value(t);
         Ok(Some((
-            self.excitation.command(e, theta, self.arm_limit),
+            self.excitation.command(e, theta, rate, self.arm_limit),
             name,
         )))
     }
@@ -357,6 +366,7 @@ pub fn run(
         t0_ns: 0,
         excited_ns: 0,
         max_arm: 0.0,
+        last_arm: None,
     };
     let (reason, calibration) = match check_rest(io, exciter.core, cfg, &mut periodic, opts.quiet) {
         Err(reason) => (reason, None),

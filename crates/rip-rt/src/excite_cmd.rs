@@ -88,6 +88,9 @@ pub(crate) struct ExciteArgs {
     /// Arm-centring gain (V/rad, 0 to 10; 0 turns it off).
     #[arg(long, value_name = "V_PER_RAD", allow_negative_numbers = true, value_parser = number)]
     centering: Option<f64>,
+    /// Arm-centring damping (V·s/rad, 0 to 2).
+    #[arg(long, value_name = "V_S_PER_RAD", allow_negative_numbers = true, value_parser = number)]
+    damping: Option<f64>,
     /// Sign-check pulse voltage (V), at most safety.voltage_limit.
     #[arg(long, value_name = "V", default_value_t = PULSE_VOLTAGE, allow_negative_numbers = true, value_parser = number)]
     check_voltage: f64,
@@ -129,6 +132,7 @@ fn settings(args: &ExciteArgs, cfg: &Config) -> Result<Excitation, SetupError> {
     set(&mut s.step_hold, args.step_hold);
     set(&mut s.kick, args.kick);
     set(&mut s.centering, args.centering);
+    set(&mut s.damping, args.damping);
     if let Some(v) = args.sweep {
         s.sweep = v;
     }
@@ -179,6 +183,7 @@ fn header(args: &ExciteArgs, cfg: &Config, x: &Excitation) -> Vec<(&'static str,
     }
     if s.signal != Signal::FreeSwing {
         h.push(("centering", s.centering.to_string()));
+        h.push(("damping", s.damping.to_string()));
     }
     h.extend([
         ("port", args.port.display().to_string()),

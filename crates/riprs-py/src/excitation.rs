@@ -121,6 +121,7 @@ fn excitation_defaults<'py>(py: Python<'py>, signal: &str) -> PyResult<Bound<'py
     d.set_item("step_hold", s.step_hold)?;
     d.set_item("kick", s.kick)?;
     d.set_item("centering", s.centering)?;
+    d.set_item("damping", s.damping)?;
     Ok(d)
 }
 
