@@ -34,6 +34,8 @@ DEFAULT_DURATION: float
 DEFAULT_SUBSTEPS: int
 DEFAULT_U_LIMIT: float
 DEFAULT_FALL_LIMIT: float
+STEP_AFTER_CATCH: float
+SWING_UP_ALLOWANCE: float
 PRESETS: list[_PresetName]
 PARAMETERS: list[_ParameterName]
 
@@ -233,6 +235,17 @@ class Lqg:
 
 @final
 class SwingUp:
+    """Swing-up from rest and catch around a balance controller (``rip_core::swingup``).
+
+    Energy pumping towards the upright energy plus the viscous loss still to come,
+    ``E_t(alpha) = delta G + 4 Dp sqrt(G/J_alpha) (1 - cos(alpha/2))``, with the arm kept inside
+    ``arm_limit`` by a braking envelope; catch when the pendulum is near upright, the arm slow
+    and the upright's unstable mode within ``catch_mode_fraction`` of what ``max_voltage`` can
+    still stop; then the balance controller (estimator seeded from the swing-up's estimate,
+    arm reference held where the arm was caught). ``riprs.simulate`` of a ``SwingUp`` records
+    ``phase``, ``catch_time``, ``time_to_upright`` and ``swing_up_succeeded``.
+    """
+
     def __new__(
         cls,
         balance: Lqr | Lqg | Mpc,

@@ -44,7 +44,12 @@ def cmd_compare(args: argparse.Namespace) -> int:
     """LQR, LQG and MPC on the nonlinear plant, Tab. 1 next to the paper's numbers."""
     from pathlib import Path
 
-    from riprs.compare import Trajectory, compare, format_monte_carlo
+    from riprs.compare import (
+        Trajectory,
+        compare,
+        format_monte_carlo,
+        format_swing_up_monte_carlo,
+    )
     from riprs.log import load_log
 
     # Logs are read first, so that a wrong path fails before the runs, not after them.
@@ -57,11 +62,15 @@ def cmd_compare(args: argparse.Namespace) -> int:
         plots=not args.no_plots,
         progress=not args.quiet,
         overlays=logs,
+        start=args.start,
     )
     print(result.table())
     if result.monte_carlo is not None:
         print()
         print(format_monte_carlo(result.monte_carlo))
+        if args.start == "down":
+            print()
+            print(format_swing_up_monte_carlo(result.monte_carlo))
     print()
     where = result.files[0].parent if result.files else Path(args.out).absolute()
     print(f"wrote {len(result.files)} files to {where}")
@@ -103,8 +112,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         raise campaign.CampaignError(message) from None
     except KeyboardInterrupt:
         print(
-            f"riprs: interrupted; finished chunks are in {args.out}/runs, "
-            "the same command resumes",
+            f"riprs: interrupted; finished chunks are in {args.out}/runs, the same command resumes",
             file=sys.stderr,
         )
         return 130
@@ -234,6 +242,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="N",
         help="N runs over noise seeds and parameter perturbations",
+    )
+    comp.add_argument(
+        "--start",
+        choices=("up", "down"),
+        default="up",
+        help="up: balanced near upright (the paper's experiment, default); down: hanging at "
+        "rest, swung up and caught first, the step 2 s after the catch",
     )
     comp.add_argument("--log", action="append", metavar="FILE.csv", help="rip-rt log to overlay")
     comp.add_argument("--no-plots", action="store_true", help="skip the figures")

@@ -16,6 +16,16 @@ voltage, as
     \\mathrm{RMSE}_u = \\sqrt{\\tfrac1N \\sum_k u[k]^2},
 
 over every sample of the run (a run that falls is cut at the fall and flagged).
+
+With ``start="down"`` (``riprs compare --start down``) every controller starts with the
+pendulum hanging at rest inside a :class:`riprs.SwingUp` (the ``[swing_up]`` settings of the
+spec): it swings up, catches, and ``riprs.STEP_AFTER_CATCH`` seconds (2 s) after the catch the
+arm reference steps 0 -> 1 rad; the run is ``reference.duration + riprs.SWING_UP_ALLOWANCE``
+seconds long. Its Tab. 1 indices are taken over the window that lines up with the paper's run
+(``reference.duration`` seconds from ``reference.step_time`` before the step, the pendulum angle
+wrapped). The table adds the time to upright (the catch), and the Monte Carlo reports per
+controller the success rate and the time-to-upright distribution (``rip-core``'s definitions,
+:attr:`riprs.SimResult.swing_up_succeeded`, :attr:`riprs.SimResult.time_to_upright`).
 """
 
 from __future__ import annotations
@@ -33,12 +43,19 @@ from typing import Any, Union
 import numpy as np
 
 from riprs import paper
-from riprs._riprs import RiprsError, table1_rmse
+from riprs._riprs import (
+    STEP_AFTER_CATCH,
+    SWING_UP_ALLOWANCE,
+    RiprsError,
+    SwingUp,
+    table1_rmse,
+)
 from riprs.config import ConfigError, Spec, load_config
 from riprs.sim import BatchMetrics, SimResult, simulate, simulate_metrics
 
 __all__ = [
     "MAX_MONTE_CARLO_RUNS",
+    "STARTS",
     "CompareResult",
     "MonteCarloResult",
     "OutputPathError",
@@ -53,6 +70,10 @@ PathLike = Union[str, "os.PathLike[str]"]
 
 #: Most Monte Carlo runs per controller: their metrics take about 90 bytes each.
 MAX_MONTE_CARLO_RUNS = 1_000_000
+
+#: Where a comparison starts: ``"up"`` balanced near upright (the paper's experiment),
+#: ``"down"`` hanging at rest, swung up and caught first.
+STARTS = ("up", "down")
 
 
 class OutputPathError(RiprsError):
@@ -70,6 +91,8 @@ class Trajectory:
     voltage: np.ndarray
     reference: np.ndarray
     fell: bool = False
+    #: The switch from swing-up to balance (s), for runs that started hanging.
+    catch_time: float | None = None
 
     @classmethod
     def from_sim(cls, result: SimResult) -> Trajectory:
@@ -80,6 +103,7 @@ class Trajectory:
             voltage=result.u,
             reference=result.r[:, 0],
             fell=result.fell,
+            catch_time=result.catch_time,
         )
 
     @classmethod
@@ -122,6 +146,28 @@ class MonteCarloResult:
         """Per controller, whether each run fell."""
         return {name: m.fell for name, m in self.runs.items()}
 
+    @property
+    def time_to_upright(self) -> dict[str, np.ndarray]:
+        """Per controller, the time to upright of each run (NaN without a catch; swing-up
+        studies only)."""
+        return {name: m.time_to_upright for name, m in self.runs.items()}
+
+    def swing_up_summary(self) -> dict[str, dict[str, float]]:
+        """Per controller: the success rate (:attr:`riprs.SimResult.swing_up_succeeded`) and
+        the median and 95th percentile of the time to upright over the runs that caught."""
+        out: dict[str, dict[str, float]] = {}
+        for name, m in self.runs.items():
+            caught = m.time_to_upright[np.isfinite(m.time_to_upright)]
+            out[name] = {
+                "success_rate": float(np.mean(m.swing_up_succeeded)),
+                "caught_rate": float(len(caught) / len(m)),
+                "upright_median": float(np.median(caught)) if len(caught) else float("nan"),
+                "upright_p95": float(np.percentile(caught, 95)) if len(caught) else float("nan"),
+                "peak_arm": float(np.max(m.peak_arm)),
+                "peak_voltage": float(np.max(m.peak_voltage)),
+            }
+        return out
+
     def summary(self) -> dict[str, dict[str, float]]:
         """Mean and standard deviation of each index over the runs that stayed up, and the fall
         rate."""
@@ -148,9 +194,11 @@ class CompareResult:
     summary: dict[str, tuple[float, float, float]]
     monte_carlo: MonteCarloResult | None = None
     files: list[Path] = field(default_factory=list)
+    start: str = "up"
 
     def table(self) -> str:
-        """The Tab. 1 layout, simulation next to the paper's experiment."""
+        """The Tab. 1 layout, simulation next to the paper's experiment (and the time to
+        upright for a run started hanging)."""
         return format_table(self.summary, self.runs)
 
 
@@ -160,8 +208,8 @@ def build_controllers(config: Spec | None = None) -> dict[str, Any]:
     return (config or Spec()).build_controllers(paper.TS)
 
 
-def _sim_options(config: Spec) -> dict[str, Any]:
-    return {
+def _sim_options(config: Spec, start: str = "up") -> dict[str, Any]:
+    options = {
         "reference": config.reference.arm_step,
         "reference_time": config.reference.step_time,
         "Ts": paper.TS,
@@ -171,6 +219,46 @@ def _sim_options(config: Spec) -> dict[str, Any]:
         "noise_std": config.sensor.noise_std,
         "u_limit": max(abs(b) for b in config.mpc.input_bounds[0]),
         "fall_limit": config.plant.fall_limit,
+    }
+    if start == "down":
+        options["x0"] = [0.0, 0.0, float(np.pi), 0.0]
+        options["step_after_catch"] = STEP_AFTER_CATCH
+    return options
+
+
+def _paper_window(traj: Trajectory, config: Spec) -> Trajectory:
+    """The part of a run the Tab. 1 indices are taken over. A run started upright is the
+    paper's experiment as it is. Of a run started hanging, the window that lines up with it:
+    ``reference.duration`` seconds starting ``reference.step_time`` before the step (so the
+    step sits where the paper's does), the pendulum angle wrapped to (-pi, pi]; a run never
+    caught is taken whole."""
+    if traj.catch_time is None or traj.t[0] == traj.catch_time:
+        return traj
+    t0 = traj.catch_time + STEP_AFTER_CATCH - config.reference.step_time
+    window = (traj.t >= t0 - 1e-9) & (traj.t < t0 + config.reference.duration - 1e-9)
+    wrapped = np.mod(traj.pendulum + np.pi, 2 * np.pi) - np.pi
+    return Trajectory(
+        t=traj.t[window],
+        arm=traj.arm[window],
+        pendulum=wrapped[window],
+        voltage=traj.voltage[window],
+        reference=traj.reference[window],
+        fell=traj.fell,
+        catch_time=traj.catch_time,
+    )
+
+
+def _duration(config: Spec, start: str) -> float:
+    extra = SWING_UP_ALLOWANCE if start == "down" else 0.0
+    return float(config.reference.duration) + extra
+
+
+def _supervised(config: Spec, controllers: Mapping[str, Any]) -> dict[str, Any]:
+    """Each balance controller inside a :class:`riprs.SwingUp` with the spec's ``[swing_up]``
+    settings, designed on its ``[plant]``."""
+    plant = config.build_plant()
+    return {
+        name: SwingUp(balance=c, plant=plant, **config.swing_up) for name, c in controllers.items()
     }
 
 
@@ -191,6 +279,7 @@ def compare(
     plots: bool = True,
     progress: bool = True,
     overlays: Mapping[str, Trajectory] | None = None,
+    start: str = "up",
 ) -> CompareResult:
     """Run the paper's comparison.
 
@@ -217,11 +306,17 @@ def compare(
     overlays : mapping of str to Trajectory, optional
         Further runs (e.g. ``rip-rt`` logs) drawn over the simulations in extra figures
         ``*_with_logs`` (needs ``out`` and ``plots``).
+    start : {"up", "down"}
+        ``"up"``: the paper's experiment, started near upright. ``"down"``: hanging at rest,
+        swung up and caught by a :class:`riprs.SwingUp` around each controller, the arm step
+        ``riprs.STEP_AFTER_CATCH`` s after the catch (module docs).
 
     Returns
     -------
     CompareResult
     """
+    if start not in STARTS:
+        raise ConfigError(f"start must be one of {STARTS}, got {start!r}")
     if config is None:
         cfg = Spec()
     elif isinstance(config, Spec):
@@ -247,19 +342,21 @@ def compare(
     try:
         # Every design is made, and a failure named by its key, before anything is simulated.
         controllers = build_controllers(cfg)
+        if start == "down":
+            controllers = _supervised(cfg, controllers)
         plant = cfg.build_plant()
-        options = _sim_options(cfg)
+        options = _sim_options(cfg, start)
         runs: dict[str, SimResult] = {}
         for name in _progress(list(controllers), "simulating", progress):
             runs[name] = simulate(
-                plant, controllers[name], cfg.reference.duration, seed=seed, **options
+                plant, controllers[name], _duration(cfg, start), seed=seed, **options
             )
         trajectories = {name: Trajectory.from_sim(r) for name, r in runs.items()}
-        summary = {name: rmse(t) for name, t in trajectories.items()}
+        summary = {name: rmse(_paper_window(t, cfg)) for name, t in trajectories.items()}
         mc = None
         if cfg.monte_carlo.runs > 0:
-            mc = _monte_carlo(cfg, controllers, seed, progress)
-        result = CompareResult(cfg, seed, runs, trajectories, summary, mc)
+            mc = _monte_carlo(cfg, controllers, seed, progress, start)
+        result = CompareResult(cfg, seed, runs, trajectories, summary, mc, start=start)
         if staging is not None:
             written = write_outputs(result, staging.path, plots=plots)
             if plots and overlays:
@@ -365,11 +462,11 @@ class _Staging:
 
 
 def _monte_carlo(
-    cfg: Spec, controllers: Mapping[str, Any], seed: int, progress: bool
+    cfg: Spec, controllers: Mapping[str, Any], seed: int, progress: bool, start: str = "up"
 ) -> MonteCarloResult:
     """Run ``i`` uses noise seed ``seed + 1 + i`` and its own parameter draw (see
     :func:`riprs.simulate_metrics`); only per-run metrics are kept."""
-    options = _sim_options(cfg)
+    options = _sim_options(cfg, start)
     runs = cfg.monte_carlo.runs
     results: dict[str, BatchMetrics] = {}
     for name, controller in controllers.items():
@@ -380,7 +477,7 @@ def _monte_carlo(
                 cfg.build_plant(),
                 controller,
                 runs,
-                cfg.reference.duration,
+                _duration(cfg, start),
                 seed=seed + 1,
                 perturbation=cfg.monte_carlo.perturbation,
                 parameters=cfg.monte_carlo.parameters,
@@ -412,11 +509,38 @@ def format_table(
         f"{'':<11}" + "".join(f"{g:>22}" for g in groups),
         f"{'controller':<11}" + f"{'riprs':>12}{'paper':>10}" * 3,
     ]
+    down = runs is not None and any(r.phase is not None and r.phase[0] == 0 for r in runs.values())
+    if down:
+        lines[0] += "; started hanging, the step 2 s after the catch"
+        lines[1] += f"{'upright':>10}"
+        lines[2] += f"{'[s]':>10}"
     for name, values in summary.items():
         ref = paper.TABLE1.get(name, (float("nan"),) * 3)
         note = "  (fell)" if runs is not None and name in runs and runs[name].fell else ""
         cells = "".join(f"{v:>12.4f}{p:>10.3f}" for v, p in zip(values, ref, strict=True))
+        if down and runs is not None and name in runs:
+            t_up = runs[name].time_to_upright
+            cells += f"{t_up:>10.2f}" if t_up is not None else f"{'never':>10}"
+            if not runs[name].swing_up_succeeded and not runs[name].fell:
+                note += "  (not caught)"
         lines.append(f"{name:<11}{cells}{note}")
+    return "\n".join(lines)
+
+
+def format_swing_up_monte_carlo(mc: MonteCarloResult) -> str:
+    """Per controller: swing-up success rate and time to upright (median, 95th percentile)."""
+    n = len(next(iter(mc.runs.values())))
+    lines = [
+        f"Swing-up Monte Carlo: {n} runs per controller from hanging at rest",
+        f"{'controller':<11}{'success':>9}{'caught':>9}{'upright median':>16}{'p95':>8}"
+        f"{'max |arm|':>11}{'max |u|':>9}",
+    ]
+    for name, s in mc.swing_up_summary().items():
+        lines.append(
+            f"{name:<11}{100 * s['success_rate']:>8.1f}%{100 * s['caught_rate']:>8.1f}%"
+            f"{s['upright_median']:>14.2f} s{s['upright_p95']:>6.2f} s"
+            f"{s['peak_arm']:>9.3f} rad{s['peak_voltage']:>6.2f} V"
+        )
     return "\n".join(lines)
 
 
@@ -449,6 +573,8 @@ def write_outputs(result: CompareResult, out: Path, *, plots: bool = True) -> li
         files += plotting.plot_comparison(result.trajectories, out)
         if result.monte_carlo is not None:
             files += plotting.plot_monte_carlo(result.monte_carlo, out)
+            if result.start == "down":
+                files += plotting.plot_time_to_upright(result.monte_carlo, out)
     return files
 
 
@@ -506,6 +632,8 @@ def _write_monte_carlo(mc: MonteCarloResult, path: Path) -> Path:
                 "fall_time",
                 "peak_voltage",
                 "settle_time",
+                "time_to_upright",
+                "swing_up_succeeded",
             ]
         )
         for name, m in mc.runs.items():
@@ -520,6 +648,8 @@ def _write_monte_carlo(mc: MonteCarloResult, path: Path) -> Path:
                         cell(m.fall_time[i]),
                         repr(float(m.peak_voltage[i])),
                         cell(m.settle_time[i]),
+                        cell(m.time_to_upright[i]),
+                        int(m.swing_up_succeeded[i]),
                     ]
                 )
     return path

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["plot_comparison", "plot_monte_carlo", "plot_trajectories"]
+__all__ = ["plot_comparison", "plot_monte_carlo", "plot_time_to_upright", "plot_trajectories"]
 
 _COLORS = {"LQR": "tab:blue", "LQG": "tab:orange", "MPC": "tab:green"}
 _PANELS = (
@@ -43,15 +43,29 @@ def plot_trajectories(trajectories: Mapping[str, Any], quantity: str, ax: Any = 
     if quantity == "arm":
         first = next(iter(trajectories.values()))
         ax.plot(first.t, first.reference, "k--", linewidth=1.0, label="reference")
+    # A run that started hanging: its switch from swing-up to balance (the catch).
+    for i, (name, tr) in enumerate(trajectories.items()):
+        t_catch = getattr(tr, "catch_time", None)
+        if t_catch is None:
+            continue
+        color = _COLORS.get(name, f"C{i}")
+        ax.axvline(t_catch, color=color, linestyle=":", linewidth=1.0)
+        ax.annotate(
+            f"{name} catch {t_catch:.2f} s",
+            xy=(t_catch, 1.0),
+            xycoords=("data", "axes fraction"),
+            xytext=(3, -12 - 11 * i),
+            textcoords="offset points",
+            fontsize=8,
+            color=color,
+        )
     ax.set_xlabel("time [s]")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize=9)
     return ax
 
 
-def plot_comparison(
-    trajectories: Mapping[str, Any], out: Path, *, suffix: str = ""
-) -> list[Path]:
+def plot_comparison(trajectories: Mapping[str, Any], out: Path, *, suffix: str = "") -> list[Path]:
     """Write ``arm_angle``, ``pendulum_angle`` and ``control_voltage`` (each followed by
     ``suffix``) as PNG and SVG; ``trajectories`` may mix simulations and ``rip-rt`` logs."""
     plt = _pyplot()
@@ -89,6 +103,31 @@ def plot_monte_carlo(mc: Any, out: Path) -> list[Path]:
     files = []
     for ext in ("png", "svg"):
         path = out / f"monte_carlo.{ext}"
+        fig.savefig(path, dpi=120)
+        files.append(path)
+    plt.close(fig)
+    return files
+
+
+def plot_time_to_upright(mc: Any, out: Path) -> list[Path]:
+    """Empirical distribution (ECDF) of the time to upright per controller over the Monte Carlo
+    runs of a swing-up study; runs never caught keep the curve below 1."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(8, 3.6), constrained_layout=True)
+    for i, (name, times) in enumerate(mc.time_to_upright.items()):
+        caught = np.sort(times[np.isfinite(times)])
+        share = np.arange(1, len(caught) + 1) / max(len(times), 1)
+        color = _COLORS.get(name, f"C{i}")
+        ax.step(caught, share, where="post", color=color, label=f"{name} ({len(times)} runs)")
+    ax.set_xlabel("time to upright [s]")
+    ax.set_ylabel("share of runs caught")
+    ax.set_ylim(0.0, 1.02)
+    ax.set_title("Swing-up: time to upright (ECDF)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="lower right", fontsize=9)
+    files = []
+    for ext in ("png", "svg"):
+        path = out / f"time_to_upright.{ext}"
         fig.savefig(path, dpi=120)
         files.append(path)
     plt.close(fig)

@@ -71,9 +71,16 @@ class SimResult:
         ``alpha - alpha_ref`` (rad) and RMS of ``u`` (V), over every sample of the run.
     phase : ndarray of int8, shape (N,) or None
         The controller's phase after each step: 0 swinging up, 1 balancing, 2 stopped (see
-        :class:`riprs.SwingUp`; always 1 for a balance controller).
+        :class:`riprs.SwingUp`; always 1 for a balance controller). The switch (catch) is the
+        first sample where it turns from 0 to 1.
     catch_time : float or None
-        Time (s) of the first balanced sample after a swing-up: the time to upright.
+        Time (s) of the switch from swing-up to balance: the first balanced sample after a
+        swing-up (``None`` without one).
+    time_to_upright : float or None
+        The time to upright (s), ``rip-core``'s one definition: the catch time.
+    swing_up_succeeded : bool
+        ``rip-core``'s one definition of a successful swing-up: caught, then balanced to the
+        end of the run (no fall, stop or divergence). False for a balance controller.
     stop_cause : str or None
         Why a :class:`riprs.SwingUp` gave up (``"swing_up_timeout"`` or
         ``"left_balance_region"``); the arrays then end at that sample.
@@ -95,6 +102,8 @@ class SimResult:
     phase: np.ndarray | None = None
     catch_time: float | None = None
     stop_cause: str | None = None
+    time_to_upright: float | None = None
+    swing_up_succeeded: bool = False
 
     @classmethod
     def _from_native(cls, d: dict[str, Any]) -> SimResult:
@@ -115,6 +124,8 @@ class SimResult:
             phase=d["phase"],
             catch_time=d["catch_time"],
             stop_cause=d["stop_cause"],
+            time_to_upright=d["time_to_upright"],
+            swing_up_succeeded=bool(d["swing_up_succeeded"]),
         )
 
 
@@ -141,6 +152,7 @@ def _config(
     u_limit: float,
     fall_limit: float,
     seed: int,
+    step_after_catch: float | None = None,
 ) -> dict[str, Any]:
     # Arrays and numbers are coerced (and bad ones named) by the native side's one policy.
     config: dict[str, Any] = {
@@ -158,6 +170,7 @@ def _config(
         "u_limit": u_limit,
         "fall_limit": fall_limit,
         "seed": _seed(seed, "seed"),
+        "reference_after_catch": step_after_catch,
     }
     if reference is not None:
         try:
@@ -200,6 +213,7 @@ _DEFAULTS: dict[str, Any] = {
     "torque_disturbance": None,
     "u_limit": _riprs.DEFAULT_U_LIMIT,
     "fall_limit": _riprs.DEFAULT_FALL_LIMIT,
+    "step_after_catch": None,
 }
 
 
@@ -220,6 +234,7 @@ def simulate(
     u_limit: float = _riprs.DEFAULT_U_LIMIT,
     fall_limit: float = _riprs.DEFAULT_FALL_LIMIT,
     seed: int = 0,
+    step_after_catch: float | None = None,
 ) -> SimResult:
     r"""Run a controller in closed loop with the nonlinear plant.
 
@@ -270,6 +285,10 @@ def simulate(
         ``x0=[0, 0, pi, 0]``); for it a fall is leaving its balance region after the catch.
     seed : int
         Seed of the measurement noise; equal seeds give identical runs.
+    step_after_catch : float, optional
+        With a :class:`riprs.SwingUp`: the scalar ``reference`` step happens this many seconds
+        after the catch instead of at ``reference_time`` (``riprs compare --start down`` uses
+        ``riprs.STEP_AFTER_CATCH``); no step in a run without a catch.
 
     Returns
     -------
@@ -296,6 +315,7 @@ def simulate(
         u_limit=u_limit,
         fall_limit=fall_limit,
         seed=seed,
+        step_after_catch=step_after_catch,
     )
     native = _riprs.sim_run(_as_plant(plant, "plant"), controller, config)
     return SimResult._from_native(native)
@@ -384,6 +404,13 @@ class BatchMetrics:
     settle_time : ndarray, shape (N,)
         Earliest sample time from which ``|theta - theta_ref| <= settle_band`` holds to the end
         of the run (s); NaN if the run fell or ended outside the band.
+    peak_arm : ndarray, shape (N,)
+        Largest true ``|theta|`` at the samples (rad).
+    time_to_upright : ndarray, shape (N,)
+        Time to upright of a :class:`riprs.SwingUp` run (s), as
+        :attr:`SimResult.time_to_upright`; NaN without a catch.
+    swing_up_succeeded : ndarray of bool, shape (N,)
+        Whether the swing-up succeeded, as :attr:`SimResult.swing_up_succeeded`.
     samples : ndarray of int64, shape (N,)
         Control samples taken (fewer than ``duration / Ts`` after a fall).
     fallbacks : ndarray of int64, shape (N,)
@@ -398,6 +425,9 @@ class BatchMetrics:
     fall_time: FloatArray
     peak_voltage: FloatArray
     settle_time: FloatArray
+    peak_arm: FloatArray
+    time_to_upright: FloatArray
+    swing_up_succeeded: np.ndarray
     samples: np.ndarray
     fallbacks: np.ndarray
 
@@ -433,7 +463,7 @@ def simulate_metrics(
     ----------
     plant : Plant or FurutaParams
         The nominal plant.
-    controller : Lqr, Lqg, Mpc
+    controller : Lqr, Lqg, Mpc or SwingUp
         Copied for every run; the object itself is not touched.
     runs : int
         Number of runs (1 to 10 000 000 per call).

@@ -17,9 +17,12 @@
 //! ```text
 //! rmse          = metrics::table1_rmse                        (the paper's Tab. 1 indices)
 //! peak_voltage  = max_k |u_k|                                 (applied, after saturation)
+//! peak_arm      = max_k |θ_k|                                 (true arm angle at the samples)
 //! settle_time   = t_j, the earliest sample with |θ_k − θ_ref,k| ≤ band for all k ≥ j
 //!                 (NaN if the run fell or its last sample is outside the band)
 //! fall_time     = time of the fall to the RK4 substep (NaN if it stayed up)
+//! time_to_upright = the swing-up's catch time (NaN without a catch)
+//! swing_up_ok   = sim::swing_up_succeeded: caught, then balanced to the end
 //! ```
 
 use std::ops::Range;
@@ -33,7 +36,7 @@ use crate::controller::Controller;
 use crate::error::{Result, RipError};
 use crate::metrics::Table1;
 use crate::plant::{FurutaParams, Plant};
-use crate::sim::{prepare, run_loop, Recorder, SimConfig};
+use crate::sim::{prepare, run_loop, swing_up_succeeded, Recorder, SimConfig};
 use crate::spec::Param;
 
 /// Largest number of runs one call may take (the result alone would be tens of MB beyond it;
@@ -58,8 +61,17 @@ pub struct RunMetrics {
     pub fall_time: f64,
     /// Largest applied `|u|` (V).
     pub peak_voltage: f64,
+    /// Largest true `|θ|` at the samples (rad).
+    pub peak_arm: f64,
     /// Time (s) from which the arm stays within the settling band to the end; `NaN` if never.
     pub settle_time: f64,
+    /// Time to upright (s): the catch time of a swing-up supervisor
+    /// ([`SimResult::time_to_upright`](crate::SimResult::time_to_upright)); `NaN` without a
+    /// catch.
+    pub time_to_upright: f64,
+    /// Whether the swing-up succeeded ([`swing_up_succeeded`]): caught, then balanced to the
+    /// end; `false` for a balance controller, which never swings up.
+    pub swing_up_succeeded: bool,
     /// Control samples taken.
     pub samples: u32,
     /// Steps in which the controller used its fallback.
@@ -185,6 +197,7 @@ struct Accumulator {
     table1: Table1,
     band: f64,
     peak: f64,
+    peak_arm: f64,
     samples: usize,
     /// Index of the first sample after the last one outside the band.
     settled_from: usize,
@@ -205,6 +218,7 @@ impl Recorder for Accumulator {
     ) {
         self.table1.push(y, u, r);
         self.peak = self.peak.max(u.abs());
+        self.peak_arm = self.peak_arm.max(x[0].abs());
         let inside = (x[0] - r[0]).abs() <= self.band;
         if !inside {
             self.settled_from = self.samples + 1;
@@ -241,6 +255,7 @@ pub fn run_metrics(
         table1: Table1::default(),
         band: options.settle_band,
         peak: 0.0,
+        peak_arm: 0.0,
         samples: 0,
         settled_from: 0,
         settled_at: f64::NAN,
@@ -255,7 +270,15 @@ pub fn run_metrics(
         diverged: end.diverged,
         fall_time: end.fall_time.unwrap_or(f64::NAN),
         peak_voltage: acc.peak,
+        peak_arm: acc.peak_arm,
         settle_time: if settled { acc.settled_at } else { f64::NAN },
+        time_to_upright: end.catch_time.unwrap_or(f64::NAN),
+        swing_up_succeeded: swing_up_succeeded(
+            end.catch_time,
+            end.fell,
+            end.diverged,
+            end.stop_cause,
+        ),
         samples: acc.samples as u32,
         fallbacks: end.fallbacks as u32,
     })
@@ -383,6 +406,63 @@ mod tests {
             }
         }
         assert!(all.iter().any(|m| m.settle_time.is_finite()));
+    }
+
+    #[test]
+    fn swing_up_metrics_match_the_full_record() {
+        use crate::spec::{ControllerKind, Spec};
+        use crate::swingup::study::{hanging_config, supervised};
+        let spec = Spec::default();
+        let design = spec.design(crate::paper::TS).unwrap();
+        let config = SimConfig {
+            duration: 6.0,
+            ..hanging_config(&spec, crate::paper::TS, 0)
+        };
+        let mc = study();
+        let make = || -> Box<dyn Controller> {
+            Box::new(supervised(&spec, &design, ControllerKind::Lqr).unwrap())
+        };
+        let never = AtomicBool::new(false);
+        let all = simulate_metrics(
+            0..4,
+            &config,
+            &MetricsOptions::default(),
+            &|i| mc.run(i),
+            &make,
+            &AtomicU64::new(0),
+            &never,
+        )
+        .unwrap();
+        for m in &all {
+            let (plant, seed) = mc.run(m.run).unwrap();
+            let res = simulate(
+                &plant,
+                make().as_mut(),
+                &SimConfig {
+                    seed,
+                    ..config.clone()
+                },
+            )
+            .unwrap();
+            assert_eq!(
+                m.time_to_upright.to_bits(),
+                res.catch_time.unwrap_or(f64::NAN).to_bits()
+            );
+            assert_eq!(
+                m.swing_up_succeeded,
+                res.catch_time.is_some() && !res.fell && res.stop_cause.is_none()
+            );
+            let peak = res.x.iter().fold(0.0f64, |a, x| a.max(x[0].abs()));
+            assert_eq!(m.peak_arm, peak);
+            // The step comes 2 s after the catch (study::STEP_AFTER_CATCH), never before.
+            if let Some(tc) = res.catch_time {
+                for (t, r) in res.t.iter().zip(&res.r) {
+                    let stepped = *t >= tc + crate::swingup::study::STEP_AFTER_CATCH - 1e-9;
+                    assert_eq!(r[0], if stepped { 1.0 } else { 0.0 }, "t {t}, catch {tc}");
+                }
+            }
+        }
+        assert!(all.iter().any(|m| m.swing_up_succeeded));
     }
 
     #[test]

@@ -49,14 +49,29 @@ fn count(d: &Bound<'_, PyDict>, key: &str) -> PyResult<u64> {
 
 /// Builds the core configuration from the wrapper's dict.
 fn config_from_dict(d: &Bound<'_, PyDict>) -> PyResult<SimConfig> {
+    let after_catch = match opt_item(d, "reference_after_catch")? {
+        Some(v) => Some(v.extract::<Real>()?.0),
+        None => None,
+    };
     let reference = match opt_item(d, "reference_sequence")? {
+        Some(_) if after_catch.is_some() => {
+            return Err(PyTypeError::new_err(
+                "step_after_catch needs a scalar reference (a step), not a sequence",
+            ))
+        }
         Some(seq) => {
             let m = matrix_arg(&seq, "reference", None, Some(2))?;
             Reference::Sequence((0..m.nrows()).map(|i| [m[(i, 0)], m[(i, 1)]]).collect())
         }
-        None => Reference::Step {
-            time: real(d, "reference_time")?,
-            value: vector_arg::<2>(&item(d, "reference_value")?, "reference")?,
+        None => match after_catch {
+            Some(delay) => Reference::StepAfterCatch {
+                delay,
+                value: vector_arg::<2>(&item(d, "reference_value")?, "reference")?,
+            },
+            None => Reference::Step {
+                time: real(d, "reference_time")?,
+                value: vector_arg::<2>(&item(d, "reference_value")?, "reference")?,
+            },
         },
     };
     let counts_per_rev = match opt_item(d, "encoder_counts")? {
@@ -109,6 +124,8 @@ fn rows<const N: usize>(v: &[[f64; N]]) -> Array2<f64> {
 fn result_to_dict<'py>(py: Python<'py>, res: SimResult) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     let n = res.len();
+    d.set_item("time_to_upright", res.time_to_upright())?;
+    d.set_item("swing_up_succeeded", res.swing_up_succeeded())?;
     d.set_item("rmse", table1_rmse(&res).to_vec())?;
     d.set_item("t", Array1::from_vec(res.t).into_pyarray(py))?;
     d.set_item("x", rows(&res.x).into_pyarray(py))?;
@@ -299,6 +316,12 @@ fn metrics_to_dict<'py>(py: Python<'py>, m: &[RunMetrics]) -> PyResult<Bound<'py
     d.set_item("fall_time", col(|r| r.fall_time))?;
     d.set_item("peak_voltage", col(|r| r.peak_voltage))?;
     d.set_item("settle_time", col(|r| r.settle_time))?;
+    d.set_item("peak_arm", col(|r| r.peak_arm))?;
+    d.set_item("time_to_upright", col(|r| r.time_to_upright))?;
+    d.set_item(
+        "swing_up_succeeded",
+        Array1::from_iter(m.iter().map(|r| r.swing_up_succeeded)).into_pyarray(py),
+    )?;
     d.set_item(
         "samples",
         Array1::from_iter(m.iter().map(|r| i64::from(r.samples))).into_pyarray(py),
@@ -315,6 +338,14 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("DEFAULT_SUBSTEPS", rip_core::sim::DEFAULT_SUBSTEPS)?;
     m.add("DEFAULT_U_LIMIT", rip_core::paper::INPUT_LIMIT)?;
     m.add("DEFAULT_FALL_LIMIT", rip_core::sim::DEFAULT_FALL_LIMIT)?;
+    m.add(
+        "STEP_AFTER_CATCH",
+        rip_core::swingup::study::STEP_AFTER_CATCH,
+    )?;
+    m.add(
+        "SWING_UP_ALLOWANCE",
+        rip_core::swingup::study::SWING_UP_ALLOWANCE,
+    )?;
     m.add_function(wrap_pyfunction!(sim_run, m)?)?;
     m.add_function(wrap_pyfunction!(sim_batch, m)?)?;
     m.add_function(wrap_pyfunction!(sim_metrics, m)?)?;

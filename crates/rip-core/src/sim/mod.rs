@@ -72,6 +72,15 @@ pub enum Reference {
     },
     /// One row per control sample; its length must equal the number of samples.
     Sequence(Vec<[f64; 2]>),
+    /// `r = 0` until `delay` seconds after the catch of a swing-up supervisor
+    /// ([`SimResult::catch_time`]), `value` from then on; 0 throughout a run without a catch.
+    /// The experiment of `riprs compare --start down`: swing up, catch, then the step.
+    StepAfterCatch {
+        /// Time (s) from the catch to the step.
+        delay: f64,
+        /// `[θ_ref, α_ref]` (rad) held from the step on.
+        value: [f64; 2],
+    },
 }
 
 impl Default for Reference {
@@ -210,6 +219,16 @@ impl SimConfig {
                 finite("reference", value[0])?;
                 finite("reference", value[1])?;
             }
+            Reference::StepAfterCatch { delay, value } => {
+                if !(delay.is_finite() && *delay >= 0.0) {
+                    return Err(RipError::invalid(
+                        "step_after_catch",
+                        format!("must be non-negative and finite, got {delay}"),
+                    ));
+                }
+                finite("reference", value[0])?;
+                finite("reference", value[1])?;
+            }
             Reference::Sequence(seq) => {
                 if seq.len() != n {
                     return Err(RipError::Shape {
@@ -300,7 +319,30 @@ pub struct SimResult {
     pub x_final: [f64; 4],
 }
 
+/// Whether a run that starts with a swing-up succeeded, the one definition used by every
+/// report: the supervisor caught the pendulum (time to upright = the catch time, the first
+/// balanced sample) and then stayed in its balance region to the end of the run, without a
+/// stop or a numerical divergence.
+pub fn swing_up_succeeded(
+    catch_time: Option<f64>,
+    fell: bool,
+    diverged: bool,
+    stop_cause: Option<StopCause>,
+) -> bool {
+    catch_time.is_some() && !fell && !diverged && stop_cause.is_none()
+}
+
 impl SimResult {
+    /// The time to upright (s): the catch time of a swing-up, `None` without one.
+    pub fn time_to_upright(&self) -> Option<f64> {
+        self.catch_time
+    }
+
+    /// [`swing_up_succeeded`] for this run.
+    pub fn swing_up_succeeded(&self) -> bool {
+        swing_up_succeeded(self.catch_time, self.fell, self.diverged, self.stop_cause)
+    }
+
     fn with_capacity(n: usize, n_estimate: usize) -> Self {
         Self {
             t: Vec::with_capacity(n),
@@ -507,6 +549,11 @@ pub(crate) fn run_loop(
                 }
             }
             Reference::Sequence(seq) => seq[k],
+            Reference::StepAfterCatch { delay, value } => match out.catch_time {
+                // Within a rounding of the sample grid: `t − t_c` is a multiple of `Ts`.
+                Some(tc) if t - tc >= *delay - 1e-9 * ts => *value,
+                _ => [0.0, 0.0],
+            },
         };
 
         let start = Instant::now();

@@ -77,10 +77,10 @@ impl RateEstimator {
     }
 }
 
-/// How far inside `arm_limit` (rad) the braking envelope ends: the continuous-time argument of
-/// the module docs holds for the nominal model, while the loop samples every `Ts` and the rig
-/// differs from the model by some percent; 0.05 rad covers one period at the envelope's top
-/// speeds and ±10 % parameter error in the simulation tests.
+/// Least distance (rad) inside `arm_limit` at which the braking envelope ends: the
+/// continuous-time argument of the module docs holds for the nominal model, while the loop
+/// samples every `Ts` and the rig differs from the model by some percent. The envelope ends
+/// one period at its top speed `√(2 a_b θ_L)` inside the limit, and at least this far.
 const ENVELOPE_MARGIN: f64 = 0.05;
 
 /// The swing-up law's constants, computed once from the nominal plant and the settings.
@@ -107,12 +107,15 @@ pub(crate) struct EnergyLaw {
 }
 
 impl EnergyLaw {
-    pub(crate) fn new(plant: &Plant, s: &SwingUpSettings) -> Self {
+    pub(crate) fn new(plant: &Plant, s: &SwingUpSettings, ts: f64) -> Self {
         let p = plant.params();
         let ja = p.jp + p.mp * p.lp * p.lp / 4.0;
         let j0 = p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr;
         let grav = p.mp * p.g * p.lp / 2.0;
         let stall = p.kt / p.rm * s.max_voltage / (j0 + ja);
+        let brake = s.brake_fraction * stall;
+        let top_speed = (2.0 * brake * s.arm_limit).sqrt();
+        let margin = (top_speed * ts).max(ENVELOPE_MARGIN).min(0.5 * s.arm_limit);
         Self {
             plant: *plant,
             ja,
@@ -120,12 +123,12 @@ impl EnergyLaw {
             target: s.energy_margin * grav,
             dissipation: 4.0 * p.dp * (grav / ja).sqrt(),
             pump: s.pump_fraction * grav / ja,
-            brake: s.brake_fraction * stall,
+            brake,
             gain: s.energy_gain,
             width: s.pump_width,
             wc: s.arm_centering,
             lambda: s.barrier_rate,
-            arm_limit: s.arm_limit - ENVELOPE_MARGIN.min(0.5 * s.arm_limit),
+            arm_limit: s.arm_limit - margin,
             u_max: s.max_voltage,
         }
     }

@@ -120,6 +120,7 @@
 
 mod law;
 mod settings;
+pub mod study;
 
 pub use settings::{OnFall, SwingUpSettings};
 
@@ -185,7 +186,7 @@ impl<C: Controller> SwingUp<C> {
             )
         })?;
         let mut out = Self {
-            law: EnergyLaw::new(plant, &settings),
+            law: EnergyLaw::new(plant, &settings, ts),
             mode,
             rates: RateEstimator::new(ts, settings.rate_cutoff),
             balance,

@@ -1,77 +1,35 @@
+use super::study::{hanging_config, supervised, STEP_AFTER_CATCH};
 use super::*;
-use crate::mpc::{self, Mpc, QpSolver};
 use crate::paper;
 use crate::plant::{FurutaParams, State};
-use crate::regulators::{Lqg, Lqr, DEFAULT_RATE_CUTOFF_HZ};
-use crate::sim::{simulate, Reference, SensorModel, SimConfig, SimResult};
+use crate::regulators::Lqr;
+use crate::sim::{simulate, Reference, SimConfig, SimResult};
+use crate::spec::{ControllerKind, Spec};
 use std::f64::consts::PI;
 
-/// The paper's three designs on `plant`'s model: the printed model for the `paper` preset,
-/// the linearisation about upright otherwise (as `riprs compare` designs them).
-type Named = Vec<(&'static str, Box<dyn Controller>)>;
-
-fn designs(preset: &str) -> (Plant, Named) {
-    let plant = if preset == "paper" {
-        Plant::paper()
-    } else {
-        Plant::qube_servo2()
-    };
-    let (ad, bd) = if preset == "paper" {
-        let m = paper::discrete_model();
-        (m.a, m.b)
-    } else {
-        plant
-            .linearize_discrete(&State::zeros(), 0.0, paper::TS)
-            .unwrap()
-    };
-    let (q, r) = paper::lqr_weights();
-    let lqr = Lqr::design(&ad, &bd, &q, &r, paper::TS, DEFAULT_RATE_CUTOFF_HZ).unwrap();
-    let mpc = Mpc::new(
-        &ad,
-        &bd,
-        &paper::output_matrix(),
-        paper::TS,
-        mpc::paper::settings(QpSolver::ActiveSet),
-    )
-    .unwrap();
-    let model = mpc.model();
-    let kf = mpc.kalman_design();
-    let lqg = Lqg::new(
-        &lqr.gain(),
-        &model.a,
-        &model.b,
-        &model.c,
-        &kf.l,
-        &kf.m,
-        paper::TS,
-    )
-    .unwrap();
-    (
-        plant,
-        vec![
-            ("LQR", Box::new(lqr) as Box<dyn Controller>),
-            ("LQG", Box::new(lqg)),
-            ("MPC", Box::new(mpc)),
-        ],
-    )
+fn spec(preset: &str) -> Spec {
+    Spec::parse(&format!("[plant]\npreset = \"{preset}\"\n")).unwrap()
 }
 
+/// The paper's `[swing_up]`-less runs of the older tests: the paper preset's LQR, a step at a
+/// fixed time, hanging at rest.
 fn hanging_run(duration: f64, step_time: f64, seed: u64) -> SimConfig {
     SimConfig {
         duration,
-        x0: [0.0, 0.0, PI, 0.0],
         reference: Reference::Step {
             time: step_time,
             value: [1.0, 0.0],
         },
-        sensor: SensorModel {
-            counts_per_rev: Some([2048.0, 2048.0]),
-            noise_std: [1e-3, 1e-3],
-            offsets: [0.0; 2],
-        },
-        seed,
-        ..Default::default()
+        ..hanging_config(&spec("paper"), paper::TS, seed)
     }
+}
+
+/// RMSE of the measured arm angle against its reference over `len` samples from `from`.
+fn arm_rmse(res: &SimResult, from: usize, len: usize) -> f64 {
+    let e: f64 = (from..from + len)
+        .map(|k| (res.y[k][0] - res.r[k][0]).powi(2))
+        .sum();
+    (e / len as f64).sqrt()
 }
 
 fn max_arm(res: &SimResult) -> f64 {
@@ -80,52 +38,81 @@ fn max_arm(res: &SimResult) -> f64 {
 
 #[test]
 fn every_balance_controller_catches_from_hanging_and_tracks_the_step() {
-    let (plant, controllers) = designs("paper");
-    let limit = SwingUpSettings::default().arm_limit;
-    for (name, balance) in controllers {
-        let mut sup = SwingUp::new(balance, &plant, SwingUpSettings::default()).unwrap();
-        for seed in [1, 2] {
-            let res = simulate(&plant, &mut sup, &hanging_run(15.0, 8.0, seed)).unwrap();
-            let caught = res
-                .catch_time
-                .unwrap_or_else(|| panic!("{name}/{seed}: no catch"));
-            assert!(!res.fell, "{name}/{seed}: fell at {:?}", res.fall_time);
-            assert!(res.stop_cause.is_none());
-            assert!(caught < 8.0, "{name}/{seed}: caught at {caught}");
-            assert_eq!(res.len(), 1500, "{name}/{seed}");
-            // Swing-up before the catch, balance from it on.
-            let k = res.t.iter().position(|&t| t == caught).unwrap();
-            assert!(res.phase[..k].iter().all(|&p| p == Phase::SwingUp));
-            assert!(res.phase[k..].iter().all(|&p| p == Phase::Balance));
-            assert!(
-                max_arm(&res) <= limit,
-                "{name}/{seed}: |θ| reached {}",
-                max_arm(&res)
-            );
-            assert!(res.u.iter().all(|u| u.abs() <= 12.0));
-            let last = res.x.last().unwrap();
-            assert!(
-                (last[0] - 1.0).abs() < 0.05,
-                "{name}/{seed}: θ = {}",
-                last[0]
-            );
-            assert!(
-                wrap_angle(last[2]).abs() < 0.02,
-                "{name}/{seed}: α = {}",
-                last[2]
-            );
-            // The arm reference is held where the arm was caught until the step.
-            let before_step = res.t.iter().position(|&t| t >= 7.9).unwrap();
-            assert!((res.r[before_step][0] - 0.0).abs() < 1e-12);
+    for preset in ["paper", "qube_servo2"] {
+        let spec = spec(preset);
+        let design = spec.design(paper::TS).unwrap();
+        let truth = spec.plant().unwrap();
+        let limit = spec.swing_up.arm_limit;
+        let u_max = spec.swing_up.max_voltage;
+        for kind in ControllerKind::ALL {
+            let name = format!("{preset}/{}", kind.name());
+            // The reference: the same controller started upright, its step at `step_time`.
+            let mut upright = design.controller(kind).unwrap();
+            let base = simulate(&truth, upright.as_mut(), &spec.sim_config(paper::TS, 1)).unwrap();
+            let k_step = (spec.reference.step_time / paper::TS).round() as usize;
+            let len = base.len() - k_step;
+            let reference = arm_rmse(&base, k_step, len);
+            let mut sup = supervised(&spec, &design, kind).unwrap();
+            // Two noise seeds on the nominal plant; the success rate over perturbed plants is
+            // the Monte Carlo's (tests/test_swingup.py, examples/swingup_monte_carlo.rs).
+            for seed in [1, 3] {
+                let config = hanging_config(&spec, paper::TS, seed);
+                let res = simulate(&truth, &mut sup, &config).unwrap();
+                let caught = res
+                    .time_to_upright()
+                    .unwrap_or_else(|| panic!("{name}/{seed}: no catch"));
+                assert!(
+                    res.swing_up_succeeded(),
+                    "{name}/{seed}: fell at {:?}",
+                    res.fall_time
+                );
+                assert_eq!(res.len(), config.validate().unwrap(), "{name}/{seed}");
+                // Swing-up before the catch, balance from it on.
+                let k = res.t.iter().position(|&t| t == caught).unwrap();
+                assert!(res.phase[..k].iter().all(|&p| p == Phase::SwingUp));
+                assert!(res.phase[k..].iter().all(|&p| p == Phase::Balance));
+                assert!(
+                    max_arm(&res) <= limit,
+                    "{name}/{seed}: |θ| {}",
+                    max_arm(&res)
+                );
+                assert!(res.u.iter().all(|u| u.abs() <= u_max));
+                // The step comes STEP_AFTER_CATCH after the catch; before it the arm reference
+                // is 0 (held where the arm was caught by the supervisor).
+                let k_up = k + (STEP_AFTER_CATCH / paper::TS).round() as usize;
+                assert!(res.r[..k_up].iter().all(|r| r[0] == 0.0), "{name}/{seed}");
+                assert!(res.r[k_up..].iter().all(|r| r[0] == 1.0), "{name}/{seed}");
+                // After the step the arm tracks as well as when started upright (the paper's
+                // Tab. 1 index over the same number of samples).
+                let rmse = arm_rmse(&res, k_up, len.min(res.len() - k_up));
+                assert!(
+                    rmse <= 1.2 * reference + 0.01,
+                    "{name}/{seed}: arm RMSE {rmse} after the step, {reference} from upright"
+                );
+                let last = res.x.last().unwrap();
+                assert!(
+                    (last[0] - 1.0).abs() < 0.05,
+                    "{name}/{seed}: θ = {}",
+                    last[0]
+                );
+                assert!(
+                    wrap_angle(last[2]).abs() < 0.02,
+                    "{name}/{seed}: α = {}",
+                    last[2]
+                );
+            }
         }
     }
 }
 
 #[test]
 fn the_estimator_has_converged_at_the_catch() {
-    let (plant, controllers) = designs("paper");
-    for (name, balance) in controllers.into_iter().skip(1) {
-        let mut sup = SwingUp::new(balance, &plant, SwingUpSettings::default()).unwrap();
+    let spec = spec("paper");
+    let design = spec.design(paper::TS).unwrap();
+    let plant = spec.plant().unwrap();
+    for kind in [ControllerKind::Lqg, ControllerKind::Mpc] {
+        let name = kind.name();
+        let mut sup = supervised(&spec, &design, kind).unwrap();
         let res = simulate(&plant, &mut sup, &hanging_run(6.0, 8.0, 3)).unwrap();
         let k = res
             .t
@@ -199,7 +186,7 @@ fn pumping_raises_the_energy_below_its_target_and_lowers_it_above() {
     // E_t(α) = δ G + 4 d_p √(G/J_α) (1 − cos(α/2)), eq. (1a).
     let plant = Plant::paper();
     let s = SwingUpSettings::default();
-    let law = law::EnergyLaw::new(&plant, &s);
+    let law = law::EnergyLaw::new(&plant, &s, paper::TS);
     let p = plant.params();
     let m12 = p.mp * p.lr * p.lp / 2.0;
     let grav = p.mp * p.g * p.lp / 2.0;
