@@ -122,7 +122,7 @@ mod law;
 mod settings;
 pub mod study;
 
-pub use settings::{OnFall, SwingUpSettings};
+pub use settings::{OnFall, SwingUpSettings, MAX_SWING_UP_TIME};
 
 use crate::controller::{Controller, Phase, StepStatus, StopCause};
 use crate::error::{Result, RipError};

@@ -4,6 +4,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, RipError};
 
+/// Largest `swing_up.max_time` (s): two minutes of pumping at up to the full voltage. A rig
+/// that has not swung up by then will not (the defaults catch within seconds), and an
+/// unbounded value would leave no swing-up timeout at all.
+pub const MAX_SWING_UP_TIME: f64 = 120.0;
+
 /// What the supervisor does when the pendulum leaves the balance region after a catch.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -116,7 +121,8 @@ pub struct SwingUpSettings {
     /// [`Controller::seed`]: crate::Controller::seed
     pub estimator_window: f64,
     /// Longest swing-up (s) before giving up with
-    /// [`StopCause::SwingUpTimeout`](crate::controller::StopCause); default 20 s.
+    /// [`StopCause::SwingUpTimeout`](crate::controller::StopCause); default 20 s, at most
+    /// [`MAX_SWING_UP_TIME`].
     pub max_time: f64,
     /// What to do after a fall; default [`OnFall::Retry`].
     pub on_fall: OnFall,
@@ -230,7 +236,14 @@ impl SwingUpSettings {
             false,
             true,
         )?;
-        in_range("max_time", self.max_time, 0.0, inf, true, true)?;
+        in_range(
+            "max_time",
+            self.max_time,
+            0.0,
+            MAX_SWING_UP_TIME,
+            true,
+            false,
+        )?;
         Ok(())
     }
 }
@@ -242,8 +255,9 @@ mod tests {
     #[test]
     fn every_key_is_named_when_bad() {
         type Spoil = fn(&mut SwingUpSettings);
-        let cases: [(&str, Spoil); 6] = [
+        let cases: [(&str, Spoil); 7] = [
             ("swing_up.max_time", |s| s.max_time = 0.0),
+            ("swing_up.max_time", |s| s.max_time = 1e300),
             ("swing_up.max_voltage", |s| s.max_voltage = f64::NAN),
             ("swing_up.arm_limit", |s| s.arm_limit = 4.0),
             ("swing_up.balance_angle", |s| s.balance_angle = 0.1),
