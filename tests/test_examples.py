@@ -25,7 +25,7 @@ WRITES = {
     "swing_up": ["swing_up.svg"],
     "rig_emulator": ["mpc.csv", "compare/arm_angle_with_logs.svg"],
     "rig_swing_up": ["swing_up.csv", "swing_up.svg"],
-    "rig_excite": ["chirp.csv", "excite.svg"],
+    "rig_excite": ["chirp.csv", "excite.svg", "rig.toml"],
     "campaign": ["fall_rate_map.svg", "rmse_pendulum_map.svg"],
 }
 
