@@ -2,10 +2,11 @@
 pendulum behind a pseudo-terminal) and `rip-rt run` balancing it with the MPC for a few seconds,
 then the log read back with riprs.load_log and overlaid on the simulated comparison.
 
-    cargo build --release -p rip-rt
+    pip install .   # or: cargo build --release -p rip-rt
     python examples/rig_emulator.py --out rig-out
 
-The rip-rt binary is taken from $RIP_RT, else target/release/rip-rt (built if missing). With
+rip-rt is $RIP_RT, else the `rip-rt` that pip installed, else cargo's release build (built
+if missing): riprs._binaries.rip_rt_path. With
 RIPRS_EXAMPLES_SMALL=1 the run lasts 2 s (the test suite's size), else 5 s.
 """
 
@@ -18,6 +19,7 @@ import subprocess
 from pathlib import Path
 
 import riprs
+from riprs._binaries import rip_rt_path
 from riprs.compare import Trajectory, compare
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -27,9 +29,7 @@ args = parser.parse_args()
 small = os.environ.get("RIPRS_EXAMPLES_SMALL") == "1"
 out = Path(args.out)
 out.mkdir(parents=True, exist_ok=True)
-rip_rt = Path(os.environ.get("RIP_RT", ROOT / "target" / "release" / "rip-rt"))
-if not rip_rt.exists():
-    subprocess.run(["cargo", "build", "--release", "-p", "rip-rt"], cwd=ROOT, check=True)
+rip_rt = rip_rt_path(build=True, workspace=ROOT)
 duration = "2" if small else "5"
 
 # --8<-- [start:run]

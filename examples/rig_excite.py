@@ -4,10 +4,11 @@ checks the rest, calibrates, checks the motor and encoder signs with a short pul
 a chirp through a weak arm-centring pull and logs it; `riprs.identify` then fits the nonlinear
 model to the log and writes the rig's [plant] file.
 
-    cargo build --release -p rip-rt
+    pip install .   # or: cargo build --release -p rip-rt
     python examples/rig_excite.py --out excite-out
 
-The rip-rt binary is taken from $RIP_RT, else target/release/rip-rt (built if missing). With
+rip-rt is $RIP_RT, else the `rip-rt` that pip installed, else cargo's release build (built
+if missing): riprs._binaries.rip_rt_path. With
 RIPRS_EXAMPLES_SMALL=1 the chirp lasts 3 s (the test suite's size), else 15 s.
 """
 
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 import riprs
+from riprs._binaries import rip_rt_path
 
 ROOT = Path(__file__).resolve().parents[1]
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -30,9 +32,7 @@ args = parser.parse_args()
 small = os.environ.get("RIPRS_EXAMPLES_SMALL") == "1"
 out = Path(args.out)
 out.mkdir(parents=True, exist_ok=True)
-rip_rt = Path(os.environ.get("RIP_RT", ROOT / "target" / "release" / "rip-rt"))
-if not rip_rt.exists():
-    subprocess.run(["cargo", "build", "--release", "-p", "rip-rt"], cwd=ROOT, check=True)
+rip_rt = rip_rt_path(build=True, workspace=ROOT)
 duration = "3" if small else "15"
 
 # --8<-- [start:hidden]

@@ -3,10 +3,11 @@ rest) and `rip-rt run --swing-up`, which checks that the rig is at rest, calibra
 zeros from that rest, swings the pendulum up, catches it with the LQR and balances; the log's
 phase column tells the swing from the balance.
 
-    cargo build --release -p rip-rt
+    pip install .   # or: cargo build --release -p rip-rt
     python examples/rig_swing_up.py --out swing-rig-out
 
-The rip-rt binary is taken from $RIP_RT, else target/release/rip-rt (built if missing). With
+rip-rt is $RIP_RT, else the `rip-rt` that pip installed, else cargo's release build (built
+if missing): riprs._binaries.rip_rt_path. With
 RIPRS_EXAMPLES_SMALL=1 it balances 1 s after the catch (the test suite's size), else 4 s.
 """
 
@@ -21,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 import riprs
+from riprs._binaries import rip_rt_path
 
 ROOT = Path(__file__).resolve().parents[1]
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -29,9 +31,7 @@ args = parser.parse_args()
 small = os.environ.get("RIPRS_EXAMPLES_SMALL") == "1"
 out = Path(args.out)
 out.mkdir(parents=True, exist_ok=True)
-rip_rt = Path(os.environ.get("RIP_RT", ROOT / "target" / "release" / "rip-rt"))
-if not rip_rt.exists():
-    subprocess.run(["cargo", "build", "--release", "-p", "rip-rt"], cwd=ROOT, check=True)
+rip_rt = rip_rt_path(build=True, workspace=ROOT)
 duration = "1" if small else "4"
 
 

@@ -1,6 +1,15 @@
-"""Shared pytest configuration."""
+"""Shared pytest configuration, and the one way the tests find rip-rt."""
 
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
 from hypothesis import HealthCheck, settings
+
+from riprs._binaries import rip_rt_path
+
+ROOT = Path(__file__).resolve().parents[1]
 
 # Property tests draw random linear systems; a fixed budget keeps CI time predictable.
 settings.register_profile(
@@ -11,3 +20,10 @@ settings.register_profile(
     derandomize=True,
 )
 settings.load_profile("riprs")
+
+
+@pytest.fixture(scope="session")
+def rip_rt() -> Path:
+    """The rip-rt the suite runs: $RIP_RT, else the installed console script, else cargo's
+    release build of this checkout (built if missing), wherever its target directory is."""
+    return rip_rt_path(build=True, workspace=ROOT)

@@ -11,7 +11,6 @@ import riprs
 from riprs.cli import main, reference
 
 ROOT = Path(__file__).resolve().parents[1]
-RIP_RT = ROOT / "target" / "release" / "rip-rt"
 
 RIG = """
 controllers = ["MPC", "LQR"]
@@ -30,15 +29,6 @@ period_ms = 10
 [safety]
 voltage_limit = 10
 """
-
-
-@pytest.fixture(scope="module")
-def rip_rt() -> Path:
-    if not RIP_RT.exists():
-        subprocess.run(
-            ["cargo", "build", "--release", "-p", "rip-rt"], cwd=ROOT, check=True, timeout=1800
-        )
-    return RIP_RT
 
 
 def _riprs_config(capsys, *args: str) -> tuple[int, str, str]:

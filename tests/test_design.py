@@ -237,10 +237,18 @@ def test_mode_on_the_unit_circle_invisible_to_the_output_is_not_detectable():
     A = np.array([[1.0, 0.1, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
     G = np.array([[0.005], [0.1], [0.0]])
     C = np.array([[1.0, 0.0, 1.0]])
-    with pytest.raises(riprs.RiprsError):
+    with pytest.raises(riprs.NotDetectableError, match="not detectable"):
         riprs.dlqe(A, G, C, [[1.0]], [[1.0]])
-    with pytest.raises(Exception):  # noqa: B017 - python-control's own error type varies
-        control.dlqe(A, G, C, [[1.0]], [[1.0]])
+    # Independent check (PBH): v = (1, 0, -1) is an eigenvector of A for lambda = 1 with
+    # C v = 0, so [A - I; C] loses rank and (A - L C) v = v for every gain L: no predictor is
+    # stable. (Whether a third-party solver raises here, or returns such a gain with a
+    # closed-loop eigenvalue at 1, changes between releases, so it is not the reference.)
+    v = np.array([1.0, 0.0, -1.0])
+    np.testing.assert_allclose(A @ v, v, atol=0)
+    np.testing.assert_allclose(C @ v, 0.0, atol=0)
+    assert np.linalg.matrix_rank(np.vstack([A - np.eye(3), C])) == 2
+    for L in np.random.default_rng(0).normal(size=(5, 3, 1)):
+        assert np.min(np.abs(np.linalg.eigvals(A - L @ C) - 1.0)) < 1e-9
 
 
 @pytest.mark.parametrize(

@@ -30,16 +30,6 @@ WRITES = {
 }
 
 
-@pytest.fixture(scope="module")
-def rip_rt() -> Path:
-    exe = ROOT / "target" / "release" / "rip-rt"
-    if not exe.exists():
-        subprocess.run(
-            ["cargo", "build", "--release", "-p", "rip-rt"], cwd=ROOT, check=True, timeout=1800
-        )
-    return exe
-
-
 def test_every_example_is_on_the_site() -> None:
     # The site's build hook runs a fixed list; an example missing from it would rot unseen.
     text = SITE_HOOK.read_text()

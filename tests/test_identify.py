@@ -205,30 +205,20 @@ def test_saturated_and_unexcited_logs_warn_and_name_what_is_not_identifiable(tmp
     assert {"kt", "Vd"} <= set(result.not_identifiable) | set(result.at_bounds)
 
 
-RIP_RT = Path(__file__).resolve().parents[1] / "target" / "release" / "rip-rt"
-
-
-def test_rip_rt_run_and_emulate_accept_the_written_file(identified, tmp_path):
+def test_rip_rt_run_and_emulate_accept_the_written_file(identified, tmp_path, rip_rt):
     import subprocess
 
-    if not RIP_RT.exists():
-        subprocess.run(
-            ["cargo", "build", "--release", "-p", "rip-rt"],
-            cwd=RIP_RT.parents[2],
-            check=True,
-            timeout=1800,
-        )
     rig = tmp_path / "rig.toml"
     rig.write_text(identified.to_toml("chirp.csv, prbs.csv"))
     # `rip-rt config` checks the file as `rip-rt run --config` does (designs included).
     checked = subprocess.run(
-        [str(RIP_RT), "config", str(rig)], capture_output=True, text=True, timeout=60
+        [str(rip_rt), "config", str(rig)], capture_output=True, text=True, timeout=60
     )
     assert checked.returncode == 0, checked.stderr
     assert f"Vd = {identified.params.Vd!r}" in checked.stdout
     # The emulator simulates it (friction and dead zone included) and exits on its own.
     emulated = subprocess.run(
-        [str(RIP_RT), "emulate", "--config", str(rig), "--duration", "0.3"],
+        [str(rip_rt), "emulate", "--config", str(rig), "--duration", "0.3"],
         capture_output=True,
         text=True,
         timeout=60,
@@ -236,7 +226,7 @@ def test_rip_rt_run_and_emulate_accept_the_written_file(identified, tmp_path):
     assert emulated.returncode == 0, emulated.stderr
 
 
-def test_hidden_rig_chain_excite_identify_run(tmp_path):
+def test_hidden_rig_chain_excite_identify_run(tmp_path, rip_rt):
     """`rip-rt emulate --config hidden.toml` is the rig; `rip-rt excite` logs a chirp and a PRBS
     run; `riprs identify` writes rig.toml; `rip-rt run --config rig.toml` balances the hidden
     emulator with LQR, LQG and MPC designed on it."""
@@ -251,14 +241,14 @@ def test_hidden_rig_chain_excite_identify_run(tmp_path):
 
     def on_emulator(args: list[str], *command: str) -> subprocess.CompletedProcess:
         emulator = subprocess.Popen(
-            [str(RIP_RT), "emulate", "--config", str(hidden), "--noise", "0.3", *args],
+            [str(rip_rt), "emulate", "--config", str(hidden), "--noise", "0.3", *args],
             stdout=subprocess.PIPE,
             text=True,
         )
         try:
             device = emulator.stdout.readline().strip().removeprefix("device: ")
             return subprocess.run(
-                [str(RIP_RT), *command, "--port", device],
+                [str(rip_rt), *command, "--port", device],
                 capture_output=True,
                 text=True,
                 timeout=120,

@@ -129,18 +129,8 @@ def test_malformed_logs_name_the_problem(tmp_path: pathlib.Path, text: str, matc
         riprs.load_log(path)
 
 
-def _binary() -> pathlib.Path | None:
-    for profile in ("release", "debug"):
-        exe = ROOT / "target" / profile / "rip-rt"
-        if exe.exists():
-            return exe
-    return None
-
-
-@pytest.mark.skipif(_binary() is None, reason="rip-rt is not built (cargo build -p rip-rt)")
-def test_reads_a_log_written_by_rip_rt(tmp_path: pathlib.Path) -> None:
-    exe = _binary()
-    assert exe is not None
+def test_reads_a_log_written_by_rip_rt(tmp_path: pathlib.Path, rip_rt: pathlib.Path) -> None:
+    exe = rip_rt
     emu = subprocess.Popen(
         [str(exe), "emulate", "--noise", "0.3"],
         stdout=subprocess.PIPE,
@@ -176,10 +166,10 @@ def test_reads_a_log_written_by_rip_rt(tmp_path: pathlib.Path) -> None:
     assert np.abs(log.u).max() <= 12.0
 
 
-@pytest.mark.skipif(_binary() is None, reason="rip-rt is not built (cargo build -p rip-rt)")
-def test_reads_the_phases_of_a_swing_up_written_by_rip_rt(tmp_path: pathlib.Path) -> None:
-    exe = _binary()
-    assert exe is not None
+def test_reads_the_phases_of_a_swing_up_written_by_rip_rt(
+    tmp_path: pathlib.Path, rip_rt: pathlib.Path
+) -> None:
+    exe = rip_rt
     config = tmp_path / "rig.toml"
     config.write_text("[calibration]\nrest_window_s = 0.5\n")
     emu = subprocess.Popen(

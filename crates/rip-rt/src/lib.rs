@@ -4,6 +4,8 @@
 //! pendulum's microcontroller over a serial link, and a device emulator that speaks the same
 //! protocol over a pseudo-terminal so the whole loop can be tested on any machine.
 //!
+//! - [`cli`] — the `rip-rt` command line, from arguments to exit code (the binary and the
+//!   Python package's console script both run it).
 //! - [`protocol`] — wire protocol v1, the `rip-protocol` crate that the firmware runs too.
 //! - [`runner`] — the periodic loop and its phases (probe, arming, balancing).
 //! - [`excite`] — `rip-rt excite`: the sign check and an open-loop excitation, hanging down.
@@ -20,7 +22,12 @@
 //! `docs/protocol.md` specifies the protocol for firmware authors and `docs/rip-rt.md` the
 //! command line, the safety rules, the exit codes and the log format.
 
+// The command line was written as the binary's crate, naming this library `rip_rt`; the alias
+// keeps those paths valid now that it lives here.
+extern crate self as rip_rt;
+
 pub mod calibrate;
+pub mod cli;
 pub mod config;
 pub mod controllers;
 pub mod emulator;

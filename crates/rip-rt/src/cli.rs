@@ -1,8 +1,16 @@
-//! `rip-rt`: the 100 Hz control loop over serial (`run`) and the device emulator (`emulate`).
+//! The `rip-rt` command line: the 100 Hz control loop over serial (`run`), the identification
+//! experiment (`excite`), the device emulator (`emulate`) and the resolved configuration
+//! (`config`).
+//!
+//! [`run`] is the whole program, from its arguments to its exit code. The `rip-rt` binary is a
+//! thin `main` around it, and the Python package's `rip-rt` console script calls it in-process
+//! through the native module (so `pip install` puts a working `rip-rt` on the PATH). Either way
+//! the exit codes (`rip-rt run --help`) and the signal dispositions ([`crate::stop`]) are the
+//! same: they are set here, not by the caller.
 
+use std::ffi::OsString;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
@@ -569,12 +577,46 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
     }
 }
 
-fn main() -> ExitCode {
-    let cli = Cli::parse();
-    match cli.command {
-        Command::Run(args) => cmd_run(args),
-        Command::Excite(args) => excite_cmd::cmd_excite(args),
-        Command::Emulate(args) => cmd_emulate(*args),
-        Command::Config(args) => cmd_config(args),
+/// The exit status of a command (`rip-rt run --help` lists them). std's `ExitCode` cannot be
+/// read back, and the in-process caller needs the number.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct ExitCode(u8);
+
+impl ExitCode {
+    pub(crate) const SUCCESS: ExitCode = ExitCode(0);
+}
+
+impl From<u8> for ExitCode {
+    fn from(code: u8) -> Self {
+        ExitCode(code)
     }
+}
+
+/// Runs `rip-rt` with the command line `args` (the program name first, as in
+/// [`std::env::args_os`]) and returns its exit code.
+///
+/// Usage errors, `--help` and `--version` are printed as clap prints them and return its code
+/// (2 for a usage error, 0 otherwise) instead of exiting the process. Standard output is
+/// flushed before returning. A panic is not caught here: the binary lets it end the process
+/// with 101, an embedding caller catches it (the motor has been stopped by the panic hook and
+/// the loop's stop guard by then).
+pub fn run<I, T>(args: I) -> u8
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    let code = match Cli::try_parse_from(args) {
+        Ok(cli) => match cli.command {
+            Command::Run(args) => cmd_run(args),
+            Command::Excite(args) => excite_cmd::cmd_excite(args),
+            Command::Emulate(args) => cmd_emulate(*args),
+            Command::Config(args) => cmd_config(args),
+        },
+        Err(e) => {
+            let _ = e.print();
+            ExitCode(u8::try_from(e.exit_code()).unwrap_or(exit_code::USAGE as u8))
+        }
+    };
+    let _ = std::io::stdout().flush();
+    code.0
 }

@@ -1,7 +1,6 @@
 //! `rip-rt excite`: the command line of an identification experiment ([`rip_rt::excite`]).
 
 use std::path::PathBuf;
-use std::process::ExitCode;
 
 use rip_core::excitation::{Excitation, ExcitationSettings, Signal, Sweep};
 use rip_core::RipError;
@@ -13,7 +12,7 @@ use rip_rt::serial::SerialPort;
 use rip_rt::sign_check::PULSE_VOLTAGE;
 use rip_rt::stop::{self, exit_code, SetupError, StopReason};
 
-use crate::{apply_realtime, baud, cpu, fail, positive_seconds};
+use super::{apply_realtime, baud, cpu, fail, positive_seconds, ExitCode};
 
 pub(crate) const EXCITE_AFTER_HELP: &str = "\
 Stages: rest check and calibration (motor disabled), sign check (a short pulse, then 0 V),
