@@ -1,5 +1,7 @@
 """scipy's own ``solve_discrete_are`` test cases (DAREX, Benner, Laub & Mehrmann 1995), run
 against riprs.dare: the stabilizing solution must agree with scipy's and satisfy the equation.
+The cases and their residual tolerances are a fixed copy (``darex_cases.py``), not whatever the
+installed scipy's own tests hold.
 
 The complex cases (scipy's 0-2) are out of scope: riprs is real-valued and refuses complex input.
 """
@@ -9,12 +11,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.linalg
+from darex_cases import CASES
+from darex_cases import MAX_TOL as TOLERANCES
 
 import riprs
-
-solvers = pytest.importorskip("scipy.linalg.tests.test_solvers")
-CASES = solvers.TestSolveDiscreteAre.cases
-TOLERANCES = solvers.TestSolveDiscreteAre.max_tol
 
 
 def _residual(a, b, q, r, x, e=None, s=None):

@@ -170,7 +170,7 @@ def test_a_signal_stops_the_motor_with_the_binarys_exit_code(
         assert balanced, "never balanced"
         time.sleep(0.5)
         run.send_signal(sig)
-        out, err = run.communicate(timeout=20)
+        _, err = run.communicate(timeout=20)
         commands = _settled_record(record)
     finally:
         emulator.send_signal(signal.SIGTERM)
