@@ -6,10 +6,15 @@ subprocess with ``--out`` pointing into a temporary directory. What it prints be
 the former with ``--8<-- "output/NAME.txt"`` (pymdownx.snippets, whose search path gets the
 temporary directory) and link the latter as site files. An example that fails, or a page that
 names an output no example made, fails the build.
+
+The site works offline (``offline.py``): MathJax is served from the site, copied from the pinned
+package of the docs extra, and a built page or stylesheet that would load a script, stylesheet
+or font from another host fails the build.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import shutil
 import subprocess
@@ -23,6 +28,18 @@ from mkdocs.exceptions import PluginError
 from mkdocs.structure.files import File, Files
 
 ROOT = Path(__file__).resolve().parents[2]
+
+
+def _sibling(name: str) -> Any:
+    # MkDocs loads a hook from its path, without its directory on sys.path.
+    spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name(f"{name}.py"))
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+offline = _sibling("offline")
 
 # Scripts run for the site, in this order, with extra arguments. The test suite runs every
 # script in examples/ (tests/test_examples.py) in its small size; the site runs them full size.
@@ -84,11 +101,25 @@ def on_files(files: Files, config: Any) -> Files:
     for path in sorted(generated.rglob("*.svg")):
         uri = "generated/" + path.relative_to(generated).as_posix()
         files.append(File.generated(config, uri, abs_src_path=str(path)))
+    try:
+        mathjax = offline.mathjax_files()
+    except RuntimeError as e:
+        raise PluginError(str(e)) from e
+    if offline.MATHJAX_SCRIPT not in config.extra_javascript:
+        raise PluginError(f"mkdocs.yml: extra_javascript must load {offline.MATHJAX_SCRIPT}")
+    for uri, path in mathjax:
+        files.append(File.generated(config, uri, abs_src_path=str(path)))
     return files
 
 
 def on_post_build(config: Any) -> None:
     shutil.rmtree(_state.pop("work"), ignore_errors=True)
+    external = offline.external_resources(Path(config.site_dir))
+    if external:
+        raise PluginError(
+            "the site must load nothing from outside it (offline lab PCs); found:\n  "
+            + "\n  ".join(external)
+        )
 
 
 def on_build_error(error: Exception) -> None:
