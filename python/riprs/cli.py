@@ -49,11 +49,15 @@ def cmd_compare(args: argparse.Namespace) -> int:
         compare,
         format_monte_carlo,
         format_swing_up_monte_carlo,
+        start_of_logs,
     )
     from riprs.log import load_log
 
-    # Logs are read first, so that a wrong path fails before the runs, not after them.
-    logs = {f"rip-rt {Path(p).stem}": Trajectory.from_log(load_log(p)) for p in args.log or []}
+    # Logs are read first, so that a wrong path fails before the runs, not after them; their
+    # phase column says how the runs started, and the simulations start alike.
+    read = {p: load_log(p) for p in args.log or []}
+    start = start_of_logs(read, args.start)
+    logs = {f"rip-rt {Path(p).stem}": Trajectory.from_log(log) for p, log in read.items()}
     result = compare(
         args.config,
         out=args.out,
@@ -62,13 +66,13 @@ def cmd_compare(args: argparse.Namespace) -> int:
         plots=not args.no_plots,
         progress=not args.quiet,
         overlays=logs,
-        start=args.start,
+        start=start,
     )
     print(result.table())
     if result.monte_carlo is not None:
         print()
         print(format_monte_carlo(result.monte_carlo))
-        if args.start == "down":
+        if start == "down":
             print()
             print(format_swing_up_monte_carlo(result.monte_carlo))
     print()
@@ -246,9 +250,10 @@ def build_parser() -> argparse.ArgumentParser:
     comp.add_argument(
         "--start",
         choices=("up", "down"),
-        default="up",
+        default=None,
         help="up: balanced near upright (the paper's experiment, default); down: hanging at "
-        "rest, swung up and caught first, the step 2 s after the catch",
+        "rest, swung up and caught first, the step 2 s after the catch. With --log, default: "
+        "as the logged run started (its phase column)",
     )
     comp.add_argument("--log", action="append", metavar="FILE.csv", help="rip-rt log to overlay")
     comp.add_argument("--no-plots", action="store_true", help="skip the figures")

@@ -42,6 +42,7 @@ from typing import Any, Union
 
 import numpy as np
 
+from riprs import _progress as _bars
 from riprs import paper
 from riprs._riprs import (
     STEP_AFTER_CATCH,
@@ -64,6 +65,8 @@ __all__ = [
     "compare",
     "format_table",
     "rmse",
+    "start_of_logs",
+    "wrap_angle",
 ]
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -96,10 +99,11 @@ class Trajectory:
 
     @classmethod
     def from_sim(cls, result: SimResult) -> Trajectory:
+        """From a simulation; the pendulum angle wrapped as a ``rip-rt`` log holds it."""
         return cls(
             t=result.t,
             arm=result.y[:, 0],
-            pendulum=result.y[:, 1],
+            pendulum=wrap_angle(result.y[:, 1]),
             voltage=result.u,
             reference=result.r[:, 0],
             fell=result.fell,
@@ -110,8 +114,69 @@ class Trajectory:
     def from_log(cls, log: Any) -> Trajectory:
         """From a :class:`riprs.RtLog` (``riprs.load_log``)."""
         return cls(
-            t=log.t, arm=log.theta, pendulum=log.alpha, voltage=log.u, reference=log.theta_ref
+            t=log.t,
+            arm=log.theta,
+            pendulum=wrap_angle(log.alpha),
+            voltage=log.u,
+            reference=log.theta_ref,
         )
+
+
+def wrap_angle(angle: Any) -> np.ndarray:
+    """An angle wrapped to (-pi, pi], as ``rip-rt`` measures the pendulum (0 upright).
+
+    A swing-up's simulated pendulum angle is continuous and climbs past pi with every turn; the
+    rig's log holds it wrapped. Figures, CSV files and the indices of a run started hanging use
+    this one wrapping for both, so that they draw and compare alike.
+    """
+    a = np.asarray(angle, dtype=float)
+    return np.pi - np.mod(np.pi - a, 2 * np.pi)
+
+
+def start_of_logs(logs: Mapping[str, Any], start: str | None = None) -> str:
+    """How the runs of ``rip-rt`` logs started, to overlay them on simulations started alike.
+
+    A log whose ``phase`` column holds ``swing_up`` rows is of a run started hanging
+    (``rip-rt run --swing-up``): ``"down"``; any other is of a run balanced from upright:
+    ``"up"``.
+
+    Parameters
+    ----------
+    logs : mapping of str to riprs.RtLog
+        The logs, by the name used in messages (their file).
+    start : {"up", "down"}, optional
+        The start asked for (``riprs compare --start``); default: the logs'.
+
+    Returns
+    -------
+    str
+        ``"up"`` or ``"down"``: ``start`` if given and the logs agree, else the logs' (``"up"``
+        without logs).
+
+    Raises
+    ------
+    riprs.ConfigError
+        The logs started differently, or not as ``start`` says.
+    """
+    if start is not None and start not in STARTS:
+        raise ConfigError(f"start must be one of {STARTS}, got {start!r}")
+    starts = {
+        name: "down" if np.any(log.phase == "swing_up") else "up" for name, log in logs.items()
+    }
+    found = set(starts.values())
+    if len(found) > 1:
+        listed = ", ".join(f"{name}: {how}" for name, how in starts.items())
+        raise ConfigError(
+            f"the logs started differently ({listed}); overlay each with its own --start"
+        )
+    if start is not None and found and start not in found:
+        name, how = next(iter(starts.items()))
+        reason = "swings up first" if how == "down" else "has no swing-up"
+        raise ConfigError(
+            f"--start {start}, but the log {name} {reason} (its phase column): overlay it with "
+            f"--start {how} or without --start"
+        )
+    return start if start is not None else (found.pop() if found else "up")
 
 
 def rmse(traj: Trajectory) -> tuple[float, float, float]:
@@ -236,7 +301,7 @@ def _paper_window(traj: Trajectory, config: Spec) -> Trajectory:
         return traj
     t0 = traj.catch_time + STEP_AFTER_CATCH - config.reference.step_time
     window = (traj.t >= t0 - 1e-9) & (traj.t < t0 + config.reference.duration - 1e-9)
-    wrapped = np.mod(traj.pendulum + np.pi, 2 * np.pi) - np.pi
+    wrapped = wrap_angle(traj.pendulum)
     return Trajectory(
         t=traj.t[window],
         arm=traj.arm[window],
@@ -263,11 +328,8 @@ def _supervised(config: Spec, controllers: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _progress(iterable: Sequence[Any], desc: str, enabled: bool) -> Any:
-    if not enabled:
-        return iterable
-    from tqdm.auto import tqdm
-
-    return tqdm(iterable, desc=desc, unit="run", leave=False)
+    shown = _bars.bar(enabled, iterable=iterable, desc=desc, unit="run", leave=False)
+    return iterable if shown is None else shown
 
 
 def compare(
@@ -302,7 +364,7 @@ def compare(
     plots : bool
         Write PNG and SVG figures (needs ``out``).
     progress : bool
-        Show progress bars.
+        Show progress bars (on standard error, and only when it is a terminal).
     overlays : mapping of str to Trajectory, optional
         Further runs (e.g. ``rip-rt`` logs) drawn over the simulations in extra figures
         ``*_with_logs`` (needs ``out`` and ``plots``).
@@ -491,11 +553,7 @@ def _monte_carlo(
 
 
 def _progress_bar(total: int, desc: str, enabled: bool) -> Any:
-    if not enabled:
-        return None
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc=desc, unit="run", leave=False)
+    return _bars.bar(enabled, total=total, desc=desc, unit="run", leave=False)
 
 
 def format_table(

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, Union
 
 from riprs import __version__
+from riprs import _progress as _bars
 from riprs.campaign.chunk import _run_payload_chunk, compute_chunk
 from riprs.campaign.plots import Aggregates
 from riprs.campaign.spec import DEFAULT_CHUNK_SIZE, Campaign, CampaignError, _int, load_spec
@@ -354,7 +355,8 @@ def run(
         Runs per chunk; results do not depend on it. Default: ``[campaign] chunk_size``, or
         :data:`DEFAULT_CHUNK_SIZE` runs, fewer when needed for four chunks per worker thread.
     progress : bool
-        Show a progress bar (runs done, runs/s, time left).
+        Show a progress bar (runs done, runs/s, time left) on standard error, when it is a
+        terminal.
     plots : bool
         Write the robustness maps and marginal plots into ``out``.
     map_axes : pair of axis names, optional
@@ -444,10 +446,9 @@ def run(
                 done = _done_ranges(out_path / "runs", campaign.runs)
                 chunks = _pending(done, campaign.runs, size)
             done_runs = sum(b - a for a, b in done)
-            if progress and done_runs < campaign.runs:
-                from tqdm.auto import tqdm
-
-                bar = tqdm(
+            if done_runs < campaign.runs:
+                bar = _bars.bar(
+                    progress,
                     total=campaign.runs,
                     initial=done_runs,
                     unit="run",

@@ -1,0 +1,205 @@
+"""What a new user tripped over on the way to the rig, each held by a test.
+
+- ``riprs compare --start down`` draws the simulated pendulum angle wrapped, as the rig's log
+  holds it (rip-rt wraps to (-pi, pi]; the reference here is ``numpy.angle``).
+- ``riprs compare --log run.csv`` starts the simulations as the logged run started (its
+  ``phase`` column), and refuses a ``--start`` that contradicts it.
+- Progress bars go to standard error, only when it is a terminal: ``riprs compare > out.txt
+  2>&1`` holds no carriage return and "Tab. 1" starts its own line.
+- The bring-up checklist's reading of a pendulum encoder 0.02 rad off (firmware/README.md) is
+  what ``rip-rt run`` prints against an emulated rig with that offset.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import riprs
+from riprs import compare as compare_module
+from riprs.cli import main
+from riprs.compare import Trajectory, compare, start_of_logs, wrap_angle
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# One controller and a short run keep these fast; the swing-up needs its allowance on top.
+SHORT = """
+controllers = ["LQR"]
+[reference]
+duration = 3.0
+step_time = 0.5
+[monte_carlo]
+runs = 0
+"""
+
+HEADER = "t,seq,theta,alpha,theta_ref,u,compute_us,jitter_us,status,phase\n"
+
+
+def _log(path: Path, phases: list[str], alpha: list[float]) -> Path:
+    rows = [
+        f"{0.01 * k:.4f},{k},0.0,{a:.6f},0.0,0.0,5.0,80.0,1,{p}\n"
+        for k, (p, a) in enumerate(zip(phases, alpha, strict=True))
+    ]
+    path.write_text("# controller: lqr\n" + HEADER + "".join(rows) + "# stop: finished\n")
+    return path
+
+
+@pytest.fixture()
+def swing_log(tmp_path: Path) -> Path:
+    return _log(
+        tmp_path / "swing.csv",
+        ["swing_up", "swing_up", "swing_up", "balance", "balance"],
+        [3.14159, -2.9, 1.2, 0.1, 0.05],
+    )
+
+
+@pytest.fixture()
+def balance_log(tmp_path: Path) -> Path:
+    return _log(tmp_path / "up.csv", ["balance"] * 4, [0.05, 0.04, 0.03, 0.02])
+
+
+def _config(tmp_path: Path) -> Path:
+    path = tmp_path / "short.toml"
+    path.write_text(SHORT)
+    return path
+
+
+def test_wrap_angle_is_rip_rts_wrapping() -> None:
+    a = np.linspace(-25.0, 25.0, 20001)
+    np.testing.assert_allclose(wrap_angle(a), np.angle(np.exp(1j * a)), atol=1e-12)
+    # (-pi, pi]: pi stays, -pi becomes pi, as rip-rt's wrap_angle does.
+    assert wrap_angle(np.pi) == np.pi and wrap_angle(-np.pi) == np.pi
+
+
+def test_start_down_draws_the_simulated_pendulum_wrapped(tmp_path: Path) -> None:
+    result = compare(_config(tmp_path), start="down", plots=False, progress=False)
+    raw = result.runs["LQR"].y[:, 1]
+    drawn = result.trajectories["LQR"].pendulum
+    # The simulated swing-up climbs past pi (hanging is pi from upright, then turns).
+    assert np.abs(raw).max() > np.pi
+    assert np.all(drawn > -np.pi) and np.all(drawn <= np.pi)
+    np.testing.assert_allclose(drawn, np.angle(np.exp(1j * raw)), atol=1e-9)
+
+
+def test_figures_draw_the_simulation_and_the_log_alike(tmp_path: Path, swing_log: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from riprs.plots import plot_trajectories
+
+    result = compare(_config(tmp_path), start="down", plots=False, progress=False)
+    log = Trajectory.from_log(riprs.load_log(swing_log))
+    ax = plot_trajectories({**result.trajectories, "rip-rt swing": log}, "pendulum")
+    for line in ax.get_lines():
+        y = np.asarray(line.get_ydata(), dtype=float)
+        assert np.all(y[np.isfinite(y)] <= np.pi + 1e-12), line.get_label()
+        assert np.all(y[np.isfinite(y)] > -np.pi - 1e-12), line.get_label()
+
+
+def test_the_start_follows_the_logs_phase_column(swing_log: Path, balance_log: Path) -> None:
+    swing, up = riprs.load_log(swing_log), riprs.load_log(balance_log)
+    assert start_of_logs({"swing.csv": swing}) == "down"
+    assert start_of_logs({"up.csv": up}) == "up"
+    assert start_of_logs({}) == "up"
+    assert start_of_logs({}, "down") == "down"
+    assert start_of_logs({"swing.csv": swing}, "down") == "down"
+    with pytest.raises(riprs.ConfigError, match=r"--start up, but the log swing\.csv swings up"):
+        start_of_logs({"swing.csv": swing}, "up")
+    with pytest.raises(riprs.ConfigError, match=r"--start down, but the log up\.csv has no"):
+        start_of_logs({"up.csv": up}, "down")
+    with pytest.raises(riprs.ConfigError, match="the logs started differently"):
+        start_of_logs({"swing.csv": swing, "up.csv": up})
+
+
+def test_cli_overlays_a_swing_up_log_on_a_swing_up_simulation(
+    tmp_path: Path, swing_log: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cfg = _config(tmp_path)
+    code = main(["compare", "--config", str(cfg), "--log", str(swing_log), "--no-plots",
+                 "--quiet", "--out", str(tmp_path / "out")])  # fmt: skip
+    printed = capsys.readouterr().out
+    assert code == 0
+    # The same table as an explicit --start down (the time to upright is its column).
+    code = main(["compare", "--config", str(cfg), "--start", "down", "--no-plots", "--quiet",
+                 "--out", str(tmp_path / "down")])  # fmt: skip
+    explicit = capsys.readouterr().out
+    assert code == 0
+    assert printed.split("\nwrote")[0] == explicit.split("\nwrote")[0]
+    assert "upright" in printed
+    code = main(["compare", "--config", str(cfg), "--log", str(swing_log), "--start", "up",
+                 "--no-plots", "--quiet", "--out", str(tmp_path / "bad")])  # fmt: skip
+    assert code == 1
+    assert "--start up, but the log" in capsys.readouterr().err
+    assert not (tmp_path / "bad").exists()
+
+
+def test_progress_is_not_written_into_a_file(tmp_path: Path) -> None:
+    # Standard output and error into one file, as `riprs compare > out.txt 2>&1` does.
+    out_txt = tmp_path / "out.txt"
+    with out_txt.open("w") as fh:
+        done = subprocess.run(
+            [sys.executable, "-c", "import sys; from riprs.cli import main; sys.exit(main())",
+             "compare", "--config", str(_config(tmp_path)), "--no-plots",
+             "--out", str(tmp_path / "out")],
+            stdout=fh, stderr=subprocess.STDOUT, timeout=300, cwd=tmp_path,
+            env={**os.environ, "MPLBACKEND": "Agg"},
+        )  # fmt: skip
+    text = out_txt.read_text()
+    assert done.returncode == 0, text
+    assert "\r" not in text and "simulating" not in text, text
+    assert any(line.startswith("Tab. 1") for line in text.splitlines()), text
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_is_drawn_on_standard_error_of_a_terminal(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    terminal = _Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    items = list(compare_module._progress([1, 2, 3], "simulating", True))
+    assert items == [1, 2, 3]
+    assert "simulating" in terminal.getvalue()
+    assert capsys.readouterr().out == ""
+    # Asked not to, or on a file: nothing, and the iterable itself.
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    seq = [1, 2]
+    assert compare_module._progress(seq, "simulating", True) is seq
+    monkeypatch.setattr(sys, "stderr", terminal)
+    assert compare_module._progress(seq, "simulating", False) is seq
+
+
+def test_the_checklists_encoder_offset_reading(tmp_path: Path, rip_rt: Path) -> None:
+    # A pendulum encoder whose zero is 0.02 rad from hanging: the refusal reads 3.120 in
+    # magnitude instead of 3.142, as firmware/README.md's bring-up checklist says.
+    rig = tmp_path / "offset.toml"
+    rig.write_text("[sensor]\nencoder_offsets = [0.0, 0.02]\n")
+    emulator = subprocess.Popen(
+        [str(rip_rt), "emulate", "--config", str(rig), "--start", "down"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert emulator.stdout is not None
+        device = emulator.stdout.readline().strip().removeprefix("device: ")
+        done = subprocess.run(
+            [str(rip_rt), "run", "--port", device, "--controller", "lqr", "--duration", "1"],
+            capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+    finally:
+        emulator.send_signal(signal.SIGTERM)
+        emulator.wait(timeout=10)
+    assert done.returncode == 6, done.stderr
+    assert "refusing to balance: pendulum at -3.120 rad from upright" in done.stderr
+    checklist = (ROOT / "firmware" / "README.md").read_text()
+    assert "-3.120 or 3.120, a 0.02 rad offset" in checklist.replace("−", "-")
+    assert "--swing-up" in checklist and "calibration.max_pendulum_offset" in checklist
