@@ -5,11 +5,15 @@ the signal)."""
 
 from __future__ import annotations
 
+import fcntl
 import os
+import pty
 import select
 import signal
+import struct
 import subprocess
 import sys
+import termios
 import time
 from pathlib import Path
 
@@ -39,9 +43,12 @@ print("finished", flush=True)
 """
 
 
-def _wait_for(proc: subprocess.Popen[bytes], needle: bytes, stream: str, limit: float) -> bytes:
-    """Reads `stream` of `proc` until `needle` appears (or `limit` seconds pass)."""
-    fd = getattr(proc, stream).fileno()
+def _wait_for(
+    proc: subprocess.Popen[bytes], needle: bytes, stream: str | int, limit: float
+) -> bytes:
+    """Reads `stream` of `proc` (or the descriptor `stream`) until `needle` appears (or `limit`
+    seconds pass)."""
+    fd = stream if isinstance(stream, int) else getattr(proc, stream).fileno()
     seen = b""
     end = time.monotonic() + limit
     while needle not in seen and time.monotonic() < end:
@@ -53,6 +60,20 @@ def _wait_for(proc: subprocess.Popen[bytes], needle: bytes, stream: str, limit: 
             seen += chunk
     assert needle in seen, seen
     return seen
+
+
+def _drain(fd: int) -> bytes:
+    """What is left to read on a terminal whose other end has closed."""
+    out = b""
+    while select.select([fd], [], [], 0.5)[0]:
+        try:
+            chunk = os.read(fd, 4096)
+        except OSError:  # EIO: the last writer is gone
+            break
+        if not chunk:
+            break
+        out += chunk
+    return out
 
 
 def _interrupt(proc: subprocess.Popen[bytes]) -> tuple[bytes, bytes]:
@@ -85,14 +106,21 @@ def test_sigint_ends_riprs_compare_with_one_line_and_130(tmp_path: Path) -> None
     config.write_text("[reference]\nduration = 3600.0\n")
     out_dir = tmp_path / "out"
     args = ["compare", "--config", str(config), "--out", str(out_dir), "--no-plots"]
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "riprs.cli", *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
-    # The progress bar appears once the simulations start.
-    seen = _wait_for(proc, b"simulating", "stderr", 120.0)
-    _, err = _interrupt(proc)
+    # Standard error on a terminal, as at a shell: the progress bar is drawn only there.
+    terminal, stderr = pty.openpty()
+    # 80 columns (a new pseudo-terminal has 0, where the bar would draw nothing).
+    fcntl.ioctl(stderr, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 80, 0, 0))
+    try:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "riprs.cli", *args], stdout=subprocess.PIPE, stderr=stderr
+        )
+        os.close(stderr)
+        # The progress bar appears once the simulations start.
+        seen = _wait_for(proc, b"simulating", terminal, 120.0)
+        _interrupt(proc)
+        err = _drain(terminal)
+    finally:
+        os.close(terminal)
     assert proc.returncode == 130
     assert b"Traceback" not in err
     last = (seen + err).replace(b"\r", b"\n").strip().splitlines()[-1]

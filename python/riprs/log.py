@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import io
 import os
+import warnings
 from typing import Any, Dict, List, Union
 
 import numpy as np
@@ -285,10 +286,15 @@ class _Reader:
         if text.startswith(b","):
             text = b"nan" + text
         try:
-            table = np.loadtxt(
-                io.BytesIO(text), delimiter=",", dtype=dtype, comments=None, ndmin=1
-            )
-        except (ValueError, OverflowError):
+            with warnings.catch_warnings():
+                # numpy 1.23-1.26 read "1.0", "nan" or "1e30" into an integer column through a
+                # float, with a DeprecationWarning; numpy 2 refuses them. Refused on every
+                # version: such a cell is not an integer of the log format.
+                warnings.filterwarnings("error", r"loadtxt\(\)", DeprecationWarning)
+                table = np.loadtxt(
+                    io.BytesIO(text), delimiter=",", dtype=dtype, comments=None, ndmin=1
+                )
+        except (ValueError, OverflowError, DeprecationWarning):
             lines = block.split(b"\n")[:-1] if numbers is None else data
             where = range(first_line, first_line + len(lines)) if numbers is None else numbers
             self._diagnose(names, lines, list(where))
