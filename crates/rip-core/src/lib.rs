@@ -43,6 +43,7 @@ pub mod mpc;
 pub mod paper;
 pub mod plant;
 pub mod regulators;
+pub mod rig;
 pub mod sim;
 pub mod spec;
 pub mod swingup;

@@ -16,6 +16,7 @@ mod interrupt;
 mod mpc;
 mod paper;
 mod plant;
+mod rig;
 mod shared;
 mod sim;
 mod spec;
@@ -35,5 +36,6 @@ fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     swingup::register(m)?;
     excitation::register(m)?;
     identify::register(m)?;
+    rig::register(m)?;
     Ok(())
 }
