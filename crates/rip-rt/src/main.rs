@@ -45,6 +45,8 @@ Exit codes (docs/rip-rt.md has the safety rules behind each):
     13   swing-up failed: no catch within swing_up.max_time; or, after falls with
          swing_up.on_fall = retry, the swing-ups took swing_up.max_time in total, or the run
          was not balanced for --duration within swing_up.max_time + --duration
+    14   refused the swing (--swing-up): the sign check's pulse found a reversed motor or
+         encoder, or a silent encoder (the message says what to swap or flip)
     101  internal error (panic)
     128+N  stopped by signal N: 129 SIGHUP, 130 SIGINT (Ctrl-C), 131 SIGQUIT, 138 SIGUSR1,
          143 SIGTERM, 148 SIGTSTP (Ctrl-Z ends the run), ...; a fatal signal (SIGSEGV,
@@ -206,7 +208,7 @@ struct RunArgs {
     #[arg(long)]
     quiet: bool,
     /// Start with the pendulum hanging at rest: check the rest, calibrate the encoders from it,
-    /// swing up with the `[swing_up]` settings and catch with the controller, then run the
+    /// check the motor sign and encoder directions with a small pulse (exit 14), swing up with the `[swing_up]` settings and catch with the controller, then run the
     /// experiment (the reference step and --duration count from the catch; a fall, retried,
     /// starts them again at the next catch).
     #[arg(long)]
@@ -402,6 +404,11 @@ fn cmd_run(args: RunArgs) -> ExitCode {
     let calibration_line = report
         .calibration
         .map_or_else(|| "none".to_string(), |c| c.to_string());
+    let sign_check_line = match (args.swing_up, report.sign_check) {
+        (_, Some(r)) => r.to_string(),
+        (true, None) => "not passed".to_string(),
+        (false, None) => "not run".to_string(),
+    };
     let catch_line = report
         .catch_s
         .map_or_else(|| "none".to_string(), |t| format!("{t:.3}"));
@@ -417,6 +424,7 @@ fn cmd_run(args: RunArgs) -> ExitCode {
             ("probe", probe_line.clone()),
             ("link", parser_line.clone()),
             ("calibration", calibration_line.clone()),
+            ("sign_check", sign_check_line.clone()),
             ("catch_s", catch_line.clone()),
             ("catches", report.catches.to_string()),
         ];
@@ -446,6 +454,7 @@ fn cmd_run(args: RunArgs) -> ExitCode {
             "rip-rt: swing-up: catch_s={catch_line} catches={} calibration: {calibration_line}",
             report.catches
         );
+        rip_rt::say!("rip-rt: sign check: {sign_check_line}");
     }
     rip_rt::say!("rip-rt: link: {parser_line}");
     ExitCode::from(code as u8)

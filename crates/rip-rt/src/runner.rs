@@ -14,8 +14,11 @@
 //!
 //! A swing-up supervisor (the controller starts in [`rip_core::Phase::SwingUp`]) replaces
 //! arming by the rest check ([`crate::calibrate`]): the rig must be at rest hanging down, and
-//! its encoder zeros are taken from that rest; then its commands run from the next period, the
-//! swing-up's and, after its catch, the balance controller's. Each catch starts the
+//! its encoder zeros are taken from that rest; then the sign check of `rip-rt excite`
+//! ([`crate::excite::check_signs`]: a small pulse, then 0 V) refuses a rig with a reversed
+//! motor or encoder ([`StopReason::SignCheck`]), which the swing would drive away to the arm
+//! limit; then its commands run from the next period, the swing-up's and, after its catch, the
+//! balance controller's, on a time axis that starts with the sign check. Each catch starts the
 //! reference's clock and `--duration` (a fall stops them); the pendulum-angle rule is the
 //! supervisor's ([`LoopCore::control`]), every other rule of balancing holds throughout. The
 //! whole run is bounded however often it falls and swings up again: after a fall the
@@ -31,10 +34,12 @@
 
 use crate::calibrate::{self, Calibration};
 use crate::config::{Config, MAX_BLIND_MS};
+use crate::excite::{self, ExciteOptions};
 use crate::log::{LogWriter, Row};
 use crate::loop_core::{LoopCore, StepOutput, FLAG_DEADLINE_MISS, FLAG_NO_REPLY};
 use crate::protocol::{Measurement, ParserStats, MAX_FRAME};
 use crate::serial::{Fd, Readiness};
+use crate::sign_check::{SignReport, PULSE_VOLTAGE};
 use crate::stop::{requested_stop, Overrun, StopGuard, StopReason};
 use crate::timing::{now_ns, Histogram, Periodic, Tick, TimingSummary};
 
@@ -66,7 +71,10 @@ pub struct RunReport {
     pub balanced_s: f64,
     /// The encoder zeros of a run that started hanging (the rest check passed).
     pub calibration: Option<Calibration>,
-    /// Seconds from the start of a swing-up to its first catch.
+    /// The sign check before a swing-up (absent when it did not run or did not pass).
+    pub sign_check: Option<SignReport>,
+    /// Seconds from the start of a swing-up (its sign check, the log's time zero) to its
+    /// first catch.
     pub catch_s: Option<f64>,
     /// Catches (more than one after falls with `swing_up.on_fall = "retry"`).
     pub catches: u32,
@@ -675,6 +683,7 @@ pub fn run(
     };
     let mut periodic = Periodic::new(period_ns, now_ns() + period_ns);
     let mut calibration = None;
+    let mut sign_check = None;
     let (reason, probe) = match probe(runner.core, cfg) {
         Err(reason) => (reason, None),
         Ok(probe) => {
@@ -688,13 +697,50 @@ pub fn run(
                     Err(reason) => reason,
                     Ok(cal) => {
                         runner.core.calibrate(&cal);
-                        runner.core.reset();
                         calibration = Some(cal);
-                        if !opts.quiet {
-                            crate::say!("rip-rt: swinging up");
+                        // A reversed motor lead or arm encoder would make the swing drive the
+                        // arm away to its limit: the pulse of `rip-rt excite` first.
+                        let check_opts = ExciteOptions {
+                            check_voltage: PULSE_VOLTAGE,
+                            quiet: opts.quiet,
+                        };
+                        let check = excite::check_signs(
+                            io,
+                            runner.core,
+                            cfg,
+                            &mut periodic,
+                            &check_opts,
+                            runner.log.as_deref_mut(),
+                        );
+                        runner.missing_total += check.missing_replies;
+                        match check.result {
+                            Err(reason) => reason,
+                            Ok(report) => {
+                                sign_check = Some(report);
+                                // The pendulum swings after the pulse: at rest again, and the
+                                // zeros from that rest, before the swing starts from it.
+                                match calibrate::settle(
+                                    io,
+                                    runner.core,
+                                    cfg,
+                                    &mut periodic,
+                                    opts.quiet,
+                                ) {
+                                    Err(reason) => reason,
+                                    Ok(cal) => {
+                                        runner.core.calibrate(&cal);
+                                        calibration = Some(cal);
+                                        runner.core.reset();
+                                        if !opts.quiet {
+                                            crate::say!("rip-rt: swinging up");
+                                        }
+                                        // One time axis for the log: from the check's start.
+                                        let start_ns = check.start_ns;
+                                        runner.periods(&mut periodic, Phase::Balancing { start_ns })
+                                    }
+                                }
+                            }
                         }
-                        let start_ns = periodic.next_deadline_ns();
-                        runner.periods(&mut periodic, Phase::Balancing { start_ns })
                     }
                 }
             } else {
@@ -719,6 +765,7 @@ pub fn run(
         missing_replies: runner.missing_total,
         balanced_s: runner.balanced_ns as f64 * 1e-9,
         calibration,
+        sign_check,
         catch_s: runner.catch_s,
         catches: runner.catches,
     }
