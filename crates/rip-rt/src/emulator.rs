@@ -72,6 +72,11 @@ pub struct EmulatorConfig {
     pub duration_s: Option<f64>,
     /// CSV file receiving every command the device accepted (`t_s,seq,voltage_mv,flags`).
     pub record: Option<PathBuf>,
+    /// CSV file receiving the simulated plant's true state ([`TRUE_STATE_HEADER`]), not the
+    /// encoders' view of it.
+    pub true_state: Option<PathBuf>,
+    /// Interval between rows of `true_state` (s); 0 writes a row every simulation step.
+    pub true_state_period_s: f64,
     /// Wiring faults, for testing the sign check ([`crate::sign_check`]).
     pub wiring: Wiring,
 }
@@ -109,6 +114,8 @@ impl Default for EmulatorConfig {
             seed: 1,
             duration_s: None,
             record: None,
+            true_state: None,
+            true_state_period_s: 0.01,
             wiring: Wiring::default(),
         }
     }
@@ -212,6 +219,17 @@ impl EmulatorConfig {
                 }
             }
         }
+        if !(self.true_state_period_s.is_finite()
+            && (0.0..=1.0).contains(&self.true_state_period_s))
+        {
+            return Err(EmulatorConfigError::new(
+                "--true-state-period",
+                format!(
+                    "must be in [0, 1] s (0: every simulation step), got {}",
+                    self.true_state_period_s
+                ),
+            ));
+        }
         if self.arm_counts_per_rev == 0 || self.pendulum_counts_per_rev == 0 {
             return Err(EmulatorConfigError::new(
                 "--counts-per-rev",
@@ -310,6 +328,45 @@ impl Device {
         }
     }
 
+    /// The voltage across the motor's windings in the plant's sign convention (a positive
+    /// voltage turns the arm the positive way): [`applied_voltage`](Self::applied_voltage),
+    /// negated when the leads are swapped.
+    pub fn motor_voltage(&self) -> f64 {
+        if self.cfg.wiring.motor_reversed {
+            -self.applied_voltage()
+        } else {
+            self.applied_voltage()
+        }
+    }
+
+    /// What the bridge does to the motor now: `"drive"` (a voltage across the windings) or
+    /// `"open"` (disabled: the windings are disconnected).
+    pub fn driver_state(&self) -> &'static str {
+        if self.firmware.pwm(PWM_MAX_DUTY).enable {
+            "drive"
+        } else {
+            "open"
+        }
+    }
+
+    /// Motor current (A) now, in the plant's sign convention.
+    pub fn motor_current(&self) -> f64 {
+        self.plant.motor_current(self.motor_voltage())
+    }
+
+    /// One row of the true-state record ([`TRUE_STATE_HEADER`]).
+    fn write_true_state(&self, w: &mut impl Write) -> io::Result<()> {
+        let [theta, theta_dot, alpha, alpha_dot] = self.state();
+        writeln!(
+            w,
+            "{:.6},{theta:.6},{theta_dot:.6},{alpha:.6},{alpha_dot:.6},{:.4},{:.5},{}",
+            self.time_s(),
+            self.motor_voltage(),
+            self.motor_current(),
+            self.driver_state()
+        )
+    }
+
     /// Encoder counts of the plant's angles (pendulum zero hanging down), with reading noise.
     fn counts(&mut self, noisy: bool) -> [i32; 2] {
         let [theta, _, alpha, _] = self.plant.state();
@@ -355,11 +412,7 @@ impl Device {
     pub fn advance(&mut self, dt_ns: u64) {
         let inputs = self.inputs();
         self.firmware.tick(&inputs);
-        let u = if self.cfg.wiring.motor_reversed {
-            -self.applied_voltage()
-        } else {
-            self.applied_voltage()
-        };
+        let u = self.motor_voltage();
         if self.released {
             self.plant.step(u, dt_ns as f64 * 1e-9);
         }
@@ -439,10 +492,84 @@ fn write_record(rec: &mut Option<BufWriter<File>>, t: f64, frame: &Frame) -> io:
     Ok(())
 }
 
+/// Columns of the emulator's true-state record (`rip-rt emulate --true-state`): simulated time
+/// (s), the plant's state `θ, θ̇, α, α̇` (rad, rad/s; α from upright, θ unwrapped) straight
+/// from the simulation rather than from the encoders, the voltage across the motor's windings
+/// and the motor current in the plant's sign convention (V, A), and the bridge's state
+/// ([`Device::driver_state`]).
+pub const TRUE_STATE_HEADER: &str = "t_s,theta,theta_dot,alpha,alpha_dot,voltage,current,driver";
+
+/// The true-state record: a row every `period` of simulated time, each flushed at once so a
+/// reader sees the plant while the emulator runs; a last row when it exits.
+struct TrueState {
+    w: BufWriter<File>,
+    period_ns: u64,
+    next_ns: u64,
+}
+
+impl TrueState {
+    fn create(cfg: &EmulatorConfig) -> io::Result<Option<Self>> {
+        let Some(path) = &cfg.true_state else {
+            return Ok(None);
+        };
+        let named = |e: io::Error| {
+            io::Error::new(e.kind(), format!("--true-state {}: {e}", path.display()))
+        };
+        let mut w = BufWriter::new(File::create(path).map_err(named)?);
+        writeln!(w, "{TRUE_STATE_HEADER}").map_err(named)?;
+        w.flush().map_err(named)?;
+        Ok(Some(Self {
+            w,
+            period_ns: (cfg.true_state_period_s * 1e9).round() as u64,
+            next_ns: 0,
+        }))
+    }
+
+    /// Writes a row if one is due at the device's time.
+    fn sample(&mut self, device: &Device) -> io::Result<()> {
+        if device.time_ns >= self.next_ns {
+            self.next_ns += self.period_ns.max(1);
+            if self.next_ns <= device.time_ns {
+                // Behind (a stalled machine): the next row is a period from now.
+                self.next_ns = device.time_ns + self.period_ns.max(1);
+            }
+            self.row(device)?;
+        }
+        Ok(())
+    }
+
+    fn row(&mut self, device: &Device) -> io::Result<()> {
+        device.write_true_state(&mut self.w)?;
+        self.w.flush()
+    }
+}
+
 /// Runs the emulator on `pty` until `stop` is set, the duration passes or the device vanishes.
 /// The simulation advances on a 1 kHz (configurable) grid of absolute deadlines; host frames are
-/// answered as soon as they arrive.
+/// answered as soon as they arrive. With `cfg.true_state`, the plant's state is recorded
+/// throughout, and once more on every way out (including an error).
 pub fn run(cfg: EmulatorConfig, pty: Pty, stop: &AtomicBool) -> io::Result<EmulatorExit> {
+    let mut truth = TrueState::create(&cfg)?;
+    let mut device = Device::new(cfg.clone());
+    if let Some(t) = truth.as_mut() {
+        t.sample(&device)?;
+    }
+    let result = serve(cfg, &mut device, &mut truth, pty, stop);
+    let last = match truth.as_mut() {
+        Some(t) => t.row(&device),
+        None => Ok(()),
+    };
+    let exit = result?;
+    last.map(|()| exit)
+}
+
+fn serve(
+    cfg: EmulatorConfig,
+    device: &mut Device,
+    truth: &mut Option<TrueState>,
+    pty: Pty,
+    stop: &AtomicBool,
+) -> io::Result<EmulatorExit> {
     let mut record = match &cfg.record {
         Some(path) => {
             let mut w = BufWriter::new(File::create(path).map_err(|e| {
@@ -457,7 +584,6 @@ pub fn run(cfg: EmulatorConfig, pty: Pty, stop: &AtomicBool) -> io::Result<Emula
     let dt_ns = (1e9 / cfg.sim_rate_hz).round() as u64;
     let duration = cfg.duration_s;
     let vanish_after = cfg.vanish_after_s;
-    let mut device = Device::new(cfg);
     let mut parser = Parser::new();
     let mut rx = [0u8; 256];
     let mut out = [0u8; MAX_FRAME];
@@ -473,6 +599,9 @@ pub fn run(cfg: EmulatorConfig, pty: Pty, stop: &AtomicBool) -> io::Result<Emula
         let now = now_ns();
         if now >= next_tick {
             device.advance(dt_ns);
+            if let Some(t) = truth.as_mut() {
+                t.sample(device)?;
+            }
             next_tick += dt_ns;
             if now > next_tick + 100 * dt_ns {
                 // Far behind (the machine stalled): resume from now rather than fast-forward.

@@ -274,6 +274,15 @@ struct EmulateArgs {
     /// Append every command the device receives to this CSV (t_s,seq,voltage_mv,flags).
     #[arg(long, value_name = "FILE.csv")]
     record: Option<PathBuf>,
+    /// Write the simulated plant's true state to this CSV
+    /// (t_s,theta,theta_dot,alpha,alpha_dot,voltage,current,driver), from the simulation
+    /// rather than the encoders; each row is flushed at once, and a last row is written on
+    /// exit.
+    #[arg(long, value_name = "FILE.csv")]
+    true_state: Option<PathBuf>,
+    /// Interval of --true-state rows in simulated seconds (0: every simulation step).
+    #[arg(long, allow_negative_numbers = true, value_name = "S", default_value_t = 0.01, value_parser = nonnegative)]
+    true_state_period: f64,
     /// Wiring fault: the motor's leads are swapped (a positive voltage turns the arm the
     /// negative way).
     #[arg(long)]
@@ -526,6 +535,8 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
         seed: args.seed,
         duration_s: args.duration,
         record: args.record,
+        true_state: args.true_state,
+        true_state_period_s: args.true_state_period,
         wiring: Wiring {
             motor_reversed: args.reverse_motor,
             encoder_reversed: [args.reverse_arm_encoder, args.reverse_pendulum_encoder],

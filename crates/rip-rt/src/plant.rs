@@ -46,6 +46,12 @@ impl PlantSim {
         self.plant.advance(&mut self.x, u, 0.0, dt, substeps);
     }
 
+    /// Motor current (A) at the current state with `u` across the windings:
+    /// `i = (z(u) − km θ̇) / rm`, `z` the dead zone.
+    pub fn motor_current(&self, u: f64) -> f64 {
+        self.plant.motor_torque(&self.x, u) / self.plant.params().kt
+    }
+
     /// `[θ, θ̇, α, α̇]`.
     pub fn state(&self) -> [f64; 4] {
         [self.x[0], self.x[1], self.x[2], self.x[3]]
