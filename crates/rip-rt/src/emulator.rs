@@ -77,8 +77,14 @@ pub struct EmulatorConfig {
     pub true_state: Option<PathBuf>,
     /// Interval between rows of `true_state` (s); 0 writes a row every simulation step.
     pub true_state_period_s: f64,
-    /// Wiring faults, for testing the sign check ([`crate::sign_check`]).
+    /// Wiring faults, for testing the sign check ([`crate::sign_check`]) and the witness
+    /// ([`crate::witness`]).
     pub wiring: Wiring,
+    /// When the wiring faults begin (s after the first enabling command); `None`: from
+    /// power-up. A fault that begins mid-run acts from the readings at its onset: a frozen
+    /// encoder keeps the count it had, a reversed one counts backwards from it (a quadrature
+    /// counter with its channels swapped), so neither makes the reading jump.
+    pub fault_at_s: Option<f64>,
 }
 
 /// How the emulated rig is wired: the motor's leads and each encoder's direction, and
@@ -117,6 +123,7 @@ impl Default for EmulatorConfig {
             true_state: None,
             true_state_period_s: 0.01,
             wiring: Wiring::default(),
+            fault_at_s: None,
         }
     }
 }
@@ -230,6 +237,21 @@ impl EmulatorConfig {
                 ),
             ));
         }
+        if let Some(t) = self.fault_at_s {
+            if !(t.is_finite() && t >= 0.0) {
+                return Err(EmulatorConfigError::new(
+                    "--fault-at",
+                    format!("must be a non-negative number of seconds, got {t}"),
+                ));
+            }
+            if self.wiring == Wiring::default() {
+                return Err(EmulatorConfigError::new(
+                    "--fault-at",
+                    "needs a wiring fault to start (--reverse-motor, --reverse-arm-encoder, \
+                     --freeze-arm-encoder, ...)",
+                ));
+            }
+        }
         if self.arm_counts_per_rev == 0 || self.pendulum_counts_per_rev == 0 {
             return Err(EmulatorConfigError::new(
                 "--counts-per-rev",
@@ -251,8 +273,11 @@ pub struct Device {
     released: bool,
     commands_seen: bool,
     time_ns: u64,
-    // The counts of a frozen encoder (set once constructed).
-    power_up_counts: Option<[i32; 2]>,
+    // When the first enabling command arrived (simulated time).
+    enabled_at_ns: Option<u64>,
+    // The wiring faults' onset: the true counts then (before noise and rounding), from which
+    // a reversed encoder counts backwards and at which a frozen one stays. `None` before it.
+    fault_onset: Option<[f64; 2]>,
 }
 
 /// What the device did with a frame.
@@ -281,11 +306,14 @@ impl Device {
             released: !cfg.hold_until_enabled,
             commands_seen: false,
             time_ns: 0,
-            power_up_counts: None,
+            enabled_at_ns: None,
+            fault_onset: None,
             cfg,
         };
+        if dev.cfg.fault_at_s.is_none() {
+            dev.fault_onset = Some(dev.true_counts());
+        }
         let [arm, pendulum] = dev.counts(false);
-        dev.power_up_counts = Some([arm, pendulum]);
         let inputs = Inputs {
             now_us: 0,
             encoders: [arm as u16, pendulum as u16],
@@ -332,7 +360,7 @@ impl Device {
     /// voltage turns the arm the positive way): [`applied_voltage`](Self::applied_voltage),
     /// negated when the leads are swapped.
     pub fn motor_voltage(&self) -> f64 {
-        if self.cfg.wiring.motor_reversed {
+        if self.wiring().motor_reversed {
             -self.applied_voltage()
         } else {
             self.applied_voltage()
@@ -367,33 +395,46 @@ impl Device {
         )
     }
 
-    /// Encoder counts of the plant's angles (pendulum zero hanging down), with reading noise.
-    fn counts(&mut self, noisy: bool) -> [i32; 2] {
+    /// The wiring in effect now: the configured faults once they began, else a correct rig.
+    pub fn wiring(&self) -> Wiring {
+        if self.fault_onset.is_some() {
+            self.cfg.wiring
+        } else {
+            Wiring::default()
+        }
+    }
+
+    /// The counts a correctly wired, noiseless encoder pair would read now (unrounded).
+    fn true_counts(&self) -> [f64; 2] {
         let [theta, _, alpha, _] = self.plant.state();
         let [o_arm, o_pendulum] = self.cfg.encoder_offsets;
-        let mut c = [
-            (theta + o_arm) * self.cfg.arm_counts_per_rev as f64,
-            (alpha + std::f64::consts::PI + o_pendulum) * self.cfg.pendulum_counts_per_rev as f64,
-        ];
-        let w = self.cfg.wiring;
+        let tau = std::f64::consts::TAU;
+        [
+            (theta + o_arm) * self.cfg.arm_counts_per_rev as f64 / tau,
+            (alpha + std::f64::consts::PI + o_pendulum) * self.cfg.pendulum_counts_per_rev as f64
+                / tau,
+        ]
+    }
+
+    /// Encoder counts of the plant's angles (pendulum zero hanging down), with reading noise
+    /// and the wiring faults in effect.
+    fn counts(&mut self, noisy: bool) -> [i32; 2] {
+        let mut c = self.true_counts();
+        let w = self.wiring();
+        let onset = self.fault_onset.unwrap_or_default();
         for (j, v) in c.iter_mut().enumerate() {
-            *v /= std::f64::consts::TAU;
+            if w.encoder_frozen[j] {
+                *v = onset[j];
+                continue;
+            }
             if w.encoder_reversed[j] {
-                *v = -*v;
+                *v = 2.0 * onset[j] - *v;
             }
             if noisy && self.cfg.noise_counts > 0.0 {
                 *v += self.noise.sample(&mut self.rng);
             }
         }
-        let mut c = c.map(|v| v.round().clamp(i32::MIN as f64, i32::MAX as f64) as i32);
-        if let Some(frozen) = self.power_up_counts {
-            for (j, v) in c.iter_mut().enumerate() {
-                if w.encoder_frozen[j] {
-                    *v = frozen[j];
-                }
-            }
-        }
-        c
+        c.map(|v| v.round().clamp(i32::MIN as f64, i32::MAX as f64) as i32)
     }
 
     /// The hardware readings now: the microsecond clock and the 16-bit encoder counters.
@@ -410,6 +451,13 @@ impl Device {
     /// Advances the simulation by `dt_ns` nanoseconds: the firmware's tick (encoders,
     /// watchdog), then the plant under the voltage the bridge applies.
     pub fn advance(&mut self, dt_ns: u64) {
+        if let (None, Some(at), Some(t0)) =
+            (self.fault_onset, self.cfg.fault_at_s, self.enabled_at_ns)
+        {
+            if self.time_ns >= t0 + (at * 1e9).round() as u64 {
+                self.fault_onset = Some(self.true_counts());
+            }
+        }
         let inputs = self.inputs();
         self.firmware.tick(&inputs);
         let u = self.motor_voltage();
@@ -433,6 +481,7 @@ impl Device {
         let reply = self.firmware.handle(event, &inputs);
         if self.firmware.enabled() {
             self.released = true;
+            self.enabled_at_ns.get_or_insert(self.time_ns);
         }
         match reply {
             Some(frame) => Reply::Bytes(encode(&frame, out)),

@@ -34,6 +34,7 @@ pub mod serial;
 pub mod sign_check;
 pub mod stop;
 pub mod timing;
+pub mod witness;
 
 /// `eprintln!` that ignores a failed write: once the terminal or the pipe behind stderr has
 /// gone (SIGHUP, a closed SSH session), a status line must not turn into a panic and its exit

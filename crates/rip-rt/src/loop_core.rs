@@ -13,6 +13,7 @@ use crate::protocol::{
     STATUS_FAULT,
 };
 use crate::stop::{next_seq, SetupError, StopReason};
+use crate::witness::{Witness, WitnessLimits};
 
 /// Log status bit (above the device's 8 status bits): no measurement arrived this period; the
 /// previous command was repeated and the controller, instead of being stepped, was told that
@@ -78,6 +79,9 @@ pub struct LoopCore {
     // enabling command may be repeated for.
     blind_periods: u32,
     blind_limit: u32,
+    // The model's check that the rig moves as commanded (crate::witness); `None` for
+    // open-loop drives and controllers without the pendulum's model.
+    witness: Option<Witness>,
 }
 
 impl fmt::Debug for LoopCore {
@@ -153,6 +157,7 @@ impl LoopCore {
             last_command: Command::STOP,
             blind_periods: 0,
             blind_limit,
+            witness: Witness::new(cfg, WitnessLimits::default()).ok(),
         })
     }
 
@@ -172,6 +177,20 @@ impl LoopCore {
         self.u = [0.0];
         self.last_command = Command::STOP;
         self.blind_periods = 0;
+        if let Some(w) = self.witness.as_mut() {
+            w.reset();
+        }
+    }
+
+    /// Turns the witness off (open-loop drives, tests of other rules).
+    pub fn without_witness(mut self) -> Self {
+        self.witness = None;
+        self
+    }
+
+    /// The witness's largest statistics so far ([`Witness::peak`]).
+    pub fn witness_peak(&self) -> Option<[f64; 3]> {
+        self.witness.as_ref().map(Witness::peak)
     }
 
     /// The voltage the device applies under the last command: its value when the driver is
@@ -191,6 +210,9 @@ impl LoopCore {
     pub fn hold(&mut self) -> f64 {
         let held = [self.held_voltage()];
         self.controller.hold(&held);
+        if let Some(w) = self.witness.as_mut() {
+            w.hold(held[0]);
+        }
         held[0]
     }
 
@@ -345,6 +367,12 @@ impl LoopCore {
                 limit: self.arm_limit,
             });
         }
+        // The voltage applied over the period that led to this measurement.
+        let applied = self.held_voltage();
+        if let Some(w) = self.witness.as_mut() {
+            w.observe(theta, alpha, applied)
+                .map_err(StopReason::Witness)?;
+        }
         let reference = self.reference_at(t);
         self.y = [theta, alpha];
         self.r = [reference, 0.0];
@@ -417,7 +445,9 @@ impl LoopCore {
     /// commands come from [`drive`](Self::drive), with the same hard bounds as
     /// [`new`](Self::new)'s.
     pub fn open_loop(cfg: &Config) -> Self {
-        Self::new(Box::new(OpenLoop), cfg).expect("OpenLoop has the pendulum's shape")
+        Self::new(Box::new(OpenLoop), cfg)
+            .expect("OpenLoop has the pendulum's shape")
+            .without_witness()
     }
 
     /// One open-loop command on measurement `m` at `t` seconds: checks the device status and
@@ -630,7 +660,10 @@ mod tests {
             phase: Phase::SwingUp,
             script,
         };
-        LoopCore::new(Box::new(c), &Config::default()).unwrap()
+        // Scripted measurements no plant makes: the witness would stop them.
+        LoopCore::new(Box::new(c), &Config::default())
+            .unwrap()
+            .without_witness()
     }
 
     #[test]

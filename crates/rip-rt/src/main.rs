@@ -47,6 +47,8 @@ Exit codes (docs/rip-rt.md has the safety rules behind each):
          was not balanced for --duration within swing_up.max_time + --duration
     14   refused the swing (--swing-up): the sign check's pulse found a reversed motor or
          encoder, or a silent encoder (the message says what to swap or flip)
+    15   the rig did not move as commanded (the witness: the measured motion disagrees with
+         what the applied voltage must produce; the message names the likely fault)
     101  internal error (panic)
     128+N  stopped by signal N: 129 SIGHUP, 130 SIGINT (Ctrl-C), 131 SIGQUIT, 138 SIGUSR1,
          143 SIGTERM, 148 SIGTSTP (Ctrl-Z ends the run), ...; a fatal signal (SIGSEGV,
@@ -299,6 +301,11 @@ struct EmulateArgs {
     /// Wiring fault: the pendulum encoder does not count.
     #[arg(long)]
     freeze_pendulum_encoder: bool,
+    /// Start the wiring faults this many seconds after the first enabling command instead of
+    /// at power-up (from the readings then: a frozen encoder keeps its count, a reversed one
+    /// counts backwards from it).
+    #[arg(long, allow_negative_numbers = true, value_name = "S", value_parser = nonnegative)]
+    fault_at: Option<f64>,
 }
 
 pub(crate) fn fail(code: i32, msg: impl std::fmt::Display) -> ExitCode {
@@ -422,6 +429,12 @@ fn cmd_run(args: RunArgs) -> ExitCode {
         .catch_s
         .map_or_else(|| "none".to_string(), |t| format!("{t:.3}"));
     let mut reason = report.reason.to_string();
+    let witness_line = report.witness_peak.map_or_else(
+        || "off".to_string(),
+        |[arm, pendulum, frozen]| {
+            format!("peak arm={arm:.1} pendulum={pendulum:.1} frozen={frozen:.2}")
+        },
+    );
     if let Some(log) = log.as_mut() {
         let footer = [
             ("stop", report.reason.name().to_string()),
@@ -436,6 +449,7 @@ fn cmd_run(args: RunArgs) -> ExitCode {
             ("sign_check", sign_check_line.clone()),
             ("catch_s", catch_line.clone()),
             ("catches", report.catches.to_string()),
+            ("witness", witness_line.clone()),
         ];
         // After a log fault the reason already says what failed; a second message about the
         // same file would only repeat it.
@@ -466,6 +480,7 @@ fn cmd_run(args: RunArgs) -> ExitCode {
         rip_rt::say!("rip-rt: sign check: {sign_check_line}");
     }
     rip_rt::say!("rip-rt: link: {parser_line}");
+    rip_rt::say!("rip-rt: witness: {witness_line}");
     ExitCode::from(code as u8)
 }
 
@@ -542,6 +557,7 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
             encoder_reversed: [args.reverse_arm_encoder, args.reverse_pendulum_encoder],
             encoder_frozen: [args.freeze_arm_encoder, args.freeze_pendulum_encoder],
         },
+        fault_at_s: args.fault_at,
         ..EmulatorConfig::default()
     };
     if let Err(e) = cfg.validate() {

@@ -78,6 +78,8 @@ pub struct RunReport {
     pub catch_s: Option<f64>,
     /// Catches (more than one after falls with `swing_up.on_fall = "retry"`).
     pub catches: u32,
+    /// The witness's largest statistics ([`crate::witness::Witness::peak`]), if it ran.
+    pub witness_peak: Option<[f64; 3]>,
 }
 
 /// Controller steps timed before enabling the motor ([`probe`]).
@@ -768,5 +770,6 @@ pub fn run(
         sign_check,
         catch_s: runner.catch_s,
         catches: runner.catches,
+        witness_peak: runner.core.witness_peak(),
     }
 }

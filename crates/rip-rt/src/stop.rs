@@ -68,6 +68,10 @@ pub mod exit_code {
     /// Refused the experiment: the motor-sign / encoder-direction check before it failed (the
     /// message says what to swap); the motor had only the check's short pulse.
     pub const SIGN_CHECK: i32 = 14;
+    /// The rig did not move as commanded: the witness ([`crate::witness`]) found the measured
+    /// motion disagreeing with what the applied voltage must produce (a motor lead swapped, an
+    /// encoder reversed or not counting).
+    pub const WITNESS: i32 = 15;
     /// A panic (Rust's own exit code for one).
     pub const PANIC: i32 = 101;
     /// Stopped by a signal: 128 + its number (130 SIGINT, 143 SIGTERM, 129 SIGHUP, …).
@@ -207,6 +211,9 @@ pub enum StopReason {
     /// The motor-sign / encoder-direction check before an experiment failed.
     #[error("refusing to start the experiment: sign check failed: {0}")]
     SignCheck(#[source] crate::sign_check::SignFault),
+    /// The rig does not move as commanded ([`crate::witness`]).
+    #[error("the rig does not move as commanded: {0}")]
+    Witness(#[source] crate::witness::WitnessFault),
     /// A thread other than the loop panicked (the panic hook already sent the stop frame).
     #[error("internal error: a panic outside the loop")]
     Panic,
@@ -233,6 +240,7 @@ impl StopReason {
             | StopReason::SwingUpRetriesExhausted { .. }
             | StopReason::SwingUpRunTimeout { .. } => exit_code::SWING_UP_FAILED,
             StopReason::SignCheck(_) => exit_code::SIGN_CHECK,
+            StopReason::Witness(_) => exit_code::WITNESS,
             StopReason::Panic => exit_code::PANIC,
         }
     }
@@ -257,6 +265,7 @@ impl StopReason {
             | StopReason::SwingUpRetriesExhausted { .. }
             | StopReason::SwingUpRunTimeout { .. } => "swing_up_failed",
             StopReason::SignCheck(_) => "sign_check",
+            StopReason::Witness(_) => "witness",
             StopReason::Panic => "panic",
         }
     }
