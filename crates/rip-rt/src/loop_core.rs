@@ -82,6 +82,10 @@ pub struct LoopCore {
     // The model's check that the rig moves as commanded (crate::witness); `None` for
     // open-loop drives and controllers without the pendulum's model.
     witness: Option<Witness>,
+    // The previous measurement's device clock (µs) and the voltage it reported applied.
+    last_sample: Option<(u32, f64)>,
+    // Request to reply (s) of the latest exchange: about when the command reaches the device.
+    latency_s: f64,
 }
 
 impl fmt::Debug for LoopCore {
@@ -158,6 +162,8 @@ impl LoopCore {
             blind_periods: 0,
             blind_limit,
             witness: Witness::new(cfg, WitnessLimits::default()).ok(),
+            last_sample: None,
+            latency_s: 0.0,
         })
     }
 
@@ -180,6 +186,13 @@ impl LoopCore {
         if let Some(w) = self.witness.as_mut() {
             w.reset();
         }
+        self.last_sample = None;
+    }
+
+    /// Notes the request-to-reply time of the latest exchange (ns): the witness takes the
+    /// next command to reach the device about that long after the sample.
+    pub fn note_latency(&mut self, ns: u64) {
+        self.latency_s = ns as f64 * 1e-9;
     }
 
     /// Turns the witness off (open-loop drives, tests of other rules).
@@ -210,9 +223,6 @@ impl LoopCore {
     pub fn hold(&mut self) -> f64 {
         let held = [self.held_voltage()];
         self.controller.hold(&held);
-        if let Some(w) = self.witness.as_mut() {
-            w.hold(held[0]);
-        }
         held[0]
     }
 
@@ -367,10 +377,18 @@ impl LoopCore {
                 limit: self.arm_limit,
             });
         }
-        // The voltage applied over the period that led to this measurement.
-        let applied = self.held_voltage();
+        // Since the previous sample (on the device's clock, so skipped periods and late
+        // wake-ups count as they were) the device applied what it reported then, until the
+        // last command arrived.
+        let reported = f64::from(m.applied_mv) / 1000.0;
+        let previous = self.last_sample.replace((m.device_time_us, reported));
+        let commanded = self.held_voltage();
         if let Some(w) = self.witness.as_mut() {
-            w.observe(theta, alpha, applied)
+            let (dt, before) = previous.map_or((0.0, 0.0), |(us, v)| {
+                (f64::from(m.device_time_us.wrapping_sub(us)) * 1e-6, v)
+            });
+            let volts = (before, commanded);
+            w.observe(theta, alpha, volts, dt, self.latency_s)
                 .map_err(StopReason::Witness)?;
         }
         let reference = self.reference_at(t);

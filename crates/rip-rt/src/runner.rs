@@ -527,6 +527,8 @@ impl Runner<'_> {
         start_ns: u64,
     ) -> Result<(), StopReason> {
         let t = (tick.deadline_ns - start_ns) as f64 * 1e-9;
+        self.core
+            .note_latency(reply.rx_ns.saturating_sub(reply.req_ns));
         let mut step = self.core.control(&reply.m, t, &mut self.tx)?;
         let compute_ns = now_ns().saturating_sub(reply.rx_ns);
         if compute_ns > self.max_step_ns {

@@ -36,6 +36,8 @@ struct Excursion {
     until_stop: f64,
     /// ... and until the end of the record (the arm coasting to rest).
     total: f64,
+    /// The motor was still driven when the fault began (else the run stopped before it).
+    driven_at_onset: bool,
 }
 
 fn excursion(truth: &[Truth], onset: f64) -> Excursion {
@@ -47,6 +49,7 @@ fn excursion(truth: &[Truth], onset: f64) -> Excursion {
         .unwrap_or(after.len());
     let dist = |rows: &[&Truth]| rows.iter().fold(0.0f64, |m, r| m.max((r.theta - at).abs()));
     Excursion {
+        driven_at_onset: after.first().is_some_and(|r| r.driver == "drive"),
         at,
         until_stop: dist(&after[..stop]),
         total: dist(&after),
@@ -101,6 +104,10 @@ fn check(controller: &str, fault: &str, fault_at: Option<f64>, expected: &str) {
         "{controller} {fault} at {fault_at:?}: exit {code}, arm {:+.3} rad at onset, moved {:.3} \
          rad until the stop, {:.3} rad in all",
         e.at, e.until_stop, e.total
+    );
+    assert!(
+        e.driven_at_onset,
+        "{controller} {fault} {fault_at:?}: stopped before the fault began: {stderr}"
     );
     let want = if fault_at.is_none() { 14 } else { 15 };
     assert_eq!(code, want, "{controller} {fault} {fault_at:?}: {stderr}");

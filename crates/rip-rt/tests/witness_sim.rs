@@ -25,6 +25,8 @@ enum Fault {
     FreezeArmEncoder,
     /// `device.arm_sign = -1` on a correctly wired rig (from the start).
     ArmSign,
+    /// `device.arm_counts_per_rev` four times the encoder's (8192 on 2048; from the start).
+    ArmScale,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -136,6 +138,7 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
             (true, Fault::ReverseArmEncoder) => 2.0 * onset.unwrap() - true_theta,
             (true, Fault::FreezeArmEncoder) => onset.unwrap(),
             (true, Fault::ArmSign) => -true_theta,
+            (true, Fault::ArmScale) => true_theta / 4.0,
             _ => true_theta,
         };
         theta = quant(theta, 0);
@@ -143,7 +146,8 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
             quant(x[2] - std::f64::consts::PI + noise[1].sample(&mut rng), 1)
                 + std::f64::consts::PI,
         );
-        if let Err(f) = witness.observe(theta, alpha, u_prev) {
+        let dt = if k == 0 { 0.0 } else { ts };
+        if let Err(f) = witness.observe(theta, alpha, (u_prev, u_prev), dt, 0.0) {
             trip = Some((t, f));
             ended = "witness";
             break;
@@ -264,6 +268,13 @@ fn fault_cases() -> Vec<(Fault, bool, Option<f64>)> {
     v
 }
 
+fn scale_cases() -> Vec<(Fault, bool, Option<f64>)> {
+    vec![
+        (Fault::ArmScale, true, None),
+        (Fault::ArmScale, false, None),
+    ]
+}
+
 #[test]
 fn each_wiring_fault_is_stopped_before_the_arm_moves_half_a_radian() {
     for (name, r) in rigs(1) {
@@ -339,7 +350,7 @@ fn measure() {
     );
     for (name, r) in &rigs {
         for kind in KINDS {
-            for (fault, swing_up, fault_at) in fault_cases() {
+            for (fault, swing_up, fault_at) in fault_cases().into_iter().chain(scale_cases()) {
                 let o = simulate(
                     r,
                     Case {
@@ -365,5 +376,51 @@ fn measure() {
                 );
             }
         }
+    }
+}
+
+/// Replays a `rip-rt run` log (`WITNESS_LOG`, `WITNESS_PRESET`) through the witness, printing
+/// the arm's statistic where it rises: for looking into a run's figures.
+#[test]
+#[ignore]
+fn replay() {
+    let Ok(path) = std::env::var("WITNESS_LOG") else {
+        return;
+    };
+    let mut cfg = Config::default();
+    if std::env::var("WITNESS_PRESET").as_deref() == Ok("qube_servo2") {
+        cfg.spec.plant.preset = rip_core::spec::Preset::QubeServo2;
+    }
+    let mut w = Witness::new(
+        &cfg,
+        WitnessLimits {
+            arm: f64::INFINITY,
+            pendulum: f64::INFINITY,
+            ..WitnessLimits::default()
+        },
+    )
+    .unwrap();
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut rows = text
+        .lines()
+        .filter(|l| l.starts_with(|c: char| c.is_ascii_digit()));
+    let mut prev: Option<(f64, f64)> = None;
+    for l in rows.by_ref() {
+        let f: Vec<f64> = l.split(',').take(6).map(|v| v.parse().unwrap()).collect();
+        let (t, theta, alpha, u) = (f[0], f[2], f[3], f[5]);
+        let phase = l.rsplit(',').next().unwrap();
+        if phase == "sign_check" {
+            continue;
+        }
+        let (dt, before) = prev.map_or((0.0, 0.0), |(t0, u0)| (t - t0, u0));
+        let _ = w.observe(theta, alpha, (before, before), dt, 0.0);
+        let s = w.statistic();
+        if s[0] > 2.0 || s[1] > 2.0 {
+            println!(
+                "t {t:.2} theta {theta:+.4} alpha {alpha:+.4} u {u:+.3} stat {:.1} {:.1} {phase}",
+                s[0], s[1]
+            );
+        }
+        prev = Some((t, u));
     }
 }
