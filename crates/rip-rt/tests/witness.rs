@@ -17,15 +17,12 @@ const AFTER_CATCH_S: f64 = 9.0;
 const MAX_MOVE: f64 = 0.5;
 
 /// The first enabling command's device time (s), from the emulator's record.
-fn first_enabling(emu: &Emulator) -> f64 {
+fn first_enabling(emu: &Emulator) -> Option<f64> {
     let text = std::fs::read_to_string(&emu.record).unwrap();
-    text.lines()
-        .skip(1)
-        .find_map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            (f.len() == 4 && f[3].trim() == "1").then(|| f[0].parse::<f64>().unwrap())
-        })
-        .expect("no enabling command")
+    text.lines().skip(1).find_map(|l| {
+        let f: Vec<&str> = l.split(',').collect();
+        (f.len() == 4 && f[3].trim() == "1").then(|| f[0].parse::<f64>().unwrap())
+    })
 }
 
 #[derive(Debug)]
@@ -91,7 +88,10 @@ fn case(controller: &str, fault: &str, fault_at: Option<f64>) -> (i32, String, E
         ],
     );
     std::thread::sleep(std::time::Duration::from_millis(1500));
-    let onset = first_enabling(&emu) + fault_at.unwrap_or(0.0);
+    let Some(enabled) = first_enabling(&emu) else {
+        panic!("{name}: the motor was never enabled: {}", r.stderr);
+    };
+    let onset = enabled + fault_at.unwrap_or(0.0);
     let truth = emu.finish();
     assert_eq!(emu.commands().last(), Some(&(0, 0)), "{name}: {}", r.stderr);
     let code = r.status.code().unwrap_or(-1);
