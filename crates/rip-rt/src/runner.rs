@@ -10,14 +10,17 @@
 //! 2. **arming**: stop commands only, until the pendulum is within `safety.start_tolerance` of
 //!    upright (or `safety.wait_upright_s` passed: [`StopReason::NotUpright`]);
 //! 3. **balancing**: the controller's enabling commands, until the duration, a stop signal or a
-//!    fault.
+//!    fault; the witness ([`crate::witness`], in [`LoopCore::control`]) stops a rig that does
+//!    not move as commanded ([`StopReason::Witness`]).
 //!
 //! A swing-up supervisor (the controller starts in [`rip_core::Phase::SwingUp`]) replaces
 //! arming by the rest check ([`crate::calibrate`]): the rig must be at rest hanging down, and
 //! its encoder zeros are taken from that rest; then the sign check of `rip-rt excite`
 //! ([`crate::excite::check_signs`]: a small pulse, then 0 V) refuses a rig with a reversed
 //! motor or encoder ([`StopReason::SignCheck`]), which the swing would drive away to the arm
-//! limit; then its commands run from the next period, the swing-up's and, after its catch, the
+//! limit; then the rest check again ([`calibrate::settle`]: the swing never starts from the
+//! pulse's aftermath) and the encoder zeros from that rest; then its commands run from the
+//! next period, the swing-up's and, after its catch, the
 //! balance controller's, on a time axis that starts with the sign check. Each catch starts the
 //! reference's clock and `--duration` (a fall stops them); the pendulum-angle rule is the
 //! supervisor's ([`LoopCore::control`]), every other rule of balancing holds throughout. The

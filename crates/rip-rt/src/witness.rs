@@ -32,9 +32,9 @@
 //! g⁺[k] = max(0, g⁺[k−1] + e[k]/σ − κ)      g⁻[k] = max(0, g⁻[k−1] − e[k]/σ − κ)
 //! ```
 //!
-//! (held, not updated, for a sample whose exchange took longer than `2τ` or whose interval
-//! on the device's clock is off the period by more than half of it: a skipped period, a
-//! device catching up), which stays near 0 under zero-mean noise and grows by about `|e|/σ − κ` every period of a
+//! (held, not updated, for a sample whose interval on the device's clock is off the period by
+//! more than half of it: a skipped period, a device catching up), which stays near 0 under
+//! zero-mean noise and grows by about `|e|/σ − κ` every period of a
 //! persistent disagreement. The run stops ([`WitnessFault`]) when `max(g⁺, g⁻)` of the arm
 //! exceeds [`ARM_THRESHOLD`] or the pendulum's [`PENDULUM_THRESHOLD`]. The drift κ and the
 //! thresholds were chosen from measurement (docs/rip-rt.md, "The witness"): the largest
@@ -346,9 +346,9 @@ impl Witness {
             self.free = x;
         }
         self.x = Some(x);
-        // A late exchange or an interval off the grid (a skipped period, a device catching up)
+        // An interval off the grid (a skipped period, a device catching up on its clock)
         // leaves the innovation unreliable: the observer takes it, the statistic does not.
-        let on_time = dt >= 0.5 * self.ts && dt <= 1.5 * self.ts && delay <= 2.0 * TIMING_S;
+        let on_time = dt >= 0.5 * self.ts && dt <= 1.5 * self.ts;
         let k = self.limits.drift;
         for j in 0..2 {
             let timing = TIMING_S * rate[j];
