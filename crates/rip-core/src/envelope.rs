@@ -23,13 +23,16 @@
 //! ```
 //!
 //! A stop is not instantaneous: the state it starts from was measured up to `τ` earlier
-//! (the loop's latency, two periods), during which the arm may still accelerate at the drive's
-//! full `a_d = b U / J_min` (`J_min = J₀ − m₁₂² / J_α`, the least effective inertia). The
-//! stopping distance from speed `ω` is therefore
+//! (the loop's latency, two periods), during which the voltage already applied, `u_a`, still
+//! acts: along the motion it accelerates the arm by at most `a_l = b u_a⁺ / J_min`
+//! (`J_min = J₀ − m₁₂² / J_α`, the least effective inertia; `u_a⁺` its part along the
+//! motion, 0 when it already brakes). The stopping distance from speed `ω` is therefore
 //!
 //! ```text
-//! D(ω) = ω τ + ½ a_d τ² + d(ω + a_d τ)                                                     (3)
+//! D(ω, u_a) = ω τ + ½ a_l τ² + d(ω + a_l τ)                                                 (3)
 //! ```
+//!
+//! and, not knowing `u_a`, at most `D(ω, U)`.
 //!
 //! and the stopping point `θ + sgn(θ̇) D(|θ̇|)`. An arm whose stopping point is inside the
 //! limit (less a margin) can still be stopped there; the loop stops it the period that is no
@@ -59,8 +62,8 @@ pub struct StoppingModel {
     pub a0: f64,
     /// `k = f c / J` (1/s).
     pub k: f64,
-    /// `a_d = b U / J_min` (rad/s²), the drive's largest acceleration.
-    pub drive: f64,
+    /// `b / J_min` (rad/s² per V), the drive's acceleration per volt at the least inertia.
+    pub drive_per_volt: f64,
     /// `τ` (s).
     pub latency: f64,
     /// The voltage bound `U` (V).
@@ -81,7 +84,7 @@ impl StoppingModel {
         Self {
             a0: fraction * b * voltage / j,
             k: fraction * c / j,
-            drive: b * voltage / j_min,
+            drive_per_volt: b / j_min,
             latency,
             voltage,
         }
@@ -100,33 +103,44 @@ impl StoppingModel {
         }
     }
 
-    /// The stopping distance `D(ω)` of (3) (rad), latency included.
-    pub fn stopping_distance(&self, omega: f64) -> f64 {
+    /// The stopping distance `D(ω, u_a)` of (3) (rad), latency included, with `along` (V)
+    /// the voltage applied along the motion during the latency (clamped to `[0, U]`).
+    pub fn stopping_distance_with(&self, omega: f64, along: f64) -> f64 {
         let w = omega.abs();
         let tau = self.latency;
-        w * tau + 0.5 * self.drive * tau * tau + self.braking_distance(w + self.drive * tau)
+        let a = self.drive_per_volt * along.clamp(0.0, self.voltage);
+        w * tau + 0.5 * a * tau * tau + self.braking_distance(w + a * tau)
     }
 
-    /// Where the arm at `theta` moving at `rate` stops: `θ + sgn(θ̇) D(|θ̇|)`.
-    pub fn stopping_point(&self, theta: f64, rate: f64) -> f64 {
-        theta + rate.signum() * self.stopping_distance(rate)
+    /// The stopping distance `D(ω, U)` (rad): the full voltage along the motion during the
+    /// latency.
+    pub fn stopping_distance(&self, omega: f64) -> f64 {
+        self.stopping_distance_with(omega, self.voltage)
     }
 
-    /// The largest speed (rad/s) from which the arm stops within `room` (rad) by (3); 0 when
-    /// even an arm at rest could not (the latency's travel alone is more).
-    pub fn max_speed(&self, room: f64) -> f64 {
-        if self.stopping_distance(0.0) >= room {
+    /// Where the arm at `theta` moving at `rate` stops with `applied` (V) acting during the
+    /// latency: `θ + sgn(θ̇) D(|θ̇|, sgn(θ̇) u_a)`.
+    pub fn stopping_point(&self, theta: f64, rate: f64, applied: f64) -> f64 {
+        let along = if rate >= 0.0 { applied } else { -applied };
+        theta + rate.signum() * self.stopping_distance_with(rate, along)
+    }
+
+    /// The largest speed (rad/s) from which the arm stops within `room` (rad) by (3) with
+    /// `along` (V) during the latency; 0 when even an arm at rest could not.
+    pub fn max_speed(&self, room: f64, along: f64) -> f64 {
+        let d = |w: f64| self.stopping_distance_with(w, along);
+        if d(0.0) >= room {
             return 0.0;
         }
         // D is increasing in ω: bisect between 0 and a speed that is too fast.
         let mut hi = 1.0;
-        while self.stopping_distance(hi) < room && hi < 1e6 {
+        while d(hi) < room && hi < 1e6 {
             hi *= 2.0;
         }
         let mut lo = 0.0;
         for _ in 0..60 {
             let mid = 0.5 * (lo + hi);
-            if self.stopping_distance(mid) < room {
+            if d(mid) < room {
                 lo = mid;
             } else {
                 hi = mid;
@@ -200,8 +214,15 @@ mod tests {
         let with_latency = StoppingModel::new(&p, 12.0, 0.5, 0.02);
         assert!(with_latency.stopping_distance(5.0) > m.stopping_distance(5.0) + 5.0 * 0.02);
         // max_speed inverts D.
-        let v = with_latency.max_speed(2.0);
+        let v = with_latency.max_speed(2.0, 12.0);
         assert!((with_latency.stopping_distance(v) - 2.0).abs() < 1e-9);
+        // A voltage that already brakes adds only the latency's travel.
+        let d = with_latency.stopping_distance_with(5.0, -3.0);
+        assert!((d - 5.0 * 0.02 - with_latency.braking_distance(5.0)).abs() < 1e-12);
+        assert_eq!(
+            with_latency.stopping_point(1.0, -5.0, -12.0),
+            1.0 - with_latency.stopping_distance(5.0)
+        );
         assert_eq!(envelope_speed(2.0, 4.0), 4.0);
         assert_eq!(envelope_speed(2.0, -1.0), 0.0);
     }

@@ -375,6 +375,10 @@ pub fn run(
             (exciter.periods(&mut periodic), Some(cal.to_string()))
         }
     };
+    let braking = crate::envelope::bring_to_rest(io, exciter.core, cfg, &mut periodic, &reason);
+    if !opts.quiet && braking.mode != crate::envelope::BrakeMode::None {
+        crate::say!("rip-rt: stop: {braking}");
+    }
     let stop_sent = guard.stop();
     drop(guard);
     ExciteReport {

@@ -78,6 +78,8 @@ pub struct LoopCore {
     // enabling command may be repeated for.
     blind_periods: u32,
     blind_limit: u32,
+    // `safety.arm_limit` for the arm's stopping point (crate::envelope).
+    envelope: crate::envelope::ArmEnvelope,
 }
 
 impl fmt::Debug for LoopCore {
@@ -153,6 +155,7 @@ impl LoopCore {
             last_command: Command::STOP,
             blind_periods: 0,
             blind_limit,
+            envelope: crate::envelope::ArmEnvelope::new(cfg),
         })
     }
 
@@ -172,6 +175,7 @@ impl LoopCore {
         self.u = [0.0];
         self.last_command = Command::STOP;
         self.blind_periods = 0;
+        self.envelope.reset();
     }
 
     /// The voltage the device applies under the last command: its value when the driver is
@@ -345,6 +349,7 @@ impl LoopCore {
                 limit: self.arm_limit,
             });
         }
+        self.envelope.check(theta, t, m.applied_mv as f64 * 1e-3)?;
         let reference = self.reference_at(t);
         self.y = [theta, alpha];
         self.r = [reference, 0.0];
@@ -443,6 +448,7 @@ impl LoopCore {
                 limit: self.arm_limit,
             });
         }
+        self.envelope.check(theta, t, m.applied_mv as f64 * 1e-3)?;
         if !voltage.is_finite() {
             return Err(StopReason::ControllerFault { voltage, t });
         }

@@ -708,6 +708,10 @@ pub fn run(
             (reason, Some(probe))
         }
     };
+    let braking = crate::envelope::bring_to_rest(io, runner.core, cfg, &mut periodic, &reason);
+    if !opts.quiet && braking.mode != crate::envelope::BrakeMode::None {
+        crate::say!("rip-rt: stop: {braking}");
+    }
     let stop_sent = guard.stop();
     drop(guard);
     RunReport {

@@ -49,3 +49,200 @@ fn the_true_state_is_recorded_while_running_and_at_exit() {
     assert_ne!(last.driver, "drive");
     assert_eq!(last.voltage, 0.0);
 }
+
+/// `safety.arm_limit` of the default configuration (rad).
+const ARM_LIMIT: f64 = 3.0;
+
+/// What a stop left the simulated rig doing: the largest true |θ| over the whole run and
+/// after it, where the arm came to rest, and the bridge's last state.
+#[derive(Debug)]
+struct Outcome {
+    code: Option<i32>,
+    stderr: String,
+    max_theta: f64,
+    rest_theta: f64,
+    last: Truth,
+}
+
+impl Outcome {
+    /// The arm came to rest inside `limit` and never left it; the bridge ended off at 0 V.
+    fn assert_safe(&self, case: &str, limit: f64) {
+        println!(
+            "{case}: exit {:?}, true max |theta| {:.3} rad, at rest at {:.3} rad, bridge {}",
+            self.code, self.max_theta, self.rest_theta, self.last.driver
+        );
+        assert!(
+            self.max_theta < limit,
+            "{case}: the arm reached {:.3} rad, past {limit} rad\n{}",
+            self.max_theta,
+            self.stderr
+        );
+        assert_ne!(self.last.driver, "drive", "{case}: {}", self.stderr);
+        assert_eq!(self.last.voltage, 0.0, "{case}");
+        assert!(
+            self.last.theta_dot.abs() < 0.2,
+            "{case}: not at rest: {:?}",
+            self.last
+        );
+    }
+}
+
+/// Waits for `child` to exit, then for the simulated arm to come to rest, and stops the
+/// emulator.
+fn settle(mut emu: Emulator, child: std::process::Child) -> Outcome {
+    let r = wait_with_timeout(child, Duration::from_secs(60));
+    emu.wait_for_rest(0.05, 1.0, Duration::from_secs(20));
+    let rows = emu.finish();
+    let last = rows.last().cloned().expect("a true-state row");
+    Outcome {
+        code: r.status.code(),
+        stderr: r.stderr,
+        max_theta: max_excursion(&rows),
+        rest_theta: last.theta,
+        last,
+    }
+}
+
+fn swing_config(name: &str, extra: &str) -> std::path::PathBuf {
+    let path = scratch(&format!("{name}.toml"));
+    std::fs::write(
+        &path,
+        format!("[calibration]\nrest_window_s = 0.5\nrest_timeout_s = 2.0\n{extra}"),
+    )
+    .unwrap();
+    path
+}
+
+/// Starts `rip-rt run --swing-up` from hanging at rest.
+fn start_swing(name: &str, controller: &str, extra_cfg: &str) -> (Emulator, std::process::Child) {
+    let cfg = swing_config(name, extra_cfg);
+    let emu = Emulator::start(
+        name,
+        &[
+            "--start",
+            "down",
+            "--noise",
+            "0.3",
+            "--config",
+            cfg.to_str().unwrap(),
+        ],
+    );
+    let child = spawn_run(
+        &emu.device,
+        controller,
+        &["--swing-up", "--config", cfg.to_str().unwrap()],
+    );
+    (emu, child)
+}
+
+/// Waits until the device has received its first enabling command (the swing's start).
+fn wait_for_enable(emu: &Emulator) {
+    let start = std::time::Instant::now();
+    while !emu.commands_so_far().iter().any(|&(_, f)| f & 1 != 0) {
+        assert!(
+            start.elapsed().as_secs() < 15,
+            "the motor was never enabled"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// Ctrl-C `delay_s` after the swing started.
+fn sigint_during_swing(controller: &str, delay_s: f64) -> Outcome {
+    let name = format!("stop-sigint-{controller}-{delay_s}");
+    let (emu, child) = start_swing(&name, controller, "");
+    wait_for_enable(&emu);
+    std::thread::sleep(Duration::from_secs_f64(delay_s));
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    settle(emu, child)
+}
+
+#[test]
+fn ctrl_c_during_the_swing_and_after_the_catch_leaves_the_arm_inside_its_limit() {
+    let _serial = one_at_a_time();
+    // Across the swing's pumping (its arm moves fastest there), and after the catch.
+    for (controller, delay) in [
+        ("lqr", 0.3),
+        ("lqr", 0.7),
+        ("mpc", 1.1),
+        ("lqg", 1.6),
+        ("lqr", 2.2),
+        ("lqr", 2.9),
+        ("mpc", 6.0),
+    ] {
+        let out = sigint_during_swing(controller, delay);
+        assert_eq!(out.code, Some(130), "{}", out.stderr);
+        out.assert_safe(
+            &format!("SIGINT {delay} s into the swing ({controller})"),
+            ARM_LIMIT,
+        );
+    }
+}
+
+#[test]
+fn a_loop_stall_after_the_catch_stops_the_arm_inside_its_limit() {
+    let _serial = one_at_a_time();
+    let (emu, child) = start_swing("stop-stall", "lqr", "");
+    wait_for_enable(&emu);
+    std::thread::sleep(Duration::from_secs(6));
+    // Suspended: the device's watchdog stops the motor (braking it); resumed, the loop finds
+    // its deadlines missed and stops as stalled.
+    unsafe { libc::kill(child.id() as i32, libc::SIGSTOP) };
+    std::thread::sleep(Duration::from_millis(400));
+    unsafe { libc::kill(child.id() as i32, libc::SIGCONT) };
+    let out = settle(emu, child);
+    assert_eq!(out.code, Some(10), "{}", out.stderr);
+    out.assert_safe("stall after the catch", ARM_LIMIT);
+}
+
+fn excite_at(signal: &str, extra: &[&str]) -> Outcome {
+    let name = format!("stop-excite-{signal}");
+    let pi = std::f64::consts::PI.to_string();
+    let emu = Emulator::start(
+        &name,
+        &["--initial-pendulum", pi.as_str(), "--noise", "0.3"],
+    );
+    let log = scratch(&format!("{name}.csv"));
+    let child = std::process::Command::new(BIN)
+        .arg("excite")
+        .arg("--port")
+        .arg(&emu.device)
+        .args(["--signal", signal, "--quiet", "--log"])
+        .arg(&log)
+        .args(extra)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("spawn excite");
+    settle(emu, child)
+}
+
+#[test]
+fn every_excitation_at_its_largest_amplitude_leaves_the_arm_inside_its_limit() {
+    let _serial = one_at_a_time();
+    for (signal, extra) in [
+        ("steps", &["--amplitude", "12", "--duration", "6"][..]),
+        ("chirp", &["--amplitude", "12", "--duration", "6"][..]),
+        (
+            "prbs",
+            &["--amplitude", "12", "--duration", "6", "--centering", "0"][..],
+        ),
+        (
+            "steps",
+            &[
+                "--amplitude",
+                "12",
+                "--duration",
+                "6",
+                "--centering",
+                "0",
+                "--damping",
+                "0",
+            ][..],
+        ),
+        ("free-swing", &["--amplitude", "12", "--kick", "2"][..]),
+    ] {
+        let out = excite_at(signal, extra);
+        out.assert_safe(&format!("excite {signal} {extra:?}"), ARM_LIMIT);
+    }
+}
