@@ -41,7 +41,8 @@
 //! The constant-deceleration envelope of the swing-up, `v(θ) = √(2 a_b (θ_L − θ)⁺)`, is (2)
 //! with `k = 0` solved for the speed ([`envelope_speed`]).
 
-use crate::plant::FurutaParams;
+use crate::excitation::{Excitation, ExcitationSettings};
+use crate::plant::{FurutaParams, Plant, State};
 
 /// Share `f` of the braking deceleration (1) that the stops of `rip-rt` count on: half, as the
 /// swing-up's default `brake_fraction` reserves, for the pendulum's reaction, dead zone and
@@ -188,10 +189,88 @@ impl BrakingLaw {
     }
 }
 
+/// Where a simulated run first left the envelope: the stop that the loop would make there.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Breach {
+    /// Seconds from the start.
+    pub t: f64,
+    /// Arm angle (rad).
+    pub theta: f64,
+    /// Arm rate (rad/s), the backward difference the loop measures.
+    pub rate: f64,
+    /// The stopping point (rad).
+    pub stop_at: f64,
+}
+
+/// Runs `law` (`(t, θ, θ̇) ↦ u`, clamped to `±model.voltage`) on `plant` from `x0` for
+/// `duration` seconds, sampled every `ts` as the loop samples it (the rate a backward
+/// difference, the voltage held between samples), and returns the first sample whose
+/// stopping point (with the voltage held over it) is past `±bound`: where the loop's envelope
+/// would stop the run. `None` when the run stays inside.
+pub fn first_breach(
+    plant: &Plant,
+    x0: State,
+    ts: f64,
+    duration: f64,
+    model: &StoppingModel,
+    bound: f64,
+    mut law: impl FnMut(f64, f64, f64) -> f64,
+) -> Option<Breach> {
+    let substeps = (ts / plant.max_rk4_substep()).ceil().clamp(1.0, 1000.0) as usize;
+    let steps = (duration / ts).ceil() as usize;
+    let mut x = x0;
+    let mut last = x[0];
+    let mut u = 0.0;
+    for k in 0..=steps {
+        let t = k as f64 * ts;
+        let theta = x[0];
+        let rate = if k == 0 { 0.0 } else { (theta - last) / ts };
+        last = theta;
+        let stop_at = model.stopping_point(theta, rate, u);
+        if stop_at.is_nan() || stop_at.abs() > bound {
+            return Some(Breach {
+                t,
+                theta,
+                rate,
+                stop_at,
+            });
+        }
+        u = law(t, theta, rate).clamp(-model.voltage, model.voltage);
+        plant.advance(&mut x, u, 0.0, ts, substeps);
+    }
+    None
+}
+
+/// [`first_breach`] of an open-loop excitation (`rip-rt excite`) on `plant`, the pendulum
+/// hanging at rest and the arm at 0: its signal through its arm-centring law with
+/// `arm_limit`, sampled every `ts`.
+pub fn excitation_breach(
+    settings: ExcitationSettings,
+    plant: &Plant,
+    ts: f64,
+    model: &StoppingModel,
+    bound: f64,
+    arm_limit: f64,
+) -> crate::error::Result<Option<Breach>> {
+    let mut x = Excitation::new(settings, ts)?;
+    let x0 = State::new(0.0, 0.0, std::f64::consts::PI, 0.0);
+    Ok(first_breach(
+        plant,
+        x0,
+        ts,
+        settings.duration,
+        model,
+        bound,
+        |t, theta, rate| {
+            let e = x.value(t);
+            x.command(e, theta, rate, arm_limit)
+        },
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plant::{Plant, State};
 
     /// (2) against a direct integration of (1), and the limits it must have.
     #[test]

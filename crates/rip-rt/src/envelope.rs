@@ -26,9 +26,14 @@
 //! that cannot brake (protocol.md rule 9) leaves the windings open on it; the active law does
 //! not depend on it.
 
-use rip_core::envelope::{BrakingLaw, StoppingModel, STOP_BRAKE_FRACTION};
+use rip_core::envelope::{
+    envelope_speed, excitation_breach, BrakingLaw, StoppingModel, STOP_BRAKE_FRACTION,
+};
+use rip_core::excitation::{ExcitationSettings, Signal};
+use rip_core::plant::Plant;
+use rip_core::spec::SpecError;
 
-use crate::config::{Config, MAX_VOLTAGE_LIMIT};
+use crate::config::{Config, ConfigError, MAX_VOLTAGE_LIMIT};
 use crate::loop_core::LoopCore;
 use crate::protocol::{encode, Command, Frame, Message, MAX_FRAME, STATUS_FAULT};
 use crate::runner::exchange;
@@ -117,6 +122,98 @@ impl ArmEnvelope {
     }
 }
 
+/// Refuses a swing-up whose arm could not be stopped inside `safety.arm_limit` from every
+/// state its own envelope lets the arm into: anywhere within `±swing_up.arm_limit` at up to
+/// the swing's envelope speed `√(2 a_b (L − |θ|))` outwards (`a_b = brake_fraction ·` its stall
+/// acceleration at `swing_up.max_voltage`), braked by the stop's model with the swing's full
+/// voltage along the motion during the latency. The error names `swing_up.arm_limit`.
+pub fn check_swing_up(cfg: &Config) -> Result<(), ConfigError> {
+    let s = &cfg.spec.swing_up;
+    let p = cfg.spec.plant.params();
+    let model = stopping_model(cfg);
+    let j = p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr + p.jp + p.mp * p.lp * p.lp / 4.0;
+    let a_b = s.brake_fraction * p.kt / p.rm * s.max_voltage / j;
+    let bound = envelope_limit(cfg);
+    let n = 400;
+    let worst = (0..=n)
+        .map(|i| {
+            let theta = -s.arm_limit + 2.0 * s.arm_limit * i as f64 / n as f64;
+            let v = envelope_speed(a_b, s.arm_limit - theta);
+            theta + model.stopping_distance_with(v, s.max_voltage)
+        })
+        .fold(f64::NEG_INFINITY, f64::max);
+    if worst > bound {
+        return Err(SpecError::new(
+            "swing_up.arm_limit",
+            format!(
+                "{} rad: a stop during the swing could carry the arm to {worst:.2} rad, past \
+                 safety.arm_limit ({} rad) less its {ENVELOPE_MARGIN} rad margin, by the \
+                 stopping model of [plant] (docs/rip-rt.md, \"Stopping\"); lower \
+                 swing_up.arm_limit or swing_up.brake_fraction, or raise safety.arm_limit",
+                s.arm_limit, cfg.safety.arm_limit
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Share of `safety.arm_limit` that an excitation's simulated stopping point keeps clear of
+/// the envelope's bound ([`check_excitation`]): the rig differs from its `[plant]` model, and
+/// an excitation accepted at the edge would be cut short by the envelope's stop.
+pub const PREFLIGHT_HEADROOM: f64 = 0.1;
+
+/// Refuses an excitation that would come within [`PREFLIGHT_HEADROOM`] of the braking
+/// envelope of `safety.arm_limit` on the configuration's `[plant]` ([`excitation_breach`]):
+/// its run would likely be cut short by the envelope's stop. The error names `--amplitude`
+/// (and, for free swing, `--kick`) and gives the largest amplitude that passes.
+pub fn check_excitation(cfg: &Config, settings: &ExcitationSettings) -> Result<(), ConfigError> {
+    let plant =
+        Plant::new(cfg.spec.plant.params()).map_err(|e| SpecError::new("plant", e.to_string()))?;
+    let model = stopping_model(cfg);
+    let bound = envelope_limit(cfg) - PREFLIGHT_HEADROOM * cfg.safety.arm_limit;
+    let ts = cfg.period_s();
+    let limit = cfg.safety.arm_limit;
+    let breach = |amplitude: f64| {
+        let s = ExcitationSettings {
+            amplitude,
+            ..*settings
+        };
+        excitation_breach(s, &plant, ts, &model, bound, limit)
+    };
+    let rip = |e: rip_core::RipError| SpecError::new("--amplitude", e.to_string());
+    let Some(b) = breach(settings.amplitude).map_err(rip)? else {
+        return Ok(());
+    };
+    // The largest amplitude without a breach, to 1 %.
+    let (mut lo, mut hi) = (0.0, settings.amplitude);
+    while hi - lo > 0.01 * settings.amplitude {
+        let mid = 0.5 * (lo + hi);
+        if breach(mid).map_err(rip)?.is_some() {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    let what = if settings.signal == Signal::FreeSwing {
+        format!("{} V with --kick {} s", settings.amplitude, settings.kick)
+    } else {
+        format!("{} V", settings.amplitude)
+    };
+    Err(SpecError::new(
+        "--amplitude",
+        format!(
+            "{what}: on the [plant] model the arm would reach the braking envelope of \
+             safety.arm_limit ({limit} rad, less {PREFLIGHT_HEADROOM} of it as headroom) {:.2} s into the signal (at {:.2} rad and \
+             {:.1} rad/s it would stop at {:.2} rad); at most {:.2} V stays inside",
+            b.t,
+            b.theta,
+            b.rate,
+            b.stop_at,
+            (lo * 100.0).floor() / 100.0
+        ),
+    ))
+}
+
 /// How a stop brakes the arm.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BrakeMode {
@@ -141,9 +238,11 @@ pub fn brake_mode(reason: &StopReason) -> BrakeMode {
         | StopReason::SwingUpRunTimeout { .. }
         | StopReason::ControllerFault { .. }
         | StopReason::LogError(_)
-        | StopReason::Overrun(_)
         | StopReason::Watchdog(_)
         | StopReason::Panic => BrakeMode::Active,
+        // The host's timing cannot be trusted to close a loop (a slow step, missed
+        // deadlines, a stall): short the windings rather than drive.
+        StopReason::Overrun(_) => BrakeMode::Short,
         StopReason::DeviceLost(_)
         | StopReason::TooSlow { .. }
         | StopReason::NotUpright { .. }
@@ -200,16 +299,22 @@ fn send(io: &Fd, command: Command) -> bool {
 }
 
 /// Brings the arm to rest after the run stopped for `reason` (module docs), on the loop's
-/// grid `periodic`; the caller then sends the stop frame. Returns at once when nothing can
-/// or need be braked.
+/// grid `periodic`; the caller then sends the stop frame. `driven`: whether the run sent an
+/// enabling command (without one the arm was never driven, and nothing is sent). Returns at
+/// once when nothing can or need be braked.
 pub fn bring_to_rest(
     io: &Fd,
     core: &mut LoopCore,
     cfg: &Config,
     periodic: &mut Periodic,
     reason: &StopReason,
+    driven: bool,
 ) -> BrakeReport {
-    let mut mode = brake_mode(reason);
+    let mut mode = if driven {
+        brake_mode(reason)
+    } else {
+        BrakeMode::None
+    };
     let mut report = BrakeReport {
         mode,
         seconds: 0.0,
@@ -222,6 +327,10 @@ pub fn bring_to_rest(
     let period_s = cfg.period_s();
     let voltage = cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT);
     let law = BrakingLaw::new(&cfg.spec.plant.params(), voltage, period_s);
+    // One count per period and a half: below it the measured rate is the encoder's
+    // quantisation, and the law would chatter between ±its gain per count.
+    let dead_band =
+        1.5 * std::f64::consts::TAU / cfg.device.arm_counts_per_rev.max(1) as f64 / period_s;
     let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
     let rest_periods = (REST_S / period_s).ceil().max(1.0) as usize;
     // The recent arm angles, for the rest test: a ring of the last `rest_periods + 1`.
@@ -290,7 +399,11 @@ pub fn bring_to_rest(
         }
         let command = match mode {
             BrakeMode::Active => Command {
-                voltage_mv: (law.voltage(rate) * 1000.0).round() as i16,
+                voltage_mv: if rate.abs() <= dead_band {
+                    0
+                } else {
+                    (law.voltage(rate) * 1000.0).round() as i16
+                },
                 flags: crate::protocol::COMMAND_ENABLE,
             },
             _ => Command::BRAKE,
@@ -332,5 +445,38 @@ mod tests {
         env.reset();
         env.check(2.0 - 1.1 * v * 0.01, 0.0, -12.0).unwrap();
         env.check(2.0, 0.01, -12.0).unwrap();
+    }
+
+    #[test]
+    fn the_defaults_pass_and_unstoppable_settings_are_refused_naming_them() {
+        for preset in ["paper", "qube_servo2"] {
+            let cfg = Config::from_toml(&format!("[plant]\npreset = \"{preset}\"\n")).unwrap();
+            check_swing_up(&cfg).unwrap();
+            for signal in [
+                Signal::Chirp,
+                Signal::Prbs,
+                Signal::Steps,
+                Signal::FreeSwing,
+            ] {
+                check_excitation(&cfg, &ExcitationSettings::new(signal))
+                    .unwrap_or_else(|e| panic!("{preset} {signal:?}: {e}"));
+                let loud = ExcitationSettings {
+                    amplitude: 12.0,
+                    centering: 0.0,
+                    damping: 0.0,
+                    kick: 2.0,
+                    ..ExcitationSettings::new(signal)
+                };
+                let e = check_excitation(&cfg, &loud).unwrap_err();
+                assert_eq!(e.key, "--amplitude", "{e}");
+                println!("{preset} {signal:?}: {e}");
+            }
+            let wide = Config::from_toml(&format!(
+                "[plant]\npreset = \"{preset}\"\n[swing_up]\narm_limit = 2.9\n"
+            ))
+            .unwrap();
+            let e = check_swing_up(&wide).unwrap_err();
+            assert_eq!(e.key, "swing_up.arm_limit", "{e}");
+        }
     }
 }

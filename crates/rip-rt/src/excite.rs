@@ -375,7 +375,9 @@ pub fn run(
             (exciter.periods(&mut periodic), Some(cal.to_string()))
         }
     };
-    let braking = crate::envelope::bring_to_rest(io, exciter.core, cfg, &mut periodic, &reason);
+    let driven = exciter.last_step.is_some();
+    let braking =
+        crate::envelope::bring_to_rest(io, exciter.core, cfg, &mut periodic, &reason, driven);
     if !opts.quiet && braking.mode != crate::envelope::BrakeMode::None {
         crate::say!("rip-rt: stop: {braking}");
     }

@@ -708,7 +708,9 @@ pub fn run(
             (reason, Some(probe))
         }
     };
-    let braking = crate::envelope::bring_to_rest(io, runner.core, cfg, &mut periodic, &reason);
+    let driven = runner.last_step.is_some();
+    let braking =
+        crate::envelope::bring_to_rest(io, runner.core, cfg, &mut periodic, &reason, driven);
     if !opts.quiet && braking.mode != crate::envelope::BrakeMode::None {
         crate::say!("rip-rt: stop: {braking}");
     }
