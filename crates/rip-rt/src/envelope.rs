@@ -3,7 +3,8 @@
 //!
 //! # The envelope ([`ArmEnvelope`])
 //!
-//! Every period the arm's rate is the difference of its last two measured angles, and its
+//! Every period the arm's rate is the difference of its last two measured angles over the
+//! device's clock between them (its sampling instants, not the host's wake-ups), and its
 //! stopping point `θ + sgn(θ̇) D(|θ̇|)` the one of `rip_core::envelope`: braked at
 //! `safety.voltage_limit` with half the braking deceleration counted on
 //! ([`STOP_BRAKE_FRACTION`]), two periods of latency at full drive, and the largest inertia
@@ -78,7 +79,8 @@ pub fn envelope_limit(cfg: &Config) -> f64 {
 pub struct ArmEnvelope {
     model: StoppingModel,
     bound: f64,
-    last: Option<(f64, f64)>,
+    // The last arm angle and the device's clock (µs, wrapping) when it was sampled.
+    last: Option<(f64, u32)>,
 }
 
 impl ArmEnvelope {
@@ -101,13 +103,21 @@ impl ArmEnvelope {
         self.last = None;
     }
 
-    /// Takes the arm angle `theta` measured at `t` (s) with `applied` (V) across the motor
-    /// (the device's report, which acts until the stop's first command); the stop reason when
-    /// the arm's stopping point is past the envelope's bound.
-    pub fn check(&mut self, theta: f64, t: f64, applied: f64) -> Result<(), StopReason> {
-        let rate = match self.last.replace((theta, t)) {
-            Some((before, at)) if t > at => (theta - before) / (t - at),
-            _ => 0.0,
+    /// Takes the arm angle `theta` sampled at the device's clock `device_us` with `applied`
+    /// (V) across the motor (the device's report, which acts until the stop's first command);
+    /// the stop reason when the arm's stopping point is past the envelope's bound.
+    pub fn check(&mut self, theta: f64, device_us: u32, applied: f64) -> Result<(), StopReason> {
+        let rate = match self.last.replace((theta, device_us)) {
+            Some((before, at)) => {
+                let dt = device_us.wrapping_sub(at);
+                // Two samples in the same microsecond, or a clock that jumped back: no rate.
+                if dt > 0 && dt < u32::MAX / 2 {
+                    (theta - before) / (dt as f64 * 1e-6)
+                } else {
+                    0.0
+                }
+            }
+            None => 0.0,
         };
         let stop_at = self.model.stopping_point(theta, rate, applied);
         if stop_at.abs() > self.bound {
@@ -160,7 +170,7 @@ pub fn check_swing_up(cfg: &Config) -> Result<(), ConfigError> {
 /// Share of `safety.arm_limit` that an excitation's simulated stopping point keeps clear of
 /// the envelope's bound ([`check_excitation`]): the rig differs from its `[plant]` model, and
 /// an excitation accepted at the edge would be cut short by the envelope's stop.
-pub const PREFLIGHT_HEADROOM: f64 = 0.1;
+pub const PREFLIGHT_HEADROOM: f64 = 0.05;
 
 /// Refuses an excitation that would come within [`PREFLIGHT_HEADROOM`] of the braking
 /// envelope of `safety.arm_limit` on the configuration's `[plant]` ([`excitation_breach`]):
@@ -337,7 +347,7 @@ pub fn bring_to_rest(
     let mut history = [f64::NAN; 64];
     let ring = (rest_periods + 1).min(history.len());
     let mut seen = 0usize;
-    let mut last: Option<(f64, u64)> = None;
+    let mut last: Option<(f64, u32)> = None;
     let mut blind = 0u32;
     let mut tx = [0u8; MAX_FRAME];
     let mut rx = [0u8; 512];
@@ -377,9 +387,10 @@ pub fn bring_to_rest(
             return report;
         }
         let (theta, _) = core.angles(&reply.m);
-        let rate = match last.replace((theta, reply.req_ns)) {
-            Some((before, at)) if reply.req_ns > at => {
-                (theta - before) / ((reply.req_ns - at) as f64 * 1e-9)
+        let now_us = reply.m.device_time_us;
+        let rate = match last.replace((theta, now_us)) {
+            Some((before, at)) if (1..u32::MAX / 2).contains(&now_us.wrapping_sub(at)) => {
+                (theta - before) / (now_us.wrapping_sub(at) as f64 * 1e-6)
             }
             _ => 0.0,
         };
@@ -427,11 +438,13 @@ mod tests {
         let room = envelope_limit(&cfg) - 2.0;
         let v = model.max_speed(room, 12.0);
         assert!(v > 1.0, "{v}");
-        env.check(2.0 - 0.9 * v * 0.01, 0.0, 12.0).unwrap();
-        env.check(2.0, 0.01, 12.0).unwrap();
+        env.check(2.0 - 0.9 * v * 0.01, 0, 12.0).unwrap();
+        env.check(2.0, 10_000, 12.0).unwrap();
         env.reset();
-        env.check(2.0 - 1.1 * v * 0.01, 0.0, 12.0).unwrap();
-        let stop = env.check(2.0, 0.01, 12.0).unwrap_err();
+        env.check(2.0 - 1.1 * v * 0.01, u32::MAX - 4_999, 12.0)
+            .unwrap();
+        // Across the wrap of the device's clock.
+        let stop = env.check(2.0, 5_000, 12.0).unwrap_err();
         assert!(
             matches!(stop, StopReason::ArmEnvelope { stop_at, .. } if stop_at > 2.95),
             "{stop}"
@@ -439,12 +452,12 @@ mod tests {
         assert_eq!(stop.exit_code(), crate::stop::exit_code::ANGLE_LIMIT);
         // Moving inwards is never stopped.
         env.reset();
-        env.check(2.5, 0.0, -12.0).unwrap();
-        env.check(2.4, 0.01, -12.0).unwrap();
+        env.check(2.5, 0, -12.0).unwrap();
+        env.check(2.4, 10_000, -12.0).unwrap();
         // At that speed, an applied voltage already braking leaves room.
         env.reset();
-        env.check(2.0 - 1.1 * v * 0.01, 0.0, -12.0).unwrap();
-        env.check(2.0, 0.01, -12.0).unwrap();
+        env.check(2.0 - 1.1 * v * 0.01, 0, -12.0).unwrap();
+        env.check(2.0, 10_000, -12.0).unwrap();
     }
 
     #[test]

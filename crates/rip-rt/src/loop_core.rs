@@ -349,7 +349,8 @@ impl LoopCore {
                 limit: self.arm_limit,
             });
         }
-        self.envelope.check(theta, t, m.applied_mv as f64 * 1e-3)?;
+        self.envelope
+            .check(theta, m.device_time_us, m.applied_mv as f64 * 1e-3)?;
         let reference = self.reference_at(t);
         self.y = [theta, alpha];
         self.r = [reference, 0.0];
@@ -448,7 +449,8 @@ impl LoopCore {
                 limit: self.arm_limit,
             });
         }
-        self.envelope.check(theta, t, m.applied_mv as f64 * 1e-3)?;
+        self.envelope
+            .check(theta, m.device_time_us, m.applied_mv as f64 * 1e-3)?;
         if !voltage.is_finite() {
             return Err(StopReason::ControllerFault { voltage, t });
         }

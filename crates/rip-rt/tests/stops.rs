@@ -264,3 +264,61 @@ fn every_excitation_beyond_its_envelope_is_refused_and_its_largest_amplitude_sta
         );
     }
 }
+
+#[test]
+fn a_watchdog_stop_after_the_catch_brakes_the_arm_inside_its_limit() {
+    let _serial = one_at_a_time();
+    let (emu, child) = start_swing("stop-watchdog", "lqr", "");
+    wait_for_enable(&emu);
+    std::thread::sleep(Duration::from_secs(6));
+    // The device goes silent for 150 ms (its process suspended): no measurement for
+    // loop.watchdog_periods periods; it answers again while the loop brakes.
+    let pid = emu.child.id() as i32;
+    unsafe { libc::kill(pid, libc::SIGSTOP) };
+    std::thread::sleep(Duration::from_millis(150));
+    unsafe { libc::kill(pid, libc::SIGCONT) };
+    let out = settle(emu, child);
+    assert_eq!(out.code, Some(4), "{}", out.stderr);
+    assert!(out.stderr.contains("stop: braked"), "{}", out.stderr);
+    out.assert_safe("watchdog after the catch", ARM_LIMIT);
+}
+
+#[test]
+fn a_fall_right_after_the_catch_brakes_the_arm_inside_its_limit() {
+    let _serial = one_at_a_time();
+    // A 2.5 rad arm step half a second after the catch: the arm runs out fast and the
+    // pendulum leaves the balance region on the way (on_fall = "stop").
+    let (emu, child) = start_swing(
+        "stop-fall",
+        "lqr",
+        "[swing_up]\non_fall = \"stop\"\n[reference]\narm_step = 2.5\nstep_time = 0.5\n",
+    );
+    let out = settle(emu, child);
+    assert_eq!(out.code, Some(5), "{}", out.stderr);
+    out.assert_safe("fall after the catch", ARM_LIMIT);
+}
+
+#[test]
+fn ctrl_c_at_the_swings_arm_envelope_leaves_the_arm_inside_its_limit() {
+    let _serial = one_at_a_time();
+    // The widest swing the refusal accepts, stopped when the arm is near its swing limit
+    // and moving outwards: the hardest stop the swing lets the arm into.
+    let (emu, child) = start_swing("stop-envelope", "lqr", "[swing_up]\narm_limit = 2.2\n");
+    wait_for_enable(&emu);
+    let start = std::time::Instant::now();
+    loop {
+        let rows = emu.truth_so_far();
+        if rows
+            .last()
+            .is_some_and(|r| r.theta.abs() > 1.2 && r.theta * r.theta_dot > 0.0)
+        {
+            break;
+        }
+        assert!(start.elapsed().as_secs() < 20, "the arm never swung out");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let out = settle(emu, child);
+    assert_eq!(out.code, Some(130), "{}", out.stderr);
+    out.assert_safe("SIGINT at the swing's arm envelope", ARM_LIMIT);
+}
