@@ -5,7 +5,9 @@
 //! command watchdog, clamping to the device's voltage limit, status flags, the 16-bit encoder
 //! counters and the PWM duty. Only the hardware is replaced: the encoder counters are the
 //! simulated angles truncated to 16 bits, and the motor receives the voltage that the PWM duty
-//! and direction produce from the bridge supply. So every end-to-end test of `rip-rt run`
+//! and direction produce from the bridge supply, or, not driven, has its windings open (the
+//! driver disabled: the arm coasts) or shorted (the bridge brakes: back-EMF stops the arm),
+//! as `rip-device` says (its "A motor that is not driven"). So every end-to-end test of `rip-rt run`
 //! against the emulator runs the code that the STM32 runs.
 //!
 //! Until the first enabling command arrives the pendulum is held still at its initial pose, the
@@ -22,7 +24,7 @@ use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use rip_device::{Direction, Inputs};
 
-use crate::plant::{Model, PlantSim};
+use crate::plant::{Model, PlantSim, Windings};
 use crate::protocol::{encode, Event, Frame, Message, Parser, MAX_FRAME, SYNC0};
 use crate::serial::{Fd, Pty, Readiness};
 use crate::timing::now_ns;
@@ -85,6 +87,9 @@ pub struct EmulatorConfig {
     /// encoder keeps the count it had, a reversed one counts backwards from it (a quadrature
     /// counter with its channels swapped), so neither makes the reading jump.
     pub fault_at_s: Option<f64>,
+    /// The emulated bridge can brake (short the windings) when not driving; without it the
+    /// windings are open whenever the motor is not driven (`--no-brake`).
+    pub can_brake: bool,
 }
 
 /// How the emulated rig is wired: the motor's leads and each encoder's direction, and
@@ -124,6 +129,7 @@ impl Default for EmulatorConfig {
             true_state_period_s: 0.01,
             wiring: Wiring::default(),
             fault_at_s: None,
+            can_brake: true,
         }
     }
 }
@@ -297,6 +303,7 @@ impl Device {
             command_timeout_us: (cfg.command_timeout_s * 1e6).round().min(u32::MAX as f64) as u32,
             voltage_limit_mv: (cfg.voltage_limit * 1000.0).round() as u16,
             supply_mv: (cfg.supply * 1000.0).round() as u16,
+            can_brake: cfg.can_brake,
         };
         let mut dev = Self {
             rng: StdRng::seed_from_u64(cfg.seed),
@@ -367,19 +374,31 @@ impl Device {
         }
     }
 
-    /// What the bridge does to the motor now: `"drive"` (a voltage across the windings) or
-    /// `"open"` (disabled: the windings are disconnected).
-    pub fn driver_state(&self) -> &'static str {
-        if self.firmware.pwm(PWM_MAX_DUTY).enable {
-            "drive"
+    /// What the bridge connects to the motor's windings now (the plant's sign convention).
+    pub fn windings(&self) -> Windings {
+        let pwm = self.firmware.pwm(PWM_MAX_DUTY);
+        if pwm.enable {
+            Windings::Driven(self.motor_voltage())
+        } else if pwm.brake {
+            Windings::Shorted
         } else {
-            "open"
+            Windings::Open
+        }
+    }
+
+    /// What the bridge does to the motor now: `"drive"` (a voltage across the windings),
+    /// `"brake"` (windings shorted) or `"open"` (driver disabled, windings disconnected).
+    pub fn driver_state(&self) -> &'static str {
+        match self.windings() {
+            Windings::Driven(_) => "drive",
+            Windings::Shorted => "brake",
+            Windings::Open => "open",
         }
     }
 
     /// Motor current (A) now, in the plant's sign convention.
     pub fn motor_current(&self) -> f64 {
-        self.plant.motor_current(self.motor_voltage())
+        self.plant.motor_current(self.windings())
     }
 
     /// One row of the true-state record ([`TRUE_STATE_HEADER`]).
@@ -460,9 +479,9 @@ impl Device {
         }
         let inputs = self.inputs();
         self.firmware.tick(&inputs);
-        let u = self.motor_voltage();
+        let w = self.windings();
         if self.released {
-            self.plant.step(u, dt_ns as f64 * 1e-9);
+            self.plant.step_windings(w, dt_ns as f64 * 1e-9);
         }
         self.time_ns += dt_ns;
     }
@@ -707,7 +726,9 @@ fn serve(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::protocol::{Command, Measurement, COMMAND_ENABLE, STATUS_ENABLED, STATUS_WATCHDOG};
+    use crate::protocol::{
+        Command, Measurement, COMMAND_ENABLE, STATUS_BRAKING, STATUS_ENABLED, STATUS_WATCHDOG,
+    };
 
     fn measure(dev: &mut Device) -> Measurement {
         let mut out = [0u8; MAX_FRAME];
@@ -757,8 +778,24 @@ mod tests {
         dev.advance(1_000_000);
         dev.advance(1_000_000);
         assert_eq!(dev.applied_voltage(), 0.0);
+        // The device stops the arm itself: the bridge shorts the windings.
+        assert_eq!(dev.driver_state(), "brake");
         let m = measure(&mut dev);
-        assert_eq!((m.applied_mv, m.status), (0, STATUS_WATCHDOG));
+        assert_eq!(
+            (m.applied_mv, m.status),
+            (0, STATUS_WATCHDOG | STATUS_BRAKING)
+        );
+        // Without a brake the windings are left open.
+        let mut dev = Device::new(EmulatorConfig {
+            can_brake: false,
+            ..EmulatorConfig::default()
+        });
+        dev.handle(enable, &mut out);
+        for _ in 0..52 {
+            dev.advance(1_000_000);
+        }
+        assert_eq!(dev.driver_state(), "open");
+        assert_eq!(measure(&mut dev).status, STATUS_WATCHDOG);
     }
 
     #[test]

@@ -398,6 +398,12 @@ pub fn run(
             (exciter.periods(&mut periodic), Some(cal.to_string()))
         }
     };
+    let driven = exciter.last_step.is_some();
+    let braking =
+        crate::envelope::bring_to_rest(io, exciter.core, cfg, &mut periodic, &reason, driven);
+    if !opts.quiet && braking.mode != crate::envelope::BrakeMode::None {
+        crate::say!("rip-rt: stop: {braking}");
+    }
     let stop_sent = guard.stop();
     drop(guard);
     ExciteReport {

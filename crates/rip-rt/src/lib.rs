@@ -10,6 +10,8 @@
 //! - [`sign_check`] — the motor-sign / encoder-direction check pulse and its diagnosis.
 //! - [`loop_core`] — the loop's logic without I/O: decoding, limits, the controller step,
 //!   command frames.
+//! - [`envelope`] — the arm's braking envelope (`safety.arm_limit` for the arm's stopping
+//!   point) and the active stop that brakes it to rest.
 //! - [`stop`] — stop reasons and exit codes, the stop frame on every exit path, signals.
 //! - [`log`] — the CSV log and its writer thread.
 //! - [`timing`] — absolute-deadline scheduling, latency histograms, real-time settings.
@@ -24,6 +26,7 @@ pub mod calibrate;
 pub mod config;
 pub mod controllers;
 pub mod emulator;
+pub mod envelope;
 pub mod excite;
 pub mod log;
 pub mod loop_core;

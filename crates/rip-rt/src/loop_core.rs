@@ -86,6 +86,8 @@ pub struct LoopCore {
     last_sample: Option<(u32, f64)>,
     // Request to reply (s) of the latest exchange: about when the command reaches the device.
     latency_s: f64,
+    // `safety.arm_limit` for the arm's stopping point (crate::envelope).
+    envelope: crate::envelope::ArmEnvelope,
 }
 
 impl fmt::Debug for LoopCore {
@@ -164,6 +166,7 @@ impl LoopCore {
             witness: Witness::new(cfg, WitnessLimits::default()).ok(),
             last_sample: None,
             latency_s: 0.0,
+            envelope: crate::envelope::ArmEnvelope::new(cfg),
         })
     }
 
@@ -183,6 +186,7 @@ impl LoopCore {
         self.u = [0.0];
         self.last_command = Command::STOP;
         self.blind_periods = 0;
+        self.envelope.reset();
         if let Some(w) = self.witness.as_mut() {
             w.reset();
         }
@@ -391,6 +395,8 @@ impl LoopCore {
             w.observe(theta, alpha, volts, dt, self.latency_s)
                 .map_err(StopReason::Witness)?;
         }
+        self.envelope
+            .check(theta, m.device_time_us, m.applied_mv as f64 * 1e-3)?;
         let reference = self.reference_at(t);
         self.y = [theta, alpha];
         self.r = [reference, 0.0];
@@ -491,6 +497,8 @@ impl LoopCore {
                 limit: self.arm_limit,
             });
         }
+        self.envelope
+            .check(theta, m.device_time_us, m.applied_mv as f64 * 1e-3)?;
         if !voltage.is_finite() {
             return Err(StopReason::ControllerFault { voltage, t });
         }

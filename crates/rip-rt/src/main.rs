@@ -285,6 +285,10 @@ struct EmulateArgs {
     /// Interval of --true-state rows in simulated seconds (0: every simulation step).
     #[arg(long, allow_negative_numbers = true, value_name = "S", default_value_t = 0.01, value_parser = nonnegative)]
     true_state_period: f64,
+    /// The emulated bridge cannot brake: a motor it does not drive always has its windings
+    /// open (by default it shorts them on a brake command and on its own watchdog stop).
+    #[arg(long)]
+    no_brake: bool,
     /// Wiring fault: the motor's leads are swapped (a positive voltage turns the arm the
     /// negative way).
     #[arg(long)]
@@ -552,6 +556,7 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
         record: args.record,
         true_state: args.true_state,
         true_state_period_s: args.true_state_period,
+        can_brake: !args.no_brake,
         wiring: Wiring {
             motor_reversed: args.reverse_motor,
             encoder_reversed: [args.reverse_arm_encoder, args.reverse_pendulum_encoder],

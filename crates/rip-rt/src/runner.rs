@@ -761,6 +761,12 @@ pub fn run(
             (reason, Some(probe))
         }
     };
+    let driven = runner.last_step.is_some();
+    let braking =
+        crate::envelope::bring_to_rest(io, runner.core, cfg, &mut periodic, &reason, driven);
+    if !opts.quiet && braking.mode != crate::envelope::BrakeMode::None {
+        crate::say!("rip-rt: stop: {braking}");
+    }
     let stop_sent = guard.stop();
     drop(guard);
     RunReport {

@@ -43,7 +43,7 @@ pub mod exit_code {
     pub const DEVICE_LOST: i32 = 3;
     /// Watchdog: no valid measurement for `loop.watchdog_periods` periods.
     pub const WATCHDOG: i32 = 4;
-    /// An angle limit was exceeded.
+    /// An angle limit was exceeded, or the arm's braking envelope reached `safety.arm_limit`.
     pub const ANGLE_LIMIT: i32 = 5;
     /// Refused to start: the pendulum was not near upright.
     pub const NOT_UPRIGHT: i32 = 6;
@@ -125,6 +125,20 @@ pub enum StopReason {
         /// The measured angle (rad).
         angle: f64,
         /// The limit (rad).
+        limit: f64,
+    },
+    /// The arm's stopping point (where braking at the voltage bound would stop it, from its
+    /// measured angle and rate: [`crate::envelope`]) left `safety.arm_limit`, less the
+    /// envelope's margin: stopped while it can still stop inside the limit.
+    #[error("arm braking envelope: at {angle:.3} rad and {rate:.2} rad/s the arm would stop at {stop_at:.3} rad when braked, past safety.arm_limit ({limit:.3} rad) less its margin")]
+    ArmEnvelope {
+        /// The measured arm angle (rad).
+        angle: f64,
+        /// The measured arm rate (rad/s).
+        rate: f64,
+        /// The predicted stopping point (rad).
+        stop_at: f64,
+        /// `safety.arm_limit` (rad).
         limit: f64,
     },
     /// The pendulum was not near upright when balancing was to start.
@@ -227,7 +241,9 @@ impl StopReason {
             StopReason::Signal(s) => exit_code::SIGNAL_BASE + s,
             StopReason::DeviceLost(_) => exit_code::DEVICE_LOST,
             StopReason::Watchdog(_) => exit_code::WATCHDOG,
-            StopReason::AngleLimit { .. } => exit_code::ANGLE_LIMIT,
+            StopReason::AngleLimit { .. } | StopReason::ArmEnvelope { .. } => {
+                exit_code::ANGLE_LIMIT
+            }
             StopReason::NotUpright { .. } => exit_code::NOT_UPRIGHT,
             StopReason::ControllerFault { .. } => exit_code::CONTROLLER_FAULT,
             StopReason::DeviceFault(_) => exit_code::DEVICE_FAULT,
@@ -252,7 +268,7 @@ impl StopReason {
             StopReason::Signal(_) => "signal",
             StopReason::DeviceLost(_) => "device_lost",
             StopReason::Watchdog(_) => "watchdog",
-            StopReason::AngleLimit { .. } => "angle_limit",
+            StopReason::AngleLimit { .. } | StopReason::ArmEnvelope { .. } => "angle_limit",
             StopReason::NotUpright { .. } => "not_upright",
             StopReason::ControllerFault { .. } => "controller_fault",
             StopReason::DeviceFault(_) => "device_fault",
