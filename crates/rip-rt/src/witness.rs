@@ -75,6 +75,10 @@ pub const GAIN_RATE: f64 = 0.1;
 /// loop's grid: wake-up jitter, the reply's latency, the command's delay. A joint moving at
 /// rate ω reads up to `ω τ` off the model's sample instant.
 pub const TIMING_S: f64 = 1e-3;
+/// Whether the command may have arrived anywhere in the interval between two samples: a
+/// device that does not run in real time (an emulator starved of the CPU catches up on its
+/// own clock before it reads the serial line) applies it late without any sign on the host.
+pub const ARRIVAL_ANYWHERE: bool = false;
 /// CUSUM drift κ (in σ): innovations below it, per period, do not accumulate.
 pub const DRIFT: f64 = 3.0;
 /// Arm statistic (in σ) at which the run stops.
@@ -310,7 +314,7 @@ impl Witness {
         // exchange or a skipped period leaves the arrival unknown within the whole interval
         // (a request-to-reply time on the host's clock need not be the device's: a starved
         // emulator catches up on its own clock).
-        let latest = if delay > TIMING_S || dt > 1.5 * self.ts {
+        let latest = if ARRIVAL_ANYWHERE || delay > TIMING_S || dt > 1.5 * self.ts {
             dt
         } else {
             delay + TIMING_S

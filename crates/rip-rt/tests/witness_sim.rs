@@ -113,6 +113,8 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
     let limit = cfg.safety.voltage_limit;
     let steps = (duration / ts).round() as usize;
     let mut u_prev = 0.0;
+    // The voltage applied at the previous sample (before `u_prev` took over).
+    let mut u_prev2 = 0.0;
     let mut onset: Option<f64> = match case.fault_at {
         None => Some(0.0),
         Some(_) => None,
@@ -147,7 +149,7 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
                 + std::f64::consts::PI,
         );
         let dt = if k == 0 { 0.0 } else { ts };
-        if let Err(f) = witness.observe(theta, alpha, (u_prev, u_prev), dt, 0.0) {
+        if let Err(f) = witness.observe(theta, alpha, (u_prev2, u_prev), dt, 0.0) {
             trip = Some((t, f));
             ended = "witness";
             break;
@@ -177,6 +179,7 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
             v
         };
         plant.advance(&mut x, applied, 0.0, ts, substeps);
+        u_prev2 = u_prev;
         u_prev = v;
     }
     // The stop: 0 V until the arm is at rest (2 s).
