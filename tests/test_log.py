@@ -195,11 +195,17 @@ def test_reads_the_phases_of_a_swing_up_written_by_rip_rt(
         emu.wait(timeout=10)
     log = riprs.load_log(log_path)
     assert log.meta["swing_up"] == "true"
-    assert log.phase[0] == "swing_up"
-    # Started hanging: α = ±π before the swing moved it.
+    # The sign check's pulse first, then the swing.
+    assert log.phase[0] == "sign_check"
+    swing = int(np.flatnonzero(log.phase != "sign_check")[0])
+    assert log.phase[swing] == "swing_up"
+    assert log.meta["sign_check"].startswith("passed")
+    # Started hanging: α = ±π before the pulse moved it.
     assert np.pi - abs(log.alpha[0]) < 0.01
     k = log.catch_index
     assert k is not None
+    assert k > swing
+    assert set(log.phase[swing:k].tolist()) == {"swing_up"}
     assert log.t[k] == pytest.approx(float(log.meta["catch_s"]), abs=1e-3)
     # It ends balanced, near upright.
     assert log.phase[-1] == "balance"

@@ -8,6 +8,13 @@
 //! | H-bridge PWM                 | PE9        | TIM1 CH1, 20 kHz            |
 //! | H-bridge direction           | PE7        | GPIO out                    |
 //! | H-bridge enable (active high)| PE8        | GPIO out, low at reset      |
+//!
+//! The bridge is a PHASE/ENABLE driver (the DRV8835 / DRV8838 class): PE7 sets the direction,
+//! the PWM on PE9 switches the high side, and PE8 (its sleep line) enables it. With PE8 low the
+//! outputs are high-impedance: the motor's windings are **open** and the arm coasts. With PE8
+//! high and 0 % duty both low-side switches conduct: the windings are **shorted** and back-EMF
+//! brakes the arm (`rip-device`, "A motor that is not driven"). A driver without that brake
+//! state sets [`CAN_BRAKE`] false.
 //! | H-bridge fault (active low)  | PE10       | GPIO in, pull-up            |
 //! | status LED (green)           | PD12       | on: driver enabled          |
 //! | fault LED (red)              | PD14       | on: watchdog or fault       |
@@ -27,6 +34,8 @@ use stm32f4xx_hal::timer::{CounterUs, PwmChannel};
 pub const SUPPLY_MV: u16 = 12_000;
 /// The device's own voltage limit (mV), at most the supply.
 pub const VOLTAGE_LIMIT_MV: u16 = 12_000;
+/// The bridge brakes (shorts the windings) at 0 % duty with its enable line high.
+pub const CAN_BRAKE: bool = true;
 /// PWM frequency: above hearing, low enough for common H-bridges' switching times.
 pub const PWM_HZ: u32 = 20_000;
 /// Hardware watchdog period (ms): the main loop feeds it every pass, so only a hung or
@@ -65,11 +74,16 @@ impl Bridge {
     }
 
     /// Drives the bridge. Off first, on last: the enable line is only raised once the
-    /// direction and duty are in place, and lowered before they change.
+    /// direction and duty are in place, and lowered before they change. Braking is 0 % duty
+    /// with the enable line high (module docs).
     pub fn apply(&mut self, p: Pwm) {
         if !p.enable {
-            self.enable.set_low();
             self.pwm.set_duty(0);
+            if p.brake && CAN_BRAKE {
+                self.enable.set_high();
+            } else {
+                self.enable.set_low();
+            }
             return;
         }
         let forward = p.direction == Direction::Forward;

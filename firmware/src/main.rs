@@ -7,7 +7,8 @@
 //! the PC, so the end-to-end tests against the emulator test this logic.
 //!
 //! Safety: the driver's enable line is low from reset until the PC sends an enabling command;
-//! the command watchdog of `rip-device` drops it when commands stop for 50 ms; the IWDG resets
+//! the command watchdog of `rip-device` stops driving when commands stop for 50 ms (and
+//! brakes: the bridge shorts the windings, see `board`); the IWDG resets
 //! the MCU (and so drops it) if the loop hangs; a panic drops it and halts.
 
 #![no_std]
@@ -43,6 +44,7 @@ fn main() -> ! {
     let cfg = Config {
         voltage_limit_mv: board::VOLTAGE_LIMIT_MV,
         supply_mv: board::SUPPLY_MV,
+        can_brake: board::CAN_BRAKE,
         ..Config::DEFAULT
     };
     let read = |b: &board::Board| Inputs {

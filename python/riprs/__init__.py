@@ -27,6 +27,7 @@ from riprs.identify import IdentifyError, IdentifyResult, IdentifyWarning, ident
 from riprs.log import LogError, RtLog, load_log
 from riprs.mpc import Mpc, MpcSolution
 from riprs.plant import FurutaParams, Plant
+from riprs.rig import Rig, random_rig
 from riprs.sim import BatchMetrics, SimResult, simulate, simulate_batch, simulate_metrics
 from riprs.statespace import StateSpace
 
@@ -54,6 +55,7 @@ __all__ = [
     "NotStabilizableError",
     "NotSymmetricError",
     "Plant",
+    "Rig",
     "RiprsError",
     "RtLog",
     "ShapeError",
@@ -73,6 +75,7 @@ __all__ = [
     "load_config",
     "load_log",
     "paper",
+    "random_rig",
     "simulate",
     "simulate_batch",
     "simulate_metrics",

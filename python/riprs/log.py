@@ -26,7 +26,8 @@ FLAG_DEADLINE_MISS = 1 << 11
 _REQUIRED = ("t", "seq", "theta", "alpha", "theta_ref", "u", "compute_us", "jitter_us", "status")
 
 #: The values of the ``phase`` column: the controller's phase after the period's step in
-#: ``rip-rt run``; the experiment's stage in ``rip-rt excite``.
+#: ``rip-rt run``; the experiment's stage in ``rip-rt excite``. A ``rip-rt run --swing-up`` log
+#: starts with ``sign_check`` rows too (the pulse before the swing, :data:`EXCITE_PHASES`).
 RUN_PHASES = ("swing_up", "balance", "stopped")
 #: The stages of ``rip-rt excite``: the sign check, then the signal (free swing: kick, coast).
 EXCITE_PHASES = ("sign_check", "chirp", "prbs", "steps", "kick", "coast")
@@ -57,8 +58,9 @@ class RtLog:
     jitter_us : wake-up lateness relative to the period's deadline (µs).
     status : device status bits | ``FLAG_*`` bits (int64).
     phase : the controller's phase after the period's step, one of :data:`PHASES` (numpy
-        strings): ``swing_up`` until a swing-up's catch, then ``balance``. Logs written before
-        this column existed read as ``balance`` throughout. An excitation log
+        strings): ``sign_check`` during a swing-up's sign check, ``swing_up`` until its catch,
+        then ``balance``. Logs written before this column existed read as ``balance``
+        throughout. An excitation log
         (``rip-rt excite``) holds its stages, :data:`EXCITE_PHASES`.
     meta : the ``# key: value`` comment lines (header and footer).
     """

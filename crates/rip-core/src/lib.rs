@@ -7,6 +7,8 @@
 //! - [`linalg`] — argument validation, eigenvalues and zero-order-hold [`c2d`].
 //! - [`dare`](mod@dare) — the discrete algebraic Riccati equation ([`dare`](fn@dare)).
 //! - [`lqr`] — [`dlqr`].
+//! - [`envelope`] — the arm's stopping distance at the voltage bound and the braking law: the
+//!   one definition behind every bound on the arm's travel.
 //! - [`kalman`](mod@kalman) — MATLAB's [`kalman`](fn@kalman) (both gains `L` and `M`),
 //!   python-control's [`dlqe`] and the allocation-free [`CurrentEstimator`].
 //!
@@ -31,6 +33,7 @@
 pub mod batch;
 pub mod controller;
 pub mod dare;
+pub mod envelope;
 pub mod error;
 pub mod excitation;
 pub mod fit;
@@ -43,6 +46,7 @@ pub mod mpc;
 pub mod paper;
 pub mod plant;
 pub mod regulators;
+pub mod rig;
 pub mod sim;
 pub mod spec;
 pub mod swingup;

@@ -3,8 +3,21 @@
 //! What the pendulum's microcontroller does, independent of its hardware: protocol v1 command
 //! handling (`docs/protocol.md`, "What the device must do"), enabling and disabling the motor
 //! driver, the command watchdog, clamping to the device's own voltage limit, sequence numbers,
-//! status flags, multi-turn encoder positions from 16-bit timer counters, and the voltage →
-//! PWM duty and direction mapping.
+//! status flags, multi-turn encoder positions from 16-bit timer counters, the voltage →
+//! PWM duty and direction mapping, and what the bridge does to a motor it does not drive.
+//!
+//! # A motor that is not driven: open or braked
+//!
+//! An H-bridge whose driver is disabled leaves the motor's windings **open**: no current flows,
+//! back-EMF produces no torque, and a moving arm coasts until friction stops it. A bridge
+//! that **brakes** shorts the windings through its low-side switches: the back-EMF drives the
+//! current `i = −k_m ω / R_m` and the torque `−k_t k_m ω / R_m` opposes the motion (the same
+//! as driving 0 V). [`Pwm`] says which of the three the bridge does; a board that cannot
+//! brake sets [`Config::can_brake`] false and its motor is open whenever it is not driven.
+//! The device brakes on [`COMMAND_BRAKE`](rip_protocol::COMMAND_BRAKE), and on its own when
+//! it stops the motor itself (the command watchdog, a frame of another version), so that a
+//! host that went silent while the arm moved does not leave it to coast; a plain disabled
+//! command (the stop frame, power-up) leaves the windings open; a driver fault opens them.
 //!
 //! The STM32 firmware (`firmware/`) and `rip-rt emulate` both run this crate, so every
 //! end-to-end test of the PC loop against the emulator exercises the firmware's logic with only
@@ -20,7 +33,7 @@
 
 use rip_protocol::{
     encode, Command, Event, Frame, Measurement, Message, Parser, Rejection, MAX_FRAME,
-    STATUS_ENABLED, STATUS_FAULT, STATUS_RX_ERROR, STATUS_WATCHDOG,
+    STATUS_BRAKING, STATUS_ENABLED, STATUS_FAULT, STATUS_RX_ERROR, STATUS_WATCHDOG,
 };
 
 /// The device's fixed settings.
@@ -34,14 +47,17 @@ pub struct Config {
     pub voltage_limit_mv: u16,
     /// H-bridge supply voltage (mV): the voltage at 100 % duty.
     pub supply_mv: u16,
+    /// The bridge can brake (short the motor's windings) while not driving it (module docs).
+    pub can_brake: bool,
 }
 
 impl Config {
-    /// 50 ms watchdog, 12 V limit on a 12 V supply (the reference rig).
+    /// 50 ms watchdog, 12 V limit on a 12 V supply, a bridge that brakes (the reference rig).
     pub const DEFAULT: Config = Config {
         command_timeout_us: 50_000,
         voltage_limit_mv: 12_000,
         supply_mv: 12_000,
+        can_brake: true,
     };
 
     /// The same settings with the limit reduced to the supply where it exceeds it, and a zero
@@ -59,6 +75,7 @@ impl Config {
                 self.voltage_limit_mv
             },
             supply_mv: self.supply_mv,
+            can_brake: self.can_brake,
         }
     }
 }
@@ -125,23 +142,36 @@ pub enum Direction {
     Reverse,
 }
 
-/// The H-bridge drive: duty cycle, direction and the driver's enable line.
+/// The H-bridge drive: duty cycle, direction, whether it drives the motor, and whether it
+/// brakes a motor it does not drive (module docs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Pwm {
     /// Compare value, `0 ..= max_duty`.
     pub duty: u16,
     /// Direction pin level.
     pub direction: Direction,
-    /// Driver enable line. When false, `duty` is 0.
+    /// The bridge drives the motor at `duty`. When false, `duty` is 0.
     pub enable: bool,
+    /// Not driving, the bridge shorts the windings (brake) rather than leaving them open.
+    /// Only with `enable` false.
+    pub brake: bool,
 }
 
 impl Pwm {
-    /// The safe state: driver disabled, duty 0.
+    /// The safe state: driver disabled, duty 0, windings open.
     pub const OFF: Pwm = Pwm {
         duty: 0,
         direction: Direction::Forward,
         enable: false,
+        brake: false,
+    };
+
+    /// Not driving, windings shorted: duty 0.
+    pub const BRAKE: Pwm = Pwm {
+        duty: 0,
+        direction: Direction::Forward,
+        enable: false,
+        brake: true,
     };
 }
 
@@ -155,6 +185,9 @@ pub struct Device {
     watchdog: bool,
     rx_error: bool,
     fault: bool,
+    // Not driving, short the windings (module docs); cleared by a fault or any command that is
+    // not a brake command.
+    brake: bool,
     arm: EncoderCounter,
     pendulum: EncoderCounter,
     commands: u32,
@@ -176,6 +209,7 @@ impl Device {
             watchdog: false,
             rx_error: false,
             fault: inputs.driver_fault,
+            brake: false,
             arm: EncoderCounter::new(inputs.encoders[0], positions[0]),
             pendulum: EncoderCounter::new(inputs.encoders[1], positions[1]),
             commands: 0,
@@ -194,13 +228,17 @@ impl Device {
         self.fault = inputs.driver_fault;
         if self.fault {
             // A driver fault drops the command: after it clears the host must enable again.
+            // A faulted bridge is not trusted to switch: open.
             self.command = Command::STOP;
+            self.brake = false;
         }
         if self.command.enabled()
             && inputs.now_us.wrapping_sub(self.last_command_us) > self.cfg.command_timeout_us
         {
+            // The host went silent while driving: stop the arm rather than let it coast.
             self.command = Command::STOP;
             self.watchdog = true;
+            self.brake = true;
         }
     }
 
@@ -217,6 +255,7 @@ impl Device {
                 self.last_command_us = inputs.now_us;
                 self.watchdog = false;
                 self.command = if self.fault { Command::STOP } else { c };
+                self.brake = c.brake() && !self.fault;
                 None
             }
             Event::Frame(Frame {
@@ -247,7 +286,11 @@ impl Device {
                 None
             }
             Event::Rejected(Rejection::Version(_)) => {
-                // The peer speaks another protocol: none of its frames can be trusted.
+                // The peer speaks another protocol: none of its frames can be trusted. Stop
+                // the arm as on a watchdog trip.
+                if self.command.enabled() {
+                    self.brake = true;
+                }
                 self.command = Command::STOP;
                 self.rx_error = true;
                 None
@@ -285,6 +328,12 @@ impl Device {
         self.command.enabled() && !self.fault
     }
 
+    /// Whether the bridge brakes now: not driving, on a board that can brake, after a brake
+    /// command or the device's own stop (module docs).
+    pub fn braking(&self) -> bool {
+        self.brake && self.cfg.can_brake && !self.enabled() && !self.fault
+    }
+
     /// The voltage applied now (mV): the last command's, clamped to the device's limit, while
     /// the driver is enabled; else 0.
     pub fn voltage_mv(&self) -> i16 {
@@ -296,10 +345,11 @@ impl Device {
     }
 
     /// The H-bridge drive for a PWM timer whose compare range is `0 ..= max_duty`:
-    /// `duty = round(|V| · max_duty / supply)`.
+    /// `duty = round(|V| · max_duty / supply)`; not driving, [`Pwm::BRAKE`] while
+    /// [`braking`](Self::braking), else [`Pwm::OFF`].
     pub fn pwm(&self, max_duty: u16) -> Pwm {
         if !self.enabled() || self.cfg.supply_mv == 0 {
-            return Pwm::OFF;
+            return if self.braking() { Pwm::BRAKE } else { Pwm::OFF };
         }
         let v = self.voltage_mv();
         let supply = self.cfg.supply_mv as u32;
@@ -312,6 +362,7 @@ impl Device {
                 Direction::Forward
             },
             enable: true,
+            brake: false,
         }
     }
 
@@ -329,6 +380,9 @@ impl Device {
         }
         if self.fault {
             s |= STATUS_FAULT;
+        }
+        if self.braking() {
+            s |= STATUS_BRAKING;
         }
         s
     }

@@ -4,8 +4,9 @@
 use proptest::prelude::*;
 use rip_device::{Config, Device, Direction, EncoderCounter, Inputs, Pwm};
 use rip_protocol::{
-    encode, Command, Event, Frame, Measurement, Message, Parser, Rejection, COMMAND_ENABLE,
-    MAX_FRAME, STATUS_ENABLED, STATUS_FAULT, STATUS_RX_ERROR, STATUS_WATCHDOG,
+    encode, Command, Event, Frame, Measurement, Message, Parser, Rejection, COMMAND_BRAKE,
+    COMMAND_ENABLE, MAX_FRAME, STATUS_BRAKING, STATUS_ENABLED, STATUS_FAULT, STATUS_RX_ERROR,
+    STATUS_WATCHDOG,
 };
 
 fn at(now_us: u32) -> Inputs {
@@ -76,13 +77,14 @@ fn watchdog_zeroes_and_disables_after_the_timeout_and_not_before() {
     dev.tick(&at(t0 + 50_001));
     assert!(!dev.enabled());
     assert_eq!(dev.voltage_mv(), 0);
-    assert_eq!(dev.pwm(4199), Pwm::OFF);
+    // The host went silent while driving: the device brakes rather than let the arm coast.
+    assert_eq!(dev.pwm(4199), Pwm::BRAKE);
     let m = sample(&mut dev, 9, &at(t0 + 60_000));
-    assert_eq!(m.status, STATUS_WATCHDOG);
+    assert_eq!(m.status, STATUS_WATCHDOG | STATUS_BRAKING);
     assert_eq!(m.applied_mv, 0);
     // It stays tripped (not re-enabled by time passing) until the next command.
     dev.tick(&at(t0 + 5_000_000));
-    assert_eq!(dev.status(), STATUS_WATCHDOG);
+    assert_eq!(dev.status(), STATUS_WATCHDOG | STATUS_BRAKING);
     dev.handle(enable(-2000), &at(t0 + 5_000_001));
     assert_eq!(dev.status(), STATUS_ENABLED);
     assert_eq!(dev.voltage_mv(), -2000);
@@ -114,11 +116,11 @@ fn a_version_mismatch_disables_at_once_until_a_new_enabling_command() {
     assert!(dev.enabled());
     dev.handle(Event::Rejected(Rejection::Version(2)), &at(100));
     assert!(!dev.enabled());
-    assert_eq!(dev.pwm(1000), Pwm::OFF);
+    assert_eq!(dev.pwm(1000), Pwm::BRAKE);
     let m = sample(&mut dev, 1, &at(200));
-    assert_eq!(m.status, STATUS_RX_ERROR);
+    assert_eq!(m.status, STATUS_RX_ERROR | STATUS_BRAKING);
     // RX_ERROR is reported once.
-    assert_eq!(sample(&mut dev, 2, &at(300)).status, 0);
+    assert_eq!(sample(&mut dev, 2, &at(300)).status, STATUS_BRAKING);
     dev.handle(enable(4000), &at(400));
     assert!(dev.enabled());
 }
@@ -380,7 +382,9 @@ proptest! {
             let pwm = dev.pwm(1000);
             prop_assert!(pwm.duty <= 1000);
             if !dev.enabled() {
-                prop_assert_eq!(pwm, Pwm::OFF);
+                // Not driving: open, or braking on a board that brakes, never under a fault.
+                prop_assert!(pwm == Pwm::OFF || (pwm == Pwm::BRAKE && !*fault));
+                prop_assert_eq!(pwm == Pwm::BRAKE, dev.status() & STATUS_BRAKING != 0);
                 prop_assert_eq!(v, 0);
             }
             if *fault || now.wrapping_sub(last_command) > cfg.command_timeout_us {
@@ -388,4 +392,54 @@ proptest! {
             }
         }
     }
+}
+
+#[test]
+fn a_brake_command_shorts_the_windings_and_a_stop_command_opens_them() {
+    let mut dev = Device::new(Config::DEFAULT, &at(0));
+    dev.handle(enable(4000), &at(0));
+    dev.handle(command(1, 0, COMMAND_BRAKE), &at(10));
+    assert!(!dev.enabled());
+    assert_eq!(dev.voltage_mv(), 0);
+    assert_eq!(dev.pwm(1000), Pwm::BRAKE);
+    assert_eq!(sample(&mut dev, 1, &at(20)).status, STATUS_BRAKING);
+    // Braking is not driving: the watchdog does not trip on a silent host while it brakes.
+    dev.tick(&at(1_000_000));
+    assert_eq!(dev.status(), STATUS_BRAKING);
+    // BRAKE with ENABLE drives the voltage.
+    dev.handle(
+        command(2, 3000, COMMAND_ENABLE | COMMAND_BRAKE),
+        &at(1_000_010),
+    );
+    assert_eq!((dev.voltage_mv(), dev.status()), (3000, STATUS_ENABLED));
+    // The stop frame (0 V, flags 0) leaves the windings open.
+    dev.handle(command(3, 0, 0), &at(1_000_020));
+    assert_eq!(dev.pwm(1000), Pwm::OFF);
+    assert_eq!(dev.status(), 0);
+}
+
+#[test]
+fn a_board_without_a_brake_leaves_the_windings_open_and_a_fault_opens_them() {
+    let cfg = Config {
+        can_brake: false,
+        ..Config::DEFAULT
+    };
+    let mut dev = Device::new(cfg, &at(0));
+    dev.handle(command(1, 0, COMMAND_BRAKE), &at(10));
+    assert_eq!(dev.pwm(1000), Pwm::OFF);
+    assert_eq!(dev.status(), 0);
+    dev.handle(enable(2000), &at(20));
+    dev.tick(&at(100_000));
+    assert_eq!((dev.pwm(1000), dev.status()), (Pwm::OFF, STATUS_WATCHDOG));
+
+    let mut dev = Device::new(Config::DEFAULT, &at(0));
+    dev.handle(command(1, 0, COMMAND_BRAKE), &at(10));
+    assert_eq!(dev.pwm(1000), Pwm::BRAKE);
+    let faulted = Inputs {
+        driver_fault: true,
+        ..at(20)
+    };
+    dev.tick(&faulted);
+    assert_eq!(dev.pwm(1000), Pwm::OFF);
+    assert_eq!(dev.status(), STATUS_FAULT);
 }

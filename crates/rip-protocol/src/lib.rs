@@ -78,8 +78,20 @@ pub const STATUS_RX_ERROR: u8 = 1 << 2;
 /// Device status bit: the motor driver reports a fault (over-current, over-temperature, ...).
 pub const STATUS_FAULT: u8 = 1 << 3;
 
+/// Device status bit: the bridge is braking, its windings shorted (a [`COMMAND_BRAKE`], or the
+/// device's own stop on a watchdog trip or a frame of another version, on a board that can
+/// brake). Bit 4 was reserved (sent as 0) before braking was defined: a device without it
+/// never sets it, and the host reads its absence as an open, coasting motor.
+pub const STATUS_BRAKING: u8 = 1 << 4;
+
 /// Command flag bit: enable the motor driver. Without it the device applies 0 V.
 pub const COMMAND_ENABLE: u8 = 1 << 0;
+/// Command flag bit, with [`COMMAND_ENABLE`] clear: brake (short the motor's windings, so that
+/// back-EMF stops the arm) instead of leaving them open, where the board can. Bit 1 was
+/// reserved before braking was defined; a device without braking ignores it and disables the
+/// driver as for any disabled command, and reports no [`STATUS_BRAKING`]. Ignored together
+/// with `COMMAND_ENABLE`: an enabled command drives its voltage.
+pub const COMMAND_BRAKE: u8 = 1 << 1;
 
 /// Encoder readings and status, sampled by the device when it receives a sample request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -114,9 +126,20 @@ impl Command {
         flags: 0,
     };
 
+    /// The brake command: 0 V, driver disabled, windings shorted ([`COMMAND_BRAKE`]).
+    pub const BRAKE: Command = Command {
+        voltage_mv: 0,
+        flags: COMMAND_BRAKE,
+    };
+
     /// Whether the enable bit is set.
     pub fn enabled(&self) -> bool {
         self.flags & COMMAND_ENABLE != 0
+    }
+
+    /// Whether this command asks for the brake: [`COMMAND_BRAKE`] without [`COMMAND_ENABLE`].
+    pub fn brake(&self) -> bool {
+        !self.enabled() && self.flags & COMMAND_BRAKE != 0
     }
 }
 

@@ -74,6 +74,15 @@ pub struct CalibrationConfig {
     ///
     /// [`rest_window_s`]: Self::rest_window_s
     pub rest_timeout_s: f64,
+    /// After the sign check's pulse of a swing-up run the rig must be at rest again (the same
+    /// window and thresholds) within this long (s), in [`rest_window_s`,
+    /// [`MAX_REST_TIMEOUT_S`]], before it is calibrated and swung up: a swing that starts
+    /// from the pulse's aftermath starts from a state the swing-up was not tuned for. The
+    /// pendulum, swinging a few tenths of a radian after the pulse, may need several of its
+    /// damping time constants. Default 30 s.
+    ///
+    /// [`rest_window_s`]: Self::rest_window_s
+    pub settle_timeout_s: f64,
     /// Largest arm rate (rad/s) over any [`RATE_SPAN_S`] of the window, in
     /// (2 counts per span, [`MAX_REST_RATE`]]. Default 0.2 rad/s.
     pub rest_arm_rate: f64,
@@ -96,6 +105,7 @@ impl Default for CalibrationConfig {
         Self {
             rest_window_s: 1.0,
             rest_timeout_s: 3.0,
+            settle_timeout_s: 30.0,
             rest_arm_rate: 0.2,
             rest_pendulum_rate: 0.2,
             rest_counts: 6,
@@ -127,6 +137,17 @@ impl CalibrationConfig {
                 format!(
                     "must be in [calibration.rest_window_s ({}), {MAX_REST_TIMEOUT_S}] s, got {}",
                     self.rest_window_s, self.rest_timeout_s
+                ),
+            );
+        }
+        if !(self.settle_timeout_s >= self.rest_window_s
+            && self.settle_timeout_s <= MAX_REST_TIMEOUT_S)
+        {
+            return bad(
+                "calibration.settle_timeout_s",
+                format!(
+                    "must be in [calibration.rest_window_s ({}), {MAX_REST_TIMEOUT_S}] s, got {}",
+                    self.rest_window_s, self.settle_timeout_s
                 ),
             );
         }
@@ -221,7 +242,7 @@ pub enum RestFault {
         "the {joint} is moving: over the last {window_s} s it spanned {spread} counts \
          (calibration.rest_counts = {max_spread}) at up to {rate:.3} rad/s \
          (calibration.rest_{joint}_rate = {max_rate}); still not at rest after {timeout_s} s \
-         (calibration.rest_timeout_s)"
+         ({timeout_key})"
     )]
     Moving {
         /// `"arm"` or `"pendulum"`.
@@ -236,13 +257,16 @@ pub enum RestFault {
         max_rate: f64,
         /// `calibration.rest_window_s`.
         window_s: f64,
-        /// `calibration.rest_timeout_s`.
+        /// The timeout (s).
         timeout_s: f64,
+        /// Its key: `calibration.rest_timeout_s`, or `calibration.settle_timeout_s` after the
+        /// sign check's pulse.
+        timeout_key: &'static str,
     },
     /// Too few measurements arrived to fill a window before the timeout.
     #[error(
         "only {got} of the {needed} measurements of a {window_s} s window arrived within \
-         {timeout_s} s (calibration.rest_timeout_s)"
+         {timeout_s} s ({timeout_key})"
     )]
     NoWindow {
         /// Measurements received.
@@ -251,8 +275,11 @@ pub enum RestFault {
         needed: usize,
         /// `calibration.rest_window_s`.
         window_s: f64,
-        /// `calibration.rest_timeout_s`.
+        /// The timeout (s).
         timeout_s: f64,
+        /// Its key: `calibration.rest_timeout_s`, or `calibration.settle_timeout_s` after the
+        /// sign check's pulse.
+        timeout_key: &'static str,
     },
     /// The pendulum rests away from hanging: held, or `[device]` does not describe its encoder.
     #[error(
@@ -289,6 +316,7 @@ struct Sample {
 #[derive(Debug, Clone)]
 pub struct RestCheck {
     cfg: CalibrationConfig,
+    timeout_key: &'static str,
     rad_per_count: [f64; 2],
     // The α (rad, 0 upright) that `[device]` reads at zero counts, before calibration.
     configured_offset: f64,
@@ -317,6 +345,7 @@ impl RestCheck {
         let d = &cfg.device;
         Self {
             cfg: c.clone(),
+            timeout_key: "calibration.rest_timeout_s",
             rad_per_count: [
                 d.arm_sign * tau / f64::from(d.arm_counts_per_rev),
                 d.pendulum_sign * tau / f64::from(d.pendulum_counts_per_rev),
@@ -435,6 +464,7 @@ impl RestCheck {
                 needed: self.ring.len(),
                 window_s: c.rest_window_s,
                 timeout_s: c.rest_timeout_s,
+                timeout_key: self.timeout_key,
             };
         };
         let max_rate = [c.rest_arm_rate, c.rest_pendulum_rate];
@@ -449,6 +479,7 @@ impl RestCheck {
             max_rate: max_rate[j],
             window_s: c.rest_window_s,
             timeout_s: c.rest_timeout_s,
+            timeout_key: self.timeout_key,
         }
     }
 }
@@ -471,20 +502,54 @@ pub fn check_rest(
     periodic: &mut Periodic,
     quiet: bool,
 ) -> Result<Calibration, StopReason> {
-    let mut check = RestCheck::new(cfg);
-    let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
-    let period_ns = periodic.period_ns();
-    let timeout_ns = (cfg.calibration.rest_timeout_s * 1e9) as u64;
-    let mut tx = [0u8; MAX_FRAME];
-    let mut rx = [0u8; 512];
-    let mut missing_in_row = 0u32;
-    let start_ns = periodic.next_deadline_ns();
     if !quiet {
         crate::say!(
             "rip-rt: checking that the rig is at rest hanging down ({} s still, motor disabled)",
             cfg.calibration.rest_window_s
         );
     }
+    let check = RestCheck::new(cfg);
+    wait_for_rest(io, core, cfg, periodic, check, quiet)
+}
+
+/// [`check_rest`] after the sign check's pulse: the same check, bounded by
+/// `calibration.settle_timeout_s` instead of `rest_timeout_s` (the pendulum swings after the
+/// pulse and needs time to settle).
+pub fn settle(
+    io: &Fd,
+    core: &mut LoopCore,
+    cfg: &Config,
+    periodic: &mut Periodic,
+    quiet: bool,
+) -> Result<Calibration, StopReason> {
+    if !quiet {
+        crate::say!(
+            "rip-rt: waiting for the rig to come to rest after the pulse (at most {} s, motor \
+             disabled)",
+            cfg.calibration.settle_timeout_s
+        );
+    }
+    let mut check = RestCheck::new(cfg);
+    check.cfg.rest_timeout_s = cfg.calibration.settle_timeout_s;
+    check.timeout_key = "calibration.settle_timeout_s";
+    wait_for_rest(io, core, cfg, periodic, check, quiet)
+}
+
+fn wait_for_rest(
+    io: &Fd,
+    core: &mut LoopCore,
+    cfg: &Config,
+    periodic: &mut Periodic,
+    mut check: RestCheck,
+    quiet: bool,
+) -> Result<Calibration, StopReason> {
+    let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
+    let period_ns = periodic.period_ns();
+    let timeout_ns = (check.cfg.rest_timeout_s * 1e9) as u64;
+    let mut tx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; 512];
+    let mut missing_in_row = 0u32;
+    let start_ns = periodic.next_deadline_ns();
     loop {
         let tick = periodic.wait();
         if let Some(reason) = requested_stop() {

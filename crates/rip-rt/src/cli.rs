@@ -53,6 +53,10 @@ Exit codes (docs/rip-rt.md has the safety rules behind each):
     13   swing-up failed: no catch within swing_up.max_time; or, after falls with
          swing_up.on_fall = retry, the swing-ups took swing_up.max_time in total, or the run
          was not balanced for --duration within swing_up.max_time + --duration
+    14   refused the swing (--swing-up): the sign check's pulse found a reversed motor or
+         encoder, or a silent encoder (the message says what to swap or flip)
+    15   the rig did not move as commanded (the witness: the measured motion disagrees with
+         what the applied voltage must produce; the message names the likely fault)
     101  internal error (panic)
     128+N  stopped by signal N: 129 SIGHUP, 130 SIGINT (Ctrl-C), 131 SIGQUIT, 138 SIGUSR1,
          143 SIGTERM, 148 SIGTSTP (Ctrl-Z ends the run), ...; a fatal signal (SIGSEGV,
@@ -214,7 +218,7 @@ struct RunArgs {
     #[arg(long)]
     quiet: bool,
     /// Start with the pendulum hanging at rest: check the rest, calibrate the encoders from it,
-    /// swing up with the `[swing_up]` settings and catch with the controller, then run the
+    /// check the motor sign and encoder directions with a small pulse (exit 14), swing up with the `[swing_up]` settings and catch with the controller, then run the
     /// experiment (the reference step and --duration count from the catch; a fall, retried,
     /// starts them again at the next catch).
     #[arg(long)]
@@ -280,6 +284,19 @@ struct EmulateArgs {
     /// Append every command the device receives to this CSV (t_s,seq,voltage_mv,flags).
     #[arg(long, value_name = "FILE.csv")]
     record: Option<PathBuf>,
+    /// Write the simulated plant's true state to this CSV
+    /// (t_s,theta,theta_dot,alpha,alpha_dot,voltage,current,driver), from the simulation
+    /// rather than the encoders; each row is flushed at once, and a last row is written on
+    /// exit.
+    #[arg(long, value_name = "FILE.csv")]
+    true_state: Option<PathBuf>,
+    /// Interval of --true-state rows in simulated seconds (0: every simulation step).
+    #[arg(long, allow_negative_numbers = true, value_name = "S", default_value_t = 0.01, value_parser = nonnegative)]
+    true_state_period: f64,
+    /// The emulated bridge cannot brake: a motor it does not drive always has its windings
+    /// open (by default it shorts them on a brake command and on its own watchdog stop).
+    #[arg(long)]
+    no_brake: bool,
     /// Wiring fault: the motor's leads are swapped (a positive voltage turns the arm the
     /// negative way).
     #[arg(long)]
@@ -296,6 +313,11 @@ struct EmulateArgs {
     /// Wiring fault: the pendulum encoder does not count.
     #[arg(long)]
     freeze_pendulum_encoder: bool,
+    /// Start the wiring faults this many seconds after the first enabling command instead of
+    /// at power-up (from the readings then: a frozen encoder keeps its count, a reversed one
+    /// counts backwards from it).
+    #[arg(long, allow_negative_numbers = true, value_name = "S", value_parser = nonnegative)]
+    fault_at: Option<f64>,
 }
 
 pub(crate) fn fail(code: i32, msg: impl std::fmt::Display) -> ExitCode {
@@ -410,10 +432,21 @@ fn cmd_run(args: RunArgs) -> ExitCode {
     let calibration_line = report
         .calibration
         .map_or_else(|| "none".to_string(), |c| c.to_string());
+    let sign_check_line = match (args.swing_up, report.sign_check) {
+        (_, Some(r)) => r.to_string(),
+        (true, None) => "not passed".to_string(),
+        (false, None) => "not run".to_string(),
+    };
     let catch_line = report
         .catch_s
         .map_or_else(|| "none".to_string(), |t| format!("{t:.3}"));
     let mut reason = report.reason.to_string();
+    let witness_line = report.witness_peak.map_or_else(
+        || "off".to_string(),
+        |[arm, pendulum, frozen]| {
+            format!("peak arm={arm:.1} pendulum={pendulum:.1} frozen={frozen:.2}")
+        },
+    );
     if let Some(log) = log.as_mut() {
         let footer = [
             ("stop", report.reason.name().to_string()),
@@ -425,8 +458,10 @@ fn cmd_run(args: RunArgs) -> ExitCode {
             ("probe", probe_line.clone()),
             ("link", parser_line.clone()),
             ("calibration", calibration_line.clone()),
+            ("sign_check", sign_check_line.clone()),
             ("catch_s", catch_line.clone()),
             ("catches", report.catches.to_string()),
+            ("witness", witness_line.clone()),
         ];
         // After a log fault the reason already says what failed; a second message about the
         // same file would only repeat it.
@@ -454,8 +489,10 @@ fn cmd_run(args: RunArgs) -> ExitCode {
             "rip-rt: swing-up: catch_s={catch_line} catches={} calibration: {calibration_line}",
             report.catches
         );
+        rip_rt::say!("rip-rt: sign check: {sign_check_line}");
     }
     rip_rt::say!("rip-rt: link: {parser_line}");
+    rip_rt::say!("rip-rt: witness: {witness_line}");
     ExitCode::from(code as u8)
 }
 
@@ -525,11 +562,15 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
         seed: args.seed,
         duration_s: args.duration,
         record: args.record,
+        true_state: args.true_state,
+        true_state_period_s: args.true_state_period,
+        can_brake: !args.no_brake,
         wiring: Wiring {
             motor_reversed: args.reverse_motor,
             encoder_reversed: [args.reverse_arm_encoder, args.reverse_pendulum_encoder],
             encoder_frozen: [args.freeze_arm_encoder, args.freeze_pendulum_encoder],
         },
+        fault_at_s: args.fault_at,
         ..EmulatorConfig::default()
     };
     if let Err(e) = cfg.validate() {

@@ -440,7 +440,7 @@ impl Config {
                 ),
             ));
         }
-        Ok(())
+        crate::envelope::check_swing_up(self)
     }
 
     /// The control period in nanoseconds.

@@ -5,7 +5,9 @@
 //! command watchdog, clamping to the device's voltage limit, status flags, the 16-bit encoder
 //! counters and the PWM duty. Only the hardware is replaced: the encoder counters are the
 //! simulated angles truncated to 16 bits, and the motor receives the voltage that the PWM duty
-//! and direction produce from the bridge supply. So every end-to-end test of `rip-rt run`
+//! and direction produce from the bridge supply, or, not driven, has its windings open (the
+//! driver disabled: the arm coasts) or shorted (the bridge brakes: back-EMF stops the arm),
+//! as `rip-device` says (its "A motor that is not driven"). So every end-to-end test of `rip-rt run`
 //! against the emulator runs the code that the STM32 runs.
 //!
 //! Until the first enabling command arrives the pendulum is held still at its initial pose, the
@@ -22,7 +24,7 @@ use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use rip_device::{Direction, Inputs};
 
-use crate::plant::{Model, PlantSim};
+use crate::plant::{Model, PlantSim, Windings};
 use crate::protocol::{encode, Event, Frame, Message, Parser, MAX_FRAME, SYNC0};
 use crate::serial::{Fd, Pty, Readiness};
 use crate::timing::now_ns;
@@ -72,8 +74,22 @@ pub struct EmulatorConfig {
     pub duration_s: Option<f64>,
     /// CSV file receiving every command the device accepted (`t_s,seq,voltage_mv,flags`).
     pub record: Option<PathBuf>,
-    /// Wiring faults, for testing the sign check ([`crate::sign_check`]).
+    /// CSV file receiving the simulated plant's true state ([`TRUE_STATE_HEADER`]), not the
+    /// encoders' view of it.
+    pub true_state: Option<PathBuf>,
+    /// Interval between rows of `true_state` (s); 0 writes a row every simulation step.
+    pub true_state_period_s: f64,
+    /// Wiring faults, for testing the sign check ([`crate::sign_check`]) and the witness
+    /// ([`crate::witness`]).
     pub wiring: Wiring,
+    /// When the wiring faults begin (s after the first enabling command); `None`: from
+    /// power-up. A fault that begins mid-run acts from the readings at its onset: a frozen
+    /// encoder keeps the count it had, a reversed one counts backwards from it (a quadrature
+    /// counter with its channels swapped), so neither makes the reading jump.
+    pub fault_at_s: Option<f64>,
+    /// The emulated bridge can brake (short the windings) when not driving; without it the
+    /// windings are open whenever the motor is not driven (`--no-brake`).
+    pub can_brake: bool,
 }
 
 /// How the emulated rig is wired: the motor's leads and each encoder's direction, and
@@ -109,7 +125,11 @@ impl Default for EmulatorConfig {
             seed: 1,
             duration_s: None,
             record: None,
+            true_state: None,
+            true_state_period_s: 0.01,
             wiring: Wiring::default(),
+            fault_at_s: None,
+            can_brake: true,
         }
     }
 }
@@ -212,6 +232,32 @@ impl EmulatorConfig {
                 }
             }
         }
+        if !(self.true_state_period_s.is_finite()
+            && (0.0..=1.0).contains(&self.true_state_period_s))
+        {
+            return Err(EmulatorConfigError::new(
+                "--true-state-period",
+                format!(
+                    "must be in [0, 1] s (0: every simulation step), got {}",
+                    self.true_state_period_s
+                ),
+            ));
+        }
+        if let Some(t) = self.fault_at_s {
+            if !(t.is_finite() && t >= 0.0) {
+                return Err(EmulatorConfigError::new(
+                    "--fault-at",
+                    format!("must be a non-negative number of seconds, got {t}"),
+                ));
+            }
+            if self.wiring == Wiring::default() {
+                return Err(EmulatorConfigError::new(
+                    "--fault-at",
+                    "needs a wiring fault to start (--reverse-motor, --reverse-arm-encoder, \
+                     --freeze-arm-encoder, ...)",
+                ));
+            }
+        }
         if self.arm_counts_per_rev == 0 || self.pendulum_counts_per_rev == 0 {
             return Err(EmulatorConfigError::new(
                 "--counts-per-rev",
@@ -233,8 +279,11 @@ pub struct Device {
     released: bool,
     commands_seen: bool,
     time_ns: u64,
-    // The counts of a frozen encoder (set once constructed).
-    power_up_counts: Option<[i32; 2]>,
+    // When the first enabling command arrived (simulated time).
+    enabled_at_ns: Option<u64>,
+    // The wiring faults' onset: the true counts then (before noise and rounding), from which
+    // a reversed encoder counts backwards and at which a frozen one stays. `None` before it.
+    fault_onset: Option<[f64; 2]>,
 }
 
 /// What the device did with a frame.
@@ -254,6 +303,7 @@ impl Device {
             command_timeout_us: (cfg.command_timeout_s * 1e6).round().min(u32::MAX as f64) as u32,
             voltage_limit_mv: (cfg.voltage_limit * 1000.0).round() as u16,
             supply_mv: (cfg.supply * 1000.0).round() as u16,
+            can_brake: cfg.can_brake,
         };
         let mut dev = Self {
             rng: StdRng::seed_from_u64(cfg.seed),
@@ -263,11 +313,14 @@ impl Device {
             released: !cfg.hold_until_enabled,
             commands_seen: false,
             time_ns: 0,
-            power_up_counts: None,
+            enabled_at_ns: None,
+            fault_onset: None,
             cfg,
         };
+        if dev.cfg.fault_at_s.is_none() {
+            dev.fault_onset = Some(dev.true_counts());
+        }
         let [arm, pendulum] = dev.counts(false);
-        dev.power_up_counts = Some([arm, pendulum]);
         let inputs = Inputs {
             now_us: 0,
             encoders: [arm as u16, pendulum as u16],
@@ -310,33 +363,97 @@ impl Device {
         }
     }
 
-    /// Encoder counts of the plant's angles (pendulum zero hanging down), with reading noise.
-    fn counts(&mut self, noisy: bool) -> [i32; 2] {
+    /// The voltage across the motor's windings in the plant's sign convention (a positive
+    /// voltage turns the arm the positive way): [`applied_voltage`](Self::applied_voltage),
+    /// negated when the leads are swapped.
+    pub fn motor_voltage(&self) -> f64 {
+        if self.wiring().motor_reversed {
+            -self.applied_voltage()
+        } else {
+            self.applied_voltage()
+        }
+    }
+
+    /// What the bridge connects to the motor's windings now (the plant's sign convention).
+    pub fn windings(&self) -> Windings {
+        let pwm = self.firmware.pwm(PWM_MAX_DUTY);
+        if pwm.enable {
+            Windings::Driven(self.motor_voltage())
+        } else if pwm.brake {
+            Windings::Shorted
+        } else {
+            Windings::Open
+        }
+    }
+
+    /// What the bridge does to the motor now: `"drive"` (a voltage across the windings),
+    /// `"brake"` (windings shorted) or `"open"` (driver disabled, windings disconnected).
+    pub fn driver_state(&self) -> &'static str {
+        match self.windings() {
+            Windings::Driven(_) => "drive",
+            Windings::Shorted => "brake",
+            Windings::Open => "open",
+        }
+    }
+
+    /// Motor current (A) now, in the plant's sign convention.
+    pub fn motor_current(&self) -> f64 {
+        self.plant.motor_current(self.windings())
+    }
+
+    /// One row of the true-state record ([`TRUE_STATE_HEADER`]).
+    fn write_true_state(&self, w: &mut impl Write) -> io::Result<()> {
+        let [theta, theta_dot, alpha, alpha_dot] = self.state();
+        writeln!(
+            w,
+            "{:.6},{theta:.6},{theta_dot:.6},{alpha:.6},{alpha_dot:.6},{:.4},{:.5},{}",
+            self.time_s(),
+            self.motor_voltage(),
+            self.motor_current(),
+            self.driver_state()
+        )
+    }
+
+    /// The wiring in effect now: the configured faults once they began, else a correct rig.
+    pub fn wiring(&self) -> Wiring {
+        if self.fault_onset.is_some() {
+            self.cfg.wiring
+        } else {
+            Wiring::default()
+        }
+    }
+
+    /// The counts a correctly wired, noiseless encoder pair would read now (unrounded).
+    fn true_counts(&self) -> [f64; 2] {
         let [theta, _, alpha, _] = self.plant.state();
         let [o_arm, o_pendulum] = self.cfg.encoder_offsets;
-        let mut c = [
-            (theta + o_arm) * self.cfg.arm_counts_per_rev as f64,
-            (alpha + std::f64::consts::PI + o_pendulum) * self.cfg.pendulum_counts_per_rev as f64,
-        ];
-        let w = self.cfg.wiring;
+        let tau = std::f64::consts::TAU;
+        [
+            (theta + o_arm) * self.cfg.arm_counts_per_rev as f64 / tau,
+            (alpha + std::f64::consts::PI + o_pendulum) * self.cfg.pendulum_counts_per_rev as f64
+                / tau,
+        ]
+    }
+
+    /// Encoder counts of the plant's angles (pendulum zero hanging down), with reading noise
+    /// and the wiring faults in effect.
+    fn counts(&mut self, noisy: bool) -> [i32; 2] {
+        let mut c = self.true_counts();
+        let w = self.wiring();
+        let onset = self.fault_onset.unwrap_or_default();
         for (j, v) in c.iter_mut().enumerate() {
-            *v /= std::f64::consts::TAU;
+            if w.encoder_frozen[j] {
+                *v = onset[j];
+                continue;
+            }
             if w.encoder_reversed[j] {
-                *v = -*v;
+                *v = 2.0 * onset[j] - *v;
             }
             if noisy && self.cfg.noise_counts > 0.0 {
                 *v += self.noise.sample(&mut self.rng);
             }
         }
-        let mut c = c.map(|v| v.round().clamp(i32::MIN as f64, i32::MAX as f64) as i32);
-        if let Some(frozen) = self.power_up_counts {
-            for (j, v) in c.iter_mut().enumerate() {
-                if w.encoder_frozen[j] {
-                    *v = frozen[j];
-                }
-            }
-        }
-        c
+        c.map(|v| v.round().clamp(i32::MIN as f64, i32::MAX as f64) as i32)
     }
 
     /// The hardware readings now: the microsecond clock and the 16-bit encoder counters.
@@ -353,15 +470,18 @@ impl Device {
     /// Advances the simulation by `dt_ns` nanoseconds: the firmware's tick (encoders,
     /// watchdog), then the plant under the voltage the bridge applies.
     pub fn advance(&mut self, dt_ns: u64) {
+        if let (None, Some(at), Some(t0)) =
+            (self.fault_onset, self.cfg.fault_at_s, self.enabled_at_ns)
+        {
+            if self.time_ns >= t0 + (at * 1e9).round() as u64 {
+                self.fault_onset = Some(self.true_counts());
+            }
+        }
         let inputs = self.inputs();
         self.firmware.tick(&inputs);
-        let u = if self.cfg.wiring.motor_reversed {
-            -self.applied_voltage()
-        } else {
-            self.applied_voltage()
-        };
+        let w = self.windings();
         if self.released {
-            self.plant.step(u, dt_ns as f64 * 1e-9);
+            self.plant.step_windings(w, dt_ns as f64 * 1e-9);
         }
         self.time_ns += dt_ns;
     }
@@ -380,6 +500,7 @@ impl Device {
         let reply = self.firmware.handle(event, &inputs);
         if self.firmware.enabled() {
             self.released = true;
+            self.enabled_at_ns.get_or_insert(self.time_ns);
         }
         match reply {
             Some(frame) => Reply::Bytes(encode(&frame, out)),
@@ -439,10 +560,84 @@ fn write_record(rec: &mut Option<BufWriter<File>>, t: f64, frame: &Frame) -> io:
     Ok(())
 }
 
+/// Columns of the emulator's true-state record (`rip-rt emulate --true-state`): simulated time
+/// (s), the plant's state `θ, θ̇, α, α̇` (rad, rad/s; α from upright, θ unwrapped) straight
+/// from the simulation rather than from the encoders, the voltage across the motor's windings
+/// and the motor current in the plant's sign convention (V, A), and the bridge's state
+/// ([`Device::driver_state`]).
+pub const TRUE_STATE_HEADER: &str = "t_s,theta,theta_dot,alpha,alpha_dot,voltage,current,driver";
+
+/// The true-state record: a row every `period` of simulated time, each flushed at once so a
+/// reader sees the plant while the emulator runs; a last row when it exits.
+struct TrueState {
+    w: BufWriter<File>,
+    period_ns: u64,
+    next_ns: u64,
+}
+
+impl TrueState {
+    fn create(cfg: &EmulatorConfig) -> io::Result<Option<Self>> {
+        let Some(path) = &cfg.true_state else {
+            return Ok(None);
+        };
+        let named = |e: io::Error| {
+            io::Error::new(e.kind(), format!("--true-state {}: {e}", path.display()))
+        };
+        let mut w = BufWriter::new(File::create(path).map_err(named)?);
+        writeln!(w, "{TRUE_STATE_HEADER}").map_err(named)?;
+        w.flush().map_err(named)?;
+        Ok(Some(Self {
+            w,
+            period_ns: (cfg.true_state_period_s * 1e9).round() as u64,
+            next_ns: 0,
+        }))
+    }
+
+    /// Writes a row if one is due at the device's time.
+    fn sample(&mut self, device: &Device) -> io::Result<()> {
+        if device.time_ns >= self.next_ns {
+            self.next_ns += self.period_ns.max(1);
+            if self.next_ns <= device.time_ns {
+                // Behind (a stalled machine): the next row is a period from now.
+                self.next_ns = device.time_ns + self.period_ns.max(1);
+            }
+            self.row(device)?;
+        }
+        Ok(())
+    }
+
+    fn row(&mut self, device: &Device) -> io::Result<()> {
+        device.write_true_state(&mut self.w)?;
+        self.w.flush()
+    }
+}
+
 /// Runs the emulator on `pty` until `stop` is set, the duration passes or the device vanishes.
 /// The simulation advances on a 1 kHz (configurable) grid of absolute deadlines; host frames are
-/// answered as soon as they arrive.
+/// answered as soon as they arrive. With `cfg.true_state`, the plant's state is recorded
+/// throughout, and once more on every way out (including an error).
 pub fn run(cfg: EmulatorConfig, pty: Pty, stop: &AtomicBool) -> io::Result<EmulatorExit> {
+    let mut truth = TrueState::create(&cfg)?;
+    let mut device = Device::new(cfg.clone());
+    if let Some(t) = truth.as_mut() {
+        t.sample(&device)?;
+    }
+    let result = serve(cfg, &mut device, &mut truth, pty, stop);
+    let last = match truth.as_mut() {
+        Some(t) => t.row(&device),
+        None => Ok(()),
+    };
+    let exit = result?;
+    last.map(|()| exit)
+}
+
+fn serve(
+    cfg: EmulatorConfig,
+    device: &mut Device,
+    truth: &mut Option<TrueState>,
+    pty: Pty,
+    stop: &AtomicBool,
+) -> io::Result<EmulatorExit> {
     let mut record = match &cfg.record {
         Some(path) => {
             let mut w = BufWriter::new(File::create(path).map_err(|e| {
@@ -457,7 +652,6 @@ pub fn run(cfg: EmulatorConfig, pty: Pty, stop: &AtomicBool) -> io::Result<Emula
     let dt_ns = (1e9 / cfg.sim_rate_hz).round() as u64;
     let duration = cfg.duration_s;
     let vanish_after = cfg.vanish_after_s;
-    let mut device = Device::new(cfg);
     let mut parser = Parser::new();
     let mut rx = [0u8; 256];
     let mut out = [0u8; MAX_FRAME];
@@ -473,6 +667,9 @@ pub fn run(cfg: EmulatorConfig, pty: Pty, stop: &AtomicBool) -> io::Result<Emula
         let now = now_ns();
         if now >= next_tick {
             device.advance(dt_ns);
+            if let Some(t) = truth.as_mut() {
+                t.sample(device)?;
+            }
             next_tick += dt_ns;
             if now > next_tick + 100 * dt_ns {
                 // Far behind (the machine stalled): resume from now rather than fast-forward.
@@ -529,7 +726,9 @@ pub fn run(cfg: EmulatorConfig, pty: Pty, stop: &AtomicBool) -> io::Result<Emula
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::protocol::{Command, Measurement, COMMAND_ENABLE, STATUS_ENABLED, STATUS_WATCHDOG};
+    use crate::protocol::{
+        Command, Measurement, COMMAND_ENABLE, STATUS_BRAKING, STATUS_ENABLED, STATUS_WATCHDOG,
+    };
 
     fn measure(dev: &mut Device) -> Measurement {
         let mut out = [0u8; MAX_FRAME];
@@ -579,8 +778,24 @@ mod tests {
         dev.advance(1_000_000);
         dev.advance(1_000_000);
         assert_eq!(dev.applied_voltage(), 0.0);
+        // The device stops the arm itself: the bridge shorts the windings.
+        assert_eq!(dev.driver_state(), "brake");
         let m = measure(&mut dev);
-        assert_eq!((m.applied_mv, m.status), (0, STATUS_WATCHDOG));
+        assert_eq!(
+            (m.applied_mv, m.status),
+            (0, STATUS_WATCHDOG | STATUS_BRAKING)
+        );
+        // Without a brake the windings are left open.
+        let mut dev = Device::new(EmulatorConfig {
+            can_brake: false,
+            ..EmulatorConfig::default()
+        });
+        dev.handle(enable, &mut out);
+        for _ in 0..52 {
+            dev.advance(1_000_000);
+        }
+        assert_eq!(dev.driver_state(), "open");
+        assert_eq!(measure(&mut dev).status, STATUS_WATCHDOG);
     }
 
     #[test]

@@ -82,7 +82,8 @@ struct Exciter<'a> {
     io: &'a Fd,
     core: &'a mut LoopCore,
     log: Option<&'a mut LogWriter>,
-    excitation: &'a mut Excitation,
+    // None: the sign check alone (`rip-rt run --swing-up`), done once it has passed.
+    excitation: Option<&'a mut Excitation>,
     check: SignCheck,
     sign_report: Option<SignReport>,
     arm_limit: f64,
@@ -107,6 +108,47 @@ struct Exciter<'a> {
     max_arm: f64,
     // The last measured arm angle and its period's deadline, for the arm rate.
     last_arm: Option<(f64, u64)>,
+}
+
+impl<'a> Exciter<'a> {
+    fn new(
+        io: &'a Fd,
+        core: &'a mut LoopCore,
+        cfg: &Config,
+        log: Option<&'a mut LogWriter>,
+        excitation: Option<&'a mut Excitation>,
+        opts: &ExciteOptions,
+    ) -> Self {
+        let period_ns = cfg.period_ns();
+        Exciter {
+            io,
+            core,
+            log,
+            excitation,
+            check: SignCheck::new(cfg, opts.check_voltage),
+            sign_report: None,
+            arm_limit: cfg.safety.arm_limit,
+            quiet: opts.quiet,
+            period_ns,
+            reply_timeout_ns: (cfg.loop_.reply_timeout_ms * 1e6).round() as u64,
+            watchdog: cfg.loop_.watchdog_periods,
+            max_step_ns: (cfg.loop_.max_step_periods * period_ns as f64) as u64,
+            max_misses: cfg.loop_.max_consecutive_misses,
+            jitter: Histogram::new(),
+            compute: Histogram::new(),
+            tx: [0; MAX_FRAME],
+            rx: [0; 512],
+            missing_in_row: 0,
+            missing_total: 0,
+            misses_in_row: 0,
+            last_step: None,
+            based_on_ns: 0,
+            t0_ns: 0,
+            excited_ns: 0,
+            max_arm: 0.0,
+            last_arm: None,
+        }
+    }
 }
 
 impl Exciter<'_> {
@@ -216,13 +258,18 @@ impl Exciter<'_> {
             let report = self.check.verdict().map_err(StopReason::SignCheck)?;
             if !self.quiet {
                 crate::say!("rip-rt: sign check {report}");
-                crate::say!(
-                    "rip-rt: {} for {} s",
-                    self.excitation.settings().signal,
-                    self.excitation.settings().duration
-                );
             }
             self.sign_report = Some(report);
+            let Some(excitation) = self.excitation.as_deref() else {
+                return Ok(None);
+            };
+            if !self.quiet {
+                crate::say!(
+                    "rip-rt: {} for {} s",
+                    excitation.settings().signal,
+                    excitation.settings().duration
+                );
+            }
             *stage = Stage::Excite {
                 start_ns: tick.deadline_ns,
             };
@@ -230,17 +277,20 @@ impl Exciter<'_> {
         let Stage::Excite { start_ns } = *stage else {
             unreachable!("the sign check ends above")
         };
+        let Some(excitation) = self.excitation.as_deref_mut() else {
+            unreachable!("without an excitation the run ends with the sign check")
+        };
         let t = (tick.deadline_ns - start_ns) as f64 * 1e-9;
         self.excited_ns = tick.deadline_ns - start_ns;
-        let name = match (self.excitation.stage(t), self.excitation.settings().signal) {
+        let name = match (excitation.stage(t), excitation.settings().signal) {
             (SignalStage::Done, _) => return Ok(None),
             (SignalStage::Coast, _) => phase::COAST,
             (SignalStage::Signal, Signal::FreeSwing) => phase::KICK,
             (SignalStage::Signal, signal) => signal.name(),
         };
-        let e = self.excitation.value(t);
+        let e = excitation.value(t);
         Ok(Some((
-            self.excitation.command(e, theta, rate, self.arm_limit),
+            excitation.command(e, theta, rate, self.arm_limit),
             name,
         )))
     }
@@ -340,34 +390,7 @@ pub fn run(
     let period_ns = cfg.period_ns();
     let mut periodic = Periodic::new(period_ns, now_ns() + period_ns);
     io.flush_input();
-    let mut exciter = Exciter {
-        io,
-        core,
-        log,
-        excitation,
-        check: SignCheck::new(cfg, opts.check_voltage),
-        sign_report: None,
-        arm_limit: cfg.safety.arm_limit,
-        quiet: opts.quiet,
-        period_ns,
-        reply_timeout_ns: (cfg.loop_.reply_timeout_ms * 1e6).round() as u64,
-        watchdog: cfg.loop_.watchdog_periods,
-        max_step_ns: (cfg.loop_.max_step_periods * period_ns as f64) as u64,
-        max_misses: cfg.loop_.max_consecutive_misses,
-        jitter: Histogram::new(),
-        compute: Histogram::new(),
-        tx: [0; MAX_FRAME],
-        rx: [0; 512],
-        missing_in_row: 0,
-        missing_total: 0,
-        misses_in_row: 0,
-        last_step: None,
-        based_on_ns: 0,
-        t0_ns: 0,
-        excited_ns: 0,
-        max_arm: 0.0,
-        last_arm: None,
-    };
+    let mut exciter = Exciter::new(io, core, cfg, log, Some(excitation), opts);
     let (reason, calibration) = match check_rest(io, exciter.core, cfg, &mut periodic, opts.quiet) {
         Err(reason) => (reason, None),
         Ok(cal) => {
@@ -375,6 +398,12 @@ pub fn run(
             (exciter.periods(&mut periodic), Some(cal.to_string()))
         }
     };
+    let driven = exciter.last_step.is_some();
+    let braking =
+        crate::envelope::bring_to_rest(io, exciter.core, cfg, &mut periodic, &reason, driven);
+    if !opts.quiet && braking.mode != crate::envelope::BrakeMode::None {
+        crate::say!("rip-rt: stop: {braking}");
+    }
     let stop_sent = guard.stop();
     drop(guard);
     ExciteReport {
@@ -391,5 +420,42 @@ pub fn run(
         sign_check: exciter.sign_report,
         excited_s: exciter.excited_ns as f64 * 1e-9,
         max_arm: exciter.max_arm,
+    }
+}
+
+/// What [`check_signs`] leaves for its caller.
+#[derive(Debug)]
+pub struct SignCheckRun {
+    /// The verdict, or why the check stopped (a [`StopReason::SignCheck`] for a wiring fault).
+    pub result: Result<SignReport, StopReason>,
+    /// The check's first deadline: the log's time zero.
+    pub start_ns: u64,
+    /// Periods without a valid measurement.
+    pub missing_replies: u64,
+}
+
+/// The sign check alone on `periodic`'s grid, with this module's per-period rules and
+/// `phase::SIGN_CHECK` rows in `log`, as `rip-rt run --swing-up` runs it between the
+/// calibration and the swing: a rig whose motor or encoders are reversed is refused before
+/// anything drives it further than the pulse. The last command sent is the check's 0 V; the
+/// caller keeps the grid and owns the stop frame.
+pub fn check_signs(
+    io: &Fd,
+    core: &mut LoopCore,
+    cfg: &Config,
+    periodic: &mut Periodic,
+    opts: &ExciteOptions,
+    log: Option<&mut LogWriter>,
+) -> SignCheckRun {
+    let mut checker = Exciter::new(io, core, cfg, log, None, opts);
+    let reason = checker.periods(periodic);
+    let result = match (reason, checker.sign_report) {
+        (StopReason::Finished, Some(report)) => Ok(report),
+        (reason, _) => Err(reason),
+    };
+    SignCheckRun {
+        result,
+        start_ns: checker.t0_ns,
+        missing_replies: checker.missing_total,
     }
 }

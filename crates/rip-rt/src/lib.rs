@@ -12,6 +12,8 @@
 //! - [`sign_check`] — the motor-sign / encoder-direction check pulse and its diagnosis.
 //! - [`loop_core`] — the loop's logic without I/O: decoding, limits, the controller step,
 //!   command frames.
+//! - [`envelope`] — the arm's braking envelope (`safety.arm_limit` for the arm's stopping
+//!   point) and the active stop that brakes it to rest.
 //! - [`stop`] — stop reasons and exit codes, the stop frame on every exit path, signals.
 //! - [`log`] — the CSV log and its writer thread.
 //! - [`timing`] — absolute-deadline scheduling, latency histograms, real-time settings.
@@ -31,6 +33,7 @@ pub mod cli;
 pub mod config;
 pub mod controllers;
 pub mod emulator;
+pub mod envelope;
 pub mod excite;
 pub mod log;
 pub mod loop_core;
@@ -41,6 +44,7 @@ pub mod serial;
 pub mod sign_check;
 pub mod stop;
 pub mod timing;
+pub mod witness;
 
 /// `eprintln!` that ignores a failed write: once the terminal or the pipe behind stderr has
 /// gone (SIGHUP, a closed SSH session), a status line must not turn into a panic and its exit

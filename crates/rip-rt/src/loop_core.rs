@@ -13,6 +13,7 @@ use crate::protocol::{
     STATUS_FAULT,
 };
 use crate::stop::{next_seq, SetupError, StopReason};
+use crate::witness::{Witness, WitnessLimits};
 
 /// Log status bit (above the device's 8 status bits): no measurement arrived this period; the
 /// previous command was repeated and the controller, instead of being stepped, was told that
@@ -78,6 +79,15 @@ pub struct LoopCore {
     // enabling command may be repeated for.
     blind_periods: u32,
     blind_limit: u32,
+    // The model's check that the rig moves as commanded (crate::witness); `None` for
+    // open-loop drives and controllers without the pendulum's model.
+    witness: Option<Witness>,
+    // The previous measurement's device clock (µs) and the voltage it reported applied.
+    last_sample: Option<(u32, f64)>,
+    // Request to reply (s) of the latest exchange: about when the command reaches the device.
+    latency_s: f64,
+    // `safety.arm_limit` for the arm's stopping point (crate::envelope).
+    envelope: crate::envelope::ArmEnvelope,
 }
 
 impl fmt::Debug for LoopCore {
@@ -153,6 +163,10 @@ impl LoopCore {
             last_command: Command::STOP,
             blind_periods: 0,
             blind_limit,
+            witness: Witness::new(cfg, WitnessLimits::default()).ok(),
+            last_sample: None,
+            latency_s: 0.0,
+            envelope: crate::envelope::ArmEnvelope::new(cfg),
         })
     }
 
@@ -172,6 +186,28 @@ impl LoopCore {
         self.u = [0.0];
         self.last_command = Command::STOP;
         self.blind_periods = 0;
+        self.envelope.reset();
+        if let Some(w) = self.witness.as_mut() {
+            w.reset();
+        }
+        self.last_sample = None;
+    }
+
+    /// Notes the request-to-reply time of the latest exchange (ns): the witness takes the
+    /// next command to reach the device about that long after the sample.
+    pub fn note_latency(&mut self, ns: u64) {
+        self.latency_s = ns as f64 * 1e-9;
+    }
+
+    /// Turns the witness off (open-loop drives, tests of other rules).
+    pub fn without_witness(mut self) -> Self {
+        self.witness = None;
+        self
+    }
+
+    /// The witness's largest statistics so far ([`Witness::peak`]).
+    pub fn witness_peak(&self) -> Option<[f64; 3]> {
+        self.witness.as_ref().map(Witness::peak)
     }
 
     /// The voltage the device applies under the last command: its value when the driver is
@@ -345,6 +381,22 @@ impl LoopCore {
                 limit: self.arm_limit,
             });
         }
+        // Since the previous sample (on the device's clock, so skipped periods and late
+        // wake-ups count as they were) the device applied what it reported then, until the
+        // last command arrived.
+        let reported = f64::from(m.applied_mv) / 1000.0;
+        let previous = self.last_sample.replace((m.device_time_us, reported));
+        let commanded = self.held_voltage();
+        if let Some(w) = self.witness.as_mut() {
+            let (dt, before) = previous.map_or((0.0, 0.0), |(us, v)| {
+                (f64::from(m.device_time_us.wrapping_sub(us)) * 1e-6, v)
+            });
+            let volts = (before, commanded);
+            w.observe(theta, alpha, volts, dt, self.latency_s)
+                .map_err(StopReason::Witness)?;
+        }
+        self.envelope
+            .check(theta, m.device_time_us, m.applied_mv as f64 * 1e-3)?;
         let reference = self.reference_at(t);
         self.y = [theta, alpha];
         self.r = [reference, 0.0];
@@ -417,7 +469,9 @@ impl LoopCore {
     /// commands come from [`drive`](Self::drive), with the same hard bounds as
     /// [`new`](Self::new)'s.
     pub fn open_loop(cfg: &Config) -> Self {
-        Self::new(Box::new(OpenLoop), cfg).expect("OpenLoop has the pendulum's shape")
+        Self::new(Box::new(OpenLoop), cfg)
+            .expect("OpenLoop has the pendulum's shape")
+            .without_witness()
     }
 
     /// One open-loop command on measurement `m` at `t` seconds: checks the device status and
@@ -443,6 +497,8 @@ impl LoopCore {
                 limit: self.arm_limit,
             });
         }
+        self.envelope
+            .check(theta, m.device_time_us, m.applied_mv as f64 * 1e-3)?;
         if !voltage.is_finite() {
             return Err(StopReason::ControllerFault { voltage, t });
         }
@@ -630,7 +686,10 @@ mod tests {
             phase: Phase::SwingUp,
             script,
         };
-        LoopCore::new(Box::new(c), &Config::default()).unwrap()
+        // Scripted measurements no plant makes: the witness would stop them.
+        LoopCore::new(Box::new(c), &Config::default())
+            .unwrap()
+            .without_witness()
     }
 
     #[test]

@@ -10,12 +10,18 @@
 //! 2. **arming**: stop commands only, until the pendulum is within `safety.start_tolerance` of
 //!    upright (or `safety.wait_upright_s` passed: [`StopReason::NotUpright`]);
 //! 3. **balancing**: the controller's enabling commands, until the duration, a stop signal or a
-//!    fault.
+//!    fault; the witness ([`crate::witness`], in [`LoopCore::control`]) stops a rig that does
+//!    not move as commanded ([`StopReason::Witness`]).
 //!
 //! A swing-up supervisor (the controller starts in [`rip_core::Phase::SwingUp`]) replaces
 //! arming by the rest check ([`crate::calibrate`]): the rig must be at rest hanging down, and
-//! its encoder zeros are taken from that rest; then its commands run from the next period, the
-//! swing-up's and, after its catch, the balance controller's. Each catch starts the
+//! its encoder zeros are taken from that rest; then the sign check of `rip-rt excite`
+//! ([`crate::excite::check_signs`]: a small pulse, then 0 V) refuses a rig with a reversed
+//! motor or encoder ([`StopReason::SignCheck`]), which the swing would drive away to the arm
+//! limit; then the rest check again ([`calibrate::settle`]: the swing never starts from the
+//! pulse's aftermath) and the encoder zeros from that rest; then its commands run from the
+//! next period, the swing-up's and, after its catch, the
+//! balance controller's, on a time axis that starts with the sign check. Each catch starts the
 //! reference's clock and `--duration` (a fall stops them); the pendulum-angle rule is the
 //! supervisor's ([`LoopCore::control`]), every other rule of balancing holds throughout. The
 //! whole run is bounded however often it falls and swings up again: after a fall the
@@ -31,10 +37,12 @@
 
 use crate::calibrate::{self, Calibration};
 use crate::config::{Config, MAX_BLIND_MS};
+use crate::excite::{self, ExciteOptions};
 use crate::log::{LogWriter, Row};
 use crate::loop_core::{LoopCore, StepOutput, FLAG_DEADLINE_MISS, FLAG_NO_REPLY};
 use crate::protocol::{Measurement, ParserStats, MAX_FRAME};
 use crate::serial::{Fd, Readiness};
+use crate::sign_check::{SignReport, PULSE_VOLTAGE};
 use crate::stop::{requested_stop, Overrun, StopGuard, StopReason};
 use crate::timing::{now_ns, Histogram, Periodic, Tick, TimingSummary};
 
@@ -66,10 +74,15 @@ pub struct RunReport {
     pub balanced_s: f64,
     /// The encoder zeros of a run that started hanging (the rest check passed).
     pub calibration: Option<Calibration>,
-    /// Seconds from the start of a swing-up to its first catch.
+    /// The sign check before a swing-up (absent when it did not run or did not pass).
+    pub sign_check: Option<SignReport>,
+    /// Seconds from the start of a swing-up (its sign check, the log's time zero) to its
+    /// first catch.
     pub catch_s: Option<f64>,
     /// Catches (more than one after falls with `swing_up.on_fall = "retry"`).
     pub catches: u32,
+    /// The witness's largest statistics ([`crate::witness::Witness::peak`]), if it ran.
+    pub witness_peak: Option<[f64; 3]>,
 }
 
 /// Controller steps timed before enabling the motor ([`probe`]).
@@ -517,6 +530,8 @@ impl Runner<'_> {
         start_ns: u64,
     ) -> Result<(), StopReason> {
         let t = (tick.deadline_ns - start_ns) as f64 * 1e-9;
+        self.core
+            .note_latency(reply.rx_ns.saturating_sub(reply.req_ns));
         let mut step = self.core.control(&reply.m, t, &mut self.tx)?;
         let compute_ns = now_ns().saturating_sub(reply.rx_ns);
         if compute_ns > self.max_step_ns {
@@ -675,6 +690,7 @@ pub fn run(
     };
     let mut periodic = Periodic::new(period_ns, now_ns() + period_ns);
     let mut calibration = None;
+    let mut sign_check = None;
     let (reason, probe) = match probe(runner.core, cfg) {
         Err(reason) => (reason, None),
         Ok(probe) => {
@@ -688,13 +704,50 @@ pub fn run(
                     Err(reason) => reason,
                     Ok(cal) => {
                         runner.core.calibrate(&cal);
-                        runner.core.reset();
                         calibration = Some(cal);
-                        if !opts.quiet {
-                            crate::say!("rip-rt: swinging up");
+                        // A reversed motor lead or arm encoder would make the swing drive the
+                        // arm away to its limit: the pulse of `rip-rt excite` first.
+                        let check_opts = ExciteOptions {
+                            check_voltage: PULSE_VOLTAGE,
+                            quiet: opts.quiet,
+                        };
+                        let check = excite::check_signs(
+                            io,
+                            runner.core,
+                            cfg,
+                            &mut periodic,
+                            &check_opts,
+                            runner.log.as_deref_mut(),
+                        );
+                        runner.missing_total += check.missing_replies;
+                        match check.result {
+                            Err(reason) => reason,
+                            Ok(report) => {
+                                sign_check = Some(report);
+                                // The pendulum swings after the pulse: at rest again, and the
+                                // zeros from that rest, before the swing starts from it.
+                                match calibrate::settle(
+                                    io,
+                                    runner.core,
+                                    cfg,
+                                    &mut periodic,
+                                    opts.quiet,
+                                ) {
+                                    Err(reason) => reason,
+                                    Ok(cal) => {
+                                        runner.core.calibrate(&cal);
+                                        calibration = Some(cal);
+                                        runner.core.reset();
+                                        if !opts.quiet {
+                                            crate::say!("rip-rt: swinging up");
+                                        }
+                                        // One time axis for the log: from the check's start.
+                                        let start_ns = check.start_ns;
+                                        runner.periods(&mut periodic, Phase::Balancing { start_ns })
+                                    }
+                                }
+                            }
                         }
-                        let start_ns = periodic.next_deadline_ns();
-                        runner.periods(&mut periodic, Phase::Balancing { start_ns })
                     }
                 }
             } else {
@@ -708,6 +761,12 @@ pub fn run(
             (reason, Some(probe))
         }
     };
+    let driven = runner.last_step.is_some();
+    let braking =
+        crate::envelope::bring_to_rest(io, runner.core, cfg, &mut periodic, &reason, driven);
+    if !opts.quiet && braking.mode != crate::envelope::BrakeMode::None {
+        crate::say!("rip-rt: stop: {braking}");
+    }
     let stop_sent = guard.stop();
     drop(guard);
     RunReport {
@@ -719,7 +778,9 @@ pub fn run(
         missing_replies: runner.missing_total,
         balanced_s: runner.balanced_ns as f64 * 1e-9,
         calibration,
+        sign_check,
         catch_s: runner.catch_s,
         catches: runner.catches,
+        witness_peak: runner.core.witness_peak(),
     }
 }

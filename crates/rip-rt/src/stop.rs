@@ -43,7 +43,7 @@ pub mod exit_code {
     pub const DEVICE_LOST: i32 = 3;
     /// Watchdog: no valid measurement for `loop.watchdog_periods` periods.
     pub const WATCHDOG: i32 = 4;
-    /// An angle limit was exceeded.
+    /// An angle limit was exceeded, or the arm's braking envelope reached `safety.arm_limit`.
     pub const ANGLE_LIMIT: i32 = 5;
     /// Refused to start: the pendulum was not near upright.
     pub const NOT_UPRIGHT: i32 = 6;
@@ -68,6 +68,10 @@ pub mod exit_code {
     /// Refused the experiment: the motor-sign / encoder-direction check before it failed (the
     /// message says what to swap); the motor had only the check's short pulse.
     pub const SIGN_CHECK: i32 = 14;
+    /// The rig did not move as commanded: the witness ([`crate::witness`]) found the measured
+    /// motion disagreeing with what the applied voltage must produce (a motor lead swapped, an
+    /// encoder reversed or not counting).
+    pub const WITNESS: i32 = 15;
     /// A panic (Rust's own exit code for one).
     pub const PANIC: i32 = 101;
     /// Stopped by a signal: 128 + its number (130 SIGINT, 143 SIGTERM, 129 SIGHUP, …).
@@ -121,6 +125,20 @@ pub enum StopReason {
         /// The measured angle (rad).
         angle: f64,
         /// The limit (rad).
+        limit: f64,
+    },
+    /// The arm's stopping point (where braking at the voltage bound would stop it, from its
+    /// measured angle and rate: [`crate::envelope`]) left `safety.arm_limit`, less the
+    /// envelope's margin: stopped while it can still stop inside the limit.
+    #[error("arm braking envelope: at {angle:.3} rad and {rate:.2} rad/s the arm would stop at {stop_at:.3} rad when braked, past safety.arm_limit ({limit:.3} rad) less its margin")]
+    ArmEnvelope {
+        /// The measured arm angle (rad).
+        angle: f64,
+        /// The measured arm rate (rad/s).
+        rate: f64,
+        /// The predicted stopping point (rad).
+        stop_at: f64,
+        /// `safety.arm_limit` (rad).
         limit: f64,
     },
     /// The pendulum was not near upright when balancing was to start.
@@ -207,6 +225,9 @@ pub enum StopReason {
     /// The motor-sign / encoder-direction check before an experiment failed.
     #[error("refusing to start the experiment: sign check failed: {0}")]
     SignCheck(#[source] crate::sign_check::SignFault),
+    /// The rig does not move as commanded ([`crate::witness`]).
+    #[error("the rig does not move as commanded: {0}")]
+    Witness(#[source] crate::witness::WitnessFault),
     /// A thread other than the loop panicked (the panic hook already sent the stop frame).
     #[error("internal error: a panic outside the loop")]
     Panic,
@@ -220,7 +241,9 @@ impl StopReason {
             StopReason::Signal(s) => exit_code::SIGNAL_BASE + s,
             StopReason::DeviceLost(_) => exit_code::DEVICE_LOST,
             StopReason::Watchdog(_) => exit_code::WATCHDOG,
-            StopReason::AngleLimit { .. } => exit_code::ANGLE_LIMIT,
+            StopReason::AngleLimit { .. } | StopReason::ArmEnvelope { .. } => {
+                exit_code::ANGLE_LIMIT
+            }
             StopReason::NotUpright { .. } => exit_code::NOT_UPRIGHT,
             StopReason::ControllerFault { .. } => exit_code::CONTROLLER_FAULT,
             StopReason::DeviceFault(_) => exit_code::DEVICE_FAULT,
@@ -233,6 +256,7 @@ impl StopReason {
             | StopReason::SwingUpRetriesExhausted { .. }
             | StopReason::SwingUpRunTimeout { .. } => exit_code::SWING_UP_FAILED,
             StopReason::SignCheck(_) => exit_code::SIGN_CHECK,
+            StopReason::Witness(_) => exit_code::WITNESS,
             StopReason::Panic => exit_code::PANIC,
         }
     }
@@ -244,7 +268,7 @@ impl StopReason {
             StopReason::Signal(_) => "signal",
             StopReason::DeviceLost(_) => "device_lost",
             StopReason::Watchdog(_) => "watchdog",
-            StopReason::AngleLimit { .. } => "angle_limit",
+            StopReason::AngleLimit { .. } | StopReason::ArmEnvelope { .. } => "angle_limit",
             StopReason::NotUpright { .. } => "not_upright",
             StopReason::ControllerFault { .. } => "controller_fault",
             StopReason::DeviceFault(_) => "device_fault",
@@ -257,6 +281,7 @@ impl StopReason {
             | StopReason::SwingUpRetriesExhausted { .. }
             | StopReason::SwingUpRunTimeout { .. } => "swing_up_failed",
             StopReason::SignCheck(_) => "sign_check",
+            StopReason::Witness(_) => "witness",
             StopReason::Panic => "panic",
         }
     }

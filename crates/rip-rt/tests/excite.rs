@@ -221,7 +221,12 @@ fn the_arm_stays_inside_a_tight_limit_under_a_low_inertia_arm() {
     // The QUBE-Servo 2's light arm at 2 V of steps: left alone it would turn at about
     // 8 rad/s, past a 1.2 rad limit within a quarter of a second.
     let cfg = scratch("tight-arm.toml");
-    std::fs::write(&cfg, "[safety]\narm_limit = 1.2\n").unwrap();
+    // The file describes the rig (its [plant]): the braking envelope's model.
+    std::fs::write(
+        &cfg,
+        "[plant]\npreset = \"qube_servo2\"\n[safety]\narm_limit = 1.2\n",
+    )
+    .unwrap();
     let emu = hanging("excite-tight", &["--model", "qube_servo2"]);
     let path = scratch("excite-tight.csv");
     let cfg_arg = cfg.display().to_string();

@@ -192,10 +192,20 @@ fn swing_up_and_balance_on(controller: &str, name: &str, seed: &str, spec: &str)
     let u = log.col("u");
     let reference = log.col("theta_ref");
     let phase = log.text("phase");
-    // Swinging from the first row; a catch, and after the last one balance to the end. (A
-    // fall swings up again, the default `swing_up.on_fall = "retry"`; on a machine that keeps
-    // the loop and the emulator on time there is none, but a starved emulator can make one.)
-    assert_eq!(phase[0], "swing_up");
+    // The sign check first, then swinging; a catch, and after the last one balance to the
+    // end. (A fall swings up again, the default `swing_up.on_fall = "retry"`; on a machine
+    // that keeps the loop and the emulator on time there is none, but a starved emulator can
+    // make one.)
+    let swing = phase.iter().position(|p| p != "sign_check").unwrap();
+    assert!(swing >= 55, "{swing} sign-check rows");
+    assert_eq!(phase[swing], "swing_up");
+    assert!(
+        log.meta("sign_check").unwrap().starts_with("passed"),
+        "{:?}",
+        log.meta("sign_check")
+    );
+    // The pulse only: ±2 V, then 0 V.
+    assert!(u[..swing].iter().all(|v| [0.0, 2.0, -2.0].contains(v)));
     let catches: Vec<usize> = (1..phase.len())
         .filter(|&k| phase[k] == "balance" && phase[k - 1] == "swing_up")
         .collect();
@@ -205,7 +215,7 @@ fn swing_up_and_balance_on(controller: &str, name: &str, seed: &str, spec: &str)
     if catches.len() > 1 {
         println!("{controller}: {} catches (falls retried)", catches.len());
     }
-    assert!(phase[..first].iter().all(|p| p == "swing_up"));
+    assert!(phase[swing..first].iter().all(|p| p == "swing_up"));
     assert!(
         phase[k..].iter().all(|p| p == "balance"),
         "{controller}: fell after the last catch at t = {}",
@@ -238,7 +248,7 @@ fn swing_up_and_balance_on(controller: &str, name: &str, seed: &str, spec: &str)
             assert_eq!(*r, expected, "reference at t = {ti}");
         }
         // (The step that falls still had the experiment's reference.)
-        if phase[j] == "swing_up" && (j == 0 || phase[j - 1] == "swing_up") {
+        if phase[j] == "swing_up" && phase[j - 1] != "balance" {
             assert_eq!(*r, 0.0, "reference at t = {ti}");
         }
     }
@@ -262,7 +272,8 @@ fn swing_up_and_balance_on(controller: &str, name: &str, seed: &str, spec: &str)
     assert!(max_abs(&theta) < SAFETY_ARM_LIMIT);
     assert!(u.iter().all(|v| v.abs() <= 12.0));
     let commands = emu.commands();
-    // The rest check's 0.5 s of stop commands came before the first enabling command.
+    // The rest check's 0.5 s of stop commands came before the first enabling command (the
+    // sign check's pulse).
     let first = before_enabling(&commands);
     assert!(first >= 50, "{first} commands before enabling");
     assert!(commands[..first].iter().all(|&c| c == (0, 0)));
@@ -319,10 +330,15 @@ fn sigint_during_the_swing_leaves_zero_volts_as_the_last_command() {
             log_path.to_str().unwrap(),
         ],
     );
-    // Wait for the swing's enabling commands, then half a second more: far from a catch.
+    // Wait for the swing's enabling commands (the sign check's pulse is ±2 V only, and the
+    // rest after it 0 V), then half a second more: far from a catch.
     let start = std::time::Instant::now();
-    while !emu.commands_so_far().iter().any(|&(_, f)| f & 1 != 0) {
-        assert!(start.elapsed().as_secs() < 10, "the swing never started");
+    while !emu
+        .commands_so_far()
+        .iter()
+        .any(|&(mv, f)| f & 1 != 0 && ![0, 2000, -2000].contains(&mv))
+    {
+        assert!(start.elapsed().as_secs() < 40, "the swing never started");
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
     std::thread::sleep(std::time::Duration::from_millis(500));
@@ -339,7 +355,12 @@ fn sigint_during_the_swing_leaves_zero_volts_as_the_last_command() {
     let log = Log::read(&log_path);
     assert_eq!(log.meta("stop"), Some("signal"));
     assert_eq!(log.meta("catch_s"), Some("none"));
-    assert!(log.text("phase").iter().all(|p| p == "swing_up"));
+    let phase = log.text("phase");
+    let swing = phase.iter().position(|p| p != "sign_check").unwrap();
+    assert!(phase[swing..].iter().all(|p| p == "swing_up"), "{phase:?}");
+    // The swing itself drove the motor before the stop.
+    let u = log.col("u");
+    assert!(u[swing..].iter().any(|v| *v != 0.0));
 }
 
 #[test]
@@ -409,8 +430,13 @@ fn a_swing_up_out_of_time_stops_with_exit_13_its_arm_inside_a_tight_limit() {
     // inside it.
     assert!(max_theta > 0.5 * LIMIT, "|θ| only up to {max_theta}");
     assert!(max_theta <= LIMIT, "|θ| up to {max_theta}");
-    // The supervisor counts its 1 s in samples (held periods included): at most 100 rows.
-    let rows = log.rows.len();
+    // The supervisor counts its 1 s in samples (held periods included): at most 100 rows
+    // after the sign check's.
+    let rows = log
+        .text("phase")
+        .iter()
+        .filter(|p| *p == "swing_up")
+        .count();
     assert!((50..=100).contains(&rows), "{rows} rows");
     let commands = emu.commands();
     assert_eq!(commands.last(), Some(&(0, 0)));
@@ -563,17 +589,27 @@ fn a_pendulum_resting_a_tenth_of_a_radian_off_hanging_is_refused_by_default() {
 }
 
 #[test]
-fn a_catch_and_fall_cycle_ends_the_run_with_exit_13_and_zero_volts() {
+fn a_wrong_pendulum_counts_per_rev_is_stopped_by_the_witness() {
     let _serial = one_at_a_time();
-    // The pendulum rests 0.1 rad off hanging, and the calibration is allowed to take that as
-    // hanging: the upright is 0.1 rad off, so each catch drops the pendulum again and the
-    // default `on_fall = "retry"` swings it up again. The run must still end: within
-    // swing_up.max_time + --duration (15 s) of the swing's start. (The emulator's catches
-    // hold for under 1.5 s each, far from the 5 s of --duration.)
-    let emu = Emulator::start("swing-cycle", &["--initial-pendulum", "3.04"]);
+    // The pendulum encoder counts 2140 a turn where the rig's configuration says 2048: the
+    // calibration at hanging is right, but the swing under gravity reads nonlinearly wrong
+    // (half a turn from hanging reads 0.14 rad past upright). Before the witness each catch
+    // dropped the pendulum again and the run cycled through falls until swing_up.max_time
+    // (exit 13); the pendulum's gravity is the reference that tells the scale is wrong.
+    // (Its zero offset puts hanging at a whole turn of counts, where the rig's reads it.)
+    let emu_cfg = scratch("swing-cycle-emulator.toml");
+    std::fs::write(
+        &emu_cfg,
+        "[sensor]\nencoder_counts = [2048, 2140]\nencoder_offsets = [0.0, -0.27012]\n",
+    )
+    .unwrap();
+    let emu = Emulator::start(
+        "swing-cycle",
+        &["--start", "down", "--config", emu_cfg.to_str().unwrap()],
+    );
     let cfg = config(
         "swing-cycle",
-        "max_pendulum_offset = 0.15\n[swing_up]\nmax_time = 10.0\n",
+        "[swing_up]\nmax_time = 10.0\n[safety]\narm_limit = 4.0\n",
     );
     let log_path = scratch("swing-cycle.csv");
     let r = run(
@@ -589,20 +625,60 @@ fn a_catch_and_fall_cycle_ends_the_run_with_exit_13_and_zero_volts() {
             log_path.to_str().unwrap(),
         ],
     );
-    assert_eq!(r.status.code(), Some(13), "{}", r.stderr);
-    assert!(r.stderr.contains("swing_up.max_time"), "{}", r.stderr);
-    assert!(r.stderr.contains("fell"), "{}", r.stderr);
+    assert_eq!(r.status.code(), Some(15), "{}", r.stderr);
+    assert!(
+        r.stderr.contains("device.pendulum_counts_per_rev"),
+        "{}",
+        r.stderr
+    );
     let log = Log::read(&log_path);
-    assert_eq!(log.meta("stop"), Some("swing_up_failed"));
-    // It did catch and fall (else this is the single swing-up's timeout, tested elsewhere).
-    let phases = log.text("phase");
-    let catches = phases
-        .windows(2)
-        .filter(|w| w[0] == "swing_up" && w[1] == "balance")
-        .count();
-    assert!(catches >= 1, "{catches} catches");
-    let t = log.col("t");
-    let last = t.last().copied().unwrap_or(0.0);
-    assert!(last <= 15.0 + 0.05, "ran {last} s");
+    assert_eq!(log.meta("stop"), Some("witness"));
     assert_eq!(emu.commands().last(), Some(&(0, 0)));
+}
+
+#[test]
+fn a_reversed_motor_or_arm_encoder_is_refused_before_the_swing_with_exit_14() {
+    let _serial = one_at_a_time();
+    for (fault, expected) in [
+        ("--reverse-motor", "swap the motor leads"),
+        ("--reverse-arm-encoder", "device.arm_sign = -1"),
+    ] {
+        let name = format!("swing-sign{fault}");
+        let emu = Emulator::start(&name, &["--start", "down", "--noise", "0.3", fault]);
+        let cfg = config(&name, "");
+        let log_path = scratch(&format!("{name}.csv"));
+        let r = run(
+            &emu.device,
+            "lqr",
+            &[
+                "--swing-up",
+                "--config",
+                cfg.to_str().unwrap(),
+                "--log",
+                log_path.to_str().unwrap(),
+            ],
+        );
+        assert_eq!(r.status.code(), Some(14), "{fault}: {}", r.stderr);
+        assert!(r.stderr.contains(expected), "{fault}: {}", r.stderr);
+        assert!(!r.stderr.contains("swinging up"), "{fault}: {}", r.stderr);
+        let log = Log::read(&log_path);
+        assert_eq!(log.meta("stop"), Some("sign_check"), "{fault}");
+        assert_eq!(log.meta("sign_check"), Some("not passed"), "{fault}");
+        let phase = log.text("phase");
+        assert!(!phase.is_empty(), "{fault}: no sign-check rows");
+        assert!(
+            phase.iter().all(|p| p == "sign_check"),
+            "{fault}: swing-up rows after a failed check"
+        );
+        // The pulse, +2 V then −2 V, and otherwise nothing but 0 V; the last command 0 V,
+        // disabled.
+        let commands = emu.commands();
+        assert!(commands.iter().all(|c| [0, 2000, -2000].contains(&c.0)));
+        let pulse = commands.iter().filter(|c| c.1 != 0 && c.0 != 0).count();
+        assert!(
+            (28..=32).contains(&pulse),
+            "{fault}: {pulse} pulse commands"
+        );
+        assert_eq!(commands.last(), Some(&(0, 0)), "{fault}");
+    }
 }

@@ -17,6 +17,7 @@ mod mpc;
 mod paper;
 mod plant;
 mod rip_rt_cli;
+mod rig;
 mod shared;
 mod sim;
 mod spec;
@@ -37,5 +38,6 @@ fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     excitation::register(m)?;
     identify::register(m)?;
     rip_rt_cli::register(m)?;
+    rig::register(m)?;
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! The energy-pumping law with its arm-limit barrier, and the rate estimator it runs on.
 //! The derivation is in the [module docs](super).
 
+use crate::envelope::envelope_speed;
 use crate::plant::{Plant, State};
 
 use super::settings::SwingUpSettings;
@@ -114,7 +115,7 @@ impl EnergyLaw {
         let grav = p.mp * p.g * p.lp / 2.0;
         let stall = p.kt / p.rm * s.max_voltage / (j0 + ja);
         let brake = s.brake_fraction * stall;
-        let top_speed = (2.0 * brake * s.arm_limit).sqrt();
+        let top_speed = envelope_speed(brake, s.arm_limit);
         let margin = (top_speed * ts).max(ENVELOPE_MARGIN).min(0.5 * s.arm_limit);
         Self {
             plant: *plant,
@@ -165,8 +166,8 @@ impl EnergyLaw {
         let centre = -self.wc * self.wc * theta - 2.0 * self.wc * theta_dot;
         let wanted = pump + centre;
         let b = self.brake;
-        let v_up = (2.0 * b * (self.arm_limit - theta).max(0.0)).sqrt();
-        let v_down = (2.0 * b * (self.arm_limit + theta).max(0.0)).sqrt();
+        let v_up = envelope_speed(b, self.arm_limit - theta);
+        let v_down = envelope_speed(b, self.arm_limit + theta);
         let hi = self.lambda * (v_up - theta_dot) - b * toward(theta_dot, v_up);
         let lo = -self.lambda * (v_down + theta_dot) + b * toward(-theta_dot, v_down);
         if lo <= hi {

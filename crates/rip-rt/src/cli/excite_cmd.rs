@@ -153,7 +153,9 @@ fn settings(args: &ExciteArgs, cfg: &Config) -> Result<Excitation, SetupError> {
             )));
         }
     }
-    Excitation::new(s, cfg.period_s()).map_err(option_error)
+    let x = Excitation::new(s, cfg.period_s()).map_err(option_error)?;
+    rip_rt::envelope::check_excitation(cfg, x.settings()).map_err(SetupError::Config)?;
+    Ok(x)
 }
 
 fn header(args: &ExciteArgs, cfg: &Config, x: &Excitation) -> Vec<(&'static str, String)> {

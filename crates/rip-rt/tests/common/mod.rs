@@ -37,15 +37,20 @@ pub struct Emulator {
     pub child: Child,
     pub device: PathBuf,
     pub record: PathBuf,
+    /// The emulator's `--true-state` record: the simulated plant, not its encoders.
+    pub truth: PathBuf,
 }
 
 impl Emulator {
     pub fn start(name: &str, extra: &[&str]) -> Self {
         let record = scratch(&format!("{name}-record.csv"));
+        let truth = scratch(&format!("{name}-truth.csv"));
         let mut child = Command::new(BIN)
             .arg("emulate")
             .arg("--record")
             .arg(&record)
+            .arg("--true-state")
+            .arg(&truth)
             .args(extra)
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -65,6 +70,43 @@ impl Emulator {
             child,
             device,
             record,
+            truth,
+        }
+    }
+
+    /// The true-state rows written so far.
+    pub fn truth_so_far(&self) -> Vec<Truth> {
+        parse_truth(&std::fs::read_to_string(&self.truth).unwrap_or_default())
+    }
+
+    /// Stops the emulator (SIGTERM) and returns its whole true-state record, which ends with
+    /// the state at exit.
+    pub fn finish(&mut self) -> Vec<Truth> {
+        unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
+        let _ = self.child.wait();
+        parse_truth(&std::fs::read_to_string(&self.truth).unwrap())
+    }
+
+    /// Waits until the simulated arm has come to rest (|θ̇| below `rate` for `hold` seconds
+    /// of simulated time) or `timeout` of wall time passed; returns the rows so far.
+    pub fn wait_for_rest(&self, rate: f64, hold: f64, timeout: Duration) -> Vec<Truth> {
+        let start = Instant::now();
+        loop {
+            let rows = self.truth_so_far();
+            if let Some(last) = rows.last() {
+                let still = rows
+                    .iter()
+                    .rev()
+                    .take_while(|r| r.theta_dot.abs() < rate && r.alpha_dot.abs() < 10.0 * rate)
+                    .last();
+                if still.is_some_and(|s| last.t - s.t >= hold) {
+                    return rows;
+                }
+            }
+            if start.elapsed() > timeout {
+                return rows;
+            }
+            std::thread::sleep(Duration::from_millis(50));
         }
     }
 
@@ -252,4 +294,55 @@ impl Log {
         let prefix = format!("{key}: ");
         self.comments.iter().find_map(|c| c.strip_prefix(&prefix))
     }
+}
+
+/// A row of the emulator's true-state record.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Truth {
+    pub t: f64,
+    pub theta: f64,
+    pub theta_dot: f64,
+    pub alpha: f64,
+    pub alpha_dot: f64,
+    pub voltage: f64,
+    pub current: f64,
+    pub driver: String,
+}
+
+/// The complete rows of a true-state record (a row being written is skipped).
+pub fn parse_truth(text: &str) -> Vec<Truth> {
+    let mut lines = text.lines();
+    assert_eq!(
+        lines
+            .next()
+            .unwrap_or("t_s,theta,theta_dot,alpha,alpha_dot,voltage,current,driver"),
+        "t_s,theta,theta_dot,alpha,alpha_dot,voltage,current,driver"
+    );
+    lines
+        .filter_map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            if f.len() != 8 {
+                return None;
+            }
+            let n = |i: usize| f[i].parse::<f64>().ok();
+            Some(Truth {
+                t: n(0)?,
+                theta: n(1)?,
+                theta_dot: n(2)?,
+                alpha: n(3)?,
+                alpha_dot: n(4)?,
+                voltage: n(5)?,
+                current: n(6)?,
+                driver: match f[7] {
+                    d @ ("drive" | "open" | "brake") => d.to_string(),
+                    _ => return None,
+                },
+            })
+        })
+        .collect()
+}
+
+/// The largest |θ| (rad) the simulated arm reached.
+pub fn max_excursion(rows: &[Truth]) -> f64 {
+    rows.iter().fold(0.0, |m, r| m.max(r.theta.abs()))
 }

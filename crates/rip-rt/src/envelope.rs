@@ -1,0 +1,495 @@
+//! `safety.arm_limit` for the arm, not for its last measurement: the braking envelope that
+//! decides when the loop must stop, and the active stop that brings the arm to rest.
+//!
+//! # The envelope ([`ArmEnvelope`])
+//!
+//! Every period the arm's rate is the difference of its last two measured angles over the
+//! device's clock between them (its sampling instants, not the host's wake-ups), and its
+//! stopping point `θ + sgn(θ̇) D(|θ̇|)` the one of `rip_core::envelope`: braked at
+//! `safety.voltage_limit` with half the braking deceleration counted on
+//! ([`STOP_BRAKE_FRACTION`]), two periods of latency at full drive, and the largest inertia
+//! of the arm, all on the configuration's `[plant]` (a preset until the rig is identified).
+//! The run stops ([`StopReason::ArmEnvelope`], exit 5) in the period the stopping point
+//! leaves `safety.arm_limit − ENVELOPE_MARGIN`, so that the stop that follows ends inside
+//! the limit. The position rule (`|θ| > safety.arm_limit`, [`StopReason::AngleLimit`]) stays
+//! as a last resort.
+//!
+//! # The active stop ([`bring_to_rest`])
+//!
+//! Whatever ended the run, the arm is then braked to rest before the driver is disabled: the
+//! braking law of `rip_core::envelope` (full voltage against the arm's measured motion,
+//! proportional near rest) until the arm has stood still for [`REST_S`], at most
+//! [`MAX_BRAKE_S`]; then the stop frame. When the run ended because the rig's motion or its
+//! device cannot be trusted (a failed sign check, a driver fault, a fault of the wiring), a
+//! voltage could drive the arm the wrong way: the stop sends the brake command instead
+//! (`COMMAND_BRAKE`: the windings shorted, which brakes whatever the wiring's sign) for as
+//! long. Without measurements (the device silent) it sends the brake command too. A device
+//! that cannot brake (protocol.md rule 9) leaves the windings open on it; the active law does
+//! not depend on it.
+
+use rip_core::envelope::{
+    envelope_speed, excitation_breach, BrakingLaw, StoppingModel, STOP_BRAKE_FRACTION,
+};
+use rip_core::excitation::{ExcitationSettings, Signal};
+use rip_core::plant::Plant;
+use rip_core::spec::SpecError;
+
+use crate::config::{Config, ConfigError, MAX_VOLTAGE_LIMIT};
+use crate::loop_core::LoopCore;
+use crate::protocol::{encode, Command, Frame, Message, MAX_FRAME, STATUS_FAULT};
+use crate::runner::exchange;
+use crate::serial::Fd;
+use crate::stop::{next_seq, StopReason};
+use crate::timing::{now_ns, Periodic};
+
+/// Distance (rad) inside `safety.arm_limit` at which the stop envelope ends, for the rate's
+/// quantisation and the arm's travel within the period of the decision.
+pub const ENVELOPE_MARGIN: f64 = 0.05;
+/// Loop periods between the measurement a stop is decided on and its first braking command
+/// (the decision's own period, and the next one, which sends it).
+pub const LATENCY_PERIODS: f64 = 2.0;
+/// The arm counts as at rest once it moved less than [`REST_TRAVEL`] over this long (s).
+pub const REST_S: f64 = 0.2;
+/// Travel (rad) below which the arm is at rest over [`REST_S`].
+pub const REST_TRAVEL: f64 = 0.01;
+/// The longest an active stop brakes (s) before the stop frame goes out regardless.
+pub const MAX_BRAKE_S: f64 = 3.0;
+/// Periods without a measurement after which the active stop gives up the law and brakes by
+/// shorting the windings.
+const BLIND_PERIODS: u32 = 3;
+
+/// The stopping model of a configuration: its `[plant]`, `safety.voltage_limit`, two loop
+/// periods of latency (module docs).
+pub fn stopping_model(cfg: &Config) -> StoppingModel {
+    StoppingModel::new(
+        &cfg.spec.plant.params(),
+        cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT),
+        STOP_BRAKE_FRACTION,
+        LATENCY_PERIODS * cfg.period_s(),
+    )
+}
+
+/// The envelope's bound on the stopping point: `safety.arm_limit − ENVELOPE_MARGIN`.
+pub fn envelope_limit(cfg: &Config) -> f64 {
+    cfg.safety.arm_limit - ENVELOPE_MARGIN
+}
+
+/// The braking envelope of `safety.arm_limit` in the loop (module docs). Allocation-free.
+#[derive(Debug, Clone)]
+pub struct ArmEnvelope {
+    model: StoppingModel,
+    bound: f64,
+    // The last arm angle and the device's clock (µs, wrapping) when it was sampled.
+    last: Option<(f64, u32)>,
+}
+
+impl ArmEnvelope {
+    /// The envelope of `cfg`.
+    pub fn new(cfg: &Config) -> Self {
+        Self {
+            model: stopping_model(cfg),
+            bound: envelope_limit(cfg),
+            last: None,
+        }
+    }
+
+    /// The stopping model it uses.
+    pub fn model(&self) -> &StoppingModel {
+        &self.model
+    }
+
+    /// Forgets the last measurement (a new phase of the run).
+    pub fn reset(&mut self) {
+        self.last = None;
+    }
+
+    /// Takes the arm angle `theta` sampled at the device's clock `device_us` with `applied`
+    /// (V) across the motor (the device's report, which acts until the stop's first command);
+    /// the stop reason when the arm's stopping point is past the envelope's bound.
+    pub fn check(&mut self, theta: f64, device_us: u32, applied: f64) -> Result<(), StopReason> {
+        let rate = match self.last.replace((theta, device_us)) {
+            Some((before, at)) => {
+                let dt = device_us.wrapping_sub(at);
+                // Two samples in the same microsecond, or a clock that jumped back: no rate.
+                if dt > 0 && dt < u32::MAX / 2 {
+                    (theta - before) / (dt as f64 * 1e-6)
+                } else {
+                    0.0
+                }
+            }
+            None => 0.0,
+        };
+        let stop_at = self.model.stopping_point(theta, rate, applied);
+        if stop_at.abs() > self.bound {
+            return Err(StopReason::ArmEnvelope {
+                angle: theta,
+                rate,
+                stop_at,
+                limit: self.bound + ENVELOPE_MARGIN,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Refuses a swing-up whose arm could not be stopped inside `safety.arm_limit` from every
+/// state its own envelope lets the arm into: anywhere within `±swing_up.arm_limit` at up to
+/// the swing's envelope speed `√(2 a_b (L − |θ|))` outwards (`a_b = brake_fraction ·` its stall
+/// acceleration at `swing_up.max_voltage`), braked by the stop's model with the swing's full
+/// voltage along the motion during the latency. The error names `swing_up.arm_limit`.
+pub fn check_swing_up(cfg: &Config) -> Result<(), ConfigError> {
+    let s = &cfg.spec.swing_up;
+    let p = cfg.spec.plant.params();
+    let model = stopping_model(cfg);
+    let j = p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr + p.jp + p.mp * p.lp * p.lp / 4.0;
+    let a_b = s.brake_fraction * p.kt / p.rm * s.max_voltage / j;
+    let bound = envelope_limit(cfg);
+    let n = 400;
+    let worst = (0..=n)
+        .map(|i| {
+            let theta = -s.arm_limit + 2.0 * s.arm_limit * i as f64 / n as f64;
+            let v = envelope_speed(a_b, s.arm_limit - theta);
+            theta + model.stopping_distance_with(v, s.max_voltage)
+        })
+        .fold(f64::NEG_INFINITY, f64::max);
+    if worst > bound {
+        return Err(SpecError::new(
+            "swing_up.arm_limit",
+            format!(
+                "{} rad: a stop during the swing could carry the arm to {worst:.2} rad, past \
+                 safety.arm_limit ({} rad) less its {ENVELOPE_MARGIN} rad margin, by the \
+                 stopping model of [plant] (docs/rip-rt.md, \"Stopping\"); lower \
+                 swing_up.arm_limit or swing_up.brake_fraction, or raise safety.arm_limit",
+                s.arm_limit, cfg.safety.arm_limit
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Share of `safety.arm_limit` that an excitation's simulated stopping point keeps clear of
+/// the envelope's bound ([`check_excitation`]): the rig differs from its `[plant]` model, and
+/// an excitation accepted at the edge would be cut short by the envelope's stop.
+pub const PREFLIGHT_HEADROOM: f64 = 0.05;
+
+/// Refuses an excitation that would come within [`PREFLIGHT_HEADROOM`] of the braking
+/// envelope of `safety.arm_limit` on the configuration's `[plant]` ([`excitation_breach`]):
+/// its run would likely be cut short by the envelope's stop. The error names `--amplitude`
+/// (and, for free swing, `--kick`) and gives the largest amplitude that passes.
+pub fn check_excitation(cfg: &Config, settings: &ExcitationSettings) -> Result<(), ConfigError> {
+    let plant =
+        Plant::new(cfg.spec.plant.params()).map_err(|e| SpecError::new("plant", e.to_string()))?;
+    let model = stopping_model(cfg);
+    let bound = envelope_limit(cfg) - PREFLIGHT_HEADROOM * cfg.safety.arm_limit;
+    let ts = cfg.period_s();
+    let limit = cfg.safety.arm_limit;
+    let breach = |amplitude: f64| {
+        let s = ExcitationSettings {
+            amplitude,
+            ..*settings
+        };
+        excitation_breach(s, &plant, ts, &model, bound, limit)
+    };
+    let rip = |e: rip_core::RipError| SpecError::new("--amplitude", e.to_string());
+    let Some(b) = breach(settings.amplitude).map_err(rip)? else {
+        return Ok(());
+    };
+    // The largest amplitude without a breach, to 1 %.
+    let (mut lo, mut hi) = (0.0, settings.amplitude);
+    while hi - lo > 0.01 * settings.amplitude {
+        let mid = 0.5 * (lo + hi);
+        if breach(mid).map_err(rip)?.is_some() {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    let what = if settings.signal == Signal::FreeSwing {
+        format!("{} V with --kick {} s", settings.amplitude, settings.kick)
+    } else {
+        format!("{} V", settings.amplitude)
+    };
+    Err(SpecError::new(
+        "--amplitude",
+        format!(
+            "{what}: on the [plant] model the arm would reach the braking envelope of \
+             safety.arm_limit ({limit} rad, less {PREFLIGHT_HEADROOM} of it as headroom) {:.2} s into the signal (at {:.2} rad and \
+             {:.1} rad/s it would stop at {:.2} rad); at most {:.2} V stays inside",
+            b.t,
+            b.theta,
+            b.rate,
+            b.stop_at,
+            (lo * 100.0).floor() / 100.0
+        ),
+    ))
+}
+
+/// How a stop brakes the arm.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BrakeMode {
+    /// The braking law on the measured rate (the motor and encoders are trusted).
+    Active,
+    /// The brake command only: windings shorted, whatever the wiring's sign.
+    Short,
+    /// Nothing can be sent (the device is gone), or the motor was never enabled.
+    None,
+}
+
+/// How the stop after `reason` brakes (module docs).
+pub fn brake_mode(reason: &StopReason) -> BrakeMode {
+    match reason {
+        StopReason::Finished
+        | StopReason::Signal(_)
+        | StopReason::AngleLimit { .. }
+        | StopReason::ArmEnvelope { .. }
+        | StopReason::Fell { .. }
+        | StopReason::SwingUpFailed { .. }
+        | StopReason::SwingUpRetriesExhausted { .. }
+        | StopReason::SwingUpRunTimeout { .. }
+        | StopReason::ControllerFault { .. }
+        | StopReason::LogError(_)
+        | StopReason::Watchdog(_)
+        | StopReason::Panic => BrakeMode::Active,
+        // The host's timing cannot be trusted to close a loop (a slow step, missed
+        // deadlines, a stall): short the windings rather than drive.
+        StopReason::Overrun(_) => BrakeMode::Short,
+        StopReason::DeviceLost(_)
+        | StopReason::TooSlow { .. }
+        | StopReason::NotUpright { .. }
+        | StopReason::NotAtRest(_) => BrakeMode::None,
+        // The sign check, a driver fault and any fault of the rig's motion: no voltage can be
+        // trusted to oppose the motion.
+        _ => BrakeMode::Short,
+    }
+}
+
+/// What an active stop did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BrakeReport {
+    /// How it braked.
+    pub mode: BrakeMode,
+    /// Seconds until the arm was at rest (or the stop gave up, [`MAX_BRAKE_S`]).
+    pub seconds: f64,
+    /// The largest arm rate measured while braking (rad/s).
+    pub max_rate: f64,
+    /// The arm came to rest.
+    pub at_rest: bool,
+}
+
+impl std::fmt::Display for BrakeReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let how = match self.mode {
+            BrakeMode::Active => "braked at the voltage bound",
+            BrakeMode::Short => "braked with the windings shorted",
+            BrakeMode::None => return write!(f, "no braking (motor not driven)"),
+        };
+        let end = if self.at_rest {
+            "to rest"
+        } else {
+            "without reaching rest"
+        };
+        write!(
+            f,
+            "{how} {end} in {:.2} s (arm rate up to {:.2} rad/s)",
+            self.seconds, self.max_rate
+        )
+    }
+}
+
+fn send(io: &Fd, command: Command) -> bool {
+    let mut out = [0u8; MAX_FRAME];
+    let n = encode(
+        &Frame {
+            seq: next_seq(),
+            message: Message::Command(command),
+        },
+        &mut out,
+    );
+    io.write_all(&out[..n]).is_ok()
+}
+
+/// Brings the arm to rest after the run stopped for `reason` (module docs), on the loop's
+/// grid `periodic`; the caller then sends the stop frame. `driven`: whether the run sent an
+/// enabling command (without one the arm was never driven, and nothing is sent). Returns at
+/// once when nothing can or need be braked.
+pub fn bring_to_rest(
+    io: &Fd,
+    core: &mut LoopCore,
+    cfg: &Config,
+    periodic: &mut Periodic,
+    reason: &StopReason,
+    driven: bool,
+) -> BrakeReport {
+    let mut mode = if driven {
+        brake_mode(reason)
+    } else {
+        BrakeMode::None
+    };
+    let mut report = BrakeReport {
+        mode,
+        seconds: 0.0,
+        max_rate: 0.0,
+        at_rest: mode == BrakeMode::None,
+    };
+    if mode == BrakeMode::None {
+        return report;
+    }
+    let period_s = cfg.period_s();
+    let voltage = cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT);
+    let law = BrakingLaw::new(&cfg.spec.plant.params(), voltage, period_s);
+    // One count per period and a half: below it the measured rate is the encoder's
+    // quantisation, and the law would chatter between ±its gain per count.
+    let dead_band =
+        1.5 * std::f64::consts::TAU / cfg.device.arm_counts_per_rev.max(1) as f64 / period_s;
+    let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
+    let rest_periods = (REST_S / period_s).ceil().max(1.0) as usize;
+    // The recent arm angles, for the rest test: a ring of the last `rest_periods + 1`.
+    let mut history = [f64::NAN; 64];
+    let ring = (rest_periods + 1).min(history.len());
+    let mut seen = 0usize;
+    let mut last: Option<(f64, u32)> = None;
+    let mut blind = 0u32;
+    let mut tx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; 512];
+    // A fresh grid: the run may have stopped in the middle of a period, or after a stall.
+    *periodic = Periodic::new(periodic.period_ns(), now_ns() + periodic.period_ns());
+    let start_ns = periodic.next_deadline_ns();
+    let end_ns = start_ns + (MAX_BRAKE_S * 1e9) as u64;
+    loop {
+        let tick = periodic.wait();
+        report.seconds = (tick.deadline_ns - start_ns) as f64 * 1e-9;
+        if tick.deadline_ns >= end_ns {
+            return report;
+        }
+        let cap = tick.deadline_ns + periodic.period_ns();
+        let reply = match exchange(io, core, &mut tx, &mut rx, reply_timeout_ns, cap) {
+            Ok((_, reply)) => reply,
+            // The device is gone: nothing more can be sent.
+            Err(_) => return report,
+        };
+        let Some(reply) = reply else {
+            blind += 1;
+            if blind >= BLIND_PERIODS {
+                mode = BrakeMode::Short;
+                report.mode = mode;
+            }
+            // Without a fresh measurement the law has no rate: short the windings.
+            if !send(io, Command::BRAKE) {
+                return report;
+            }
+            continue;
+        };
+        blind = 0;
+        if reply.m.status & STATUS_FAULT != 0 {
+            // A faulted driver opens the windings itself; nothing to drive.
+            send(io, Command::BRAKE);
+            report.mode = BrakeMode::Short;
+            return report;
+        }
+        let (theta, _) = core.angles(&reply.m);
+        let now_us = reply.m.device_time_us;
+        let rate = match last.replace((theta, now_us)) {
+            Some((before, at)) if (1..u32::MAX / 2).contains(&now_us.wrapping_sub(at)) => {
+                (theta - before) / (now_us.wrapping_sub(at) as f64 * 1e-6)
+            }
+            _ => 0.0,
+        };
+        report.max_rate = report.max_rate.max(rate.abs());
+        history[seen % ring] = theta;
+        seen += 1;
+        if seen >= ring {
+            let (lo, hi) = history[..ring]
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+                    (lo.min(v), hi.max(v))
+                });
+            if hi - lo < REST_TRAVEL {
+                report.at_rest = true;
+                return report;
+            }
+        }
+        let command = match mode {
+            BrakeMode::Active => Command {
+                voltage_mv: if rate.abs() <= dead_band {
+                    0
+                } else {
+                    (law.voltage(rate) * 1000.0).round() as i16
+                },
+                flags: crate::protocol::COMMAND_ENABLE,
+            },
+            _ => Command::BRAKE,
+        };
+        if !send(io, command) {
+            return report;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_envelope_stops_a_fast_arm_before_its_limit_and_lets_a_slow_one_run() {
+        let cfg = Config::from_toml("").unwrap();
+        let mut env = ArmEnvelope::new(&cfg);
+        let model = *env.model();
+        // At 2 rad from the 3 rad limit, the fastest speed it may still move outwards.
+        let room = envelope_limit(&cfg) - 2.0;
+        let v = model.max_speed(room, 12.0);
+        assert!(v > 1.0, "{v}");
+        env.check(2.0 - 0.9 * v * 0.01, 0, 12.0).unwrap();
+        env.check(2.0, 10_000, 12.0).unwrap();
+        env.reset();
+        env.check(2.0 - 1.1 * v * 0.01, u32::MAX - 4_999, 12.0)
+            .unwrap();
+        // Across the wrap of the device's clock.
+        let stop = env.check(2.0, 5_000, 12.0).unwrap_err();
+        assert!(
+            matches!(stop, StopReason::ArmEnvelope { stop_at, .. } if stop_at > 2.95),
+            "{stop}"
+        );
+        assert_eq!(stop.exit_code(), crate::stop::exit_code::ANGLE_LIMIT);
+        // Moving inwards is never stopped.
+        env.reset();
+        env.check(2.5, 0, -12.0).unwrap();
+        env.check(2.4, 10_000, -12.0).unwrap();
+        // At that speed, an applied voltage already braking leaves room.
+        env.reset();
+        env.check(2.0 - 1.1 * v * 0.01, 0, -12.0).unwrap();
+        env.check(2.0, 10_000, -12.0).unwrap();
+    }
+
+    #[test]
+    fn the_defaults_pass_and_unstoppable_settings_are_refused_naming_them() {
+        for preset in ["paper", "qube_servo2"] {
+            let cfg = Config::from_toml(&format!("[plant]\npreset = \"{preset}\"\n")).unwrap();
+            check_swing_up(&cfg).unwrap();
+            for signal in [
+                Signal::Chirp,
+                Signal::Prbs,
+                Signal::Steps,
+                Signal::FreeSwing,
+            ] {
+                check_excitation(&cfg, &ExcitationSettings::new(signal))
+                    .unwrap_or_else(|e| panic!("{preset} {signal:?}: {e}"));
+                let loud = ExcitationSettings {
+                    amplitude: 12.0,
+                    centering: 0.0,
+                    damping: 0.0,
+                    kick: 2.0,
+                    ..ExcitationSettings::new(signal)
+                };
+                let e = check_excitation(&cfg, &loud).unwrap_err();
+                assert_eq!(e.key, "--amplitude", "{e}");
+                println!("{preset} {signal:?}: {e}");
+            }
+            let wide = Config::from_toml(&format!(
+                "[plant]\npreset = \"{preset}\"\n[swing_up]\narm_limit = 2.9\n"
+            ))
+            .unwrap();
+            let e = check_swing_up(&wide).unwrap_err();
+            assert_eq!(e.key, "swing_up.arm_limit", "{e}");
+        }
+    }
+}

@@ -1,0 +1,513 @@
+//! The witness: during every run the model checks that the rig moves as the applied voltage
+//! must make it move, and stops a rig that does not (a motor lead swapped, an encoder
+//! reversed or no longer counting, a wrong `device.arm_sign`) before it drives the arm away.
+//!
+//! # The observer
+//!
+//! The witness runs its own observer of the nonlinear plant of `[plant]` (the model the
+//! controllers are designed on, valid through the swing-up and the balance alike, whatever the
+//! controller): with the measured angles `y = (θ, α)` at step `k` and the voltage `u` the
+//! device applied over the period before it,
+//!
+//! ```text
+//! x̄[k]  = Φ(x̂[k−1], u[k−1], Ts)                       (RK4 over one period)
+//! e[k]  = y[k] − (x̄_θ[k], x̄_α[k])                     (α wrapped)
+//! x̂[k]  = x̄[k] + (ℓ_p e_θ, ℓ_v e_θ / Ts, ℓ_p e_α, ℓ_v e_α / Ts)
+//! ```
+//!
+//! a per-joint α-β correction ([`GAIN_POSITION`], [`GAIN_RATE`]) on top of the model's
+//! prediction. On a rig that matches the model the innovation `e` is measurement noise and
+//! quantisation; on a rig that does not move as commanded it is the gap between the motion the
+//! voltage must produce and the motion measured, every period, with the same sign.
+//!
+//! # The statistic
+//!
+//! Each joint's innovation, in units of its measurement's standard deviation
+//! `σ_j = √(q_j²/12 + s_j² + (τ ω̂_j)² + δ_j²)` (`q_j` one encoder count, `s_j` the `[sensor]
+//! noise_std`, `ω̂_j` the joint's predicted rate, τ = [`TIMING_S`] the uncertainty of the
+//! sampling instant and of the command's arrival, and `δ_j` how far the prediction moves when
+//! the command arrives at the sample or τ later than expected), feeds a two-sided CUSUM:
+//!
+//! ```text
+//! g⁺[k] = max(0, g⁺[k−1] + e[k]/σ − κ)      g⁻[k] = max(0, g⁻[k−1] − e[k]/σ − κ)
+//! ```
+//!
+//! (held, not updated, for a sample whose interval on the device's clock is off the period by
+//! more than half of it: a skipped period, a device catching up), which stays near 0 under
+//! zero-mean noise and grows by about `|e|/σ − κ` every period of a
+//! persistent disagreement. The run stops ([`WitnessFault`]) when `max(g⁺, g⁻)` of the arm
+//! exceeds [`ARM_THRESHOLD`] or the pendulum's [`PENDULUM_THRESHOLD`]. The drift κ and the
+//! thresholds were chosen from measurement (docs/rip-rt.md, "The witness"): the largest
+//! statistic of normal runs on both presets and on generated rigs, with a stated margin.
+//!
+//! # An encoder that stopped counting
+//!
+//! While the arm balances slowly, an arm encoder that stops counting leaves innovations too
+//! small for the CUSUM: the observer follows the constant reading. So a second, free-running
+//! copy of the model's arm (its pendulum taken from the observer every period) starts from the
+//! observer's state at each change of the arm reading and runs on the applied voltage alone;
+//! when the reading has stayed constant while this free arm has moved more than
+//! `max(FROZEN_RAD, FROZEN_COUNTS counts)` ([`FROZEN_RAD`], [`FROZEN_COUNTS`]) from it, the
+//! run stops ([`WitnessFault::ArmFrozen`]).
+//!
+//! # What the stop says
+//!
+//! At a trip the witness compares the arm's motion the model predicted with the motion
+//! measured since the disagreement began (the statistic last at 0): a reading that did not
+//! change since then (or for [`FROZEN_PERIODS`]) while the model predicted motion is an arm encoder that
+//! stopped counting ([`WitnessFault::ArmFrozen`]); a measured motion against the predicted one
+//! is a reversed motor lead, a reversed arm encoder or `device.arm_sign`
+//! ([`WitnessFault::ArmWrongWay`]); anything else is named with every likely cause
+//! ([`WitnessFault::ArmDisagrees`]).
+//!
+//! Everything is allocation-free per step: the plant's RK4 on stack vectors and a few scalars.
+
+use rip_core::plant::{Plant, State};
+use rip_core::swingup::wrap_angle;
+
+use crate::config::Config;
+
+/// Position gain ℓ_p of the observer's correction (module docs).
+pub const GAIN_POSITION: f64 = 0.5;
+/// Rate gain ℓ_v of the observer's correction (module docs).
+pub const GAIN_RATE: f64 = 0.1;
+/// Uncertainty (s) of when a measurement is taken and a command applied, relative to the
+/// loop's grid: wake-up jitter, the reply's latency, the command's delay. A joint moving at
+/// rate ω reads up to `ω τ` off the model's sample instant.
+pub const TIMING_S: f64 = 1e-3;
+/// Whether the command may have arrived anywhere in the interval between two samples: a
+/// device that does not run in real time (an emulator starved of the CPU catches up on its
+/// own clock before it reads the serial line) applies it late without any sign on the host.
+pub const ARRIVAL_ANYWHERE: bool = false;
+/// CUSUM drift κ (in σ): innovations below it, per period, do not accumulate.
+pub const DRIFT: f64 = 3.0;
+/// Arm statistic (in σ) at which the run stops.
+pub const ARM_THRESHOLD: f64 = 40.0;
+/// Pendulum statistic (in σ) at which the run stops.
+pub const PENDULUM_THRESHOLD: f64 = 30.0;
+/// Arm motion (rad) that the free-running arm model may predict while the arm reading stays
+/// constant before the run stops as a frozen arm encoder (at least [`FROZEN_COUNTS`] counts).
+pub const FROZEN_RAD: f64 = 0.1;
+/// The least arm motion, in encoder counts, of the frozen-encoder rule.
+pub const FROZEN_COUNTS: f64 = 8.0;
+/// Periods the arm reading must stay constant before a trip is named a frozen encoder.
+pub const FROZEN_PERIODS: u32 = 2;
+
+/// Why the witness stopped the run: the likely fault.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum WitnessFault {
+    /// The arm encoder's reading stayed constant while the voltage must have turned the arm.
+    #[error(
+        "the arm encoder has read a constant {theta:+.3} rad for {still_s:.2} s while the \
+         applied voltage must have turned the arm by {predicted:+.3} rad: the arm encoder \
+         stopped counting (check its cable and connector)"
+    )]
+    ArmFrozen {
+        /// The constant reading (rad).
+        theta: f64,
+        /// The arm motion the model predicted meanwhile (rad).
+        predicted: f64,
+        /// How long the reading has been constant (s).
+        still_s: f64,
+    },
+    /// The arm moved against the motion the voltage must produce.
+    #[error(
+        "the arm moved {measured:+.3} rad over the last {window_s:.2} s where the applied \
+         voltage must have turned it {predicted:+.3} rad (statistic {stat:.0} > {limit}): the \
+         motor leads are swapped, the arm encoder counts backwards, or device.arm_sign is wrong \
+         (rip-rt excite's sign check tells which)"
+    )]
+    ArmWrongWay {
+        /// The measured arm motion since the disagreement began (rad).
+        measured: f64,
+        /// The arm motion the model predicted meanwhile (rad).
+        predicted: f64,
+        /// How long ago the disagreement began (s).
+        window_s: f64,
+        /// The statistic at the trip.
+        stat: f64,
+        /// Its threshold.
+        limit: f64,
+    },
+    /// The arm moved the predicted way, but not as far as the model says.
+    #[error(
+        "the arm's motion disagrees with what the applied voltage must produce: it moved \
+         {measured:+.3} rad over the last {window_s:.2} s where [plant] predicts \
+         {predicted:+.3} rad (statistic {stat:.0} > {limit}): swapped motor leads, a reversed \
+         arm encoder or device.arm_sign (rip-rt excite's sign check tells which), a wrong \
+         device.arm_counts_per_rev, a slipping arm, or a rig unlike [plant] (riprs identify)"
+    )]
+    ArmDisagrees {
+        /// The measured arm motion since the disagreement began (rad).
+        measured: f64,
+        /// The arm motion the model predicted meanwhile (rad).
+        predicted: f64,
+        /// How long ago the disagreement began (s).
+        window_s: f64,
+        /// The statistic at the trip.
+        stat: f64,
+        /// Its threshold.
+        limit: f64,
+    },
+    /// The pendulum's motion disagrees with the model.
+    #[error(
+        "the pendulum's motion disagrees with what the arm's motion must produce (statistic \
+         {stat:.0} > {limit}): check the pendulum encoder (cable, device.pendulum_sign, \
+         device.pendulum_counts_per_rev) and the motor leads"
+    )]
+    PendulumDisagrees {
+        /// The statistic at the trip.
+        stat: f64,
+        /// Its threshold.
+        limit: f64,
+    },
+}
+
+/// The thresholds and gains (module docs); [`WitnessLimits::default`] is the measured choice.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WitnessLimits {
+    /// CUSUM drift κ (σ).
+    pub drift: f64,
+    /// Arm threshold (σ); `f64::INFINITY` only measures.
+    pub arm: f64,
+    /// Pendulum threshold (σ); `f64::INFINITY` only measures.
+    pub pendulum: f64,
+}
+
+impl Default for WitnessLimits {
+    fn default() -> Self {
+        Self {
+            drift: DRIFT,
+            arm: ARM_THRESHOLD,
+            pendulum: PENDULUM_THRESHOLD,
+        }
+    }
+}
+
+/// The witness of one run (module docs).
+#[derive(Debug, Clone)]
+pub struct Witness {
+    plant: Plant,
+    substeps: usize,
+    ts: f64,
+    limits: WitnessLimits,
+    sigma: [f64; 2],
+    arm_count: f64,
+    x: Option<State>,
+    cusum: [[f64; 2]; 2],
+    // Predicted and measured arm increments, and periods, since the arm statistic left 0.
+    predicted: f64,
+    measured: f64,
+    disagreeing: u32,
+    last_theta: f64,
+    // Periods since the arm reading last changed, and the model's arm motion meanwhile.
+    unchanged: u32,
+    predicted_unchanged: f64,
+    // The free-running arm (module docs) and how far the frozen rule lets it go (rad).
+    free: State,
+    frozen_rad: f64,
+    peak: [f64; 3],
+}
+
+impl Witness {
+    /// The witness for `cfg` (assumed valid): its `[plant]`, `[sensor]`, `[device]` and period,
+    /// with `limits`.
+    pub fn new(cfg: &Config, limits: WitnessLimits) -> Result<Self, String> {
+        let plant = cfg.spec.plant().map_err(|e| e.to_string())?;
+        let ts = cfg.period_s();
+        let substeps = (ts / plant.max_rk4_substep()).ceil().clamp(1.0, 1000.0) as usize;
+        let tau = std::f64::consts::TAU;
+        let d = &cfg.device;
+        let q = [
+            tau / f64::from(d.arm_counts_per_rev),
+            tau / f64::from(d.pendulum_counts_per_rev),
+        ];
+        let s = cfg.spec.sensor.noise_std;
+        Ok(Self {
+            plant,
+            substeps,
+            ts,
+            limits,
+            sigma: [
+                (q[0] * q[0] / 12.0 + s[0] * s[0]).sqrt(),
+                (q[1] * q[1] / 12.0 + s[1] * s[1]).sqrt(),
+            ],
+            arm_count: q[0],
+            x: None,
+            cusum: [[0.0; 2]; 2],
+            predicted: 0.0,
+            measured: 0.0,
+            disagreeing: 0,
+            last_theta: 0.0,
+            unchanged: 0,
+            predicted_unchanged: 0.0,
+            free: State::zeros(),
+            frozen_rad: FROZEN_RAD.max(FROZEN_COUNTS * q[0]),
+            peak: [0.0; 3],
+        })
+    }
+
+    /// Forgets the state: the next [`observe`](Self::observe) starts the observer afresh at
+    /// rest where it measures (the largest statistics so far are kept).
+    pub fn reset(&mut self) {
+        self.x = None;
+        self.cusum = [[0.0; 2]; 2];
+        self.predicted = 0.0;
+        self.measured = 0.0;
+        self.disagreeing = 0;
+        self.unchanged = 0;
+        self.predicted_unchanged = 0.0;
+    }
+
+    /// The largest statistics since construction: the arm's and the pendulum's CUSUM (σ), and
+    /// the free arm's distance from a constant arm reading (in units of the frozen rule's
+    /// limit: 1 trips).
+    pub fn peak(&self) -> [f64; 3] {
+        self.peak
+    }
+
+    /// The current arm and pendulum statistics (σ).
+    pub fn statistic(&self) -> [f64; 2] {
+        [
+            self.cusum[0][0].max(self.cusum[0][1]),
+            self.cusum[1][0].max(self.cusum[1][1]),
+        ]
+    }
+
+    /// Advances `x` by `dt` seconds: `before` (V) for the first `delay` of them, then `after`.
+    fn predict(&self, x: &mut State, (before, after): (f64, f64), dt: f64, delay: f64) {
+        let delay = delay.clamp(0.0, dt);
+        let n = |span: f64| ((span / self.ts) * self.substeps as f64).ceil().max(1.0) as usize;
+        if delay > 0.0 {
+            self.plant.advance(x, before, 0.0, delay, n(delay));
+        }
+        if dt > delay {
+            self.plant.advance(x, after, 0.0, dt - delay, n(dt - delay));
+        }
+    }
+
+    /// Takes the measured arm angle `theta` and pendulum angle `alpha` (rad, 0 upright), `dt`
+    /// seconds after the previous measurement (on the device's clock), over which the device
+    /// applied `volts.0` (V) until the command `volts.1` (V) arrived `delay` seconds in; an
+    /// error names the likely fault. A `dt` outside (0, 0.5] s restarts the observer here.
+    pub fn observe(
+        &mut self,
+        theta: f64,
+        alpha: f64,
+        volts: (f64, f64),
+        dt: f64,
+        delay: f64,
+    ) -> Result<(), WitnessFault> {
+        if !(dt > 0.0 && dt <= 0.5) {
+            self.reset();
+        }
+        let Some(mut x) = self.x else {
+            let x = State::new(theta, 0.0, alpha, 0.0);
+            self.x = Some(x);
+            self.free = x;
+            self.last_theta = theta;
+            return Ok(());
+        };
+        let start = x[0];
+        // The same period with the command arriving at the sample and TIMING_S after the
+        // expected delay: how much the prediction hangs on when the voltage changed. A slow
+        // exchange or a skipped period leaves the arrival unknown within the whole interval
+        // (a request-to-reply time on the host's clock need not be the device's: a starved
+        // emulator catches up on its own clock).
+        let latest = if ARRIVAL_ANYWHERE || delay > TIMING_S || dt > 1.5 * self.ts {
+            dt
+        } else {
+            delay + TIMING_S
+        };
+        let (mut early, mut late) = (x, x);
+        self.predict(&mut early, volts, dt, 0.0);
+        self.predict(&mut late, volts, dt, latest);
+        self.predict(&mut x, volts, dt, delay);
+        let switch = [
+            (late[0] - x[0]).abs().max((early[0] - x[0]).abs()),
+            (late[2] - x[2]).abs().max((early[2] - x[2]).abs()),
+        ];
+        let mut free = self.free;
+        self.predict(&mut free, volts, dt, delay);
+        self.free = free;
+        let e = [theta - x[0], wrap_angle(alpha - x[2])];
+        let rate = [x[1], x[3]];
+        let step = x[0] - start;
+        let moved = theta - self.last_theta;
+        self.last_theta = theta;
+        x[0] += GAIN_POSITION * e[0];
+        x[1] += GAIN_RATE * e[0] / self.ts;
+        x[2] = wrap_angle(x[2] + GAIN_POSITION * e[1]);
+        x[3] += GAIN_RATE * e[1] / self.ts;
+        if moved.abs() < 0.5 * self.arm_count {
+            self.unchanged = self.unchanged.saturating_add(1);
+            self.predicted_unchanged += step;
+            self.free[2] = x[2];
+            self.free[3] = x[3];
+        } else {
+            self.unchanged = 0;
+            self.predicted_unchanged = 0.0;
+            self.free = x;
+        }
+        self.x = Some(x);
+        // An interval off the grid (a skipped period, a device catching up on its clock)
+        // leaves the innovation unreliable: the observer takes it, the statistic does not.
+        let on_time = dt >= 0.5 * self.ts && dt <= 1.5 * self.ts;
+        let k = self.limits.drift;
+        for j in 0..2 {
+            let timing = TIMING_S * rate[j];
+            let var = self.sigma[j] * self.sigma[j] + timing * timing + switch[j] * switch[j];
+            let z = e[j] / var.sqrt();
+            let g = &mut self.cusum[j];
+            if on_time {
+                g[0] = (g[0] + z - k).max(0.0);
+                g[1] = (g[1] - z - k).max(0.0);
+            }
+            self.peak[j] = self.peak[j].max(g[0].max(g[1]));
+        }
+        if self.cusum[0] == [0.0, 0.0] {
+            self.predicted = 0.0;
+            self.measured = 0.0;
+            self.disagreeing = 0;
+        } else {
+            self.predicted += step;
+            self.measured += moved;
+            self.disagreeing += 1;
+        }
+        let frozen = if self.unchanged >= FROZEN_PERIODS {
+            (self.free[0] - theta).abs() / self.frozen_rad
+        } else {
+            0.0
+        };
+        self.peak[2] = self.peak[2].max(frozen);
+        if frozen > 1.0 {
+            return Err(WitnessFault::ArmFrozen {
+                theta,
+                predicted: self.free[0] - theta,
+                still_s: f64::from(self.unchanged) * self.ts,
+            });
+        }
+        let [arm, pendulum] = self.statistic();
+        if arm > self.limits.arm {
+            return Err(self.classify(theta, arm));
+        }
+        if pendulum > self.limits.pendulum {
+            return Err(WitnessFault::PendulumDisagrees {
+                stat: pendulum,
+                limit: self.limits.pendulum,
+            });
+        }
+        Ok(())
+    }
+
+    fn classify(&self, theta: f64, stat: f64) -> WitnessFault {
+        let (predicted, measured) = (self.predicted, self.measured);
+        let limit = self.limits.arm;
+        let window_s = f64::from(self.disagreeing) * self.ts;
+        // No motion at all since the disagreement began, against the model's.
+        if self.unchanged >= self.disagreeing.min(FROZEN_PERIODS)
+            && self.unchanged > 0
+            && measured.abs() < 0.5 * self.arm_count
+            && predicted.abs() > 2.0 * self.arm_count
+        {
+            WitnessFault::ArmFrozen {
+                theta,
+                predicted,
+                still_s: f64::from(self.unchanged) * self.ts,
+            }
+        } else if predicted * measured < 0.0 {
+            WitnessFault::ArmWrongWay {
+                measured,
+                predicted,
+                window_s,
+                stat,
+                limit,
+            }
+        } else {
+            WitnessFault::ArmDisagrees {
+                measured,
+                predicted,
+                window_s,
+                stat,
+                limit,
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    /// Drives the hanging paper rig open loop with `u(t)` and feeds the witness what an
+    /// encoder pair wired by `wiring` reads (2048 counts); returns the first fault and when.
+    fn drive(
+        u: impl Fn(f64) -> f64,
+        wiring: impl Fn(f64, f64) -> f64,
+        seconds: f64,
+    ) -> Option<(f64, WitnessFault)> {
+        let cfg = Config::default();
+        let plant = cfg.spec.plant().unwrap();
+        let mut w = Witness::new(&cfg, WitnessLimits::default()).unwrap();
+        let ts = cfg.period_s();
+        let q = std::f64::consts::TAU / 2048.0;
+        let mut x = State::new(0.0, 0.0, PI, 0.0);
+        let mut prev = 0.0;
+        for k in 0..(seconds / ts) as usize {
+            let t = k as f64 * ts;
+            let theta = (wiring(x[0], t) / q).round() * q;
+            let alpha = wrap_angle((x[2] / q).round() * q);
+            let dt = if k == 0 { 0.0 } else { ts };
+            if let Err(f) = w.observe(theta, alpha, (prev, prev), dt, 0.0) {
+                return Some((t, f));
+            }
+            prev = u(t);
+            plant.advance(&mut x, prev, 0.0, ts, 10);
+        }
+        None
+    }
+
+    #[test]
+    fn a_rig_that_moves_as_commanded_never_trips() {
+        // A ±3 V square wave of 0.4 s: the arm turns back and forth, the pendulum swings.
+        let square = |t: f64| if (t / 0.2) as i64 % 2 == 0 { 3.0 } else { -3.0 };
+        assert_eq!(drive(square, |theta, _| theta, 5.0), None);
+        assert_eq!(drive(|_| 0.0, |theta, _| theta, 2.0), None);
+    }
+
+    #[test]
+    fn a_frozen_arm_encoder_is_named() {
+        let (t, f) = drive(|_| 3.0, |_, _| 0.0, 2.0).expect("not stopped");
+        assert!(matches!(f, WitnessFault::ArmFrozen { .. }), "{f}");
+        assert!(t < 0.3, "{t}");
+        assert!(f.to_string().contains("stopped counting"), "{f}");
+    }
+
+    #[test]
+    fn motion_against_the_voltage_is_named() {
+        // The encoder counts backwards from 0.5 s on, while the arm turns under 3 V.
+        let reversed = |theta: f64, t: f64| if t < 0.5 { theta } else { -theta };
+        let (t, f) = drive(|_| 3.0, reversed, 2.0).expect("not stopped");
+        assert!((0.5..0.6).contains(&t), "{t}");
+        assert!(
+            matches!(
+                f,
+                WitnessFault::ArmWrongWay { .. } | WitnessFault::ArmDisagrees { .. }
+            ),
+            "{f}"
+        );
+        assert!(f.to_string().contains("motor leads"), "{f}");
+    }
+
+    #[test]
+    fn a_gap_in_the_device_clock_restarts_the_observer() {
+        let cfg = Config::default();
+        let mut w = Witness::new(&cfg, WitnessLimits::default()).unwrap();
+        w.observe(0.0, PI, (0.0, 0.0), 0.0, 0.0).unwrap();
+        // A second later the arm is elsewhere: no prediction spans the gap.
+        w.observe(1.0, PI, (0.0, 0.0), 1.0, 0.0).unwrap();
+        w.observe(1.0, PI, (0.0, 0.0), 0.01, 0.0).unwrap();
+        assert_eq!(w.statistic(), [0.0, 0.0]);
+    }
+}

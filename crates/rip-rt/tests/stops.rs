@@ -1,0 +1,352 @@
+//! Stops judged on the arm's true position: the emulator's `--true-state` record (the
+//! simulated plant, not its encoders) before, during and after `rip-rt run` and `rip-rt
+//! excite` stop.
+
+mod common;
+
+use std::time::Duration;
+
+use common::*;
+
+#[test]
+fn the_true_state_is_recorded_while_running_and_at_exit() {
+    let _serial = one_at_a_time();
+    let mut emu = Emulator::start("truth", &["--seed", "3"]);
+    let log_path = scratch("truth-run.csv");
+    let child = spawn_run(
+        &emu.device,
+        "lqr",
+        &["--duration", "2", "--log", log_path.to_str().unwrap()],
+    );
+    // Readable mid-run: rows keep arriving while the loop balances.
+    std::thread::sleep(Duration::from_millis(1500));
+    let during = emu.truth_so_far();
+    assert!(during.iter().any(|r| r.driver == "drive"), "{during:?}");
+    let r = wait_with_timeout(child, Duration::from_secs(30));
+    assert_eq!(r.status.code(), Some(0), "{}", r.stderr);
+    std::thread::sleep(Duration::from_millis(200));
+    let rows = emu.finish();
+    assert!(rows.len() > during.len());
+    // Before the first command the emulator holds the pendulum at its initial pose.
+    assert_eq!((rows[0].theta, rows[0].alpha), (0.0, 0.05));
+    // A row every 10 ms of simulated time.
+    for w in rows.windows(2).take(100) {
+        assert!((w[1].t - w[0].t - 0.01).abs() < 1.5e-3, "{w:?}");
+    }
+    // The encoders' view (the log) agrees with the plant to the resolution of 2048 counts:
+    // its first row is the pose the emulator held until then, and every logged arm angle is
+    // one the plant passed through while driven.
+    let log = Log::read(&log_path);
+    let count = std::f64::consts::TAU / 2048.0;
+    let (theta, alpha) = (log.col("theta"), log.col("alpha"));
+    assert!(
+        theta[0].abs() <= count && (alpha[0] - 0.05).abs() <= count,
+        "{} {}",
+        theta[0],
+        alpha[0]
+    );
+    let driven: Vec<f64> = rows
+        .iter()
+        .filter(|r| r.driver == "drive")
+        .map(|r| r.theta)
+        .collect();
+    let lo = driven.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = driven.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    assert!(
+        theta
+            .iter()
+            .all(|&th| th >= lo - 2.0 * count && th <= hi + 2.0 * count),
+        "log outside the true range [{lo}, {hi}]"
+    );
+    // The run ended with the bridge off and 0 V across the motor, which the last row (written
+    // at exit) shows.
+    let last = rows.last().unwrap();
+    assert_ne!(last.driver, "drive");
+    assert_eq!(last.voltage, 0.0);
+}
+
+/// `safety.arm_limit` of the default configuration (rad).
+const ARM_LIMIT: f64 = 3.0;
+
+/// What a stop left the simulated rig doing: the largest true |θ| over the whole run and
+/// after it, where the arm came to rest, and the bridge's last state.
+#[derive(Debug)]
+struct Outcome {
+    code: Option<i32>,
+    stderr: String,
+    max_theta: f64,
+    rest_theta: f64,
+    last: Truth,
+}
+
+impl Outcome {
+    /// The arm came to rest inside `limit` and never left it; the bridge ended off at 0 V.
+    fn assert_safe(&self, case: &str, limit: f64) {
+        println!(
+            "{case}: exit {:?}, true max |theta| {:.3} rad, at rest at {:.3} rad, bridge {}",
+            self.code, self.max_theta, self.rest_theta, self.last.driver
+        );
+        assert!(
+            self.max_theta < limit,
+            "{case}: the arm reached {:.3} rad, past {limit} rad\n{}",
+            self.max_theta,
+            self.stderr
+        );
+        assert_ne!(self.last.driver, "drive", "{case}: {}", self.stderr);
+        assert_eq!(self.last.voltage, 0.0, "{case}");
+        assert!(
+            self.last.theta_dot.abs() < 0.2,
+            "{case}: not at rest: {:?}",
+            self.last
+        );
+    }
+}
+
+/// Waits for `child` to exit, then for the simulated arm to come to rest, and stops the
+/// emulator.
+fn settle(mut emu: Emulator, child: std::process::Child) -> Outcome {
+    let r = wait_with_timeout(child, Duration::from_secs(60));
+    emu.wait_for_rest(0.05, 1.0, Duration::from_secs(20));
+    let rows = emu.finish();
+    let last = rows.last().cloned().expect("a true-state row");
+    Outcome {
+        code: r.status.code(),
+        stderr: r.stderr,
+        max_theta: max_excursion(&rows),
+        rest_theta: last.theta,
+        last,
+    }
+}
+
+fn swing_config(name: &str, extra: &str) -> std::path::PathBuf {
+    let path = scratch(&format!("{name}.toml"));
+    std::fs::write(
+        &path,
+        format!("[calibration]\nrest_window_s = 0.5\nrest_timeout_s = 4.0\n{extra}"),
+    )
+    .unwrap();
+    path
+}
+
+/// Starts `rip-rt run --swing-up` from hanging at rest.
+fn start_swing(name: &str, controller: &str, extra_cfg: &str) -> (Emulator, std::process::Child) {
+    let cfg = swing_config(name, extra_cfg);
+    let emu = Emulator::start(
+        name,
+        &[
+            "--start",
+            "down",
+            "--noise",
+            "0.3",
+            "--config",
+            cfg.to_str().unwrap(),
+        ],
+    );
+    let child = spawn_run(
+        &emu.device,
+        controller,
+        &["--swing-up", "--config", cfg.to_str().unwrap()],
+    );
+    (emu, child)
+}
+
+/// Waits until the device has received its first enabling command (the swing's start); a
+/// run that ended before it fails the test with its message.
+fn wait_for_enable(emu: &Emulator, child: &mut std::process::Child) {
+    let start = std::time::Instant::now();
+    while !emu.commands_so_far().iter().any(|&(_, f)| f & 1 != 0) {
+        if let Some(status) = child.try_wait().unwrap() {
+            let mut stderr = String::new();
+            use std::io::Read;
+            child
+                .stderr
+                .take()
+                .unwrap()
+                .read_to_string(&mut stderr)
+                .unwrap();
+            panic!("the run ended ({status}) before enabling the motor: {stderr}");
+        }
+        assert!(
+            start.elapsed().as_secs() < 15,
+            "the motor was never enabled"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// Ctrl-C `delay_s` after the swing started.
+fn sigint_during_swing(controller: &str, delay_s: f64) -> Outcome {
+    let name = format!("stop-sigint-{controller}-{delay_s}");
+    let (emu, mut child) = start_swing(&name, controller, "");
+    wait_for_enable(&emu, &mut child);
+    std::thread::sleep(Duration::from_secs_f64(delay_s));
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    settle(emu, child)
+}
+
+#[test]
+fn ctrl_c_during_the_swing_and_after_the_catch_leaves_the_arm_inside_its_limit() {
+    let _serial = one_at_a_time();
+    // Across the swing's pumping (its arm moves fastest there), and after the catch.
+    for (controller, delay) in [
+        ("lqr", 0.3),
+        ("lqr", 0.7),
+        ("mpc", 1.1),
+        ("lqg", 1.6),
+        ("lqr", 2.2),
+        ("lqr", 2.9),
+        ("mpc", 6.0),
+    ] {
+        let out = sigint_during_swing(controller, delay);
+        assert_eq!(out.code, Some(130), "{}", out.stderr);
+        out.assert_safe(
+            &format!("SIGINT {delay} s into the swing ({controller})"),
+            ARM_LIMIT,
+        );
+    }
+}
+
+#[test]
+fn a_loop_stall_after_the_catch_stops_the_arm_inside_its_limit() {
+    let _serial = one_at_a_time();
+    let (emu, mut child) = start_swing("stop-stall", "lqr", "");
+    wait_for_enable(&emu, &mut child);
+    std::thread::sleep(Duration::from_secs(6));
+    // Suspended: the device's watchdog stops the motor (braking it); resumed, the loop finds
+    // its deadlines missed and stops as stalled.
+    unsafe { libc::kill(child.id() as i32, libc::SIGSTOP) };
+    std::thread::sleep(Duration::from_millis(400));
+    unsafe { libc::kill(child.id() as i32, libc::SIGCONT) };
+    let out = settle(emu, child);
+    assert_eq!(out.code, Some(10), "{}", out.stderr);
+    out.assert_safe("stall after the catch", ARM_LIMIT);
+}
+
+fn excite_at(signal: &str, extra: &[&str]) -> Outcome {
+    let name = format!("stop-excite-{signal}");
+    let pi = std::f64::consts::PI.to_string();
+    let emu = Emulator::start(
+        &name,
+        &["--initial-pendulum", pi.as_str(), "--noise", "0.3"],
+    );
+    let log = scratch(&format!("{name}.csv"));
+    let child = std::process::Command::new(BIN)
+        .arg("excite")
+        .arg("--port")
+        .arg(&emu.device)
+        .args(["--signal", signal, "--quiet", "--log"])
+        .arg(&log)
+        .args(extra)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("spawn excite");
+    settle(emu, child)
+}
+
+/// The largest amplitude the refusal of `message` names ("at most X V stays inside").
+fn largest_accepted(message: &str) -> String {
+    let at = message
+        .find("at most ")
+        .unwrap_or_else(|| panic!("no largest amplitude in {message}"));
+    let rest = &message[at + "at most ".len()..];
+    rest[..rest.find(" V").unwrap()].to_string()
+}
+
+#[test]
+fn every_excitation_beyond_its_envelope_is_refused_and_its_largest_amplitude_stays_inside() {
+    let _serial = one_at_a_time();
+    for (signal, extra) in [
+        ("steps", &["--duration", "6"][..]),
+        ("chirp", &["--duration", "6"][..]),
+        ("prbs", &["--duration", "6", "--centering", "0"][..]),
+        (
+            "steps",
+            &["--duration", "6", "--centering", "0", "--damping", "0"][..],
+        ),
+        ("free-swing", &["--duration", "6", "--kick", "2"][..]),
+    ] {
+        // 12 V (safety.voltage_limit) cannot be stopped inside the limit: refused before the
+        // motor moves, naming the option.
+        let mut args = vec!["--amplitude", "12"];
+        args.extend_from_slice(extra);
+        let out = excite_at(signal, &args);
+        assert_eq!(out.code, Some(2), "{signal}: {}", out.stderr);
+        assert!(out.stderr.contains("--amplitude"), "{}", out.stderr);
+        assert_eq!(out.max_theta, 0.0, "{signal}: the arm moved");
+        // The largest amplitude accepted runs, and the arm stays inside.
+        let amplitude = largest_accepted(&out.stderr);
+        let mut args = vec!["--amplitude", amplitude.as_str()];
+        args.extend_from_slice(extra);
+        let out = excite_at(signal, &args);
+        // Accepted on the model with headroom; the rig (here the emulator after the sign
+        // check's pulse) may still reach the envelope, whose stop ends the run (exit 5).
+        assert!(
+            matches!(out.code, Some(0) | Some(5)),
+            "{signal} at {amplitude} V: {}",
+            out.stderr
+        );
+        out.assert_safe(
+            &format!("excite {signal} {amplitude} V {extra:?}"),
+            ARM_LIMIT,
+        );
+    }
+}
+
+#[test]
+fn a_watchdog_stop_after_the_catch_brakes_the_arm_inside_its_limit() {
+    let _serial = one_at_a_time();
+    let (emu, mut child) = start_swing("stop-watchdog", "lqr", "");
+    wait_for_enable(&emu, &mut child);
+    std::thread::sleep(Duration::from_secs(6));
+    // The device goes silent for 150 ms (its process suspended): no measurement for
+    // loop.watchdog_periods periods; it answers again while the loop brakes.
+    let pid = emu.child.id() as i32;
+    unsafe { libc::kill(pid, libc::SIGSTOP) };
+    std::thread::sleep(Duration::from_millis(150));
+    unsafe { libc::kill(pid, libc::SIGCONT) };
+    let out = settle(emu, child);
+    assert_eq!(out.code, Some(4), "{}", out.stderr);
+    assert!(out.stderr.contains("stop: braked"), "{}", out.stderr);
+    out.assert_safe("watchdog after the catch", ARM_LIMIT);
+}
+
+#[test]
+fn a_fall_right_after_the_catch_brakes_the_arm_inside_its_limit() {
+    let _serial = one_at_a_time();
+    // A 2.5 rad arm step half a second after the catch: the arm runs out fast and the
+    // pendulum leaves the balance region on the way (on_fall = "stop").
+    let (emu, child) = start_swing(
+        "stop-fall",
+        "lqr",
+        "[swing_up]\non_fall = \"stop\"\n[reference]\narm_step = 2.5\nstep_time = 0.5\n",
+    );
+    let out = settle(emu, child);
+    assert_eq!(out.code, Some(5), "{}", out.stderr);
+    out.assert_safe("fall after the catch", ARM_LIMIT);
+}
+
+#[test]
+fn ctrl_c_at_the_swings_arm_envelope_leaves_the_arm_inside_its_limit() {
+    let _serial = one_at_a_time();
+    // The widest swing the refusal accepts, stopped when the arm is near its swing limit
+    // and moving outwards: the hardest stop the swing lets the arm into.
+    let (emu, mut child) = start_swing("stop-envelope", "lqr", "[swing_up]\narm_limit = 2.2\n");
+    wait_for_enable(&emu, &mut child);
+    let start = std::time::Instant::now();
+    loop {
+        let rows = emu.truth_so_far();
+        if rows
+            .last()
+            .is_some_and(|r| r.theta.abs() > 1.2 && r.theta * r.theta_dot > 0.0)
+        {
+            break;
+        }
+        assert!(start.elapsed().as_secs() < 20, "the arm never swung out");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let out = settle(emu, child);
+    assert_eq!(out.code, Some(130), "{}", out.stderr);
+    out.assert_safe("SIGINT at the swing's arm envelope", ARM_LIMIT);
+}

@@ -1,0 +1,429 @@
+//! The witness in simulation, faster than real time: closed loops of the run's controllers
+//! (LQR, LQG, MPC, each with and without the swing-up) on the nonlinear plant, measured through
+//! quantised, noisy encoders, with wiring faults that start at a chosen time. Judged on the
+//! simulated (true) arm angle: a normal run never trips the witness; a faulty one is stopped
+//! before the arm has moved 0.5 rad from where it was when the fault began.
+//!
+//! `cargo test --release -p rip-rt --test witness_sim -- --ignored --nocapture` prints the
+//! measurement behind the thresholds (docs/rip-rt.md, "The witness").
+
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+use rip_core::plant::{Plant, State};
+use rip_core::rig::Rig;
+use rip_core::Phase;
+use rip_rt::config::Config;
+use rip_rt::controllers::{self, ControllerKind};
+use rip_rt::witness::{Witness, WitnessFault, WitnessLimits};
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Fault {
+    None,
+    ReverseMotor,
+    ReverseArmEncoder,
+    FreezeArmEncoder,
+    /// `device.arm_sign = -1` on a correctly wired rig (from the start).
+    ArmSign,
+    /// `device.arm_counts_per_rev` four times the encoder's (8192 on 2048; from the start).
+    ArmScale,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Case {
+    kind: ControllerKind,
+    swing_up: bool,
+    fault: Fault,
+    /// Seconds after the start (`None`: the fault is there from the start).
+    fault_at: Option<f64>,
+    seed: u64,
+}
+
+#[derive(Debug)]
+struct Outcome {
+    trip: Option<(f64, WitnessFault)>,
+    peak: [f64; 3],
+    caught: bool,
+    /// True arm angle when the fault began.
+    arm_at_fault: f64,
+    /// Largest true arm distance from `arm_at_fault` up to the trip (or the end).
+    excursion_to_trip: f64,
+    /// ... and up to rest after the stop (0 V for 2 s).
+    excursion_after_stop: f64,
+    ended: &'static str,
+    /// The fault began before the run ended.
+    faulted: bool,
+}
+
+struct Rigged {
+    cfg: Config,
+    noise: [f64; 2],
+}
+
+fn preset(name: &str) -> Rigged {
+    let mut cfg = Config::default();
+    if name == "qube_servo2" {
+        cfg.spec.plant.preset = rip_core::spec::Preset::QubeServo2;
+    }
+    Rigged {
+        noise: cfg.spec.sensor.noise_std,
+        cfg,
+    }
+}
+
+fn rigged(seed: u64) -> Rigged {
+    let rig = Rig::random(seed);
+    let mut cfg = Config::default();
+    cfg.spec.plant = rig.plant_spec();
+    cfg.spec.sensor = rig.sensor_spec();
+    cfg.device.arm_counts_per_rev = rig.encoder_counts[0];
+    cfg.device.pendulum_counts_per_rev = rig.encoder_counts[1];
+    Rigged {
+        noise: rig.noise_std,
+        cfg,
+    }
+}
+
+fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
+    let cfg = &r.cfg;
+    let mut controller = if case.swing_up {
+        controllers::build_swing_up(case.kind, cfg).unwrap()
+    } else {
+        controllers::build(case.kind, cfg).unwrap()
+    };
+    let plant: Plant = cfg.spec.plant().unwrap();
+    let ts = cfg.period_s();
+    let substeps = (ts / plant.max_rk4_substep()).ceil().max(1.0) as usize;
+    let mut witness = Witness::new(cfg, WitnessLimits::default()).unwrap();
+    let tau = std::f64::consts::TAU;
+    let q = [
+        tau / f64::from(cfg.device.arm_counts_per_rev),
+        tau / f64::from(cfg.device.pendulum_counts_per_rev),
+    ];
+    let mut rng = StdRng::seed_from_u64(case.seed);
+    let noise = [
+        Normal::new(0.0, r.noise[0].max(1e-12)).unwrap(),
+        Normal::new(0.0, r.noise[1].max(1e-12)).unwrap(),
+    ];
+    let mut x = if case.swing_up {
+        State::new(0.0, 0.0, std::f64::consts::PI, 0.0)
+    } else {
+        State::new(0.0, 0.0, 0.05, 0.0)
+    };
+    let limit = cfg.safety.voltage_limit;
+    let steps = (duration / ts).round() as usize;
+    let mut u_prev = 0.0;
+    // The voltage applied at the previous sample (before `u_prev` took over).
+    let mut u_prev2 = 0.0;
+    let mut onset: Option<f64> = match case.fault_at {
+        None => Some(0.0),
+        Some(_) => None,
+    };
+    let mut arm_at_fault = 0.0;
+    let mut excursion: f64 = 0.0;
+    let mut trip = None;
+    let mut caught = false;
+    let mut ended = "finished";
+    for k in 0..steps {
+        let t = k as f64 * ts;
+        if onset.is_none() && case.fault_at.is_some_and(|at| t >= at) {
+            onset = Some(x[0]);
+            arm_at_fault = x[0];
+        }
+        let active = onset.is_some();
+        if active {
+            excursion = excursion.max((x[0] - arm_at_fault).abs());
+        }
+        let quant = |v: f64, j: usize| (v / q[j]).round() * q[j];
+        let true_theta = x[0] + noise[0].sample(&mut rng);
+        let mut theta = match (active, case.fault) {
+            (true, Fault::ReverseArmEncoder) => 2.0 * onset.unwrap() - true_theta,
+            (true, Fault::FreezeArmEncoder) => onset.unwrap(),
+            (true, Fault::ArmSign) => -true_theta,
+            (true, Fault::ArmScale) => true_theta / 4.0,
+            _ => true_theta,
+        };
+        theta = quant(theta, 0);
+        let alpha = rip_core::swingup::wrap_angle(
+            quant(x[2] - std::f64::consts::PI + noise[1].sample(&mut rng), 1)
+                + std::f64::consts::PI,
+        );
+        let dt = if k == 0 { 0.0 } else { ts };
+        if let Err(f) = witness.observe(theta, alpha, (u_prev2, u_prev), dt, 0.0) {
+            trip = Some((t, f));
+            ended = "witness";
+            break;
+        }
+        if theta.abs() > cfg.safety.arm_limit {
+            ended = "arm_limit";
+            break;
+        }
+        if !case.swing_up && alpha.abs() > cfg.safety.pendulum_limit {
+            ended = "fell";
+            break;
+        }
+        let mut u = [0.0];
+        controller.step(&[theta, alpha], &[0.0, 0.0], &mut u);
+        match controller.phase() {
+            Phase::Balance => caught = true,
+            Phase::Stopped(_) => {
+                ended = "supervisor";
+                break;
+            }
+            _ => {}
+        }
+        let v = (u[0].clamp(-limit, limit) * 1000.0).round() / 1000.0;
+        let applied = if active && case.fault == Fault::ReverseMotor {
+            -v
+        } else {
+            v
+        };
+        plant.advance(&mut x, applied, 0.0, ts, substeps);
+        u_prev2 = u_prev;
+        u_prev = v;
+    }
+    // The stop: 0 V until the arm is at rest (2 s).
+    let mut after = excursion;
+    if onset.is_some() {
+        for _ in 0..200 {
+            plant.advance(&mut x, 0.0, 0.0, ts, substeps);
+            after = after.max((x[0] - arm_at_fault).abs());
+        }
+    }
+    Outcome {
+        trip,
+        peak: witness.peak(),
+        caught,
+        arm_at_fault,
+        excursion_to_trip: excursion,
+        excursion_after_stop: after,
+        ended,
+        faulted: onset.is_some(),
+    }
+}
+
+const KINDS: [ControllerKind; 3] = [
+    ControllerKind::Lqr,
+    ControllerKind::Lqg,
+    ControllerKind::Mpc,
+];
+
+/// The rigs of the tests: both presets and generated rigs that the defaults swing up and
+/// balance (a rig that cannot be swung up at 12 V tells nothing about the witness).
+fn rigs(n_generated: usize) -> Vec<(String, Rigged)> {
+    let mut out = vec![
+        ("paper".to_string(), preset("paper")),
+        ("qube_servo2".to_string(), preset("qube_servo2")),
+    ];
+    let mut seed = 0;
+    while out.len() < 2 + n_generated {
+        let r = rigged(seed);
+        let ok = simulate(
+            &r,
+            Case {
+                kind: ControllerKind::Lqr,
+                swing_up: true,
+                fault: Fault::None,
+                fault_at: None,
+                seed,
+            },
+            15.0,
+        );
+        if ok.caught && ok.ended == "finished" {
+            out.push((format!("rig{seed}"), r));
+        }
+        seed += 1;
+    }
+    out
+}
+
+#[test]
+fn normal_runs_never_trip_the_witness() {
+    for (name, r) in rigs(2) {
+        for kind in KINDS {
+            for swing_up in [false, true] {
+                let case = Case {
+                    kind,
+                    swing_up,
+                    fault: Fault::None,
+                    fault_at: None,
+                    seed: 1,
+                };
+                let o = simulate(&r, case, if swing_up { 15.0 } else { 5.0 });
+                assert!(o.trip.is_none(), "{name} {kind} swing_up={swing_up}: {o:?}");
+            }
+        }
+    }
+}
+
+fn fault_cases() -> Vec<(Fault, bool, Option<f64>)> {
+    let mut v = Vec::new();
+    for fault in [
+        Fault::ReverseMotor,
+        Fault::ReverseArmEncoder,
+        Fault::FreezeArmEncoder,
+    ] {
+        // Mid-swing (1 s into the swing), after the catch (balancing from upright, 1 s in).
+        v.push((fault, true, Some(1.0)));
+        v.push((fault, false, Some(1.0)));
+    }
+    v.push((Fault::ArmSign, false, None));
+    v
+}
+
+fn scale_cases() -> Vec<(Fault, bool, Option<f64>)> {
+    vec![
+        (Fault::ArmScale, true, None),
+        (Fault::ArmScale, false, None),
+    ]
+}
+
+#[test]
+fn each_wiring_fault_is_stopped_before_the_arm_moves_half_a_radian() {
+    for (name, r) in rigs(1) {
+        for kind in KINDS {
+            for (fault, swing_up, fault_at) in fault_cases() {
+                let case = Case {
+                    kind,
+                    swing_up,
+                    fault,
+                    fault_at,
+                    seed: 2,
+                };
+                let o = simulate(&r, case, 10.0);
+                let what = format!("{name} {kind} {fault:?} swing_up={swing_up}: {o:?}");
+                if !o.faulted {
+                    // This controller does not balance this rig: nothing to witness.
+                    assert_ne!(o.ended, "witness", "{what}");
+                    continue;
+                }
+                assert!(o.trip.is_some(), "not stopped: {what}");
+                assert!(o.excursion_to_trip < 0.5, "too late: {what}");
+                let f = o.trip.unwrap().1;
+                let named = match fault {
+                    Fault::FreezeArmEncoder => matches!(
+                        f,
+                        WitnessFault::ArmFrozen { .. } | WitnessFault::PendulumDisagrees { .. }
+                    ),
+                    _ => !matches!(f, WitnessFault::ArmFrozen { .. }),
+                };
+                assert!(named, "misnamed: {what}");
+            }
+        }
+    }
+}
+
+/// The measurement behind the thresholds: the statistics' maxima over normal runs, and each
+/// fault's detection time and arm excursion.
+#[test]
+#[ignore]
+fn measure() {
+    let rigs = rigs(8);
+    let mut worst = [0.0f64; 3];
+    let mut runs = 0;
+    let mut trips = 0;
+    for (name, r) in &rigs {
+        for kind in KINDS {
+            for swing_up in [false, true] {
+                for seed in 0..2 {
+                    let case = Case {
+                        kind,
+                        swing_up,
+                        fault: Fault::None,
+                        fault_at: None,
+                        seed,
+                    };
+                    let o = simulate(r, case, if swing_up { 15.0 } else { 5.0 });
+                    runs += 1;
+                    trips += usize::from(o.trip.is_some());
+                    for (w, p) in worst.iter_mut().zip(o.peak) {
+                        *w = w.max(p);
+                    }
+                    println!(
+                        "normal {name:12} {kind} swing_up={swing_up:5} peak arm {:7.1} pendulum {:7.1} frozen {:5.2} ended {} caught {}",
+                        o.peak[0], o.peak[1], o.peak[2], o.ended, o.caught
+                    );
+                }
+            }
+        }
+    }
+    println!(
+        "normal runs {runs}, witness trips {trips}, worst arm {:.1} pendulum {:.1} frozen {:.2}",
+        worst[0], worst[1], worst[2]
+    );
+    for (name, r) in &rigs {
+        for kind in KINDS {
+            for (fault, swing_up, fault_at) in fault_cases().into_iter().chain(scale_cases()) {
+                let o = simulate(
+                    r,
+                    Case {
+                        kind,
+                        swing_up,
+                        fault,
+                        fault_at,
+                        seed: 3,
+                    },
+                    10.0,
+                );
+                let delay = o.trip.map(|(t, _)| t - fault_at.unwrap_or(0.0));
+                println!(
+                    "fault {name:12} {kind} {fault:?} swing_up={swing_up:5} delay {:?} excursion {:.3} after stop {:.3} at {:.2} peak {:.0}/{:.0}/{:.2} {}",
+                    delay,
+                    o.excursion_to_trip,
+                    o.excursion_after_stop,
+                    o.arm_at_fault,
+                    o.peak[0],
+                    o.peak[1],
+                    o.peak[2],
+                    o.trip.map_or("NOT STOPPED".to_string(), |(_, f)| format!("{f:?}")),
+                );
+            }
+        }
+    }
+}
+
+/// Replays a `rip-rt run` log (`WITNESS_LOG`, `WITNESS_PRESET`) through the witness, printing
+/// the arm's statistic where it rises: for looking into a run's figures.
+#[test]
+#[ignore]
+fn replay() {
+    let Ok(path) = std::env::var("WITNESS_LOG") else {
+        return;
+    };
+    let mut cfg = Config::default();
+    if std::env::var("WITNESS_PRESET").as_deref() == Ok("qube_servo2") {
+        cfg.spec.plant.preset = rip_core::spec::Preset::QubeServo2;
+    }
+    let mut w = Witness::new(
+        &cfg,
+        WitnessLimits {
+            arm: f64::INFINITY,
+            pendulum: f64::INFINITY,
+            ..WitnessLimits::default()
+        },
+    )
+    .unwrap();
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut rows = text
+        .lines()
+        .filter(|l| l.starts_with(|c: char| c.is_ascii_digit()));
+    let mut prev: Option<(f64, f64)> = None;
+    for l in rows.by_ref() {
+        let f: Vec<f64> = l.split(',').take(6).map(|v| v.parse().unwrap()).collect();
+        let (t, theta, alpha, u) = (f[0], f[2], f[3], f[5]);
+        let phase = l.rsplit(',').next().unwrap();
+        if phase == "sign_check" {
+            continue;
+        }
+        let (dt, before) = prev.map_or((0.0, 0.0), |(t0, u0)| (t - t0, u0));
+        let _ = w.observe(theta, alpha, (before, before), dt, 0.0);
+        let s = w.statistic();
+        if s[0] > 2.0 || s[1] > 2.0 {
+            println!(
+                "t {t:.2} theta {theta:+.4} alpha {alpha:+.4} u {u:+.3} stat {:.1} {:.1} {phase}",
+                s[0], s[1]
+            );
+        }
+        prev = Some((t, u));
+    }
+}
