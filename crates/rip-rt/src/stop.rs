@@ -9,6 +9,12 @@
 //!   signals, sends it with a bare `write(2)` on the registered descriptor, without locks or
 //!   allocation.
 //!
+//! An orderly stop first brings the arm to rest ([`crate::envelope::bring_to_rest`]) and then
+//! sends the stop frame. The paths that cannot run the braking law (a fatal signal, a panic)
+//! send the brake command instead (0 V, disabled, windings shorted: protocol.md rule 9), which
+//! a device that can brake holds until the next command, so that the arm is braked by its
+//! back-EMF rather than left to coast.
+//!
 //! # Signals ([`install_signal_handlers`])
 //!
 //! | class | signals | effect |
@@ -437,7 +443,8 @@ pub(crate) fn request_stop(sig: i32) {
 
 extern "C" fn on_fatal_signal(sig: libc::c_int) {
     emergency_stop();
-    const MSG: &[u8] = b"rip-rt: fatal signal; stop command (0 V, disabled) sent\n";
+    const MSG: &[u8] =
+        b"rip-rt: fatal signal; brake command (0 V, disabled, windings shorted) sent\n";
     // SAFETY: write, sigaction and raise are async-signal-safe; every pointer is valid.
     unsafe {
         libc::write(2, MSG.as_ptr().cast(), MSG.len());
@@ -491,7 +498,7 @@ pub fn install_signal_handlers() -> Result<(), SetupError> {
     Ok(())
 }
 
-/// Installs a panic hook that sends the stop frame before anything else runs, and asks the
+/// Installs a panic hook that sends the brake command before anything else runs, and asks the
 /// loop to stop when the panic is on another thread (the loop's own panic unwinds through its
 /// [`StopGuard`]).
 pub fn install_panic_hook() {
@@ -521,11 +528,16 @@ pub(crate) fn next_seq() -> u16 {
 /// Writes the stop frame to `fd` with a bare `write(2)`; returns whether all bytes went out.
 /// Async-signal-safe: no locks, no allocation.
 fn write_stop(fd: i32) -> bool {
+    write_command(fd, Command::STOP)
+}
+
+/// Writes `command` to `fd` with a bare `write(2)`; async-signal-safe.
+fn write_command(fd: i32, command: Command) -> bool {
     let mut buf = [0u8; MAX_FRAME];
     let n = encode(
         &Frame {
             seq: next_seq(),
-            message: Message::Command(Command::STOP),
+            message: Message::Command(command),
         },
         &mut buf,
     );
@@ -534,13 +546,14 @@ fn write_stop(fd: i32) -> bool {
     written == n as isize
 }
 
-/// Sends the stop frame three times on the descriptor registered by the running loop, if
-/// any. Safe to call from a panic hook or a signal handler: no locks, no allocation.
+/// Sends the brake command (0 V, driver disabled, windings shorted; module docs) three times
+/// on the descriptor registered by the running loop, if any. Safe to call from a panic hook or
+/// a signal handler: no locks, no allocation.
 pub fn emergency_stop() {
     let fd = STOP_FD.load(Ordering::SeqCst);
     if fd >= 0 {
         for _ in 0..3 {
-            write_stop(fd);
+            write_command(fd, Command::BRAKE);
         }
     }
 }
@@ -573,7 +586,14 @@ impl StopGuard {
 
 impl Drop for StopGuard {
     fn drop(&mut self) {
-        self.stop();
+        if std::thread::panicking() {
+            // Unwinding past the braking law: brake with the windings instead (module docs).
+            for _ in 0..3 {
+                write_command(self.fd, Command::BRAKE);
+            }
+        } else {
+            self.stop();
+        }
         STOP_FD.store(-1, Ordering::SeqCst);
         IN_LOOP_THREAD.with(|t| t.store(false, Ordering::Relaxed));
     }
