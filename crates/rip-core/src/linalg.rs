@@ -180,7 +180,7 @@ pub fn c2d(a: &Mat, b: &Mat, ts: f64) -> Result<(Mat, Mat)> {
             ),
         ));
     };
-    if !(exp.error_estimate <= C2D_ERROR_TOLERANCE) {
+    if exp.error_estimate.is_nan() || exp.error_estimate > C2D_ERROR_TOLERANCE {
         return Err(RipError::invalid(
             "Ts",
             format!(
@@ -262,7 +262,7 @@ const PADE13: [f64; 14] = [
 /// Padé [m/m] approximant has a backward error below the unit round-off.
 const THETA: [(usize, f64); 4] = [
     (3, 1.495_585_217_958_292e-2),
-    (5, 2.539_398_330_063_230e-1),
+    (5, 2.539_398_330_063_23e-1),
     (7, 9.504_178_996_162_932e-1),
     (9, 2.097_847_961_257_068),
 ];
@@ -519,7 +519,7 @@ fn finish(a: &Mat, powers: &[Mat], m: usize, s: u32) -> Option<Exponential> {
             Some(next) => estimate = next,
         }
         // Beyond a relative error of one the first-order model no longer bounds anything.
-        if !(estimate <= 1.0) {
+        if estimate.is_nan() || estimate > 1.0 {
             estimate = f64::INFINITY;
             break;
         }
