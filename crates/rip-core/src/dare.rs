@@ -275,9 +275,9 @@ pub(crate) fn solve_dare_validated(
                             "Newton's method did not converge to a stabilizing solution".into(),
                         )
                     })?;
-                let closed_loop = problem.closed_loop(&y).ok_or_else(|| {
-                    diagnose("BᵀXB + R is not positive definite at the solution".into())
-                })?;
+                let closed_loop = problem
+                    .closed_loop(&y)
+                    .ok_or_else(|| diagnose("BᵀXB + R is singular at the solution".into()))?;
                 with_residual(Candidate {
                     y,
                     closed_loop,
@@ -295,14 +295,11 @@ pub(crate) fn solve_dare_validated(
                 };
                 let (y, newton_steps) =
                     exact.newton(solution.closed_loop.gain).ok_or_else(|| {
-                        diagnose(
-                    "Newton's method on the singular R did not converge to a stabilizing solution"
-                        .into(),
-                )
+                        diagnose("Newton's method on the singular R did not converge".into())
                     })?;
-                let closed_loop = exact.closed_loop(&y).ok_or_else(|| {
-                    diagnose("BᵀXB + R is not positive definite at the solution".into())
-                })?;
+                let closed_loop = exact
+                    .closed_loop(&y)
+                    .ok_or_else(|| diagnose("BᵀXB + R is singular at the solution".into()))?;
                 with_residual_for(
                     Candidate {
                         y,
