@@ -235,11 +235,10 @@ def dlqe(
 
     Parameters
     ----------
-    A : array_like, shape (n, n)
-    G : array_like, shape (n, w)
-    C : array_like, shape (p, n)
-    QN : array_like, shape (w, w)
-    RN : array_like, shape (p, p)
+    A, G, C : array_like
+        Plant, noise input and output matrices, shapes (n, n), (n, w) and (p, n).
+    QN, RN : array_like
+        Process and measurement noise covariances, shapes (w, w) and (p, p).
     NN : array_like, shape (w, p), optional
         Noise cross-covariance (python-control 0.10 refuses one; riprs uses it).
     method : {None, 'scipy', 'slycot'}, optional
