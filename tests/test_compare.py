@@ -146,7 +146,7 @@ def test_monte_carlo_small(tmp_path):
         # Values valid alone that fail in a design, and bounds of the simulation: all named
         # by their key before any run.
         ("[lqr]\nQ = [0, 0, 0, 0]\n", "lqr.Q"),
-        ("[lqr]\nR = 1e-300\n", "lqr.R"),
+        ("[lqr]\nR = 1e308\n", "lqr.R"),
         ("[plant]\nsubsteps = 100001\n", "plant.substeps"),
         ("[plant]\ninitial_state = [0.0, 0.0, 2.0, 0.0]\n", "plant.initial_state[2]"),
         ("[mpc]\noutput_weights = [1e308, 1e308]\n", "mpc.output_weights"),
@@ -179,7 +179,7 @@ def test_a_design_failure_is_found_before_any_simulation(tmp_path, monkeypatch, 
         raise AssertionError("a simulation ran on a file whose designs fail")
 
     monkeypatch.setattr(compare_module, "simulate", refuse)
-    cfg = _write(tmp_path, "[lqr]\nR = 1e-300\n")
+    cfg = _write(tmp_path, "[lqr]\nR = 1e308\n")
     code = main(["compare", "--config", str(cfg), "--out", str(tmp_path / "o"), "--quiet"])
     assert code == 1
     err = capsys.readouterr().err

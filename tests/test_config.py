@@ -63,7 +63,7 @@ def test_both_tools_print_the_same_experiment_sections(tmp_path, capsys, rip_rt)
         ("[mpc]\nprediction_horizon = 0\n", "mpc.prediction_horizon"),
         ("[plant]\npreset = 'qube'\n", "plant.preset"),
         ("[sensor]\nnoise_std = [0.001, -1.0]\n", "sensor.noise_std[1]"),
-        ("[lqr]\nR = 1e-300\n", "lqr.R"),
+        ("[lqr]\nR = 1e308\n", "lqr.R"),
         ("[plant]\nsubsteps = 100001\n", "plant.substeps"),
     ],
 )

@@ -26,6 +26,12 @@
 //! failure is diagnosed (an unstable mode the input cannot reach, by the PBH test, or no
 //! stabilizing solution) instead of returning a wrong matrix.
 //!
+//! Where `BᵀXB + R` is invertible but indefinite at the solution (DAREX 1.2 with its `S`, and
+//! 1.4), the doubling finds no stabilizing gain; Newton's method on the true equation, started
+//! from the gain of the auxiliary problem `Q = I`, `R = I`, `S = 0`, then finds the stabilizing
+//! solution, its intermediate Stein equations solved in Kronecker form where the closed loop
+//! is not yet stable.
+//!
 //! `R` need only be positive semidefinite: the equation needs `BᵀXB + R` invertible, not `R`
 //! (SLICOT's and scipy's DAREX examples 3 and 4 have `R = 0` and a singular `R`). For a
 //! singular `R` the doubling runs on `R + δI` (`δ = 10⁻⁶` of the problem's scale) only to find
@@ -241,65 +247,107 @@ pub(crate) fn solve_dare_validated(
         (candidate, x, residual)
     };
     let with_residual = |candidate: Candidate| with_residual_for(candidate, r);
-    let doubled = doubling(&h0)
-        .filter(|c| c.closed_loop.radius < 1.0 - UNIT_CIRCLE_MARGIN)
-        .map(with_residual);
-    let (solution, x, relative_residual) = match doubled {
-        Some(done) if done.2 <= NEWTON_REFINEMENT_THRESHOLD => done,
-        doubled => {
-            let start = match doubled {
-                Some((candidate, _, _)) => candidate,
-                None => {
-                    let delta = 1e-6 * h0.norm().max(1.0);
-                    let h_reg = &h0 + Mat::identity(h0.nrows(), h0.nrows()) * delta;
-                    doubling(&h_reg)
-                        .filter(|c| c.closed_loop.radius < 1.0)
-                        .ok_or_else(|| {
-                            diagnose(
+    let main_path = || -> std::result::Result<(Candidate, Mat, f64), DareFailure> {
+        let doubled = doubling(&h0)
+            .filter(|c| c.closed_loop.radius < 1.0 - UNIT_CIRCLE_MARGIN)
+            .map(with_residual);
+        let (solution, x, relative_residual) = match doubled {
+            Some(done) if done.2 <= NEWTON_REFINEMENT_THRESHOLD => done,
+            doubled => {
+                let start = match doubled {
+                    Some((candidate, _, _)) => candidate,
+                    None => {
+                        let delta = 1e-6 * h0.norm().max(1.0);
+                        let h_reg = &h0 + Mat::identity(h0.nrows(), h0.nrows()) * delta;
+                        doubling(&h_reg)
+                            .filter(|c| c.closed_loop.radius < 1.0)
+                            .ok_or_else(|| {
+                                diagnose(
                                 "the doubling iteration found no stabilizing gain to start from"
                                     .into(),
                             )
-                        })?
-                }
-            };
-            let (y, newton_steps) = problem.newton(start.closed_loop.gain).ok_or_else(|| {
-                diagnose("Newton's method did not converge to a stabilizing solution".into())
-            })?;
-            let closed_loop = problem.closed_loop(&y).ok_or_else(|| {
-                diagnose("BᵀXB + R is not positive definite at the solution".into())
-            })?;
-            with_residual(Candidate {
-                y,
-                closed_loop,
-                iterations: start.iterations + newton_steps,
-            })
-        }
+                            })?
+                    }
+                };
+                let (y, newton_steps) =
+                    problem.newton(start.closed_loop.gain).ok_or_else(|| {
+                        diagnose(
+                            "Newton's method did not converge to a stabilizing solution".into(),
+                        )
+                    })?;
+                let closed_loop = problem
+                    .closed_loop(&y)
+                    .ok_or_else(|| diagnose("BᵀXB + R is singular at the solution".into()))?;
+                with_residual(Candidate {
+                    y,
+                    closed_loop,
+                    iterations: start.iterations + newton_steps,
+                })
+            }
+        };
+        let (solution, x, relative_residual) = if regularised.is_none() {
+            (solution, x, relative_residual)
+        } else {
+            {
+                let exact = StandardDare {
+                    r: r_true,
+                    ..problem
+                };
+                let (y, newton_steps) =
+                    exact.newton(solution.closed_loop.gain).ok_or_else(|| {
+                        diagnose("Newton's method on the singular R did not converge".into())
+                    })?;
+                let closed_loop = exact
+                    .closed_loop(&y)
+                    .ok_or_else(|| diagnose("BᵀXB + R is singular at the solution".into()))?;
+                with_residual_for(
+                    Candidate {
+                        y,
+                        closed_loop,
+                        iterations: solution.iterations + newton_steps,
+                    },
+                    r_true,
+                )
+            }
+        };
+        Ok((solution, x, relative_residual))
     };
-    let (solution, x, relative_residual) = if regularised.is_none() {
-        (solution, x, relative_residual)
-    } else {
-        {
+    // The doubling needs R⁻¹ and converges to the stabilizing solution only where BᵀXB + R is
+    // positive definite; where it is merely invertible (indefinite Q or a singular R with a
+    // cross term, SLICOT's DAREX 1.2 and 1.4) it finds no stabilizing gain. Newton's method on
+    // the true equation, started from the gain of the auxiliary problem Q = I, R = I, S = 0
+    // (stabilizing whenever (A, B) is stabilizable), converges to the stabilizing solution
+    // there; the same closed-loop and residual checks decide.
+    let acceptable = |done: &(Candidate, Mat, f64)| {
+        let (radius, residual) = (done.0.closed_loop.radius, done.2);
+        radius < 1.0 - UNIT_CIRCLE_MARGIN && residual <= DARE_RESIDUAL_TOLERANCE
+    };
+    let (solution, x, relative_residual) = match main_path() {
+        Ok(done) if acceptable(&done) => done,
+        first => {
             let exact = StandardDare {
                 r: r_true,
                 ..problem
             };
-            let (y, newton_steps) = exact.newton(solution.closed_loop.gain).ok_or_else(|| {
-                diagnose(
-                    "Newton's method on the singular R did not converge to a stabilizing solution"
-                        .into(),
-                )
-            })?;
-            let closed_loop = exact.closed_loop(&y).ok_or_else(|| {
-                diagnose("BᵀXB + R is not positive definite at the solution".into())
-            })?;
-            with_residual_for(
-                Candidate {
-                    y,
-                    closed_loop,
-                    iterations: solution.iterations + newton_steps,
-                },
-                r_true,
-            )
+            let fallback = auxiliary_gain(&a_hat, &b_hat)
+                .and_then(|gain| exact.newton(gain))
+                .and_then(|(y, steps)| {
+                    let closed_loop = exact.closed_loop(&y)?;
+                    Some(with_residual_for(
+                        Candidate {
+                            y,
+                            closed_loop,
+                            iterations: steps,
+                        },
+                        r_true,
+                    ))
+                })
+                .filter(acceptable);
+            match (fallback, first) {
+                (Some(done), _) => done,
+                (None, Ok(done)) => done,
+                (None, Err(failure)) => return Err(failure),
+            }
         }
     };
     let ClosedLoop {
@@ -359,13 +407,15 @@ struct ClosedLoop {
 }
 
 impl StandardDare<'_> {
+    /// `None` where `B̂ᵀYB̂ + R` is singular; it need not be definite (DAREX 1.2 and 1.4).
     fn gain(&self, y: &Mat) -> Option<Mat> {
         let btyb_r = symmetrize(&(self.b.transpose() * y * self.b + self.r));
         let mut rhs = self.b.transpose() * y * self.a;
         if let Some(s) = self.s {
             rhs += s.transpose();
         }
-        btyb_r.cholesky().map(|c| c.solve(&rhs))
+        let gain = btyb_r.lu().solve(&rhs)?;
+        gain.iter().all(|v| v.is_finite()).then_some(gain)
     }
 
     fn closed_loop(&self, y: &Mat) -> Option<ClosedLoop> {
@@ -411,9 +461,53 @@ impl StandardDare<'_> {
     }
 }
 
-/// Solves the Stein equation `Y = Φᵀ Y Φ + M` for a Schur-stable `Φ` by Smith's doubling,
-/// `Y₊ = Y + Φ_kᵀ Y Φ_k`, `Φ₊ = Φ_k²`, which sums `Σ (Φᵀ)ʲ M Φʲ` in `log₂` as many steps.
+/// The gain of the auxiliary DARE with `Q = I`, `R = I`, `S = 0` on `(Â, B̂)`, by the
+/// doubling: a stabilizing gain whenever `(Â, B̂)` is stabilizable, from which Newton's method
+/// can start on any other weights.
+fn auxiliary_gain(a: &Mat, b: &Mat) -> Option<Mat> {
+    let n = a.nrows();
+    let eye_n = Mat::identity(n, n);
+    let eye_m = Mat::identity(b.ncols(), b.ncols());
+    let (y, _) = sda_dispatch(a, &symmetrize(&(b * b.transpose())), &eye_n)?;
+    let aux = StandardDare {
+        a,
+        b,
+        q: &eye_n,
+        r: &eye_m,
+        s: None,
+    };
+    aux.closed_loop(&symmetrize(&y))
+        .filter(|c| c.radius < 1.0)
+        .map(|c| c.gain)
+}
+
+/// Largest state dimension for which [`stein`] falls back to the Kronecker form (an
+/// `n² × n²` solve) when `Φ` is not Schur stable.
+const STEIN_KRONECKER_MAX_STATES: usize = 24;
+
+/// Solves the Stein equation `Y = Φᵀ Y Φ + M`. For a Schur-stable `Φ`, by Smith's doubling
+/// (`stein_smith`); otherwise (an intermediate Newton step of an indefinite problem) by its
+/// Kronecker form `(I − Φᵀ ⊗ Φᵀ) vec Y = vec M`, solvable unless two eigenvalues of `Φ` have
+/// product one.
 fn stein(phi: &Mat, m: &Mat) -> Option<Mat> {
+    stein_smith(phi, m).or_else(|| {
+        let n = phi.nrows();
+        if n > STEIN_KRONECKER_MAX_STATES {
+            return None;
+        }
+        let phi_t = phi.transpose();
+        let system = Mat::identity(n * n, n * n) - phi_t.kronecker(&phi_t);
+        let vec_y = system
+            .lu()
+            .solve(&nalgebra::DVector::from_column_slice(m.as_slice()))?;
+        let y = Mat::from_column_slice(n, n, vec_y.as_slice());
+        y.iter().all(|v| v.is_finite()).then(|| symmetrize(&y))
+    })
+}
+
+/// Smith's doubling for the Stein equation with a Schur-stable `Φ`:
+/// `Y₊ = Y + Φ_kᵀ Y Φ_k`, `Φ₊ = Φ_k²`, which sums `Σ (Φᵀ)ʲ M Φʲ` in `log₂` as many steps.
+fn stein_smith(phi: &Mat, m: &Mat) -> Option<Mat> {
     let mut y = m.clone();
     let mut phi = phi.clone();
     for _ in 0..64 {
@@ -446,14 +540,14 @@ pub fn dare_relative_residual(
         cross += s;
     }
     let btxb_r = b.transpose() * x * b + r;
-    let Some(chol) = btxb_r.cholesky() else {
+    let Some(weighted_cross) = btxb_r.lu().solve(&cross.transpose()) else {
         return f64::INFINITY;
     };
     let exe = match e {
         Some(e) => e.transpose() * x * e,
         None => x.clone(),
     };
-    let residual = a.transpose() * x * a - exe - &cross * chol.solve(&cross.transpose()) + q;
+    let residual = a.transpose() * x * a - exe - &cross * weighted_cross + q;
     let scale = q.norm() + x.norm() * (1.0 + a.norm_squared());
     residual.norm() / scale.max(f64::MIN_POSITIVE)
 }
@@ -580,6 +674,55 @@ mod tests {
         let b = mat(2, 1, &[0.0, 1.0]);
         let sol = dare(&a, &b, &Mat::identity(2, 2), &mat(1, 1, &[1.0]), None, None).unwrap();
         assert!(sol.relative_residual < 1e-12);
+    }
+
+    #[test]
+    fn darex_1_2_singular_r_with_cross_term_is_solved() {
+        // Ionescu & Weiss 1992 (DAREX 1.2, SLICOT BB02AD): R singular, S ≠ 0; BᵀXB + R is
+        // invertible but indefinite at the solution. Reference: Newton's method in 40-digit
+        // arithmetic (mpmath), residual 6e-37; closed-loop spectral radius 0.68727.
+        let a = mat(2, 2, &[0.0, 1.0, 0.0, -1.0]);
+        let b = mat(2, 2, &[1.0, 0.0, 2.0, 1.0]);
+        let q = mat(2, 2, &[-4.0, -4.0, -4.0, 7.0]) / 11.0;
+        let r = mat(2, 2, &[9.0, 3.0, 3.0, 1.0]);
+        let s = mat(2, 2, &[3.0, 1.0, -1.0, 7.0]);
+        let want = mat(
+            2,
+            2,
+            &[
+                -1.402_134_124_423_919_6,
+                13.056_866_399_158_116,
+                13.056_866_399_158_116,
+                -125.636_492_795_290_76,
+            ],
+        );
+        let sol = dare(&a, &b, &q, &r, Some(&s), None).unwrap();
+        assert!((&sol.x - &want).norm() < 1e-13 * want.norm(), "{}", sol.x);
+        let radius = sol
+            .closed_loop_eigenvalues
+            .iter()
+            .map(|z| z.norm())
+            .fold(0.0, f64::max);
+        assert!((radius - 0.687_271_691_663_810_5).abs() < 1e-12, "{radius}");
+    }
+
+    #[test]
+    fn darex_1_4_indefinite_q_and_singular_r_is_solved() {
+        // Sun 1998 (DAREX 1.4): Q = diag(1e5, 1e3, −10) indefinite, R = diag(0, 1). The exact
+        // solution is X = diag(1e5, 1e3, −9.9) (the 3,3 equation reads 0.1 − x − 10 = 0;
+        // SLICOT's BB02AD lists x₃₃ = 0, whose residual is 9.9); BᵀXB + R = diag(1e5, −8.9).
+        let mut a = Mat::zeros(3, 3);
+        a[(0, 1)] = 0.1;
+        a[(1, 2)] = 0.01;
+        let mut b = Mat::zeros(3, 2);
+        b[(0, 0)] = 1.0;
+        b[(2, 1)] = 1.0;
+        let q = Mat::from_diagonal(&nalgebra::DVector::from_vec(vec![1e5, 1e3, -10.0]));
+        let r = Mat::from_diagonal(&nalgebra::DVector::from_vec(vec![0.0, 1.0]));
+        let sol = dare(&a, &b, &q, &r, None, None).unwrap();
+        let want = Mat::from_diagonal(&nalgebra::DVector::from_vec(vec![1e5, 1e3, -9.9]));
+        assert!((&sol.x - &want).amax() < 1e-10, "{}", sol.x);
+        assert!(sol.closed_loop_eigenvalues.iter().all(|z| z.norm() < 1e-8));
     }
 
     #[test]

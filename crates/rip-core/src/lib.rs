@@ -6,9 +6,9 @@
 //!
 //! - [`linalg`] — argument validation, eigenvalues and zero-order-hold [`c2d`].
 //! - [`dare`](mod@dare) — the discrete algebraic Riccati equation ([`dare`](fn@dare)).
-//! - [`lqr`] — [`dlqr`].
 //! - [`envelope`] — the arm's stopping distance at the voltage bound and the braking law: the
 //!   one definition behind every bound on the arm's travel.
+//! - [`lqr`] — [`dlqr`], [`dlqr_integral`] (python-control's `integral_action`).
 //! - [`kalman`](mod@kalman) — MATLAB's [`kalman`](fn@kalman) (both gains `L` and `M`),
 //!   python-control's [`dlqe`] and the allocation-free [`CurrentEstimator`].
 //!
@@ -56,7 +56,7 @@ pub use dare::{dare, DareSolution};
 pub use error::{Result, RipError};
 pub use kalman::{dlqe, kalman, CurrentEstimator, KalmanDesign};
 pub use linalg::{c2d, Mat};
-pub use lqr::{dlqr, LqrDesign};
+pub use lqr::{dlqr, dlqr_integral, LqrDesign};
 pub use mpc::{Mpc, MpcSettings, QpSolver, QpStatus};
 pub use plant::{FurutaParams, Plant, State};
 pub use regulators::{Lqg, Lqr};

@@ -38,7 +38,7 @@ fn dare<'py>(
 }
 
 #[pyfunction]
-#[pyo3(signature = (a, b, q, r, n=None))]
+#[pyo3(signature = (a, b, q, r, n=None, integral_action=None))]
 fn dlqr<'py>(
     py: Python<'py>,
     a: &Bound<'py, PyAny>,
@@ -46,15 +46,20 @@ fn dlqr<'py>(
     q: &Bound<'py, PyAny>,
     r: &Bound<'py, PyAny>,
     n: Option<&Bound<'py, PyAny>>,
+    integral_action: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<(Py2<'py>, Py2<'py>, PyEig<'py>)> {
     let n = matrix_opt(n, "N")?;
-    let d = rip_core::dlqr(
-        &matrix_arg(a, "A", None, None)?,
-        &matrix_arg(b, "B", None, None)?,
-        &matrix_arg(q, "Q", None, None)?,
-        &matrix_arg(r, "R", None, None)?,
-        n.as_ref(),
-    )
+    let integral_action = matrix_opt(integral_action, "integral_action")?;
+    let (a, b, q, r) = (
+        matrix_arg(a, "A", None, None)?,
+        matrix_arg(b, "B", None, None)?,
+        matrix_arg(q, "Q", None, None)?,
+        matrix_arg(r, "R", None, None)?,
+    );
+    let d = match &integral_action {
+        Some(c) => rip_core::dlqr_integral(&a, &b, &q, &r, n.as_ref(), c),
+        None => rip_core::dlqr(&a, &b, &q, &r, n.as_ref()),
+    }
     .py()?;
     Ok((
         mat_to_py(py, &d.k),

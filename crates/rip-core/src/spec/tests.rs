@@ -287,7 +287,15 @@ fn designs_that_fail_name_the_key() {
     };
     let e = Spec::parse("[lqr]\nQ = [0.0, 0.0, 0.0, 0.0]\n").unwrap_err();
     assert_eq!(e.key, "lqr.Q[0]", "{e}");
-    let e = fails("[lqr]\nR = 1e-300\n");
+    // R = 1e-300 is the cheap-control limit, solved like a singular R (the DARE needs only
+    // BᵀXB + R invertible): it designs (riprs.dlqr of the paper's model at R = 1e-300 matches
+    // scipy's R = 0 gain to 5e-9).
+    let design = Spec::parse("[lqr]\nR = 1e-300\n")
+        .unwrap()
+        .design(paper::TS)
+        .unwrap();
+    assert!(design.k.iter().all(|v| v.is_finite()));
+    let e = fails("[lqr]\nR = 1e308\n");
     assert_eq!(e.key, "lqr.R", "{e}");
     let e = fails("[mpc]\noutput_weights = [1e308, 1e308]\n");
     assert!(e.key.starts_with("mpc."), "{e}");
