@@ -9,6 +9,7 @@ use pyo3::prelude::*;
 mod control;
 mod convert;
 mod design;
+mod envs;
 mod errors;
 mod excitation;
 mod identify;
@@ -35,5 +36,6 @@ fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     swingup::register(m)?;
     excitation::register(m)?;
     identify::register(m)?;
+    envs::register(m)?;
     Ok(())
 }

@@ -38,6 +38,7 @@ use crate::plant::{Plant, State};
 use crate::swingup::wrap_angle;
 
 mod runs;
+pub mod vec_env;
 pub use runs::{
     batch_runs, simulate_batch, simulate_batch_cloned, simulate_runs, simulate_runs_cancellable,
     Pairing,
