@@ -553,7 +553,11 @@ ENV_MAX_OBS_RATE: float
 @final
 class NativeVecEnv:
     def __new__(
-        cls, num_envs: int, spec: Spec, task: Literal["balance", "swing_up"], settings: dict[str, Any]
+        cls,
+        num_envs: int,
+        spec: Spec,
+        task: Literal["balance", "swing_up"],
+        settings: dict[str, Any],
     ) -> NativeVecEnv: ...
     @property
     def num_envs(self) -> int: ...
