@@ -17,6 +17,7 @@
 //! - [`regulators`] — [`Lqr`] and [`Lqg`] behind the [`Controller`] trait; [`sim`] runs them in
 //!   closed loop ([`simulate`], [`simulate_batch`]); [`metrics`] computes the paper's Tab. 1;
 //!   [`batch`] runs Monte Carlo studies that keep only per-run metrics.
+//!   [`sim::vec_env`] steps many pendulums as reinforcement-learning environments.
 //! - [`mpc`] — constrained MPC with soft output bounds and the disturbance-model Kalman filter
 //!   ([`Mpc`]), solved by Clarabel or a dense active-set method.
 //! - [`spec`] — the experiment file every front end reads ([`Spec`]), and the one assembly of
