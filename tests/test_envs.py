@@ -168,6 +168,31 @@ def test_seeds_reproduce_and_randomisation_stays_in_its_ranges() -> None:
     assert single.episode_params == first
 
 
+def test_an_experiment_file_configures_plant_sensor_and_voltage(tmp_path) -> None:
+    rig = tmp_path / "rig.toml"
+    rig.write_text(
+        '[plant]\npreset = "qube_servo2"\nmp = 0.03\n\n'
+        "[sensor]\nencoder_counts = [512, 4096]\nnoise_std = [0.0, 0.0]\n\n"
+        "[mpc]\ninput_bounds = [[-6.0, 6.0]]\n"
+    )
+    env = envs.PendulumEnv(config=rig, init_spread=0.0)
+    assert env.u_limit == 6.0
+    assert env.episode_params == riprs.FurutaParams.qube_servo2().replace(mp=0.03)
+    env.reset(seed=0)
+    for _ in range(30):
+        obs, *_ = env.step(np.array([0.5], dtype=np.float32))
+    theta, alpha = env.state[0], env.state[2]
+    q = 2 * np.pi / np.array([512, 4096])
+    y = q * np.round(np.array([theta, alpha]) / q)
+    np.testing.assert_allclose(obs[[1, 3]], np.sin(y), atol=1e-7)
+    # Full voltage is 6 V: the same actions on a 12 V environment move the arm further.
+    big = envs.PendulumEnv(params=env.episode_params, init_spread=0.0, noise_std=0.0)
+    big.reset(seed=0)
+    for _ in range(30):
+        big.step(np.array([0.5], dtype=np.float32))
+    assert abs(big.state[0]) > 1.5 * abs(theta)
+
+
 def test_covariance_draws_have_the_stated_covariance(tmp_path) -> None:
     cov = [[4e-8, 1e-9], [1e-9, 1e-10]]
     rig = tmp_path / "rig.toml"
@@ -245,6 +270,18 @@ def test_callable_errors_propagate() -> None:
 
     with pytest.raises(RuntimeError, match="policy crashed"):
         riprs.simulate(plant, broken, 1.0, x0=[0, 0, 0.05, 0])
+    calls = []
+
+    def fails_at_ten(y):
+        calls.append(y.copy())
+        if len(calls) == 10:
+            raise KeyboardInterrupt
+        return 0.0
+
+    with pytest.raises(KeyboardInterrupt):
+        riprs.simulate(plant, fails_at_ten, 100.0, x0=[0, 0, 0.05, 0])
+    assert len(calls) == 10  # the run ended at the failing sample
+    assert all(c.shape == (2,) and c.dtype == np.float64 for c in calls)
     with pytest.raises(riprs.NonFiniteError, match="finite"):
         riprs.simulate(plant, lambda y: float("nan"), 1.0, x0=[0, 0, 0.05, 0])
     with pytest.raises(TypeError):

@@ -168,8 +168,8 @@ fn result_to_dict<'py>(py: Python<'py>, res: SimResult) -> PyResult<Bound<'py, P
 
 /// A Python callable as the controller: `u = f(y)`, `y` the measured `[θ, α]` as a numpy
 /// array, `u` a real number (V). The first exception it raises (or a result that is not a
-/// finite number) is kept, every later step writes 0 V without calling it, and the run's
-/// caller raises it.
+/// finite number) is kept, the controller reports itself stopped so that the run ends at that
+/// sample, and the run's caller raises it.
 struct CallableController {
     func: Py<PyAny>,
     error: Option<PyErr>,
@@ -214,6 +214,15 @@ impl Controller for CallableController {
         }
         u[0] = 0.0;
         rip_core::StepStatus::Fallback
+    }
+
+    fn phase(&self) -> rip_core::Phase {
+        // After an exception the run has no controller left: end it at this sample.
+        if self.error.is_some() {
+            rip_core::Phase::Stopped(rip_core::StopCause::LeftBalanceRegion)
+        } else {
+            rip_core::Phase::Balance
+        }
     }
 
     fn reset(&mut self) {}

@@ -489,9 +489,9 @@ impl Observer {
     #[inline]
     pub fn observe(&mut self, y: [f64; 2]) -> [f64; OBS_DIM] {
         if self.started {
-            for i in 0..2 {
-                let d = (y[i] - self.prev[i]) / self.ts;
-                self.rates[i] = self.a * self.rates[i] + (1.0 - self.a) * d;
+            for ((rate, yi), prev) in self.rates.iter_mut().zip(y).zip(self.prev) {
+                let d = (yi - prev) / self.ts;
+                *rate = self.a * *rate + (1.0 - self.a) * d;
             }
         } else {
             self.rates = [0.0; 2];
