@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import os
 import sys
+import types
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence, Union
 
@@ -110,6 +111,8 @@ def _native(num_envs: int, task: str, config: ConfigLike, settings: dict[str, An
         randomize = dict(DEFAULT_RANDOMIZATION)
     elif randomize is False:
         randomize = None
+    elif isinstance(randomize, Mapping):
+        randomize = {k: dict(v) if isinstance(v, Mapping) else v for k, v in randomize.items()}
     if cov is not None:
         randomize = dict(randomize or {})
         randomize.setdefault("covariance", cov)
@@ -123,26 +126,28 @@ def _native(num_envs: int, task: str, config: ConfigLike, settings: dict[str, An
 #: The ranges of ``randomize=True``: what sim-to-real reports on Furuta pendulums blame
 #: (friction, stiction, delay, noise) over the envelope of ``docs/design.md``, and +-10 % (+-50 %
 #: for the damping, which sources give orders of magnitude apart) on the physical parameters.
-DEFAULT_RANDOMIZATION: Mapping[str, Any] = {
-    "relative": {
-        "mr": 0.1,
-        "Lr": 0.1,
-        "Jr": 0.1,
-        "mp": 0.1,
-        "Lp": 0.1,
-        "Jp": 0.1,
-        "Rm": 0.1,
-        "kt": 0.1,
-        "km": 0.1,
-        "Dr": 0.5,
-        "Dp": 0.5,
-    },
-    "Vd": (0.0, 0.3),
-    "Cr": (0.0, 0.003),
-    "Cp": (0.0, 2.5e-5),
-    "action_delay": (0, 2),
-    "noise_std": (0.0, 2e-3),
-}
+DEFAULT_RANDOMIZATION: Mapping[str, Any] = types.MappingProxyType(
+    {
+        "relative": {
+            "mr": 0.1,
+            "Lr": 0.1,
+            "Jr": 0.1,
+            "mp": 0.1,
+            "Lp": 0.1,
+            "Jp": 0.1,
+            "Rm": 0.1,
+            "kt": 0.1,
+            "km": 0.1,
+            "Dr": 0.5,
+            "Dp": 0.5,
+        },
+        "Vd": (0.0, 0.3),
+        "Cr": (0.0, 0.003),
+        "Cp": (0.0, 2.5e-5),
+        "action_delay": (0, 2),
+        "noise_std": (0.0, 2e-3),
+    }
+)
 
 
 def _spaces() -> tuple[spaces.Box, spaces.Box]:
