@@ -1,10 +1,12 @@
-"""Train a Stable-Baselines3 SAC agent to balance on riprs/Balance-v0 under domain randomisation,
-evaluate it on 100 randomised episodes, then run it through riprs.simulate against LQR.
+"""Train a Stable-Baselines3 agent (PPO or SAC) to balance on riprs/Balance-v0 under domain
+randomisation, evaluate it on 100 randomised episodes, then run it through riprs.simulate
+against LQR.
 
-Not run by CI (it needs ``pip install stable-baselines3``, which brings PyTorch, and minutes of
-training). ``examples/gym_balance.py`` trains a linear policy on the same environment in seconds.
+Not run by CI (it needs ``pip install ".[rl]"``, i.e. Stable-Baselines3 and PyTorch, and
+minutes of training). ``examples/gym_balance.py`` trains a linear policy on the same
+environment in seconds.
 
-Usage: python benches/gym_train_sb3.py [--steps 200000] [--envs 16] [--save sac_balance.zip]
+Usage: python benches/gym_train_sb3.py [--algo ppo|sac] [--steps 200000] [--envs 16] [--save FILE]
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import time
 from typing import Any, Sequence
 
 import numpy as np
-from stable_baselines3 import SAC
+from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.vec_env import VecEnv
 
 import riprs
@@ -83,13 +85,15 @@ class Sb3VecEnv(VecEnv):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--algo", choices=["ppo", "sac"], default="ppo")
     ap.add_argument("--steps", type=int, default=200_000)
     ap.add_argument("--envs", type=int, default=16)
     ap.add_argument("--save", default=None)
     args = ap.parse_args()
 
     train = Sb3VecEnv(args.envs, randomize=True, max_episode_steps=500)
-    model = SAC("MlpPolicy", train, verbose=0, seed=0)
+    algo = {"ppo": PPO, "sac": SAC}[args.algo]
+    model = algo("MlpPolicy", train, verbose=0, seed=0, device="cpu")
     start = time.perf_counter()
     model.learn(total_timesteps=args.steps)
     print(f"trained {args.steps:,} env-steps in {time.perf_counter() - start:.0f} s")
@@ -112,7 +116,7 @@ def main() -> None:
     plant = riprs.paper.plant()
     policy = envs.policy_controller(act, evaluation)
     opts = {"x0": [0.0, 0.0, 0.1, 0.0], "encoder_counts": 2048, "noise_std": 1e-3, "seed": 0}
-    for name, ctrl in [("SAC", policy), ("LQR", riprs.Lqr.paper())]:
+    for name, ctrl in [(args.algo.upper(), policy), ("LQR", riprs.Lqr.paper())]:
         run = riprs.simulate(plant, ctrl, 10.0, **opts)
         print(f"{name}: fell={run.fell} RMSE theta, alpha, u = {np.round(run.rmse, 4)}")
 
