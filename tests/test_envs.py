@@ -111,6 +111,23 @@ def test_the_environment_steps_rip_cores_plant_and_sensor() -> None:
         )
 
 
+def test_measurement_noise_has_the_configured_standard_deviation() -> None:
+    env = envs.PendulumEnv(
+        "swing_up", encoder_counts=None, noise_std=[2e-3, 5e-4], max_episode_steps=5000
+    )
+    env.reset(seed=11)
+    errors = []
+    for _ in range(4000):
+        obs, *_ = env.step(np.zeros(1, dtype=np.float32))
+        x = env.state
+        measured = np.arctan2(obs[[1, 3]], obs[[0, 2]]).astype(np.float64)
+        errors.append(np.angle(np.exp(1j * (measured - x[[0, 2]]))))
+    e = np.array(errors)
+    # float32 observations add about 1e-7 rad; 4000 samples estimate a std to about 2 %.
+    np.testing.assert_allclose(e.std(axis=0), [2e-3, 5e-4], rtol=0.06)
+    assert np.all(np.abs(e.mean(axis=0)) < 4 * np.array([2e-3, 5e-4]) / np.sqrt(4000))
+
+
 def test_observed_rates_are_the_lqr_rate_filter_of_the_measurements() -> None:
     env = envs.PendulumEnv(init_spread=0.0, noise_std=0.0, encoder_counts=None, rate_cutoff=20.0)
     env.reset(seed=0)
