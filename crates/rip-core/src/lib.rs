@@ -47,6 +47,7 @@ pub mod regulators;
 pub mod sim;
 pub mod spec;
 pub mod swingup;
+pub mod trig;
 
 pub use controller::{Controller, Phase, StepStatus, StopCause};
 pub use dare::{dare, DareSolution};
