@@ -13,7 +13,7 @@
 //! - [`paper`] — the study's model, its recovered unrounded matrices and printed results.
 //! - [`plant`] — the nonlinear Furuta pendulum ([`Plant`], [`FurutaParams`]) and RK4; [`fit`]
 //!   recovers physical parameters from a discrete linear model; [`identify`](mod@identify) fits
-//!   the nonlinear model to logged excitation runs.
+//!   the nonlinear model to logged excitation runs; [`trig`] is its branch-free `sin`/`cos`.
 //! - [`regulators`] — [`Lqr`] and [`Lqg`] behind the [`Controller`] trait; [`sim`] runs them in
 //!   closed loop ([`simulate`], [`simulate_batch`]); [`metrics`] computes the paper's Tab. 1;
 //!   [`batch`] runs Monte Carlo studies that keep only per-run metrics.

@@ -64,8 +64,10 @@
 //! its action and reports its first observation with reward 0 and neither flag set.
 //!
 //! Stepping allocates nothing; resets build the drawn [`Plant`] (which computes its RK4
-//! stability limit). [`VecEnv::step`] spreads environments over threads (rayon) from
-//! [`PARALLEL_MIN_ENVS`] on.
+//! stability limit). [`VecEnv::step`] integrates [`LANES`] environments per call of
+//! [`Plant::advance_lanes`] (each in its own SIMD lane, with its own drawn plant: the bits of
+//! [`Plant::advance`]), and spreads these chunks over threads (rayon) from
+//! [`PARALLEL_MIN_ENVS`] environments on.
 
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -959,6 +961,10 @@ impl VecEnv {
                 .zip(reward.par_chunks_mut(LANES))
                 .zip(terminated.par_chunks_mut(LANES))
                 .zip(truncated.par_chunks_mut(LANES))
+                // Jobs of at least PARALLEL_MIN_ENVS / 2 environments: a few per thread, each
+                // far longer than rayon's scheduling of it, which on a loaded machine (workers
+                // preempted) otherwise costs more than the parallelism gains.
+                .with_min_len(PARALLEL_MIN_ENVS / (2 * LANES))
                 .for_each(|(((((e, a), o), r), te), tr)| {
                     step_chunk(config, autoreset, e, a, o, r, te, tr)
                 });
