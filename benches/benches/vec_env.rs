@@ -1,6 +1,7 @@
 //! The reinforcement-learning environments (`rip_core::sim::vec_env`): one step of `N`
 //! balance environments (10 RK4 substeps each, encoder and noise model, rate filter, reward),
-//! serial below `PARALLEL_MIN_ENVS` and on rayon's threads from it on.
+//! integrated `LANES` at a time in SIMD lanes, serial below `PARALLEL_MIN_ENVS` and on rayon's
+//! threads from it on.
 
 use criterion::{black_box, criterion_main, Criterion};
 use rip_core::sim::vec_env::{EnvConfig, VecEnv, OBS_DIM};
