@@ -54,6 +54,7 @@ EXAMPLES: dict[str, list[str]] = {
     "rig_excite": [],
     "campaign": [],
     "performance": [],
+    "gym_balance": [],
 }
 
 _state: dict[str, Any] = {}

@@ -269,7 +269,11 @@ class SwingUp:
     @property
     def x_hat(self) -> _F | None: ...
 
-def sim_run(plant: Plant, controller: _Controller, config: dict[str, Any]) -> dict[str, Any]: ...
+def sim_run(
+    plant: Plant,
+    controller: _Controller | Callable[[_F], float],
+    config: dict[str, Any],
+) -> dict[str, Any]: ...
 def sim_batch(
     plants: list[Plant],
     controller: _Controller,
@@ -559,3 +563,58 @@ class Rig:
     def to_toml(self) -> str: ...
 
 def random_rig(seed: int) -> Rig: ...
+
+# riprs.envs (rip_core::sim::vec_env)
+ENV_OBS_DIM: int
+ENV_MAX_DELAY: int
+ENV_MAX_OBS_RATE: float
+
+@final
+class NativeVecEnv:
+    def __new__(
+        cls,
+        num_envs: int,
+        spec: Spec,
+        task: Literal["balance", "swing_up"],
+        settings: dict[str, Any],
+    ) -> NativeVecEnv: ...
+    @property
+    def num_envs(self) -> int: ...
+    @property
+    def Ts(self) -> float: ...
+    @property
+    def u_limit(self) -> float: ...
+    @property
+    def max_episode_steps(self) -> int: ...
+    @property
+    def rate_cutoff(self) -> float: ...
+    @property
+    def params(self) -> FurutaParams: ...
+    def reset(
+        self,
+        obs: NDArray[np.float32],
+        seeds: Sequence[int] | None = None,
+        mask: NDArray[np.bool_] | None = None,
+    ) -> None: ...
+    def step(
+        self,
+        actions: NDArray[np.float32],
+        autoreset: bool,
+        obs: NDArray[np.float32],
+        reward: _F,
+        terminated: NDArray[np.bool_],
+        truncated: NDArray[np.bool_],
+    ) -> None: ...
+    def state(self, i: int) -> _F: ...
+    def episode_params(self, i: int) -> FurutaParams: ...
+    def episode_sensor(self, i: int) -> tuple[int, tuple[float, float]]: ...
+
+@final
+class EnvObserver:
+    def __new__(cls, Ts: float, rate_cutoff: float) -> EnvObserver: ...
+    def observe(self, y: ArrayLike) -> NDArray[np.float32]: ...
+    def reset(self) -> None: ...
+
+def env_replay(
+    plant: Plant, y: ArrayLike, u: ArrayLike, Ts: float, substeps: int
+) -> tuple[_F, tuple[float, float]]: ...

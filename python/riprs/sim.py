@@ -219,7 +219,7 @@ _DEFAULTS: dict[str, Any] = {
 
 def simulate(
     plant: PlantLike,
-    controller: Controller,
+    controller: Controller | Callable[[FloatArray], float],
     duration: float = _riprs.DEFAULT_DURATION,
     *,
     reference: ArrayLike | None = None,
@@ -248,13 +248,21 @@ def simulate(
         x(t_{k+1}) &= \mathrm{RK4}\big(x(t_k), \mathrm{sat}(u[k], \pm u_{limit}), \tau_d\big)
         \text{ with ``substeps`` steps}
 
-    The controller is copied and reset first, so the object passed in is not modified.
+    A riprs controller is copied and reset first, so the object passed in is not modified.
 
     Parameters
     ----------
     plant : Plant or FurutaParams
         The nonlinear plant.
-    controller : Lqr, Lqg, Mpc or SwingUp
+    controller : Lqr, Lqg, Mpc, SwingUp or callable
+        A riprs controller, or any Python callable ``u = controller(y)`` from the measured
+        angles ``y = [theta, alpha]`` (float64 array, shape (2,)) to the voltage (a real
+        number, saturated at ``u_limit``), e.g. a trained policy
+        (:func:`riprs.envs.policy_controller`). A callable is called once per control period
+        on the calling thread, in order, and is not copied or reset: keep its state (filters,
+        clocks) inside it and use a fresh one per run. It is a balance controller (the run
+        stops at ``fall_limit``). An exception it raises, or a result that is not a finite
+        number (``NonFiniteError``), ends the run and propagates.
     duration : float
         Length of the run (s); ``round(duration / Ts)`` samples.
     reference : float or array_like, optional
@@ -299,7 +307,8 @@ def simulate(
     InvalidParameterError, ShapeError, NonFiniteError
         A bad setting; the message names it.
     TypeError
-        ``plant`` or ``controller`` is not a riprs object.
+        ``plant`` is not a riprs object, ``controller`` is neither a riprs controller nor
+        callable, or a callable returned something that is not a number.
     """
     config = _config(
         duration=duration,

@@ -15,10 +15,11 @@
 //! - [`paper`] — the study's model, its recovered unrounded matrices and printed results.
 //! - [`plant`] — the nonlinear Furuta pendulum ([`Plant`], [`FurutaParams`]) and RK4; [`fit`]
 //!   recovers physical parameters from a discrete linear model; [`identify`](mod@identify) fits
-//!   the nonlinear model to logged excitation runs.
+//!   the nonlinear model to logged excitation runs; [`trig`] is its branch-free `sin`/`cos`.
 //! - [`regulators`] — [`Lqr`] and [`Lqg`] behind the [`Controller`] trait; [`sim`] runs them in
 //!   closed loop ([`simulate`], [`simulate_batch`]); [`metrics`] computes the paper's Tab. 1;
 //!   [`batch`] runs Monte Carlo studies that keep only per-run metrics.
+//!   [`sim::vec_env`] steps many pendulums as reinforcement-learning environments.
 //! - [`mpc`] — constrained MPC with soft output bounds and the disturbance-model Kalman filter
 //!   ([`Mpc`]), solved by Clarabel or a dense active-set method.
 //! - [`spec`] — the experiment file every front end reads ([`Spec`]), and the one assembly of
@@ -50,6 +51,7 @@ pub mod rig;
 pub mod sim;
 pub mod spec;
 pub mod swingup;
+pub mod trig;
 
 pub use controller::{Controller, Phase, StepStatus, StopCause};
 pub use dare::{dare, DareSolution};

@@ -44,6 +44,11 @@
 //! (J. Control Sci. Eng., 2011), with the pendulum's `sin²α` inertia term kept and the arm's
 //! parallel-axis term included (see [`FurutaParams::qube_servo2`]).
 //!
+//! `sin α` and `cos α` are evaluated together once per evaluation of the right-hand side, by
+//! [`crate::trig::sin_cos`] (within 2 ulp of the correctly rounded values). The same
+//! operations run over several pendulums at once in [`Plant::advance_lanes`], which the
+//! compiler can map to SIMD lanes without changing a bit of any pendulum's trajectory.
+//!
 //! # Coulomb friction and the voltage dead zone
 //!
 //! Coulomb friction is a torque of constant size `cr` (arm) or `cp` (pendulum) against the
@@ -411,38 +416,18 @@ impl Plant {
     /// `M [θ̈; α̈] = [f₁; f₂]`, without Coulomb friction and dead zone.
     #[inline]
     fn mass_and_forces(&self, x: &State, u: f64, tau_d: f64) -> ([f64; 3], [f64; 2]) {
-        let (s, c) = x[2].sin_cos();
-        let (td, ad) = (x[1], x[3]);
-        let m = [self.j0 + self.ja * s * s, -self.m12 * c, self.ja];
-        let f1 = self.b * u - self.c_arm * td + tau_d
-            - 2.0 * self.ja * s * c * td * ad
-            - self.m12 * s * ad * ad;
-        let f2 = -self.dp * ad + self.ja * s * c * td * td + self.grav * s;
-        (m, [f1, f2])
-    }
-
-    /// `M q̈ = f` solved for `ẋ`.
-    #[inline]
-    fn solve(x: &State, [m11, m12, m22]: [f64; 3], [f1, f2]: [f64; 2]) -> State {
-        let det = m11 * m22 - m12 * m12;
-        let thdd = (m22 * f1 - m12 * f2) / det;
-        let addd = (m11 * f2 - m12 * f1) / det;
-        State::new(x[1], thdd, x[3], addd)
+        let c = Coefficients::gather([self]);
+        let (m, f) = c.mass_and_forces(&lanes_of([x]), &[u], &[tau_d]);
+        (m.map(|v| v[0]), f.map(|v| v[0]))
     }
 
     /// `ẋ = f(x, u, τ_d)`: the equations of motion of the module docs, `τ_d` (N·m) being an
     /// external torque on the arm.
     #[inline]
     pub fn derivative(&self, x: &State, u: f64, tau_d: f64) -> State {
-        let (m, [mut f1, mut f2]) = self.mass_and_forces(x, dead_zone(u, self.vd), tau_d);
-        // Skipped at zero so that the frictionless presets cost (and compute) what they did.
-        if self.coulomb[0] != 0.0 {
-            f1 -= self.coulomb[0] * (x[1] / COULOMB_VELOCITY_SCALE).tanh();
-        }
-        if self.coulomb[1] != 0.0 {
-            f2 -= self.coulomb[1] * (x[3] / COULOMB_VELOCITY_SCALE).tanh();
-        }
-        Self::solve(x, m, [f1, f2])
+        let c = Coefficients::gather([self]);
+        let d = c.derivative(&lanes_of([x]), &[u], &[tau_d]);
+        State::new(d[0][0], d[1][0], d[2][0], d[3][0])
     }
 
     /// `ẋ` of the smooth part of the model (no Coulomb friction, no dead zone), which
@@ -450,17 +435,50 @@ impl Plant {
     #[inline]
     fn smooth_derivative(&self, x: &State, u: f64) -> State {
         let (m, f) = self.mass_and_forces(x, u, 0.0);
-        Self::solve(x, m, f)
+        let [thdd, addd] = solve([m[0]], [m[1]], [m[2]], [f[0]], [f[1]]);
+        State::new(x[1], thdd[0], x[3], addd[0])
     }
 
     /// One classical fourth-order Runge–Kutta step of length `h` with `u`, `τ_d` held.
     #[inline]
     pub fn rk4_step(&self, x: &mut State, u: f64, tau_d: f64, h: f64) {
-        let k1 = self.derivative(x, u, tau_d);
-        let k2 = self.derivative(&(*x + k1 * (0.5 * h)), u, tau_d);
-        let k3 = self.derivative(&(*x + k2 * (0.5 * h)), u, tau_d);
-        let k4 = self.derivative(&(*x + k3 * h), u, tau_d);
-        *x += (k1 + (k2 + k3) * 2.0 + k4) * (h / 6.0);
+        let c = Coefficients::gather([self]);
+        let mut z = lanes_of([&*x]);
+        c.rk4_step(&mut z, &[u], &[tau_d], h);
+        *x = State::new(z[0][0], z[1][0], z[2][0], z[3][0]);
+    }
+
+    /// Advances `x` by `dt` with `substeps` RK4 steps under a zero-order-held input.
+    #[inline]
+    pub fn advance(&self, x: &mut State, u: f64, tau_d: f64, dt: f64, substeps: usize) {
+        let mut xs = [*x];
+        Self::advance_lanes([self], &mut xs, &[u], &[tau_d], dt, substeps);
+        *x = xs[0];
+    }
+
+    /// [`advance`](Self::advance) of `L` pendulums at once, pendulum `l` on `plants[l]` from
+    /// `x[l]` with `u[l]`, `tau_d[l]`: the same operations in the same order per pendulum, so
+    /// each result has exactly the bits `plants[l].advance(...)` gives, but evaluated lane by
+    /// lane over structure-of-arrays state so that the compiler can use SIMD.
+    #[inline(always)]
+    pub fn advance_lanes<const L: usize>(
+        plants: [&Plant; L],
+        x: &mut [State; L],
+        u: &[f64; L],
+        tau_d: &[f64; L],
+        dt: f64,
+        substeps: usize,
+    ) {
+        let c = Coefficients::gather(plants);
+        let n = substeps.max(1);
+        let h = dt / n as f64;
+        let mut z = lanes_of(x.each_ref());
+        for _ in 0..n {
+            c.rk4_step(&mut z, u, tau_d, h);
+        }
+        for (l, xl) in x.iter_mut().enumerate() {
+            *xl = State::new(z[0][l], z[1][l], z[2][l], z[3][l]);
+        }
     }
 
     /// [`advance`](Self::advance) with every argument checked and the work bounded: `x`, `u`,
@@ -574,20 +592,10 @@ impl Plant {
         Ok(())
     }
 
-    /// Advances `x` by `dt` with `substeps` RK4 steps under a zero-order-held input.
-    #[inline]
-    pub fn advance(&self, x: &mut State, u: f64, tau_d: f64, dt: f64, substeps: usize) {
-        let n = substeps.max(1);
-        let h = dt / n as f64;
-        for _ in 0..n {
-            self.rk4_step(x, u, tau_d, h);
-        }
-    }
-
     /// Total mechanical energy `T + V` (J), with `V = G cos α` (module docs). Conserved when
     /// `km = dr = dp = cr = cp = 0` and `u = τ_d = 0`.
     pub fn energy(&self, x: &State) -> f64 {
-        let (s, c) = x[2].sin_cos();
+        let (s, c) = crate::trig::sin_cos(x[2]);
         let (td, ad) = (x[1], x[3]);
         0.5 * (self.j0 + self.ja * s * s) * td * td - self.m12 * c * td * ad
             + 0.5 * self.ja * ad * ad
@@ -603,7 +611,7 @@ impl Plant {
     /// (`θ̇ = α̇ = 0`, `α ∈ {0, π}`, `u = 0`) this is the linearised model; elsewhere it is the
     /// first-order Taylor model about a moving point.
     pub fn linearize(&self, x: &State, u: f64) -> (SMatrix<f64, 4, 4>, SVector<f64, 4>) {
-        let (s, c) = x[2].sin_cos();
+        let (s, c) = crate::trig::sin_cos(x[2]);
         let (td, ad) = (x[1], x[3]);
         let ([m11, m12, m22], _) = self.mass_and_forces(x, u, 0.0);
         let det = m11 * m22 - m12 * m12;
@@ -665,6 +673,132 @@ impl Plant {
             &Mat::from_fn(4, 1, |i, _| b[i]),
             ts,
         )
+    }
+}
+
+/// A state per lane, structure of arrays: `z[i][l]` is component `i` of pendulum `l`.
+type Lanes<const L: usize> = [[f64; L]; 4];
+
+#[inline(always)]
+fn lanes_of<const L: usize>(x: [&State; L]) -> Lanes<L> {
+    std::array::from_fn(|i| std::array::from_fn(|l| x[l][i]))
+}
+
+/// `M q̈ = f` solved for `(θ̈, α̈)` in every lane.
+#[inline(always)]
+fn solve<const L: usize>(
+    m11: [f64; L],
+    m12: [f64; L],
+    m22: [f64; L],
+    f1: [f64; L],
+    f2: [f64; L],
+) -> [[f64; L]; 2] {
+    let mut out = [[0.0; L]; 2];
+    for l in 0..L {
+        let det = m11[l] * m22[l] - m12[l] * m12[l];
+        out[0][l] = (m22[l] * f1[l] - m12[l] * f2[l]) / det;
+        out[1][l] = (m11[l] * f2[l] - m12[l] * f1[l]) / det;
+    }
+    out
+}
+
+/// The lumped coefficients of [`Plant`] of `L` pendulums, one lane each: the one definition of
+/// the equations of motion, which one pendulum evaluates with `L = 1`.
+#[derive(Clone, Copy)]
+struct Coefficients<const L: usize> {
+    j0: [f64; L],
+    ja: [f64; L],
+    m12: [f64; L],
+    grav: [f64; L],
+    b: [f64; L],
+    c_arm: [f64; L],
+    dp: [f64; L],
+    cr: [f64; L],
+    cp: [f64; L],
+    vd: [f64; L],
+}
+
+impl<const L: usize> Coefficients<L> {
+    #[inline(always)]
+    fn gather(p: [&Plant; L]) -> Self {
+        Self {
+            j0: p.map(|p| p.j0),
+            ja: p.map(|p| p.ja),
+            m12: p.map(|p| p.m12),
+            grav: p.map(|p| p.grav),
+            b: p.map(|p| p.b),
+            c_arm: p.map(|p| p.c_arm),
+            dp: p.map(|p| p.dp),
+            cr: p.map(|p| p.coulomb[0]),
+            cp: p.map(|p| p.coulomb[1]),
+            vd: p.map(|p| p.vd),
+        }
+    }
+
+    /// `(M₁₁, M₁₂, M₂₂)` and `(f₁, f₂)` of the module docs without Coulomb friction and dead
+    /// zone, per lane.
+    #[inline(always)]
+    fn mass_and_forces(
+        &self,
+        x: &Lanes<L>,
+        u: &[f64; L],
+        tau_d: &[f64; L],
+    ) -> ([[f64; L]; 3], [[f64; L]; 2]) {
+        let (s, c) = crate::trig::sin_cos_lanes(&x[2]);
+        let mut m = [[0.0; L]; 3];
+        let mut f = [[0.0; L]; 2];
+        for l in 0..L {
+            let (s, c, td, ad) = (s[l], c[l], x[1][l], x[3][l]);
+            let ja = self.ja[l];
+            m[0][l] = self.j0[l] + ja * s * s;
+            m[1][l] = -self.m12[l] * c;
+            m[2][l] = ja;
+            f[0][l] = self.b[l] * u[l] - self.c_arm[l] * td + tau_d[l]
+                - 2.0 * ja * s * c * td * ad
+                - self.m12[l] * s * ad * ad;
+            f[1][l] = -self.dp[l] * ad + ja * s * c * td * td + self.grav[l] * s;
+        }
+        (m, f)
+    }
+
+    /// `ẋ` of every lane ([`Plant::derivative`]).
+    #[inline(always)]
+    fn derivative(&self, x: &Lanes<L>, u: &[f64; L], tau_d: &[f64; L]) -> Lanes<L> {
+        let mut applied = [0.0; L];
+        for l in 0..L {
+            applied[l] = dead_zone(u[l], self.vd[l]);
+        }
+        let (m, [mut f1, mut f2]) = self.mass_and_forces(x, &applied, tau_d);
+        // Skipped at zero so that the frictionless presets cost (and compute) what they did.
+        for (f, coulomb, v) in [(&mut f1, &self.cr, &x[1]), (&mut f2, &self.cp, &x[3])] {
+            if coulomb.iter().any(|c| *c != 0.0) {
+                for l in 0..L {
+                    if coulomb[l] != 0.0 {
+                        f[l] -= coulomb[l] * (v[l] / COULOMB_VELOCITY_SCALE).tanh();
+                    }
+                }
+            }
+        }
+        let [thdd, addd] = solve(m[0], m[1], m[2], f1, f2);
+        [x[1], thdd, x[3], addd]
+    }
+
+    /// One RK4 step of every lane ([`Plant::rk4_step`]).
+    #[inline(always)]
+    fn rk4_step(&self, x: &mut Lanes<L>, u: &[f64; L], tau_d: &[f64; L], h: f64) {
+        let shifted = |x: &Lanes<L>, k: &Lanes<L>, a: f64| -> Lanes<L> {
+            std::array::from_fn(|i| std::array::from_fn(|l| x[i][l] + k[i][l] * a))
+        };
+        let k1 = self.derivative(x, u, tau_d);
+        let k2 = self.derivative(&shifted(x, &k1, 0.5 * h), u, tau_d);
+        let k3 = self.derivative(&shifted(x, &k2, 0.5 * h), u, tau_d);
+        let k4 = self.derivative(&shifted(x, &k3, h), u, tau_d);
+        let w = h / 6.0;
+        for i in 0..4 {
+            for l in 0..L {
+                x[i][l] += (k1[i][l] + (k2[i][l] + k3[i][l]) * 2.0 + k4[i][l]) * w;
+            }
+        }
     }
 }
 

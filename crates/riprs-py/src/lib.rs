@@ -9,6 +9,7 @@ use pyo3::prelude::*;
 mod control;
 mod convert;
 mod design;
+mod envs;
 mod errors;
 mod excitation;
 mod identify;
@@ -39,5 +40,6 @@ fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     identify::register(m)?;
     rip_rt_cli::register(m)?;
     rig::register(m)?;
+    envs::register(m)?;
     Ok(())
 }

@@ -166,6 +166,68 @@ fn result_to_dict<'py>(py: Python<'py>, res: SimResult) -> PyResult<Bound<'py, P
     Ok(d)
 }
 
+/// A Python callable as the controller: `u = f(y)`, `y` the measured `[θ, α]` as a numpy
+/// array, `u` a real number (V). The first exception it raises (or a result that is not a
+/// finite number) is kept, the controller reports itself stopped so that the run ends at that
+/// sample, and the run's caller raises it.
+struct CallableController {
+    func: Py<PyAny>,
+    error: Option<PyErr>,
+}
+
+impl CallableController {
+    fn call(&self, py: Python<'_>, y: &[f64]) -> PyResult<f64> {
+        let arr = numpy::PyArray1::from_slice(py, y);
+        let out = self.func.call1(py, (arr,))?;
+        let out = out.bind(py);
+        let u = match out.extract::<Real>() {
+            Ok(r) => r.0,
+            Err(_) => vector_arg::<1>(out, "controller's return value")?[0],
+        };
+        if !u.is_finite() {
+            return Err(crate::errors::NonFiniteError::new_err(format!(
+                "the controller returned {u}, not a finite voltage"
+            )));
+        }
+        Ok(u)
+    }
+}
+
+impl Controller for CallableController {
+    fn n_outputs(&self) -> usize {
+        2
+    }
+
+    fn n_inputs(&self) -> usize {
+        1
+    }
+
+    fn step(&mut self, y: &[f64], _r: &[f64], u: &mut [f64]) -> rip_core::StepStatus {
+        if self.error.is_none() {
+            match Python::with_gil(|py| self.call(py, y)) {
+                Ok(v) => {
+                    u[0] = v;
+                    return rip_core::StepStatus::Nominal;
+                }
+                Err(e) => self.error = Some(e),
+            }
+        }
+        u[0] = 0.0;
+        rip_core::StepStatus::Fallback
+    }
+
+    fn phase(&self) -> rip_core::Phase {
+        // After an exception the run has no controller left: end it at this sample.
+        if self.error.is_some() {
+            rip_core::Phase::Stopped(rip_core::StopCause::LeftBalanceRegion)
+        } else {
+            rip_core::Phase::Balance
+        }
+    }
+
+    fn reset(&mut self) {}
+}
+
 /// One closed-loop run; returns the record as a dict of numpy arrays.
 #[pyfunction]
 fn sim_run<'py>(
@@ -176,7 +238,21 @@ fn sim_run<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let cfg = config_from_dict(config)?;
     let plant: Plant = plant.inner;
-    let mut c = extract_controller(controller)?;
+    let native = extract_controller(controller);
+    if native.is_err() && controller.is_callable() {
+        // Every step calls back into Python: the run stays on this thread with the GIL held
+        // (Ctrl-C reaches the callable as KeyboardInterrupt, which ends the run).
+        let mut c = CallableController {
+            func: controller.clone().unbind(),
+            error: None,
+        };
+        let res = rip_core::sim::simulate(&plant, &mut c, &cfg).py()?;
+        if let Some(e) = c.error {
+            return Err(e);
+        }
+        return result_to_dict(py, res);
+    }
+    let mut c = native?;
     let res = interruptible(
         py,
         |cancel| rip_core::sim::simulate_cancellable(&plant, c.as_mut(), &cfg, cancel),

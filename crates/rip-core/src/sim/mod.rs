@@ -38,6 +38,7 @@ use crate::plant::{Plant, State};
 use crate::swingup::wrap_angle;
 
 mod runs;
+pub mod vec_env;
 pub use runs::{
     batch_runs, simulate_batch, simulate_batch_cloned, simulate_runs, simulate_runs_cancellable,
     Pairing,
@@ -107,6 +108,34 @@ pub struct SensorModel {
     pub noise_std: [f64; 2],
     /// Encoder zero offsets (rad): the encoders read `[θ + o₀, α + o₁]` before quantisation.
     pub offsets: [f64; 2],
+}
+
+impl SensorModel {
+    /// The measured angles `[θ, α]` of the true state `x` (module docs): offset, quantised,
+    /// then noise of standard deviation `noise_std` (this model's, or a drawn one), one
+    /// standard-normal draw from `rng` per angle with a positive deviation.
+    #[inline]
+    pub fn measure<R: rand::Rng + ?Sized>(
+        &self,
+        x: &[f64; 4],
+        noise_std: [f64; 2],
+        rng: &mut R,
+    ) -> [f64; 2] {
+        let mut y = [0.0; 2];
+        for (i, yi) in y.iter_mut().enumerate() {
+            let angle = x[2 * i] + self.offsets[i];
+            let mut v = match self.counts_per_rev {
+                Some(cpr) => quantise(angle, cpr[i]),
+                None => angle,
+            };
+            if noise_std[i] > 0.0 {
+                let z: f64 = StandardNormal.sample(rng);
+                v += noise_std[i] * z;
+            }
+            *yi = v;
+        }
+        y
+    }
 }
 
 /// A step that starts at `time`.
@@ -522,23 +551,15 @@ pub(crate) fn run_loop(
             return Err(RipError::Cancelled);
         }
         let t = k as f64 * ts;
-        for (i, yi) in y.iter_mut().enumerate() {
-            let angle = x[2 * i] + config.sensor.offsets[i];
-            let mut v = match config.sensor.counts_per_rev {
-                Some(cpr) => quantise(angle, cpr[i]),
-                None => angle,
+        let measured =
+            config
+                .sensor
+                .measure(&[x[0], x[1], x[2], x[3]], config.sensor.noise_std, &mut rng);
+        for (i, (yi, v)) in y.iter_mut().zip(measured).enumerate() {
+            *yi = match &config.output_disturbance {
+                Some(d) if t >= d.time => v + d.value[i],
+                _ => v,
             };
-            let std = config.sensor.noise_std[i];
-            if std > 0.0 {
-                let z: f64 = StandardNormal.sample(&mut rng);
-                v += std * z;
-            }
-            if let Some(d) = &config.output_disturbance {
-                if t >= d.time {
-                    v += d.value[i];
-                }
-            }
-            *yi = v;
         }
         let r = match &config.reference {
             Reference::Step { time, value } => {
