@@ -192,6 +192,14 @@ as `riprs config` prints it; `riprs config FILE` prints a file resolved the same
   and the measurement-noise diagonal of eq. (2).
 - `[mpc]`: section 3's MPC with Python's `riprs.Mpc` names; `input_bounds` (V) also clamps LQR
   and LQG; `output_bounds` per output, `[-inf, inf]` for none.
+- `[compensation]`: the dead zone and arm Coulomb friction compensated on the voltage of
+  every controller and of the swing-up (dead-zone inverse and friction feed-forward,
+  [design.md](design.md#dead-zone-and-friction-compensation)): `dead_zone` (V) and
+  `arm_friction` (N m) default to the `[plant]`'s `Vd` and `Cr`, `voltage_scale` (V) and
+  `velocity_scale` (rad/s) are the widths of the ramps that replace their signs; the
+  controllers then plan within `input_bounds` shrunk by the correction, so the voltage written
+  stays inside them. `enabled = false` runs the controllers uncompensated; a rig with neither
+  (every preset) has none.
 - `[monte_carlo]`: runs over noise seeds and uniform perturbations of the named parameters.
 
 ```toml

@@ -29,6 +29,7 @@
 //! Every fallible routine returns [`RipError`], whose variants name the offending argument.
 
 pub mod batch;
+pub mod compensation;
 pub mod controller;
 pub mod dare;
 pub mod error;
@@ -47,6 +48,7 @@ pub mod sim;
 pub mod spec;
 pub mod swingup;
 
+pub use compensation::{Compensated, Compensation};
 pub use controller::{Controller, Phase, StepStatus, StopCause};
 pub use dare::{dare, DareSolution};
 pub use error::{Result, RipError};

@@ -286,16 +286,21 @@ impl PySpec {
             let obj: Bound<'py, PyAny> = match kind {
                 ControllerKind::Lqr => {
                     let c = py.allow_threads(|| d.lqr()).map_err(config_err)?;
-                    Bound::new(py, PyLqr::from_core(c))?.into_any()
+                    Bound::new(py, PyLqr::from_core(c, d.compensation().copied()))?.into_any()
                 }
                 ControllerKind::Lqg => {
                     let c = py.allow_threads(|| d.lqg()).map_err(config_err)?;
-                    Bound::new(py, PyLqg::from_core(c))?.into_any()
+                    Bound::new(py, PyLqg::from_core(c, d.compensation().copied()))?.into_any()
                 }
                 ControllerKind::Mpc => {
                     let c = py.allow_threads(|| d.mpc()).map_err(config_err)?;
                     let inner = Shared::new(c);
-                    Bound::new(py, PyMpc { inner })?.into_any()
+                    let compensation = d.compensation().copied();
+                    Bound::new(py, PyMpc {
+                        inner,
+                        compensation,
+                    })?
+                    .into_any()
                 }
             };
             out.set_item(kind.name(), obj)?;

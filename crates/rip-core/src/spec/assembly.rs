@@ -10,6 +10,9 @@
 //! LQR            K, lqr.rate_cutoff, clamp to mpc.input_bounds
 //! LQG            K on the estimator (no MPC is built for it)
 //! MPC            [mpc] settings on the same estimator
+//! compensation   when [compensation] finds a dead zone or arm friction to compensate, each
+//!                controller plans within the input bounds shrunk by V_d + V_f and its
+//!                voltage passes through the compensation (crate::compensation)
 //! ```
 //!
 //! Every failure is a [`SpecError`] naming the key that caused it, so a file whose values are
@@ -18,6 +21,7 @@
 use nalgebra::DVector;
 
 use super::{ControllerKind, Spec, SpecError};
+use crate::compensation::{Compensated, Compensation};
 use crate::controller::Controller;
 use crate::error::RipError;
 use crate::linalg::{c2d, Mat};
@@ -47,6 +51,8 @@ pub struct Design {
     pub k: Mat,
     /// The shared Kalman design.
     pub estimator: EstimatorDesign,
+    /// The compensation every controller's voltage passes through, if any.
+    compensation: Option<Compensation>,
 }
 
 fn plant_key(e: &RipError) -> String {
@@ -150,6 +156,32 @@ impl Spec {
         }
     }
 
+    /// The compensation of `[compensation]` (module docs of [`crate::compensation`]) for the
+    /// `[plant]` and `[mpc] input_bounds`; `None` when it is disabled or there is neither a
+    /// dead zone nor arm friction to compensate.
+    pub fn compensation(&self) -> Result<Option<Compensation>, SpecError> {
+        let c = &self.compensation;
+        if !c.enabled {
+            return Ok(None);
+        }
+        let p = self.plant.params();
+        let vd = c.dead_zone.unwrap_or(p.vd);
+        let cr = c.arm_friction.unwrap_or(p.cr);
+        if vd == 0.0 && cr == 0.0 {
+            return Ok(None);
+        }
+        let [lo, hi] = self.mpc.input_bounds[0];
+        Compensation::new(vd, cr * p.rm / p.kt, c.voltage_scale, c.velocity_scale, (lo, hi))
+            .map(Some)
+            .map_err(|e| {
+                let key = match e.name {
+                    "input_bounds" => "mpc.input_bounds".to_string(),
+                    name => format!("compensation.{name}"),
+                };
+                SpecError::new(key, e.to_string())
+            })
+    }
+
     /// The simulation of `[plant]`, `[sensor]` and `[reference]` at sample time `ts`.
     pub fn sim_config(&self, ts: f64, seed: u64) -> SimConfig {
         let [lo, hi] = self.mpc.input_bounds[0];
@@ -184,6 +216,7 @@ impl Spec {
             ));
         }
         self.validate()?;
+        let compensation = self.compensation()?;
         let (ac, bc) = self.continuous_design_model()?;
         let (a, b) = c2d(&ac, &bc, ts)
             .map_err(|e| SpecError::new("plant", format!("discretisation at Ts = {ts} s: {e}")))?;
@@ -229,6 +262,7 @@ impl Spec {
             c,
             k,
             estimator,
+            compensation,
         })
     }
 }
@@ -239,9 +273,30 @@ impl Design {
         self.ts
     }
 
-    fn bounds(&self) -> (f64, f64) {
-        let [lo, hi] = self.spec.mpc.input_bounds[0];
-        (lo, hi)
+    /// The bounds the controllers plan within: `[mpc] input_bounds`, shrunk by the
+    /// compensation's largest correction when there is one.
+    pub fn bounds(&self) -> (f64, f64) {
+        match &self.compensation {
+            Some(c) => c.inner_bounds(),
+            None => {
+                let [lo, hi] = self.spec.mpc.input_bounds[0];
+                (lo, hi)
+            }
+        }
+    }
+
+    /// The compensation every controller's voltage passes through, if any.
+    pub fn compensation(&self) -> Option<&Compensation> {
+        self.compensation.as_ref()
+    }
+
+    /// `controller` with this design's compensation around it, or unchanged when there is
+    /// none. `controller` should plan within [`bounds`](Self::bounds).
+    pub fn compensate<'a>(&self, controller: Box<dyn Controller + 'a>) -> Box<dyn Controller + 'a> {
+        match self.compensation {
+            Some(law) => Box::new(Compensated::new(controller, law)),
+            None => controller,
+        }
     }
 
     /// LQR: `K` on measured angles and filtered-difference rates, clamped to the input bounds.
@@ -276,14 +331,24 @@ impl Design {
             .map_err(|e| SpecError::new("kalman", format!("the LQG estimator: {e}")))
     }
 
-    /// The MPC of `[mpc]` on the shared Kalman filter.
+    /// The MPC of `[mpc]` on the shared Kalman filter, planning within
+    /// [`bounds`](Self::bounds).
     pub fn mpc(&self) -> Result<Mpc, SpecError> {
-        Mpc::with_estimator(&self.estimator, self.ts, self.spec.mpc_settings())
+        let mut settings = self.spec.mpc_settings();
+        settings.input_bounds = vec![self.bounds()];
+        Mpc::with_estimator(&self.estimator, self.ts, settings)
             .map_err(|e| SpecError::new(mpc_key(&e), format!("the MPC design fails: {e}")))
     }
 
-    /// The controller `kind`.
+    /// The controller `kind` as it runs: [`balance`](Self::balance) with the compensation
+    /// around it ([`compensate`](Self::compensate)).
     pub fn controller(&self, kind: ControllerKind) -> Result<Box<dyn Controller>, SpecError> {
+        Ok(self.compensate(self.balance(kind)?))
+    }
+
+    /// The controller `kind` without the compensation, planning within
+    /// [`bounds`](Self::bounds): for a supervisor that puts the compensation around itself.
+    pub fn balance(&self, kind: ControllerKind) -> Result<Box<dyn Controller>, SpecError> {
         Ok(match kind {
             ControllerKind::Lqr => Box::new(self.lqr()?),
             ControllerKind::Lqg => Box::new(self.lqg()?),

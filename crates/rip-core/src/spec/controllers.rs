@@ -217,3 +217,53 @@ impl MpcSpec {
         Ok(())
     }
 }
+
+/// `[compensation]`: the dead-zone inverse and arm-friction feed-forward every controller's
+/// voltage passes through ([`crate::compensation`]).
+///
+/// The corrections default to the `[plant]`'s own `vd` and `cr` (what the identification
+/// found); set them to compensate other values, or `enabled = false` to run the controllers
+/// as designed. A rig with neither (every preset) gets no compensation at all.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CompensationSpec {
+    /// Compensate at all.
+    pub enabled: bool,
+    /// Dead zone compensated (V); `plant.vd` when absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dead_zone: Option<f64>,
+    /// Arm Coulomb friction compensated (N·m), as the voltage `cr·rm/kt`; `plant.cr` when
+    /// absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub arm_friction: Option<f64>,
+    /// Width (V) of the ramp that replaces the sign of the dead-zone inverse.
+    pub voltage_scale: f64,
+    /// Width (rad/s) of the ramp that replaces the sign of the arm rate in the friction
+    /// feed-forward.
+    pub velocity_scale: f64,
+}
+
+impl Default for CompensationSpec {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            dead_zone: None,
+            arm_friction: None,
+            voltage_scale: 0.05,
+            velocity_scale: 0.05,
+        }
+    }
+}
+
+impl CompensationSpec {
+    pub(super) fn validate(&self) -> Result<(), SpecError> {
+        if let Some(v) = self.dead_zone {
+            non_negative("compensation.dead_zone", v)?;
+        }
+        if let Some(v) = self.arm_friction {
+            non_negative("compensation.arm_friction", v)?;
+        }
+        positive("compensation.voltage_scale", self.voltage_scale)?;
+        positive("compensation.velocity_scale", self.velocity_scale)
+    }
+}

@@ -596,6 +596,7 @@ pub(super) fn validate_sections(spec: &super::Spec) -> Result<(), SpecError> {
     spec.lqr.validate()?;
     spec.kalman.validate()?;
     spec.mpc.validate()?;
+    spec.compensation.validate()?;
     spec.monte_carlo.validate()?;
     spec.swing_up.validate().map_err(|e| match e {
         // The key is already `swing_up.<key>`.
