@@ -161,6 +161,8 @@ class Plant:
 
 @final
 class Lqr:
+    @property
+    def compensation(self) -> dict[str, float] | None: ...
     def __new__(
         cls,
         K: ArrayLike,
@@ -201,6 +203,8 @@ class Lqr:
 
 @final
 class Lqg:
+    @property
+    def compensation(self) -> dict[str, float] | None: ...
     def __new__(
         cls,
         K: ArrayLike,
@@ -235,6 +239,8 @@ class Lqg:
 
 @final
 class SwingUp:
+    @property
+    def compensation(self) -> dict[str, float] | None: ...
     """Swing-up from rest and catch around a balance controller (``rip_core::swingup``).
 
     Energy pumping towards the upright energy plus the viscous loss still to come,
@@ -309,6 +315,8 @@ class MpcSolution:
 
 @final
 class Mpc:
+    @property
+    def compensation(self) -> dict[str, float] | None: ...
     def __new__(
         cls,
         A: ArrayLike,
@@ -439,6 +447,19 @@ class KalmanSpec:
     def measurement_noise(self) -> list[float]: ...
 
 @final
+class CompensationSpec:
+    @property
+    def enabled(self) -> bool: ...
+    @property
+    def dead_zone(self) -> float | None: ...
+    @property
+    def arm_friction(self) -> float | None: ...
+    @property
+    def voltage_scale(self) -> float: ...
+    @property
+    def velocity_scale(self) -> float: ...
+
+@final
 class MpcSpec:
     @property
     def prediction_horizon(self) -> int: ...
@@ -502,6 +523,8 @@ class Spec:
     def kalman(self) -> KalmanSpec: ...
     @property
     def mpc(self) -> MpcSpec: ...
+    @property
+    def compensation(self) -> CompensationSpec: ...
     @property
     def monte_carlo(self) -> MonteCarloSpec: ...
     @property

@@ -86,9 +86,19 @@ impl Compensation {
         velocity_scale: f64,
         (u_min, u_max): (f64, f64),
     ) -> Result<Self, InvalidCompensation> {
-        let bad = |name, value, reason| Err(InvalidCompensation { name, value, reason });
+        let bad = |name, value, reason| {
+            Err(InvalidCompensation {
+                name,
+                value,
+                reason,
+            })
+        };
         if !(dead_zone.is_finite() && dead_zone >= 0.0) {
-            return bad("dead_zone", dead_zone, "must be finite and non-negative (V)");
+            return bad(
+                "dead_zone",
+                dead_zone,
+                "must be finite and non-negative (V)",
+            );
         }
         if !(friction_voltage.is_finite() && friction_voltage >= 0.0) {
             return bad(
@@ -347,11 +357,29 @@ mod tests {
     fn bad_parameters_are_named() {
         let b = (-12.0, 12.0);
         let name = |r: Result<Compensation, InvalidCompensation>| r.unwrap_err().name;
-        assert_eq!(name(Compensation::new(-0.1, 0.0, 0.05, 0.05, b)), "dead_zone");
-        assert_eq!(name(Compensation::new(0.1, f64::NAN, 0.05, 0.05, b)), "arm_friction");
-        assert_eq!(name(Compensation::new(0.1, 0.0, 0.0, 0.05, b)), "voltage_scale");
-        assert_eq!(name(Compensation::new(0.1, 0.0, 0.05, -1.0, b)), "velocity_scale");
-        assert_eq!(name(Compensation::new(0.1, 0.0, 0.05, 0.05, (1.0, 1.0))), "input_bounds");
-        assert_eq!(name(Compensation::new(7.0, 6.0, 0.05, 0.05, b)), "dead_zone");
+        assert_eq!(
+            name(Compensation::new(-0.1, 0.0, 0.05, 0.05, b)),
+            "dead_zone"
+        );
+        assert_eq!(
+            name(Compensation::new(0.1, f64::NAN, 0.05, 0.05, b)),
+            "arm_friction"
+        );
+        assert_eq!(
+            name(Compensation::new(0.1, 0.0, 0.0, 0.05, b)),
+            "voltage_scale"
+        );
+        assert_eq!(
+            name(Compensation::new(0.1, 0.0, 0.05, -1.0, b)),
+            "velocity_scale"
+        );
+        assert_eq!(
+            name(Compensation::new(0.1, 0.0, 0.05, 0.05, (1.0, 1.0))),
+            "input_bounds"
+        );
+        assert_eq!(
+            name(Compensation::new(7.0, 6.0, 0.05, 0.05, b)),
+            "dead_zone"
+        );
     }
 }

@@ -47,19 +47,31 @@ pub fn controller_factory(obj: &Bound<'_, PyAny>) -> PyResult<ControllerFactory>
     let py = obj.py();
     if let Ok(c) = obj.downcast::<PyLqr>() {
         let c = c.get();
-        return Ok(compensated_factory(c.inner.lock(py).clone(), c.compensation));
+        return Ok(compensated_factory(
+            c.inner.lock(py).clone(),
+            c.compensation,
+        ));
     }
     if let Ok(c) = obj.downcast::<PyLqg>() {
         let c = c.get();
-        return Ok(compensated_factory(c.inner.lock(py).clone(), c.compensation));
+        return Ok(compensated_factory(
+            c.inner.lock(py).clone(),
+            c.compensation,
+        ));
     }
     if let Ok(c) = obj.downcast::<crate::mpc::PyMpc>() {
         let c = c.get();
-        return Ok(compensated_factory(c.inner.lock(py).clone(), c.compensation));
+        return Ok(compensated_factory(
+            c.inner.lock(py).clone(),
+            c.compensation,
+        ));
     }
     if let Ok(c) = obj.downcast::<crate::swingup::PySwingUp>() {
         let c = c.get();
-        return Ok(compensated_factory(c.inner.lock(py).clone(), c.compensation));
+        return Ok(compensated_factory(
+            c.inner.lock(py).clone(),
+            c.compensation,
+        ));
     }
     Err(PyTypeError::new_err(format!(
         "controller must be a riprs controller (Lqr, Lqg, Mpc, SwingUp), got {}",
@@ -176,7 +188,10 @@ impl PyLqr {
     /// ``friction_voltage``, ``u_min``, ``u_max``, all in V), or ``None``. :meth:`step`
     /// returns the voltage before it.
     #[getter]
-    fn compensation<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
+    fn compensation<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
         crate::control::compensation_dict(py, self.compensation)
     }
 
@@ -376,7 +391,10 @@ impl PyLqg {
     /// ``friction_voltage``, ``u_min``, ``u_max``, all in V), or ``None``. :meth:`step`
     /// returns the voltage before it.
     #[getter]
-    fn compensation<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
+    fn compensation<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
         crate::control::compensation_dict(py, self.compensation)
     }
 

@@ -339,7 +339,10 @@ impl PyMpc {
     /// ``friction_voltage``, ``u_min``, ``u_max``, all in V), or ``None``. :meth:`step`
     /// returns the voltage before it.
     #[getter]
-    fn compensation<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
+    fn compensation<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
         crate::control::compensation_dict(py, self.compensation)
     }
 

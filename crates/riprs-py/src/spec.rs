@@ -148,6 +148,17 @@ pub struct PyKalmanSpec {
     measurement_noise: Vec<f64>,
 }
 
+/// `[compensation]` (read-only): ``dead_zone`` and ``arm_friction`` are ``None`` when they
+/// follow the ``[plant]``'s ``Vd`` and ``Cr``.
+#[pyclass(name = "CompensationSpec", module = "riprs._riprs", frozen, get_all)]
+pub struct PyCompensationSpec {
+    enabled: bool,
+    dead_zone: Option<f64>,
+    arm_friction: Option<f64>,
+    voltage_scale: f64,
+    velocity_scale: f64,
+}
+
 /// `[mpc]` (read-only).
 #[pyclass(name = "MpcSpec", module = "riprs._riprs", frozen, get_all)]
 pub struct PyMpcSpec {
@@ -296,10 +307,13 @@ impl PySpec {
                     let c = py.allow_threads(|| d.mpc()).map_err(config_err)?;
                     let inner = Shared::new(c);
                     let compensation = d.compensation().copied();
-                    Bound::new(py, PyMpc {
-                        inner,
-                        compensation,
-                    })?
+                    Bound::new(
+                        py,
+                        PyMpc {
+                            inner,
+                            compensation,
+                        },
+                    )?
                     .into_any()
                 }
             };
@@ -396,6 +410,19 @@ impl PySpec {
         PyKalmanSpec {
             disturbance_gain: k.disturbance_gain,
             measurement_noise: k.measurement_noise.to_vec(),
+        }
+    }
+
+    /// ``[compensation]``.
+    #[getter]
+    fn compensation(&self) -> PyCompensationSpec {
+        let c = &self.inner.compensation;
+        PyCompensationSpec {
+            enabled: c.enabled,
+            dead_zone: c.dead_zone,
+            arm_friction: c.arm_friction,
+            voltage_scale: c.voltage_scale,
+            velocity_scale: c.velocity_scale,
         }
     }
 
@@ -517,6 +544,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyLqrSpec>()?;
     m.add_class::<PyKalmanSpec>()?;
     m.add_class::<PyMpcSpec>()?;
+    m.add_class::<PyCompensationSpec>()?;
     m.add_class::<PyMonteCarloSpec>()?;
     m.add_function(wrap_pyfunction!(load_config, m)?)?;
     m.add_function(wrap_pyfunction!(table1_rmse, m)?)?;

@@ -11,12 +11,12 @@ use rip_core::{
 };
 
 use crate::control::{PyLqg, PyLqr};
-use rip_core::Compensation;
 use crate::convert::vector_arg;
 use crate::errors::IntoPyResult;
 use crate::mpc::PyMpc;
 use crate::plant::{PyFurutaParams, PyPlant};
 use crate::shared::Shared;
+use rip_core::Compensation;
 
 /// The balance controllers a supervisor can hold, as one cloneable type.
 #[derive(Clone)]
@@ -37,11 +37,17 @@ impl Balance {
         }
         if let Ok(c) = obj.downcast::<PyLqg>() {
             let c = c.get();
-            return Ok((Self::Lqg(Box::new(c.inner.lock(py).clone())), c.compensation));
+            return Ok((
+                Self::Lqg(Box::new(c.inner.lock(py).clone())),
+                c.compensation,
+            ));
         }
         if let Ok(c) = obj.downcast::<PyMpc>() {
             let c = c.get();
-            return Ok((Self::Mpc(Box::new(c.inner.lock(py).clone())), c.compensation));
+            return Ok((
+                Self::Mpc(Box::new(c.inner.lock(py).clone())),
+                c.compensation,
+            ));
         }
         Err(PyTypeError::new_err(format!(
             "balance must be a riprs balance controller (Lqr, Lqg, Mpc), got {}",
@@ -257,7 +263,10 @@ impl PySwingUp {
     /// ``friction_voltage``, ``u_min``, ``u_max``, all in V), or ``None``. :meth:`step`
     /// returns the voltage before it.
     #[getter]
-    fn compensation<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
+    fn compensation<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
         crate::control::compensation_dict(py, self.compensation)
     }
 

@@ -171,15 +171,21 @@ impl Spec {
             return Ok(None);
         }
         let [lo, hi] = self.mpc.input_bounds[0];
-        Compensation::new(vd, cr * p.rm / p.kt, c.voltage_scale, c.velocity_scale, (lo, hi))
-            .map(Some)
-            .map_err(|e| {
-                let key = match e.name {
-                    "input_bounds" => "mpc.input_bounds".to_string(),
-                    name => format!("compensation.{name}"),
-                };
-                SpecError::new(key, e.to_string())
-            })
+        Compensation::new(
+            vd,
+            cr * p.rm / p.kt,
+            c.voltage_scale,
+            c.velocity_scale,
+            (lo, hi),
+        )
+        .map(Some)
+        .map_err(|e| {
+            let key = match e.name {
+                "input_bounds" => "mpc.input_bounds".to_string(),
+                name => format!("compensation.{name}"),
+            };
+            SpecError::new(key, e.to_string())
+        })
     }
 
     /// The simulation of `[plant]`, `[sensor]` and `[reference]` at sample time `ts`.
