@@ -162,6 +162,8 @@ class Plant:
 @final
 class Lqr:
     @property
+    def integral_gain(self) -> float | None: ...
+    @property
     def compensation(self) -> dict[str, float] | None: ...
     def __new__(
         cls,
@@ -203,6 +205,8 @@ class Lqr:
 
 @final
 class Lqg:
+    @property
+    def integral_gain(self) -> float | None: ...
     @property
     def compensation(self) -> dict[str, float] | None: ...
     def __new__(
@@ -438,6 +442,8 @@ class LqrSpec:
     def R(self) -> float: ...
     @property
     def rate_cutoff(self) -> float: ...
+    @property
+    def integral_weight(self) -> float: ...
 
 @final
 class KalmanSpec:

@@ -187,7 +187,9 @@ as `riprs config` prints it; `riprs config FILE` prints a file resolved the same
   zero offsets (rad; an encoder reads `angle + offset`).
 - `[reference]`: the arm step (rad), its time (s) and the run length (s).
 - `[lqr]`: `Q` (diagonal) and `R` of eq. (13), shared by LQR and LQG; LQR's rate-filter
-  cut-off (Hz, `inf` for none).
+  cut-off (Hz, `inf` for none); `integral_weight`, the weight of the integrated arm error in
+  LQR's and LQG's integral action (MATLAB's `lqi`, [design.md](design.md#integral-action);
+  0, the paper's setting, for none).
 - `[kalman]`: the one Kalman filter LQG and MPC share: the output-disturbance gain of eq. (1)
   and the measurement-noise diagonal of eq. (2).
 - `[mpc]`: section 3's MPC with Python's `riprs.Mpc` names; `input_bounds` (V) also clamps LQR

@@ -314,6 +314,13 @@ impl PyLqr {
         self.inner.lock(py).input_bounds().0
     }
 
+    /// Gain ``k_i`` on the integrated arm error (integral action, ``lqr.integral_weight``), or
+    /// ``None`` without integral action.
+    #[getter]
+    fn integral_gain(&self, py: Python<'_>) -> Option<f64> {
+        self.inner.lock(py).integral_gain()
+    }
+
     /// Upper input bound (V).
     #[getter]
     fn u_max(&self, py: Python<'_>) -> f64 {
@@ -482,6 +489,13 @@ impl PyLqg {
     #[getter]
     fn u_min(&self, py: Python<'_>) -> f64 {
         self.inner.lock(py).input_bounds().0
+    }
+
+    /// Gain ``k_i`` on the integrated arm error (integral action, ``lqr.integral_weight``), or
+    /// ``None`` without integral action.
+    #[getter]
+    fn integral_gain(&self, py: Python<'_>) -> Option<f64> {
+        self.inner.lock(py).integral_gain()
     }
 
     /// Upper input bound (V).

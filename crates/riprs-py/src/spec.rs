@@ -139,6 +139,7 @@ pub struct PyLqrSpec {
     Q: Vec<f64>,
     R: f64,
     rate_cutoff: f64,
+    integral_weight: f64,
 }
 
 /// `[kalman]` (read-only).
@@ -400,6 +401,7 @@ impl PySpec {
             Q: l.Q.to_vec(),
             R: l.R,
             rate_cutoff: l.rate_cutoff,
+            integral_weight: l.integral_weight,
         }
     }
 

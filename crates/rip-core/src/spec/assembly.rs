@@ -5,6 +5,9 @@
 //!                A_c, B_c: the paper's recovered model for the unchanged `paper` preset,
 //!                otherwise the [plant] parameters' linearisation about upright
 //! gain           K = dlqr(A_d, B_d, diag(lqr.Q), lqr.R)                          eq. (13)
+//!                with lqr.integral_weight q_i > 0: [K k_i] = dlqr of the model with the
+//!                integrated arm error x_i⁺ = x_i − Ts θ appended, diag(Q, q_i), R
+//!                (crate::regulators, "Integral action")
 //! estimator      one Kalman design on the augmented model (mpc::EstimatorDesign):
 //!                plant + [kalman] disturbance, MPC scales, eqs. (1)–(11)
 //! LQR            K, lqr.rate_cutoff, clamp to mpc.input_bounds
@@ -47,8 +50,11 @@ pub struct Design {
     pub b: Mat,
     /// `C`: the two angles.
     pub c: Mat,
-    /// `K = dlqr(A_d, B_d, diag(Q), R)` (1×4).
+    /// `K = dlqr(A_d, B_d, diag(Q), R)` (1×4); the state part `K_x` of the augmented design
+    /// when there is integral action.
     pub k: Mat,
+    /// `k_i`, the gain on the integrated arm error, when `lqr.integral_weight > 0`.
+    pub integral_gain: Option<f64>,
     /// The shared Kalman design.
     pub estimator: EstimatorDesign,
     /// The compensation every controller's voltage passes through, if any.
@@ -227,9 +233,14 @@ impl Spec {
         let (a, b) = c2d(&ac, &bc, ts)
             .map_err(|e| SpecError::new("plant", format!("discretisation at Ts = {ts} s: {e}")))?;
         let c = paper::output_matrix();
-        let q = Mat::from_diagonal(&DVector::from_row_slice(&self.lqr.Q));
+        let (ad, bd, q) = if self.lqr.integral_weight > 0.0 {
+            integral_model(&a, &b, ts, &self.lqr.Q, self.lqr.integral_weight)
+        } else {
+            let q = Mat::from_diagonal(&DVector::from_row_slice(&self.lqr.Q));
+            (a.clone(), b.clone(), q)
+        };
         let r = Mat::from_element(1, 1, self.lqr.R);
-        let k = match dlqr(&a, &b, &q, &r, None) {
+        let k_full = match dlqr(&ad, &bd, &q, &r, None) {
             Ok(d) => d.k,
             Err(e @ RipError::NotStabilizable { .. }) => {
                 return Err(SpecError::new("plant", format!("the design model: {e}")))
@@ -244,7 +255,9 @@ impl Spec {
                 ))
             }
         };
-        if !k.iter().all(|v| v.is_finite()) {
+        let k = k_full.columns(0, 4).into_owned();
+        let integral_gain = (k_full.ncols() > 4).then(|| k_full[(0, 4)]);
+        if !k_full.iter().all(|v| v.is_finite()) {
             return Err(SpecError::new(
                 "lqr.R",
                 format!("the LQR gain is not finite with R = {}", self.lqr.R),
@@ -267,10 +280,25 @@ impl Spec {
             b,
             c,
             k,
+            integral_gain,
             estimator,
             compensation,
         })
     }
+}
+
+/// The design model with the integrated arm error appended (MATLAB's `lqi`, discrete):
+/// `A_i = [A_d 0; −Ts e_θᵀ 1]`, `B_i = [B_d; 0]`, `Q_i = diag(Q, q_i)`.
+fn integral_model(a: &Mat, b: &Mat, ts: f64, q: &[f64; 4], qi: f64) -> (Mat, Mat, Mat) {
+    let mut ai = Mat::zeros(5, 5);
+    ai.view_mut((0, 0), (4, 4)).copy_from(a);
+    ai[(4, 0)] = -ts;
+    ai[(4, 4)] = 1.0;
+    let mut bi = Mat::zeros(5, 1);
+    bi.view_mut((0, 0), (4, 1)).copy_from(b);
+    let mut diag = q.to_vec();
+    diag.push(qi);
+    (ai, bi, Mat::from_diagonal(&DVector::from_vec(diag)))
 }
 
 impl Design {
@@ -305,11 +333,13 @@ impl Design {
         }
     }
 
-    /// LQR: `K` on measured angles and filtered-difference rates, clamped to the input bounds.
+    /// LQR: `K` on measured angles and filtered-difference rates (and `k_i` on the integrated
+    /// arm error, when there is integral action), clamped to the input bounds.
     pub fn lqr(&self) -> Result<Lqr, SpecError> {
         let (lo, hi) = self.bounds();
         Lqr::new(&self.k, self.ts, self.spec.lqr.rate_cutoff)
             .and_then(|c| c.with_input_bounds(lo, hi))
+            .and_then(|c| c.with_integral_action(self.integral_gain.unwrap_or(0.0)))
             .map_err(|e| SpecError::new("lqr.rate_cutoff", e.to_string()))
     }
 
@@ -334,6 +364,7 @@ impl Design {
         }
         Lqg::new(&self.k, &model.a, &model.b, &c, &l, &m, self.ts)
             .and_then(|g| g.with_input_bounds(lo, hi))
+            .and_then(|g| g.with_integral_action(self.integral_gain.unwrap_or(0.0)))
             .map_err(|e| SpecError::new("kalman", format!("the LQG estimator: {e}")))
     }
 

@@ -25,6 +25,9 @@ pub struct LqrSpec {
     pub R: f64,
     /// Cut-off (Hz) of LQR's filtered-difference rate estimate; `inf` for the plain difference.
     pub rate_cutoff: f64,
+    /// Weight `q_i` of the integrated arm error in LQR's and LQG's integral action
+    /// (`crate::regulators`, MATLAB's `lqi`); 0 (the paper's setting) for none.
+    pub integral_weight: f64,
 }
 
 impl Default for LqrSpec {
@@ -33,6 +36,7 @@ impl Default for LqrSpec {
             Q: [25.0, 0.0, 50.0, 0.0],
             R: 0.1,
             rate_cutoff: DEFAULT_RATE_CUTOFF_HZ,
+            integral_weight: 0.0,
         }
     }
 }
@@ -49,6 +53,7 @@ impl LqrSpec {
             ));
         }
         positive("lqr.R", self.R)?;
+        non_negative("lqr.integral_weight", self.integral_weight)?;
         if self.rate_cutoff.is_nan() || self.rate_cutoff <= 0.0 {
             return Err(bad(
                 "lqr.rate_cutoff",
