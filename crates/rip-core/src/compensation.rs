@@ -156,6 +156,13 @@ impl Compensation {
         (self.u_min + m, self.u_max - m)
     }
 
+    /// A planner's own voltage limit (such as the swing-up law's `max_voltage`) inside
+    /// [`inner_bounds`](Self::inner_bounds), so that it too plans with what the rig can get.
+    pub fn planned_limit(&self, max_voltage: f64) -> f64 {
+        let (lo, hi) = self.inner_bounds();
+        max_voltage.min(hi).min(-lo)
+    }
+
     /// The voltage to write for the controller's `v`, at the arm-rate estimate `arm_rate`
     /// (module docs). A non-finite rate counts as zero.
     #[inline]

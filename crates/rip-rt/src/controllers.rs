@@ -103,9 +103,8 @@ pub fn build_swing_up(kind: ControllerKind, cfg: &Config) -> Result<Box<dyn Cont
     let design = design(kind, cfg)?;
     // The law, like the balance controller, plans within the bounds the compensation leaves.
     settings.max_voltage = settings.max_voltage.min(cfg.safety.voltage_limit);
-    if design.compensation().is_some() {
-        let (lo, hi) = design.bounds();
-        settings.max_voltage = settings.max_voltage.min(hi).min(-lo);
+    if let Some(c) = design.compensation() {
+        settings.max_voltage = c.planned_limit(settings.max_voltage);
     }
     let balance = design
         .balance(kind.into())

@@ -303,8 +303,7 @@ impl PySwingUp {
         }
         if let Some(c) = compensation {
             // The law plans within the bounds the compensation leaves, as the balance does.
-            let (lo, hi) = c.inner_bounds();
-            s.max_voltage = s.max_voltage.min(hi).min(-lo);
+            s.max_voltage = c.planned_limit(s.max_voltage);
         }
         let balance_kind = balance.name();
         let inner = SwingUp::new(balance, &plant, s).py()?;
