@@ -224,3 +224,20 @@ def test_ten_rigs_across_the_envelope_balance_compensated():
         off = _spec(plant, {"enabled": False})
         lqg_falls += _run(off, off.build_controllers(TS)["LQG"]).fell
     assert lqg_falls >= 5, lqg_falls
+
+
+def test_stiction_the_compensation_does_not_know_is_survived():
+    # The arm's breakaway torque twice its Coulomb level (0.002 N m where Cr is 0): LQR stays
+    # within 0.042 rad, MPC 0.063, LQG cycles up to 0.141 rad, none falls.
+    bound = {"LQR": 0.05, "LQG": 0.2, "MPC": 0.08}
+    for rig, p in RIGS.items():
+        cs = 2.0 * max(p.get("Cr", 0.0), 0.002)
+        spec = _spec({**p, "arm_breakaway": cs})
+        assert spec.build_plant().arm_breakaway == pytest.approx(cs)
+        for name, c in spec.build_controllers(TS).items():
+            r = _run(spec, c)
+            pp, _, offset = _steady(r)
+            assert not r.fell, (rig, name)
+            assert pp <= bound[name] and abs(offset) <= 0.02, (rig, name, pp, offset)
+    with pytest.raises(riprs.ConfigError, match=r"plant\.arm_breakaway"):
+        Spec.from_dict({"plant": {"preset": "qube_servo2", "Cr": 0.003, "arm_breakaway": 0.001}})

@@ -179,10 +179,13 @@ as `riprs config` prints it; `riprs config FILE` prints a file resolved the same
 - `[plant]`: `preset` (`paper` or `qube_servo2`) and the physical parameters
   `mr, Lr, Jr, mp, Lp, Jp, Dr, Dp, Rm, kt, km` (SI units), Coulomb friction `Cr, Cp` (N m,
   sign smoothed as `tanh(rate / 0.05 rad/s)`) and the voltage dead zone `Vd` (V, applied
-  voltage `u - clip(u, -Vd, Vd)`), each overriding the preset, so an identified rig
-  (`riprs identify`) is a file; the controllers are designed on this plant's linearisation at
-  the loop period without friction and dead zone (the unchanged `paper` preset keeps the
-  paper's recovered model). `substeps`, `initial_state`, `fall_limit` set up a simulated run.
+  voltage `u - clip(u, -Vd, Vd)`), each overriding the preset, and optionally the arm's
+  breakaway torque `arm_breakaway` (N m, at least `Cr`: stiction of the simulated plant,
+  friction decaying as `exp(-(rate / 0.1 rad/s)^2)` to `Cr`, which no controller knows), so
+  an identified rig (`riprs identify`) is a file; the controllers are designed on this
+  plant's linearisation at the loop period without friction and dead zone (the unchanged
+  `paper` preset keeps the paper's recovered model). `substeps`, `initial_state`,
+  `fall_limit` set up a simulated run.
 - `[sensor]`: encoder counts per revolution, white-noise standard deviation (rad) and encoder
   zero offsets (rad; an encoder reads `angle + offset`).
 - `[reference]`: the arm step (rad), its time (s) and the run length (s).

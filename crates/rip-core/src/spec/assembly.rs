@@ -115,9 +115,16 @@ fn mpc_key(e: &RipError) -> String {
 }
 
 impl Spec {
-    /// The nonlinear plant of `[plant]`.
+    /// The nonlinear plant of `[plant]`, with its stiction (`plant.arm_breakaway`) if any.
     pub fn plant(&self) -> Result<Plant, SpecError> {
-        Plant::new(self.plant.params()).map_err(|e| SpecError::new(plant_key(&e), e.to_string()))
+        let plant = Plant::new(self.plant.params())
+            .map_err(|e| SpecError::new(plant_key(&e), e.to_string()))?;
+        match self.plant.arm_breakaway {
+            Some(cs) => plant
+                .with_arm_breakaway(cs)
+                .map_err(|e| SpecError::new("plant.arm_breakaway", e.to_string())),
+            None => Ok(plant),
+        }
     }
 
     /// The continuous-time design model `(A_c, B_c)` (module docs).
