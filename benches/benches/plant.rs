@@ -5,7 +5,9 @@
 use criterion::{black_box, criterion_main, Criterion};
 use rip_core::mpc::QpSolver;
 use rip_core::sim::{Reference, SensorModel};
-use rip_core::{simulate, Controller, Lqg, Lqr, Plant, SimConfig, State};
+use rip_core::{
+    simulate, Compensated, Compensation, Controller, Lqg, Lqr, Plant, SimConfig, State,
+};
 
 fn paper_run() -> SimConfig {
     SimConfig {
@@ -40,6 +42,20 @@ fn plant(c: &mut Criterion) {
     let mut lqr = Lqr::paper().unwrap();
     c.bench_function("lqr_step", |b| {
         b.iter(|| lqr.step(black_box(&y), black_box(&r), &mut u))
+    });
+    // The same step behind the dead-zone and friction compensation (QUBE-Servo 3's 0.65 V
+    // dead band, 0.003 N m arm friction): the difference to lqr_step is its cost.
+    let law = Compensation::new(0.65, 0.5, 0.05, 0.05, (-12.0, 12.0)).unwrap();
+    let (lo, hi) = law.inner_bounds();
+    let mut compensated = Compensated::new(
+        Lqr::paper().unwrap().with_input_bounds(lo, hi).unwrap(),
+        law,
+    );
+    c.bench_function("lqr_step_compensated", |b| {
+        b.iter(|| compensated.step(black_box(&y), black_box(&r), &mut u))
+    });
+    c.bench_function("compensation_apply", |b| {
+        b.iter(|| law.apply(black_box(0.3), black_box(0.02)))
     });
     let mut lqg = Lqg::paper().unwrap();
     c.bench_function("lqg_step", |b| {

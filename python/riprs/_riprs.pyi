@@ -149,6 +149,8 @@ class Plant:
     @staticmethod
     def paper() -> Plant: ...
     @property
+    def arm_breakaway(self) -> float: ...
+    @property
     def params(self) -> FurutaParams: ...
     def derivative(self, x: ArrayLike, u: float = 0.0, torque: float = 0.0) -> _F: ...
     def step(
@@ -163,6 +165,10 @@ class Plant:
 
 @final
 class Lqr:
+    @property
+    def integral_gain(self) -> float | None: ...
+    @property
+    def compensation(self) -> dict[str, float] | None: ...
     def __new__(
         cls,
         K: ArrayLike,
@@ -203,6 +209,10 @@ class Lqr:
 
 @final
 class Lqg:
+    @property
+    def integral_gain(self) -> float | None: ...
+    @property
+    def compensation(self) -> dict[str, float] | None: ...
     def __new__(
         cls,
         K: ArrayLike,
@@ -237,6 +247,8 @@ class Lqg:
 
 @final
 class SwingUp:
+    @property
+    def compensation(self) -> dict[str, float] | None: ...
     """Swing-up from rest and catch around a balance controller (``rip_core::swingup``).
 
     Energy pumping towards the upright energy plus the viscous loss still to come,
@@ -315,6 +327,8 @@ class MpcSolution:
 
 @final
 class Mpc:
+    @property
+    def compensation(self) -> dict[str, float] | None: ...
     def __new__(
         cls,
         A: ArrayLike,
@@ -436,6 +450,8 @@ class LqrSpec:
     def R(self) -> float: ...
     @property
     def rate_cutoff(self) -> float: ...
+    @property
+    def integral_weight(self) -> float: ...
 
 @final
 class KalmanSpec:
@@ -443,6 +459,19 @@ class KalmanSpec:
     def disturbance_gain(self) -> float: ...
     @property
     def measurement_noise(self) -> list[float]: ...
+
+@final
+class CompensationSpec:
+    @property
+    def enabled(self) -> bool: ...
+    @property
+    def dead_zone(self) -> float | None: ...
+    @property
+    def arm_friction(self) -> float | None: ...
+    @property
+    def voltage_scale(self) -> float: ...
+    @property
+    def velocity_scale(self) -> float: ...
 
 @final
 class MpcSpec:
@@ -508,6 +537,8 @@ class Spec:
     def kalman(self) -> KalmanSpec: ...
     @property
     def mpc(self) -> MpcSpec: ...
+    @property
+    def compensation(self) -> CompensationSpec: ...
     @property
     def monte_carlo(self) -> MonteCarloSpec: ...
     @property

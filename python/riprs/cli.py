@@ -183,19 +183,32 @@ as `riprs config` prints it; `riprs config FILE` prints a file resolved the same
 - `[plant]`: `preset` (`paper` or `qube_servo2`) and the physical parameters
   `mr, Lr, Jr, mp, Lp, Jp, Dr, Dp, Rm, kt, km` (SI units), Coulomb friction `Cr, Cp` (N m,
   sign smoothed as `tanh(rate / 0.05 rad/s)`) and the voltage dead zone `Vd` (V, applied
-  voltage `u - clip(u, -Vd, Vd)`), each overriding the preset, so an identified rig
-  (`riprs identify`) is a file; the controllers are designed on this plant's linearisation at
-  the loop period without friction and dead zone (the unchanged `paper` preset keeps the
-  paper's recovered model). `substeps`, `initial_state`, `fall_limit` set up a simulated run.
+  voltage `u - clip(u, -Vd, Vd)`), each overriding the preset, and optionally the arm's
+  breakaway torque `arm_breakaway` (N m, at least `Cr`: stiction of the simulated plant,
+  friction decaying as `exp(-(rate / 0.1 rad/s)^2)` to `Cr`, which no controller knows), so
+  an identified rig (`riprs identify`) is a file; the controllers are designed on this
+  plant's linearisation at the loop period without friction and dead zone (the unchanged
+  `paper` preset keeps the paper's recovered model). `substeps`, `initial_state`,
+  `fall_limit` set up a simulated run.
 - `[sensor]`: encoder counts per revolution, white-noise standard deviation (rad) and encoder
   zero offsets (rad; an encoder reads `angle + offset`).
 - `[reference]`: the arm step (rad), its time (s) and the run length (s).
 - `[lqr]`: `Q` (diagonal) and `R` of eq. (13), shared by LQR and LQG; LQR's rate-filter
-  cut-off (Hz, `inf` for none).
+  cut-off (Hz, `inf` for none); `integral_weight`, the weight of the integrated arm error in
+  LQR's and LQG's integral action (MATLAB's `lqi`, [design.md](design.md#integral-action);
+  0, the paper's setting, for none).
 - `[kalman]`: the one Kalman filter LQG and MPC share: the output-disturbance gain of eq. (1)
   and the measurement-noise diagonal of eq. (2).
 - `[mpc]`: section 3's MPC with Python's `riprs.Mpc` names; `input_bounds` (V) also clamps LQR
   and LQG; `output_bounds` per output, `[-inf, inf]` for none.
+- `[compensation]`: the dead zone and arm Coulomb friction compensated on the voltage of
+  every controller and of the swing-up (dead-zone inverse and friction feed-forward,
+  [design.md](design.md#dead-zone-and-friction-compensation)): `dead_zone` (V) and
+  `arm_friction` (N m) default to the `[plant]`'s `Vd` and `Cr`, `voltage_scale` (V) and
+  `velocity_scale` (rad/s) are the widths of the ramps that replace their signs; the
+  controllers then plan within `input_bounds` shrunk by the correction, so the voltage written
+  stays inside them. `enabled = false` runs the controllers uncompensated; a rig with neither
+  (every preset) has none.
 - `[monte_carlo]`: runs over noise seeds and uniform perturbations of the named parameters.
 
 ```toml

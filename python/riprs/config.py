@@ -14,6 +14,7 @@ from __future__ import annotations
 from riprs._riprs import (
     PARAMETERS,
     PRESETS,
+    CompensationSpec,
     ConfigError,
     KalmanSpec,
     LqrSpec,
@@ -29,6 +30,7 @@ from riprs._riprs import (
 __all__ = [
     "PARAMETERS",
     "PRESETS",
+    "CompensationSpec",
     "ConfigError",
     "KalmanSpec",
     "LqrSpec",

@@ -248,7 +248,10 @@ def simulate(
         x(t_{k+1}) &= \mathrm{RK4}\big(x(t_k), \mathrm{sat}(u[k], \pm u_{limit}), \tau_d\big)
         \text{ with ``substeps`` steps}
 
-    A riprs controller is copied and reset first, so the object passed in is not modified.
+    A riprs controller is copied and reset first, so the object passed in is not modified. A
+    controller with a ``compensation`` (built from an experiment file whose ``[plant]`` has a
+    dead zone or arm friction, see ``[compensation]``) runs with it, as ``rip-rt run`` runs
+    it: ``u[k]`` is then the compensated voltage.
 
     Parameters
     ----------

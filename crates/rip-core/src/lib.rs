@@ -32,6 +32,7 @@
 //! Every fallible routine returns [`RipError`], whose variants name the offending argument.
 
 pub mod batch;
+pub mod compensation;
 pub mod controller;
 pub mod dare;
 pub mod envelope;
@@ -53,6 +54,7 @@ pub mod spec;
 pub mod swingup;
 pub mod trig;
 
+pub use compensation::{Compensated, Compensation};
 pub use controller::{Controller, Phase, StepStatus, StopCause};
 pub use dare::{dare, DareSolution};
 pub use error::{Result, RipError};

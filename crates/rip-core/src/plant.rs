@@ -64,6 +64,16 @@
 //! within 4 % of its full size. That slope is the stiffest term of the model, and
 //! [`Plant::max_rk4_substep`] accounts for it.
 //!
+//! Optionally ([`Plant::with_arm_breakaway`]) the arm's friction rises above the Coulomb level
+//! at low speed, to a breakaway torque `cs ≥ cr` (stiction, a Stribeck curve):
+//!
+//! ```text
+//! F_r(θ̇) = (cr + (cs − cr) e^{−(θ̇/v_s)²}) sgnₛ(θ̇),   v_s = STRIBECK_VELOCITY = 0.1 rad/s
+//! ```
+//!
+//! so that a torque below `cs` holds the arm nearly still and the friction drops to `cr` once
+//! it moves: what a compensation of `cr` alone does not know.
+//!
 //! The motor driver does not move the motor below a threshold voltage `vd` (the QUBE-Servo 3's
 //! default dead band is 0.65 V); the applied voltage is the dead-zone function
 //!
@@ -105,6 +115,10 @@ const RK4_STABILITY_LIMIT: f64 = 2.78;
 /// Velocity scale `v_c` (rad/s) of the smoothed sign `tanh(v / v_c)` of the Coulomb friction
 /// (module docs).
 pub const COULOMB_VELOCITY_SCALE: f64 = 0.05;
+
+/// Velocity scale `v_s` (rad/s) of the Stribeck decay from the breakaway torque to the Coulomb
+/// level (module docs).
+pub const STRIBECK_VELOCITY: f64 = 0.1;
 
 /// The dead-zone function `z(u) = u − clamp(u, −vd, vd)` (module docs); `z(u) = u` exactly
 /// when `vd = 0`.
@@ -363,6 +377,8 @@ pub struct Plant {
     /// Coulomb friction of arm and pendulum, `cr`, `cp`.
     coulomb: [f64; 2],
     vd: f64,
+    /// The arm's breakaway torque above `cr` (stiction, module docs), `cs − cr`; 0 for none.
+    stiction: f64,
     /// [`max_rk4_substep`](Self::max_rk4_substep), computed once: it takes two eigenvalue
     /// problems, far more than a checked step itself.
     max_substep: f64,
@@ -384,10 +400,40 @@ impl Plant {
             dp: p.dp,
             coulomb: [p.cr, p.cp],
             vd: p.vd,
+            stiction: 0.0,
             max_substep: f64::INFINITY,
         };
         plant.max_substep = plant.rk4_stability_limit();
         Ok(plant)
+    }
+
+    /// The same plant with the arm's friction rising to the breakaway torque `cs` (N·m) at
+    /// rest (stiction, module docs); `cs = 0` for none.
+    ///
+    /// # Errors
+    /// `cs` not finite, negative, or positive but below the Coulomb level `cr`.
+    pub fn with_arm_breakaway(mut self, cs: f64) -> Result<Self> {
+        if !(cs.is_finite() && (cs == 0.0 || cs >= self.coulomb[0])) {
+            return Err(RipError::invalid(
+                "arm_breakaway",
+                format!(
+                    "must be 0 or finite and at least cr = {}, got {cs}",
+                    self.coulomb[0]
+                ),
+            ));
+        }
+        self.stiction = if cs == 0.0 { 0.0 } else { cs - self.coulomb[0] };
+        self.max_substep = self.rk4_stability_limit();
+        Ok(self)
+    }
+
+    /// The arm's breakaway torque (N·m), 0 without stiction.
+    pub fn arm_breakaway(&self) -> f64 {
+        if self.stiction == 0.0 {
+            0.0
+        } else {
+            self.coulomb[0] + self.stiction
+        }
     }
 
     /// The QUBE-Servo 2 preset ([`FurutaParams::qube_servo2`]).
@@ -565,7 +611,9 @@ impl Plant {
                 let ([m11, m12, m22], _) = self.mass_and_forces(x, 0.0, 0.0);
                 let det = m11 * m22 - m12 * m12;
                 let minv = [[m22 / det, -m12 / det], [-m12 / det, m11 / det]];
-                let slope = self.coulomb.map(|c| c / COULOMB_VELOCITY_SCALE);
+                // At rest the arm's friction is at its breakaway level.
+                let rest = [self.coulomb[0] + self.stiction, self.coulomb[1]];
+                let slope = rest.map(|c| c / COULOMB_VELOCITY_SCALE);
                 for (row, i) in [(1usize, 0usize), (3, 1)] {
                     a[(row, 1)] -= minv[i][0] * slope[0];
                     a[(row, 3)] -= minv[i][1] * slope[1];
@@ -714,6 +762,7 @@ struct Coefficients<const L: usize> {
     c_arm: [f64; L],
     dp: [f64; L],
     cr: [f64; L],
+    stiction: [f64; L],
     cp: [f64; L],
     vd: [f64; L],
 }
@@ -730,6 +779,7 @@ impl<const L: usize> Coefficients<L> {
             c_arm: p.map(|p| p.c_arm),
             dp: p.map(|p| p.dp),
             cr: p.map(|p| p.coulomb[0]),
+            stiction: p.map(|p| p.stiction),
             cp: p.map(|p| p.coulomb[1]),
             vd: p.map(|p| p.vd),
         }
@@ -770,12 +820,23 @@ impl<const L: usize> Coefficients<L> {
         }
         let (m, [mut f1, mut f2]) = self.mass_and_forces(x, &applied, tau_d);
         // Skipped at zero so that the frictionless presets cost (and compute) what they did.
-        for (f, coulomb, v) in [(&mut f1, &self.cr, &x[1]), (&mut f2, &self.cp, &x[3])] {
-            if coulomb.iter().any(|c| *c != 0.0) {
-                for l in 0..L {
-                    if coulomb[l] != 0.0 {
-                        f[l] -= coulomb[l] * (v[l] / COULOMB_VELOCITY_SCALE).tanh();
+        if self.cr.iter().chain(&self.stiction).any(|c| *c != 0.0) {
+            for l in 0..L {
+                if self.cr[l] != 0.0 || self.stiction[l] != 0.0 {
+                    let mut level = self.cr[l];
+                    if self.stiction[l] != 0.0 {
+                        // The breakaway torque's Stribeck decay (module docs).
+                        let s = x[1][l] / STRIBECK_VELOCITY;
+                        level += self.stiction[l] * (-s * s).exp();
                     }
+                    f1[l] -= level * (x[1][l] / COULOMB_VELOCITY_SCALE).tanh();
+                }
+            }
+        }
+        if self.cp.iter().any(|c| *c != 0.0) {
+            for l in 0..L {
+                if self.cp[l] != 0.0 {
+                    f2[l] -= self.cp[l] * (x[3][l] / COULOMB_VELOCITY_SCALE).tanh();
                 }
             }
         }
@@ -936,6 +997,54 @@ mod tests {
             vd: 0.4,
             ..FurutaParams::qube_servo2()
         }
+    }
+
+    #[test]
+    fn stiction_raises_the_arm_friction_to_the_breakaway_torque_at_low_speed() {
+        let p = rough_params();
+        let smooth = Plant::new(FurutaParams {
+            cr: 0.0,
+            cp: 0.0,
+            vd: 0.0,
+            ..p
+        })
+        .unwrap();
+        let coulomb = Plant::new(FurutaParams {
+            cp: 0.0,
+            vd: 0.0,
+            ..p
+        })
+        .unwrap();
+        let sticky = coulomb.with_arm_breakaway(3.0 * p.cr).unwrap();
+        assert_eq!(sticky.arm_breakaway(), 3.0 * p.cr);
+        // The friction torque on the arm, from the difference of the arm's equation with and
+        // without it: M ẍ differs only in the first force, f1.
+        let friction = |plant: &Plant, rate: f64| {
+            let x = State::new(0.0, rate, 0.0, 0.0);
+            let ([m11, m12, _], _) = smooth.mass_and_forces(&x, 0.0, 0.0);
+            let (d0, d1) = (
+                smooth.derivative(&x, 2.0, 0.0),
+                plant.derivative(&x, 2.0, 0.0),
+            );
+            // Only f1 changes: M [Δθ̈; Δα̈] = [Δf1; 0].
+            m11 * (d0[1] - d1[1]) + m12 * (d0[3] - d1[3])
+        };
+        for rate in [0.02, 0.05, 0.1, 0.3, 1.0] {
+            let sgn = (rate / COULOMB_VELOCITY_SCALE).tanh();
+            let want = (p.cr + 2.0 * p.cr * (-(rate / STRIBECK_VELOCITY).powi(2)).exp()) * sgn;
+            assert!((friction(&sticky, rate) - want).abs() < 1e-12, "{rate}");
+            assert!(
+                (friction(&coulomb, rate) - p.cr * sgn).abs() < 1e-12,
+                "{rate}"
+            );
+        }
+        // Well above v_s the breakaway has decayed to the Coulomb level.
+        assert!((friction(&sticky, 1.0) - friction(&coulomb, 1.0)).abs() < 1e-12);
+        // The stiffer friction at rest shortens the RK4 substep limit.
+        assert!(sticky.max_rk4_substep() < coulomb.max_rk4_substep());
+        assert!(coulomb.with_arm_breakaway(0.5 * p.cr).is_err());
+        assert!(coulomb.with_arm_breakaway(f64::NAN).is_err());
+        assert_eq!(coulomb.with_arm_breakaway(0.0).unwrap(), coulomb);
     }
 
     #[test]

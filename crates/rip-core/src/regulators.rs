@@ -12,6 +12,25 @@
 //! This is exact steady-state tracking for this plant because θ is a pure integrator: any
 //! constant `[θ_ref, 0, 0, 0]` is an equilibrium with `u = 0`. Both clamp to their input bounds
 //! (default ±12 V, the paper's actuator limit) and write only finite inputs.
+//!
+//! # Integral action (optional)
+//!
+//! A constant torque on the arm (friction left over by the compensation, a cable, a tilt)
+//! needs a constant voltage, which `−K(x − x_ref)` only gives with an arm offset. With
+//! [`with_integral_action`](Lqr::with_integral_action), in the manner of MATLAB's `lqi` for
+//! discrete systems, the arm error is integrated and fed back as well:
+//!
+//! ```text
+//! x_i[k+1] = x_i[k] + Ts (θ_ref[k] − θ[k])          θ: the measured arm angle
+//! u[k]     = sat(−K_x (x̂[k] − x_ref[k]) − k_i x_i[k],  u_min, u_max)
+//! [K_x k_i] = dlqr([A_d 0; −Ts e_θᵀ 1], [B_d; 0], diag(Q, q_i), R)
+//! ```
+//!
+//! Anti-windup by conditional integration: while `u` is held at a bound, the integrator does
+//! not move in the direction that would push it further in. Bumpless start: `x_i` is zero
+//! after construction, [`reset`](Controller::reset), [`seed`](Controller::seed) and every
+//! [`observe`](Controller::observe) (a sample whose input someone else chose, such as the
+//! swing-up's), so the first own move after a catch is the plain `−K_x(x̂ − x_ref)`.
 
 use nalgebra::{DVector, SMatrix, SVector};
 
@@ -56,19 +75,74 @@ fn gain_row(k: &Mat) -> Result<SMatrix<f64, 1, NX>> {
     Ok(SMatrix::<f64, 1, NX>::from_fn(|_, j| k[(0, j)]))
 }
 
-/// `sat(−K (x − x_ref))`; a non-finite value (only possible from non-finite measurements)
-/// becomes 0 and is reported as [`StepStatus::Fallback`].
+/// The integrator of the arm error and its gain (module docs, "Integral action").
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Integral {
+    gain: f64,
+    ts: f64,
+    state: f64,
+}
+
+impl Integral {
+    fn new(gain: f64, ts: f64) -> Result<Self> {
+        if !gain.is_finite() {
+            return Err(RipError::invalid(
+                "integral_gain",
+                format!("must be finite, got {gain}"),
+            ));
+        }
+        Ok(Self {
+            gain,
+            ts,
+            state: 0.0,
+        })
+    }
+
+    /// Integrates the arm error `error = θ_ref − θ̂` after a move whose unclamped value was
+    /// `v` and written value `u`, except in the direction that deepens a saturation.
+    #[inline]
+    fn update(&mut self, error: f64, v: f64, u: f64) {
+        let push = -self.gain * self.ts * error;
+        if (v > u && push > 0.0) || (v < u && push < 0.0) {
+            return;
+        }
+        let next = self.state + self.ts * error;
+        if next.is_finite() {
+            self.state = next;
+        }
+    }
+}
+
+/// Zeroes the integrator, if any (the bumpless start).
+fn clear(integral: &mut Option<Integral>) {
+    if let Some(i) = integral {
+        i.state = 0.0;
+    }
+}
+
+/// `sat(−K (x − x_ref) − k_i x_i)` (the integral term when there is one), then the
+/// integrator's update with the measured arm angle `arm`; a non-finite value (only possible from non-finite measurements)
+/// becomes 0 and is reported as [`StepStatus::Fallback`], and leaves the integrator as it was.
 #[inline]
 fn feedback(
     k: &SMatrix<f64, 1, NX>,
     x: &SVector<f64, NX>,
     r: &[f64],
     bounds: (f64, f64),
+    integral: &mut Option<Integral>,
+    arm: f64,
 ) -> (f64, StepStatus) {
     let err = SVector::<f64, NX>::new(x[0] - r[0], x[1], x[2] - r[1], x[3]);
-    let u = -(k * err)[0];
-    if u.is_finite() {
-        (u.clamp(bounds.0, bounds.1), StepStatus::Nominal)
+    let mut v = -(k * err)[0];
+    if let Some(i) = integral {
+        v -= i.gain * i.state;
+    }
+    if v.is_finite() {
+        let u = v.clamp(bounds.0, bounds.1);
+        if let Some(i) = integral {
+            i.update(r[0] - arm, v, u);
+        }
+        (u, StepStatus::Nominal)
     } else {
         (0.0f64.clamp(bounds.0, bounds.1), StepStatus::Fallback)
     }
@@ -112,6 +186,7 @@ pub struct Lqr {
     started: bool,
     /// Periods held since the last measured angle.
     held: u32,
+    integral: Option<Integral>,
 }
 
 impl Lqr {
@@ -135,6 +210,7 @@ impl Lqr {
             x_hat: SVector::zeros(),
             started: false,
             held: 0,
+            integral: None,
         })
     }
 
@@ -165,6 +241,22 @@ impl Lqr {
         check_bounds(u_min, u_max)?;
         self.bounds = (u_min, u_max);
         Ok(self)
+    }
+
+    /// Adds integral action on the arm error with gain `k_i` (module docs): `K` is then the
+    /// state part `K_x` of the augmented design. A zero gain is no integral action.
+    pub fn with_integral_action(mut self, k_i: f64) -> Result<Self> {
+        self.integral = if k_i == 0.0 {
+            None
+        } else {
+            Some(Integral::new(k_i, self.ts)?)
+        };
+        Ok(self)
+    }
+
+    /// The integral gain `k_i`, when the regulator has integral action.
+    pub fn integral_gain(&self) -> Option<f64> {
+        self.integral.map(|i| i.gain)
     }
 
     /// The gain `K` (1×4).
@@ -230,7 +322,17 @@ impl Lqr {
     /// the feedback on the kept estimate (zero before the first usable sample).
     fn discard_sample(&mut self, r: &[f64], u: &mut [f64]) -> StepStatus {
         self.count_held_period();
-        u[0] = feedback(&self.k, &self.x_hat, r, self.bounds).0;
+        // No measurement of the arm error: the integral term acts, the integrator stays.
+        let mut frozen = self.integral;
+        u[0] = feedback(
+            &self.k,
+            &self.x_hat,
+            r,
+            self.bounds,
+            &mut frozen,
+            self.x_hat[0],
+        )
+        .0;
         StepStatus::Fallback
     }
 }
@@ -248,7 +350,15 @@ impl Controller for Lqr {
         if !self.update_estimate(y) {
             return self.discard_sample(r, u);
         }
-        let (value, status) = feedback(&self.k, &self.x_hat, r, self.bounds);
+        let arm = self.x_hat[0];
+        let (value, status) = feedback(
+            &self.k,
+            &self.x_hat,
+            r,
+            self.bounds,
+            &mut self.integral,
+            arm,
+        );
         u[0] = value;
         status
     }
@@ -259,10 +369,12 @@ impl Controller for Lqr {
         if !self.update_estimate(y) {
             self.count_held_period();
         }
+        clear(&mut self.integral);
     }
 
     /// `x̂ = x`, the next rate difference taken from this sample's angles.
     fn seed(&mut self, x: &[f64], _u: &[f64]) {
+        clear(&mut self.integral);
         if x.len() >= NX && x[..NX].iter().all(|v| v.is_finite()) {
             self.x_hat.copy_from_slice(&x[..NX]);
             self.started = true;
@@ -281,6 +393,7 @@ impl Controller for Lqr {
         self.x_hat.fill(0.0);
         self.started = false;
         self.held = 0;
+        clear(&mut self.integral);
     }
 
     fn sample_time(&self) -> Option<f64> {
@@ -325,6 +438,7 @@ pub struct Lqg {
     u_buf: [f64; 1],
     /// The full estimator state written by [`Controller::seed`].
     seed_buf: Vec<f64>,
+    integral: Option<Integral>,
 }
 
 impl Lqg {
@@ -373,6 +487,7 @@ impl Lqg {
             plant_estimate: SVector::zeros(),
             u_buf: [0.0],
             seed_buf: vec![0.0; n],
+            integral: None,
         })
     }
 
@@ -390,6 +505,22 @@ impl Lqg {
         check_bounds(u_min, u_max)?;
         self.bounds = (u_min, u_max);
         Ok(self)
+    }
+
+    /// Adds integral action on the arm error with gain `k_i` (module docs): `K` is then the
+    /// state part `K_x` of the augmented design. A zero gain is no integral action.
+    pub fn with_integral_action(mut self, k_i: f64) -> Result<Self> {
+        self.integral = if k_i == 0.0 {
+            None
+        } else {
+            Some(Integral::new(k_i, self.ts)?)
+        };
+        Ok(self)
+    }
+
+    /// The integral gain `k_i`, when the regulator has integral action.
+    pub fn integral_gain(&self) -> Option<f64> {
+        self.integral.map(|i| i.gain)
     }
 
     /// The gain `K` (1×4).
@@ -462,7 +593,23 @@ impl Controller for Lqg {
 
     fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
         let usable = self.correct(y);
-        let (value, status) = feedback(&self.k, &self.plant_estimate, r, self.bounds);
+        // An unusable sample is no measurement of the arm error: nothing to integrate.
+        let mut frozen = self.integral;
+        let integral = if usable {
+            &mut self.integral
+        } else {
+            &mut frozen
+        };
+        // The measured arm angle, as `lqi` integrates the output: the plant part of the
+        // estimate leaves out what the output-disturbance state has taken up.
+        let (value, status) = feedback(
+            &self.k,
+            &self.plant_estimate,
+            r,
+            self.bounds,
+            integral,
+            y[0],
+        );
         self.u_buf[0] = value;
         u[0] = value;
         self.estimator.predict(&self.u_buf);
@@ -477,6 +624,7 @@ impl Controller for Lqg {
     /// applied `u` (a non-finite `u` keeps the last applied input, as in
     /// [`hold`](Controller::hold)).
     fn observe(&mut self, y: &[f64], u: &[f64]) {
+        clear(&mut self.integral);
         self.correct(y);
         self.set_applied(u);
         self.estimator.predict(&self.u_buf);
@@ -484,6 +632,7 @@ impl Controller for Lqg {
 
     /// `x̂[k|k] = [x; 0]`, then `x̂[k+1|k] = A x̂[k|k] + B_u u`.
     fn seed(&mut self, x: &[f64], u: &[f64]) {
+        clear(&mut self.integral);
         if x.len() < NX || !x[..NX].iter().all(|v| v.is_finite()) {
             self.hold(u);
             return;
@@ -511,6 +660,7 @@ impl Controller for Lqg {
         self.estimator.reset();
         self.plant_estimate.fill(0.0);
         self.u_buf[0] = 0.0;
+        clear(&mut self.integral);
     }
 
     fn sample_time(&self) -> Option<f64> {
@@ -726,6 +876,51 @@ mod tests {
         let mut again = before;
         again.hold(&[u[0]]);
         assert_eq!(c.state_estimate(), again.state_estimate());
+    }
+
+    #[test]
+    fn integral_action_does_not_wind_up_and_starts_bumpless() {
+        let k = Mat::from_row_slice(1, 4, &[10.0, 0.0, 0.0, 0.0]);
+        let lqr = Lqr::new(&k, 0.01, f64::INFINITY).unwrap();
+        let mut c = lqr.with_integral_action(-50.0).unwrap();
+        let mut u = [0.0];
+        let zero = [0.0, 0.0];
+        // Error 1 rad: the state feedback is 10 V, the integral term adds 50 x_i.
+        c.step(&zero, &[1.0, 0.0], &mut u);
+        assert_eq!(u[0], 10.0);
+        c.step(&zero, &[1.0, 0.0], &mut u);
+        assert!((u[0] - 10.5).abs() < 1e-12, "{}", u[0]);
+        // At the bound the integrator does not move deeper in: x_i stays 0.02.
+        for _ in 0..100 {
+            c.step(&zero, &[2.0, 0.0], &mut u);
+            assert_eq!(u[0], 12.0);
+        }
+        c.step(&zero, &zero, &mut u);
+        assert!((u[0] - 1.0).abs() < 1e-12, "wound up: {}", u[0]);
+        // A sample someone else's input went with clears it, for a bumpless catch.
+        c.observe(&zero, &[3.0]);
+        c.step(&zero, &zero, &mut u);
+        assert_eq!(u[0], 0.0);
+        assert_eq!(c.integral_gain(), Some(-50.0));
+        assert!(lqr_without_integral_has_none());
+        // The LQG clears it on seed the same way.
+        let mut g = Lqg::paper().unwrap().with_integral_action(-5.0).unwrap();
+        for _ in 0..50 {
+            g.step(&[0.0, 0.0], &[1.0, 0.0], &mut u);
+        }
+        assert!(g.integral.unwrap().state > 0.0);
+        g.seed(&[0.0; 4], &[0.0]);
+        assert_eq!(g.integral.unwrap().state, 0.0);
+    }
+
+    fn lqr_without_integral_has_none() -> bool {
+        Lqr::paper().unwrap().integral_gain().is_none()
+            && Lqr::paper()
+                .unwrap()
+                .with_integral_action(0.0)
+                .unwrap()
+                .integral_gain()
+                .is_none()
     }
 
     #[test]

@@ -71,6 +71,22 @@ fn regulator_steps_do_not_allocate() {
 }
 
 #[test]
+fn compensated_steps_with_integral_action_do_not_allocate() {
+    // A rig with a dead zone and arm friction, integral action on, the MPC on its active set.
+    let spec = rip_core::Spec::parse(
+        "[plant]\npreset = 'qube_servo2'\nVd = 0.65\nCr = 0.003\n\
+         [lqr]\nintegral_weight = 20.0\n[mpc]\nsolver = 'active_set'\n",
+    )
+    .unwrap();
+    let design = spec.design(0.01).unwrap();
+    assert!(design.compensation().is_some() && design.integral_gain.is_some());
+    for kind in rip_core::spec::ControllerKind::ALL {
+        let mut c = design.controller(kind).unwrap();
+        assert_eq!(drive(c.as_mut()), 0, "compensated {kind:?}");
+    }
+}
+
+#[test]
 fn active_set_mpc_step_does_not_allocate() {
     let mut mpc = controller(QpSolver::ActiveSet).unwrap();
     assert_eq!(drive(&mut mpc), 0, "Mpc::step (active set)");

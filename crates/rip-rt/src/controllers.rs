@@ -63,10 +63,9 @@ impl From<ControllerKind> for Kind {
     }
 }
 
-/// Builds the controller `kind` as configured, at the loop period. Its input bounds are the
-/// file's `[mpc] input_bounds` inside `±safety.voltage_limit`, so that no controller plans
-/// with more voltage than the loop will send.
-pub fn build(kind: ControllerKind, cfg: &Config) -> Result<Box<dyn Controller>, String> {
+/// The one assembly's design for `kind` at the loop period, with `[mpc] input_bounds` inside
+/// `±safety.voltage_limit`.
+fn design(kind: ControllerKind, cfg: &Config) -> Result<rip_core::spec::Design, String> {
     let mut spec = cfg.spec.clone();
     let v = cfg.safety.voltage_limit;
     let [lo, hi] = spec.mpc.input_bounds[0];
@@ -79,21 +78,39 @@ pub fn build(kind: ControllerKind, cfg: &Config) -> Result<Box<dyn Controller>, 
     }
     spec.mpc.input_bounds[0] = [lo, hi];
     spec.design(cfg.period_s())
-        .and_then(|d| d.controller(kind.into()))
+        .map_err(|e| format!("{kind} design: {e}"))
+}
+
+/// Builds the controller `kind` as configured, at the loop period. Its input bounds are the
+/// file's `[mpc] input_bounds` inside `±safety.voltage_limit`, so that no controller plans
+/// with more voltage than the loop will send; the `[compensation]` of the dead zone and arm
+/// friction is applied to the voltage it writes (rip-core's assembly).
+pub fn build(kind: ControllerKind, cfg: &Config) -> Result<Box<dyn Controller>, String> {
+    design(kind, cfg)?
+        .controller(kind.into())
         .map_err(|e| format!("{kind} design: {e}"))
 }
 
 /// Builds the swing-up supervisor (rip-core's [`SwingUp`]) around the balance controller
 /// `kind` ([`build`]), with the `[swing_up]` settings designed on the `[plant]` model. The law's
 /// voltage is at most `safety.voltage_limit` (so that its arm-limit envelope plans with the
-/// voltage the loop sends). [`Config::validate_swing_up`] checks the settings against the
+/// voltage the loop sends) and inside the bounds the compensation leaves; the compensation is
+/// applied around the whole supervisor, to the swing-up law's voltage as to the balance
+/// controller's. [`Config::validate_swing_up`] checks the settings against the
 /// loop's.
 pub fn build_swing_up(kind: ControllerKind, cfg: &Config) -> Result<Box<dyn Controller>, String> {
     let mut settings = cfg.spec.swing_up.clone();
+    let design = design(kind, cfg)?;
+    // The law, like the balance controller, plans within the bounds the compensation leaves.
     settings.max_voltage = settings.max_voltage.min(cfg.safety.voltage_limit);
-    let balance = build(kind, cfg)?;
+    if let Some(c) = design.compensation() {
+        settings.max_voltage = c.planned_limit(settings.max_voltage);
+    }
+    let balance = design
+        .balance(kind.into())
+        .map_err(|e| format!("{kind} design: {e}"))?;
     let plant = cfg.spec.plant().map_err(|e| e.to_string())?;
     SwingUp::new(balance, &plant, settings)
-        .map(|s| Box::new(s) as Box<dyn Controller>)
+        .map(|s| design.compensate(Box::new(s)))
         .map_err(|e| format!("swing-up around {kind}: {e}"))
 }

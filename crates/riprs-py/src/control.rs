@@ -12,7 +12,7 @@ use pyo3::prelude::*;
 use rip_core::paper::INPUT_LIMIT;
 use rip_core::paper::TS;
 use rip_core::regulators::DEFAULT_RATE_CUTOFF_HZ;
-use rip_core::{Controller, Lqg, Lqr};
+use rip_core::{Compensated, Compensation, Controller, Lqg, Lqr};
 
 use crate::convert::mat_to_py;
 use crate::convert::{matrix_arg, vector_arg, Real};
@@ -46,21 +46,64 @@ fn factory_of<C: Controller + Clone + 'static>(template: C) -> ControllerFactory
 pub fn controller_factory(obj: &Bound<'_, PyAny>) -> PyResult<ControllerFactory> {
     let py = obj.py();
     if let Ok(c) = obj.downcast::<PyLqr>() {
-        return Ok(factory_of(c.get().inner.lock(py).clone()));
+        let c = c.get();
+        return Ok(compensated_factory(
+            c.inner.lock(py).clone(),
+            c.compensation,
+        ));
     }
     if let Ok(c) = obj.downcast::<PyLqg>() {
-        return Ok(factory_of(c.get().inner.lock(py).clone()));
+        let c = c.get();
+        return Ok(compensated_factory(
+            c.inner.lock(py).clone(),
+            c.compensation,
+        ));
     }
     if let Ok(c) = obj.downcast::<crate::mpc::PyMpc>() {
-        return Ok(factory_of(c.get().inner.lock(py).clone()));
+        let c = c.get();
+        return Ok(compensated_factory(
+            c.inner.lock(py).clone(),
+            c.compensation,
+        ));
     }
     if let Ok(c) = obj.downcast::<crate::swingup::PySwingUp>() {
-        return Ok(factory_of(c.get().inner.lock(py).clone()));
+        let c = c.get();
+        return Ok(compensated_factory(
+            c.inner.lock(py).clone(),
+            c.compensation,
+        ));
     }
     Err(PyTypeError::new_err(format!(
         "controller must be a riprs controller (Lqr, Lqg, Mpc, SwingUp), got {}",
         obj.get_type().name()?
     )))
+}
+
+/// Copies of `template`, inside the compensation (rip-core's `Compensated`) when there is one.
+fn compensated_factory<C: Controller + Clone + 'static>(
+    template: C,
+    compensation: Option<Compensation>,
+) -> ControllerFactory {
+    match compensation {
+        Some(law) => factory_of(Compensated::new(template, law)),
+        None => factory_of(template),
+    }
+}
+
+/// The compensation as a dict (``dead_zone``, ``friction_voltage`` in V; ``u_min``,
+/// ``u_max``: the bounds of the written voltage), or ``None``.
+pub(crate) fn compensation_dict<'py>(
+    py: Python<'py>,
+    c: Option<Compensation>,
+) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
+    let Some(c) = c else { return Ok(None) };
+    let d = pyo3::types::PyDict::new(py);
+    let (lo, hi) = c.bounds();
+    d.set_item("dead_zone", c.dead_zone())?;
+    d.set_item("friction_voltage", c.friction_voltage())?;
+    d.set_item("u_min", lo)?;
+    d.set_item("u_max", hi)?;
+    Ok(Some(d))
 }
 
 /// An owned copy of the Rust controller inside a Python controller object (see
@@ -124,19 +167,34 @@ fn estimate_py<'py, C: Controller>(py: Python<'py>, c: &Shared<C>) -> Option<Py1
 #[pyclass(name = "Lqr", module = "riprs._riprs", frozen)]
 pub struct PyLqr {
     pub(crate) inner: Shared<Lqr>,
+    /// Applied around the regulator wherever it runs (`riprs.simulate`, campaigns).
+    pub(crate) compensation: Option<Compensation>,
 }
 
 impl PyLqr {
     /// Wraps a core regulator (from the controller assembly).
-    pub(crate) fn from_core(inner: Lqr) -> Self {
+    pub(crate) fn from_core(inner: Lqr, compensation: Option<Compensation>) -> Self {
         Self {
             inner: Shared::new(inner),
+            compensation,
         }
     }
 }
 
 #[pymethods]
 impl PyLqr {
+    /// The dead-zone and friction compensation applied around this controller wherever it
+    /// runs (:func:`riprs.simulate`, campaigns, ``rip-rt``), as a dict (``dead_zone``,
+    /// ``friction_voltage``, ``u_min``, ``u_max``, all in V), or ``None``. :meth:`step`
+    /// returns the voltage before it.
+    #[getter]
+    fn compensation<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
+        crate::control::compensation_dict(py, self.compensation)
+    }
+
     #[new]
     #[pyo3(signature = (K, Ts=Real(TS), *, rate_cutoff=Real(DEFAULT_RATE_CUTOFF_HZ), u_min=Real(-INPUT_LIMIT), u_max=Real(INPUT_LIMIT)))]
     #[allow(non_snake_case)]
@@ -154,6 +212,7 @@ impl PyLqr {
             .py()?;
         Ok(Self {
             inner: Shared::new(inner),
+            compensation: None,
         })
     }
 
@@ -192,6 +251,7 @@ impl PyLqr {
             .py()?;
         Ok(Self {
             inner: Shared::new(inner),
+            compensation: None,
         })
     }
 
@@ -200,6 +260,7 @@ impl PyLqr {
     fn paper() -> PyResult<Self> {
         Ok(Self {
             inner: Shared::new(Lqr::paper().py()?),
+            compensation: None,
         })
     }
 
@@ -251,6 +312,13 @@ impl PyLqr {
     #[getter]
     fn u_min(&self, py: Python<'_>) -> f64 {
         self.inner.lock(py).input_bounds().0
+    }
+
+    /// Gain ``k_i`` on the integrated arm error (integral action, ``lqr.integral_weight``), or
+    /// ``None`` without integral action.
+    #[getter]
+    fn integral_gain(&self, py: Python<'_>) -> Option<f64> {
+        self.inner.lock(py).integral_gain()
     }
 
     /// Upper input bound (V).
@@ -309,19 +377,34 @@ impl PyLqr {
 #[pyclass(name = "Lqg", module = "riprs._riprs", frozen)]
 pub struct PyLqg {
     pub(crate) inner: Shared<Lqg>,
+    /// Applied around the regulator wherever it runs (`riprs.simulate`, campaigns).
+    pub(crate) compensation: Option<Compensation>,
 }
 
 impl PyLqg {
     /// Wraps a core regulator (from the controller assembly).
-    pub(crate) fn from_core(inner: Lqg) -> Self {
+    pub(crate) fn from_core(inner: Lqg, compensation: Option<Compensation>) -> Self {
         Self {
             inner: Shared::new(inner),
+            compensation,
         }
     }
 }
 
 #[pymethods]
 impl PyLqg {
+    /// The dead-zone and friction compensation applied around this controller wherever it
+    /// runs (:func:`riprs.simulate`, campaigns, ``rip-rt``), as a dict (``dead_zone``,
+    /// ``friction_voltage``, ``u_min``, ``u_max``, all in V), or ``None``. :meth:`step`
+    /// returns the voltage before it.
+    #[getter]
+    fn compensation<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
+        crate::control::compensation_dict(py, self.compensation)
+    }
+
     #[new]
     #[pyo3(signature = (K, A, B, C, L, M, Ts=Real(TS), *, u_min=Real(-INPUT_LIMIT), u_max=Real(INPUT_LIMIT)))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
@@ -349,6 +432,7 @@ impl PyLqg {
             .py()?;
         Ok(Self {
             inner: Shared::new(inner),
+            compensation: None,
         })
     }
 
@@ -357,6 +441,7 @@ impl PyLqg {
     fn paper() -> PyResult<Self> {
         Ok(Self {
             inner: Shared::new(Lqg::paper().py()?),
+            compensation: None,
         })
     }
 
@@ -404,6 +489,13 @@ impl PyLqg {
     #[getter]
     fn u_min(&self, py: Python<'_>) -> f64 {
         self.inner.lock(py).input_bounds().0
+    }
+
+    /// Gain ``k_i`` on the integrated arm error (integral action, ``lqr.integral_weight``), or
+    /// ``None`` without integral action.
+    #[getter]
+    fn integral_gain(&self, py: Python<'_>) -> Option<f64> {
+        self.inner.lock(py).integral_gain()
     }
 
     /// Upper input bound (V).

@@ -328,10 +328,24 @@ impl PyMpcSolution {
 pub struct PyMpc {
     // Shared by the Python threads that use this object (see `crate::shared`).
     pub(crate) inner: Shared<Mpc>,
+    /// Applied around the MPC wherever it runs (`riprs.simulate`, campaigns).
+    pub(crate) compensation: Option<rip_core::Compensation>,
 }
 
 #[pymethods]
 impl PyMpc {
+    /// The dead-zone and friction compensation applied around this controller wherever it
+    /// runs (:func:`riprs.simulate`, campaigns, ``rip-rt``), as a dict (``dead_zone``,
+    /// ``friction_voltage``, ``u_min``, ``u_max``, all in V), or ``None``. :meth:`step`
+    /// returns the voltage before it.
+    #[getter]
+    fn compensation<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
+        crate::control::compensation_dict(py, self.compensation)
+    }
+
     #[new]
     #[pyo3(signature = (
         A, B, C, Ts, *, prediction_horizon=Count::of(rip_core::mpc::DEFAULT_PREDICTION_HORIZON as i64),
@@ -393,6 +407,7 @@ impl PyMpc {
             .py()?;
         Ok(Self {
             inner: Shared::new(inner),
+            compensation: None,
         })
     }
 
@@ -404,6 +419,7 @@ impl PyMpc {
         let inner = py.allow_threads(|| paper::controller(solver)).py()?;
         Ok(Self {
             inner: Shared::new(inner),
+            compensation: None,
         })
     }
 

@@ -376,6 +376,12 @@ impl PyPlant {
         }
     }
 
+    /// The arm's breakaway torque (N m) of its stiction (``plant.arm_breakaway``), 0 for none.
+    #[getter]
+    fn arm_breakaway(&self) -> f64 {
+        self.inner.arm_breakaway()
+    }
+
     /// The physical parameters.
     #[getter]
     fn params(&self) -> PyFurutaParams {

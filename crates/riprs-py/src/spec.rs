@@ -139,6 +139,7 @@ pub struct PyLqrSpec {
     Q: Vec<f64>,
     R: f64,
     rate_cutoff: f64,
+    integral_weight: f64,
 }
 
 /// `[kalman]` (read-only).
@@ -146,6 +147,17 @@ pub struct PyLqrSpec {
 pub struct PyKalmanSpec {
     disturbance_gain: f64,
     measurement_noise: Vec<f64>,
+}
+
+/// `[compensation]` (read-only): ``dead_zone`` and ``arm_friction`` are ``None`` when they
+/// follow the ``[plant]``'s ``Vd`` and ``Cr``.
+#[pyclass(name = "CompensationSpec", module = "riprs._riprs", frozen, get_all)]
+pub struct PyCompensationSpec {
+    enabled: bool,
+    dead_zone: Option<f64>,
+    arm_friction: Option<f64>,
+    voltage_scale: f64,
+    velocity_scale: f64,
 }
 
 /// `[mpc]` (read-only).
@@ -286,16 +298,24 @@ impl PySpec {
             let obj: Bound<'py, PyAny> = match kind {
                 ControllerKind::Lqr => {
                     let c = py.allow_threads(|| d.lqr()).map_err(config_err)?;
-                    Bound::new(py, PyLqr::from_core(c))?.into_any()
+                    Bound::new(py, PyLqr::from_core(c, d.compensation().copied()))?.into_any()
                 }
                 ControllerKind::Lqg => {
                     let c = py.allow_threads(|| d.lqg()).map_err(config_err)?;
-                    Bound::new(py, PyLqg::from_core(c))?.into_any()
+                    Bound::new(py, PyLqg::from_core(c, d.compensation().copied()))?.into_any()
                 }
                 ControllerKind::Mpc => {
                     let c = py.allow_threads(|| d.mpc()).map_err(config_err)?;
                     let inner = Shared::new(c);
-                    Bound::new(py, PyMpc { inner })?.into_any()
+                    let compensation = d.compensation().copied();
+                    Bound::new(
+                        py,
+                        PyMpc {
+                            inner,
+                            compensation,
+                        },
+                    )?
+                    .into_any()
                 }
             };
             out.set_item(kind.name(), obj)?;
@@ -381,6 +401,7 @@ impl PySpec {
             Q: l.Q.to_vec(),
             R: l.R,
             rate_cutoff: l.rate_cutoff,
+            integral_weight: l.integral_weight,
         }
     }
 
@@ -391,6 +412,19 @@ impl PySpec {
         PyKalmanSpec {
             disturbance_gain: k.disturbance_gain,
             measurement_noise: k.measurement_noise.to_vec(),
+        }
+    }
+
+    /// ``[compensation]``.
+    #[getter]
+    fn compensation(&self) -> PyCompensationSpec {
+        let c = &self.inner.compensation;
+        PyCompensationSpec {
+            enabled: c.enabled,
+            dead_zone: c.dead_zone,
+            arm_friction: c.arm_friction,
+            voltage_scale: c.voltage_scale,
+            velocity_scale: c.velocity_scale,
         }
     }
 
@@ -512,6 +546,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyLqrSpec>()?;
     m.add_class::<PyKalmanSpec>()?;
     m.add_class::<PyMpcSpec>()?;
+    m.add_class::<PyCompensationSpec>()?;
     m.add_class::<PyMonteCarloSpec>()?;
     m.add_function(wrap_pyfunction!(load_config, m)?)?;
     m.add_function(wrap_pyfunction!(table1_rmse, m)?)?;

@@ -16,6 +16,7 @@ use crate::errors::IntoPyResult;
 use crate::mpc::PyMpc;
 use crate::plant::{PyFurutaParams, PyPlant};
 use crate::shared::Shared;
+use rip_core::Compensation;
 
 /// The balance controllers a supervisor can hold, as one cloneable type.
 #[derive(Clone)]
@@ -26,16 +27,27 @@ pub enum Balance {
 }
 
 impl Balance {
-    fn extract(obj: &Bound<'_, PyAny>) -> PyResult<Self> {
+    /// The balance controller and its compensation, which the supervisor takes over and
+    /// applies around itself (to the swing-up law's voltage as to the balance controller's).
+    fn extract(obj: &Bound<'_, PyAny>) -> PyResult<(Self, Option<Compensation>)> {
         let py = obj.py();
         if let Ok(c) = obj.downcast::<PyLqr>() {
-            return Ok(Self::Lqr(c.get().inner.lock(py).clone()));
+            let c = c.get();
+            return Ok((Self::Lqr(c.inner.lock(py).clone()), c.compensation));
         }
         if let Ok(c) = obj.downcast::<PyLqg>() {
-            return Ok(Self::Lqg(Box::new(c.get().inner.lock(py).clone())));
+            let c = c.get();
+            return Ok((
+                Self::Lqg(Box::new(c.inner.lock(py).clone())),
+                c.compensation,
+            ));
         }
         if let Ok(c) = obj.downcast::<PyMpc>() {
-            return Ok(Self::Mpc(Box::new(c.get().inner.lock(py).clone())));
+            let c = c.get();
+            return Ok((
+                Self::Mpc(Box::new(c.inner.lock(py).clone())),
+                c.compensation,
+            ));
         }
         Err(PyTypeError::new_err(format!(
             "balance must be a riprs balance controller (Lqr, Lqg, Mpc), got {}",
@@ -159,6 +171,8 @@ impl Controller for Balance {
 pub struct PySwingUp {
     pub(crate) inner: Shared<SwingUp<Balance>>,
     balance_kind: &'static str,
+    /// The balance controller's compensation, applied around the whole supervisor.
+    pub(crate) compensation: Option<Compensation>,
 }
 
 fn apply_setting(s: &mut SwingUpSettings, key: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
@@ -244,6 +258,18 @@ fn phase_name(p: Phase) -> &'static str {
 
 #[pymethods]
 impl PySwingUp {
+    /// The dead-zone and friction compensation applied around this controller wherever it
+    /// runs (:func:`riprs.simulate`, campaigns, ``rip-rt``), as a dict (``dead_zone``,
+    /// ``friction_voltage``, ``u_min``, ``u_max``, all in V), or ``None``. :meth:`step`
+    /// returns the voltage before it.
+    #[getter]
+    fn compensation<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
+        crate::control::compensation_dict(py, self.compensation)
+    }
+
     #[new]
     #[pyo3(signature = (balance, plant=None, **settings))]
     fn new(
@@ -251,7 +277,7 @@ impl PySwingUp {
         plant: Option<&Bound<'_, PyAny>>,
         settings: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
-        let balance = Balance::extract(balance)?;
+        let (balance, compensation) = Balance::extract(balance)?;
         let plant = match plant {
             None => Plant::paper(),
             Some(p) if p.is_none() => Plant::paper(),
@@ -275,11 +301,16 @@ impl PySwingUp {
                 apply_setting(&mut s, &key, &value)?;
             }
         }
+        if let Some(c) = compensation {
+            // The law plans within the bounds the compensation leaves, as the balance does.
+            s.max_voltage = c.planned_limit(s.max_voltage);
+        }
         let balance_kind = balance.name();
         let inner = SwingUp::new(balance, &plant, s).py()?;
         Ok(Self {
             inner: Shared::new(inner),
             balance_kind,
+            compensation,
         })
     }
 

@@ -5,11 +5,17 @@
 //!                A_c, B_c: the paper's recovered model for the unchanged `paper` preset,
 //!                otherwise the [plant] parameters' linearisation about upright
 //! gain           K = dlqr(A_d, B_d, diag(lqr.Q), lqr.R)                          eq. (13)
+//!                with lqr.integral_weight q_i > 0: [K k_i] = dlqr of the model with the
+//!                integrated arm error x_i⁺ = x_i − Ts θ appended, diag(Q, q_i), R
+//!                (crate::regulators, "Integral action")
 //! estimator      one Kalman design on the augmented model (mpc::EstimatorDesign):
 //!                plant + [kalman] disturbance, MPC scales, eqs. (1)–(11)
 //! LQR            K, lqr.rate_cutoff, clamp to mpc.input_bounds
 //! LQG            K on the estimator (no MPC is built for it)
 //! MPC            [mpc] settings on the same estimator
+//! compensation   when [compensation] finds a dead zone or arm friction to compensate, each
+//!                controller plans within the input bounds shrunk by V_d + V_f and its
+//!                voltage passes through the compensation (crate::compensation)
 //! ```
 //!
 //! Every failure is a [`SpecError`] naming the key that caused it, so a file whose values are
@@ -18,6 +24,7 @@
 use nalgebra::DVector;
 
 use super::{ControllerKind, Spec, SpecError};
+use crate::compensation::{Compensated, Compensation};
 use crate::controller::Controller;
 use crate::error::RipError;
 use crate::linalg::{c2d, Mat};
@@ -43,10 +50,15 @@ pub struct Design {
     pub b: Mat,
     /// `C`: the two angles.
     pub c: Mat,
-    /// `K = dlqr(A_d, B_d, diag(Q), R)` (1×4).
+    /// `K = dlqr(A_d, B_d, diag(Q), R)` (1×4); the state part `K_x` of the augmented design
+    /// when there is integral action.
     pub k: Mat,
+    /// `k_i`, the gain on the integrated arm error, when `lqr.integral_weight > 0`.
+    pub integral_gain: Option<f64>,
     /// The shared Kalman design.
     pub estimator: EstimatorDesign,
+    /// The compensation every controller's voltage passes through, if any.
+    compensation: Option<Compensation>,
 }
 
 fn plant_key(e: &RipError) -> String {
@@ -103,9 +115,16 @@ fn mpc_key(e: &RipError) -> String {
 }
 
 impl Spec {
-    /// The nonlinear plant of `[plant]`.
+    /// The nonlinear plant of `[plant]`, with its stiction (`plant.arm_breakaway`) if any.
     pub fn plant(&self) -> Result<Plant, SpecError> {
-        Plant::new(self.plant.params()).map_err(|e| SpecError::new(plant_key(&e), e.to_string()))
+        let plant = Plant::new(self.plant.params())
+            .map_err(|e| SpecError::new(plant_key(&e), e.to_string()))?;
+        match self.plant.arm_breakaway {
+            Some(cs) => plant
+                .with_arm_breakaway(cs)
+                .map_err(|e| SpecError::new("plant.arm_breakaway", e.to_string())),
+            None => Ok(plant),
+        }
     }
 
     /// The continuous-time design model `(A_c, B_c)` (module docs).
@@ -150,6 +169,38 @@ impl Spec {
         }
     }
 
+    /// The compensation of `[compensation]` (module docs of [`crate::compensation`]) for the
+    /// `[plant]` and `[mpc] input_bounds`; `None` when it is disabled or there is neither a
+    /// dead zone nor arm friction to compensate.
+    pub fn compensation(&self) -> Result<Option<Compensation>, SpecError> {
+        let c = &self.compensation;
+        if !c.enabled {
+            return Ok(None);
+        }
+        let p = self.plant.params();
+        let vd = c.dead_zone.unwrap_or(p.vd);
+        let cr = c.arm_friction.unwrap_or(p.cr);
+        if vd == 0.0 && cr == 0.0 {
+            return Ok(None);
+        }
+        let [lo, hi] = self.mpc.input_bounds[0];
+        Compensation::new(
+            vd,
+            cr * p.rm / p.kt,
+            c.voltage_scale,
+            c.velocity_scale,
+            (lo, hi),
+        )
+        .map(Some)
+        .map_err(|e| {
+            let key = match e.name {
+                "input_bounds" => "mpc.input_bounds".to_string(),
+                name => format!("compensation.{name}"),
+            };
+            SpecError::new(key, e.to_string())
+        })
+    }
+
     /// The simulation of `[plant]`, `[sensor]` and `[reference]` at sample time `ts`.
     pub fn sim_config(&self, ts: f64, seed: u64) -> SimConfig {
         let [lo, hi] = self.mpc.input_bounds[0];
@@ -184,13 +235,19 @@ impl Spec {
             ));
         }
         self.validate()?;
+        let compensation = self.compensation()?;
         let (ac, bc) = self.continuous_design_model()?;
         let (a, b) = c2d(&ac, &bc, ts)
             .map_err(|e| SpecError::new("plant", format!("discretisation at Ts = {ts} s: {e}")))?;
         let c = paper::output_matrix();
-        let q = Mat::from_diagonal(&DVector::from_row_slice(&self.lqr.Q));
+        let (ad, bd, q) = if self.lqr.integral_weight > 0.0 {
+            integral_model(&a, &b, ts, &self.lqr.Q, self.lqr.integral_weight)
+        } else {
+            let q = Mat::from_diagonal(&DVector::from_row_slice(&self.lqr.Q));
+            (a.clone(), b.clone(), q)
+        };
         let r = Mat::from_element(1, 1, self.lqr.R);
-        let k = match dlqr(&a, &b, &q, &r, None) {
+        let k_full = match dlqr(&ad, &bd, &q, &r, None) {
             Ok(d) => d.k,
             Err(e @ RipError::NotStabilizable { .. }) => {
                 return Err(SpecError::new("plant", format!("the design model: {e}")))
@@ -205,7 +262,9 @@ impl Spec {
                 ))
             }
         };
-        if !k.iter().all(|v| v.is_finite()) {
+        let k = k_full.columns(0, 4).into_owned();
+        let integral_gain = (k_full.ncols() > 4).then(|| k_full[(0, 4)]);
+        if !k_full.iter().all(|v| v.is_finite()) {
             return Err(SpecError::new(
                 "lqr.R",
                 format!("the LQR gain is not finite with R = {}", self.lqr.R),
@@ -228,9 +287,25 @@ impl Spec {
             b,
             c,
             k,
+            integral_gain,
             estimator,
+            compensation,
         })
     }
+}
+
+/// The design model with the integrated arm error appended (MATLAB's `lqi`, discrete):
+/// `A_i = [A_d 0; −Ts e_θᵀ 1]`, `B_i = [B_d; 0]`, `Q_i = diag(Q, q_i)`.
+fn integral_model(a: &Mat, b: &Mat, ts: f64, q: &[f64; 4], qi: f64) -> (Mat, Mat, Mat) {
+    let mut ai = Mat::zeros(5, 5);
+    ai.view_mut((0, 0), (4, 4)).copy_from(a);
+    ai[(4, 0)] = -ts;
+    ai[(4, 4)] = 1.0;
+    let mut bi = Mat::zeros(5, 1);
+    bi.view_mut((0, 0), (4, 1)).copy_from(b);
+    let mut diag = q.to_vec();
+    diag.push(qi);
+    (ai, bi, Mat::from_diagonal(&DVector::from_vec(diag)))
 }
 
 impl Design {
@@ -239,16 +314,39 @@ impl Design {
         self.ts
     }
 
-    fn bounds(&self) -> (f64, f64) {
-        let [lo, hi] = self.spec.mpc.input_bounds[0];
-        (lo, hi)
+    /// The bounds the controllers plan within: `[mpc] input_bounds`, shrunk by the
+    /// compensation's largest correction when there is one.
+    pub fn bounds(&self) -> (f64, f64) {
+        match &self.compensation {
+            Some(c) => c.inner_bounds(),
+            None => {
+                let [lo, hi] = self.spec.mpc.input_bounds[0];
+                (lo, hi)
+            }
+        }
     }
 
-    /// LQR: `K` on measured angles and filtered-difference rates, clamped to the input bounds.
+    /// The compensation every controller's voltage passes through, if any.
+    pub fn compensation(&self) -> Option<&Compensation> {
+        self.compensation.as_ref()
+    }
+
+    /// `controller` with this design's compensation around it, or unchanged when there is
+    /// none. `controller` should plan within [`bounds`](Self::bounds).
+    pub fn compensate<'a>(&self, controller: Box<dyn Controller + 'a>) -> Box<dyn Controller + 'a> {
+        match self.compensation {
+            Some(law) => Box::new(Compensated::new(controller, law)),
+            None => controller,
+        }
+    }
+
+    /// LQR: `K` on measured angles and filtered-difference rates (and `k_i` on the integrated
+    /// arm error, when there is integral action), clamped to the input bounds.
     pub fn lqr(&self) -> Result<Lqr, SpecError> {
         let (lo, hi) = self.bounds();
         Lqr::new(&self.k, self.ts, self.spec.lqr.rate_cutoff)
             .and_then(|c| c.with_input_bounds(lo, hi))
+            .and_then(|c| c.with_integral_action(self.integral_gain.unwrap_or(0.0)))
             .map_err(|e| SpecError::new("lqr.rate_cutoff", e.to_string()))
     }
 
@@ -273,17 +371,28 @@ impl Design {
         }
         Lqg::new(&self.k, &model.a, &model.b, &c, &l, &m, self.ts)
             .and_then(|g| g.with_input_bounds(lo, hi))
+            .and_then(|g| g.with_integral_action(self.integral_gain.unwrap_or(0.0)))
             .map_err(|e| SpecError::new("kalman", format!("the LQG estimator: {e}")))
     }
 
-    /// The MPC of `[mpc]` on the shared Kalman filter.
+    /// The MPC of `[mpc]` on the shared Kalman filter, planning within
+    /// [`bounds`](Self::bounds).
     pub fn mpc(&self) -> Result<Mpc, SpecError> {
-        Mpc::with_estimator(&self.estimator, self.ts, self.spec.mpc_settings())
+        let mut settings = self.spec.mpc_settings();
+        settings.input_bounds = vec![self.bounds()];
+        Mpc::with_estimator(&self.estimator, self.ts, settings)
             .map_err(|e| SpecError::new(mpc_key(&e), format!("the MPC design fails: {e}")))
     }
 
-    /// The controller `kind`.
+    /// The controller `kind` as it runs: [`balance`](Self::balance) with the compensation
+    /// around it ([`compensate`](Self::compensate)).
     pub fn controller(&self, kind: ControllerKind) -> Result<Box<dyn Controller>, SpecError> {
+        Ok(self.compensate(self.balance(kind)?))
+    }
+
+    /// The controller `kind` without the compensation, planning within
+    /// [`bounds`](Self::bounds): for a supervisor that puts the compensation around itself.
+    pub fn balance(&self, kind: ControllerKind) -> Result<Box<dyn Controller>, SpecError> {
         Ok(match kind {
             ControllerKind::Lqr => Box::new(self.lqr()?),
             ControllerKind::Lqg => Box::new(self.lqg()?),

@@ -25,6 +25,9 @@ pub struct LqrSpec {
     pub R: f64,
     /// Cut-off (Hz) of LQR's filtered-difference rate estimate; `inf` for the plain difference.
     pub rate_cutoff: f64,
+    /// Weight `q_i` of the integrated arm error in LQR's and LQG's integral action
+    /// (`crate::regulators`, MATLAB's `lqi`); 0 (the paper's setting) for none.
+    pub integral_weight: f64,
 }
 
 impl Default for LqrSpec {
@@ -33,6 +36,7 @@ impl Default for LqrSpec {
             Q: [25.0, 0.0, 50.0, 0.0],
             R: 0.1,
             rate_cutoff: DEFAULT_RATE_CUTOFF_HZ,
+            integral_weight: 0.0,
         }
     }
 }
@@ -49,6 +53,7 @@ impl LqrSpec {
             ));
         }
         positive("lqr.R", self.R)?;
+        non_negative("lqr.integral_weight", self.integral_weight)?;
         if self.rate_cutoff.is_nan() || self.rate_cutoff <= 0.0 {
             return Err(bad(
                 "lqr.rate_cutoff",
@@ -215,5 +220,55 @@ impl MpcSpec {
             return Err(bad("mpc.max_iterations", "must be at least 1, got 0"));
         }
         Ok(())
+    }
+}
+
+/// `[compensation]`: the dead-zone inverse and arm-friction feed-forward every controller's
+/// voltage passes through ([`crate::compensation`]).
+///
+/// The corrections default to the `[plant]`'s own `vd` and `cr` (what the identification
+/// found); set them to compensate other values, or `enabled = false` to run the controllers
+/// as designed. A rig with neither (every preset) gets no compensation at all.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CompensationSpec {
+    /// Compensate at all.
+    pub enabled: bool,
+    /// Dead zone compensated (V); `plant.vd` when absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dead_zone: Option<f64>,
+    /// Arm Coulomb friction compensated (N·m), as the voltage `cr·rm/kt`; `plant.cr` when
+    /// absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub arm_friction: Option<f64>,
+    /// Width (V) of the ramp that replaces the sign of the dead-zone inverse.
+    pub voltage_scale: f64,
+    /// Width (rad/s) of the ramp that replaces the sign of the arm rate in the friction
+    /// feed-forward.
+    pub velocity_scale: f64,
+}
+
+impl Default for CompensationSpec {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            dead_zone: None,
+            arm_friction: None,
+            voltage_scale: 0.05,
+            velocity_scale: 0.05,
+        }
+    }
+}
+
+impl CompensationSpec {
+    pub(super) fn validate(&self) -> Result<(), SpecError> {
+        if let Some(v) = self.dead_zone {
+            non_negative("compensation.dead_zone", v)?;
+        }
+        if let Some(v) = self.arm_friction {
+            non_negative("compensation.arm_friction", v)?;
+        }
+        positive("compensation.voltage_scale", self.voltage_scale)?;
+        positive("compensation.velocity_scale", self.velocity_scale)
     }
 }

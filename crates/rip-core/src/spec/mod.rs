@@ -9,6 +9,7 @@
 //! [lqr]          # eq. (13) weights shared by LQR and LQG, rate filter   (LqrSpec)
 //! [kalman]       # the estimator LQG and MPC share                       (KalmanSpec)
 //! [mpc]          # section 3's MPC                                       (MpcSpec)
+//! [compensation] # dead zone and arm friction compensated                (CompensationSpec)
 //! [monte_carlo]  # runs over seeds and parameter perturbations           (MonteCarloSpec)
 //! [swing_up]     # swing-up from rest and catch                          (SwingUpSettings)
 //! ```
@@ -34,7 +35,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 pub use assembly::Design;
-pub use controllers::{KalmanSpec, LqrSpec, MpcSpec, Solver};
+pub use controllers::{CompensationSpec, KalmanSpec, LqrSpec, MpcSpec, Solver};
 pub use sections::{
     ControllerKind, MonteCarloSpec, Param, PlantSpec, Preset, ReferenceSpec, SensorSpec,
     MAX_DURATION, MAX_MONTE_CARLO_RUNS,
@@ -104,6 +105,8 @@ pub struct Spec {
     pub kalman: KalmanSpec,
     /// `[mpc]`
     pub mpc: MpcSpec,
+    /// `[compensation]`: dead zone and arm friction compensated on every controller's voltage
+    pub compensation: CompensationSpec,
     /// `[monte_carlo]`
     pub monte_carlo: MonteCarloSpec,
     /// `[swing_up]`: the swing-up and its supervisor
@@ -122,6 +125,7 @@ impl Default for Spec {
             lqr: LqrSpec::default(),
             kalman: KalmanSpec::default(),
             mpc: MpcSpec::default(),
+            compensation: CompensationSpec::default(),
             monte_carlo: MonteCarloSpec::default(),
             swing_up: crate::swingup::SwingUpSettings::default(),
         }

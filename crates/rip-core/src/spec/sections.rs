@@ -303,6 +303,11 @@ pub struct PlantSpec {
     /// Voltage dead zone of the motor drive (V), `vd` of [`crate::plant`].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub Vd: Option<f64>,
+    /// The arm's breakaway torque (N·m, at least `Cr`): stiction of the simulated plant
+    /// ([`crate::plant::Plant::with_arm_breakaway`]); none when absent. Not a parameter the
+    /// controllers or the compensation know.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub arm_breakaway: Option<f64>,
     /// RK4 steps per control period in simulation.
     pub substeps: usize,
     /// Initial state `[θ, θ̇, α, α̇]` of a simulated run (rad, rad/s; α = 0 upright).
@@ -329,6 +334,7 @@ impl Default for PlantSpec {
             Cr: None,
             Cp: None,
             Vd: None,
+            arm_breakaway: None,
             substeps: DEFAULT_SUBSTEPS,
             initial_state: [0.0, 0.0, 0.05, 0.0],
             fall_limit: DEFAULT_FALL_LIMIT,
@@ -391,6 +397,15 @@ impl PlantSpec {
     }
 
     fn validate(&self) -> Result<(), SpecError> {
+        if let Some(cs) = self.arm_breakaway {
+            let cr = self.params().cr;
+            if !(cs.is_finite() && cs >= cr) {
+                return Err(bad(
+                    "plant.arm_breakaway",
+                    format!("must be finite and at least plant.Cr = {cr}, got {cs}"),
+                ));
+            }
+        }
         for (param, value) in Param::ALL.into_iter().zip(self.overrides()) {
             if let Some(v) = value {
                 let key = format!("plant.{}", param.name());
@@ -596,6 +611,7 @@ pub(super) fn validate_sections(spec: &super::Spec) -> Result<(), SpecError> {
     spec.lqr.validate()?;
     spec.kalman.validate()?;
     spec.mpc.validate()?;
+    spec.compensation.validate()?;
     spec.monte_carlo.validate()?;
     spec.swing_up.validate().map_err(|e| match e {
         // The key is already `swing_up.<key>`.

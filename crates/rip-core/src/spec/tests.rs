@@ -328,3 +328,99 @@ fn friction_dead_zone_and_offsets_reach_the_plant_and_the_simulation() {
     let cfg = spec.sim_config(paper::TS, 0);
     assert_eq!(cfg.sensor.offsets, [0.1, -0.2]);
 }
+
+#[test]
+fn a_rig_without_dead_zone_or_friction_gets_the_controllers_unchanged() {
+    for text in ["", "[plant]\npreset = 'qube_servo2'\n"] {
+        let design = Spec::parse(text).unwrap().design(paper::TS).unwrap();
+        assert!(design.compensation().is_none());
+        assert_eq!(design.bounds(), (-12.0, 12.0));
+        for kind in ControllerKind::ALL {
+            let mut built = design.controller(kind).unwrap();
+            let mut bare = design.balance(kind).unwrap();
+            let (mut u, mut v) = ([0.0], [0.0]);
+            for k in 0..40 {
+                let y = [0.01 * f64::from(k), 0.02 * (f64::from(k) * 0.3).sin()];
+                built.step(&y, &[1.0, 0.0], &mut u);
+                bare.step(&y, &[1.0, 0.0], &mut v);
+                assert_eq!(u[0].to_bits(), v[0].to_bits(), "{kind:?} step {k}");
+            }
+        }
+    }
+}
+
+#[test]
+fn the_compensation_follows_the_plant_and_shrinks_the_planned_bounds() {
+    let text = "[plant]\npreset = 'qube_servo2'\nCr = 0.003\nVd = 0.4\n";
+    let spec = Spec::parse(text).unwrap();
+    let design = spec.design(paper::TS).unwrap();
+    let p = spec.plant.params();
+    let law = *design.compensation().unwrap();
+    let vf = 0.003 * p.rm / p.kt;
+    assert_eq!((law.dead_zone(), law.friction_voltage()), (0.4, vf));
+    assert_eq!(law.bounds(), (-12.0, 12.0));
+    let (lo, hi) = design.bounds();
+    assert!((hi - (12.0 - 0.4 - vf)).abs() < 1e-12 && (lo + hi).abs() < 1e-12);
+    assert_eq!(design.lqr().unwrap().input_bounds(), (lo, hi));
+    // The MPC plans within the shrunk bounds: a large error saturates it there, and the
+    // written voltage is the law's value of that, inside ±12 V.
+    let mut mpc = design.balance(ControllerKind::Mpc).unwrap();
+    let mut built = design.controller(ControllerKind::Mpc).unwrap();
+    let (mut v, mut u) = ([0.0], [0.0]);
+    mpc.step(&[0.0, 0.3], &[0.0, 0.0], &mut v);
+    built.step(&[0.0, 0.3], &[0.0, 0.0], &mut u);
+    assert!((v[0].abs() - hi).abs() < 1e-6, "{}", v[0]);
+    assert!(u[0].abs() <= 12.0, "{}", u[0]);
+    assert!((u[0] - v[0]).abs() > 0.1, "{} {}", u[0], v[0]);
+    assert_eq!(u[0], law.apply(v[0], built.state_estimate().unwrap()[1]));
+    // Explicit values and the switch.
+    let own = Spec::parse(&format!(
+        "{text}[compensation]\ndead_zone = 0.28\narm_friction = 0.0\n"
+    ))
+    .unwrap()
+    .design(paper::TS)
+    .unwrap();
+    let own = own.compensation().unwrap();
+    assert_eq!((own.dead_zone(), own.friction_voltage()), (0.28, 0.0));
+    let off = Spec::parse(&format!("{text}[compensation]\nenabled = false\n"))
+        .unwrap()
+        .design(paper::TS)
+        .unwrap();
+    assert!(off.compensation().is_none());
+    assert_eq!(off.bounds(), (-12.0, 12.0));
+    // The resolved file reads back equal.
+    let resolved = Spec::parse(&format!("{text}[compensation]\ndead_zone = 0.28\n")).unwrap();
+    assert_eq!(
+        Spec::parse(&resolved.to_toml()).unwrap(),
+        resolved.resolved()
+    );
+}
+
+#[test]
+fn bad_compensation_values_name_the_key() {
+    assert_eq!(
+        key_of("[compensation]\nvoltage_scale = 0\n"),
+        "compensation.voltage_scale"
+    );
+    assert_eq!(
+        key_of("[compensation]\nvelocity_scale = -1\n"),
+        "compensation.velocity_scale"
+    );
+    assert_eq!(
+        key_of("[compensation]\ndead_zone = nan\n"),
+        "compensation.dead_zone"
+    );
+    assert_eq!(
+        key_of("[compensation]\narm_friction = -1\n"),
+        "compensation.arm_friction"
+    );
+    assert_eq!(
+        key_of("[compensation]\nenabled = 1\n"),
+        "compensation.enabled"
+    );
+    let e = Spec::parse("[compensation]\ndead_zone = 12.5\n")
+        .unwrap()
+        .design(paper::TS)
+        .unwrap_err();
+    assert_eq!(e.key, "compensation.dead_zone", "{e}");
+}
