@@ -117,7 +117,8 @@ with warnings.catch_warnings():
     result = riprs.identify([log_path], start="qube_servo2")
 fit = result.fit_percent[0]
 print(f"held-out fit: arm {fit[0]:.1f} %, pendulum {fit[1]:.1f} %"
-      f" ({result.simulations} segment simulations)")
+      f" ({result.simulations} segment simulations);"
+      f" verdict: {'trusted' if result.trusted else 'NOT trusted'}")
 truth = riprs.load_config(hidden).params
 for name in ("Dr", "Cr", "Vd", "Jp"):
     print(f"  {name}: identified {getattr(result.params, name):.4g},"
@@ -126,6 +127,7 @@ for name in ("Dr", "Cr", "Vd", "Jp"):
 print("wrote", out / "rig.toml")
 # --8<-- [end:identify]
 # The page says the fit recovers the hidden rig: check it against the file the emulator ran.
+assert result.trusted, result.problems
 assert np.all(result.fit_percent > 80), result.fit_percent
 for name in ("Cr", "Vd"):
     assert abs(getattr(result.params, name) / getattr(truth, name) - 1) < 0.3, name
