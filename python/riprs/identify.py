@@ -3,8 +3,11 @@ Furuta model (``rip_core::identify``), its report, figures and the ``[plant]`` f
 
 The model, the identifiable parameters and the criterion are documented in
 ``rip_core::identify``: the pendulum's mass and length (``mp``, ``Lp``), ``mr``, ``Rm``, ``km``
-and ``g`` are taken from the start set and fix the scale; ``Lr``, ``Jr``, ``Jp``, ``kt``,
-``Dr``, ``Dp``, Coulomb friction ``Cr``, ``Cp`` and the dead zone ``Vd`` are estimated.
+and ``g`` are taken from the start set (or the lab file, :func:`read_lab`) and fix the scale;
+``Lr``, ``Jr``, ``Jp``, ``kt``, ``Dr``, ``Dp``, Coulomb friction ``Cr``, ``Cp`` and the dead
+zone ``Vd`` are estimated. Every result carries the core's verdict
+(:attr:`IdentifyResult.problems`): ``riprs identify`` writes no rig file for a result that
+has any.
 """
 
 from __future__ import annotations
@@ -661,7 +664,9 @@ def identify(
         otherwise estimated), and are carried into :attr:`IdentifyResult.lab` and the rig file.
     strict : bool
         Raise :class:`UntrustedIdentification` when the verdict finds problems, instead of
-        returning them in :attr:`IdentifyResult.problems`.
+        returning them in :attr:`IdentifyResult.problems`. A fit whose verdict finds problems
+        is first repeated from the dead zones of :data:`RESTART_DEAD_ZONES` (multi-start); the
+        trusted result of least cost is returned.
 
     Returns
     -------
