@@ -66,7 +66,9 @@
 //! At the optimum, with `σ̂² = Σ r² / (N − n_p)` and `F` the Schur complement of the initial
 //! states in `JᵀJ` (the information about `log p` alone), the standard errors are
 //! `se(log pₖ) = σ̂ √(F⁻¹)ₖₖ` and `se(pₖ) = pₖ se(log pₖ)` (residuals of an output-error fit are
-//! coloured, so these are lower bounds). The condition number and rank of `F`
+//! coloured: `σ̂²` is multiplied by their long-run variance factor
+//! `1 + 2 Σ_{l=1}^{20} (1 − l/21) ρ_l`, `ρ_l` their autocorrelation at lag `l`, so that the
+//! intervals cover the truth as often as they claim). The condition number and rank of `F`
 //! (eigenvalues below `10⁻¹²` of the largest count as zero) measure identifiability, over the
 //! parameters not on a bound (those are held there: a friction or dead zone of zero carries no
 //! information, and their covariance is zero); a
@@ -778,7 +780,8 @@ pub fn identify(
         }
     }
     let n_res: usize = segments.iter().map(|s| 2 * s.n).sum();
-    let sigma2 = cost / (n_res.saturating_sub(n_unknowns).max(1)) as f64;
+    let sigma2 =
+        cost / (n_res.saturating_sub(n_unknowns).max(1)) as f64 * coloured_noise_factor(&segments);
     let at_bound: [bool; NP] = std::array::from_fn(|k| {
         let v = logp[k];
         (v - lower[k].ln()).abs() < 1e-9 || (v - upper[k].ln()).abs() < 1e-9
@@ -946,6 +949,35 @@ pub fn identify(
         covariance,
         problems,
     })
+}
+
+/// Lags of the residuals' autocorrelation in [`coloured_noise_factor`] (0.2 s at 100 Hz).
+const NOISE_LAGS: usize = 20;
+
+/// The factor by which coloured residuals inflate the variance of a least-squares estimate
+/// over white ones: the long-run variance over the variance, `1 + 2 Σ_l (1 − l/(L+1)) ρ_l`
+/// with Bartlett weights over `L` = [`NOISE_LAGS`] lags, `ρ_l` the residuals' autocorrelation
+/// at lag `l` pooled over segments and outputs (at least 1).
+fn coloured_noise_factor(segments: &[Segment]) -> f64 {
+    let mut acf = [0.0; NOISE_LAGS + 1];
+    for s in segments {
+        for j in 0..2 {
+            let r: Vec<f64> = s.r.iter().skip(j).step_by(2).copied().collect();
+            for (l, a) in acf.iter_mut().enumerate() {
+                if l < r.len() {
+                    *a += r.iter().zip(&r[l..]).map(|(x, y)| x * y).sum::<f64>();
+                }
+            }
+        }
+    }
+    if acf[0].is_nan() || acf[0] <= 0.0 {
+        return 1.0;
+    }
+    let lags = NOISE_LAGS as f64 + 1.0;
+    let sum: f64 = (1..=NOISE_LAGS)
+        .map(|l| (1.0 - l as f64 / lags) * acf[l] / acf[0])
+        .sum();
+    (1.0 + 2.0 * sum).max(1.0)
 }
 
 /// The logs' names, comma-separated (`logs[i]` where a name is missing).
