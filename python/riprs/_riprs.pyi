@@ -568,6 +568,8 @@ def excitation(
     kick: float | None = ...,
 ) -> _F: ...
 def excitation_defaults(signal: _SignalName) -> dict[str, float | int | str]: ...
+IDENTIFY_MAX_SAMPLES: int
+
 def identify_logs(
     logs: list[tuple[float, ArrayLike, ArrayLike]],
     start: FurutaParams,
@@ -576,6 +578,8 @@ def identify_logs(
     holdout: float = 0.25,
     max_iter: int = 60,
     substeps: int = 4,
+    names: list[str] = ...,
+    fixed: list[str] = ...,
 ) -> dict[str, Any]: ...
 def rip_rt_main(argv: Sequence[str]) -> int: ...
 

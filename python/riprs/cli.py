@@ -130,15 +130,21 @@ def cmd_campaign(args: argparse.Namespace) -> int:
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
-    """Fit the nonlinear model to excitation logs; report, figures and a [plant] file."""
+    """Fit the nonlinear model to excitation logs; report, figures, the [plant] file and the
+    identification file beside it. An untrusted fit writes nothing unless --force."""
     import warnings
     from pathlib import Path
 
-    from riprs.identify import IdentifyWarning, identify, plot_fit
+    from riprs.identify import (
+        IdentifyError,
+        IdentifyWarning,
+        identification_path,
+        identify,
+        plot_fit,
+    )
     from riprs.log import load_log
 
     out = Path(args.out)
-    logs = [load_log(p) for p in args.logs]
     names = [Path(p).stem for p in args.logs]
     with warnings.catch_warnings():
         # The report prints every warning once, after the numbers.
@@ -149,18 +155,33 @@ def cmd_identify(args: argparse.Namespace) -> int:
             holdout=args.holdout,
             segment=args.segment,
             max_iter=args.max_iter,
+            lab=args.lab,
         )
     print(result.report())
+    if result.problems and not args.force:
+        raise IdentifyError(
+            f"{', '.join(Path(p).name for p in args.logs)}: the identified model cannot be "
+            f"trusted ({len(result.problems)} problems above); {out} was not written. Fix what "
+            "they name (a lab file with --lab, more excitation) or pass --force to write it "
+            "marked as untrusted"
+        )
     out.parent.mkdir(parents=True, exist_ok=True)
-    staged = out.with_name(out.name + ".tmp")
-    staged.write_text(result.to_toml(", ".join(Path(p).name for p in args.logs)))
-    staged.replace(out)
+    source = ", ".join(Path(p).name for p in args.logs)
+    side = identification_path(out)
+    for path, text in ((out, result.to_toml(source)), (side, result.identification_toml(source))):
+        staged = path.with_name(path.name + ".tmp")
+        staged.write_text(text)
+        staged.replace(path)
     figures = []
     if not args.no_plots:
-        for name, log in zip(names, logs, strict=True):
+        for name, path in zip(names, args.logs, strict=True):
+            log = load_log(path)
             figures.append(plot_fit(result, log, name, out.with_name(f"{out.stem}-{name}.png")))
     print()
-    print(f"wrote {out}" + (f" and {len(figures)} figures next to it" if figures else ""))
+    print(
+        f"wrote {out}{' (UNTRUSTED, --force)' if result.problems else ''} and {side}"
+        + (f" and {len(figures)} figures next to them" if figures else "")
+    )
     return 0
 
 
@@ -324,6 +345,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--segment", type=float, default=2.0, metavar="S", help="simulated segment length (s)"
     )
     ident.add_argument("--max-iter", type=int, default=60, metavar="N", help="iteration limit")
+    ident.add_argument(
+        "--lab",
+        metavar="LAB.toml",
+        help="lab file: measured masses, lengths, motor resistance, encoder counts (docs/rig.md)",
+    )
+    ident.add_argument(
+        "--force",
+        action="store_true",
+        help="write the rig file even when the fit cannot be trusted (marked as such)",
+    )
     ident.add_argument("--no-plots", action="store_true", help="skip the figures")
     ident.set_defaults(func=cmd_identify)
     return parser

@@ -3,8 +3,11 @@ Furuta model (``rip_core::identify``), its report, figures and the ``[plant]`` f
 
 The model, the identifiable parameters and the criterion are documented in
 ``rip_core::identify``: the pendulum's mass and length (``mp``, ``Lp``), ``mr``, ``Rm``, ``km``
-and ``g`` are taken from the start set and fix the scale; ``Lr``, ``Jr``, ``Jp``, ``kt``,
-``Dr``, ``Dp``, Coulomb friction ``Cr``, ``Cp`` and the dead zone ``Vd`` are estimated.
+and ``g`` are taken from the start set (or the lab file, :func:`read_lab`) and fix the scale;
+``Lr``, ``Jr``, ``Jp``, ``kt``, ``Dr``, ``Dp``, Coulomb friction ``Cr``, ``Cp`` and the dead
+zone ``Vd`` are estimated. Every result carries the core's verdict
+(:attr:`IdentifyResult.problems`): ``riprs identify`` writes no rig file for a result that
+has any.
 """
 
 from __future__ import annotations
@@ -12,13 +15,21 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import sys
 import warnings
 from pathlib import Path
 from typing import Dict, List, Sequence, Tuple, Union
 
 import numpy as np
 
-from riprs._riprs import FurutaParams, Plant, RiprsError, identify_logs, load_config
+from riprs._riprs import (
+    IDENTIFY_MAX_SAMPLES,
+    FurutaParams,
+    Plant,
+    RiprsError,
+    identify_logs,
+    load_config,
+)
 from riprs.log import FLAG_CLAMPED, RtLog, load_log
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -34,6 +45,17 @@ PLANT_KEYS = ("mr", "Lr", "Jr", "mp", "Lp", "Jp", "Dr", "Dp", "Rm", "kt", "km", 
 
 class IdentifyError(RiprsError):
     """Logs that cannot be identified from; the message names the log and what is wrong."""
+
+
+class UntrustedIdentification(IdentifyError):
+    """A fit that ran but cannot be trusted (``rip_core::identify``'s verdict): poor held-out
+    fit, an ill-conditioned information matrix, parameters at bounds or implausible for the
+    logs. The message lists every reason with the measurement or excitation that would fix it;
+    :attr:`result` holds the rejected :class:`IdentifyResult`."""
+
+    def __init__(self, message: str, result: IdentifyResult) -> None:
+        super().__init__(message)
+        self.result = result
 
 
 class IdentifyWarning(UserWarning):
@@ -84,6 +106,18 @@ class IdentifyResult:
         A name for each log (the file stem, or ``log i``).
     warnings : tuple of str
         Every warning issued.
+    problems : tuple of str
+        The verdict: every reason not to trust the result (empty when trusted), each naming
+        the log or parameter and what to measure or add. See :attr:`trusted`.
+    covariance : ndarray, shape (9, 9)
+        Covariance of the natural logarithm of the estimated values, in the order of
+        ``std_errors`` (``Jr``, ``Jp``: of the joint-axis inertias ``J0``, ``Jalpha``); infinite
+        rows for parameters the logs do not determine.
+    held_out_motion : ndarray, shape (n_logs, 2)
+        RMS deviation (rad) of ``[theta, alpha]`` over each log's held-out part; below
+        ``MIN_HELDOUT_MOTION`` the fit is not scored (NaN, "not measurable").
+    lab : dict
+        The lab file's measurements used (name -> value), empty without one.
     """
 
     params: FurutaParams
@@ -109,6 +143,16 @@ class IdentifyResult:
     segment: float
     names: Tuple[str, ...]
     warnings: Tuple[str, ...]
+    problems: Tuple[str, ...] = ()
+    covariance: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
+    held_out_motion: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 2)))
+    lab: Dict[str, float] = dataclasses.field(default_factory=dict)
+    values: Tuple[float, ...] = ()
+
+    @property
+    def trusted(self) -> bool:
+        """Whether every check of the verdict passed (no :attr:`problems`)."""
+        return not self.problems
 
     def report(self) -> str:
         """A plain-text report: parameters with standard errors, fits, diagnostics."""
@@ -137,7 +181,13 @@ class IdentifyResult:
             self.names, self.fit_percent, self.training_fit_percent, strict=True
         ):
             lines.append(
-                f"  {name}: {fit[0]:6.1f} / {fit[1]:6.1f} | {train[0]:6.1f} / {train[1]:6.1f}"
+                f"  {name}: {_fit_text(fit[0])} / {_fit_text(fit[1])} | {train[0]:6.1f} / "
+                f"{train[1]:6.1f}"
+            )
+        if np.isnan(self.fit_percent).any() and self.holdout > 0:
+            lines.append(
+                "  (not measurable: the held-out part does not move, e.g. a pendulum at rest; "
+                "it is not scored)"
             )
         lines.append("")
         lines.append(
@@ -152,6 +202,13 @@ class IdentifyResult:
             lines.append(f"  {row} | {self.Bd[i, 0]:11.6f}")
         for w in self.warnings:
             lines.append(f"warning: {w}")
+        if self.problems:
+            lines.append("")
+            lines.append("NOT TRUSTED: the model cannot be used as it is:")
+            lines += [f"  - {p}" for p in self.problems]
+        else:
+            lines.append("verdict: every check passed (held-out fit, conditioning, bounds, "
+                         "plausibility)")
         return "\n".join(lines)
 
     def to_toml(self, source: str = "") -> str:
@@ -159,18 +216,71 @@ class IdentifyResult:
         ``rip-rt run --config`` and ``rip-rt emulate --config``)."""
         p = self.params.to_dict()
         head = [f"# Identified by riprs identify{' from ' + source if source else ''}."]
+        if self.problems:
+            head.append("# UNTRUSTED: written by riprs identify --force despite:")
+            head += [f"#   - {p}" for p in self.problems]
         head.append(
             "# Held-out fit (theta/alpha %): "
             + "; ".join(
-                f"{n} {f[0]:.1f}/{f[1]:.1f}"
+                f"{n} {_fit_text(f[0]).strip()}/{_fit_text(f[1]).strip()}"
                 for n, f in zip(self.names, self.fit_percent, strict=True)
             )
+        )
+        if self.lab:
+            head.append(
+                "# Lab measurements: " + ", ".join(f"{k} = {v!r}" for k, v in self.lab.items())
+            )
+        head.append(
+            "# Verdict, lab values, fit report and parameter covariance: the .identification.toml "
+            "file beside this one."
         )
         if self.not_identifiable:
             head.append("# Not identifiable from the logs: " + ", ".join(self.not_identifiable))
         body = ["[plant]", f'preset = "{self.preset}"']
         body += [f"{k} = {p[k]!r}" for k in PLANT_KEYS]
         return "\n".join(head + body) + "\n"
+
+    def identification_toml(self, source: str = "") -> str:
+        """The identification file written beside the rig file (:func:`identification_path`):
+        the verdict, the lab's measurements, the fit report and the parameters' covariance.
+
+        ``[covariance]`` holds ``parameters`` (the estimated ones; ``J0`` and ``Jalpha`` are the
+        joint-axis inertias ``Jr + mr Lr^2/4 + mp Lr^2`` and ``Jp + mp Lp^2/4``, which the logs
+        determine), their ``values`` and ``log_covariance``, the covariance of their natural
+        logarithms (``inf`` for parameters the logs do not determine, 0 for those held on a
+        bound): a perturbation ``values * exp(N(0, log_covariance))`` draws rigs consistent with
+        the logs."""
+        names = ["J0" if n == "Jr" else "Jalpha" if n == "Jp" else n for n in self.std_errors]
+        lines = [
+            f"# Identification of the rig by riprs identify{' from ' + source if source else ''}.",
+            "[identification]",
+            f"trusted = {'true' if self.trusted else 'false'}",
+            "logs = [" + ", ".join(_toml_str(n) for n in self.names) + "]",
+            "problems = [" + ", ".join(_toml_str(p) for p in self.problems) + "]",
+            "warnings = [" + ", ".join(_toml_str(w) for w in self.warnings) + "]",
+            "",
+            "[lab]",
+        ]
+        lines += [f"{k} = {v!r}" for k, v in self.lab.items()]
+        lines += [
+            "",
+            "[fit]",
+            "# Held-out and training fit (%) per log, [theta, alpha]; nan: not measurable.",
+            f"held_out_percent = {_toml_matrix(self.fit_percent)}",
+            f"training_percent = {_toml_matrix(self.training_fit_percent)}",
+            f"held_out_motion_rad = {_toml_matrix(self.held_out_motion)}",
+            f"condition_number = {_toml_float(self.condition_number)}",
+            f"rank = {self.rank}",
+            f"rms_residual = {_toml_float(self.rms_residual)}",
+            f"iterations = {self.iterations}",
+            f"converged = {'true' if self.converged else 'false'}",
+            "",
+            "[covariance]",
+            "parameters = [" + ", ".join(_toml_str(n) for n in names) + "]",
+            f"values = [{', '.join(_toml_float(v) for v in self.values)}]",
+            f"log_covariance = {_toml_matrix(self.covariance)}",
+        ]
+        return "\n".join(lines) + "\n"
 
     def simulate(self, log: RtLog) -> np.ndarray:
         """The identified model's angles for ``log``, shape (n, 2): simulated in pieces of
@@ -189,6 +299,36 @@ class IdentifyResult:
             traj = plant.integrate(x0, u[k0 : k1 - 1], ts, 4)
             out[k0:k1] = traj[:, [0, 2]]
         return out
+
+
+def identification_path(rig: PathLike) -> Path:
+    """The identification file beside a rig file: ``rig.toml`` -> ``rig.identification.toml``."""
+    path = Path(rig)
+    return path.with_name(f"{path.stem}.identification.toml")
+
+
+def _toml_float(value: float) -> str:
+    v = float(value)
+    return "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf") if math.isinf(v) else repr(v)
+
+
+def _toml_matrix(m: np.ndarray) -> str:
+    return "[" + ", ".join("[" + ", ".join(map(_toml_float, row)) + "]" for row in m) + "]"
+
+
+def _toml_str(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", " ") + '"'
+
+
+def _fit_text(value: float) -> str:
+    """A held-out fit for reports: ``not measurable`` for NaN (no motion held out)."""
+    return f"{value:6.1f}" if math.isfinite(value) else "not measurable"
+
+
+#: Initial dead zones (V) of the further starts tried when the fit from the start set is not
+#: trusted (a fit started at a small dead zone can end in a basin where the dead zone swallows
+#: the excitation and the motor constant vanishes).
+RESTART_DEAD_ZONES = (0.5, 1.0)
 
 
 #: Longest run of missing samples (replies lost or late on the link) filled in by
@@ -211,6 +351,84 @@ def _arrays(log: RtLog) -> Tuple[float, np.ndarray, np.ndarray]:
     return ts, np.ascontiguousarray(log.u, dtype=np.float64), np.ascontiguousarray(y)
 
 
+#: Keys of a lab file's ``[lab]`` table: what a scale, a ruler and a multimeter give, and the
+#: encoders' counts per revolution. Each is optional (docs/rig.md says what each one buys).
+LAB_KEYS = {
+    "mp": "pendulum mass (kg)",
+    "Lp": "pendulum length (m)",
+    "mr": "arm mass (kg)",
+    "Lr": "arm length, motor axis to pendulum joint (m)",
+    "Rm": "motor terminal resistance (ohm)",
+    "km": "motor back-EMF constant (V s/rad)",
+    "kt": "motor torque constant (N m/A)",
+    "arm_counts": "arm encoder counts per revolution",
+    "pendulum_counts": "pendulum encoder counts per revolution",
+}
+
+
+def read_lab(path: PathLike) -> Dict[str, float]:
+    """Read a lab file: a TOML ``[lab]`` table of measured values (:data:`LAB_KEYS`).
+
+    Raises
+    ------
+    IdentifyError
+        An unknown key, a value that is not a positive finite number (counts: an integer of at
+        least 16), or a file that is not TOML; the message names the file and the key.
+    """
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover
+        import tomli as tomllib
+
+    name = os.fspath(path)
+    try:
+        with open(name, "rb") as fh:
+            doc = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise IdentifyError(f"{name}: not a TOML file: {exc}") from None
+    table = doc.get("lab")
+    if not isinstance(table, dict) or set(doc) != {"lab"}:
+        raise IdentifyError(
+            f"{name}: a lab file holds one [lab] table (keys: {', '.join(LAB_KEYS)})"
+        )
+    out: Dict[str, float] = {}
+    for key, value in table.items():
+        if key not in LAB_KEYS:
+            raise IdentifyError(
+                f"{name}: lab.{key}: unknown key; the keys are {', '.join(LAB_KEYS)}"
+            )
+        if key.endswith("_counts"):
+            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 16):
+                raise IdentifyError(f"{name}: lab.{key}: must be an integer >= 16, got {value!r}")
+        elif not (
+            isinstance(value, (int, float))
+            and not isinstance(value, bool)
+            and math.isfinite(value)
+            and value > 0
+        ):
+            raise IdentifyError(f"{name}: lab.{key}: must be a positive number, got {value!r}")
+        out[key] = value
+    return out
+
+
+def _apply_lab(start: FurutaParams, lab: Dict[str, float]) -> FurutaParams:
+    """The start set with the lab's measurements in place; centroidal inertias of measured
+    links restart as those of uniform rods, ``km = kt`` (SI units) when only one is given."""
+    d = start.to_dict()
+    for key in ("mp", "Lp", "mr", "Lr", "Rm", "km", "kt"):
+        if key in lab:
+            d[key] = float(lab[key])
+    if "km" in lab and "kt" not in lab:
+        d["kt"] = d["km"]
+    if "kt" in lab and "km" not in lab:
+        d["km"] = d["kt"]
+    if "mp" in lab or "Lp" in lab:
+        d["Jp"] = d["mp"] * d["Lp"] ** 2 / 12.0
+    if "mr" in lab or "Lr" in lab:
+        d["Jr"] = d["mr"] * d["Lr"] ** 2 / 12.0
+    return FurutaParams(**d)
+
+
 def _start(start: Union[str, FurutaParams, PathLike]) -> Tuple[FurutaParams, str]:
     if isinstance(start, FurutaParams):
         return start, "qube_servo2"
@@ -225,6 +443,133 @@ def _start(start: Union[str, FurutaParams, PathLike]) -> Tuple[FurutaParams, str
     return spec.params, spec.plant.preset
 
 
+#: Bytes of a log read to estimate its row count before it is read whole.
+_PROBE_BYTES = 1 << 16
+#: A sample this far (rad) from the median of its neighbours, and 50 times the column's
+#: typical step, is a wild sample (a corrupted reading), not motion.
+WILD_ANGLE = 1.0
+#: A voltage beyond this (V) is no motor command.
+WILD_VOLTAGE = 100.0
+#: t-statistic below which the voltage and the arm's acceleration are judged of opposite sign.
+SIGN_T = -3.0
+
+
+def _estimated_rows(name: str, path: str) -> int:
+    """Rows of the log at ``path`` estimated from its size and its first data lines, so that a
+    log too large for one identification is refused before it is read whole."""
+    size = os.path.getsize(path)
+    with open(path, "rb") as fh:
+        head = fh.read(_PROBE_BYTES)
+    lines = head.split(b"\n")
+    if len(head) < _PROBE_BYTES:
+        return sum(1 for ln in lines if ln.strip() and not ln.startswith(b"#")) - 1
+    data = [ln for ln in lines[:-1] if ln.strip() and not ln.startswith(b"#")][1:]
+    if not data:
+        return 0
+    per_row = sum(len(ln) + 1 for ln in data) / len(data)
+    return int(size / per_row)
+
+
+def _wild(values: np.ndarray, limit: float) -> np.ndarray:
+    """Indices of samples far from the median of their 5-sample neighbourhood: more than
+    ``limit`` and 50 typical steps."""
+    n = len(values)
+    if n < 5:
+        return np.zeros(0, dtype=np.int64)
+    padded = np.concatenate([values[:2], values, values[-2:]])
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 5)
+    with np.errstate(invalid="ignore", over="ignore"):
+        dev = np.abs(values - np.median(windows, axis=1))
+        step = float(np.median(np.abs(np.diff(values))))
+    return np.flatnonzero(dev > max(limit, 50.0 * step))
+
+
+def _check_units(name: str, log: RtLog) -> None:
+    """Wild samples, angles in degrees, time in milliseconds, and the sign relation between the
+    voltage and the arm's acceleration; each error names the log and the column."""
+    for column in ("theta", "alpha"):
+        values = getattr(log, column)
+        bad = _wild(np.unwrap(values) if column == "alpha" else values, WILD_ANGLE)
+        if 0 < bad.size <= max(3, len(values) // 1000):
+            raise IdentifyError(
+                f"{name}: column {column!r} has a wild sample at row {bad[0]} "
+                f"({values[bad[0]]:.6g} rad, its neighbours about "
+                f"{np.median(values[max(bad[0] - 2, 0) : bad[0] + 3]):.6g}): a corrupted reading; "
+                "remove the row or repeat the run"
+            )
+    bad_u = np.flatnonzero(np.abs(log.u) > WILD_VOLTAGE)
+    if bad_u.size:
+        raise IdentifyError(
+            f"{name}: column 'u' is {log.u[bad_u[0]]:.6g} V at row {bad_u[0]}: no motor command "
+            f"exceeds {WILD_VOLTAGE:g} V; a corrupted reading"
+        )
+    if np.max(np.abs(log.theta)) > 2 * math.pi:
+        raise IdentifyError(
+            f"{name}: column 'theta' reaches {np.max(np.abs(log.theta)):.4g}: the arm angle looks "
+            "like degrees (an arm stays within one turn; the log must be in rad)"
+        )
+    if np.median(np.abs(log.alpha)) > 2 * math.pi:
+        raise IdentifyError(
+            f"{name}: column 'alpha' is {np.median(np.abs(log.alpha)):.4g} in the median: the "
+            "pendulum angle looks like degrees (hanging is pi rad; the log must be in rad)"
+        )
+    if len(log.t) > 1:
+        dt = float(np.median(np.diff(log.t)))
+        period = log.meta.get("period_ms")
+        try:
+            expected = float(period) / 1000.0 if period is not None else None
+        except ValueError:
+            expected = None
+        if expected is not None and expected > 0:
+            if abs(dt / expected - 1000.0) < 50.0:
+                raise IdentifyError(
+                    f"{name}: column 't' steps by {dt:g} but the header says period_ms: {period}: "
+                    "the time column is in milliseconds; it must be in seconds"
+                )
+            if abs(dt / expected - 1.0) > 0.1:
+                raise IdentifyError(
+                    f"{name}: column 't' steps by {dt:g} s but the header says period_ms: "
+                    f"{period}; the time column and the header disagree"
+                )
+        elif dt >= 0.5:
+            raise IdentifyError(
+                f"{name}: column 't' steps by {dt:g}: a sample time of half a second or more "
+                "cannot identify a pendulum; the time column looks like milliseconds (it must "
+                "be in seconds)"
+            )
+    _check_sign(name, log)
+
+
+def _check_sign(name: str, log: RtLog) -> None:
+    """The sign relation between voltage and arm acceleration (rip-rt excite's sign check): a
+    positive voltage accelerates the arm towards positive theta. A least-squares fit of the
+    arm's rate change per sample on ``[u, rate, 1]``; a clearly negative voltage coefficient is
+    a negated voltage column or a reversed arm encoder."""
+    if len(log.t) < 50 or np.ptp(log.u) < 0.5:
+        return
+    ts = float(np.median(np.diff(log.t)))
+    if not ts > 0:
+        return
+    rate = np.diff(log.theta) / ts
+    accel = np.diff(rate)
+    regressors = np.column_stack([log.u[1:-1], rate[:-1], np.ones(len(accel))])
+    coef, *_ = np.linalg.lstsq(regressors, accel, rcond=None)
+    resid = accel - regressors @ coef
+    dof = max(len(accel) - 3, 1)
+    try:
+        cov = np.linalg.inv(regressors.T @ regressors) * float(resid @ resid) / dof
+    except np.linalg.LinAlgError:
+        return
+    t_stat = coef[0] / math.sqrt(max(cov[0, 0], 1e-300))
+    if t_stat < SIGN_T:
+        raise IdentifyError(
+            f"{name}: columns 'u' and 'theta' have opposite signs: a positive voltage "
+            f"decelerates the arm (t = {t_stat:.1f}); the voltage is negated or the arm encoder "
+            "is reversed (swap the motor leads or the encoder's A/B, or set the sign in the "
+            "calibration, and repeat the run)"
+        )
+
+
 def _check(name: str, log: RtLog, holdout: float) -> List[str]:
     """Refuses what cannot be fitted; returns warnings for what can."""
     notes = []
@@ -236,6 +581,7 @@ def _check(name: str, log: RtLog, holdout: float) -> List[str]:
                 f"{name}: column {column!r} is not a number in {bad.size} rows (first at row "
                 f"{bad[0]}); identification needs every sample"
             )
+    _check_units(name, log)
     train = int((1.0 - holdout) * n)
     if train < MIN_TRAINING_SAMPLES:
         raise IdentifyError(
@@ -291,6 +637,8 @@ def identify(
     segment: float = 2.0,
     max_iter: int = 60,
     substeps: int = 4,
+    lab: Union[PathLike, Dict[str, float], None] = None,
+    strict: bool = False,
 ) -> IdentifyResult:
     """Fit the nonlinear Furuta model to excitation logs (output error).
 
@@ -310,6 +658,15 @@ def identify(
         Levenberg-Marquardt iteration limit (at most 500).
     substeps : int
         Least RK4 steps per sample.
+    lab : path or dict, optional
+        A lab file (TOML, :func:`read_lab`) or its values: what was weighed and measured on the
+        rig. Its values replace the start set's and are held fixed (``Lr`` too, which is
+        otherwise estimated), and are carried into :attr:`IdentifyResult.lab` and the rig file.
+    strict : bool
+        Raise :class:`UntrustedIdentification` when the verdict finds problems, instead of
+        returning them in :attr:`IdentifyResult.problems`. A fit whose verdict finds problems
+        is first repeated from the dead zones of :data:`RESTART_DEAD_ZONES` (multi-start); the
+        trusted result of least cost is returned.
 
     Returns
     -------
@@ -318,8 +675,13 @@ def identify(
     Raises
     ------
     IdentifyError
-        A log that cannot be identified from: not a number, too short, unevenly sampled, a
-        balancing run, no excitation; the message names the log.
+        A log that cannot be identified from: too large (checked from its size before it is
+        read), not a number, a wild sample, angles in degrees, time in milliseconds, voltage
+        and arm acceleration of opposite signs (negated voltage or reversed arm encoder), too
+        short, unevenly sampled, a balancing run, no excitation; the message names the log and
+        the column.
+    UntrustedIdentification
+        With ``strict``, a fit whose verdict found problems.
     LogError
         A file that is not a ``rip-rt`` log (wrong columns, unreadable rows).
     KeyboardInterrupt
@@ -332,15 +694,26 @@ def identify(
         logs, or a fit that did not converge.
     """
     params0, preset = _start(start)
+    lab_values = read_lab(lab) if lab is not None and not isinstance(lab, dict) else dict(lab or {})
+    params0 = _apply_lab(params0, lab_values)
     loaded: List[RtLog] = []
     names: List[str] = []
+    rows = 0
     for i, item in enumerate(logs):
         if isinstance(item, RtLog):
-            loaded.append(item)
             names.append(f"log {i}")
+            rows += len(item.t)
         else:
-            loaded.append(load_log(item))
             names.append(Path(os.fspath(item)).stem)
+            rows += _estimated_rows(names[-1], os.fspath(item))
+        if rows > IDENTIFY_MAX_SAMPLES:
+            raise IdentifyError(
+                f"{names[-1]}: the logs hold about {rows} samples up to this one, more than the "
+                f"{IDENTIFY_MAX_SAMPLES} one identification takes; cut the logs (a few minutes "
+                "of excitation suffice)"
+            )
+    for item in logs:
+        loaded.append(item if isinstance(item, RtLog) else load_log(item))
     if not loaded:
         raise IdentifyError("logs: at least one log is needed")
     if not (isinstance(holdout, (int, float)) and 0.0 <= holdout <= 0.9):
@@ -354,14 +727,28 @@ def identify(
     for name, (ts, _, _) in zip(names, data, strict=True):
         if abs(ts - ts0) > 1e-6 * ts0:
             raise IdentifyError(f"{name}: sample time {ts:g} s differs from {names[0]}'s {ts0:g} s")
-    raw = identify_logs(
-        [(ts0, u, y) for _, u, y in data],
-        params0,
-        segment=segment,
-        holdout=holdout,
-        max_iter=max_iter,
-        substeps=substeps,
-    )
+    raw = {}
+    # Multi-start: when the fit from the start set is not trusted, the friction and dead-zone
+    # terms (which the start set does not know) are restarted from the values of
+    # RESTART_DEAD_ZONES; the trusted result of least cost is kept (else the first).
+    for k, vd in enumerate((None, *RESTART_DEAD_ZONES)):
+        start_k = params0 if vd is None else FurutaParams(**{**params0.to_dict(), "Vd": vd})
+        candidate = identify_logs(
+            [(ts0, u, y) for _, u, y in data],
+            start_k,
+            segment=segment,
+            holdout=holdout,
+            max_iter=max_iter,
+            substeps=substeps,
+            names=names,
+            fixed=["Lr"] if "Lr" in lab_values else [],
+        )
+        if k == 0:
+            raw = candidate
+        elif not candidate["problems"] and (raw["problems"] or candidate["cost"] < raw["cost"]):
+            raw = candidate
+        if not raw["problems"]:
+            break
     if raw["not_identifiable"]:
         notes.append(
             "not identifiable from these logs: "
@@ -381,7 +768,7 @@ def identify(
         notes.append(f"the fit did not converge in {raw['iterations']} iterations")
     for note in notes:
         warnings.warn(note, IdentifyWarning, stacklevel=2)
-    return IdentifyResult(
+    result = IdentifyResult(
         params=raw["params"],
         start=params0,
         preset=preset,
@@ -405,7 +792,19 @@ def identify(
         segment=segment,
         names=tuple(names),
         warnings=tuple(notes),
+        problems=tuple(raw["problems"]),
+        covariance=np.array(raw["covariance"]),
+        held_out_motion=np.array(raw["held_out_motion"]),
+        lab=dict(lab_values),
+        values=tuple(raw["values"]),
     )
+    if strict and result.problems:
+        raise UntrustedIdentification(
+            f"{', '.join(names)}: the identified model cannot be trusted:\n  - "
+            + "\n  - ".join(result.problems),
+            result,
+        )
+    return result
 
 
 def plot_fit(result: IdentifyResult, log: RtLog, name: str, path: PathLike) -> Path:
@@ -439,4 +838,13 @@ def plot_fit(result: IdentifyResult, log: RtLog, name: str, path: PathLike) -> P
     return out
 
 
-__all__ = ["IdentifyError", "IdentifyResult", "IdentifyWarning", "identify", "plot_fit"]
+__all__ = [
+    "IdentifyError",
+    "IdentifyResult",
+    "IdentifyWarning",
+    "UntrustedIdentification",
+    "identification_path",
+    "identify",
+    "plot_fit",
+    "read_lab",
+]

@@ -11,6 +11,13 @@ use crate::errors::{to_py, IntoPyResult};
 use crate::interrupt::interruptible;
 use crate::plant::{py_name, PyFurutaParams};
 
+/// The Rust name of a parameter given by its Python name (`Lr` -> `lr`).
+fn rust_name(name: &str) -> String {
+    FREE.iter()
+        .find(|n| py_name(n) == name)
+        .map_or_else(|| name.to_string(), |n| (*n).to_string())
+}
+
 /// Output-error identification of the nonlinear model (``rip_core::identify``).
 ///
 /// ``logs`` is a list of ``(Ts, u, y)``: sample time (s), voltage (N,) and measured angles
@@ -19,11 +26,16 @@ use crate::plant::{py_name, PyFurutaParams};
 /// ``fit_percent`` and ``training_fit_percent`` (per log, ``[theta, alpha]``),
 /// ``not_identifiable``, ``at_bounds``, ``condition_number``, ``rank``, ``cost``,
 /// ``rms_residual``, ``iterations``, ``converged``, ``simulations``, ``segments``, ``Ad``,
-/// ``Bd``. Ctrl-C stops it (``KeyboardInterrupt``).
+/// ``Bd``, ``held_out_motion`` (per log, rad), ``covariance`` (9 x 9, of the log of the
+/// ``free`` values), ``values`` (those values: ``Jr``, ``Jp`` as the joint-axis inertias) and ``problems`` (the verdict: why not to trust the result, empty when
+/// trusted; ``names`` name the logs in it). ``fixed`` (Python names of ``free``) are held at
+/// the start's values. Ctrl-C stops it (``KeyboardInterrupt``).
 #[pyfunction]
-#[pyo3(signature = (logs, start, *, segment=Real(2.0), holdout=Real(0.25), max_iter=Count::of(60), substeps=Count::of(4)))]
-#[pyo3(text_signature = "(logs, start, *, segment=2.0, holdout=0.25, max_iter=60, substeps=4)")]
-#[allow(clippy::type_complexity)]
+#[pyo3(signature = (logs, start, *, segment=Real(2.0), holdout=Real(0.25), max_iter=Count::of(60), substeps=Count::of(4), names=Vec::new(), fixed=Vec::new()))]
+#[pyo3(
+    text_signature = "(logs, start, *, segment=2.0, holdout=0.25, max_iter=60, substeps=4, names=[], fixed=[])"
+)]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
 fn identify_logs<'py>(
     py: Python<'py>,
     logs: Vec<(Real, PyReadonlyArray1<'py, f64>, PyReadonlyArray2<'py, f64>)>,
@@ -32,6 +44,8 @@ fn identify_logs<'py>(
     holdout: Real,
     max_iter: Count,
     substeps: Count,
+    names: Vec<String>,
+    fixed: Vec<String>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let mut data = Vec::with_capacity(logs.len());
     for (i, (ts, u, y)) in logs.iter().enumerate() {
@@ -56,6 +70,8 @@ fn identify_logs<'py>(
         holdout: holdout.0,
         max_iterations: max_iter.get("max_iter")?,
         substeps: substeps.get("substeps")?,
+        names,
+        fixed: fixed.iter().map(|n| rust_name(n)).collect(),
         ..Default::default()
     };
     let result = interruptible(py, |cancel| identify(&data, &options, cancel), |_| Ok(()))?.py()?;
@@ -97,10 +113,30 @@ fn identify_logs<'py>(
     d.set_item("segments", result.segments)?;
     d.set_item("Ad", mat_to_py(py, &result.ad))?;
     d.set_item("Bd", mat_to_py(py, &result.bd))?;
+    d.set_item(
+        "held_out_motion",
+        result
+            .held_out_motion
+            .iter()
+            .map(|f| f.to_vec())
+            .collect::<Vec<_>>(),
+    )?;
+    let n = FREE.len();
+    d.set_item(
+        "covariance",
+        result
+            .covariance
+            .chunks(n)
+            .map(<[f64]>::to_vec)
+            .collect::<Vec<_>>(),
+    )?;
+    d.set_item("problems", result.problems)?;
+    d.set_item("values", result.values.to_vec())?;
     Ok(d)
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(identify_logs, m)?)?;
+    m.add("IDENTIFY_MAX_SAMPLES", rip_core::identify::MAX_SAMPLES)?;
     Ok(())
 }

@@ -50,8 +50,11 @@
 //!
 //! # Method
 //!
-//! Levenberg–Marquardt on `log p` (positivity), projected onto bounds `[10⁻⁴ p₀, 10³ p₀]` (the
-//! friction and dead-zone terms, which may be zero, start at small positive values). The
+//! Levenberg–Marquardt on `log p` (positivity), projected onto bounds `[10⁻⁴ p₀, 10³ p₀]`
+//! (`10⁻² p₀` below for the rigid-body and motor terms), capped above by physical ceilings
+//! (Coulomb friction at most 0.1 N m on the arm, dead zone at most 5 V, ...); the friction and
+//! dead-zone terms, which may be zero, start at small positive values. A step to a point whose
+//! neighbours cannot be simulated is refused like one that raises the cost. The
 //! Jacobian is by forward differences, one simulation per parameter and segment; segments run
 //! in parallel (rayon) with per-segment buffers allocated once, and a segment's initial state
 //! perturbs only its own simulation, so one Jacobian costs `(9 + 4 + 1)` segment simulations
@@ -63,16 +66,41 @@
 //! At the optimum, with `σ̂² = Σ r² / (N − n_p)` and `F` the Schur complement of the initial
 //! states in `JᵀJ` (the information about `log p` alone), the standard errors are
 //! `se(log pₖ) = σ̂ √(F⁻¹)ₖₖ` and `se(pₖ) = pₖ se(log pₖ)` (residuals of an output-error fit are
-//! coloured, so these are lower bounds). The condition number and rank of `F`
-//! (eigenvalues below `10⁻¹²` of the largest count as zero) measure identifiability; a
+//! coloured: `σ̂²` is multiplied by their long-run variance factor
+//! `1 + 2 Σ_{l=1}^{20} (1 − l/21) ρ_l`, `ρ_l` their autocorrelation at lag `l`, so that the
+//! intervals cover the truth as often as they claim). The condition number and rank of `F`
+//! (eigenvalues below `10⁻¹²` of the largest count as zero) measure identifiability, over the
+//! parameters not on a bound (those are held there: a friction or dead zone of zero carries no
+//! information, and their covariance is zero); a
 //! parameter whose relative standard error exceeds [`NOT_IDENTIFIABLE_RSE`], or that dominates
 //! a null direction of `F`, is named as not identifiable from the given logs.
 //!
 //! # Held-out fit
 //!
-//! The last `holdout` fraction of each log is simulated in one piece from an initial state
-//! estimated on it (as MATLAB's `compare` estimates initial conditions), and each output's fit
-//! is MATLAB's normalised RMSE fit `100 (1 − ‖y − ŷ‖ / ‖y − mean(y)‖)` %.
+//! The last `holdout` fraction of each log is simulated in windows of the segment length,
+//! each from an initial state estimated on it (as MATLAB's `compare` estimates initial
+//! conditions; windows, because a pendulum that swings over the top is chaotic and one long
+//! simulation would score the chaos rather than the model), and each output's fit
+//! is MATLAB's normalised RMSE fit `100 (1 − ‖y − ŷ‖ / ‖y − mean(y)‖)` %. An output whose
+//! held-out part moves less than [`MIN_HELDOUT_MOTION`] (root-mean-square deviation) is not
+//! scored: its fit is NaN, "not measurable", since `‖y − mean(y)‖` is then noise.
+//!
+//! # Verdict
+//!
+//! A converged fit is not a trusted one. [`IdentifyResult::problems`] lists every reason not
+//! to trust it, each naming the log, the parameter and the measurement or excitation that
+//! would fix it; callers must refuse to use a result with problems (`riprs identify` exits
+//! non-zero and writes no rig file). The checks:
+//!
+//! - the held-out fit of every scored output is at least [`MIN_FIT_PERCENT`];
+//! - `F` has full rank and a condition number of at most [`MAX_CONDITION`];
+//! - every parameter of the upright linearisation ([`LINEAR`]) has a relative standard error
+//!   of at most [`MAX_RSE`];
+//! - no parameter ends on its upper bound, and none of `lr, jr, jp, kt, dr` on its lower bound
+//!   (the friction and dead-zone terms may be zero);
+//! - `mr`, `mp`, `lp` changed by at most a factor [`MAX_FIXED_CHANGE`] (a uniform-rod split
+//!   beyond that means the fixed values are not the rig's);
+//! - the dead zone is at most [`MAX_DEAD_ZONE_FRACTION`] of the logs' 95th percentile of `|u|`.
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
@@ -106,6 +134,37 @@ pub const MAX_SAMPLES: usize = 2_000_000;
 /// Fewest training samples per log: two segments' worth of a hundred samples.
 pub const MIN_SAMPLES: usize = 200;
 
+/// Least root-mean-square deviation (rad) of an output over a log's held-out part for its fit
+/// to be scored: a held-out part with less motion (a pendulum at rest, a few encoder counts of
+/// noise) has no excitation to compare with, and its fit is "not measurable" (NaN), not the
+/// ratio of two noise levels. Ten times the envelope's worst noise (2 mrad) and above the
+/// coarsest encoder's quantum (2π/512 ≈ 12 mrad).
+pub const MIN_HELDOUT_MOTION: f64 = 0.02;
+
+/// Least held-out fit (%) of every scored output for the result to be trusted. Fits of rigs of
+/// the envelope identified from a chirp and a PRBS run measure above 90 %; the wrong models of
+/// a start far from the rig measure below 45 %.
+pub const MIN_FIT_PERCENT: f64 = 70.0;
+
+/// Largest condition number of the information matrix for the result to be trusted: the
+/// identified rigs of the envelope measure at most about 1e4.
+pub const MAX_CONDITION: f64 = 1e6;
+
+/// Largest relative standard error of a parameter that enters the upright linearisation
+/// ([`LINEAR`]) for the result to be trusted.
+pub const MAX_RSE: f64 = 0.2;
+
+/// The free parameters that enter the upright linearisation: each must be determined.
+pub const LINEAR: [&str; 6] = ["lr", "jr", "jp", "kt", "dr", "dp"];
+
+/// Largest identified dead zone as a fraction of the logs' 95th percentile of `|u|`: a dead zone
+/// that swallows most of the excitation is not one the logs can show.
+pub const MAX_DEAD_ZONE_FRACTION: f64 = 0.6;
+
+/// Largest factor by which `mr`, `mp` or `lp` may be changed from the fixed values (module
+/// docs) before the start set is judged inconsistent with the rig.
+pub const MAX_FIXED_CHANGE: f64 = 10.0;
+
 /// One open-loop log sampled every `ts` seconds.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LogData {
@@ -132,6 +191,12 @@ pub struct IdentifyOptions {
     pub substeps: usize,
     /// Stop when an accepted step lowers the cost by less than this fraction.
     pub tolerance: f64,
+    /// A name for each log (a file name), used in [`IdentifyResult::problems`]; `logs[i]`
+    /// where missing.
+    pub names: Vec<String>,
+    /// Names (of [`FREE`]) held at the start set's values: measured on the rig (a lab file's
+    /// `Lr`), so not estimated; their standard error is zero.
+    pub fixed: Vec<String>,
 }
 
 impl Default for IdentifyOptions {
@@ -143,6 +208,8 @@ impl Default for IdentifyOptions {
             max_iterations: 60,
             substeps: 4,
             tolerance: 1e-6,
+            names: Vec::new(),
+            fixed: Vec::new(),
         }
     }
 }
@@ -155,8 +222,11 @@ pub struct IdentifyResult {
     /// Standard error of each of [`FREE`] (same units; `inf` when not identifiable; for `jr`
     /// and `jp` those of the joint-axis inertias `J₀` and `Jα`, which the logs determine).
     pub std_errors: [f64; NP],
-    /// Held-out fit (%) per log and output `[θ, α]`; NaN for a log without a held-out part.
+    /// Held-out fit (%) per log and output `[θ, α]`; NaN for a log without a held-out part
+    /// and for an output that does not move over it (not measurable, [`MIN_HELDOUT_MOTION`]).
     pub fit_percent: Vec<[f64; 2]>,
+    /// Root-mean-square deviation (rad) of each output over each log's held-out part.
+    pub held_out_motion: Vec<[f64; 2]>,
     /// The same fit over each log's training segments (each from its estimated initial state).
     pub training_fit_percent: Vec<[f64; 2]>,
     /// Names (of [`FREE`]) not identifiable from these logs (module docs).
@@ -183,6 +253,17 @@ pub struct IdentifyResult {
     pub ad: Mat,
     /// See `ad`.
     pub bd: Mat,
+    /// The optimisation values of [`FREE`] at the optimum: the parameters themselves, but the
+    /// joint-axis inertias `J₀`, `Jα` in place of `jr`, `jp` (module docs).
+    pub values: [f64; NP],
+    /// Covariance of `log` of [`FREE`]'s optimisation values (`jr`, `jp`: of `J₀`, `Jα`),
+    /// `σ̂² F⁺` (module docs), row-major `9 × 9`; rows and columns of parameters in a null
+    /// direction are infinite.
+    pub covariance: Vec<f64>,
+    /// Why the result cannot be trusted, one sentence each naming the log, the parameter or
+    /// the measurement that would fix it; empty when every check passes (module docs,
+    /// "Verdict").
+    pub problems: Vec<String>,
 }
 
 /// The arm's inertia about the motor axis, `J₀ = jr + mr lr²/4 + mp lr²`.
@@ -244,6 +325,11 @@ fn with(mut p: FurutaParams, v: &[f64; NP]) -> FurutaParams {
     }
     p
 }
+
+/// Upper bounds of the optimisation values beyond any bench-top rig (ten times the envelope of
+/// shared rigs and more): a fit that reaches one is inconsistent with the rig (the verdict says
+/// so), and the stiff friction law of a huge Coulomb term would stall the simulation.
+const CEILING: [f64; NP] = [1.0, 1.0, 1.0, 10.0, 0.1, 0.01, 0.1, 0.002, 5.0];
 
 /// Initial values of the free parameters: the start set's, or small positive values for those
 /// that may be zero and are.
@@ -377,6 +463,12 @@ fn check(logs: &[LogData], o: &IdentifyOptions) -> Result<()> {
             format!("must be in 1..={MAX_ITERATIONS}, got {}", o.max_iterations),
         ));
     }
+    if let Some(name) = o.fixed.iter().find(|n| !FREE.contains(&n.as_str())) {
+        return Err(RipError::invalid(
+            "fixed",
+            format!("{name:?} is not one of the estimated parameters {FREE:?}"),
+        ));
+    }
     crate::plant::check_substeps(o.substeps)?;
     if !(o.tolerance.is_finite() && o.tolerance > 0.0) {
         return Err(RipError::invalid(
@@ -454,8 +546,9 @@ pub fn identify(
     let p0 = initial(&options.start);
     let lower: [f64; NP] =
         std::array::from_fn(|k| p0[k] * if (4..NP).contains(&k) { 1e-4 } else { 1e-2 });
-    let upper: [f64; NP] = std::array::from_fn(|k| p0[k] * 1e3);
+    let upper: [f64; NP] = std::array::from_fn(|k| (p0[k] * 1e3).min(CEILING[k]));
     let mut logp: [f64; NP] = p0.map(f64::ln);
+    let held: [bool; NP] = std::array::from_fn(|k| options.fixed.iter().any(|n| n == FREE[k]));
     let params_of = |logp: &[f64; NP]| with(options.start, &logp.map(f64::exp));
     let cancelled = || cancel.load(Ordering::Relaxed);
 
@@ -580,8 +673,14 @@ pub fn identify(
             if jac_ok.iter().any(|v| !v) {
                 return Err(RipError::invalid(
                     "logs",
-                    "the simulation diverges next to the current parameters; the logs may not be \
-                 of an open-loop excitation run",
+                    format!(
+                        "{}: the fit left the region where the model can be simulated on these \
+                         logs (the simulation diverges next to the parameters it reached): the \
+                         start set is too far from the rig; weigh and measure it (a lab file \
+                         with mp, Lp, mr, Lr, Rm) and check that the logs are of open-loop \
+                         excitation runs",
+                        log_names(logs, &options.names)
+                    ),
                 ));
             }
             assemble(&segments, &mut normal, &mut grad);
@@ -591,7 +690,14 @@ pub fn identify(
                 for k in 0..n_unknowns {
                     lhs[(k, k)] += lambda * normal[(k, k)].max(1e-12);
                 }
-                let Some(step) = lhs.cholesky().map(|c| c.solve(&(-&grad))) else {
+                let mut rhs = -&grad;
+                for k in (0..NP).filter(|&k| held[k]) {
+                    lhs.row_mut(k).fill(0.0);
+                    lhs.column_mut(k).fill(0.0);
+                    lhs[(k, k)] = 1.0;
+                    rhs[k] = 0.0;
+                }
+                let Some(step) = lhs.cholesky().map(|c| c.solve(&rhs)) else {
                     lambda *= 10.0;
                     continue;
                 };
@@ -602,6 +708,16 @@ pub fn identify(
                     lambda *= 4.0;
                     continue;
                 };
+                // A point whose neighbours cannot be simulated (a stiff friction law, an arm
+                // inertia at its limit) would end the fit at the next Jacobian: step shorter.
+                if (0..NP).any(|k| {
+                    let mut lp = trial_logp;
+                    lp[k] += h;
+                    problem.plant(&params_of(&lp)).is_none()
+                }) {
+                    lambda *= 4.0;
+                    continue;
+                }
                 let trial_cost: Option<f64> = segments
                     .par_iter_mut()
                     .enumerate()
@@ -664,13 +780,29 @@ pub fn identify(
         }
     }
     let n_res: usize = segments.iter().map(|s| 2 * s.n).sum();
-    let sigma2 = cost / (n_res.saturating_sub(n_unknowns).max(1)) as f64;
-    let eig = SymmetricEigen::new(info.clone());
-    let lmax = eig.eigenvalues.max().max(0.0);
+    let sigma2 =
+        cost / (n_res.saturating_sub(n_unknowns).max(1)) as f64 * coloured_noise_factor(&segments);
+    let at_bound: [bool; NP] = std::array::from_fn(|k| {
+        let v = logp[k];
+        (v - lower[k].ln()).abs() < 1e-9 || (v - upper[k].ln()).abs() < 1e-9
+    });
+    // Parameters on a bound are held there (a friction or dead zone of zero carries no
+    // information): rank, condition and covariance are those of the others.
+    let interior: Vec<usize> = (0..NP).filter(|&k| !at_bound[k] && !held[k]).collect();
+    let ni = interior.len();
+    let sub = DMatrix::from_fn(ni, ni, |a, b| info[(interior[a], interior[b])]);
+    let eig = SymmetricEigen::new(sub);
+    let lmax = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
     let tiny = 1e-12 * lmax;
-    let rank = eig.eigenvalues.iter().filter(|&&l| l > tiny).count();
-    let lmin = eig.eigenvalues.min();
-    let condition_number = if lmin > tiny {
+    let rank = eig.eigenvalues.iter().filter(|&&l| l > tiny).count() + (NP - ni);
+    let lmin = eig
+        .eigenvalues
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min);
+    let condition_number = if ni == 0 {
+        1.0
+    } else if lmin > tiny {
         (lmax / lmin).sqrt()
     } else {
         f64::INFINITY
@@ -681,17 +813,17 @@ pub fn identify(
     for (i, &l) in eig.eigenvalues.iter().enumerate() {
         let v = eig.eigenvectors.column(i);
         if l > tiny {
-            cov += (v * v.transpose()) / l;
+            for a in 0..ni {
+                for b in 0..ni {
+                    cov[(interior[a], interior[b])] += v[a] * v[b] / l;
+                }
+            }
         } else {
-            for k in 0..NP {
-                null_weight[k] += v[k] * v[k];
+            for a in 0..ni {
+                null_weight[interior[a]] += v[a] * v[a];
             }
         }
     }
-    let at_bound: [bool; NP] = std::array::from_fn(|k| {
-        let v = logp[k];
-        (v - lower[k].ln()).abs() < 1e-9 || (v - upper[k].ln()).abs() < 1e-9
-    });
     let mut std_errors = [0.0; NP];
     let mut not_identifiable = Vec::new();
     let mut at_bounds = Vec::new();
@@ -702,6 +834,9 @@ pub fn identify(
             (sigma2 * cov[(k, k)]).max(0.0).sqrt()
         };
         std_errors[k] = rse * logp[k].exp();
+        if held[k] {
+            continue;
+        }
         if at_bound[k] {
             at_bounds.push(FREE[k]);
         } else if rse.is_nan() || rse > NOT_IDENTIFIABLE_RSE {
@@ -732,9 +867,12 @@ pub fn identify(
         .plant(&params)
         .expect("accepted parameters simulate");
     let mut fit = Vec::with_capacity(logs.len());
+    let mut held_out_motion = Vec::with_capacity(logs.len());
     for (l, log) in logs.iter().enumerate() {
         let train = ((1.0 - options.holdout) * log.u.len() as f64).floor() as usize;
         let n = log.u.len() - train;
+        let motion = rms_deviation(&log.y[train..]);
+        held_out_motion.push(motion);
         if n < 20 {
             fit.push([f64::NAN; 2]);
             continue;
@@ -742,14 +880,58 @@ pub fn identify(
         if cancelled() {
             return Err(RipError::Cancelled);
         }
-        let r = fit_initial_state(&problem, &final_plant, l, train, n);
-        fit.push(fit_percent(&r, &log.y[train..], w));
+        // In windows of the segment length, each from its own estimated initial state: a
+        // pendulum that swings over the top is chaotic, and one simulation of the whole
+        // held-out part would score the chaos, not the model.
+        let mut r = Vec::with_capacity(2 * n);
+        let mut k0 = train;
+        while k0 < log.u.len() {
+            let len = if log.u.len() - k0 < 2 * seg_len {
+                log.u.len() - k0
+            } else {
+                seg_len
+            };
+            r.extend(fit_initial_state(&problem, &final_plant, l, k0, len));
+            k0 += len;
+        }
+        let f = fit_percent(&r, &log.y[train..], w);
+        fit.push(std::array::from_fn(|j| {
+            if motion[j] >= MIN_HELDOUT_MOTION {
+                f[j]
+            } else {
+                f64::NAN
+            }
+        }));
     }
     let (ad, bd) = final_plant.0.linearize_discrete(&State::zeros(), 0.0, ts)?;
+    let covariance: Vec<f64> = (0..NP * NP)
+        .map(|i| {
+            let (a, b) = (i / NP, i % NP);
+            if null_weight[a] > 0.25 || null_weight[b] > 0.25 {
+                f64::INFINITY
+            } else {
+                sigma2 * cov[(a, b)]
+            }
+        })
+        .collect();
+    let rse: [f64; NP] = std::array::from_fn(|k| std_errors[k] / logp[k].exp());
+    let problems = verdict(&Verdict {
+        logs,
+        names: &options.names,
+        start: &options.start,
+        params: &params,
+        fit: &fit,
+        rse: &rse,
+        at_bounds: &at_bounds,
+        at_upper: &std::array::from_fn(|k| (logp[k] - upper[k].ln()).abs() < 1e-9),
+        rank,
+        condition_number,
+    });
     Ok(IdentifyResult {
         params,
         std_errors,
         fit_percent: fit,
+        held_out_motion,
         training_fit_percent,
         not_identifiable,
         at_bounds,
@@ -763,7 +945,171 @@ pub fn identify(
         segments: n_seg,
         ad,
         bd,
+        values: logp.map(f64::exp),
+        covariance,
+        problems,
     })
+}
+
+/// Lags of the residuals' autocorrelation in [`coloured_noise_factor`] (0.2 s at 100 Hz).
+const NOISE_LAGS: usize = 20;
+
+/// The factor by which coloured residuals inflate the variance of a least-squares estimate
+/// over white ones: the long-run variance over the variance, `1 + 2 Σ_l (1 − l/(L+1)) ρ_l`
+/// with Bartlett weights over `L` = [`NOISE_LAGS`] lags, `ρ_l` the residuals' autocorrelation
+/// at lag `l` pooled over segments and outputs (at least 1).
+fn coloured_noise_factor(segments: &[Segment]) -> f64 {
+    let mut acf = [0.0; NOISE_LAGS + 1];
+    for s in segments {
+        for j in 0..2 {
+            let r: Vec<f64> = s.r.iter().skip(j).step_by(2).copied().collect();
+            for (l, a) in acf.iter_mut().enumerate() {
+                if l < r.len() {
+                    *a += r.iter().zip(&r[l..]).map(|(x, y)| x * y).sum::<f64>();
+                }
+            }
+        }
+    }
+    if acf[0].is_nan() || acf[0] <= 0.0 {
+        return 1.0;
+    }
+    let lags = NOISE_LAGS as f64 + 1.0;
+    let sum: f64 = (1..=NOISE_LAGS)
+        .map(|l| (1.0 - l as f64 / lags) * acf[l] / acf[0])
+        .sum();
+    (1.0 + 2.0 * sum).max(1.0)
+}
+
+/// The logs' names, comma-separated (`logs[i]` where a name is missing).
+fn log_names(logs: &[LogData], names: &[String]) -> String {
+    (0..logs.len())
+        .map(|l| {
+            names
+                .get(l)
+                .cloned()
+                .unwrap_or_else(|| format!("logs[{l}]"))
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Root-mean-square deviation from the mean of each output.
+fn rms_deviation(y: &[[f64; 2]]) -> [f64; 2] {
+    let n = y.len().max(1) as f64;
+    std::array::from_fn(|j| {
+        let mean = y.iter().map(|v| v[j]).sum::<f64>() / n;
+        (y.iter().map(|v| (v[j] - mean).powi(2)).sum::<f64>() / n).sqrt()
+    })
+}
+
+/// What [`verdict`] judges.
+struct Verdict<'a> {
+    logs: &'a [LogData],
+    names: &'a [String],
+    start: &'a FurutaParams,
+    params: &'a FurutaParams,
+    fit: &'a [[f64; 2]],
+    rse: &'a [f64; NP],
+    at_bounds: &'a [&'static str],
+    at_upper: &'a [bool; NP],
+    rank: usize,
+    condition_number: f64,
+}
+
+/// The checks of the module docs' "Verdict", each failure a sentence for the user. (The
+/// upright eigenvalue is tied to the logs by the pendulum's held-out fit: a model whose
+/// pendulum frequency is wrong does not predict a swing.)
+fn verdict(v: &Verdict<'_>) -> Vec<String> {
+    let mut out = Vec::new();
+    let name = |l: usize| {
+        v.names
+            .get(l)
+            .cloned()
+            .unwrap_or_else(|| format!("logs[{l}]"))
+    };
+    for (l, f) in v.fit.iter().enumerate() {
+        for (j, output) in ["theta", "alpha"].iter().enumerate() {
+            if f[j] < MIN_FIT_PERCENT {
+                out.push(format!(
+                    "{}: held-out fit of {output} is {:.1} %, below {MIN_FIT_PERCENT} %: the \
+                     model does not predict this log; weigh and measure the rig (a lab file: \
+                     mp, Lp, mr, Lr, Rm) so that the fit starts near it",
+                    name(l),
+                    f[j]
+                ));
+            }
+        }
+    }
+    if v.rank < NP || v.condition_number.is_nan() || v.condition_number > MAX_CONDITION {
+        out.push(format!(
+            "the information matrix has rank {}/{NP} and condition number {:.3e} (at most \
+             {MAX_CONDITION:.0e}): the logs do not determine the parameters; add a chirp and a \
+             PRBS run (motor and arm) and a free swing (pendulum)",
+            v.rank, v.condition_number
+        ));
+    }
+    for (k, name) in FREE.iter().enumerate() {
+        if LINEAR.contains(name) && (v.rse[k].is_nan() || v.rse[k] > MAX_RSE) {
+            out.push(format!(
+                "{name} has a relative standard error of {:.1} % (at most {} %): the upright \
+                 model is not determined; {}",
+                100.0 * v.rse[k],
+                100.0 * MAX_RSE,
+                if *name == "dp" || *name == "jp" {
+                    "add a free-swing log (rip-rt excite --signal free-swing)"
+                } else {
+                    "add a chirp or PRBS run with more amplitude"
+                }
+            ));
+        }
+        let structural = ["lr", "jr", "jp", "kt", "dr"].contains(name);
+        if v.at_upper[k] || (structural && v.at_bounds.contains(name)) {
+            out.push(format!(
+                "{name} ended on its bound ({:.4e}): the start set is inconsistent with the rig; \
+                 {}",
+                get(v.params, k),
+                match *name {
+                    "dr" => "measure the motor's km (back-EMF) and Rm",
+                    "lr" | "jr" => "measure mr and Lr",
+                    "jp" => "measure mp and Lp",
+                    _ => "measure Rm with a multimeter",
+                }
+            ));
+        }
+    }
+    for (what, a, b) in [
+        ("mr", v.start.mr, v.params.mr),
+        ("mp", v.start.mp, v.params.mp),
+        ("Lp", v.start.lp, v.params.lp),
+    ] {
+        if !(b <= a * MAX_FIXED_CHANGE && b >= a / MAX_FIXED_CHANGE) {
+            out.push(format!(
+                "{what} had to change from {a:.4} to {b:.4} to fit (more than a factor \
+                 {MAX_FIXED_CHANGE}): the start set's masses and lengths are not the rig's; \
+                 weigh and measure it (lab file: {what})"
+            ));
+        }
+    }
+    let mut drive: Vec<f64> = v
+        .logs
+        .iter()
+        .flat_map(|l| l.u.iter().map(|u| u.abs()))
+        .collect();
+    if !drive.is_empty() {
+        let k = ((drive.len() - 1) as f64 * 0.95) as usize;
+        let (_, p95, _) = drive.select_nth_unstable_by(k, f64::total_cmp);
+        let p95 = *p95;
+        if p95 > 0.0 && v.params.vd > MAX_DEAD_ZONE_FRACTION * p95 {
+            out.push(format!(
+                "the identified dead zone {:.3} V is more than {} % of the logs' voltage (95th \
+                 percentile {p95:.3} V): the motor would barely move; repeat the excitation \
+                 with a larger amplitude",
+                v.params.vd,
+                100.0 * MAX_DEAD_ZONE_FRACTION
+            ));
+        }
+    }
+    out
 }
 
 /// `JᵀJ` and `Jᵀr` of all segments into `normal`, `grad` (global block first, then four

@@ -139,3 +139,58 @@ fn bad_logs_are_refused_by_name() {
         Err(RipError::Cancelled)
     ));
 }
+
+#[test]
+fn the_verdict_trusts_a_good_fit_and_names_a_wrong_start() {
+    let truth = Plant::new(hidden()).unwrap();
+    let logs = [
+        run(&truth, Signal::Chirp, 20.0, 3),
+        run(&truth, Signal::Prbs, 20.0, 4),
+    ];
+    let cancel = AtomicBool::new(false);
+    let names = vec!["chirp".to_string(), "prbs".to_string()];
+    let good = IdentifyOptions {
+        start: hidden(),
+        names: names.clone(),
+        ..Default::default()
+    };
+    let result = identify(&logs, &good, &cancel).unwrap();
+    assert!(result.problems.is_empty(), "{:?}", result.problems);
+    assert_eq!(result.covariance.len(), NP * NP);
+    // A start whose pendulum is a third of the rig's mass and length: the scale it fixes is
+    // wrong, and the verdict says so, naming a log or the measurement.
+    let mut wrong = hidden();
+    wrong.mp /= 3.0;
+    wrong.lp /= 3.0;
+    wrong.jp /= 27.0;
+    let bad = IdentifyOptions {
+        start: wrong,
+        names,
+        max_iterations: 20,
+        ..Default::default()
+    };
+    match identify(&logs, &bad, &cancel) {
+        Ok(r) => assert!(!r.problems.is_empty(), "accepted: {:?}", r.params),
+        Err(e) => assert!(e.to_string().contains("lab file"), "{e}"),
+    }
+}
+
+#[test]
+fn a_held_out_part_at_rest_is_not_scored() {
+    let truth = Plant::new(hidden()).unwrap();
+    let mut log = run(&truth, Signal::Chirp, 8.0, 5);
+    let rest = log.y.len() * 3 / 4;
+    for k in rest..log.y.len() {
+        log.u[k] = 0.0;
+        log.y[k] = [0.1 + 1e-4 * (k % 3) as f64, std::f64::consts::PI - 1e-3];
+    }
+    let o = IdentifyOptions {
+        max_iterations: 2,
+        ..Default::default()
+    };
+    let result = identify(&[log], &o, &AtomicBool::new(false)).unwrap();
+    assert!(result.fit_percent[0].iter().all(|f| f.is_nan()));
+    assert!(result.held_out_motion[0]
+        .iter()
+        .all(|m| *m < MIN_HELDOUT_MOTION));
+}
