@@ -133,7 +133,9 @@ print("wrote", out / "rig.toml")
 # The page says the fit recovers the hidden rig: check it against the file the emulator ran.
 assert result.trusted, result.problems
 scored = result.fit_percent[np.isfinite(result.fit_percent)]
-assert scored.size and np.all(scored > 80), result.fit_percent
-for name in ("Cr", "Vd"):
-    assert abs(getattr(result.params, name) / getattr(truth, name) - 1) < 0.3, name
+# A held-out part the arm-limit envelope kept too still is "not measurable"; the parameters
+# against the hidden rig's then carry the check.
+assert np.all(scored > 80), result.fit_percent
+for name, tolerance in (("Dr", 0.1), ("Jp", 0.1), ("Cr", 0.3), ("Vd", 0.3)):
+    assert abs(getattr(result.params, name) / getattr(truth, name) - 1) < tolerance, name
 riprs.load_config(out / "rig.toml")  # the written file is a valid experiment file
