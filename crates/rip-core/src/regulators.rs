@@ -84,6 +84,16 @@ struct Integral {
 }
 
 impl Integral {
+    /// The integrator of gain `gain`, or none for a zero gain (no integral action): the one
+    /// rule behind both regulators' `with_integral_action`.
+    fn with_gain(gain: f64, ts: f64) -> Result<Option<Self>> {
+        if gain == 0.0 {
+            Ok(None)
+        } else {
+            Self::new(gain, ts).map(Some)
+        }
+    }
+
     fn new(gain: f64, ts: f64) -> Result<Self> {
         if !gain.is_finite() {
             return Err(RipError::invalid(
@@ -246,11 +256,7 @@ impl Lqr {
     /// Adds integral action on the arm error with gain `k_i` (module docs): `K` is then the
     /// state part `K_x` of the augmented design. A zero gain is no integral action.
     pub fn with_integral_action(mut self, k_i: f64) -> Result<Self> {
-        self.integral = if k_i == 0.0 {
-            None
-        } else {
-            Some(Integral::new(k_i, self.ts)?)
-        };
+        self.integral = Integral::with_gain(k_i, self.ts)?;
         Ok(self)
     }
 
@@ -510,11 +516,7 @@ impl Lqg {
     /// Adds integral action on the arm error with gain `k_i` (module docs): `K` is then the
     /// state part `K_x` of the augmented design. A zero gain is no integral action.
     pub fn with_integral_action(mut self, k_i: f64) -> Result<Self> {
-        self.integral = if k_i == 0.0 {
-            None
-        } else {
-            Some(Integral::new(k_i, self.ts)?)
-        };
+        self.integral = Integral::with_gain(k_i, self.ts)?;
         Ok(self)
     }
 
