@@ -40,8 +40,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::{Config, ConfigError, DeviceConfig, PendulumZero};
 use crate::loop_core::LoopCore;
+use crate::period::{exchange, Reply};
 use crate::protocol::{MAX_FRAME, STATUS_FAULT};
-use crate::runner::{exchange, Reply};
 use crate::serial::Fd;
 use crate::stop::{requested_stop, StopReason};
 use crate::timing::Periodic;
@@ -544,7 +544,6 @@ fn wait_for_rest(
     quiet: bool,
 ) -> Result<Calibration, StopReason> {
     let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
-    let period_ns = periodic.period_ns();
     let timeout_ns = (check.cfg.rest_timeout_s * 1e9) as u64;
     let mut tx = [0u8; MAX_FRAME];
     let mut rx = [0u8; 512];
@@ -559,8 +558,7 @@ fn wait_for_rest(
         if elapsed_ns >= timeout_ns {
             return Err(StopReason::NotAtRest(check.timeout_fault()));
         }
-        let cap_ns = tick.deadline_ns + period_ns;
-        let (_, reply) = exchange(io, core, &mut tx, &mut rx, reply_timeout_ns, cap_ns)?;
+        let (_, reply) = exchange(io, core, periodic, &mut tx, &mut rx, reply_timeout_ns)?;
         let n = core.encode_stop(&mut tx);
         io.write_all(&tx[..n]).map_err(StopReason::DeviceLost)?;
         let Some(Reply { m, .. }) = reply else {

@@ -549,6 +549,7 @@ fn run_in_process(name: &str, controller: Slows) -> (rip_rt::stop::StopReason, V
     let opts = rip_rt::runner::RunOptions {
         duration_s: Some(5.0),
         quiet: true,
+        clock: Default::default(),
     };
     let report = rip_rt::runner::run(port.io(), &mut core, &cfg, &opts, None);
     assert!(report.stop_sent);
