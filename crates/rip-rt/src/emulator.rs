@@ -98,7 +98,8 @@ pub struct EmulatorConfig {
 
 /// In lockstep, a host silent for this long (wall time) no longer paces the plant: it runs on
 /// in real time, so that what happens after a run (the arm coasting, the device watchdog)
-/// plays out as on the rig, until the next sample request.
+/// plays out as on the rig, until the next sample request. Before the host's first frame the
+/// plant waits, so that a lockstep run is reproducible.
 pub const LOCKSTEP_IDLE_NS: u64 = 500_000_000;
 
 /// How the emulated rig is wired: the motor's leads and each encoder's direction, and
@@ -703,7 +704,9 @@ fn serve(
             return Ok(EmulatorExit::Stopped);
         }
         let now = now_ns();
-        let paced = lockstep_steps.is_some() && now < host_ns + LOCKSTEP_IDLE_NS;
+        // Before the host's first frame the plant waits for it too: a lockstep run is the same
+        // sequence of plant steps and noise draws however long the host took to start.
+        let paced = lockstep_steps.is_some() && (host_ns == 0 || now < host_ns + LOCKSTEP_IDLE_NS);
         if paced {
             next_tick = now + dt_ns;
         } else if now >= next_tick {
@@ -718,7 +721,9 @@ fn serve(
             continue;
         }
         let wait_ns = if paced {
-            host_ns + LOCKSTEP_IDLE_NS - now
+            (host_ns + LOCKSTEP_IDLE_NS)
+                .saturating_sub(now)
+                .max(1_000_000)
         } else {
             next_tick - now
         };
