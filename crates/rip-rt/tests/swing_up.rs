@@ -536,13 +536,17 @@ fn a_swing_up_arm_limit_outside_the_safety_limit_is_refused_naming_it() {
     );
     assert_eq!(r.status.code(), Some(2), "{}", r.stderr);
     assert!(r.stderr.contains("swing_up.arm_limit"), "{}", r.stderr);
-    // Without --swing-up the section is not used, and the file is fine.
+    // One validation for the file: a run without --swing-up, like `rip-rt config` and
+    // `riprs config`, refuses the swing-up it sets, naming the file and the key (it used to
+    // accept the file, which the swing-up run then refused).
     let r = run(
         std::path::Path::new("/nonexistent"),
         "lqr",
         &["--config", file.to_str().unwrap()],
     );
-    assert_eq!(r.status.code(), Some(1), "{}", r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{}", r.stderr);
+    let named = format!("{}: swing_up.arm_limit", file.display());
+    assert!(r.stderr.contains(&named), "{}", r.stderr);
 }
 
 #[test]
@@ -571,6 +575,24 @@ fn a_swing_up_region_or_voltage_beyond_the_safety_limits_is_refused_naming_both_
         assert_eq!(r.status.code(), Some(2), "{name}: {}", r.stderr);
         assert!(r.stderr.contains(key), "{name}: {}", r.stderr);
         assert!(r.stderr.contains(safety), "{name}: {}", r.stderr);
+        // The message names the file, as every other configuration error does.
+        let named = format!("{}: {key}", file.display());
+        assert!(r.stderr.contains(&named), "{name}: {}", r.stderr);
+        // `rip-rt config` refuses what the file sets of `[swing_up]`, with the same message
+        // (the second file leaves the swing-up at its defaults: only a swing-up run needs
+        // them inside a lowered voltage limit).
+        let checked = std::process::Command::new(BIN)
+            .arg("config")
+            .arg(&file)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&checked.stderr);
+        if text.contains("[swing_up]") {
+            assert_eq!(checked.status.code(), Some(2), "{name}: {stderr}");
+            assert!(stderr.contains(&named), "{name}: {stderr}");
+        } else {
+            assert!(checked.status.success(), "{name}: {stderr}");
+        }
     }
 }
 
