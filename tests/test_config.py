@@ -65,6 +65,17 @@ def test_both_tools_print_the_same_experiment_sections(tmp_path, capsys, rip_rt)
         ("[sensor]\nnoise_std = [0.001, -1.0]\n", "sensor.noise_std[1]"),
         ("[lqr]\nR = 1e308\n", "lqr.R"),
         ("[plant]\nsubsteps = 100001\n", "plant.substeps"),
+        # rip-rt's sections are part of the one schema: riprs checks them too.
+        ("loop = 3\n", "loop"),
+        ("[device]\narm_sign = 0\n", "device.arm_sign"),
+        ("[loop]\nperiod_ms = 'x'\n", "loop.period_ms"),
+        ("[loop]\nperiod_ms = 1e308\n", "loop.period_ms"),
+        ("[calibration]\nrest_window_s = 0.01\n", "calibration.rest_window_s"),
+        # A file that sets the swing-up keeps it inside the safety limits, as the run needs.
+        ("[swing_up]\nbalance_angle = 0.7\n", "swing_up.balance_angle"),
+        ("[swing_up]\nmax_voltage = 13\n", "swing_up.max_voltage"),
+        ("[swing_up]\narm_limit = 3.1\n", "swing_up.arm_limit"),
+        ("[sefety]\n", "sefety"),
     ],
 )
 def test_both_tools_give_the_same_message(tmp_path, capsys, rip_rt, text, key):
@@ -84,3 +95,12 @@ def test_configuration_reference_is_generated_from_the_spec():
     # docs/configuration.md is `riprs config --reference`; regenerate it after changing the
     # spec.
     assert (ROOT / "docs" / "configuration.md").read_text() == reference()
+
+
+def test_an_unknown_section_lists_the_rig_sections_too(tmp_path, capsys):
+    path = tmp_path / "typo.toml"
+    path.write_text("[sefety]\nvoltage_limit = 5\n")
+    code, _, err = _riprs_config(capsys, str(path))
+    assert code == 1
+    for name in ("plant", "swing_up", "loop", "device", "safety", "calibration"):
+        assert f"`{name}`" in err, err

@@ -84,6 +84,12 @@ pub const STATUS_FAULT: u8 = 1 << 3;
 /// never sets it, and the host reads its absence as an open, coasting motor.
 pub const STATUS_BRAKING: u8 = 1 << 4;
 
+/// Device status bit: the device is an emulator in lockstep (`rip-rt emulate --lockstep`),
+/// which advances its plant by exactly one host period per sample request instead of in real
+/// time. Bit 5 was reserved (sent as 0) before lockstep was defined; a real device never sets
+/// it, and the host refuses to run in lockstep against a device that does not.
+pub const STATUS_LOCKSTEP: u8 = 1 << 5;
+
 /// Command flag bit: enable the motor driver. Without it the device applies 0 V.
 pub const COMMAND_ENABLE: u8 = 1 << 0;
 /// Command flag bit, with [`COMMAND_ENABLE`] clear: brake (short the motor's windings, so that

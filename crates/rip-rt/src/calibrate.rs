@@ -36,168 +36,18 @@
 //! loop's safety rules (stop signals, watchdog, driver faults), sending the stop command every
 //! period. The caller owns the [`StopGuard`](crate::stop::StopGuard) that sends 0 V on exit.
 
-use serde::{Deserialize, Serialize};
-
-use crate::config::{Config, ConfigError, DeviceConfig, PendulumZero};
+use crate::config::{Config, PendulumZero};
 use crate::loop_core::LoopCore;
+use crate::period::{exchange, Reply};
 use crate::protocol::{MAX_FRAME, STATUS_FAULT};
-use crate::runner::{exchange, Reply};
 use crate::serial::Fd;
 use crate::stop::{requested_stop, StopReason};
 use crate::timing::Periodic;
 
-/// The span (s) over which rates are taken from encoder differences (module docs).
-pub const RATE_SPAN_S: f64 = 0.1;
-/// Allowed `calibration.rest_window_s` (s): at least a few rate spans, at most a patient wait.
-pub const REST_WINDOW_S: std::ops::RangeInclusive<f64> = 0.2..=10.0;
-/// Longest `calibration.rest_timeout_s` (s); the motor stays disabled while waiting.
-pub const MAX_REST_TIMEOUT_S: f64 = 600.0;
-/// Largest rate threshold (rad/s): above it a gently swinging pendulum would pass.
-pub const MAX_REST_RATE: f64 = 1.0;
-/// Largest `calibration.max_pendulum_offset` (rad, about 11°): the accepted offset becomes an
-/// error of the upright by as much, and already a tenth of a radian makes the balance
-/// controllers drop the pendulum they caught.
-pub const MAX_PENDULUM_OFFSET: f64 = 0.2;
-/// Allowed `calibration.rest_counts`.
-pub const REST_COUNTS: std::ops::RangeInclusive<u32> = 1..=64;
-
-/// `[calibration]`: when the rig counts as at rest, and how far from hanging its rest pose may
-/// be (module docs). Every key is optional.
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct CalibrationConfig {
-    /// Both joints must be still for this long (s), in [`REST_WINDOW_S`]; the encoder zeros
-    /// are the means over this window. Default 1 s.
-    pub rest_window_s: f64,
-    /// The check refuses when no window was still this long (s) after it started, in
-    /// [`rest_window_s`, [`MAX_REST_TIMEOUT_S`]]. Default 3 s.
-    ///
-    /// [`rest_window_s`]: Self::rest_window_s
-    pub rest_timeout_s: f64,
-    /// After the sign check's pulse of a swing-up run the rig must be at rest again (the same
-    /// window and thresholds) within this long (s), in [`rest_window_s`,
-    /// [`MAX_REST_TIMEOUT_S`]], before it is calibrated and swung up: a swing that starts
-    /// from the pulse's aftermath starts from a state the swing-up was not tuned for. The
-    /// pendulum, swinging a few tenths of a radian after the pulse, may need several of its
-    /// damping time constants. Default 30 s.
-    ///
-    /// [`rest_window_s`]: Self::rest_window_s
-    pub settle_timeout_s: f64,
-    /// Largest arm rate (rad/s) over any [`RATE_SPAN_S`] of the window, in
-    /// (2 counts per span, [`MAX_REST_RATE`]]. Default 0.2 rad/s.
-    pub rest_arm_rate: f64,
-    /// Largest pendulum rate (rad/s), as [`rest_arm_rate`](Self::rest_arm_rate). Default
-    /// 0.2 rad/s.
-    pub rest_pendulum_rate: f64,
-    /// Largest spread (max − min, counts) of either encoder over the window, in
-    /// [`REST_COUNTS`]. Default 6 counts (2048 counts per revolution: 18 mrad).
-    pub rest_counts: u32,
-    /// Largest distance (rad) of the pendulum's rest pose from hanging as `[device]` reads it
-    /// (`pendulum_zero`), in (0, [`MAX_PENDULUM_OFFSET`]]. Default 0.05 rad (about 3°, 16
-    /// counts at 2048 per revolution): Coulomb friction lets a free pendulum rest within about
-    /// a degree of hanging, and a pose farther off (held, leaning on the cable) would shift the
-    /// upright by as much, since the calibration takes it as exactly π.
-    pub max_pendulum_offset: f64,
-}
-
-impl Default for CalibrationConfig {
-    fn default() -> Self {
-        Self {
-            rest_window_s: 1.0,
-            rest_timeout_s: 3.0,
-            settle_timeout_s: 30.0,
-            rest_arm_rate: 0.2,
-            rest_pendulum_rate: 0.2,
-            rest_counts: 6,
-            max_pendulum_offset: 0.05,
-        }
-    }
-}
-
-impl CalibrationConfig {
-    /// Checks every value against its range (and the rate thresholds against the encoders'
-    /// resolution in `device`); the error names the key.
-    pub fn validate(&self, device: &DeviceConfig) -> Result<(), ConfigError> {
-        let bad = |key: &str, reason: String| Err(ConfigError::new(key, reason));
-        if !REST_WINDOW_S.contains(&self.rest_window_s) {
-            return bad(
-                "calibration.rest_window_s",
-                format!(
-                    "must be in [{}, {}] s, got {}",
-                    REST_WINDOW_S.start(),
-                    REST_WINDOW_S.end(),
-                    self.rest_window_s
-                ),
-            );
-        }
-        if !(self.rest_timeout_s >= self.rest_window_s && self.rest_timeout_s <= MAX_REST_TIMEOUT_S)
-        {
-            return bad(
-                "calibration.rest_timeout_s",
-                format!(
-                    "must be in [calibration.rest_window_s ({}), {MAX_REST_TIMEOUT_S}] s, got {}",
-                    self.rest_window_s, self.rest_timeout_s
-                ),
-            );
-        }
-        if !(self.settle_timeout_s >= self.rest_window_s
-            && self.settle_timeout_s <= MAX_REST_TIMEOUT_S)
-        {
-            return bad(
-                "calibration.settle_timeout_s",
-                format!(
-                    "must be in [calibration.rest_window_s ({}), {MAX_REST_TIMEOUT_S}] s, got {}",
-                    self.rest_window_s, self.settle_timeout_s
-                ),
-            );
-        }
-        for (key, rate, counts) in [
-            (
-                "calibration.rest_arm_rate",
-                self.rest_arm_rate,
-                device.arm_counts_per_rev,
-            ),
-            (
-                "calibration.rest_pendulum_rate",
-                self.rest_pendulum_rate,
-                device.pendulum_counts_per_rev,
-            ),
-        ] {
-            let floor = 2.0 * std::f64::consts::TAU / f64::from(counts.max(1)) / RATE_SPAN_S;
-            if !(rate > floor && rate <= MAX_REST_RATE) {
-                return bad(
-                    key,
-                    format!(
-                        "must be in ({floor:.4}, {MAX_REST_RATE}] rad/s (above 2 counts per \
-                         {RATE_SPAN_S} s at {counts} counts/rev), got {rate}"
-                    ),
-                );
-            }
-        }
-        if !REST_COUNTS.contains(&self.rest_counts) {
-            return bad(
-                "calibration.rest_counts",
-                format!(
-                    "must be in {}..={}, got {}",
-                    REST_COUNTS.start(),
-                    REST_COUNTS.end(),
-                    self.rest_counts
-                ),
-            );
-        }
-        if !(self.max_pendulum_offset > 0.0 && self.max_pendulum_offset <= MAX_PENDULUM_OFFSET) {
-            return bad(
-                "calibration.max_pendulum_offset",
-                format!(
-                    "must be in (0, {MAX_PENDULUM_OFFSET}] rad (the accepted offset shifts the \
-                     upright by as much), got {}",
-                    self.max_pendulum_offset
-                ),
-            );
-        }
-        Ok(())
-    }
-}
+pub use rip_core::spec::rig_sections::{
+    CalibrationConfig, MAX_PENDULUM_OFFSET, MAX_REST_RATE, MAX_REST_TIMEOUT_S, RATE_SPAN_S,
+    REST_COUNTS, REST_WINDOW_S,
+};
 
 /// The encoder zeros taken from a window at rest, and what that window measured.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -544,7 +394,6 @@ fn wait_for_rest(
     quiet: bool,
 ) -> Result<Calibration, StopReason> {
     let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
-    let period_ns = periodic.period_ns();
     let timeout_ns = (check.cfg.rest_timeout_s * 1e9) as u64;
     let mut tx = [0u8; MAX_FRAME];
     let mut rx = [0u8; 512];
@@ -559,8 +408,7 @@ fn wait_for_rest(
         if elapsed_ns >= timeout_ns {
             return Err(StopReason::NotAtRest(check.timeout_fault()));
         }
-        let cap_ns = tick.deadline_ns + period_ns;
-        let (_, reply) = exchange(io, core, &mut tx, &mut rx, reply_timeout_ns, cap_ns)?;
+        let (_, reply) = exchange(io, core, periodic, &mut tx, &mut rx, reply_timeout_ns)?;
         let n = core.encode_stop(&mut tx);
         io.write_all(&tx[..n]).map_err(StopReason::DeviceLost)?;
         let Some(Reply { m, .. }) = reply else {

@@ -223,6 +223,10 @@ struct RunArgs {
     /// starts them again at the next catch).
     #[arg(long)]
     swing_up: bool,
+    /// Run in lockstep with `rip-rt emulate --lockstep`: no period waits for the wall clock,
+    /// the emulator advances its plant one period per exchange (refused by any other device).
+    #[arg(long)]
+    lockstep: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -318,6 +322,20 @@ struct EmulateArgs {
     /// counts backwards from it).
     #[arg(long, allow_negative_numbers = true, value_name = "S", value_parser = nonnegative)]
     fault_at: Option<f64>,
+    /// Lockstep with `rip-rt run/excite --lockstep`: advance the plant by one host period
+    /// (`[loop] period_ms` of --config, else 10 ms) per sample request instead of in real
+    /// time; after 0.5 s without a host frame the plant runs on in real time.
+    #[arg(long)]
+    lockstep: bool,
+}
+
+/// The loop's clock for a `--lockstep` flag.
+pub(crate) fn clock_mode(lockstep: bool) -> timing::ClockMode {
+    if lockstep {
+        timing::ClockMode::Lockstep
+    } else {
+        timing::ClockMode::RealTime
+    }
 }
 
 pub(crate) fn fail(code: i32, msg: impl std::fmt::Display) -> ExitCode {
@@ -336,7 +354,10 @@ fn prepare(
         None => Config::default(),
     };
     let controller = if args.swing_up {
-        cfg.validate_swing_up()?;
+        cfg.validate_swing_up().map_err(|e| match &args.config {
+            Some(path) => e.in_file(path),
+            None => e,
+        })?;
         controllers::build_swing_up(args.controller, &cfg)
     } else {
         controllers::build(args.controller, &cfg)
@@ -408,6 +429,7 @@ fn cmd_run(args: RunArgs) -> ExitCode {
     let opts = RunOptions {
         duration_s: args.duration,
         quiet: args.quiet,
+        clock: clock_mode(args.lockstep),
     };
     let report = runner::run(port.io(), &mut core, &cfg, &opts, log.as_mut());
     let mut code = report.reason.exit_code();
@@ -518,15 +540,17 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
     let defaults = EmulatorConfig::default();
     // The pose: the flags, else the file's initial state, else the defaults (upright). A file
     // also gives the plant's sensor: encoder resolutions and zero offsets.
-    let (model, sensor, mut initial_arm, mut initial_pendulum) = match &args.config {
+    let (model, sensor, mut initial_arm, mut initial_pendulum, period_s) = match &args.config {
         Some(path) => match Config::load(path) {
             Ok(c) => {
                 let x0 = c.spec.plant.initial_state;
+                let period_s = c.period_s();
                 (
                     Model::Params(c.spec.plant.params()),
                     c.spec.sensor,
                     x0[0],
                     x0[2],
+                    period_s,
                 )
             }
             Err(e) => return fail(exit_code::USAGE, e),
@@ -536,6 +560,7 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
             rip_core::spec::SensorSpec::default(),
             defaults.initial_arm,
             defaults.initial_pendulum,
+            Config::default().period_s(),
         ),
     };
     match args.start.as_deref() {
@@ -571,6 +596,7 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
             encoder_frozen: [args.freeze_arm_encoder, args.freeze_pendulum_encoder],
         },
         fault_at_s: args.fault_at,
+        lockstep_period_s: args.lockstep.then_some(period_s),
         ..EmulatorConfig::default()
     };
     if let Err(e) = cfg.validate() {

@@ -25,7 +25,7 @@ use rand_distr::{Distribution, Normal};
 use rip_device::{Direction, Inputs};
 
 use crate::plant::{Model, PlantSim, Windings};
-use crate::protocol::{encode, Event, Frame, Message, Parser, MAX_FRAME, SYNC0};
+use crate::protocol::{encode, Event, Frame, Message, Parser, MAX_FRAME, STATUS_LOCKSTEP, SYNC0};
 use crate::serial::{Fd, Pty, Readiness};
 use crate::timing::now_ns;
 
@@ -90,7 +90,17 @@ pub struct EmulatorConfig {
     /// The emulated bridge can brake (short the windings) when not driving; without it the
     /// windings are open whenever the motor is not driven (`--no-brake`).
     pub can_brake: bool,
+    /// Lockstep with the host (`--lockstep`): the plant advances by exactly this period (s,
+    /// the host's `loop.period_ms`) before each sample request is answered, instead of in
+    /// real time; measurements carry [`STATUS_LOCKSTEP`]. `None`: real time.
+    pub lockstep_period_s: Option<f64>,
 }
+
+/// In lockstep, a host silent for this long (wall time) no longer paces the plant: it runs on
+/// in real time, so that what happens after a run (the arm coasting, the device watchdog)
+/// plays out as on the rig, until the next sample request. Before the host's first frame the
+/// plant waits, so that a lockstep run is reproducible.
+pub const LOCKSTEP_IDLE_NS: u64 = 500_000_000;
 
 /// How the emulated rig is wired: the motor's leads and each encoder's direction, and
 /// encoders that do not count (a loose cable). The default is a correctly wired rig.
@@ -130,6 +140,7 @@ impl Default for EmulatorConfig {
             wiring: Wiring::default(),
             fault_at_s: None,
             can_brake: true,
+            lockstep_period_s: None,
         }
     }
 }
@@ -242,6 +253,18 @@ impl EmulatorConfig {
                     self.true_state_period_s
                 ),
             ));
+        }
+        if let Some(p) = self.lockstep_period_s {
+            let dt = 1.0 / self.sim_rate_hz;
+            if !(p.is_finite() && p >= dt && p <= 1.0) {
+                return Err(EmulatorConfigError::new(
+                    "--lockstep",
+                    format!(
+                        "the host period must be in [{dt}, 1] s (one simulation step to 1 s), \
+                         got {p}"
+                    ),
+                ));
+            }
         }
         if let Some(t) = self.fault_at_s {
             if !(t.is_finite() && t >= 0.0) {
@@ -503,7 +526,14 @@ impl Device {
             self.enabled_at_ns.get_or_insert(self.time_ns);
         }
         match reply {
-            Some(frame) => Reply::Bytes(encode(&frame, out)),
+            Some(mut frame) => {
+                if let (Message::Measurement(m), Some(_)) =
+                    (&mut frame.message, self.cfg.lockstep_period_s)
+                {
+                    m.status |= STATUS_LOCKSTEP;
+                }
+                Reply::Bytes(encode(&frame, out))
+            }
             None => Reply::None,
         }
     }
@@ -650,58 +680,80 @@ fn serve(
         None => None,
     };
     let dt_ns = (1e9 / cfg.sim_rate_hz).round() as u64;
-    let duration = cfg.duration_s;
-    let vanish_after = cfg.vanish_after_s;
+    let mut clock = SimClock {
+        dt_ns,
+        duration: cfg.duration_s,
+        vanish_after: cfg.vanish_after_s,
+        first_command_at: None,
+    };
+    // Simulation steps per host period in lockstep.
+    let lockstep_steps = cfg
+        .lockstep_period_s
+        .map(|p| ((p * 1e9 / dt_ns as f64).round() as u64).max(1));
     let mut parser = Parser::new();
     let mut rx = [0u8; 256];
     let mut out = [0u8; MAX_FRAME];
     let mut wire = Vec::with_capacity(MAX_FRAME + 16);
-    let start = now_ns();
-    let mut next_tick = start + dt_ns;
-    let mut first_command_at: Option<f64> = None;
+    let mut next_tick = now_ns() + dt_ns;
+    // Wall time of the host's latest frame (lockstep: the host paces the plant until it has
+    // been silent for LOCKSTEP_IDLE_NS).
+    let mut host_ns = 0u64;
     let io: &Fd = pty.io();
     loop {
         if stop.load(Ordering::Relaxed) {
             return Ok(EmulatorExit::Stopped);
         }
         let now = now_ns();
-        if now >= next_tick {
-            device.advance(dt_ns);
-            if let Some(t) = truth.as_mut() {
-                t.sample(device)?;
+        // Before the host's first frame the plant waits for it too: a lockstep run is the same
+        // sequence of plant steps and noise draws however long the host took to start.
+        let paced = lockstep_steps.is_some() && (host_ns == 0 || now < host_ns + LOCKSTEP_IDLE_NS);
+        if paced {
+            next_tick = now + dt_ns;
+        } else if now >= next_tick {
+            if let Some(exit) = clock.step(device, truth)? {
+                return Ok(exit);
             }
             next_tick += dt_ns;
             if now > next_tick + 100 * dt_ns {
                 // Far behind (the machine stalled): resume from now rather than fast-forward.
                 next_tick = now + dt_ns;
             }
-            let t = device.time_s();
-            if duration.is_some_and(|d| t >= d) {
-                return Ok(EmulatorExit::Finished);
-            }
-            if let (Some(v), Some(t0)) = (vanish_after, first_command_at) {
-                if t - t0 >= v {
-                    drop(pty);
-                    return Ok(EmulatorExit::Vanished);
-                }
-            }
             continue;
         }
-        match io.wait_readable(next_tick - now)? {
+        let wait_ns = if paced {
+            (host_ns + LOCKSTEP_IDLE_NS)
+                .saturating_sub(now)
+                .max(1_000_000)
+        } else {
+            next_tick - now
+        };
+        match io.wait_readable(wait_ns)? {
             Readiness::Readable => {}
             Readiness::Timeout | Readiness::Interrupted => continue,
         }
         let n = io.read_available(&mut rx)?;
+        host_ns = now_ns();
         let mut error = None;
-        let t = device.time_s();
         for &byte in &rx[..n] {
             parser.push(byte);
             // Rejected candidates go to the firmware too: it reports them with RX_ERROR in the
             // next measurement and disables the motor on a frame of another version.
             while let Some(event) = parser.poll_event() {
                 if let Event::Frame(frame) = event {
-                    if first_command_at.is_none() && matches!(frame.message, Message::Command(_)) {
-                        first_command_at = Some(t);
+                    if let (Some(steps), Message::SampleRequest) = (lockstep_steps, frame.message) {
+                        // One host period of the plant under the command in force, then the
+                        // answer: the measurement a sampled loop sees at its next deadline.
+                        for _ in 0..steps {
+                            if let Some(exit) = clock.step(device, truth)? {
+                                return Ok(exit);
+                            }
+                        }
+                    }
+                    let t = device.time_s();
+                    if clock.first_command_at.is_none()
+                        && matches!(frame.message, Message::Command(_))
+                    {
+                        clock.first_command_at = Some(t);
                     }
                     if let Err(e) = write_record(&mut record, t, &frame) {
                         error.get_or_insert(e);
@@ -720,6 +772,40 @@ fn serve(
         if let Some(e) = error {
             return Err(e);
         }
+    }
+}
+
+/// The simulation's own clock: one step of the plant and the ends it can bring (the
+/// emulator's `--duration`, the vanish fault).
+struct SimClock {
+    dt_ns: u64,
+    duration: Option<f64>,
+    vanish_after: Option<f64>,
+    first_command_at: Option<f64>,
+}
+
+impl SimClock {
+    /// Advances the plant by one simulation step and records it; `Some` when the emulator
+    /// must end.
+    fn step(
+        &self,
+        device: &mut Device,
+        truth: &mut Option<TrueState>,
+    ) -> io::Result<Option<EmulatorExit>> {
+        device.advance(self.dt_ns);
+        if let Some(t) = truth.as_mut() {
+            t.sample(device)?;
+        }
+        let t = device.time_s();
+        if self.duration.is_some_and(|d| t >= d) {
+            return Ok(Some(EmulatorExit::Finished));
+        }
+        if let (Some(v), Some(t0)) = (self.vanish_after, self.first_command_at) {
+            if t - t0 >= v {
+                return Ok(Some(EmulatorExit::Vanished));
+            }
+        }
+        Ok(None)
     }
 }
 

@@ -36,11 +36,11 @@ use rip_core::spec::SpecError;
 
 use crate::config::{Config, ConfigError, MAX_VOLTAGE_LIMIT};
 use crate::loop_core::LoopCore;
+use crate::period::exchange;
 use crate::protocol::{encode, Command, Frame, Message, MAX_FRAME, STATUS_FAULT};
-use crate::runner::exchange;
 use crate::serial::Fd;
 use crate::stop::{next_seq, StopReason};
-use crate::timing::{now_ns, Periodic};
+use crate::timing::Periodic;
 
 /// Distance (rad) inside `safety.arm_limit` at which the stop envelope ends, for the rate's
 /// quantisation and the arm's travel within the period of the decision.
@@ -352,7 +352,7 @@ pub fn bring_to_rest(
     let mut tx = [0u8; MAX_FRAME];
     let mut rx = [0u8; 512];
     // A fresh grid: the run may have stopped in the middle of a period, or after a stall.
-    *periodic = Periodic::new(periodic.period_ns(), now_ns() + periodic.period_ns());
+    periodic.restart();
     let start_ns = periodic.next_deadline_ns();
     let end_ns = start_ns + (MAX_BRAKE_S * 1e9) as u64;
     loop {
@@ -361,8 +361,7 @@ pub fn bring_to_rest(
         if tick.deadline_ns >= end_ns {
             return report;
         }
-        let cap = tick.deadline_ns + periodic.period_ns();
-        let reply = match exchange(io, core, &mut tx, &mut rx, reply_timeout_ns, cap) {
+        let reply = match exchange(io, core, periodic, &mut tx, &mut rx, reply_timeout_ns) {
             Ok((_, reply)) => reply,
             // The device is gone: nothing more can be sent.
             Err(_) => return report,

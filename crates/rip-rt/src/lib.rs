@@ -7,7 +7,9 @@
 //! - [`cli`] — the `rip-rt` command line, from arguments to exit code (the binary and the
 //!   Python package's console script both run it).
 //! - [`protocol`] — wire protocol v1, the `rip-protocol` crate that the firmware runs too.
-//! - [`runner`] — the periodic loop and its phases (probe, arming, balancing).
+//! - [`period`] — the period driver: the exchange, staleness, watchdog, stall, compute and
+//!   log rules every command law (`run`, `excite`) runs under, on one clock.
+//! - [`runner`] — `rip-rt run`'s command law and its phases (probe, arming, balancing).
 //! - [`excite`] — `rip-rt excite`: the sign check and an open-loop excitation, hanging down.
 //! - [`sign_check`] — the motor-sign / encoder-direction check pulse and its diagnosis.
 //! - [`loop_core`] — the loop's logic without I/O: decoding, limits, the controller step,
@@ -37,6 +39,7 @@ pub mod envelope;
 pub mod excite;
 pub mod log;
 pub mod loop_core;
+pub mod period;
 pub mod plant;
 pub use rip_protocol as protocol;
 pub mod runner;

@@ -31,20 +31,21 @@
 //! Every way out of [`run`] ends with the stop frame (see [`crate::stop`]). Rules that hold in
 //! every period of balancing: no enabling command from a measurement older than
 //! `loop.max_step_periods` (compute overrun) and no repeated enabling command more than
-//! `loop.watchdog_periods` (and never more than [`MAX_BLIND_MS`]) after the last measurement;
+//! `loop.watchdog_periods` (and never more than [`MAX_BLIND_MS`](crate::config::MAX_BLIND_MS)) after the last measurement;
 //! `loop.max_consecutive_misses` periods in a row longer than a period, or a loop that did not run for
-//! [`MAX_BLIND_MS`] (suspended, starved), stop it.
+//! [`MAX_BLIND_MS`](crate::config::MAX_BLIND_MS) (suspended, starved), stop it.
 
 use crate::calibrate::{self, Calibration};
-use crate::config::{Config, MAX_BLIND_MS};
-use crate::excite::{self, ExciteOptions};
-use crate::log::{LogWriter, Row};
-use crate::loop_core::{LoopCore, StepOutput, FLAG_DEADLINE_MISS, FLAG_NO_REPLY};
-use crate::protocol::{Measurement, ParserStats, MAX_FRAME};
-use crate::serial::{Fd, Readiness};
+use crate::config::Config;
+use crate::excite;
+use crate::log::LogWriter;
+use crate::loop_core::{LoopCore, StepOutput};
+use crate::period::{Act, Law, Logged, Period, Reply};
+use crate::protocol::{ParserStats, MAX_FRAME};
+use crate::serial::Fd;
 use crate::sign_check::{SignReport, PULSE_VOLTAGE};
-use crate::stop::{requested_stop, Overrun, StopGuard, StopReason};
-use crate::timing::{now_ns, Histogram, Periodic, Tick, TimingSummary};
+use crate::stop::{requested_stop, StopGuard, StopReason};
+use crate::timing::{now_ns, ClockMode, Periodic, Tick, TimingSummary};
 
 /// Options of one run besides the configuration.
 #[derive(Debug, Clone, Default)]
@@ -53,6 +54,8 @@ pub struct RunOptions {
     pub duration_s: Option<f64>,
     /// Suppress progress messages on stderr.
     pub quiet: bool,
+    /// The clock of the loop: real time, or lockstep with an emulator (`--lockstep`).
+    pub clock: ClockMode,
 }
 
 /// The outcome of [`run`].
@@ -255,27 +258,14 @@ enum Phase {
     },
 }
 
-/// The state of one run: the device, the controller, the log and the counters.
-struct Runner<'a> {
-    io: &'a Fd,
-    core: &'a mut LoopCore,
-    log: Option<&'a mut LogWriter>,
+/// The command law of `rip-rt run`: arming, then the controller's commands, with the run's
+/// own bounds (`--duration`, `safety.wait_upright_s`, a swing-up's time).
+struct RunLaw {
+    phase: Phase,
     quiet: bool,
     period_ns: u64,
-    reply_timeout_ns: u64,
-    watchdog: u32,
-    max_step_ns: u64,
-    max_misses: u32,
     wait_upright_ns: u64,
     duration_ns: Option<u64>,
-    jitter: Histogram,
-    compute: Histogram,
-    tx: [u8; MAX_FRAME],
-    rx: [u8; 512],
-    missing_in_row: u32,
-    missing_total: u64,
-    misses_in_row: u32,
-    last_step: Option<StepOutput>,
     balanced_ns: u64,
     // When the experiment (the reference's clock, `--duration`) started: with balancing, or at
     // a swing-up's latest catch (none while it swings).
@@ -290,138 +280,39 @@ struct Runner<'a> {
     falls: u32,
     swing_periods: u64,
     max_swing_s: f64,
-    // When the request was sent whose measurement the last enabling command rests on.
-    based_on_ns: u64,
 }
 
-/// A measurement, when its request was sent and when its bytes were read.
-#[derive(Debug, Clone, Copy)]
-pub struct Reply {
-    /// The measurement.
-    pub m: Measurement,
-    /// When its sample request was sent (ns, `CLOCK_MONOTONIC`).
-    pub req_ns: u64,
-    /// When its bytes were read.
-    pub rx_ns: u64,
-}
-
-/// Sends a sample request on `io` and waits for the measurement answering it, up to
-/// `reply_timeout_ns` after the request and never past `cap_ns` (the next deadline, which
-/// the next request must keep). `None` when none arrived in time; bytes that are not the
-/// answer (stale replies, garbage) are consumed by `core`'s parser.
-pub fn exchange(
-    io: &Fd,
-    core: &mut LoopCore,
-    tx: &mut [u8; MAX_FRAME],
-    rx: &mut [u8],
-    reply_timeout_ns: u64,
-    cap_ns: u64,
-) -> Result<(u16, Option<Reply>), StopReason> {
-    let (seq, n) = core.encode_request(tx);
-    let req_ns = now_ns();
-    io.write_all(&tx[..n]).map_err(StopReason::DeviceLost)?;
-    // Counted from the request, so a late wake-up does not cost a measurement the device
-    // answers at once.
-    let deadline = (now_ns() + reply_timeout_ns).min(cap_ns);
-    loop {
-        let now = now_ns();
-        if now >= deadline {
-            return Ok((seq, None));
+impl RunLaw {
+    fn new(cfg: &Config, opts: &RunOptions, core_phase: rip_core::Phase) -> Self {
+        RunLaw {
+            phase: Phase::Arming {
+                since_ns: 0,
+                told: false,
+            },
+            quiet: opts.quiet,
+            period_ns: cfg.period_ns(),
+            wait_upright_ns: (cfg.safety.wait_upright_s * 1e9) as u64,
+            duration_ns: opts.duration_s.map(|d| (d * 1e9) as u64),
+            balanced_ns: 0,
+            experiment_ns: None,
+            last_phase: core_phase,
+            catch_s: None,
+            catches: 0,
+            falls: 0,
+            swing_periods: 0,
+            max_swing_s: cfg.spec.swing_up.max_time,
         }
-        match io.wait_readable(deadline - now) {
-            Ok(Readiness::Readable) => {}
-            Ok(Readiness::Timeout) => return Ok((seq, None)),
-            Ok(Readiness::Interrupted) => continue,
-            Err(e) => return Err(StopReason::DeviceLost(e)),
-        }
-        let got = io.read_available(rx).map_err(StopReason::DeviceLost)?;
-        let rx_ns = now_ns();
-        if let Some(m) = core.receive(&rx[..got], seq) {
-            return Ok((seq, Some(Reply { m, req_ns, rx_ns })));
-        }
-    }
-}
-
-impl Runner<'_> {
-    fn send(&self, n: usize) -> Result<(), StopReason> {
-        self.io
-            .write_all(&self.tx[..n])
-            .map_err(StopReason::DeviceLost)
-    }
-
-    /// Sends the sample request and waits for its answer until the reply timeout.
-    fn sample(&mut self, tick: &Tick) -> Result<(u16, Option<Reply>), StopReason> {
-        let cap_ns = tick.deadline_ns + self.period_ns;
-        exchange(
-            self.io,
-            self.core,
-            &mut self.tx,
-            &mut self.rx,
-            self.reply_timeout_ns,
-            cap_ns,
-        )
-    }
-
-    /// Refuses an enabling command resting on a measurement requested at `req_ns` when that
-    /// is [`MAX_BLIND_MS`] or more ago. The period-counting bounds cannot see a loop that was
-    /// suspended (or starved) inside a period, between the request and the command: without
-    /// this, its first act on resuming is to drive on a measurement as old as the suspension.
-    fn check_fresh(&self, req_ns: u64) -> Result<(), StopReason> {
-        let age_ns = now_ns().saturating_sub(req_ns);
-        if age_ns as f64 >= MAX_BLIND_MS * 1e6 {
-            return Err(StopReason::Overrun(Overrun::Stall {
-                ms: age_ns as f64 * 1e-6,
-            }));
-        }
-        Ok(())
-    }
-
-    fn log_row(&mut self, row: Row) -> Result<(), StopReason> {
-        match self.log.as_deref_mut() {
-            Some(log) => log.push(row).map_err(StopReason::LogError),
-            None => Ok(()),
-        }
-    }
-
-    /// Checks that apply at the top of every period.
-    fn check_period(&mut self, tick: &Tick, phase: Phase) -> Result<(), StopReason> {
-        if let Some(reason) = requested_stop() {
-            return Err(reason);
-        }
-        if let Some(log) = self.log.as_deref() {
-            log.check().map_err(StopReason::LogError)?;
-        }
-        let Phase::Balancing { .. } = phase else {
-            return Ok(());
-        };
-        // A loop that did not run (suspended with SIGSTOP, starved of the CPU) has driven
-        // blind all that time; past the hard bound its controller state is too stale to go on.
-        // Deadlines skipped before the wait, and lateness after it: a stop during the sleep
-        // shows as the latter.
-        let absent_ns = tick.skipped * self.period_ns + tick.lateness_ns;
-        if absent_ns as f64 >= MAX_BLIND_MS * 1e6 {
-            return Err(StopReason::Overrun(Overrun::Stall {
-                ms: absent_ns as f64 * 1e-6,
-            }));
-        }
-        if let Some(experiment_ns) = self.experiment_ns {
-            self.balanced_ns = tick.deadline_ns - experiment_ns;
-            if self.duration_ns.is_some_and(|d| self.balanced_ns >= d) {
-                return Err(StopReason::Finished);
-            }
-        }
-        self.check_swing_up_run(tick, phase)
     }
 
     /// A swing-up run as a whole: once the pendulum has fallen after a catch (and the
     /// supervisor swings up again), the swing-ups together may take `swing_up.max_time`, and
     /// with `--duration` the run ends `swing_up.max_time + --duration` after the swing's start
     /// at the latest. The supervisor's own clock bounds each swing-up only.
-    fn check_swing_up_run(&self, tick: &Tick, phase: Phase) -> Result<(), StopReason> {
-        let Phase::Balancing { start_ns } = phase else {
+    fn check_swing_up_run(&self, core: &LoopCore, tick: &Tick) -> Result<(), StopReason> {
+        let Phase::Balancing { start_ns } = self.phase else {
             return Ok(());
         };
-        if !self.core.supervises_swing_up() {
+        if !core.supervises_swing_up() {
             return Ok(());
         }
         if self.falls > 0
@@ -445,60 +336,23 @@ impl Runner<'_> {
         Ok(())
     }
 
-    /// A period without a measurement: the previous command again (within the staleness
-    /// bounds), and the controller told that the period passed with it.
-    fn no_reply(&mut self, tick: &Tick, seq: u16, phase: Phase) -> Result<(), StopReason> {
-        self.missing_in_row += 1;
-        self.missing_total += 1;
-        if self.missing_in_row >= self.watchdog {
-            return Err(StopReason::Watchdog(self.missing_in_row));
-        }
-        let n = self.core.encode_held(&mut self.tx)?;
-        if self.core.held_voltage() != 0.0 {
-            self.check_fresh(self.based_on_ns)?;
-        }
-        self.send(n)?;
-        let Phase::Balancing { start_ns } = phase else {
-            return Ok(());
+    /// Arming: stop commands until the pendulum is upright; `Ok(true)` once it is (the phase
+    /// is then balancing).
+    fn arm(&mut self, core: &mut LoopCore, tick: &Tick, reply: &Reply) -> Result<bool, StopReason> {
+        let Phase::Arming { since_ns, told } = self.phase else {
+            return Ok(true);
         };
-        // Without this the controller's next step would treat two periods as one: a rate
-        // difference over 2 Ts divided by Ts, an estimator prior one period stale.
-        self.core.hold();
-        if let Some(prev) = self.last_step {
-            let t = (tick.deadline_ns - start_ns) as f64 * 1e-9;
-            let step = StepOutput {
-                flags: FLAG_NO_REPLY,
-                reference: self.core.reference_at(t),
-                ..prev
-            };
-            self.log_row(Row {
-                t,
-                seq,
-                step,
-                estimate: None,
-                compute_us: 0.0,
-                jitter_us: tick.lateness_ns as f64 / 1e3,
-                phase: step.phase.name(),
-            })?;
-        }
-        Ok(())
-    }
-
-    /// Arming: stop commands until the pendulum is upright; returns the next phase.
-    fn arm(&mut self, tick: &Tick, reply: &Reply, phase: Phase) -> Result<Phase, StopReason> {
-        let Phase::Arming { since_ns, told } = phase else {
-            return Ok(phase);
-        };
-        match self.core.check_start(&reply.m) {
+        match core.check_start(&reply.m) {
             Ok(()) => {
-                self.core.reset();
+                core.reset();
                 if !self.quiet {
                     crate::say!("rip-rt: pendulum upright, balancing");
                 }
                 self.experiment_ns = Some(tick.deadline_ns);
-                Ok(Phase::Balancing {
+                self.phase = Phase::Balancing {
                     start_ns: tick.deadline_ns,
-                })
+                };
+                Ok(true)
             }
             Err(reason) => {
                 let waited = tick.deadline_ns.saturating_sub(since_ns);
@@ -511,54 +365,13 @@ impl Runner<'_> {
                         "rip-rt: waiting for the pendulum to be brought upright ({reason})"
                     );
                 }
-                let n = self.core.encode_stop(&mut self.tx);
-                self.send(n)?;
-                Ok(Phase::Arming {
+                self.phase = Phase::Arming {
                     since_ns,
                     told: true,
-                })
+                };
+                Ok(false)
             }
         }
-    }
-
-    /// Balancing: one controller step and its enabling command.
-    fn balance(
-        &mut self,
-        tick: &Tick,
-        seq: u16,
-        reply: &Reply,
-        start_ns: u64,
-    ) -> Result<(), StopReason> {
-        let t = (tick.deadline_ns - start_ns) as f64 * 1e-9;
-        self.core
-            .note_latency(reply.rx_ns.saturating_sub(reply.req_ns));
-        let mut step = self.core.control(&reply.m, t, &mut self.tx)?;
-        let compute_ns = now_ns().saturating_sub(reply.rx_ns);
-        if compute_ns > self.max_step_ns {
-            return Err(StopReason::Overrun(Overrun::Step {
-                took_ms: compute_ns as f64 * 1e-6,
-                limit_ms: self.max_step_ns as f64 * 1e-6,
-            }));
-        }
-        self.check_fresh(reply.req_ns)?;
-        self.based_on_ns = reply.req_ns;
-        self.send(step.len)?;
-        self.compute.record(compute_ns);
-        if tick.skipped > 0 {
-            step.flags |= FLAG_DEADLINE_MISS;
-        }
-        self.last_step = Some(step);
-        self.follow_phase(tick, t, step.phase);
-        let estimate = Row::estimate_from(self.core.state_estimate());
-        self.log_row(Row {
-            t,
-            seq,
-            step,
-            estimate,
-            compute_us: compute_ns as f64 / 1e3,
-            jitter_us: tick.lateness_ns as f64 / 1e3,
-            phase: step.phase.name(),
-        })
     }
 
     /// A swing-up's catches and falls. Each catch starts the experiment (the reference's
@@ -566,14 +379,14 @@ impl Runner<'_> {
     /// = "retry"`) still ends with the whole experiment balanced; a fall stops its clock and
     /// returns the reference to 0, so that the next catch holds the arm where it is caught
     /// until the step.
-    fn follow_phase(&mut self, tick: &Tick, t: f64, phase: rip_core::Phase) {
+    fn follow_phase(&mut self, core: &mut LoopCore, tick: &Tick, t: f64, phase: rip_core::Phase) {
         use rip_core::Phase::{Balance, SwingUp};
         match (self.last_phase, phase) {
             (SwingUp, Balance) => {
                 self.catches += 1;
                 self.catch_s.get_or_insert(t);
                 self.experiment_ns = Some(tick.deadline_ns);
-                self.core.start_reference_at(t);
+                core.start_reference_at(t);
                 if !self.quiet {
                     crate::say!("rip-rt: caught at t = {t:.2} s, balancing");
                 }
@@ -581,7 +394,7 @@ impl Runner<'_> {
             (Balance, SwingUp) => {
                 self.falls += 1;
                 self.experiment_ns = None;
-                self.core.start_reference_at(f64::INFINITY);
+                core.start_reference_at(f64::INFINITY);
                 if !self.quiet {
                     crate::say!(
                         "rip-rt: the pendulum left the balance region at t = {t:.2} s; \
@@ -596,53 +409,115 @@ impl Runner<'_> {
         }
         self.last_phase = phase;
     }
+}
 
-    fn periods(&mut self, periodic: &mut Periodic, mut phase: Phase) -> StopReason {
-        loop {
-            let tick = periodic.wait();
-            let result = self.period(&tick, phase);
-            match result {
-                Ok(next) => phase = next,
-                Err(reason) => return reason,
-            }
-        }
+impl Law for RunLaw {
+    fn driving(&self) -> bool {
+        matches!(self.phase, Phase::Balancing { .. })
     }
 
-    fn period(&mut self, tick: &Tick, phase: Phase) -> Result<Phase, StopReason> {
-        self.check_period(tick, phase)?;
-        self.jitter.record(tick.lateness_ns);
-        let (seq, reply) = self.sample(tick)?;
-        let Some(reply) = reply else {
-            self.no_reply(tick, seq, phase)?;
-            return Ok(phase);
+    fn check(&mut self, core: &LoopCore, tick: &Tick) -> Result<(), StopReason> {
+        if !self.driving() {
+            return Ok(());
+        }
+        if let Some(experiment_ns) = self.experiment_ns {
+            self.balanced_ns = tick.deadline_ns - experiment_ns;
+            if self.duration_ns.is_some_and(|d| self.balanced_ns >= d) {
+                return Err(StopReason::Finished);
+            }
+        }
+        self.check_swing_up_run(core, tick)
+    }
+
+    fn command(
+        &mut self,
+        core: &mut LoopCore,
+        tx: &mut [u8; MAX_FRAME],
+        tick: &Tick,
+        reply: &Reply,
+    ) -> Result<Act, StopReason> {
+        if !self.arm(core, tick, reply)? {
+            return Ok(Act::Stop);
+        }
+        let Phase::Balancing { start_ns } = self.phase else {
+            unreachable!("arming ends above")
         };
-        self.missing_in_row = 0;
-        let phase = self.arm(tick, &reply, phase)?;
-        match phase {
-            Phase::Arming { .. } => {}
-            Phase::Balancing { start_ns } => {
-                self.balance(tick, seq, &reply, start_ns)?;
-                self.count_overrun(tick)?;
-            }
-        }
-        Ok(phase)
+        let t = (tick.deadline_ns - start_ns) as f64 * 1e-9;
+        core.note_latency(reply.rx_ns.saturating_sub(reply.req_ns));
+        let step = core.control(&reply.m, t, tx)?;
+        Ok(Act::Drive(Logged {
+            t,
+            step,
+            phase: step.phase.name(),
+            with_estimate: true,
+        }))
     }
 
-    /// Counts periods whose own work (wake-up to command sent) took longer than a period.
-    /// A late wake-up alone is the scheduler's doing, not the controller's, and is left to the
-    /// stall rule.
-    fn count_overrun(&mut self, tick: &Tick) -> Result<(), StopReason> {
-        let woke_ns = tick.deadline_ns + tick.lateness_ns;
-        if now_ns().saturating_sub(woke_ns) > self.period_ns {
-            self.misses_in_row += 1;
-            if self.misses_in_row >= self.max_misses {
-                return Err(StopReason::Overrun(Overrun::Misses(self.misses_in_row)));
-            }
-        } else {
-            self.misses_in_row = 0;
-        }
-        Ok(())
+    fn sent(&mut self, core: &mut LoopCore, tick: &Tick, logged: &Logged) {
+        self.follow_phase(core, tick, logged.t, logged.step.phase);
     }
+
+    fn missed(
+        &mut self,
+        core: &mut LoopCore,
+        tick: &Tick,
+        last: Option<&Logged>,
+    ) -> Option<Logged> {
+        let Phase::Balancing { start_ns } = self.phase else {
+            return None;
+        };
+        // Without this the controller's next step would treat two periods as one: a rate
+        // difference over 2 Ts divided by Ts, an estimator prior one period stale.
+        core.hold();
+        let prev = last?;
+        let t = (tick.deadline_ns - start_ns) as f64 * 1e-9;
+        let step = StepOutput {
+            reference: core.reference_at(t),
+            ..prev.step
+        };
+        Some(Logged {
+            t,
+            step,
+            phase: step.phase.name(),
+            with_estimate: false,
+        })
+    }
+}
+
+/// The swing-up's way to its first command: the rest check, the sign check, the rest check
+/// again; the law then starts balancing from the sign check's time zero. Returns the stop
+/// reason of a check that failed.
+fn prepare_swing_up(
+    driver: &mut Period<'_>,
+    law: &mut RunLaw,
+    cfg: &Config,
+    calibration: &mut Option<Calibration>,
+    sign_check: &mut Option<SignReport>,
+) -> Result<(), StopReason> {
+    let quiet = driver.quiet();
+    // Hanging at rest first; the swing starts in the period after the check, on the same grid.
+    let cal = calibrate::check_rest(driver.io, driver.core, cfg, &mut driver.clock, quiet)?;
+    driver.core.calibrate(&cal);
+    *calibration = Some(cal);
+    // A reversed motor lead or arm encoder would make the swing drive the arm away to its
+    // limit: the pulse of `rip-rt excite` first.
+    let check = excite::check_signs(driver, cfg, PULSE_VOLTAGE);
+    let report = check.result?;
+    *sign_check = Some(report);
+    // The pendulum swings after the pulse: at rest again, and the zeros from that rest,
+    // before the swing starts from it.
+    let cal = calibrate::settle(driver.io, driver.core, cfg, &mut driver.clock, quiet)?;
+    driver.core.calibrate(&cal);
+    *calibration = Some(cal);
+    driver.core.reset();
+    if !quiet {
+        crate::say!("rip-rt: swinging up");
+    }
+    // One time axis for the log: from the check's start.
+    law.phase = Phase::Balancing {
+        start_ns: check.start_ns,
+    };
+    Ok(())
 }
 
 /// Runs the loop on `io` until a stop reason arises (module docs): the probe, then arming and
@@ -656,114 +531,42 @@ pub fn run(
     log: Option<&mut LogWriter>,
 ) -> RunReport {
     let guard = StopGuard::new(io.raw());
-    let period_ns = cfg.period_ns();
-    let core_phase = core.phase();
-    let mut runner = Runner {
-        io,
-        core,
-        log,
-        quiet: opts.quiet,
-        period_ns,
-        reply_timeout_ns: (cfg.loop_.reply_timeout_ms * 1e6).round() as u64,
-        watchdog: cfg.loop_.watchdog_periods,
-        max_step_ns: (cfg.loop_.max_step_periods * period_ns as f64) as u64,
-        max_misses: cfg.loop_.max_consecutive_misses,
-        wait_upright_ns: (cfg.safety.wait_upright_s * 1e9) as u64,
-        duration_ns: opts.duration_s.map(|d| (d * 1e9) as u64),
-        jitter: Histogram::new(),
-        compute: Histogram::new(),
-        tx: [0; MAX_FRAME],
-        rx: [0; 512],
-        missing_in_row: 0,
-        missing_total: 0,
-        misses_in_row: 0,
-        last_step: None,
-        balanced_ns: 0,
-        experiment_ns: None,
-        last_phase: core_phase,
-        catch_s: None,
-        catches: 0,
-        falls: 0,
-        swing_periods: 0,
-        max_swing_s: cfg.spec.swing_up.max_time,
-        based_on_ns: 0,
-    };
-    let mut periodic = Periodic::new(period_ns, now_ns() + period_ns);
+    let mut law = RunLaw::new(cfg, opts, core.phase());
+    let clock = Periodic::starting(cfg.period_ns(), opts.clock);
+    let mut driver = Period::new(io, core, cfg, clock, log, opts.quiet);
     let mut calibration = None;
     let mut sign_check = None;
-    let (reason, probe) = match probe(runner.core, cfg) {
+    let (reason, probe) = match probe(driver.core, cfg) {
         Err(reason) => (reason, None),
         Ok(probe) => {
             io.flush_input();
             // The probe may have taken longer than a period: start the grid afresh.
-            periodic = Periodic::new(period_ns, now_ns() + period_ns);
-            let reason = if runner.core.supervises_swing_up() {
-                // Hanging at rest first; the swing starts in the period after the check, on
-                // the same grid.
-                match calibrate::check_rest(io, runner.core, cfg, &mut periodic, opts.quiet) {
-                    Err(reason) => reason,
-                    Ok(cal) => {
-                        runner.core.calibrate(&cal);
-                        calibration = Some(cal);
-                        // A reversed motor lead or arm encoder would make the swing drive the
-                        // arm away to its limit: the pulse of `rip-rt excite` first.
-                        let check_opts = ExciteOptions {
-                            check_voltage: PULSE_VOLTAGE,
-                            quiet: opts.quiet,
-                        };
-                        let check = excite::check_signs(
-                            io,
-                            runner.core,
-                            cfg,
-                            &mut periodic,
-                            &check_opts,
-                            runner.log.as_deref_mut(),
-                        );
-                        runner.missing_total += check.missing_replies;
-                        match check.result {
-                            Err(reason) => reason,
-                            Ok(report) => {
-                                sign_check = Some(report);
-                                // The pendulum swings after the pulse: at rest again, and the
-                                // zeros from that rest, before the swing starts from it.
-                                match calibrate::settle(
-                                    io,
-                                    runner.core,
-                                    cfg,
-                                    &mut periodic,
-                                    opts.quiet,
-                                ) {
-                                    Err(reason) => reason,
-                                    Ok(cal) => {
-                                        runner.core.calibrate(&cal);
-                                        calibration = Some(cal);
-                                        runner.core.reset();
-                                        if !opts.quiet {
-                                            crate::say!("rip-rt: swinging up");
-                                        }
-                                        // One time axis for the log: from the check's start.
-                                        let start_ns = check.start_ns;
-                                        runner.periods(&mut periodic, Phase::Balancing { start_ns })
-                                    }
-                                }
-                            }
-                        }
-                    }
-                }
+            driver.clock.restart();
+            let prepared = if driver.core.supervises_swing_up() {
+                prepare_swing_up(
+                    &mut driver,
+                    &mut law,
+                    cfg,
+                    &mut calibration,
+                    &mut sign_check,
+                )
             } else {
-                let since_ns = periodic.next_deadline_ns();
-                let arming = Phase::Arming {
-                    since_ns,
+                law.phase = Phase::Arming {
+                    since_ns: driver.clock.next_deadline_ns(),
                     told: false,
                 };
-                runner.periods(&mut periodic, arming)
+                Ok(())
+            };
+            let reason = match prepared {
+                Err(reason) => reason,
+                Ok(()) => driver.run(&mut law),
             };
             (reason, Some(probe))
         }
     };
-    let driven = runner.last_step.is_some();
+    let driven = driver.driven();
     let braking =
-        crate::envelope::bring_to_rest(io, runner.core, cfg, &mut periodic, &reason, driven);
+        crate::envelope::bring_to_rest(io, driver.core, cfg, &mut driver.clock, &reason, driven);
     if !opts.quiet && braking.mode != crate::envelope::BrakeMode::None {
         crate::say!("rip-rt: stop: {braking}");
     }
@@ -772,15 +575,19 @@ pub fn run(
     RunReport {
         reason,
         stop_sent,
-        timing: TimingSummary::from_histograms(&runner.jitter, &runner.compute, periodic.missed()),
+        timing: TimingSummary::from_histograms(
+            &driver.jitter,
+            &driver.compute,
+            driver.clock.missed(),
+        ),
         probe,
-        parser: runner.core.parser_stats(),
-        missing_replies: runner.missing_total,
-        balanced_s: runner.balanced_ns as f64 * 1e-9,
+        parser: driver.core.parser_stats(),
+        missing_replies: driver.missing_total,
+        balanced_s: law.balanced_ns as f64 * 1e-9,
         calibration,
         sign_check,
-        catch_s: runner.catch_s,
-        catches: runner.catches,
-        witness_peak: runner.core.witness_peak(),
+        catch_s: law.catch_s,
+        catches: law.catches,
+        witness_peak: driver.core.witness_peak(),
     }
 }

@@ -42,12 +42,34 @@ pub fn sleep_until(deadline_ns: u64) {
     }
 }
 
-/// A grid of absolute deadlines `t₀ + k·period`.
+/// Which clock a [`Periodic`] grid runs on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ClockMode {
+    /// `CLOCK_MONOTONIC`: every deadline is waited for (the rig, and the emulator in real
+    /// time).
+    #[default]
+    RealTime,
+    /// Simulated time against an emulator in lockstep (`rip-rt emulate --lockstep`): the
+    /// device advances its plant by exactly one period per sample request, so the loop waits
+    /// for no deadline, the clock moves by one period per [`Periodic::wait`] and stands still
+    /// within a period (compute, stall and lateness rules see no time pass).
+    Lockstep,
+}
+
+/// How long (ns of wall time) a lockstep exchange waits for the emulator's answer before it
+/// counts the period as without a measurement: generous, so that a loaded machine never
+/// loses a reply, and short enough that the dropped-reply faults of a test end in seconds.
+pub const LOCKSTEP_REPLY_WAIT_NS: u64 = 1_000_000_000;
+
+/// A grid of absolute deadlines `t₀ + k·period` on a [`ClockMode`]'s clock: the one clock of
+/// a run, from which every phase of the loop (rest check, sign check, control, the stop)
+/// takes its deadlines and its "now".
 #[derive(Debug, Clone)]
 pub struct Periodic {
     period_ns: u64,
     next_ns: u64,
     missed: u64,
+    mode: ClockMode,
 }
 
 /// What [`Periodic::wait`] observed.
@@ -70,6 +92,37 @@ impl Periodic {
             period_ns,
             next_ns: start_ns,
             missed: 0,
+            mode: ClockMode::RealTime,
+        }
+    }
+
+    /// A grid on `mode`'s clock whose first deadline is one period from now.
+    pub fn starting(period_ns: u64, mode: ClockMode) -> Self {
+        let mut grid = Self::new(period_ns, now_ns() + period_ns);
+        grid.mode = mode;
+        grid
+    }
+
+    /// The clock this grid runs on.
+    pub fn mode(&self) -> ClockMode {
+        self.mode
+    }
+
+    /// Now on this grid's clock (ns): `CLOCK_MONOTONIC` in real time; in lockstep the
+    /// deadline of the current period (the grid's clock stands still within a period).
+    pub fn now_ns(&self) -> u64 {
+        match self.mode {
+            ClockMode::RealTime => now_ns(),
+            ClockMode::Lockstep => self.next_ns - self.period_ns,
+        }
+    }
+
+    /// Starts the grid afresh with its first deadline one period from now (after a phase
+    /// that may have taken longer than a period, such as the probe); the deadlines in
+    /// between are not misses.
+    pub fn restart(&mut self) {
+        if self.mode == ClockMode::RealTime {
+            self.next_ns = now_ns() + self.period_ns;
         }
     }
 
@@ -92,6 +145,15 @@ impl Periodic {
     /// already passed (the previous iteration overran them) are counted as misses and skipped,
     /// so the loop stays on the grid instead of bursting to catch up.
     pub fn wait(&mut self) -> Tick {
+        if self.mode == ClockMode::Lockstep {
+            let deadline = self.next_ns;
+            self.next_ns = deadline + self.period_ns;
+            return Tick {
+                deadline_ns: deadline,
+                lateness_ns: 0,
+                skipped: 0,
+            };
+        }
         let now = now_ns();
         let mut skipped = 0;
         if now > self.next_ns {

@@ -12,7 +12,7 @@ use rip_rt::controllers::{self, ControllerKind};
 use rip_rt::loop_core::LoopCore;
 use rip_rt::serial::SerialPort;
 use rip_rt::stop::{StopGuard, StopReason};
-use rip_rt::timing::{now_ns, Periodic};
+use rip_rt::timing::{ClockMode, Periodic};
 
 /// What [`rest_check`] saw: the check's outcome, the rest pose's angles after calibration, and
 /// the commands the device received.
@@ -24,13 +24,13 @@ type RestOutcome = (
 
 /// Runs the rest check of `cfg_text` against an emulator started with `emulator_args`.
 fn rest_check(name: &str, emulator_args: &[&str], cfg_text: &str) -> RestOutcome {
-    let emu = Emulator::start(name, emulator_args);
+    let emu = Emulator::lockstep(name, emulator_args);
     let cfg = Config::from_toml(cfg_text).unwrap();
     let port = SerialPort::open(&emu.device, 115_200).unwrap();
     let controller = controllers::build(ControllerKind::Lqr, &cfg).unwrap();
     let mut core = LoopCore::new(controller, &cfg).unwrap();
     let guard = StopGuard::new(port.io().raw());
-    let mut periodic = Periodic::new(cfg.period_ns(), now_ns() + cfg.period_ns());
+    let mut periodic = Periodic::starting(cfg.period_ns(), ClockMode::Lockstep);
     let result = calibrate::check_rest(port.io(), &mut core, &cfg, &mut periodic, true);
     let angles = result.as_ref().ok().map(|cal| {
         core.calibrate(cal);
@@ -154,7 +154,7 @@ fn swing_up_and_balance(controller: &str, seed: &str) {
 /// simulates too (its `[plant]`).
 fn swing_up_and_balance_on(controller: &str, name: &str, seed: &str, spec: &str) {
     let cfg = config(name, spec);
-    let emu = Emulator::start(
+    let emu = Emulator::lockstep(
         name,
         &[
             "--start",
@@ -168,7 +168,7 @@ fn swing_up_and_balance_on(controller: &str, name: &str, seed: &str, spec: &str)
         ],
     );
     let log_path = scratch(&format!("{name}.csv"));
-    let r = run(
+    let r = run_lockstep(
         &emu.device,
         controller,
         &[
@@ -367,13 +367,13 @@ fn sigint_during_the_swing_leaves_zero_volts_as_the_last_command() {
 fn a_rig_that_is_not_at_rest_is_refused_before_any_enabling_command() {
     let _serial = one_at_a_time();
     // Released 0.34 rad from hanging: it swings for far longer than the check waits.
-    let emu = Emulator::start(
+    let emu = Emulator::lockstep(
         "swing-not-at-rest",
         &["--initial-pendulum", "2.8", "--no-hold"],
     );
     let cfg = config("swing-not-at-rest", "");
     let log_path = scratch("swing-not-at-rest.csv");
-    let r = run(
+    let r = run_lockstep(
         &emu.device,
         "lqr",
         &[
@@ -403,13 +403,13 @@ fn a_swing_up_out_of_time_stops_with_exit_13_its_arm_inside_a_tight_limit() {
     let _serial = one_at_a_time();
     // 1 s is too short to pump a hanging pendulum up; 0.8 rad of arm holds the law in hard.
     const LIMIT: f64 = 0.8;
-    let emu = Emulator::start("swing-timeout", &["--start", "down", "--noise", "0.3"]);
+    let emu = Emulator::lockstep("swing-timeout", &["--start", "down", "--noise", "0.3"]);
     let cfg = config(
         "swing-timeout",
         &format!("[swing_up]\nmax_time = 1.0\narm_limit = {LIMIT}\ncatch_arm_angle = 0.5\n"),
     );
     let log_path = scratch("swing-timeout.csv");
-    let r = run(
+    let r = run_lockstep(
         &emu.device,
         "lqg",
         &[
@@ -536,13 +536,17 @@ fn a_swing_up_arm_limit_outside_the_safety_limit_is_refused_naming_it() {
     );
     assert_eq!(r.status.code(), Some(2), "{}", r.stderr);
     assert!(r.stderr.contains("swing_up.arm_limit"), "{}", r.stderr);
-    // Without --swing-up the section is not used, and the file is fine.
+    // One validation for the file: a run without --swing-up, like `rip-rt config` and
+    // `riprs config`, refuses the swing-up it sets, naming the file and the key (it used to
+    // accept the file, which the swing-up run then refused).
     let r = run(
         std::path::Path::new("/nonexistent"),
         "lqr",
         &["--config", file.to_str().unwrap()],
     );
-    assert_eq!(r.status.code(), Some(1), "{}", r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{}", r.stderr);
+    let named = format!("{}: swing_up.arm_limit", file.display());
+    assert!(r.stderr.contains(&named), "{}", r.stderr);
 }
 
 #[test]
@@ -571,6 +575,24 @@ fn a_swing_up_region_or_voltage_beyond_the_safety_limits_is_refused_naming_both_
         assert_eq!(r.status.code(), Some(2), "{name}: {}", r.stderr);
         assert!(r.stderr.contains(key), "{name}: {}", r.stderr);
         assert!(r.stderr.contains(safety), "{name}: {}", r.stderr);
+        // The message names the file, as every other configuration error does.
+        let named = format!("{}: {key}", file.display());
+        assert!(r.stderr.contains(&named), "{name}: {}", r.stderr);
+        // `rip-rt config` refuses what the file sets of `[swing_up]`, with the same message
+        // (the second file leaves the swing-up at its defaults: only a swing-up run needs
+        // them inside a lowered voltage limit).
+        let checked = std::process::Command::new(BIN)
+            .arg("config")
+            .arg(&file)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&checked.stderr);
+        if text.contains("[swing_up]") {
+            assert_eq!(checked.status.code(), Some(2), "{name}: {stderr}");
+            assert!(stderr.contains(&named), "{name}: {stderr}");
+        } else {
+            assert!(checked.status.success(), "{name}: {stderr}");
+        }
     }
 }
 
@@ -603,7 +625,7 @@ fn a_wrong_pendulum_counts_per_rev_is_stopped_by_the_witness() {
         "[sensor]\nencoder_counts = [2048, 2140]\nencoder_offsets = [0.0, -0.27012]\n",
     )
     .unwrap();
-    let emu = Emulator::start(
+    let emu = Emulator::lockstep(
         "swing-cycle",
         &["--start", "down", "--config", emu_cfg.to_str().unwrap()],
     );
@@ -612,7 +634,7 @@ fn a_wrong_pendulum_counts_per_rev_is_stopped_by_the_witness() {
         "[swing_up]\nmax_time = 10.0\n[safety]\narm_limit = 4.0\n",
     );
     let log_path = scratch("swing-cycle.csv");
-    let r = run(
+    let r = run_lockstep(
         &emu.device,
         "lqr",
         &[
@@ -644,10 +666,10 @@ fn a_reversed_motor_or_arm_encoder_is_refused_before_the_swing_with_exit_14() {
         ("--reverse-arm-encoder", "device.arm_sign = -1"),
     ] {
         let name = format!("swing-sign{fault}");
-        let emu = Emulator::start(&name, &["--start", "down", "--noise", "0.3", fault]);
+        let emu = Emulator::lockstep(&name, &["--start", "down", "--noise", "0.3", fault]);
         let cfg = config(&name, "");
         let log_path = scratch(&format!("{name}.csv"));
-        let r = run(
+        let r = run_lockstep(
             &emu.device,
             "lqr",
             &[

@@ -478,7 +478,7 @@ impl PySpec {
 /// ----------
 /// path : str or os.PathLike
 ///     The TOML file. ``[loop]``, ``[device]``, ``[safety]`` and ``[calibration]`` belong to
-///     ``rip-rt`` and are not checked here.
+///     ``rip-rt``; they are checked here with the same function as ``rip-rt config`` runs.
 ///
 /// Returns
 /// -------
@@ -491,7 +491,8 @@ impl PySpec {
 ///     that fail together in a design; the message names the file and the key.
 #[pyfunction]
 fn load_config(py: Python<'_>, path: PathBuf) -> PyResult<PySpec> {
-    let spec = Spec::load(&path).map_err(config_err)?;
+    // The whole file, rip-rt's sections included: the check `rip-rt config` runs.
+    let (spec, _rig) = rip_core::spec::rig_sections::load_file(&path).map_err(config_err)?;
     let out = PySpec {
         inner: spec.resolved(),
     };

@@ -27,6 +27,7 @@
 
 mod assembly;
 mod controllers;
+pub mod rig_sections;
 mod sections;
 
 use std::fmt;

@@ -102,6 +102,9 @@ pub(crate) struct ExciteArgs {
     /// Only print the final summary.
     #[arg(long)]
     quiet: bool,
+    /// Run in lockstep with `rip-rt emulate --lockstep` (see `rip-rt run --lockstep`).
+    #[arg(long)]
+    lockstep: bool,
 }
 
 /// A bad setting as a usage error naming its option (`f_end` → `--f-end`).
@@ -229,6 +232,7 @@ pub(crate) fn cmd_excite(args: ExciteArgs) -> ExitCode {
     let opts = ExciteOptions {
         check_voltage: args.check_voltage,
         quiet: args.quiet,
+        clock: super::clock_mode(args.lockstep),
     };
     let report = excite::run(
         port.io(),

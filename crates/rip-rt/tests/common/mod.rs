@@ -5,6 +5,12 @@
 //! the default test threads would otherwise run several such pairs on two cores at once, so
 //! that scheduling delays (skipped periods, watchdog stops) rather than the code decide the
 //! outcome.
+//!
+//! Tests of control and safety logic, where timing is not what they test, run in lockstep
+//! ([`Emulator::lockstep`], [`run_lockstep`]): the emulator advances its plant one period per
+//! exchange and `rip-rt` waits for no deadline, so they run faster than real time and the
+//! machine's load cannot change their outcome. Timing, the watchdog and the stall rules keep
+//! their real-time runs.
 
 // Each test binary uses its own share of these.
 #![allow(dead_code)]
@@ -41,7 +47,23 @@ pub struct Emulator {
     pub truth: PathBuf,
 }
 
+/// The flag that puts `rip-rt emulate`, `rip-rt run` and `rip-rt excite` in lockstep.
+pub const LOCKSTEP: &str = "--lockstep";
+
+/// `args` with [`LOCKSTEP`] appended.
+pub fn with_lockstep<'a>(args: &[&'a str]) -> Vec<&'a str> {
+    let mut v = args.to_vec();
+    v.push(LOCKSTEP);
+    v
+}
+
 impl Emulator {
+    /// An emulator in lockstep (module docs): pair it with [`run_lockstep`] or a run given
+    /// [`LOCKSTEP`].
+    pub fn lockstep(name: &str, extra: &[&str]) -> Self {
+        Self::start(name, &with_lockstep(extra))
+    }
+
     pub fn start(name: &str, extra: &[&str]) -> Self {
         let record = scratch(&format!("{name}-record.csv"));
         let truth = scratch(&format!("{name}-truth.csv"));
@@ -229,6 +251,11 @@ pub fn run(device: &Path, controller: &str, extra: &[&str]) -> RunResult {
         spawn_run(device, controller, extra),
         Duration::from_secs(30),
     )
+}
+
+/// `rip-rt run` in lockstep with an [`Emulator::lockstep`].
+pub fn run_lockstep(device: &Path, controller: &str, extra: &[&str]) -> RunResult {
+    run(device, controller, &with_lockstep(extra))
 }
 
 /// A `rip-rt run` log: its columns, its rows as text cells, and its comment lines.
