@@ -331,7 +331,7 @@ mod tests {
             assert!(
                 (got[k] - want[k]).abs() <= 1e-6 * want[k].abs(),
                 "{}: {} vs {}",
-                crate::plant::PARAM_NAMES[k],
+                crate::plant::Param::FIELDS[k],
                 got[k],
                 want[k]
             );
@@ -352,7 +352,7 @@ mod tests {
             assert!(
                 (got[k] - want[k]).abs() <= 1e-6 * want[k].abs(),
                 "{}: fitted {:.10e}, preset {:.10e}",
-                crate::plant::PARAM_NAMES[k],
+                crate::plant::Param::FIELDS[k],
                 got[k],
                 want[k]
             );

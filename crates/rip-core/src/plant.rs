@@ -106,7 +106,12 @@ use nalgebra::{SMatrix, SVector};
 use crate::error::{Result, RipError};
 use crate::linalg::spectral_radius;
 use crate::linalg::{c2d, Mat};
-use crate::sim::MAX_SUBSTEPS;
+
+mod params;
+pub use params::{FurutaParams, Param};
+
+/// Most RK4 substeps per control period.
+pub const MAX_SUBSTEPS: usize = 100_000;
 
 /// Extent of classical RK4's stability region along the negative real axis (`|h λ| ≤ 2.785`),
 /// rounded down.
@@ -129,177 +134,6 @@ pub fn dead_zone(u: f64, vd: f64) -> f64 {
 
 /// State vector `[θ, θ̇, α, α̇]`.
 pub type State = SVector<f64, 4>;
-
-/// Physical parameters of the pendulum and its motor (SI units).
-///
-/// Masses, lengths, inertias, `rm`, `kt` and `g` must be positive; `km`, `dr`, `dp`, `cr`,
-/// `cp`, `vd` may be zero (zero back-EMF and friction give the conservative plant). See the
-/// module docs for how each enters the equations of motion.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FurutaParams {
-    /// Motor terminal resistance (Ω).
-    pub rm: f64,
-    /// Motor torque constant (N·m/A).
-    pub kt: f64,
-    /// Motor back-EMF constant (V·s/rad).
-    pub km: f64,
-    /// Arm mass (kg).
-    pub mr: f64,
-    /// Arm length, motor axis to pendulum joint (m).
-    pub lr: f64,
-    /// Arm moment of inertia about its own centre of mass (kg·m²).
-    pub jr: f64,
-    /// Pendulum mass (kg).
-    pub mp: f64,
-    /// Pendulum length (m); its centre of mass is at `lp/2`.
-    pub lp: f64,
-    /// Pendulum moment of inertia about its own centre of mass (kg·m²).
-    pub jp: f64,
-    /// Viscous friction of the arm joint (N·m·s/rad).
-    pub dr: f64,
-    /// Viscous friction of the pendulum joint (N·m·s/rad).
-    pub dp: f64,
-    /// Gravitational acceleration (m/s²).
-    pub g: f64,
-    /// Coulomb friction torque of the arm joint (N·m), smoothed (module docs).
-    pub cr: f64,
-    /// Coulomb friction torque of the pendulum joint (N·m), smoothed (module docs).
-    pub cp: f64,
-    /// Voltage dead zone of the motor drive (V): `|u| ≤ vd` does not move the motor.
-    pub vd: f64,
-}
-
-/// Number of fields of [`FurutaParams`].
-pub const N_PARAMS: usize = 15;
-
-/// The fields of [`FurutaParams`] in declaration order, as they are named in errors.
-pub const PARAM_NAMES: [&str; N_PARAMS] = [
-    "rm", "kt", "km", "mr", "lr", "jr", "mp", "lp", "jp", "dr", "dp", "g", "cr", "cp", "vd",
-];
-
-/// The fields of [`FurutaParams`] that may be zero (the others must be positive).
-pub const MAY_BE_ZERO: [&str; 6] = ["km", "dr", "dp", "cr", "cp", "vd"];
-
-impl FurutaParams {
-    /// Quanser QUBE-Servo 2 with the rotary-pendulum module.
-    ///
-    /// Source: Quanser, *QUBE-Servo 2 User Manual* and the parameter script of its
-    /// rotary-pendulum workbook (`qube2_rotpen_param.m`): `Rm = 8.4 Ω`,
-    /// `kt = km = 0.042`, `Mr = 0.095 kg`, `Lr = 0.085 m`, `Mp = 0.024 kg`, `Lp = 0.129 m`,
-    /// `Jr = Mr Lr²/12`, `Jp = Mp Lp²/12`, `g = 9.81`; damping `Dr = 0.001`,
-    /// `Dp = 0.00005 N·m·s/rad` (the QUBE-Servo 2 script's values, "tuned heuristically to
-    /// match QUBE-Servo 2 response").
-    ///
-    /// Convention chosen: `Mr Lr²/12` and `Mp Lp²/12` are *centroidal* inertias of uniform rods,
-    /// and both links pivot at an end, so the parallel-axis terms `Mr Lr²/4` and `Mp Lp²/4` are
-    /// added (arm-axis inertia `Mr Lr²/3`). The workbook's own model uses `Jr` directly as the
-    /// inertia about the motor axis (an arm pivoted at its centre, 4× less inertia) and drops the
-    /// `Jp sin²α θ̇²` term; both differences are second order for balancing, and ours is the
-    /// physically consistent reading of the published masses and lengths. Other sources quote
-    /// `Dr = 0.0015`, `Dp = 0.0005` (10× the pendulum damping): that pendulum would have a
-    /// damping ratio of 0.18 and lose 1/e of its swing amplitude in half a second, and lose
-    /// more energy on one pass from hanging to upright (`4 Dp √(G/Jα) = 1.4 G`) than the whole
-    /// swing-up has to supply (`2 G`), unlike the QUBE's freely swinging pendulum; with it no
-    /// energy-based swing-up within ±1.5 rad of arm travel reaches upright.
-    pub fn qube_servo2() -> Self {
-        let (mr, lr, mp, lp) = (0.095, 0.085, 0.024, 0.129);
-        Self {
-            rm: 8.4,
-            kt: 0.042,
-            km: 0.042,
-            mr,
-            lr,
-            jr: mr * lr * lr / 12.0,
-            mp,
-            lp,
-            jp: mp * lp * lp / 12.0,
-            dr: 0.001,
-            dp: 0.00005,
-            g: 9.81,
-            cr: 0.0,
-            cp: 0.0,
-            vd: 0.0,
-        }
-    }
-
-    /// Parameters fitted so that the linearisation about upright, discretised by zero-order hold
-    /// at `Ts = 0.01 s`, reproduces the paper's `A_d`, `B_d` (eq. (3)).
-    ///
-    /// The motor constants, both masses and `g` are not identifiable from a linear model (see
-    /// [`crate::fit`]) and are fixed at the QUBE-Servo 2 values; `lr`, `lp`, `jr`, `jp`, `dr`,
-    /// `dp` come from [`crate::fit::fit_params`] against [`crate::paper::discrete_model`] with
-    /// each residual weighted by half the last printed digit of the entry
-    /// ([`crate::fit::paper_weights`]). The result reproduces every printed entry of `B_d` and
-    /// of `A_d` (except the corrected typo `A_d[0][1]`, see [`crate::paper`]) after rounding;
-    /// the largest deviation from the unrounded model is 0.07 of half a printed unit.
-    pub fn paper() -> Self {
-        Self {
-            lr: 1.491_006_775_583e-1,
-            lp: 2.788_137_143_023e-1,
-            jr: 4.956_499_901_120e-4,
-            jp: 3.289_148_708_531e-4,
-            dr: 1.894_388_980_126e-3,
-            dp: 4.512_959_398_114e-4,
-            ..Self::qube_servo2()
-        }
-    }
-
-    /// The parameters as an array in [`PARAM_NAMES`] order.
-    pub fn to_array(&self) -> [f64; N_PARAMS] {
-        [
-            self.rm, self.kt, self.km, self.mr, self.lr, self.jr, self.mp, self.lp, self.jp,
-            self.dr, self.dp, self.g, self.cr, self.cp, self.vd,
-        ]
-    }
-
-    /// Builds parameters from an array in [`PARAM_NAMES`] order (not validated).
-    pub fn from_array(v: [f64; N_PARAMS]) -> Self {
-        let [rm, kt, km, mr, lr, jr, mp, lp, jp, dr, dp, g, cr, cp, vd] = v;
-        Self {
-            rm,
-            kt,
-            km,
-            mr,
-            lr,
-            jr,
-            mp,
-            lp,
-            jp,
-            dr,
-            dp,
-            g,
-            cr,
-            cp,
-            vd,
-        }
-    }
-
-    /// Checks every field; the error names the first bad one.
-    pub fn validate(&self) -> Result<()> {
-        for (name, value) in PARAM_NAMES.iter().zip(self.to_array()) {
-            let may_be_zero = MAY_BE_ZERO.contains(name);
-            if !value.is_finite() {
-                return Err(RipError::invalid(
-                    *name,
-                    format!("must be finite, got {value}"),
-                ));
-            }
-            if may_be_zero && value < 0.0 {
-                return Err(RipError::invalid(
-                    *name,
-                    format!("must be non-negative, got {value}"),
-                ));
-            }
-            if !may_be_zero && value <= 0.0 {
-                return Err(RipError::invalid(
-                    *name,
-                    format!("must be positive, got {value}"),
-                ));
-            }
-        }
-        Ok(())
-    }
-}
 
 /// Largest number of RK4 steps one [`Plant::integrate`] call may take (about a second of
 /// computation), so that a call from Python, which cannot be interrupted while it runs,
@@ -350,12 +184,6 @@ fn diverged(dt: f64, substeps: usize) -> RipError {
             "the state overflowed integrating with dt = {dt:e} s in {substeps} substeps; the step \
              or the input is too large for the plant"
         ),
-    }
-}
-
-impl Default for FurutaParams {
-    fn default() -> Self {
-        Self::qube_servo2()
     }
 }
 
@@ -966,7 +794,7 @@ mod tests {
         assert!(err.to_string().contains("mp"), "{err}");
         let mut p = FurutaParams::qube_servo2();
         p.dr = f64::NAN;
-        assert!(Plant::new(p).unwrap_err().to_string().contains("dr"));
+        assert!(Plant::new(p).unwrap_err().to_string().contains("Dr"));
         let mut p = FurutaParams::qube_servo2();
         p.km = 0.0;
         assert!(Plant::new(p).is_ok());

@@ -147,25 +147,7 @@ impl Rig {
 
     /// The `[plant]` section: the QUBE-Servo 2 preset (its `g`) with every parameter given.
     pub fn plant_spec(&self) -> PlantSpec {
-        let p = &self.params;
-        PlantSpec {
-            preset: Preset::QubeServo2,
-            mr: Some(p.mr),
-            Lr: Some(p.lr),
-            Jr: Some(p.jr),
-            mp: Some(p.mp),
-            Lp: Some(p.lp),
-            Jp: Some(p.jp),
-            Dr: Some(p.dr),
-            Dp: Some(p.dp),
-            Rm: Some(p.rm),
-            kt: Some(p.kt),
-            km: Some(p.km),
-            Cr: Some(p.cr),
-            Cp: Some(p.cp),
-            Vd: Some(p.vd),
-            ..PlantSpec::default()
-        }
+        PlantSpec::with_params(Preset::QubeServo2, &self.params)
     }
 
     /// The `[sensor]` section: the encoders and the angle noise, zero offsets.

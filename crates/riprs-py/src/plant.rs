@@ -7,7 +7,7 @@ use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rip_core::fit::{fit_params, FitOptions};
-use rip_core::plant::{N_PARAMS, PARAM_NAMES};
+use rip_core::plant::Param;
 use rip_core::{FurutaParams, Mat, Plant, RipError, State};
 
 use crate::convert::{array_like, mat_to_py, matrix_arg, vector_arg, Count, Real};
@@ -16,27 +16,13 @@ use crate::errors::{to_py, IntoPyResult};
 type Py1<'py> = Bound<'py, PyArray1<f64>>;
 type Py2<'py> = Bound<'py, PyArray2<f64>>;
 
-/// Python names of the parameters, in `PARAM_NAMES` order (Quanser's spelling).
-pub(crate) const PY_NAMES: [&str; N_PARAMS] = [
-    "Rm", "kt", "km", "mr", "Lr", "Jr", "mp", "Lp", "Jp", "Dr", "Dp", "g", "Cr", "Cp", "Vd",
-];
-
+/// The Python name of a field named in lower case (the identification's names), until the
+/// identification names its parameters by [`Param`] too.
 pub(crate) fn py_name(core: &str) -> String {
-    PARAM_NAMES
-        .iter()
-        .position(|n| *n == core)
-        .map_or_else(|| core.to_string(), |i| PY_NAMES[i].to_string())
-}
-
-/// Renames a parameter error from the core's field name to the Python keyword.
-fn param_err(err: RipError) -> PyErr {
-    match err {
-        RipError::InvalidParameter { name, reason } => to_py(RipError::InvalidParameter {
-            name: py_name(&name),
-            reason,
-        }),
-        other => to_py(other),
-    }
+    Param::FIELDS
+        .into_iter()
+        .find(|p| p.name().eq_ignore_ascii_case(core))
+        .map_or_else(|| core.to_string(), |p| p.name().to_string())
 }
 
 fn finite_scalar(v: f64, name: &str) -> PyResult<f64> {
@@ -106,20 +92,20 @@ fn params_from_kwargs(
     if let Some(kw) = kwargs {
         for (key, value) in kw.iter() {
             let key: String = key.extract()?;
-            let Some(i) = PY_NAMES.iter().position(|n| *n == key) else {
+            let Some(param) = Param::from_field_name(&key) else {
                 return Err(PyTypeError::new_err(format!(
                     "unknown parameter {key:?}; expected one of {}",
-                    PY_NAMES.join(", ")
+                    Param::FIELDS.map(Param::name).join(", ")
                 )));
             };
-            values[i] = value
+            values[param.index()] = value
                 .extract::<Real>()
                 .map_err(|_| PyTypeError::new_err(format!("{key} must be a real number")))?
                 .0;
         }
     }
     let params = FurutaParams::from_array(values);
-    params.validate().map_err(param_err)?;
+    params.validate().map_err(to_py)?;
     Ok(params)
 }
 
@@ -161,8 +147,8 @@ impl PyFurutaParams {
     /// The parameters as a ``dict`` keyed by their Python names.
     fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        for (name, value) in PY_NAMES.iter().zip(self.inner.to_array()) {
-            d.set_item(name, value)?;
+        for (param, value) in Param::FIELDS.into_iter().zip(self.inner.to_array()) {
+            d.set_item(param.name(), value)?;
         }
         Ok(d)
     }
@@ -228,7 +214,7 @@ impl PyFurutaParams {
         };
         let report = py
             .allow_threads(|| fit_params(&ad, &bd, Ts, &options))
-            .map_err(param_err)?;
+            .map_err(to_py)?;
         let d = PyDict::new(py);
         d.set_item("Ad", mat_to_py(py, &report.ad))?;
         d.set_item("Bd", mat_to_py(py, &report.bd))?;
@@ -307,8 +293,9 @@ impl PyFurutaParams {
     }
 
     fn __repr__(&self) -> String {
-        let body: Vec<String> = PY_NAMES
-            .iter()
+        let body: Vec<String> = Param::FIELDS
+            .map(Param::name)
+            .into_iter()
             .zip(self.inner.to_array())
             .map(|(n, v)| format!("{n}={v}"))
             .collect();
@@ -356,7 +343,7 @@ impl PyPlant {
     fn new(params: Option<PyFurutaParams>) -> PyResult<Self> {
         let p = params.map_or_else(FurutaParams::qube_servo2, |p| p.inner);
         Ok(Self {
-            inner: Plant::new(p).map_err(param_err)?,
+            inner: Plant::new(p).map_err(to_py)?,
         })
     }
 

@@ -5,7 +5,8 @@ use pyo3::types::PyDict;
 use rip_core::rig::Rig;
 
 use crate::convert::Count;
-use crate::plant::{PyFurutaParams, PY_NAMES};
+use crate::plant::PyFurutaParams;
+use rip_core::plant::Param;
 
 /// A rig drawn across the envelope riprs must handle (see :func:`random_rig`).
 ///
@@ -66,10 +67,8 @@ impl PyRig {
     fn to_config<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let plant = PyDict::new(py);
         plant.set_item("preset", "qube_servo2")?;
-        for (name, value) in PY_NAMES.iter().zip(self.inner.params.to_array()) {
-            if *name != "g" {
-                plant.set_item(name, value)?;
-            }
+        for param in Param::ALL {
+            plant.set_item(param.name(), self.inner.params.get(param))?;
         }
         let sensor = PyDict::new(py);
         sensor.set_item("encoder_counts", self.inner.encoder_counts.to_vec())?;

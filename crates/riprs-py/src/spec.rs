@@ -92,28 +92,28 @@ fn merge(base: &mut toml::Table, changes: toml::Table) {
     }
 }
 
-/// `[plant]` (read-only; every parameter resolved from the preset).
+/// `[plant]` (read-only; ``params`` holds every parameter, resolved from the preset).
 #[pyclass(name = "PlantSpec", module = "riprs._riprs", frozen, get_all)]
-#[allow(non_snake_case)]
 pub struct PyPlantSpec {
     preset: String,
-    mr: f64,
-    Lr: f64,
-    Jr: f64,
-    mp: f64,
-    Lp: f64,
-    Jp: f64,
-    Dr: f64,
-    Dp: f64,
-    Rm: f64,
-    kt: f64,
-    km: f64,
-    Cr: f64,
-    Cp: f64,
-    Vd: f64,
+    params: PyFurutaParams,
+    arm_breakaway: Option<f64>,
     substeps: usize,
     initial_state: Vec<f64>,
     fall_limit: f64,
+}
+
+#[pymethods]
+impl PyPlantSpec {
+    /// A ``[plant]`` parameter by its key (``spec.plant.Jr``), resolved from the preset.
+    fn __getattr__(&self, name: &str) -> PyResult<f64> {
+        match rip_core::plant::Param::from_name(name) {
+            Some(p) => Ok(self.params.inner.get(p)),
+            None => Err(pyo3::exceptions::PyAttributeError::new_err(format!(
+                "PlantSpec has no attribute {name:?}"
+            ))),
+        }
+    }
 }
 
 /// `[sensor]` (read-only).
@@ -340,23 +340,10 @@ impl PySpec {
     #[getter]
     fn plant(&self) -> PyPlantSpec {
         let p = &self.inner.plant;
-        let v = p.params();
         PyPlantSpec {
             preset: p.preset.name().into(),
-            mr: v.mr,
-            Lr: v.lr,
-            Jr: v.jr,
-            mp: v.mp,
-            Lp: v.lp,
-            Jp: v.jp,
-            Dr: v.dr,
-            Dp: v.dp,
-            Rm: v.rm,
-            kt: v.kt,
-            km: v.km,
-            Cr: v.cr,
-            Cp: v.cp,
-            Vd: v.vd,
+            params: PyFurutaParams { inner: p.params() },
+            arm_breakaway: p.arm_breakaway,
             substeps: p.substeps,
             initial_state: p.initial_state.to_vec(),
             fall_limit: p.fall_limit,

@@ -114,7 +114,7 @@ use crate::plant::{FurutaParams, Plant, State};
 #[cfg(test)]
 mod tests;
 
-/// The parameters the fit estimates, as named in [`crate::plant::PARAM_NAMES`]. `mr`, `mp` and
+/// The parameters the fit estimates, as named in [`crate::plant::FurutaParams`]' fields. `mr`, `mp` and
 /// `lp` change too when the start's values leave no room for positive `jr`, `jp` (module docs).
 pub const FREE: [&str; 9] = ["lr", "jr", "jp", "kt", "dr", "dp", "cr", "cp", "vd"];
 const NP: usize = FREE.len();

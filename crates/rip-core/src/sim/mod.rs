@@ -48,8 +48,7 @@ pub use runs::{
 /// allocations, e.g. a duration in ms passed as s).
 pub const MAX_SAMPLES: usize = 10_000_000;
 
-/// Most RK4 substeps per control period.
-pub const MAX_SUBSTEPS: usize = 100_000;
+pub use crate::plant::MAX_SUBSTEPS;
 
 /// Default length of a run (s): the span of the paper's step-response figures.
 pub const DEFAULT_DURATION: f64 = 10.0;

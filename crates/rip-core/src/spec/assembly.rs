@@ -61,18 +61,6 @@ pub struct Design {
     compensation: Option<Compensation>,
 }
 
-fn plant_key(e: &RipError) -> String {
-    if let RipError::InvalidParameter { name, .. } = e {
-        if let Some(p) = super::Param::ALL
-            .into_iter()
-            .find(|p| p.name().eq_ignore_ascii_case(name))
-        {
-            return format!("plant.{}", p.name());
-        }
-    }
-    "plant".into()
-}
-
 /// The weight an LQR design failure is blamed on: `R` when it is named, or when it is so
 /// small against `Q` (below 1e-12 of its largest entry) that the Riccati equation is
 /// ill-conditioned; `Q` otherwise.
@@ -117,8 +105,11 @@ fn mpc_key(e: &RipError) -> String {
 impl Spec {
     /// The nonlinear plant of `[plant]`, with its stiction (`plant.arm_breakaway`) if any.
     pub fn plant(&self) -> Result<Plant, SpecError> {
-        let plant = Plant::new(self.plant.params())
-            .map_err(|e| SpecError::new(plant_key(&e), e.to_string()))?;
+        let params = self.plant.params();
+        params
+            .check()
+            .map_err(|(p, reason)| SpecError::new(format!("plant.{p}"), reason))?;
+        let plant = Plant::new(params).map_err(|e| SpecError::new("plant", e.to_string()))?;
         match self.plant.arm_breakaway {
             Some(cs) => plant
                 .with_arm_breakaway(cs)

@@ -35,11 +35,12 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::plant::Param;
 pub use assembly::Design;
 pub use controllers::{CompensationSpec, KalmanSpec, LqrSpec, MpcSpec, Solver};
 pub use sections::{
-    ControllerKind, MonteCarloSpec, Param, PlantSpec, Preset, ReferenceSpec, SensorSpec,
-    MAX_DURATION, MAX_MONTE_CARLO_RUNS,
+    ControllerKind, MonteCarloSpec, PlantSpec, Preset, ReferenceSpec, SensorSpec, MAX_DURATION,
+    MAX_MONTE_CARLO_RUNS,
 };
 
 /// Top-level tables that belong to `rip-rt` and are not checked here.

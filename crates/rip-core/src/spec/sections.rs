@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::SpecError;
 use crate::paper;
-use crate::plant::FurutaParams;
+use crate::plant::{FurutaParams, Param};
 use crate::sim::{DEFAULT_DURATION, DEFAULT_FALL_LIMIT, DEFAULT_SUBSTEPS, MAX_SUBSTEPS};
 
 /// Longest simulated run (s): an hour of the paper's 100 Hz loop.
@@ -124,189 +124,27 @@ impl Preset {
     }
 }
 
-/// A physical parameter that `[plant]` can override and `[monte_carlo]` can perturb, named
-/// as in [`FurutaParams`]' Python API.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub enum Param {
-    /// Arm mass (kg).
-    #[serde(rename = "mr")]
-    Mr,
-    /// Arm length (m).
-    #[serde(rename = "Lr")]
-    Lr,
-    /// Arm inertia about its centre of mass (kg·m²).
-    #[serde(rename = "Jr")]
-    Jr,
-    /// Pendulum mass (kg).
-    #[serde(rename = "mp")]
-    Mp,
-    /// Pendulum length (m).
-    #[serde(rename = "Lp")]
-    Lp,
-    /// Pendulum inertia about its centre of mass (kg·m²).
-    #[serde(rename = "Jp")]
-    Jp,
-    /// Arm viscous friction (N·m·s/rad).
-    #[serde(rename = "Dr")]
-    Dr,
-    /// Pendulum viscous friction (N·m·s/rad).
-    #[serde(rename = "Dp")]
-    Dp,
-    /// Motor resistance (Ω).
-    #[serde(rename = "Rm")]
-    Rm,
-    /// Motor torque constant (N·m/A).
-    #[serde(rename = "kt")]
-    Kt,
-    /// Motor back-EMF constant (V·s/rad).
-    #[serde(rename = "km")]
-    Km,
-    /// Arm Coulomb friction (N·m).
-    #[serde(rename = "Cr")]
-    Cr,
-    /// Pendulum Coulomb friction (N·m).
-    #[serde(rename = "Cp")]
-    Cp,
-    /// Voltage dead zone of the motor drive (V).
-    #[serde(rename = "Vd")]
-    Vd,
-}
-
-impl Param {
-    /// Every parameter, in the order of the `[plant]` section.
-    pub const ALL: [Param; 14] = [
-        Self::Mr,
-        Self::Lr,
-        Self::Jr,
-        Self::Mp,
-        Self::Lp,
-        Self::Jp,
-        Self::Dr,
-        Self::Dp,
-        Self::Rm,
-        Self::Kt,
-        Self::Km,
-        Self::Cr,
-        Self::Cp,
-        Self::Vd,
-    ];
-
-    /// The name as spelled in files and in Python.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Mr => "mr",
-            Self::Lr => "Lr",
-            Self::Jr => "Jr",
-            Self::Mp => "mp",
-            Self::Lp => "Lp",
-            Self::Jp => "Jp",
-            Self::Dr => "Dr",
-            Self::Dp => "Dp",
-            Self::Rm => "Rm",
-            Self::Kt => "kt",
-            Self::Km => "km",
-            Self::Cr => "Cr",
-            Self::Cp => "Cp",
-            Self::Vd => "Vd",
-        }
-    }
-
-    /// Parses a name as spelled in files and in Python.
-    pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|p| p.name() == name)
-    }
-
-    /// The parameter's field of `p`.
-    pub fn field(self, p: &mut FurutaParams) -> &mut f64 {
-        match self {
-            Self::Mr => &mut p.mr,
-            Self::Lr => &mut p.lr,
-            Self::Jr => &mut p.jr,
-            Self::Mp => &mut p.mp,
-            Self::Lp => &mut p.lp,
-            Self::Jp => &mut p.jp,
-            Self::Dr => &mut p.dr,
-            Self::Dp => &mut p.dp,
-            Self::Rm => &mut p.rm,
-            Self::Kt => &mut p.kt,
-            Self::Km => &mut p.km,
-            Self::Cr => &mut p.cr,
-            Self::Cp => &mut p.cp,
-            Self::Vd => &mut p.vd,
-        }
-    }
-
-    /// Whether the parameter may be zero (friction, back-EMF, dead zone); the others must be
-    /// positive.
-    pub fn may_be_zero(self) -> bool {
-        matches!(
-            self,
-            Self::Km | Self::Dr | Self::Dp | Self::Cr | Self::Cp | Self::Vd
-        )
-    }
-}
-
 /// `[plant]`: the simulated (or emulated) nonlinear plant, and through it the design model.
 ///
-/// `preset` names a parameter set; each of `mr, Lr, Jr, mp, Lp, Jp, Dr, Dp, Rm, kt, km, Cr, Cp,
-/// Vd` given overrides the preset's value, so an identified rig is a file of its own. `Cr`,
-/// `Cp` (Coulomb friction) and `Vd` (dead zone) are 0 in both presets; they act on the
-/// simulated plant but not on the design model ([`crate::plant`] explains why). The controllers
-/// are designed on this plant's linearisation about upright, discretised at the loop period;
-/// the `paper` preset without changed parameters keeps the paper's recovered model
-/// ([`paper::continuous_model`]) so that the paper's numbers do not move.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-#[allow(non_snake_case)]
+/// `preset` names a parameter set; each [`Param::ALL`] key given (`mr, Lr, Jr, mp, Lp, Jp,
+/// Dr, Dp, Rm, kt, km, Cr, Cp, Vd`) overrides the preset's value, so an identified rig is a
+/// file of its own. `Cr`, `Cp` (Coulomb friction) and `Vd` (dead zone) are 0 in both presets;
+/// they act on the simulated plant but not on the design model ([`crate::plant`] explains
+/// why). The controllers are designed on this plant's linearisation about upright, discretised
+/// at the loop period; the `paper` preset without changed parameters keeps the paper's
+/// recovered model ([`paper::continuous_model`]) so that the paper's numbers do not move.
+///
+/// The parameter keys are not fields: they are [`Param`]'s names, read and written by this
+/// type's own serde implementation, so the names exist once.
+#[derive(Debug, Clone, PartialEq)]
 pub struct PlantSpec {
     /// The parameter set the overrides start from.
     pub preset: Preset,
-    /// Arm mass (kg).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub mr: Option<f64>,
-    /// Arm length, motor axis to pendulum joint (m).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub Lr: Option<f64>,
-    /// Arm inertia about its centre of mass (kg·m²).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub Jr: Option<f64>,
-    /// Pendulum mass (kg).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub mp: Option<f64>,
-    /// Pendulum length (m).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub Lp: Option<f64>,
-    /// Pendulum inertia about its centre of mass (kg·m²).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub Jp: Option<f64>,
-    /// Arm viscous friction (N·m·s/rad).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub Dr: Option<f64>,
-    /// Pendulum viscous friction (N·m·s/rad).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub Dp: Option<f64>,
-    /// Motor terminal resistance (Ω).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub Rm: Option<f64>,
-    /// Motor torque constant (N·m/A).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub kt: Option<f64>,
-    /// Motor back-EMF constant (V·s/rad).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub km: Option<f64>,
-    /// Coulomb friction torque of the arm joint (N·m), `cr` of [`crate::plant`].
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub Cr: Option<f64>,
-    /// Coulomb friction torque of the pendulum joint (N·m), `cp` of [`crate::plant`].
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub Cp: Option<f64>,
-    /// Voltage dead zone of the motor drive (V), `vd` of [`crate::plant`].
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub Vd: Option<f64>,
+    /// The parameters given, indexed by [`Param::index`] (never [`Param::G`]).
+    pub overrides: [Option<f64>; Param::COUNT],
     /// The arm's breakaway torque (N·m, at least `Cr`): stiction of the simulated plant
     /// ([`crate::plant::Plant::with_arm_breakaway`]); none when absent. Not a parameter the
     /// controllers or the compensation know.
-    #[serde(skip_serializing_if = "Option::is_none")]
     pub arm_breakaway: Option<f64>,
     /// RK4 steps per control period in simulation.
     pub substeps: usize,
@@ -320,20 +158,7 @@ impl Default for PlantSpec {
     fn default() -> Self {
         Self {
             preset: Preset::Paper,
-            mr: None,
-            Lr: None,
-            Jr: None,
-            mp: None,
-            Lp: None,
-            Jp: None,
-            Dr: None,
-            Dp: None,
-            Rm: None,
-            kt: None,
-            km: None,
-            Cr: None,
-            Cp: None,
-            Vd: None,
+            overrides: [None; Param::COUNT],
             arm_breakaway: None,
             substeps: DEFAULT_SUBSTEPS,
             initial_state: [0.0, 0.0, 0.05, 0.0],
@@ -342,39 +167,120 @@ impl Default for PlantSpec {
     }
 }
 
+/// The `[plant]` keys that are not parameters.
+const PLANT_FIELDS: [&str; 5] = [
+    "preset",
+    "arm_breakaway",
+    "substeps",
+    "initial_state",
+    "fall_limit",
+];
+
+impl Serialize for PlantSpec {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut map = s.serialize_map(None)?;
+        map.serialize_entry("preset", &self.preset)?;
+        for p in Param::ALL {
+            if let Some(v) = self.get(p) {
+                map.serialize_entry(p.name(), &v)?;
+            }
+        }
+        if let Some(v) = self.arm_breakaway {
+            map.serialize_entry("arm_breakaway", &v)?;
+        }
+        map.serialize_entry("substeps", &self.substeps)?;
+        map.serialize_entry("initial_state", &self.initial_state)?;
+        map.serialize_entry("fall_limit", &self.fall_limit)?;
+        map.end()
+    }
+}
+
+impl<'de> Deserialize<'de> for PlantSpec {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = PlantSpec;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("the [plant] table")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                mut map: A,
+            ) -> Result<PlantSpec, A::Error> {
+                use serde::de::Error;
+                let mut out = PlantSpec::default();
+                let mut seen: Vec<String> = Vec::new();
+                while let Some(key) = map.next_key::<String>()? {
+                    if seen.contains(&key) {
+                        return Err(A::Error::custom(format!("duplicate field `{key}`")));
+                    }
+                    match key.as_str() {
+                        "preset" => out.preset = map.next_value()?,
+                        "arm_breakaway" => out.arm_breakaway = Some(map.next_value()?),
+                        "substeps" => out.substeps = map.next_value()?,
+                        "initial_state" => out.initial_state = map.next_value()?,
+                        "fall_limit" => out.fall_limit = map.next_value()?,
+                        name => match Param::from_name(name) {
+                            Some(p) => out.overrides[p.index()] = Some(map.next_value()?),
+                            None => {
+                                let expected: Vec<String> = PLANT_FIELDS[..1]
+                                    .iter()
+                                    .copied()
+                                    .chain(Param::ALL.map(Param::name))
+                                    .chain(PLANT_FIELDS[1..].iter().copied())
+                                    .map(|n| format!("`{n}`"))
+                                    .collect();
+                                return Err(A::Error::custom(format!(
+                                    "unknown field `{name}`, expected one of {}",
+                                    expected.join(", ")
+                                )));
+                            }
+                        },
+                    }
+                    seen.push(key);
+                }
+                Ok(out)
+            }
+        }
+        d.deserialize_map(Visitor)
+    }
+}
+
 impl PlantSpec {
-    fn overrides(&self) -> [Option<f64>; 14] {
-        [
-            self.mr, self.Lr, self.Jr, self.mp, self.Lp, self.Jp, self.Dr, self.Dp, self.Rm,
-            self.kt, self.km, self.Cr, self.Cp, self.Vd,
-        ]
+    /// The `preset` with every `[plant]` parameter given as in `params` (its `g` is the
+    /// preset's).
+    pub fn with_params(preset: Preset, params: &FurutaParams) -> Self {
+        let mut out = Self {
+            preset,
+            ..Self::default()
+        };
+        for param in Param::ALL {
+            out.set(param, Some(params.get(param)));
+        }
+        out
     }
 
-    fn overrides_mut(&mut self) -> [&mut Option<f64>; 14] {
-        [
-            &mut self.mr,
-            &mut self.Lr,
-            &mut self.Jr,
-            &mut self.mp,
-            &mut self.Lp,
-            &mut self.Jp,
-            &mut self.Dr,
-            &mut self.Dp,
-            &mut self.Rm,
-            &mut self.kt,
-            &mut self.km,
-            &mut self.Cr,
-            &mut self.Cp,
-            &mut self.Vd,
-        ]
+    /// The value given for `param`, if any.
+    pub fn get(&self, param: Param) -> Option<f64> {
+        self.overrides[param.index()]
+    }
+
+    /// Gives `param` the value `value` (`None`: the preset's).
+    ///
+    /// # Panics
+    /// On [`Param::G`], which is not a `[plant]` key.
+    pub fn set(&mut self, param: Param, value: Option<f64>) {
+        assert!(param != Param::G, "g is not a [plant] key");
+        self.overrides[param.index()] = value;
     }
 
     /// The preset's parameters with the given ones in their place.
     pub fn params(&self) -> FurutaParams {
         let mut p = self.preset.params();
-        for (param, value) in Param::ALL.into_iter().zip(self.overrides()) {
-            if let Some(v) = value {
-                *param.field(&mut p) = v;
+        for param in Param::ALL {
+            if let Some(v) = self.get(param) {
+                p.set(param, v);
             }
         }
         p
@@ -383,9 +289,9 @@ impl PlantSpec {
     /// Every parameter written out (the preset's value where none was given).
     pub fn resolved(&self) -> Self {
         let mut out = self.clone();
-        let mut p = self.params();
-        for (param, slot) in Param::ALL.into_iter().zip(out.overrides_mut()) {
-            *slot = Some(*param.field(&mut p));
+        let p = self.params();
+        for param in Param::ALL {
+            out.overrides[param.index()] = Some(p.get(param));
         }
         out
     }
@@ -397,6 +303,13 @@ impl PlantSpec {
     }
 
     fn validate(&self) -> Result<(), SpecError> {
+        for param in Param::ALL {
+            if let Some(v) = self.get(param) {
+                param
+                    .check(v)
+                    .map_err(|reason| bad(format!("plant.{param}"), reason))?;
+            }
+        }
         if let Some(cs) = self.arm_breakaway {
             let cr = self.params().cr;
             if !(cs.is_finite() && cs >= cr) {
@@ -404,16 +317,6 @@ impl PlantSpec {
                     "plant.arm_breakaway",
                     format!("must be finite and at least plant.Cr = {cr}, got {cs}"),
                 ));
-            }
-        }
-        for (param, value) in Param::ALL.into_iter().zip(self.overrides()) {
-            if let Some(v) = value {
-                let key = format!("plant.{}", param.name());
-                if param.may_be_zero() {
-                    non_negative(&key, v)?;
-                } else {
-                    positive(&key, v)?;
-                }
             }
         }
         if self.substeps == 0 || self.substeps > MAX_SUBSTEPS {

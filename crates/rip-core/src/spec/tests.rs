@@ -27,7 +27,7 @@ fn empty_file_is_the_paper_setting() {
 fn printed_spec_reads_back_equal_and_names_every_key() {
     let mut spec = Spec::default();
     spec.plant.preset = Preset::QubeServo2;
-    spec.plant.Lp = Some(0.2);
+    spec.plant.set(Param::Lp, Some(0.2));
     spec.mpc.solver = Solver::Clarabel;
     spec.monte_carlo.parameters = vec![Param::Mp, Param::Lp];
     let text = spec.to_toml();
