@@ -92,6 +92,9 @@ pub const FROZEN_RAD: f64 = 0.1;
 pub const FROZEN_COUNTS: f64 = 8.0;
 /// Periods the arm reading must stay constant before a trip is named a frozen encoder.
 pub const FROZEN_PERIODS: u32 = 2;
+/// Threshold of the sign statistic (a log-likelihood ratio, module docs): the run stops as
+/// a reversed motor or arm encoder when it exceeds this.
+pub const SIGN_THRESHOLD: f64 = 25.0;
 
 /// Why the witness stopped the run: the likely fault.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
@@ -172,6 +175,8 @@ pub struct WitnessLimits {
     pub arm: f64,
     /// Pendulum threshold (σ); `f64::INFINITY` only measures.
     pub pendulum: f64,
+    /// Sign statistic's threshold (log-likelihood ratio); `f64::INFINITY` only measures.
+    pub sign: f64,
 }
 
 impl Default for WitnessLimits {
@@ -180,6 +185,7 @@ impl Default for WitnessLimits {
             drift: DRIFT,
             arm: ARM_THRESHOLD,
             pendulum: PENDULUM_THRESHOLD,
+            sign: SIGN_THRESHOLD,
         }
     }
 }
@@ -206,7 +212,23 @@ pub struct Witness {
     // The free-running arm (module docs) and how far the frozen rule lets it go (rad).
     free: State,
     frozen_rad: f64,
-    peak: [f64; 3],
+    // The sign statistic, and since it last left 0: the arm motion the voltage must have
+    // added to the model's motion at 0 V, and the measured motion relative to the latter.
+    sign: f64,
+    sign_expected: [f64; 2],
+    sign_response: [f64; 2],
+    sign_periods: u32,
+    // The weighted sums of the regression of the response on the voltage's part.
+    response: [f64; 2],
+    // The last two arm readings (newest first), the interval between them, and the model's
+    // change of the arm rate over the last period: in all, and the voltage's part of it.
+    // `history` counts the consecutive on-time samples behind them.
+    readings: [f64; 2],
+    interval: f64,
+    rate_change: [f64; 2],
+    last_switch: f64,
+    history: u32,
+    peak: [f64; 4],
 }
 
 impl Witness {
@@ -243,7 +265,17 @@ impl Witness {
             predicted_unchanged: 0.0,
             free: State::zeros(),
             frozen_rad: FROZEN_RAD.max(FROZEN_COUNTS * q[0]),
-            peak: [0.0; 3],
+            sign: 0.0,
+            sign_expected: [0.0; 2],
+            sign_response: [0.0; 2],
+            sign_periods: 0,
+            response: [0.0; 2],
+            readings: [0.0; 2],
+            interval: 0.0,
+            rate_change: [0.0; 2],
+            last_switch: 0.0,
+            history: 0,
+            peak: [0.0; 4],
         })
     }
 
@@ -257,13 +289,32 @@ impl Witness {
         self.disagreeing = 0;
         self.unchanged = 0;
         self.predicted_unchanged = 0.0;
+        self.sign = 0.0;
+        self.sign_expected = [0.0; 2];
+        self.sign_response = [0.0; 2];
+        self.sign_periods = 0;
+        self.response = [0.0; 2];
+        self.history = 0;
     }
 
     /// The largest statistics since construction: the arm's and the pendulum's CUSUM (σ), and
     /// the free arm's distance from a constant arm reading (in units of the frozen rule's
     /// limit: 1 trips).
     pub fn peak(&self) -> [f64; 3] {
-        self.peak
+        [self.peak[0], self.peak[1], self.peak[2]]
+    }
+
+    /// The model's estimate of the rig's state now: the free-running arm's while the arm
+    /// reading has not changed (an encoder that may have stopped counting), else the
+    /// observer's; `None` before the first measurement.
+    pub fn estimate(&self) -> Option<State> {
+        let x = self.x?;
+        Some(if self.unchanged > 0 { self.free } else { x })
+    }
+
+    /// The largest sign statistic since construction (a log-likelihood ratio, module docs).
+    pub fn sign_peak(&self) -> f64 {
+        self.peak[3]
     }
 
     /// The current arm and pendulum statistics (σ).
@@ -323,6 +374,12 @@ impl Witness {
         self.predict(&mut early, volts, dt, 0.0);
         self.predict(&mut late, volts, dt, latest);
         self.predict(&mut x, volts, dt, delay);
+        // The same period at 0 V: what the voltage adds to the arm's motion, by the model.
+        let mut coast = self.x.unwrap_or(x);
+        self.predict(&mut coast, (0.0, 0.0), dt, delay);
+        let prior = self.x.unwrap_or(x);
+        let rate_change = [x[1] - prior[1], x[1] - coast[1]];
+        let pushed = x[0] - coast[0];
         let switch = [
             (late[0] - x[0]).abs().max((early[0] - x[0]).abs()),
             (late[2] - x[2]).abs().max((early[2] - x[2]).abs()),
@@ -365,6 +422,16 @@ impl Witness {
             }
             self.peak[j] = self.peak[j].max(g[0].max(g[1]));
         }
+        if on_time {
+            // The log-likelihood ratio of "the voltage acts reversed" (the arm measured at
+            // the 0 V motion less the voltage's part) against "as modelled".
+            let timing = TIMING_S * rate[0];
+            let var = self.sigma[0] * self.sigma[0] + timing * timing + switch[0] * switch[0];
+            let llr = -2.0 * pushed * (e[0] + pushed) / var;
+            self.sign = (self.sign + llr).max(0.0);
+            self.peak[3] = self.peak[3].max(self.sign);
+        }
+        self.response_test(theta, dt, rate_change, switch[0], on_time);
         if self.cusum[0] == [0.0, 0.0] {
             self.predicted = 0.0;
             self.measured = 0.0;
@@ -387,9 +454,32 @@ impl Witness {
                 still_s: f64::from(self.unchanged) * self.ts,
             });
         }
+        if self.sign > self.limits.sign {
+            // A reading that stopped changing when the disagreement began: a dead encoder
+            // (its constant reading against a moving model looks like any wrong response).
+            if self.unchanged >= FROZEN_PERIODS.max(self.sign_periods.min(2 * FROZEN_PERIODS)) {
+                return Err(WitnessFault::ArmFrozen {
+                    theta,
+                    predicted: self.free[0] - theta,
+                    still_s: f64::from(self.unchanged) * self.ts,
+                });
+            }
+            // Reversed only when the response itself has the wrong sign: a wrong scale or a
+            // weak motor also leaves the arm short of the model's motion.
+            if !self.response_gain().is_some_and(|g| g < 0.0) {
+                return Err(self.classify(theta, self.sign, self.limits.sign));
+            }
+            return Err(WitnessFault::ArmWrongWay {
+                measured: self.sign_response[1],
+                predicted: self.sign_expected[1],
+                window_s: f64::from(self.sign_periods) * self.ts,
+                stat: self.sign,
+                limit: self.limits.sign,
+            });
+        }
         let [arm, pendulum] = self.statistic();
         if arm > self.limits.arm {
-            return Err(self.classify(theta, arm));
+            return Err(self.classify(theta, arm, self.limits.arm));
         }
         if pendulum > self.limits.pendulum {
             return Err(WitnessFault::PendulumDisagrees {
@@ -400,9 +490,68 @@ impl Witness {
         Ok(())
     }
 
-    fn classify(&self, theta: f64, stat: f64) -> WitnessFault {
+    /// The arm's response to the voltage since the sign statistic left 0 (module docs), with
+    /// the arm reading `theta`, `dt` after the last, the model's change of the arm rate over
+    /// the period (in all, and the voltage's part) and how far the command's timing moves the
+    /// prediction (`switch`, rad).
+    fn response_test(
+        &mut self,
+        theta: f64,
+        dt: f64,
+        rate_change: [f64; 2],
+        switch: f64,
+        on_time: bool,
+    ) {
+        if !on_time {
+            self.history = 0;
+        }
+        if self.sign == 0.0 {
+            self.sign_expected = [0.0; 2];
+            self.sign_response = [0.0; 2];
+            self.response = [0.0; 2];
+            self.sign_periods = 0;
+        }
+        if self.history >= 2 && self.sign > 0.0 {
+            let h1 = self.interval;
+            let [t1, t2] = self.readings;
+            // The measured change of the mean rate between the last two intervals, and the
+            // model's: half the rate changes of the two periods (a piecewise constant
+            // acceleration), of which the voltage's part is `push`.
+            let measured = (theta - t1) / dt - (t1 - t2) / h1;
+            let model = 0.5 * (rate_change[0] + self.rate_change[0]);
+            let push = 0.5 * (rate_change[1] + self.rate_change[1]);
+            let s2 = self.sigma[0] * self.sigma[0];
+            let var = s2 * (1.0 / (dt * dt) + (1.0 / dt + 1.0 / h1).powi(2) + 1.0 / (h1 * h1))
+                + (switch / dt).powi(2)
+                + (self.last_switch / h1).powi(2);
+            // What the measured change beyond the model's at 0 V says of the voltage's gain:
+            // the weighted regression of the one on the other.
+            let beyond = measured - (model - push);
+            self.response[0] += push * beyond / var;
+            self.response[1] += push * push / var;
+            // Rate and displacement the voltage must have added to the model's motion at
+            // 0 V, and what was measured beyond that motion.
+            self.sign_expected[0] += push;
+            self.sign_expected[1] += self.sign_expected[0] * dt;
+            self.sign_response[0] += beyond;
+            self.sign_response[1] += self.sign_response[0] * dt;
+            self.sign_periods += 1;
+        }
+        self.readings = [theta, self.readings[0]];
+        self.interval = dt;
+        self.rate_change = rate_change;
+        self.last_switch = switch;
+        self.history = self.history.saturating_add(1);
+    }
+
+    /// The voltage's gain on the arm that the measurements since the sign statistic left 0
+    /// show, relative to the model's (1 as modelled, −1 reversed); `None` without a response.
+    pub fn response_gain(&self) -> Option<f64> {
+        (self.response[1] > 0.0).then(|| self.response[0] / self.response[1])
+    }
+
+    fn classify(&self, theta: f64, stat: f64, limit: f64) -> WitnessFault {
         let (predicted, measured) = (self.predicted, self.measured);
-        let limit = self.limits.arm;
         let window_s = f64::from(self.disagreeing) * self.ts;
         // No motion at all since the disagreement began, against the model's.
         if self.unchanged >= self.disagreeing.min(FROZEN_PERIODS)
