@@ -645,6 +645,91 @@ impl RestTest {
 mod tests {
     use super::*;
 
+    /// Spins the paper rig's arm to `speed` (rad/s), then runs `brake` on it for 2 s, the
+    /// motor's leads swapped if `reversed`, the reading that of a 2048-count encoder; the
+    /// arm's travel from the stop's start and its final speed.
+    fn braked(mut brake: Brake, reversed: bool, speed: f64) -> (f64, f64) {
+        use crate::plant::{Model, PlantSim, Windings};
+        let cfg = Config::from_toml("").unwrap();
+        let ts = cfg.period_s();
+        let q = std::f64::consts::TAU / 2048.0;
+        let mut sim = PlantSim::new(Model::Paper, 0.0, std::f64::consts::PI);
+        sim.set_state([0.0, speed, std::f64::consts::PI, 0.0]);
+        let read = |x: [f64; 4]| (x[0] / q).round() * q;
+        let mut last = read(sim.state());
+        let mut travel: f64 = 0.0;
+        for _ in 0..200 {
+            let theta = read(sim.state());
+            let rate = (theta - last) / ts;
+            last = theta;
+            let w = match brake.command(Some(rate)) {
+                BrakeCommand::Volts(v) => Windings::Driven(if reversed { -v } else { v }),
+                BrakeCommand::Short => Windings::Shorted,
+            };
+            sim.step_windings(w, ts);
+            travel = travel.max(sim.state()[0].abs());
+        }
+        (travel, sim.state()[1])
+    }
+
+    #[test]
+    fn a_reversed_rig_is_braked_by_the_reversed_law_and_a_wrong_diagnosis_falls_back_to_the_short()
+    {
+        let cfg = Config::from_toml("").unwrap();
+        // The law as it stands drives a reversed rig away; reversed, it brakes it, as far as
+        // the trusted law brakes a rig wired right.
+        let (right, v_right) = braked(Brake::new(&cfg, BrakeMode::Active), false, 10.0);
+        let (rev, v_rev) = braked(Brake::new(&cfg, BrakeMode::Reversed), true, 10.0);
+        assert!(
+            v_right.abs() < 0.1 && v_rev.abs() < 0.1,
+            "{v_right} {v_rev}"
+        );
+        assert!((rev - right).abs() < 0.05 * right, "{rev} vs {right}");
+        // The reversed law on a rig wired right speeds the arm up: the stop shorts instead
+        // after a few periods (here 9.2 rad of travel from 10 rad/s, against 6.9 rad for the
+        // short alone and 1.4 rad for the law with the right sign).
+        let (short, _) = braked(Brake::new(&cfg, BrakeMode::Short), false, 10.0);
+        let (travel, v) = braked(Brake::new(&cfg, BrakeMode::Reversed), false, 10.0);
+        assert!(v.abs() < 1.0, "{v}");
+        assert!(travel < 1.4 * short, "{travel} vs {short}");
+        assert!(short > 2.0 * right, "{short} {right}");
+    }
+
+    #[test]
+    fn a_modelled_stop_brakes_as_the_trusted_law_and_a_moving_reading_ends_it() {
+        let cfg = Config::from_toml("").unwrap();
+        let x = State::new(0.0, 10.0, std::f64::consts::PI, 0.0);
+        let (right, _) = braked(Brake::new(&cfg, BrakeMode::Active), false, 10.0);
+        // The reading is frozen: the model's rate is all the stop has.
+        let mut brake = Brake::modelled(&cfg, Some(x), 0.0);
+        assert_eq!(brake.mode(), BrakeMode::Modelled);
+        let mut sim = crate::plant::PlantSim::new(crate::plant::Model::Paper, 0.0, 0.0);
+        sim.set_state([0.0, 10.0, std::f64::consts::PI, 0.0]);
+        // The period until the stop's first command, at the voltage held (0 V).
+        sim.step_windings(crate::plant::Windings::Driven(0.0), cfg.period_s());
+        let mut travel: f64 = 0.0;
+        for _ in 0..200 {
+            let w = match brake.command(Some(0.0)) {
+                BrakeCommand::Volts(v) => crate::plant::Windings::Driven(v),
+                BrakeCommand::Short => crate::plant::Windings::Shorted,
+            };
+            sim.step_windings(w, cfg.period_s());
+            travel = travel.max(sim.state()[0].abs());
+        }
+        assert_eq!(brake.mode(), BrakeMode::Short);
+        // At rest but for the pendulum's swing, which the short then damps.
+        assert!(sim.state()[1].abs() < 1.0, "{:?}", sim.state());
+        // Within half a radian of the law on the measured rate, which keeps braking against
+        // the pendulum's reaction after the arm's rest where the modelled stop shorts (1.55
+        // against 1.07 rad from 10 rad/s; the short alone: 6.9 rad).
+        assert!(travel < right + 0.5, "{travel} vs {right}");
+        // A reading that moves: the model is not the arm.
+        let mut brake = Brake::modelled(&cfg, Some(x), 0.0);
+        assert_eq!(brake.command(Some(3.0)), BrakeCommand::Short);
+        assert_eq!(brake.mode(), BrakeMode::Short);
+        assert_eq!(Brake::modelled(&cfg, None, 0.0).mode(), BrakeMode::Short);
+    }
+
     #[test]
     fn the_envelope_stops_a_fast_arm_before_its_limit_and_lets_a_slow_one_run() {
         let cfg = Config::from_toml("").unwrap();

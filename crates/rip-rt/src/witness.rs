@@ -40,6 +40,33 @@
 //! thresholds were chosen from measurement (docs/rip-rt.md, "The witness"): the largest
 //! statistic of normal runs on both presets and on generated rigs, with a stated margin.
 //!
+//! # The sign statistic
+//!
+//! The CUSUM is normalised by the measurement's noise, not by how hard the voltage pushes the
+//! arm: on a light arm with a strong motor, a reversed motor mid-swing moves the arm half a
+//! radian in the 5–7 periods the CUSUM takes. So a second test asks the question the fault
+//! poses, with the rig's own model: does the voltage move the arm the way it must? Each
+//! period the model also predicts the same period at 0 V (`x̄⁰`); `p = x̄_θ − x̄⁰_θ` is the
+//! voltage's share of the predicted arm motion. If the voltage acted reversed, the arm would
+//! be measured near `x̄_θ − 2p`, so the log-likelihood ratio of "reversed" against "as
+//! modelled" is
+//!
+//! ```text
+//! λ[k] = ((e)² − (e + 2p)²) / (2 σ²) = −2 p (e + p) / σ²        S[k] = max(0, S[k−1] + λ[k])
+//! ```
+//!
+//! (`e` the arm's innovation, `σ` its standard deviation above). It scales with the rig: a
+//! period in which the voltage pushes the arm by `p ≫ σ` adds about `2 p²/σ²` under a
+//! reversal; on a rig whose voltage acts with gain `g` relative to the model (the arm
+//! measured near `x̄_θ − (1 − g) p`) it is `−2 g p²/σ²` on average, negative for every
+//! positive gain (a weaker motor, a wrong scale) and 0 only for none. The run stops when `S`
+//! exceeds [`SIGN_THRESHOLD`]. What stopped it is named from the response itself: over the
+//! periods since `S` left 0, the regression of the measured change of the arm's mean rate
+//! (beyond the model's at 0 V) on the voltage's share of it ([`Witness::response_gain`]); a
+//! negative gain is a reversed motor or arm encoder ([`WitnessFault::ArmWrongWay`], which
+//! the stop brakes with the opposite sign), anything else is named as by the CUSUM; a reading
+//! that stopped changing when the disagreement began is a dead encoder.
+//!
 //! # An encoder that stopped counting
 //!
 //! While the arm balances slowly, an arm encoder that stops counting leaves innovations too
@@ -647,6 +674,25 @@ mod tests {
             "{f}"
         );
         assert!(f.to_string().contains("motor leads"), "{f}");
+    }
+
+    #[test]
+    fn a_reversed_motor_trips_the_sign_statistic_within_a_few_periods_and_a_scale_does_not() {
+        // The encoder counts backwards from 0.5 s on while ±6 V square waves turn the arm:
+        // the voltage's share of the motion reads reversed from the first period.
+        let square = |t: f64| if (t / 0.1) as i64 % 2 == 0 { 6.0 } else { -6.0 };
+        let reversed = |theta: f64, t: f64| if t < 0.5 { theta } else { -theta };
+        let (t, f) = drive(square, reversed, 2.0).expect("not stopped");
+        assert!((0.5..0.55).contains(&t), "{t}");
+        assert!(
+            matches!(f, WitnessFault::ArmWrongWay { stat, limit, .. } if stat > limit && limit == SIGN_THRESHOLD),
+            "{f}"
+        );
+        // A quarter of the motion (8192 counts configured on a 2048-count encoder): the
+        // voltage still moves the arm its way, so it is not named a reversal.
+        if let Some((_, f)) = drive(square, |theta, _| theta / 4.0, 2.0) {
+            assert!(!matches!(f, WitnessFault::ArmWrongWay { .. }), "{f}");
+        }
     }
 
     #[test]
