@@ -245,6 +245,8 @@ pub struct Witness {
     sign_expected: [f64; 2],
     sign_response: [f64; 2],
     sign_periods: u32,
+    // Whether the last period's command arrival was unknown.
+    arrival_unknown: bool,
     // The weighted sums of the regression of the response on the voltage's part.
     response: [f64; 2],
     // The last two arm readings (newest first), the interval between them, and the model's
@@ -297,6 +299,7 @@ impl Witness {
             sign_response: [0.0; 2],
             sign_periods: 0,
             response: [0.0; 2],
+            arrival_unknown: false,
             readings: [0.0; 2],
             interval: 0.0,
             rate_change: [0.0; 2],
@@ -407,6 +410,18 @@ impl Witness {
         let prior = self.x.unwrap_or(x);
         let rate_change = [x[1] - prior[1], x[1] - coast[1]];
         let pushed = x[0] - coast[0];
+        // For the sign statistic, the command may have arrived anywhere in the interval: a
+        // late command at a reversal of the voltage leaves the arm on the old voltage's side,
+        // which no number of such periods may add up to a reversal (a device starved of the
+        // CPU applies commands milliseconds late without a sign on the host).
+        let arrival_unknown = latest >= dt;
+        let anywhere = if latest < dt {
+            let mut last = prior;
+            self.predict(&mut last, volts, dt, dt);
+            (last[0] - x[0]).abs().max((early[0] - x[0]).abs())
+        } else {
+            0.0
+        };
         let switch = [
             (late[0] - x[0]).abs().max((early[0] - x[0]).abs()),
             (late[2] - x[2]).abs().max((early[2] - x[2]).abs()),
@@ -453,11 +468,18 @@ impl Witness {
             // The log-likelihood ratio of "the voltage acts reversed" (the arm measured at
             // the 0 V motion less the voltage's part) against "as modelled".
             let timing = TIMING_S * rate[0];
-            let var = self.sigma[0] * self.sigma[0] + timing * timing + switch[0] * switch[0];
+            let switch = switch[0].max(anywhere);
+            let var = self.sigma[0] * self.sigma[0] + timing * timing + switch * switch;
             let llr = -2.0 * pushed * (e[0] + pushed) / var;
-            self.sign = (self.sign + llr).max(0.0);
+            // Held (not updated) for a period whose command's arrival is unknown (a slow
+            // exchange, a skipped period) and for the one after it: a command that arrived
+            // late, even after the interval, leaves the arm on the old voltage's side.
+            if !(arrival_unknown || self.arrival_unknown) {
+                self.sign = (self.sign + llr).max(0.0);
+            }
             self.peak[3] = self.peak[3].max(self.sign);
         }
+        self.arrival_unknown = arrival_unknown;
         self.response_test(theta, dt, rate_change, switch[0], on_time);
         if self.cusum[0] == [0.0, 0.0] {
             self.predicted = 0.0;
