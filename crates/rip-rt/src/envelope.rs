@@ -31,7 +31,7 @@ use rip_core::envelope::{
     envelope_speed, excitation_breach, BrakingLaw, StoppingModel, STOP_BRAKE_FRACTION,
 };
 use rip_core::excitation::{ExcitationSettings, Signal};
-use rip_core::plant::Plant;
+use rip_core::plant::{Plant, State};
 use rip_core::spec::SpecError;
 
 use crate::config::{Config, ConfigError, MAX_VOLTAGE_LIMIT};
@@ -41,6 +41,7 @@ use crate::protocol::{encode, Command, Frame, Message, MAX_FRAME, STATUS_FAULT};
 use crate::serial::Fd;
 use crate::stop::{next_seq, StopReason};
 use crate::timing::Periodic;
+use crate::witness::WitnessFault;
 
 /// Distance (rad) inside `safety.arm_limit` at which the stop envelope ends, for the rate's
 /// quantisation and the arm's travel within the period of the decision.
@@ -229,6 +230,14 @@ pub fn check_excitation(cfg: &Config, settings: &ExcitationSettings) -> Result<(
 pub enum BrakeMode {
     /// The braking law on the measured rate (the motor and encoders are trusted).
     Active,
+    /// The braking law with its sign reversed: the witness saw the arm move against the
+    /// voltage (a swapped motor lead or a reversed arm encoder), and in both cases a voltage
+    /// along the *measured* motion is the one that opposes the true motion.
+    Reversed,
+    /// The braking law on the model's arm rate, run open loop from the witness's estimate
+    /// at the stop (the arm encoder stopped counting; the motor is trusted), until the
+    /// model's arm is at rest; then the short.
+    Modelled,
     /// The brake command only: windings shorted, whatever the wiring's sign.
     Short,
     /// Nothing can be sent (the device is gone), or the motor was never enabled.
@@ -250,6 +259,11 @@ pub fn brake_mode(reason: &StopReason) -> BrakeMode {
         | StopReason::LogError(_)
         | StopReason::Watchdog(_)
         | StopReason::Panic => BrakeMode::Active,
+        // The arm's response to the voltage has the wrong sign, and its encoder counts: brake
+        // with the sign the rig showed ([`Brake`] falls back to the short if that is wrong).
+        StopReason::Witness(WitnessFault::ArmWrongWay { .. }) => BrakeMode::Reversed,
+        // The arm encoder stopped counting: brake on the model's arm.
+        StopReason::Witness(WitnessFault::ArmFrozen { .. }) => BrakeMode::Modelled,
         // The host's timing cannot be trusted to close a loop (a slow step, missed
         // deadlines, a stall): short the windings rather than drive.
         StopReason::Overrun(_) => BrakeMode::Short,
@@ -257,9 +271,182 @@ pub fn brake_mode(reason: &StopReason) -> BrakeMode {
         | StopReason::TooSlow { .. }
         | StopReason::NotUpright { .. }
         | StopReason::NotAtRest(_) => BrakeMode::None,
-        // The sign check, a driver fault and any fault of the rig's motion: no voltage can be
-        // trusted to oppose the motion.
+        // The sign check, a driver fault and any other fault of the rig's motion: no voltage
+        // can be trusted to oppose the motion.
         _ => BrakeMode::Short,
+    }
+}
+
+/// Periods in a row of a rising arm speed under the saturated reversed braking law after
+/// which the stop gives up the law and shorts the windings (the sign the arm showed was not
+/// the wiring's: a wrong scale, say).
+pub const WRONG_SIGN_PERIODS: u32 = 4;
+/// Periods over which the saturated reversed law must take a tenth off the arm's speed, or
+/// the stop shorts the windings.
+pub const PROGRESS_PERIODS: u32 = 10;
+
+/// What the stop applies for one period.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum BrakeCommand {
+    /// Drive this voltage (V).
+    Volts(f64),
+    /// Short the windings (the brake command).
+    Short,
+}
+
+/// The stop's command, period by period (module docs): one definition for `rip-rt`'s stops
+/// and for the simulations that test them. Allocation-free.
+#[derive(Debug, Clone)]
+pub struct Brake {
+    mode: BrakeMode,
+    law: BrakingLaw,
+    dead_band: f64,
+    last_speed: f64,
+    rising: u32,
+    // The speed at the start of the current progress window, and the periods into it.
+    window_speed: f64,
+    window: u32,
+    // The model braked open loop (BrakeMode::Modelled): the plant, its state, RK4 substeps
+    // per period, the period (s), and how long its arm has been at rest (periods).
+    model: Option<(Plant, State, usize, f64, u32)>,
+}
+
+impl Brake {
+    /// The stop of `cfg` braking in `mode`.
+    pub fn new(cfg: &Config, mode: BrakeMode) -> Self {
+        let period_s = cfg.period_s();
+        let voltage = cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT);
+        Self {
+            mode,
+            law: BrakingLaw::new(&cfg.spec.plant.params(), voltage, period_s),
+            // One count per period and a half: below it the measured rate is the encoder's
+            // quantisation, and the law would chatter between ±its gain per count.
+            dead_band: 1.5 * std::f64::consts::TAU
+                / cfg.device.arm_counts_per_rev.max(1) as f64
+                / period_s,
+            last_speed: f64::INFINITY,
+            rising: 0,
+            window_speed: f64::INFINITY,
+            window: 0,
+            model: None,
+        }
+    }
+
+    /// The stop of `cfg` in [`BrakeMode::Modelled`] from the model's state `x` at the stop
+    /// decision, `held` (V) still applied for the period until the stop's first command (the
+    /// short when there is no state, or the configuration has no plant).
+    pub fn modelled(cfg: &Config, x: Option<State>, held: f64) -> Self {
+        let plant = cfg.spec.plant().ok();
+        let mut brake = Self::new(cfg, BrakeMode::Short);
+        if let (Some(plant), Some(x)) = (plant, x) {
+            let ts = cfg.period_s();
+            let substeps = (ts / plant.max_rk4_substep()).ceil().clamp(1.0, 1000.0) as usize;
+            let mut x = x;
+            plant.advance(&mut x, held, 0.0, ts, substeps);
+            brake.model = Some((plant, x, substeps, ts, 0));
+            brake.mode = BrakeMode::Modelled;
+        }
+        brake
+    }
+
+    /// The model's arm angle (rad) in [`BrakeMode::Modelled`].
+    pub fn model_arm(&self) -> Option<f64> {
+        self.model.as_ref().map(|m| m.1[0])
+    }
+
+    /// How it brakes now (a law whose sign proved wrong became [`BrakeMode::Short`]).
+    pub fn mode(&self) -> BrakeMode {
+        self.mode
+    }
+
+    /// Gives up the law for the short from now on.
+    pub fn short(&mut self) {
+        if self.mode != BrakeMode::None {
+            self.mode = BrakeMode::Short;
+        }
+    }
+
+    /// The command for the measured arm rate `rate` (rad/s; `None` without a fresh
+    /// measurement, which shorts the windings for that period).
+    pub fn command(&mut self, rate: Option<f64>) -> BrakeCommand {
+        let sign = match self.mode {
+            BrakeMode::Active => 1.0,
+            BrakeMode::Reversed => -1.0,
+            // A reading that moves after all: the model's arm is not the arm.
+            BrakeMode::Modelled if rate.is_some_and(|r| r.abs() > self.dead_band) => {
+                self.mode = BrakeMode::Short;
+                return BrakeCommand::Short;
+            }
+            BrakeMode::Modelled => return self.modelled_command(),
+            BrakeMode::Short | BrakeMode::None => return BrakeCommand::Short,
+        };
+        let Some(rate) = rate.filter(|r| r.is_finite()) else {
+            return BrakeCommand::Short;
+        };
+        let speed = rate.abs();
+        if self.mode == BrakeMode::Reversed && self.wrong_sign(speed) {
+            self.mode = BrakeMode::Short;
+            return BrakeCommand::Short;
+        }
+        if speed <= self.dead_band {
+            BrakeCommand::Volts(0.0)
+        } else {
+            BrakeCommand::Volts(sign * self.law.voltage(rate))
+        }
+    }
+
+    /// The law on the model's arm rate; the model then advances a period under it.
+    fn modelled_command(&mut self) -> BrakeCommand {
+        let rest_periods = (REST_S / self.law_period()).ceil() as u32;
+        let Some((plant, x, substeps, ts, still)) = self.model.as_mut() else {
+            self.mode = BrakeMode::Short;
+            return BrakeCommand::Short;
+        };
+        let rate = x[1];
+        let v = if rate.abs() <= self.dead_band {
+            *still += 1;
+            0.0
+        } else {
+            *still = 0;
+            self.law.voltage(rate)
+        };
+        plant.advance(x, v, 0.0, *ts, *substeps);
+        if *still >= rest_periods {
+            self.mode = BrakeMode::Short;
+            return BrakeCommand::Short;
+        }
+        BrakeCommand::Volts(v)
+    }
+
+    fn law_period(&self) -> f64 {
+        self.model.as_ref().map_or(0.01, |m| m.3)
+    }
+
+    /// Whether the reversed law, saturated, proves not to brake: a law that opposes the
+    /// motion slows the arm after the latency; one whose sign is wrong speeds it up period
+    /// after period, or holds it at the speed where the motor's back-EMF balances it.
+    fn wrong_sign(&mut self, speed: f64) -> bool {
+        let saturated = speed > self.law.linear_below;
+        if saturated && speed > self.last_speed + self.dead_band {
+            self.rising += 1;
+        } else {
+            self.rising = 0;
+        }
+        self.last_speed = speed;
+        if !saturated {
+            self.window = 0;
+            self.window_speed = f64::INFINITY;
+            return false;
+        }
+        if self.window == 0 {
+            self.window_speed = speed;
+        }
+        self.window += 1;
+        let stalled = self.window > PROGRESS_PERIODS && speed > 0.9 * self.window_speed;
+        if self.window > PROGRESS_PERIODS {
+            self.window = 0;
+        }
+        self.rising >= WRONG_SIGN_PERIODS || stalled
     }
 }
 
@@ -280,6 +467,8 @@ impl std::fmt::Display for BrakeReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let how = match self.mode {
             BrakeMode::Active => "braked at the voltage bound",
+            BrakeMode::Reversed => "braked at the voltage bound with the sign the arm showed",
+            BrakeMode::Modelled => "braked at the voltage bound on the model's arm",
             BrakeMode::Short => "braked with the windings shorted",
             BrakeMode::None => return write!(f, "no braking (motor not driven)"),
         };
@@ -320,7 +509,7 @@ pub fn bring_to_rest(
     reason: &StopReason,
     driven: bool,
 ) -> BrakeReport {
-    let mut mode = if driven {
+    let mode = if driven {
         brake_mode(reason)
     } else {
         BrakeMode::None
@@ -334,19 +523,14 @@ pub fn bring_to_rest(
     if mode == BrakeMode::None {
         return report;
     }
+    let mut brake = if mode == BrakeMode::Modelled {
+        Brake::modelled(cfg, core.witness_estimate(), core.held_voltage())
+    } else {
+        Brake::new(cfg, mode)
+    };
     let period_s = cfg.period_s();
-    let voltage = cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT);
-    let law = BrakingLaw::new(&cfg.spec.plant.params(), voltage, period_s);
-    // One count per period and a half: below it the measured rate is the encoder's
-    // quantisation, and the law would chatter between ±its gain per count.
-    let dead_band =
-        1.5 * std::f64::consts::TAU / cfg.device.arm_counts_per_rev.max(1) as f64 / period_s;
     let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
-    let rest_periods = (REST_S / period_s).ceil().max(1.0) as usize;
-    // The recent arm angles, for the rest test: a ring of the last `rest_periods + 1`.
-    let mut history = [f64::NAN; 64];
-    let ring = (rest_periods + 1).min(history.len());
-    let mut seen = 0usize;
+    let mut rest = RestTest::new(period_s);
     let mut last: Option<(f64, u32)> = None;
     let mut blind = 0u32;
     let mut tx = [0u8; MAX_FRAME];
@@ -355,9 +539,13 @@ pub fn bring_to_rest(
     periodic.restart();
     let start_ns = periodic.next_deadline_ns();
     let end_ns = start_ns + (MAX_BRAKE_S * 1e9) as u64;
+    // After the law brought the arm to rest, the windings stay shorted until it rests
+    // there too (a swinging pendulum still pushes it), and only then open (module docs).
+    let mut holding = false;
     loop {
         let tick = periodic.wait();
         report.seconds = (tick.deadline_ns - start_ns) as f64 * 1e-9;
+        report.mode = brake.mode();
         if tick.deadline_ns >= end_ns {
             return report;
         }
@@ -369,8 +557,7 @@ pub fn bring_to_rest(
         let Some(reply) = reply else {
             blind += 1;
             if blind >= BLIND_PERIODS {
-                mode = BrakeMode::Short;
-                report.mode = mode;
+                brake.short();
             }
             // Without a fresh measurement the law has no rate: short the windings.
             if !send(io, Command::BRAKE) {
@@ -394,29 +581,22 @@ pub fn bring_to_rest(
             _ => 0.0,
         };
         report.max_rate = report.max_rate.max(rate.abs());
-        history[seen % ring] = theta;
-        seen += 1;
-        if seen >= ring {
-            let (lo, hi) = history[..ring]
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
-                    (lo.min(v), hi.max(v))
-                });
-            if hi - lo < REST_TRAVEL {
+        // The model's arm while the stop runs on it: the reading is not the arm's.
+        if rest.observe(brake.model_arm().unwrap_or(theta)) {
+            if holding || brake.mode() == BrakeMode::Short {
                 report.at_rest = true;
                 return report;
             }
+            holding = true;
+            brake.short();
+            rest = RestTest::new(period_s);
         }
-        let command = match mode {
-            BrakeMode::Active => Command {
-                voltage_mv: if rate.abs() <= dead_band {
-                    0
-                } else {
-                    (law.voltage(rate) * 1000.0).round() as i16
-                },
+        let command = match brake.command(Some(rate)) {
+            BrakeCommand::Volts(v) => Command {
+                voltage_mv: (v * 1000.0).round() as i16,
                 flags: crate::protocol::COMMAND_ENABLE,
             },
-            _ => Command::BRAKE,
+            BrakeCommand::Short => Command::BRAKE,
         };
         if !send(io, command) {
             return report;
@@ -424,9 +604,130 @@ pub fn bring_to_rest(
     }
 }
 
+/// The stop's rest test: the arm moved less than [`REST_TRAVEL`] over the last [`REST_S`].
+/// Allocation-free (a ring of the recent angles).
+#[derive(Debug, Clone)]
+pub struct RestTest {
+    history: [f64; 64],
+    ring: usize,
+    seen: usize,
+}
+
+impl RestTest {
+    /// The test for a loop of period `period_s` (s).
+    pub fn new(period_s: f64) -> Self {
+        let rest_periods = (REST_S / period_s).ceil().max(1.0) as usize;
+        Self {
+            history: [f64::NAN; 64],
+            ring: (rest_periods + 1).min(64),
+            seen: 0,
+        }
+    }
+
+    /// Takes the next measured arm angle (rad); whether the arm is at rest.
+    pub fn observe(&mut self, theta: f64) -> bool {
+        self.history[self.seen % self.ring] = theta;
+        self.seen += 1;
+        if self.seen < self.ring {
+            return false;
+        }
+        let (lo, hi) = self.history[..self.ring]
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            });
+        hi - lo < REST_TRAVEL
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Spins the paper rig's arm to `speed` (rad/s), then runs `brake` on it for 2 s, the
+    /// motor's leads swapped if `reversed`, the reading that of a 2048-count encoder; the
+    /// arm's travel from the stop's start and its final speed.
+    fn braked(mut brake: Brake, reversed: bool, speed: f64) -> (f64, f64) {
+        use crate::plant::{Model, PlantSim, Windings};
+        let cfg = Config::from_toml("").unwrap();
+        let ts = cfg.period_s();
+        let q = std::f64::consts::TAU / 2048.0;
+        let mut sim = PlantSim::new(Model::Paper, 0.0, std::f64::consts::PI);
+        sim.set_state([0.0, speed, std::f64::consts::PI, 0.0]);
+        let read = |x: [f64; 4]| (x[0] / q).round() * q;
+        let mut last = read(sim.state());
+        let mut travel: f64 = 0.0;
+        for _ in 0..200 {
+            let theta = read(sim.state());
+            let rate = (theta - last) / ts;
+            last = theta;
+            let w = match brake.command(Some(rate)) {
+                BrakeCommand::Volts(v) => Windings::Driven(if reversed { -v } else { v }),
+                BrakeCommand::Short => Windings::Shorted,
+            };
+            sim.step_windings(w, ts);
+            travel = travel.max(sim.state()[0].abs());
+        }
+        (travel, sim.state()[1])
+    }
+
+    #[test]
+    fn a_reversed_rig_is_braked_by_the_reversed_law_and_a_wrong_diagnosis_falls_back_to_the_short()
+    {
+        let cfg = Config::from_toml("").unwrap();
+        // The law as it stands drives a reversed rig away; reversed, it brakes it, as far as
+        // the trusted law brakes a rig wired right.
+        let (right, v_right) = braked(Brake::new(&cfg, BrakeMode::Active), false, 10.0);
+        let (rev, v_rev) = braked(Brake::new(&cfg, BrakeMode::Reversed), true, 10.0);
+        assert!(
+            v_right.abs() < 0.1 && v_rev.abs() < 0.1,
+            "{v_right} {v_rev}"
+        );
+        assert!((rev - right).abs() < 0.05 * right, "{rev} vs {right}");
+        // The reversed law on a rig wired right speeds the arm up: the stop shorts instead
+        // after a few periods (here 9.2 rad of travel from 10 rad/s, against 6.9 rad for the
+        // short alone and 1.4 rad for the law with the right sign).
+        let (short, _) = braked(Brake::new(&cfg, BrakeMode::Short), false, 10.0);
+        let (travel, v) = braked(Brake::new(&cfg, BrakeMode::Reversed), false, 10.0);
+        assert!(v.abs() < 1.0, "{v}");
+        assert!(travel < 1.4 * short, "{travel} vs {short}");
+        assert!(short > 2.0 * right, "{short} {right}");
+    }
+
+    #[test]
+    fn a_modelled_stop_brakes_as_the_trusted_law_and_a_moving_reading_ends_it() {
+        let cfg = Config::from_toml("").unwrap();
+        let x = State::new(0.0, 10.0, std::f64::consts::PI, 0.0);
+        let (right, _) = braked(Brake::new(&cfg, BrakeMode::Active), false, 10.0);
+        // The reading is frozen: the model's rate is all the stop has.
+        let mut brake = Brake::modelled(&cfg, Some(x), 0.0);
+        assert_eq!(brake.mode(), BrakeMode::Modelled);
+        let mut sim = crate::plant::PlantSim::new(crate::plant::Model::Paper, 0.0, 0.0);
+        sim.set_state([0.0, 10.0, std::f64::consts::PI, 0.0]);
+        // The period until the stop's first command, at the voltage held (0 V).
+        sim.step_windings(crate::plant::Windings::Driven(0.0), cfg.period_s());
+        let mut travel: f64 = 0.0;
+        for _ in 0..200 {
+            let w = match brake.command(Some(0.0)) {
+                BrakeCommand::Volts(v) => crate::plant::Windings::Driven(v),
+                BrakeCommand::Short => crate::plant::Windings::Shorted,
+            };
+            sim.step_windings(w, cfg.period_s());
+            travel = travel.max(sim.state()[0].abs());
+        }
+        assert_eq!(brake.mode(), BrakeMode::Short);
+        // At rest but for the pendulum's swing, which the short then damps.
+        assert!(sim.state()[1].abs() < 1.0, "{:?}", sim.state());
+        // Within half a radian of the law on the measured rate, which keeps braking against
+        // the pendulum's reaction after the arm's rest where the modelled stop shorts (1.55
+        // against 1.07 rad from 10 rad/s; the short alone: 6.9 rad).
+        assert!(travel < right + 0.5, "{travel} vs {right}");
+        // A reading that moves: the model is not the arm.
+        let mut brake = Brake::modelled(&cfg, Some(x), 0.0);
+        assert_eq!(brake.command(Some(3.0)), BrakeCommand::Short);
+        assert_eq!(brake.mode(), BrakeMode::Short);
+        assert_eq!(Brake::modelled(&cfg, None, 0.0).mode(), BrakeMode::Short);
+    }
 
     #[test]
     fn the_envelope_stops_a_fast_arm_before_its_limit_and_lets_a_slow_one_run() {

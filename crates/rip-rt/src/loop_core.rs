@@ -205,6 +205,11 @@ impl LoopCore {
         self
     }
 
+    /// The witness's estimate of the rig's state ([`Witness::estimate`]).
+    pub fn witness_estimate(&self) -> Option<rip_core::plant::State> {
+        self.witness.as_ref().and_then(Witness::estimate)
+    }
+
     /// The witness's largest statistics so far ([`Witness::peak`]).
     pub fn witness_peak(&self) -> Option<[f64; 3]> {
         self.witness.as_ref().map(Witness::peak)
