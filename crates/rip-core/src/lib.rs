@@ -22,6 +22,8 @@
 //!   [`sim::vec_env`] steps many pendulums as reinforcement-learning environments.
 //! - [`mpc`] — constrained MPC with soft output bounds and the disturbance-model Kalman filter
 //!   ([`Mpc`]), solved by Clarabel or a dense active-set method.
+//! - [`preflight`] — the checks before a run: an untrusted identification, a rig no controller
+//!   can balance at the voltage bound, a controller predicted to fall.
 //! - [`spec`] — the experiment file every front end reads ([`Spec`]), and the one assembly of
 //!   LQR, LQG and MPC from it.
 //! - [`excitation`] — chirp, PRBS, steps and free-swing signals for identification runs, and
@@ -47,6 +49,7 @@ pub mod metrics;
 pub mod mpc;
 pub mod paper;
 pub mod plant;
+pub mod preflight;
 pub mod regulators;
 pub mod rig;
 pub mod sim;
