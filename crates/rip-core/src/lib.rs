@@ -22,6 +22,7 @@
 //!   [`sim::vec_env`] steps many pendulums as reinforcement-learning environments.
 //! - [`mpc`] — constrained MPC with soft output bounds and the disturbance-model Kalman filter
 //!   ([`Mpc`]), solved by Clarabel or a dense active-set method.
+//! - [`margins`] — gain, phase and disk margins of a controller's loop at the plant input.
 //! - [`preflight`] — the checks before a run: an untrusted identification, a rig no controller
 //!   can balance at the voltage bound, a controller predicted to fall.
 //! - [`spec`] — the experiment file every front end reads ([`Spec`]), and the one assembly of
@@ -45,6 +46,7 @@ pub mod identify;
 pub mod kalman;
 pub mod linalg;
 pub mod lqr;
+pub mod margins;
 pub mod metrics;
 pub mod mpc;
 pub mod paper;

@@ -31,7 +31,8 @@
 //!   friction and stiction; `[sensor]`; the `[reference]` step), three noise seeds of at most
 //!   [`PREDICTION_HORIZON`] seconds, faster than real time. A run that falls, diverges or
 //!   carries the arm past `safety.arm_limit` refuses, naming the seed, the time and the
-//!   angle.
+//!   angle. A controller too slow to simulate within [`PREDICTION_BUDGET`] is not predicted
+//!   (a warning): the loop's timing probe judges it.
 //!
 //! Further checks (the swing-up's feasibility, a stored tuning's verdict) join by adding a
 //! function to [`CHECKS`]; each returns `None` when it does not apply to the input.
@@ -48,6 +49,10 @@ use crate::spec::{ControllerKind, Design};
 /// Longest simulated run (s) of the prediction check: long enough to see a limit cycle build
 /// up or the arm settle after the paper's step at 1 s.
 pub const PREDICTION_HORIZON: f64 = 10.0;
+
+/// Longest time (s) the prediction check may take; a controller whose simulation would take
+/// longer is not predicted (a warning).
+pub const PREDICTION_BUDGET: f64 = 3.0;
 
 /// Noise seeds of the prediction check.
 pub const PREDICTION_SEEDS: [u64; 3] = [1, 2, 3];
@@ -313,6 +318,29 @@ fn prediction(input: &Input<'_>) -> Option<Finding> {
         Ok(c) => c,
         Err(e) => return Some(Finding::new("prediction", Verdict::Refuse, e.to_string())),
     };
+    // A controller too slow to simulate in the budget (a long MPC horizon) is left to the
+    // loop's own timing probe: the pre-flight must not hold the run for long.
+    let steps = (spec.reference.duration.min(PREDICTION_HORIZON) / design.ts()).ceil();
+    let per_step = {
+        let start = std::time::Instant::now();
+        let mut u = [0.0];
+        for _ in 0..10 {
+            controller.step(&[0.0, 0.01], &[0.0, 0.0], &mut u);
+        }
+        start.elapsed().as_secs_f64() / 10.0
+    };
+    let estimate = per_step * steps * PREDICTION_SEEDS.len() as f64;
+    if estimate > PREDICTION_BUDGET {
+        return Some(Finding::new(
+            "prediction",
+            Verdict::Warn,
+            format!(
+                "not predicted: {} takes {:.2} ms a step, {estimate:.1} s to simulate, more                  than the pre-flight's {PREDICTION_BUDGET} s",
+                kind.name(),
+                per_step * 1e3
+            ),
+        ));
+    }
     let mut worst_arm = 0.0f64;
     let mut worst_alpha = 0.0f64;
     let mut horizon = 0.0;
