@@ -25,6 +25,7 @@
 //! - [`margins`] — gain, phase and disk margins of a controller's loop at the plant input.
 //! - [`preflight`] — the checks before a run: an untrusted identification, a rig no controller
 //!   can balance at the voltage bound, a controller predicted to fall.
+//! - [`tune`] — shared weights for LQR, LQG and MPC chosen for the rig in the file.
 //! - [`spec`] — the experiment file every front end reads ([`Spec`]), and the one assembly of
 //!   LQR, LQG and MPC from it.
 //! - [`excitation`] — chirp, PRBS, steps and free-swing signals for identification runs, and
@@ -58,6 +59,7 @@ pub mod sim;
 pub mod spec;
 pub mod swingup;
 pub mod trig;
+pub mod tune;
 
 pub use compensation::{Compensated, Compensation};
 pub use controller::{Controller, Phase, StepStatus, StopCause};
