@@ -540,7 +540,10 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
             Ok(c) => {
                 let x0 = c.spec.plant.initial_state;
                 (
-                    Model::Params(c.spec.plant.params()),
+                    match c.spec.plant.arm_breakaway {
+                        Some(cs) => Model::Stiction(c.spec.plant.params(), cs),
+                        None => Model::Params(c.spec.plant.params()),
+                    },
                     c.spec.sensor,
                     x0[0],
                     x0[2],
