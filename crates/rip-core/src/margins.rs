@@ -75,8 +75,8 @@ pub struct Margins {
 }
 
 impl Margins {
-    /// All zero: an unstable loop.
-    fn unstable() -> Self {
+    /// All zero: an unstable loop (or one not measured).
+    pub(crate) fn unstable() -> Self {
         Self {
             stable: false,
             gain_margin_db: 0.0,
