@@ -209,7 +209,8 @@ class TuneResult:
             f"{n} {'ok' if c.works else 'misses the bar'}" for n, c in self.controllers.items()
         )
         head.append(f"# Tuned by riprs tune ({summary}).")
-        return "\n".join(head) + "\n" + self.spec.to_toml()
+        body = _without_defaults(self.spec.to_toml(), ("controllers", "monte_carlo"))
+        return "\n".join(head) + "\n" + body
 
 
 @dataclass(frozen=True)
@@ -229,6 +230,40 @@ class PreflightFinding:
     check: str
     verdict: str
     message: str
+
+
+def _blocks(text: str) -> List[Tuple[str, str]]:
+    """``(name, text)`` of each top-level block of a resolved spec: the keys before the first
+    table under ``""``, then each table (``[[...]]`` arrays under their own name)."""
+    out: List[Tuple[str, str]] = [("", "")]
+    for line in text.splitlines(keepends=True):
+        if line.startswith("["):
+            out.append((line.strip().strip("[]"), line))
+        else:
+            out[-1] = (out[-1][0], out[-1][1] + line)
+    return out
+
+
+def _without_defaults(text: str, names: Tuple[str, ...]) -> str:
+    """``text`` without the top-level ``controllers`` key and the tables of ``names`` where
+    they are the defaults, so that the tuned file is also the experiment part of a campaign
+    spec (which sets its controllers and runs in ``[campaign]``)."""
+    default = dict(_blocks(Spec().to_toml()))
+    keep = []
+    for name, block in _blocks(text):
+        if name == "":
+            lines = block.splitlines(keepends=True)
+            plain = [ln for ln in lines if not ln.startswith("controllers")]
+            if "controllers" in names and "".join(plain) != block:
+                default_top = [ln for ln in default[""].splitlines(keepends=True)]
+                if [ln for ln in lines if ln.startswith("controllers")] == [
+                    ln for ln in default_top if ln.startswith("controllers")
+                ]:
+                    block = "".join(plain)
+        elif name in names and block == default.get(name):
+            continue
+        keep.append(block)
+    return "".join(keep).lstrip("\n")
 
 
 def _spec(rig: Union[Spec, PathLike]) -> Spec:
