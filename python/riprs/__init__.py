@@ -30,6 +30,7 @@ from riprs.plant import FurutaParams, Plant
 from riprs.rig import Rig, random_rig
 from riprs.sim import BatchMetrics, SimResult, simulate, simulate_batch, simulate_metrics
 from riprs.statespace import StateSpace
+from riprs.tune import TuneResult, tune
 
 __all__ = [
     "BatchMetrics",
@@ -63,6 +64,7 @@ __all__ = [
     "Spec",
     "StateSpace",
     "SwingUp",
+    "TuneResult",
     "__version__",
     "c2d",
     "dare",
@@ -79,4 +81,5 @@ __all__ = [
     "simulate",
     "simulate_batch",
     "simulate_metrics",
+    "tune",
 ]

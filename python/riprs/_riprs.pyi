@@ -632,3 +632,29 @@ class EnvObserver:
 def env_replay(
     plant: Plant, y: ArrayLike, u: ArrayLike, Ts: float, substeps: int
 ) -> tuple[_F, tuple[float, float]]: ...
+
+def loop_margins(
+    spec: Spec, controller: _ControllerName, Ts: float = ...
+) -> dict[str, float | bool]: ...
+def loop_response(
+    spec: Spec, controller: _ControllerName, w: NDArray[np.float64], Ts: float = ...
+) -> _C | None: ...
+def tune_weights(
+    spec: Spec, Ts: float = ...
+) -> tuple[Spec, dict[str, float], bool, list[dict[str, Any]], int]: ...
+def tune_robustness(
+    spec: Spec,
+    runs: int,
+    seed: int,
+    Ts: float = ...,
+    spread: float = ...,
+    names: Sequence[str] | None = ...,
+    log_covariance: NDArray[np.float64] | None = ...,
+) -> list[tuple[str, float]]: ...
+def preflight_check(
+    spec: Spec,
+    controller: _ControllerName,
+    Ts: float = ...,
+    rig_file: str | os.PathLike[str] | None = ...,
+    arm_limit: float | None = ...,
+) -> list[tuple[str, str, str]]: ...

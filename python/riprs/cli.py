@@ -185,6 +185,26 @@ def cmd_identify(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_tune(args: argparse.Namespace) -> int:
+    """Choose shared LQR/LQG/MPC weights for a rig and write the tuned experiment file."""
+    from pathlib import Path
+
+    from riprs.tune import tune
+
+    result = tune(
+        args.rig, runs=args.runs, seed=args.seed, spread=args.spread, progress=not args.quiet
+    )
+    print(result.report())
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staged = out.with_name(out.name + ".tmp")
+    staged.write_text(result.to_toml())
+    staged.replace(out)
+    print()
+    print(f"wrote {out} (riprs compare --config, riprs campaign and rip-rt run --config read it)")
+    return 0
+
+
 REFERENCE_HEADER = """# Configuration reference
 
 One TOML file drives `riprs compare --config FILE`, `riprs.load_config(FILE)`,
@@ -357,6 +377,31 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ident.add_argument("--no-plots", action="store_true", help="skip the figures")
     ident.set_defaults(func=cmd_identify)
+    tun = sub.add_parser(
+        "tune",
+        help="choose shared LQR/LQG/MPC weights for a rig and write the tuned file",
+        description="Keeps the file's shared weights where they work; otherwise chooses shared "
+        "weights (one Q, R for LQR, LQG and MPC; the estimator's measurement noise; integral "
+        "action where needed) that stay inside the voltage bound on the reference step, keep "
+        "margins of 6 dB and 30 deg at the plant input (or the disk margin of that disk) and "
+        "balance the rig's model within the bar; prints per controller the predicted RMSE, "
+        "margins and the fraction of rigs drawn around this one that it balances.",
+    )
+    tun.add_argument("rig", metavar="RIG.toml", help="the rig's experiment file")
+    tun.add_argument("--out", metavar="TUNED.toml", required=True, help="tuned file to write")
+    tun.add_argument(
+        "--runs", type=int, default=20, metavar="N", help="robustness runs per controller"
+    )
+    tun.add_argument("--seed", type=int, default=0, metavar="N", help="their seed")
+    tun.add_argument(
+        "--spread",
+        type=float,
+        default=0.1,
+        metavar="F",
+        help="relative spread of each parameter without an identification covariance",
+    )
+    tun.add_argument("--quiet", action="store_true", help="no progress bar")
+    tun.set_defaults(func=cmd_tune)
     return parser
 
 

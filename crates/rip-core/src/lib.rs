@@ -22,6 +22,10 @@
 //!   [`sim::vec_env`] steps many pendulums as reinforcement-learning environments.
 //! - [`mpc`] — constrained MPC with soft output bounds and the disturbance-model Kalman filter
 //!   ([`Mpc`]), solved by Clarabel or a dense active-set method.
+//! - [`margins`] — gain, phase and disk margins of a controller's loop at the plant input.
+//! - [`preflight`] — the checks before a run: an untrusted identification, a rig no controller
+//!   can balance at the voltage bound, a controller predicted to fall.
+//! - [`tune`] — shared weights for LQR, LQG and MPC chosen for the rig in the file.
 //! - [`spec`] — the experiment file every front end reads ([`Spec`]), and the one assembly of
 //!   LQR, LQG and MPC from it.
 //! - [`excitation`] — chirp, PRBS, steps and free-swing signals for identification runs, and
@@ -43,16 +47,19 @@ pub mod identify;
 pub mod kalman;
 pub mod linalg;
 pub mod lqr;
+pub mod margins;
 pub mod metrics;
 pub mod mpc;
 pub mod paper;
 pub mod plant;
+pub mod preflight;
 pub mod regulators;
 pub mod rig;
 pub mod sim;
 pub mod spec;
 pub mod swingup;
 pub mod trig;
+pub mod tune;
 
 pub use compensation::{Compensated, Compensation};
 pub use controller::{Controller, Phase, StepStatus, StopCause};

@@ -57,6 +57,9 @@ Exit codes (docs/rip-rt.md has the safety rules behind each):
          encoder, or a silent encoder (the message says what to swap or flip)
     15   the rig did not move as commanded (the witness: the measured motion disagrees with
          what the applied voltage must produce; the message names the likely fault)
+    16   refused to start by the pre-flight check: an untrusted identification, a rig no
+         controller can balance at the voltage bound, or a controller predicted to fall (the
+         message says why; --force runs it anyway; motor never enabled)
     101  internal error (panic)
     128+N  stopped by signal N: 129 SIGHUP, 130 SIGINT (Ctrl-C), 131 SIGQUIT, 138 SIGUSR1,
          143 SIGTERM, 148 SIGTSTP (Ctrl-Z ends the run), ...; a fatal signal (SIGSEGV,
@@ -227,6 +230,10 @@ struct RunArgs {
     /// the emulator advances its plant one period per exchange (refused by any other device).
     #[arg(long)]
     lockstep: bool,
+    /// Run even when the pre-flight check refuses (an untrusted identification, a rig no
+    /// controller can balance at the voltage bound, a controller predicted to fall; exit 16).
+    #[arg(long)]
+    force: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -363,6 +370,16 @@ fn prepare(
         controllers::build(args.controller, &cfg)
     }
     .map_err(SetupError::Design)?;
+    let report = controllers::preflight(args.controller, &cfg, args.config.as_deref())
+        .map_err(SetupError::Design)?;
+    if report.refused() {
+        if !args.force {
+            return Err(SetupError::Preflight(report.to_string()));
+        }
+        for f in report.refusals() {
+            rip_rt::say!("rip-rt: warning: --force: {f}");
+        }
+    }
     let core = LoopCore::new(controller, &cfg)?;
     let n_estimates = core.state_estimate().map_or(0, |x| x.len());
     stop::install_signal_handlers()?;
@@ -546,7 +563,10 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
                 let x0 = c.spec.plant.initial_state;
                 let period_s = c.period_s();
                 (
-                    Model::Params(c.spec.plant.params()),
+                    match c.spec.plant.arm_breakaway {
+                        Some(cs) => Model::Stiction(c.spec.plant.params(), cs),
+                        None => Model::Params(c.spec.plant.params()),
+                    },
                     c.spec.sensor,
                     x0[0],
                     x0[2],

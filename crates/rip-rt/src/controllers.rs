@@ -81,6 +81,23 @@ fn design(kind: ControllerKind, cfg: &Config) -> Result<rip_core::spec::Design, 
         .map_err(|e| format!("{kind} design: {e}"))
 }
 
+/// The pre-flight check (rip-core's [`rip_core::preflight`]) of the balance controller `kind`
+/// as [`build`] designs it, on the rig of `cfg` (from the file `rig_file`), with
+/// `safety.arm_limit` as the arm's bound.
+pub fn preflight(
+    kind: ControllerKind,
+    cfg: &Config,
+    rig_file: Option<&std::path::Path>,
+) -> Result<rip_core::preflight::Report, String> {
+    let design = design(kind, cfg)?;
+    Ok(rip_core::preflight::run(&rip_core::preflight::Input {
+        design: &design,
+        controller: kind.into(),
+        rig_file,
+        arm_limit: Some(cfg.safety.arm_limit),
+    }))
+}
+
 /// Builds the controller `kind` as configured, at the loop period. Its input bounds are the
 /// file's `[mpc] input_bounds` inside `±safety.voltage_limit`, so that no controller plans
 /// with more voltage than the loop will send; the `[compensation]` of the dead zone and arm

@@ -30,6 +30,9 @@ pub enum Model {
     QubeServo2,
     /// The parameters of a configuration file's `[plant]` section.
     Params(FurutaParams),
+    /// The same with the arm's stiction: breakaway torque (N·m) above its Coulomb level
+    /// (`plant.arm_breakaway`, rip-core's [`Plant::with_arm_breakaway`]).
+    Stiction(FurutaParams, f64),
 }
 
 /// A simulated pendulum: the nonlinear plant and its state.
@@ -49,6 +52,9 @@ impl PlantSim {
             Model::QubeServo2 => Plant::qube_servo2(),
             // Checked when the file was read (rip_core::spec).
             Model::Params(p) => Plant::new(p).expect("validated [plant] parameters"),
+            Model::Stiction(p, cs) => Plant::new(p)
+                .and_then(|plant| plant.with_arm_breakaway(cs))
+                .expect("validated [plant] parameters and arm_breakaway"),
         };
         Self {
             max_substep: plant.max_rk4_substep(),
@@ -111,6 +117,31 @@ impl PlantSim {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The emulator's stiction is rip-core's: the same plant, step for step, and not the
+    /// plant without it.
+    #[test]
+    fn the_emulator_sticks_as_the_simulated_plant_does() {
+        let p = FurutaParams {
+            cr: 0.003,
+            vd: 0.4,
+            ..FurutaParams::qube_servo2()
+        };
+        let reference = Plant::new(p).unwrap().with_arm_breakaway(0.006).unwrap();
+        let mut sim = PlantSim::new(Model::Stiction(p, 0.006), 0.0, 0.2);
+        let mut free = PlantSim::new(Model::Params(p), 0.0, 0.2);
+        let mut x = State::new(0.0, 0.0, 0.2, 0.0);
+        let substeps = (0.01 / sim.max_substep).ceil().clamp(1.0, 1000.0) as usize;
+        for k in 0..200 {
+            // A voltage that breaks the arm loose now and then.
+            let u = 1.5 * (f64::from(k) * 0.07).sin();
+            sim.step(u, 0.01);
+            free.step(u, 0.01);
+            reference.advance(&mut x, u, 0.0, 0.01, substeps);
+            assert_eq!(sim.state(), [x[0], x[1], x[2], x[3]], "step {k}");
+        }
+        assert!((free.state()[0] - sim.state()[0]).abs() > 1e-4);
+    }
 
     /// Energy balance, `E(T) − E(0) = −∫ c θ̇² dt` on a plant without pendulum damping, with
     /// `c = d_r` when the windings are open and `d_r + k_t k_m / R_m` when shorted (no source

@@ -78,6 +78,10 @@ pub mod exit_code {
     /// motion disagreeing with what the applied voltage must produce (a motor lead swapped, an
     /// encoder reversed or not counting).
     pub const WITNESS: i32 = 15;
+    /// Refused to start: the pre-flight check (rip-core's `preflight`) refused the run (an
+    /// untrusted identification, a rig no controller can balance at the voltage bound, a
+    /// controller predicted to fall); `--force` runs it anyway. The motor was never enabled.
+    pub const PREFLIGHT: i32 = 16;
     /// A panic (Rust's own exit code for one).
     pub const PANIC: i32 = 101;
     /// Stopped by a signal: 128 + its number (130 SIGINT, 143 SIGTERM, 129 SIGHUP, …).
@@ -333,14 +337,18 @@ pub enum SetupError {
     /// The log could not be created or its header not written.
     #[error(transparent)]
     Log(#[from] LogError),
+    /// The pre-flight check refused the run (its findings, one a line).
+    #[error("the pre-flight check refuses this run (--force runs it anyway):\n{0}")]
+    Preflight(String),
 }
 
 impl SetupError {
-    /// The process exit code: [`exit_code::USAGE`] for a bad configuration, else
-    /// [`exit_code::SETUP`].
+    /// The process exit code: [`exit_code::USAGE`] for a bad configuration,
+    /// [`exit_code::PREFLIGHT`] for a pre-flight refusal, else [`exit_code::SETUP`].
     pub fn exit_code(&self) -> i32 {
         match self {
             SetupError::Config(_) => exit_code::USAGE,
+            SetupError::Preflight(_) => exit_code::PREFLIGHT,
             _ => exit_code::SETUP,
         }
     }

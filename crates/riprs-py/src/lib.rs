@@ -23,6 +23,7 @@ mod shared;
 mod sim;
 mod spec;
 mod swingup;
+mod tune;
 
 #[pymodule]
 fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -41,5 +42,6 @@ fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     rip_rt_cli::register(m)?;
     rig::register(m)?;
     envs::register(m)?;
+    tune::register(m)?;
     Ok(())
 }

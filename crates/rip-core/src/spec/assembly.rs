@@ -300,6 +300,11 @@ fn integral_model(a: &Mat, b: &Mat, ts: f64, q: &[f64; 4], qi: f64) -> (Mat, Mat
 }
 
 impl Design {
+    /// The spec this design was built from.
+    pub fn spec(&self) -> &Spec {
+        &self.spec
+    }
+
     /// The sample time (s) of every controller of this design.
     pub fn ts(&self) -> f64 {
         self.ts

@@ -1,0 +1,482 @@
+//! Per-rig tuning: shared weights for LQR, LQG and MPC that balance the rig in the file.
+//!
+//! The paper's thesis is one cost for all three controllers, so the tuning keeps them
+//! shared: a candidate scales the arm weights `Q[0], Q[1]` by `q_θ`, the pendulum weights
+//! `Q[2], Q[3]` by `q_α` and `R` by `ρ`; the MPC's weights enter its cost squared, so its
+//! `w^y` scale by `√q_θ, √q_α` and its `w^u, w^Δu` by `√ρ`, and the cost stays the one cost
+//! of the file, reweighted alike. A candidate may lower the shared estimator's measurement
+//! noise (loop transfer recovery, [`candidates`]) and add integral action
+//! (`lqr.integral_weight`, MATLAB's `lqi`) to LQR and LQG; the MPC has its output-disturbance
+//! model already.
+//!
+//! A candidate **works** when every controller, on the rig's nonlinear model (its dead zone,
+//! friction and stiction; `[sensor]`; the `[reference]` step, [`SEEDS`] noise seeds) and with
+//! the file's compensation:
+//!
+//! - balances (no fall, no divergence), with the steady state over the last
+//!   [`Bar::window`] seconds inside the bar: arm peak-to-peak, pendulum `|α|`, arm offset
+//!   `|mean θ − θ_ref|`;
+//! - respects the voltage bound: LQR and LQG never reach their clamp (the MPC plans within
+//!   it by construction);
+//! - has robustness margins of its linearised loop at the plant input (crate::margins) of at
+//!   least [`Bar::gain_margin_db`] both ways and [`Bar::phase_margin_deg`], or the disk margin
+//!   of the same disk ([`Bar::disk_margin`]).
+//!
+//! [`tune`] tries the file's own weights first and keeps them when they work; otherwise the
+//! candidates of [`candidates`] in order (closest to the file's first) and keeps the first
+//! that works, or, when none does, the one that misses the bar by least (and says so),
+//! preferring one that balances within the bar and the voltage bound with margins short of
+//! the bar to one that does not balance within it.
+//! [`robustness`] then draws rigs around the file's (each parameter within ±10 %, or from
+//! the identification's covariance) and counts the runs each tuned controller balances.
+
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+
+use crate::margins::Margins;
+use crate::metrics::table1_rmse;
+use crate::plant::{FurutaParams, Plant};
+use crate::sim::simulate;
+use crate::spec::{ControllerKind, Spec, SpecError};
+
+/// Noise seeds of each candidate's simulations.
+pub const SEEDS: [u64; 2] = [11, 12];
+
+/// What "works" means (module docs). `Default` is the bar: 0.05 rad arm
+/// peak-to-peak, 0.02 rad pendulum, 0.02 rad offset over the last 3 s; 6 dB and 30°.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bar {
+    /// Largest steady-state arm peak-to-peak (rad).
+    pub arm_peak_to_peak: f64,
+    /// Largest steady-state `|α|` (rad).
+    pub pendulum: f64,
+    /// Largest steady-state arm offset from the reference (rad).
+    pub offset: f64,
+    /// The steady-state window at the end of the run (s).
+    pub window: f64,
+    /// Smallest gain margin, both ways (dB).
+    pub gain_margin_db: f64,
+    /// Smallest phase margin (degrees).
+    pub phase_margin_deg: f64,
+    /// The disk margin accepted in place of the classical ones: the `α` whose disk gives
+    /// `gain_margin_db` (`(2 + α)/(2 − α) = 10^{gm/20}`, 0.67 for 6 dB; its phase margin
+    /// `2 atan(α/2)` is 36.9°).
+    pub disk_margin: f64,
+}
+
+impl Default for Bar {
+    fn default() -> Self {
+        let f = 10f64.powf(6.0 / 20.0);
+        Self {
+            arm_peak_to_peak: 0.05,
+            pendulum: 0.02,
+            offset: 0.02,
+            window: 3.0,
+            gain_margin_db: 6.0,
+            phase_margin_deg: 30.0,
+            disk_margin: 2.0 * (f - 1.0) / (f + 1.0),
+        }
+    }
+}
+
+/// One candidate's change to the file's weights (module docs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Weights {
+    /// Factor `q_θ` on the arm weights.
+    pub arm: f64,
+    /// Factor `q_α` on the pendulum weights.
+    pub pendulum: f64,
+    /// Factor `ρ` on `R`.
+    pub input: f64,
+    /// `lqr.integral_weight` (0: none).
+    pub integral_weight: f64,
+    /// Factor on `kalman.measurement_noise` (the shared estimator's `D_n`).
+    pub measurement_noise: f64,
+}
+
+impl Weights {
+    /// The file's own weights.
+    pub const FILE: Weights = Weights {
+        arm: 1.0,
+        pendulum: 1.0,
+        input: 1.0,
+        integral_weight: 0.0,
+        measurement_noise: 1.0,
+    };
+
+    /// `spec` with these weights (module docs); the integral weight replaces the file's only
+    /// when it is positive here or the other factors change nothing.
+    pub fn apply(&self, spec: &Spec) -> Spec {
+        let mut s = spec.clone();
+        s.lqr.Q[0] *= self.arm;
+        s.lqr.Q[1] *= self.arm;
+        s.lqr.Q[2] *= self.pendulum;
+        s.lqr.Q[3] *= self.pendulum;
+        s.lqr.R *= self.input;
+        if *self != Self::FILE {
+            s.lqr.integral_weight = self.integral_weight;
+        }
+        s.mpc.output_weights[0] *= self.arm.sqrt();
+        s.mpc.output_weights[1] *= self.pendulum.sqrt();
+        s.mpc.input_rate_weights[0] *= self.input.sqrt();
+        s.mpc.input_weights[0] *= self.input.sqrt();
+        for v in s.kalman.measurement_noise.iter_mut() {
+            *v *= self.measurement_noise;
+        }
+        s
+    }
+}
+
+/// The candidates after the file's own weights, closest to them first: the estimator's
+/// measurement noise lowered (loop transfer recovery at the plant input: the shared Kalman
+/// filter already models unit noise on the scaled input, so a smaller `D_n` makes LQG's loop
+/// approach LQR's, whose margins it otherwise loses); `R` raised (a gentler loop that stays
+/// inside the voltage bound on the step) or lowered; the arm weighted more; then integral
+/// action (`q_i = Q[0]` of the tuned `Q`).
+pub fn candidates(spec: &Spec) -> Vec<Weights> {
+    let mut out = Vec::new();
+    let q0 = spec.lqr.Q[0];
+    for integral in [0.0, 1.0] {
+        for noise in [1.0, 0.1, 0.01, 0.001] {
+            for arm in [1.0, 4.0, 16.0] {
+                for input in [1.0, 3.0, 10.0, 30.0, 100.0] {
+                    let w = Weights {
+                        arm,
+                        pendulum: 1.0,
+                        input,
+                        integral_weight: integral * q0 * arm,
+                        measurement_noise: noise,
+                    };
+                    if w != Weights::FILE {
+                        out.push(w);
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// How one controller does on the rig (module docs), the worst over [`SEEDS`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Assessment {
+    /// The controller.
+    pub kind: ControllerKind,
+    /// Its margins at the plant input.
+    pub margins: Margins,
+    /// The paper's Tab. 1 RMSE `[θ, α, u]` of the first seed's run.
+    pub rmse: [f64; 3],
+    /// Largest `|u|` applied (V).
+    pub peak_voltage: f64,
+    /// Whether LQR or LQG reached its clamp.
+    pub saturated: bool,
+    /// Whether a run fell or diverged.
+    pub fell: bool,
+    /// Steady-state arm peak-to-peak (rad).
+    pub arm_peak_to_peak: f64,
+    /// Steady-state largest `|α|` (rad).
+    pub pendulum: f64,
+    /// Steady-state `|mean θ − θ_ref|` (rad).
+    pub offset: f64,
+}
+
+impl Assessment {
+    /// Whether the margins meet the bar (classical, or the disk's).
+    pub fn margins_ok(&self, bar: &Bar) -> bool {
+        self.margins.meets(bar.gain_margin_db, bar.phase_margin_deg)
+            || (self.margins.stable && self.margins.disk_margin >= bar.disk_margin)
+    }
+
+    /// Whether the steady state meets the bar and the run did not fall.
+    pub fn balances(&self, bar: &Bar) -> bool {
+        !self.fell
+            && self.arm_peak_to_peak <= bar.arm_peak_to_peak
+            && self.pendulum <= bar.pendulum
+            && self.offset <= bar.offset
+    }
+
+    /// Whether everything of the bar holds (module docs).
+    pub fn works(&self, bar: &Bar) -> bool {
+        self.balances(bar) && !self.saturated && self.margins_ok(bar)
+    }
+
+    /// How far from the bar (0 when it [works](Self::works)): the relative excess of each
+    /// steady-state figure and margin, a fall or saturation counting 10 and 1.
+    pub fn shortfall(&self, bar: &Bar) -> f64 {
+        let over = |v: f64, limit: f64| (v / limit - 1.0).max(0.0);
+        let mut s = if self.fell { 10.0 } else { 0.0 };
+        if !self.fell {
+            s += over(self.arm_peak_to_peak, bar.arm_peak_to_peak)
+                + over(self.pendulum, bar.pendulum)
+                + over(self.offset, bar.offset);
+        }
+        if self.saturated {
+            s += 1.0;
+        }
+        if !self.margins_ok(bar) {
+            s += if self.margins.stable {
+                (1.0 - self.margins.disk_margin / bar.disk_margin).max(0.0)
+            } else {
+                2.0
+            };
+        }
+        s
+    }
+}
+
+/// Assesses every controller of `spec` on its rig at sample time `ts` (module docs).
+pub fn assess(spec: &Spec, ts: f64, bar: &Bar) -> Result<Vec<Assessment>, SpecError> {
+    Ok(assess_until(spec, ts, bar, false)?.0)
+}
+
+/// [`assess`]; with `stop_early`, the assessment stops at the first controller that does not
+/// balance within the bar and the voltage bound, and the margins are measured only when all
+/// do (the search needs no more to rank such a candidate). The flag says whether it is
+/// complete.
+fn assess_until(
+    spec: &Spec,
+    ts: f64,
+    bar: &Bar,
+    stop_early: bool,
+) -> Result<(Vec<Assessment>, bool), SpecError> {
+    let design = spec.design(ts)?;
+    let plant = spec.plant()?;
+    let (lo, hi) = design.bounds();
+    let clamp = hi.min(-lo);
+    let comp = design
+        .compensation()
+        .map_or(0.0, |c| c.dead_zone() + c.friction_voltage());
+    let mut out = Vec::new();
+    for kind in ControllerKind::ALL {
+        let mut controller = design.controller(kind)?;
+        let mut a = Assessment {
+            kind,
+            margins: Margins::unstable(),
+            rmse: [f64::NAN; 3],
+            peak_voltage: 0.0,
+            saturated: false,
+            fell: false,
+            arm_peak_to_peak: 0.0,
+            pendulum: 0.0,
+            offset: 0.0,
+        };
+        for (i, seed) in SEEDS.into_iter().enumerate() {
+            let cfg = spec.sim_config(ts, seed);
+            let run = simulate(&plant, controller.as_mut(), &cfg)
+                .map_err(|e| SpecError::new("plant", format!("simulation: {e}")))?;
+            if i == 0 {
+                a.rmse = table1_rmse(&run);
+            }
+            a.fell |= run.fell || run.diverged;
+            let peak = run.u.iter().map(|u| u.abs()).fold(0.0, f64::max);
+            a.peak_voltage = a.peak_voltage.max(peak);
+            // The written voltage exceeds the planned clamp by at most the compensation; the
+            // controller's own clamp is what saturation means here.
+            if kind != ControllerKind::Mpc {
+                a.saturated |= peak >= clamp + comp - 1e-9;
+            }
+            let s = steady_state(&run, bar.window);
+            a.arm_peak_to_peak = a.arm_peak_to_peak.max(s.0);
+            a.pendulum = a.pendulum.max(s.1);
+            a.offset = a.offset.max(s.2);
+        }
+        let failed = !a.balances(bar) || a.saturated;
+        out.push(a);
+        if stop_early && failed {
+            return Ok((out, false));
+        }
+    }
+    for a in out.iter_mut() {
+        a.margins = design.margins(a.kind)?;
+    }
+    Ok((out, true))
+}
+
+/// `(arm peak-to-peak, max |α|, |mean θ − θ_ref|)` of the true state over the last `window`
+/// seconds of `run`.
+pub fn steady_state(run: &crate::sim::SimResult, window: f64) -> (f64, f64, f64) {
+    let Some(&end) = run.t.last() else {
+        return (f64::NAN, f64::NAN, f64::NAN);
+    };
+    let (mut lo, mut hi, mut alpha, mut sum, mut n) =
+        (f64::INFINITY, f64::NEG_INFINITY, 0.0f64, 0.0, 0usize);
+    for k in 0..run.len() {
+        if run.t[k] >= end - window {
+            let th = run.x[k][0];
+            lo = lo.min(th);
+            hi = hi.max(th);
+            alpha = alpha.max(run.x[k][2].abs());
+            sum += th - run.r[k][0];
+            n += 1;
+        }
+    }
+    (hi - lo, alpha, (sum / n.max(1) as f64).abs())
+}
+
+/// The outcome of [`tune`].
+#[derive(Debug, Clone)]
+pub struct Tuned {
+    /// The spec with the chosen weights.
+    pub spec: Spec,
+    /// The chosen change to the file's weights ([`Weights::FILE`] when they were kept).
+    pub weights: Weights,
+    /// Whether every controller works with them (module docs).
+    pub works: bool,
+    /// Each controller's assessment with them.
+    pub assessments: Vec<Assessment>,
+    /// Candidates assessed.
+    pub tried: usize,
+}
+
+/// Chooses shared weights for the rig of `spec` at sample time `ts` (module docs).
+pub fn tune(spec: &Spec, ts: f64, bar: &Bar) -> Result<Tuned, SpecError> {
+    let mut best: Option<(f64, Weights)> = None;
+    let mut tried = 0;
+    for w in std::iter::once(Weights::FILE).chain(candidates(spec)) {
+        let candidate = w.apply(spec);
+        tried += 1;
+        let Ok((assessments, complete)) = assess_until(&candidate, ts, bar, true) else {
+            continue;
+        };
+        if complete && assessments.iter().all(|a| a.works(bar)) {
+            return Ok(Tuned {
+                spec: candidate,
+                weights: w,
+                works: true,
+                assessments,
+                tried,
+            });
+        }
+        // Short of the whole bar, a candidate that balances within the bar and the voltage
+        // bound (its margins short) beats any that does not; a controller not assessed counts
+        // as a fall.
+        let missing = ControllerKind::ALL.len() - assessments.len();
+        let shortfall: f64 = assessments.iter().map(|a| a.shortfall(bar)).sum::<f64>()
+            + if complete {
+                0.0
+            } else {
+                100.0 + 12.0 * missing as f64
+            };
+        if best.as_ref().map_or(true, |b| shortfall < b.0) {
+            best = Some((shortfall, w));
+        }
+    }
+    let (_, weights) = best.ok_or_else(|| {
+        SpecError::new("lqr", "no candidate weights could be designed for this rig")
+    })?;
+    let spec = weights.apply(spec);
+    let assessments = assess(&spec, ts, bar)?;
+    Ok(Tuned {
+        spec,
+        weights,
+        works: false,
+        assessments,
+        tried,
+    })
+}
+
+/// How the robustness runs perturb the rig.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Perturbation {
+    /// Each physical parameter times an independent uniform factor in `1 ± spread`.
+    Relative(f64),
+    /// `values · exp(N(0, log_covariance))` on the named parameters (the identification's
+    /// `[covariance]`; names as [`crate::spec::Param`] spells them), the rest as they are.
+    LogNormal {
+        /// The parameters.
+        names: Vec<String>,
+        /// The covariance of their logarithms (row-major, `n × n`).
+        log_covariance: Vec<f64>,
+    },
+}
+
+/// A rig drawn around `p` by `perturbation` with `rng`.
+pub fn perturb(p: &FurutaParams, perturbation: &Perturbation, rng: &mut StdRng) -> FurutaParams {
+    let mut v = p.to_array();
+    match perturbation {
+        Perturbation::Relative(spread) => {
+            // g (the last entry of to_array's order is not a rig property) stays.
+            let g = p.g;
+            for x in v.iter_mut() {
+                *x *= 1.0 + spread * (2.0 * rng.gen::<f64>() - 1.0);
+            }
+            let mut out = FurutaParams::from_array(v);
+            out.g = g;
+            out
+        }
+        Perturbation::LogNormal {
+            names,
+            log_covariance,
+        } => {
+            let n = names.len();
+            let cov = nalgebra::DMatrix::from_row_slice(n, n, log_covariance);
+            // Parameters the logs do not determine (inf) or held (0) are left as they are.
+            let finite: Vec<usize> = (0..n)
+                .filter(|&i| cov[(i, i)].is_finite() && cov[(i, i)] > 0.0)
+                .collect();
+            let sub = nalgebra::DMatrix::from_fn(finite.len(), finite.len(), |i, j| {
+                cov[(finite[i], finite[j])]
+            });
+            let Some(chol) = sub.cholesky() else {
+                return *p;
+            };
+            let z = nalgebra::DVector::from_fn(finite.len(), |_, _| standard_normal(rng));
+            let d = chol.l() * z;
+            let mut out = *p;
+            for (k, &i) in finite.iter().enumerate() {
+                if let Some(param) = crate::spec::Param::from_name(&names[i]) {
+                    let f = param.field(&mut out);
+                    *f *= d[k].exp();
+                }
+            }
+            out
+        }
+    }
+}
+
+fn standard_normal(rng: &mut StdRng) -> f64 {
+    // Box–Muller.
+    let u1 = rng.gen::<f64>().max(f64::MIN_POSITIVE);
+    let u2 = rng.gen::<f64>();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+/// For each controller of `spec` (designed on the file's model), the fraction of `runs`
+/// rigs drawn by `perturbation` (seeds from `seed`) on which it balances: no fall over the
+/// `[reference]` run. Runs whose drawn parameters are not a valid rig are redrawn.
+pub fn robustness(
+    spec: &Spec,
+    ts: f64,
+    perturbation: &Perturbation,
+    runs: usize,
+    seed: u64,
+) -> Result<Vec<(ControllerKind, f64)>, SpecError> {
+    let design = spec.design(ts)?;
+    let nominal = spec.plant.params();
+    let mut rng = StdRng::seed_from_u64(seed);
+    let mut plants = Vec::with_capacity(runs);
+    while plants.len() < runs {
+        let p = perturb(&nominal, perturbation, &mut rng);
+        if let Ok(mut plant) = Plant::new(p) {
+            if let Some(cs) = spec.plant.arm_breakaway {
+                plant = plant.with_arm_breakaway(cs.max(p.cr)).unwrap_or(plant);
+            }
+            plants.push(plant);
+        }
+    }
+    let mut out = Vec::new();
+    for kind in ControllerKind::ALL {
+        let mut controller = design.controller(kind)?;
+        let mut ok = 0usize;
+        for (i, plant) in plants.iter().enumerate() {
+            let cfg = spec.sim_config(ts, seed.wrapping_add(i as u64));
+            let run = simulate(plant, controller.as_mut(), &cfg)
+                .map_err(|e| SpecError::new("plant", format!("simulation: {e}")))?;
+            if !(run.fell || run.diverged) {
+                ok += 1;
+            }
+        }
+        out.push((kind, ok as f64 / runs.max(1) as f64));
+    }
+    Ok(out)
+}

@@ -1,0 +1,280 @@
+//! Bindings for `rip_core::{margins, tune, preflight}`: the loop's robustness margins, the
+//! per-rig tuning of the shared weights, its robustness runs and the pre-flight check. The
+//! Python package (`riprs.tune`) shapes the results into typed objects.
+
+use std::path::PathBuf;
+
+use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use rip_core::margins::Margins;
+use rip_core::preflight;
+use rip_core::spec::{ControllerKind, SpecError};
+use rip_core::tune::{self, Assessment, Bar, Perturbation, Weights};
+
+use crate::spec::{ConfigError, PySpec};
+
+fn config_err(e: SpecError) -> PyErr {
+    ConfigError::new_err(e.to_string())
+}
+
+fn kind(name: &str) -> PyResult<ControllerKind> {
+    ControllerKind::from_name(name).ok_or_else(|| {
+        PyValueError::new_err(format!(
+            "controller: expected one of 'LQR', 'LQG', 'MPC', got {name:?}"
+        ))
+    })
+}
+
+fn check_ts(ts: f64) -> PyResult<()> {
+    if ts.is_finite() && ts > 0.0 {
+        Ok(())
+    } else {
+        Err(PyValueError::new_err(format!(
+            "Ts: must be positive and finite, got {ts}"
+        )))
+    }
+}
+
+fn margins_dict<'py>(py: Python<'py>, m: &Margins) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("stable", m.stable)?;
+    d.set_item("gain_margin_db", m.gain_margin_db)?;
+    d.set_item("gain_reduction_db", m.gain_reduction_db)?;
+    d.set_item("phase_margin_deg", m.phase_margin_deg)?;
+    d.set_item("crossover_rad_s", m.crossover_rad_s)?;
+    d.set_item("disk_margin", m.disk_margin)?;
+    d.set_item("disk_gain_margin_db", m.disk_gain_margin_db)?;
+    d.set_item("disk_phase_margin_deg", m.disk_phase_margin_deg)?;
+    Ok(d)
+}
+
+fn assessment_dict<'py>(
+    py: Python<'py>,
+    a: &Assessment,
+    bar: &Bar,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("controller", a.kind.name())?;
+    d.set_item("margins", margins_dict(py, &a.margins)?)?;
+    d.set_item("rmse", a.rmse.to_vec())?;
+    d.set_item("peak_voltage", a.peak_voltage)?;
+    d.set_item("saturated", a.saturated)?;
+    d.set_item("fell", a.fell)?;
+    d.set_item("arm_peak_to_peak", a.arm_peak_to_peak)?;
+    d.set_item("pendulum", a.pendulum)?;
+    d.set_item("offset", a.offset)?;
+    d.set_item("margins_ok", a.margins_ok(bar))?;
+    d.set_item("works", a.works(bar))?;
+    Ok(d)
+}
+
+/// The robustness margins of the loop of ``controller`` (without compensation) at the plant
+/// input, on the spec's design model at sample time ``Ts`` (``rip_core::margins``).
+#[pyfunction]
+#[pyo3(signature = (spec, controller, Ts = rip_core::paper::TS))]
+#[allow(non_snake_case)]
+fn loop_margins<'py>(
+    py: Python<'py>,
+    spec: PyRef<'py, PySpec>,
+    controller: &str,
+    Ts: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_ts(Ts)?;
+    let kind = kind(controller)?;
+    let s = spec.inner.clone();
+    let m = py
+        .allow_threads(|| s.design(Ts).and_then(|d| d.margins(kind)))
+        .map_err(config_err)?;
+    margins_dict(py, &m)
+}
+
+/// ``L(e^{j w Ts})`` of the loop of ``controller`` at the plant input at the frequencies
+/// ``w`` (rad/s); ``None`` when the closed loop is unstable.
+#[pyfunction]
+#[pyo3(signature = (spec, controller, w, Ts = rip_core::paper::TS))]
+#[allow(non_snake_case)]
+fn loop_response<'py>(
+    py: Python<'py>,
+    spec: PyRef<'py, PySpec>,
+    controller: &str,
+    w: PyReadonlyArray1<'py, f64>,
+    Ts: f64,
+) -> PyResult<Option<Bound<'py, PyArray1<numpy::Complex64>>>> {
+    check_ts(Ts)?;
+    let kind = kind(controller)?;
+    let w = w.as_slice()?.to_vec();
+    if !w.iter().all(|v| v.is_finite() && *v > 0.0) {
+        return Err(PyValueError::new_err(
+            "w: frequencies must be positive and finite",
+        ));
+    }
+    let s = spec.inner.clone();
+    let out = py
+        .allow_threads(|| -> Result<_, SpecError> {
+            let d = s.design(Ts)?;
+            let mut c = d.balance(kind)?;
+            rip_core::margins::loop_response(c.as_mut(), &d.a, &d.b, &d.c, Ts, &w)
+                .map_err(|e| SpecError::new("plant", e.to_string()))
+        })
+        .map_err(config_err)?;
+    Ok(out.map(|v| {
+        let v: Vec<numpy::Complex64> = v
+            .iter()
+            .map(|c| numpy::Complex64::new(c.re, c.im))
+            .collect();
+        PyArray1::from_vec(py, v)
+    }))
+}
+
+/// Chooses shared weights for the spec's rig (``rip_core::tune::tune``). Returns
+/// ``(tuned spec, weights, works, assessments, tried)``.
+#[pyfunction]
+#[pyo3(signature = (spec, Ts = rip_core::paper::TS))]
+#[allow(non_snake_case)]
+#[allow(clippy::type_complexity)]
+fn tune_weights<'py>(
+    py: Python<'py>,
+    spec: PyRef<'py, PySpec>,
+    Ts: f64,
+) -> PyResult<(
+    PySpec,
+    Bound<'py, PyDict>,
+    bool,
+    Vec<Bound<'py, PyDict>>,
+    usize,
+)> {
+    check_ts(Ts)?;
+    let s = spec.inner.clone();
+    let bar = Bar::default();
+    let t = py
+        .allow_threads(|| tune::tune(&s, Ts, &bar))
+        .map_err(config_err)?;
+    let w = PyDict::new(py);
+    let Weights {
+        arm,
+        pendulum,
+        input,
+        integral_weight,
+        measurement_noise,
+    } = t.weights;
+    w.set_item("arm", arm)?;
+    w.set_item("pendulum", pendulum)?;
+    w.set_item("input", input)?;
+    w.set_item("integral_weight", integral_weight)?;
+    w.set_item("measurement_noise", measurement_noise)?;
+    let list = t
+        .assessments
+        .iter()
+        .map(|a| assessment_dict(py, a, &bar))
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok((
+        PySpec {
+            inner: t.spec.resolved(),
+        },
+        w,
+        t.works,
+        list,
+        t.tried,
+    ))
+}
+
+/// For each controller, the fraction of ``runs`` rigs drawn around the spec's on which it
+/// balances (``rip_core::tune::robustness``): each parameter within ``1 ± spread``, or
+/// log-normal with ``log_covariance`` over the parameters ``names``.
+#[pyfunction]
+#[pyo3(signature = (spec, runs, seed, Ts = rip_core::paper::TS, spread = 0.1, names = None, log_covariance = None))]
+#[allow(non_snake_case)]
+#[allow(clippy::too_many_arguments)]
+fn tune_robustness(
+    py: Python<'_>,
+    spec: PyRef<'_, PySpec>,
+    runs: usize,
+    seed: u64,
+    Ts: f64,
+    spread: f64,
+    names: Option<Vec<String>>,
+    log_covariance: Option<PyReadonlyArray2<'_, f64>>,
+) -> PyResult<Vec<(String, f64)>> {
+    check_ts(Ts)?;
+    if !(spread.is_finite() && (0.0..1.0).contains(&spread)) {
+        return Err(PyValueError::new_err(format!(
+            "spread: must be in [0, 1), got {spread}"
+        )));
+    }
+    let perturbation = match (names, log_covariance) {
+        (Some(names), Some(cov)) => {
+            let n = names.len();
+            let view = cov.as_array();
+            let shape = view.shape().to_vec();
+            if shape != [n, n] {
+                return Err(PyValueError::new_err(format!(
+                    "log_covariance: must be {n} x {n} (one row per name), got {shape:?}"
+                )));
+            }
+            Perturbation::LogNormal {
+                names,
+                log_covariance: view.iter().copied().collect(),
+            }
+        }
+        (None, None) => Perturbation::Relative(spread),
+        _ => {
+            return Err(PyValueError::new_err(
+                "names and log_covariance: give both or neither",
+            ))
+        }
+    };
+    let s = spec.inner.clone();
+    let out = py
+        .allow_threads(|| tune::robustness(&s, Ts, &perturbation, runs, seed))
+        .map_err(config_err)?;
+    Ok(out
+        .into_iter()
+        .map(|(k, f)| (k.name().to_string(), f))
+        .collect())
+}
+
+/// The pre-flight check of ``controller`` on the spec's rig (``rip_core::preflight``):
+/// ``(check, verdict, message)`` per check that applied.
+#[pyfunction]
+#[pyo3(signature = (spec, controller, Ts = rip_core::paper::TS, rig_file = None, arm_limit = None))]
+#[allow(non_snake_case)]
+fn preflight_check(
+    py: Python<'_>,
+    spec: PyRef<'_, PySpec>,
+    controller: &str,
+    Ts: f64,
+    rig_file: Option<PathBuf>,
+    arm_limit: Option<f64>,
+) -> PyResult<Vec<(String, String, String)>> {
+    check_ts(Ts)?;
+    let kind = kind(controller)?;
+    let s = spec.inner.clone();
+    let report = py
+        .allow_threads(|| {
+            s.design(Ts).map(|design| {
+                preflight::run(&preflight::Input {
+                    design: &design,
+                    controller: kind,
+                    rig_file: rig_file.as_deref(),
+                    arm_limit,
+                })
+            })
+        })
+        .map_err(config_err)?;
+    Ok(report
+        .findings
+        .into_iter()
+        .map(|f| (f.check.to_string(), f.verdict.name().to_string(), f.message))
+        .collect())
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(loop_margins, m)?)?;
+    m.add_function(wrap_pyfunction!(loop_response, m)?)?;
+    m.add_function(wrap_pyfunction!(tune_weights, m)?)?;
+    m.add_function(wrap_pyfunction!(tune_robustness, m)?)?;
+    m.add_function(wrap_pyfunction!(preflight_check, m)?)?;
+    Ok(())
+}

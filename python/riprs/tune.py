@@ -1,0 +1,471 @@
+"""Per-rig tuning (``riprs tune``), the loop's robustness margins and the pre-flight check.
+
+The work is done in ``rip-core`` (``rip_core::tune``, ``rip_core::margins``,
+``rip_core::preflight``); this module shapes its results into typed objects and writes the
+tuned file. ``docs/tuning.md`` has the method and the math.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Dict, List, Tuple, Union
+
+import numpy as np
+import tomllib
+
+from riprs import _progress
+from riprs._riprs import (
+    TS,
+    Spec,
+    load_config,
+    loop_margins,
+    loop_response,
+    preflight_check,
+    tune_robustness,
+    tune_weights,
+)
+
+__all__ = [
+    "ControllerTuning",
+    "Margins",
+    "PreflightFinding",
+    "TuneResult",
+    "loop_response",
+    "margins",
+    "preflight",
+    "tune",
+]
+
+PathLike = Union[str, "os.PathLike[str]"]
+CONTROLLERS = ("LQR", "LQG", "MPC")
+
+
+@dataclass(frozen=True)
+class Margins:
+    """Robustness margins of a controller's linearised loop broken at the plant input.
+
+    Attributes
+    ----------
+    stable : bool
+        Whether the closed loop is stable (every margin is 0 when it is not).
+    gain_margin_db : float
+        Smallest factor (dB, > 0) by which the loop gain may grow; ``inf`` for none.
+    gain_reduction_db : float
+        Largest factor (dB, < 0) by which it may shrink (the unstable pendulum needs gain).
+    phase_margin_deg : float
+        Smallest phase margin over the gain crossovers (degrees).
+    crossover_rad_s : float
+        Frequency of that crossover (rad/s).
+    disk_margin : float
+        Balanced disk margin alpha, as MATLAB's ``diskmargin``: ``1 / max |S - 1/2|``.
+    disk_gain_margin_db : float
+        ``20 log10((2 + alpha) / (2 - alpha))``.
+    disk_phase_margin_deg : float
+        ``2 atan(alpha / 2)`` in degrees.
+    """
+
+    stable: bool
+    gain_margin_db: float
+    gain_reduction_db: float
+    phase_margin_deg: float
+    crossover_rad_s: float
+    disk_margin: float
+    disk_gain_margin_db: float
+    disk_phase_margin_deg: float
+
+    @classmethod
+    def _from(cls, d: Dict[str, float]) -> Margins:
+        return cls(**{k: (bool(v) if k == "stable" else float(v)) for k, v in d.items()})
+
+
+@dataclass(frozen=True)
+class ControllerTuning:
+    """How one tuned controller does on the rig's model.
+
+    Attributes
+    ----------
+    controller : str
+        ``"LQR"``, ``"LQG"`` or ``"MPC"``.
+    rmse : numpy.ndarray
+        The paper's Tab. 1 RMSE ``(arm, pendulum, voltage)`` of the predicted run.
+    margins : Margins
+        Its loop's margins at the plant input.
+    peak_voltage : float
+        Largest applied voltage (V) on the step.
+    saturated : bool
+        Whether LQR or LQG reached the voltage bound.
+    fell : bool
+        Whether a predicted run fell.
+    arm_peak_to_peak, pendulum, offset : float
+        Steady state over the last 3 s (rad): arm peak-to-peak, largest ``|alpha|``, arm offset.
+    margins_ok, works : bool
+        Whether the margins, and everything of the bar, hold.
+    balanced_fraction : float
+        Fraction of the robustness runs (rigs drawn around this one) it balanced; NaN when
+        none were run.
+    """
+
+    controller: str
+    rmse: np.ndarray
+    margins: Margins
+    peak_voltage: float
+    saturated: bool
+    fell: bool
+    arm_peak_to_peak: float
+    pendulum: float
+    offset: float
+    margins_ok: bool
+    works: bool
+    balanced_fraction: float = float("nan")
+
+
+@dataclass(frozen=True)
+class TuneResult:
+    """The outcome of :func:`tune`.
+
+    Attributes
+    ----------
+    spec : Spec
+        The experiment with the tuned weights (what :meth:`to_toml` writes).
+    weights : dict
+        The change to the file's weights: factors ``arm``, ``pendulum``, ``input`` (on Q and R,
+        and on the MPC's weights by their square roots), ``measurement_noise`` (on
+        ``kalman.measurement_noise``) and the ``integral_weight`` set.
+    kept_file_weights : bool
+        Whether the file's own weights were kept (they already worked).
+    works : bool
+        Whether every controller meets the bar with them.
+    controllers : dict
+        :class:`ControllerTuning` per controller name.
+    tried : int
+        Candidates assessed.
+    runs : int
+        Robustness runs per controller.
+    perturbation : str
+        How those runs drew rigs.
+    header : list of str
+        Comment lines of the input file kept at the top of the tuned file (an identification's
+        ``# UNTRUSTED`` marker stays).
+    """
+
+    spec: Spec
+    weights: Dict[str, float]
+    kept_file_weights: bool
+    works: bool
+    controllers: Dict[str, ControllerTuning]
+    tried: int
+    runs: int
+    perturbation: str
+    header: List[str] = field(default_factory=list)
+
+    def report(self) -> str:
+        """The per-controller table ``riprs tune`` prints."""
+        w = self.weights
+        lines = [
+            "weights: "
+            + (
+                "the file's own (they work)"
+                if self.kept_file_weights
+                else f"Q arm x{w['arm']:g}, Q pendulum x{w['pendulum']:g}, R x{w['input']:g}, "
+                f"kalman.measurement_noise x{w['measurement_noise']:g}, "
+                f"lqr.integral_weight {w['integral_weight']:g}"
+            ),
+            f"lqr.Q = {list(self.spec.lqr.Q)}, lqr.R = {self.spec.lqr.R:g}, "
+            f"mpc.output_weights = {list(self.spec.mpc.output_weights)}, "
+            f"mpc.input_rate_weights = {list(self.spec.mpc.input_rate_weights)}",
+            "",
+            f"{'':4} {'RMSE arm':>9} {'pend':>7} {'volt':>6} | {'GM dB':>11} {'PM deg':>6} "
+            f"{'disk':>5} | {'p-p arm':>7} {'|alpha|':>7} {'offset':>6} {'peak V':>6} | "
+            f"balanced ({self.perturbation})",
+        ]
+        for name, c in self.controllers.items():
+            m = c.margins
+            frac = "-" if np.isnan(c.balanced_fraction) else f"{c.balanced_fraction:.0%}"
+            lines.append(
+                f"{name:4} {c.rmse[0]:9.4f} {c.rmse[1]:7.4f} {c.rmse[2]:6.2f} | "
+                f"{m.gain_margin_db:5.1f}/{m.gain_reduction_db:5.1f} {m.phase_margin_deg:6.1f} "
+                f"{m.disk_margin:5.2f} | {c.arm_peak_to_peak:7.3f} {c.pendulum:7.3f} "
+                f"{c.offset:6.3f} {c.peak_voltage:6.2f} | {frac} of {self.runs}"
+                + ("" if c.works else "  (misses the bar)")
+            )
+        lines.append("")
+        lines.append(
+            "every controller meets the bar (steady-state arm p-p <= 0.05, |alpha| <= 0.02, "
+            "offset <= 0.02 rad; inside the voltage bound; margins >= 6 dB and 30 deg or disk "
+            ">= 0.67)"
+            if self.works
+            else "NOT every controller meets the bar with any candidate tried: these weights miss "
+            "it by least (see the rows marked)"
+        )
+        return "\n".join(lines)
+
+    def to_toml(self) -> str:
+        """The tuned experiment file: the input file's comment header, then every section
+        resolved (``riprs compare``, ``riprs campaign`` and ``rip-rt run`` read it as is)."""
+        head = list(self.header)
+        summary = ", ".join(
+            f"{n} {'ok' if c.works else 'misses the bar'}" for n, c in self.controllers.items()
+        )
+        head.append(f"# Tuned by riprs tune ({summary}).")
+        body = _without_defaults(self.spec.to_toml(), ("controllers", "monte_carlo"))
+        return "\n".join(head) + "\n" + body
+
+
+@dataclass(frozen=True)
+class PreflightFinding:
+    """One pre-flight check's conclusion.
+
+    Attributes
+    ----------
+    check : str
+        ``"identification"``, ``"voltage"`` or ``"prediction"``.
+    verdict : str
+        ``"pass"``, ``"warn"`` or ``"refuse"``.
+    message : str
+        Why (the prediction, the margin, the voltage it would need).
+    """
+
+    check: str
+    verdict: str
+    message: str
+
+
+def _blocks(text: str) -> List[Tuple[str, str]]:
+    """``(name, text)`` of each top-level block of a resolved spec: the keys before the first
+    table under ``""``, then each table (``[[...]]`` arrays under their own name)."""
+    out: List[Tuple[str, str]] = [("", "")]
+    for line in text.splitlines(keepends=True):
+        if line.startswith("["):
+            out.append((line.strip().strip("[]"), line))
+        else:
+            out[-1] = (out[-1][0], out[-1][1] + line)
+    return out
+
+
+def _without_defaults(text: str, names: Tuple[str, ...]) -> str:
+    """``text`` without the top-level ``controllers`` key and the tables of ``names`` where
+    they are the defaults, so that the tuned file is also the experiment part of a campaign
+    spec (which sets its controllers and runs in ``[campaign]``)."""
+    default = dict(_blocks(Spec().to_toml()))
+    keep = []
+    for name, block in _blocks(text):
+        if name == "":
+            lines = block.splitlines(keepends=True)
+            plain = [ln for ln in lines if not ln.startswith("controllers")]
+            if "controllers" in names and "".join(plain) != block:
+                default_top = [ln for ln in default[""].splitlines(keepends=True)]
+                if [ln for ln in lines if ln.startswith("controllers")] == [
+                    ln for ln in default_top if ln.startswith("controllers")
+                ]:
+                    block = "".join(plain)
+        elif name in names and block == default.get(name):
+            continue
+        keep.append(block)
+    return "".join(keep).lstrip("\n")
+
+
+def _spec(rig: Union[Spec, PathLike]) -> Spec:
+    return rig if isinstance(rig, Spec) else load_config(os.fspath(rig))
+
+
+def _controller(name: str) -> str:
+    up = str(name).upper()
+    if up not in CONTROLLERS:
+        raise ValueError(f"controller: expected one of LQR, LQG, MPC, got {name!r}")
+    return up
+
+
+def margins(rig: Union[Spec, PathLike], controller: str, Ts: float = TS) -> Margins:
+    """The robustness margins of ``controller``'s loop at the plant input.
+
+    Parameters
+    ----------
+    rig : Spec or path
+        The experiment (its design model, weights and estimator).
+    controller : {"LQR", "LQG", "MPC"}
+        The controller, without its compensation.
+    Ts : float
+        Sample time (s).
+
+    Returns
+    -------
+    Margins
+    """
+    return Margins._from(loop_margins(_spec(rig), _controller(controller), Ts))
+
+
+def preflight(
+    rig: PathLike,
+    controller: str,
+    Ts: float = TS,
+    arm_limit: float | None = None,
+) -> List[PreflightFinding]:
+    """The pre-flight check ``rip-rt run`` makes before enabling the motor.
+
+    Parameters
+    ----------
+    rig : path
+        The experiment file (its identification marker is read too).
+    controller : {"LQR", "LQG", "MPC"}
+        The controller to run.
+    Ts : float
+        Sample time (s).
+    arm_limit : float, optional
+        ``safety.arm_limit`` (rad): a predicted arm beyond it refuses.
+
+    Returns
+    -------
+    list of PreflightFinding
+    """
+    spec = _spec(rig)
+    return [
+        PreflightFinding(*f)
+        for f in preflight_check(spec, _controller(controller), Ts, os.fspath(rig), arm_limit)
+    ]
+
+
+def _header(path: Path | None) -> List[str]:
+    if path is None:
+        return []
+    out = []
+    for line in path.read_text().splitlines():
+        if line.strip().startswith("#"):
+            out.append(line)
+        elif line.strip():
+            break
+    return out
+
+
+def _covariance(path: Path | None) -> Tuple[List[str], np.ndarray] | None:
+    """``(names, log_covariance)`` of the identification file beside ``path``, if any."""
+    if path is None:
+        return None
+    side = path.with_name(f"{path.stem}.identification.toml")
+    if not side.exists():
+        return None
+    with side.open("rb") as f:
+        data = tomllib.load(f)
+    cov = data.get("covariance", {})
+    names, matrix = cov.get("parameters"), cov.get("log_covariance")
+    if not names or matrix is None:
+        return None
+    m = np.asarray(matrix, dtype=float)
+    if m.shape != (len(names), len(names)):
+        return None
+    return list(names), m
+
+
+def tune(
+    rig: Union[Spec, PathLike],
+    *,
+    Ts: float = TS,
+    runs: int = 20,
+    seed: int = 0,
+    spread: float = 0.1,
+    progress: bool = True,
+) -> TuneResult:
+    """Chooses shared weights for LQR, LQG and MPC on this rig (``riprs tune``).
+
+    Keeps the file's weights when every controller meets the bar with them; otherwise tries
+    the candidates of ``rip_core::tune::candidates`` (the estimator's measurement noise, R, the
+    arm weight, integral action) and keeps the first that works, or the one that misses by
+    least. Then draws ``runs`` rigs around this one, from the identification's covariance
+    (the ``.identification.toml`` beside the file) or each parameter within ``1 +- spread``,
+    and counts the runs each tuned controller balances.
+
+    Parameters
+    ----------
+    rig : Spec or path
+        The rig's experiment file (``riprs identify`` writes one).
+    Ts : float
+        Sample time (s).
+    runs : int
+        Robustness runs per controller (0 for none).
+    seed : int
+        Seed of the robustness runs.
+    spread : float
+        Relative spread of each parameter where there is no covariance.
+    progress : bool
+        Show a progress bar on a terminal.
+
+    Returns
+    -------
+    TuneResult
+
+    Raises
+    ------
+    ConfigError
+        The file is invalid, or no candidate can be designed.
+    ValueError
+        ``runs`` negative or ``spread`` outside [0, 1).
+    """
+    if runs < 0:
+        raise ValueError(f"runs: must be non-negative, got {runs}")
+    if not 0.0 <= spread < 1.0:
+        raise ValueError(f"spread: must be in [0, 1), got {spread}")
+    path = None if isinstance(rig, Spec) else Path(os.fspath(rig))
+    spec = _spec(rig)
+    bar = _progress.bar(progress, total=1 + runs, desc="riprs tune", unit="step")
+    tuned, weights, works, assessments, tried = tune_weights(spec, Ts)
+    if bar is not None:
+        bar.update(1)
+    cov = _covariance(path)
+    fractions: Dict[str, float] = {}
+    if runs > 0:
+        counts = {n: 0.0 for n in CONTROLLERS}
+        done, chunk = 0, 5
+        while done < runs:
+            n = min(chunk, runs - done)
+            if cov is not None:
+                part = tune_robustness(
+                    tuned, n, seed + done, Ts, spread, cov[0], np.ascontiguousarray(cov[1])
+                )
+            else:
+                part = tune_robustness(tuned, n, seed + done, Ts, spread)
+            for name, frac in part:
+                counts[name] += frac * n
+            done += n
+            if bar is not None:
+                bar.update(n)
+        fractions = {n: c / runs for n, c in counts.items()}
+    if bar is not None:
+        bar.close()
+    controllers = {}
+    for a in assessments:
+        name = a["controller"]
+        controllers[name] = ControllerTuning(
+            controller=name,
+            rmse=np.asarray(a["rmse"], dtype=float),
+            margins=Margins._from(a["margins"]),
+            peak_voltage=float(a["peak_voltage"]),
+            saturated=bool(a["saturated"]),
+            fell=bool(a["fell"]),
+            arm_peak_to_peak=float(a["arm_peak_to_peak"]),
+            pendulum=float(a["pendulum"]),
+            offset=float(a["offset"]),
+            margins_ok=bool(a["margins_ok"]),
+            works=bool(a["works"]),
+            balanced_fraction=fractions.get(name, float("nan")),
+        )
+    kept = weights == {
+        "arm": 1.0,
+        "pendulum": 1.0,
+        "input": 1.0,
+        "integral_weight": 0.0,
+        "measurement_noise": 1.0,
+    }
+    return TuneResult(
+        spec=tuned,
+        weights=dict(weights),
+        kept_file_weights=kept,
+        works=bool(works),
+        controllers=controllers,
+        tried=int(tried),
+        runs=runs,
+        perturbation=(
+            "identification covariance" if cov is not None else f"+-{spread:.0%} per parameter"
+        ),
+        header=_header(path),
+    )
