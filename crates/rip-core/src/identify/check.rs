@@ -202,14 +202,20 @@ pub(super) fn verdict(v: &Verdict<'_>) -> (Vec<String>, bool) {
     }
     for (e, entry) in LINEAR_ENTRIES.iter().enumerate() {
         let rse = v.linear_rse[e];
-        if rse.is_nan() || rse > MAX_ENTRY_RSE {
+        let damping = e == 2 || e == 6;
+        let limit = if damping {
+            MAX_DAMPING_RSE
+        } else {
+            MAX_ENTRY_RSE
+        };
+        if rse.is_nan() || rse > limit {
             uncertain += 1;
             out.push(format!(
                 "{entry} of the upright linearisation has a relative standard error of {:.2} % \
                  (at most {} %, so that it is known within {} % at two standard errors): {}",
                 100.0 * rse,
-                100.0 * MAX_ENTRY_RSE,
-                200.0 * MAX_ENTRY_RSE,
+                100.0 * limit,
+                200.0 * limit,
                 match e {
                     2 | 6 => {
                         "the pendulum's damping is not determined; record a longer free swing \
