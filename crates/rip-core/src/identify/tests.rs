@@ -373,16 +373,22 @@ fn rigs_across_the_envelope_meet_the_bar_or_are_refused() {
                 }
             );
             if r.problems.is_empty() {
+                // The damping column (each[3], each[8]) has the verdict's looser bar.
+                let others = (0..10)
+                    .filter(|&i| i != 3 && i != 8)
+                    .map(|i| each[i])
+                    .fold(0.0, f64::max);
+                let damping = each[3].max(each[8]);
                 assert!(
-                    worst < 0.02 && eig < 0.01,
-                    "rig {seed} {what}: {worst} {eig}"
+                    others < 0.02 && damping < 0.1 && eig < 0.01,
+                    "rig {seed} {what}: {others} {damping} {eig}"
                 );
                 trusted_from_lab += usize::from(what == "lab");
             }
         }
     }
     assert!(
-        trusted_from_lab >= 6,
+        trusted_from_lab >= 7,
         "{trusted_from_lab} of 8 trusted from the lab file"
     );
 }
