@@ -23,6 +23,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 import riprs
+import riprs.envs
 from riprs.cli import main
 from riprs.identify import IdentifyError, UntrustedIdentification, identification_path, read_lab
 
@@ -41,36 +42,12 @@ HEAVY = riprs.FurutaParams(
         "Cr": 0.006,
     }
 )
-#: Kick (V) of the free-swing runs (rip-rt excite's default).
+#: Kick (V) and length (s) of the free-swing runs docs/rig.md asks for: long enough for a
+#: lightly damped pendulum's decay to determine its damping (the kick of rip-rt excite's
+#: default: a larger one swings the heavy pendulum over the top).
 FREE_AMPLITUDE = 3.0
+FREE_DURATION = 60.0
 LAB_KEYS = ("mp", "Lp", "mr", "Lr", "Rm", "km")
-
-
-def envelope_rig(seed: int) -> tuple[riprs.FurutaParams, int, float]:
-    """A rig drawn uniformly across the envelope, with its encoder counts and noise (rad)."""
-    r = np.random.default_rng(seed)
-
-    def u(a: float, b: float) -> float:
-        return float(r.uniform(a, b))
-
-    mp, lp, mr, lr, k = u(0.015, 0.08), u(0.08, 0.30), u(0.05, 0.15), u(0.06, 0.15), u(0.02, 0.08)
-    params = riprs.FurutaParams(
-        mp=mp,
-        Lp=lp,
-        mr=mr,
-        Lr=lr,
-        Jr=mr * lr**2 / 12 * u(0.5, 1.5),
-        Jp=mp * lp**2 / 12 * u(0.5, 1.5),
-        Rm=u(2.0, 10.0),
-        kt=k,
-        km=k,
-        Dr=u(2e-4, 3e-3),
-        Dp=u(1e-5, 2e-4),
-        Vd=u(0.0, 1.0),
-        Cr=u(0.0, 0.006),
-        Cp=u(0.0, 5e-5),
-    )
-    return params, int(r.choice([512, 1024, 2048, 4096, 8192])), u(0.0, 2e-3)
 
 
 def excitation_run(
@@ -90,7 +67,7 @@ def excitation_run(
     rng = np.random.default_rng(seed)
     free = signal == "free-swing"
     if free:
-        e = riprs.excitation(signal, dt=TS, duration=20.0, amplitude=FREE_AMPLITUDE)
+        e = riprs.excitation(signal, dt=TS, duration=FREE_DURATION, amplitude=FREE_AMPLITUDE)
     else:
         e = riprs.excitation(signal, dt=TS, duration=duration, amplitude=2.5, seed=seed)
     q = 2 * math.pi / counts
@@ -130,29 +107,28 @@ def lab_of(params: riprs.FurutaParams) -> dict[str, float]:
     return {k: getattr(params, k) for k in LAB_KEYS}
 
 
-#: Bound on the relative error of the pendulum-damping entries A[1,3], A[3,3] (see
-#: linearisation_error): quantisation and noise bias the split of a small pendulum friction
-#: into viscous Dp and Coulomb Cp by up to about 15 % on some rigs (without them it is 0.2 %).
-DAMPING_BOUND = 0.25
+#: The verdict's bar on the pendulum-damping entries A[1,3], A[3,3] (rip_core::identify's
+#: MAX_DAMPING_RSE at two standard errors); every other entry's is 2 %.
+DAMPING_BOUND = 0.1
 
 
 def linearisation_error(
     params: riprs.FurutaParams, truth: riprs.FurutaParams
-) -> tuple[float, float, float]:
+) -> tuple[float, float]:
     """Largest relative error over the entries of the continuous upright [A B] that are not
-    structural zeros, except the pendulum-damping column (A[1,3], A[3,3], set by Dp alone);
-    the relative error of the unstable eigenvalue; the largest of the damping column."""
+    structural zeros (the damping entries A[1,3], A[3,3] divided by DAMPING_BOUND / 0.02, so
+    that 0.02 is the bar for all), and the relative error of the unstable eigenvalue (against
+    the truth's own linearisation)."""
     up = [0.0, 0.0, 0.0, 0.0]
     a, b = riprs.Plant(params).linearize(up, 0.0)
     a0, b0 = riprs.Plant(truth).linearize(up, 0.0)
     got = np.hstack([a, np.reshape(b, (4, 1))])
     true = np.hstack([a0, np.reshape(b0, (4, 1))])
-    rel = np.abs(got - true) / np.maximum(np.abs(true), 1e-300)
     mask = np.abs(true) > 1e-12
-    damping = float(max(rel[1, 3], rel[3, 3]))
-    mask[[1, 3], 3] = False
+    rel = np.where(mask, np.abs(got - true) / np.where(mask, np.abs(true), 1.0), 0.0)
+    rel[[1, 3], 3] *= 0.02 / DAMPING_BOUND
     lam, lam0 = np.linalg.eigvals(a).real.max(), np.linalg.eigvals(a0).real.max()
-    return float(rel[mask].max()), abs(lam - lam0) / lam0, damping
+    return float(rel.max()), abs(lam - lam0) / lam0
 
 
 def quiet_identify(*args, **kw) -> riprs.IdentifyResult:
@@ -311,8 +287,8 @@ def test_the_heavy_rig_from_its_lab_file_is_identified_and_the_files_carry_it(
     assert main(["identify", *map(str, heavy_logs), "--out", str(out), "--no-plots",
                  "--lab", str(lab)]) == 0  # fmt: skip
     spec = riprs.load_config(out)
-    entries, eig, damping = linearisation_error(spec.params, HEAVY)
-    assert entries < 0.02 and eig < 0.01 and damping < DAMPING_BOUND, (entries, eig, damping)
+    entries, eig = linearisation_error(spec.params, HEAVY)
+    assert entries < 0.02 and eig < 0.01, (entries, eig)
     # The rig's own measured values, not the start set's.
     for key in LAB_KEYS:
         assert getattr(spec.params, key) == pytest.approx(getattr(HEAVY, key), rel=1e-12)
@@ -320,59 +296,94 @@ def test_the_heavy_rig_from_its_lab_file_is_identified_and_the_files_carry_it(
     side = tomllib.loads(identification_path(out).read_text())
     assert side["identification"]["trusted"] is True
     assert side["lab"]["mp"] == HEAVY.mp and side["lab"]["arm_counts"] == 2048
-    cov = np.array(side["covariance"]["log_covariance"])
-    assert cov.shape == (9, 9) and np.allclose(cov, cov.T)
-    assert side["covariance"]["parameters"][:3] == ["Lr", "J0", "Jalpha"]
-    j_alpha = HEAVY.Jp + HEAVY.mp * HEAVY.Lp**2 / 4
-    assert side["covariance"]["values"][2] == pytest.approx(j_alpha, rel=0.02)
+    # The covariance in the one format riprs.envs reads; Lr is measured, so held (zero).
+    cov = side["plant_covariance"]
+    matrix = np.array(cov["matrix"])
+    assert cov["parameters"][:3] == ["Lr", "Jr", "Jp"]
+    assert matrix.shape == (len(cov["parameters"]),) * 2 and np.allclose(matrix, matrix.T)
+    assert matrix[0, 0] == 0.0 and np.all(np.linalg.eigvalsh(matrix) > -1e-12 * matrix.max())
+    env = riprs.envs.PendulumEnv(config=out)
+    draws = []
+    for seed in range(400):
+        env.reset(seed=seed)
+        draws.append(env.episode_params.Jp)
+    jp = cov["parameters"].index("Jp")
+    assert np.std(draws) == pytest.approx(math.sqrt(matrix[jp, jp]), rel=0.2)
 
 
 def test_the_heavy_rig_is_recovered_over_noise_seeds(tmp_path):
     for seed in (11, 12, 13):
         logs = logs_of(tmp_path, f"heavy{seed}", HEAVY, seed=seed)
         result = quiet_identify(logs, lab=lab_of(HEAVY))
-        entries, eig, damping = linearisation_error(result.params, HEAVY)
+        entries, eig = linearisation_error(result.params, HEAVY)
         assert result.trusted, (seed, result.problems)
-        assert entries < 0.02 and eig < 0.01 and damping < DAMPING_BOUND, (seed, entries, eig)
+        assert entries < 0.02 and eig < 0.01, (seed, entries, eig)
 
 
-ENVELOPE_SEEDS = (1, 2, 3, 4, 5, 6, 7, 8)
-
-
-@pytest.mark.parametrize("seed", ENVELOPE_SEEDS)
-def test_rigs_across_the_envelope_from_the_lab_file_and_from_the_default_start(
-    tmp_path, seed, capsys
-):
-    params, counts, noise = envelope_rig(seed)
-    logs = logs_of(tmp_path, f"rig{seed}", params, seed=seed, counts=counts, noise=noise)
-    result = quiet_identify(logs, lab=lab_of(params))
-    entries, eig, damping = linearisation_error(result.params, params)
-    ad, bd = riprs.Plant(params).linearize_discrete(TS)
-    worst_d = float(
-        np.max(
-            np.abs(np.hstack([result.Ad, result.Bd]) - np.hstack([ad, bd]))
-            / np.maximum(np.abs(np.hstack([ad, bd])), 1e-12)
-            * (np.abs(np.hstack([ad, bd])) > 1e-12)
-        )
+def test_a_generated_rig_from_its_lab_file_through_the_command_line(tmp_path):
+    # The envelope itself is covered by rip_core::identify's rigs_across_the_envelope test (8
+    # rigs of the shared generator); here one of them through riprs identify's files.
+    rig = riprs.random_rig(2)
+    params = rig.params
+    logs = logs_of(
+        tmp_path, "rig2", params, seed=2, counts=rig.encoder_counts[0], noise=rig.noise_std[0]
     )
-    with capsys.disabled():
-        print(
-            f"\nrig {seed} ({counts} counts, {1e3 * noise:.2f} mrad): lab: [A B] "
-            f"{100 * entries:.3f} %, damping column {100 * damping:.2f} %, eigenvalue "
-            f"{100 * eig:.3f} %, [A_d B_d] {100 * worst_d:.3f} %"
-        )
-    assert result.trusted, result.problems
-    assert entries < 0.02 and eig < 0.01 and damping < DAMPING_BOUND, (entries, eig, damping)
-    # Without the lab file: the same bar, or a refusal.
-    default = quiet_identify(logs)
-    entries, eig, damping = linearisation_error(default.params, params)
-    with capsys.disabled():
-        print(
-            f"rig {seed}: default start: {'trusted' if default.trusted else 'refused'}, "
-            f"[A B] {100 * entries:.3f} %"
-        )
-    assert not default.trusted or (entries < 0.02 and eig < 0.01 and damping < DAMPING_BOUND), (
-        entries,
-        eig,
-        damping,
+    lab = write_lab(tmp_path / "lab.toml", lab_of(params))
+    out = tmp_path / "rig.toml"
+    assert main(["identify", *map(str, logs), "--out", str(out), "--no-plots",
+                 "--lab", str(lab)]) == 0  # fmt: skip
+    entries, eig = linearisation_error(riprs.load_config(out).params, params)
+    assert entries < 0.02 and eig < 0.01, (entries, eig)
+
+
+# --- the rig file is the rig ----------------------------------------------------------------
+
+
+def test_the_rig_file_carries_the_headers_sensor_device_and_lab(heavy_logs, tmp_path, rip_rt):
+    import subprocess
+
+    # The logs as rip-rt excite --lab writes them: device settings and lab values in the header.
+    header = (
+        "# arm_counts_per_rev: 1024\n# pendulum_counts_per_rev: 4096\n# pendulum_zero: down\n"
+        "# arm_sign: 1\n# pendulum_sign: -1\n"
+        + "".join(f"# lab.{k}: {getattr(HEAVY, k)!r}\n" for k in LAB_KEYS)
     )
+    logs = []
+    for path in heavy_logs:
+        copy = tmp_path / path.name
+        copy.write_text(header + path.read_text())
+        logs.append(copy)
+    out = tmp_path / "rig.toml"
+    assert main(["identify", *map(str, logs), "--out", str(out), "--no-plots"]) == 0
+    doc = tomllib.loads(out.read_text())
+    assert doc["device"] == {
+        "arm_counts_per_rev": 1024,
+        "pendulum_counts_per_rev": 4096,
+        "pendulum_zero": "down",
+        "arm_sign": 1.0,
+        "pendulum_sign": -1.0,
+    }
+    assert doc["sensor"]["encoder_counts"] == [1024, 4096]
+    assert doc["loop"]["period_ms"] == 10.0
+    # The header's lab values were used: the rig's own mp, Lp, ... in [plant].
+    for key in LAB_KEYS:
+        assert doc["plant"][key] == pytest.approx(getattr(HEAVY, key), rel=1e-12)
+    # rip-rt reads the file as it is (rip-rt config checks it as rip-rt run --config does),
+    # and riprs compare's reader too.
+    checked = subprocess.run(
+        [str(rip_rt), "config", str(out)], capture_output=True, text=True, timeout=60
+    )
+    assert checked.returncode == 0, checked.stderr
+    assert "arm_counts_per_rev = 1024" in checked.stdout
+    assert list(riprs.load_config(out).sensor.encoder_counts) == [1024, 4096]
+
+
+def test_logs_recorded_with_different_settings_are_refused_naming_both(heavy_logs, tmp_path):
+    logs = []
+    for i, path in enumerate(heavy_logs[:2]):
+        copy = tmp_path / path.name
+        copy.write_text(f"# arm_counts_per_rev: {1024 * (i + 1)}\n" + path.read_text())
+        logs.append(copy)
+    pattern = r"heavy-prbs: header arm_counts_per_rev: 2048, but heavy-chirp says 1024"
+    with pytest.raises(IdentifyError, match=pattern):
+        riprs.identify(logs)

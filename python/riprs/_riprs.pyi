@@ -548,6 +548,9 @@ def excitation(
 ) -> _F: ...
 def excitation_defaults(signal: _SignalName) -> dict[str, float | int | str]: ...
 IDENTIFY_MAX_SAMPLES: int
+LAB_KEYS: list[tuple[str, str]]
+
+def read_lab_file(path: str | os.PathLike[str]) -> dict[str, float | int]: ...
 
 def identify_logs(
     logs: list[tuple[float, ArrayLike, ArrayLike]],

@@ -3,6 +3,7 @@
 use numpy::{PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use rip_core::identify::lab::Lab;
 use rip_core::identify::{identify, IdentifyOptions, LogData, FREE};
 use rip_core::RipError;
 
@@ -25,9 +26,13 @@ fn rust_name(name: &str) -> String {
 /// (FurutaParams), ``free`` (Python names of the estimated parameters), ``std_errors``,
 /// ``fit_percent`` and ``training_fit_percent`` (per log, ``[theta, alpha]``),
 /// ``not_identifiable``, ``at_bounds``, ``condition_number``, ``rank``, ``cost``,
-/// ``rms_residual``, ``iterations``, ``converged``, ``simulations``, ``segments``, ``Ad``,
+/// ``rms_residual``, ``iterations``, ``converged``, ``simulations``, ``starts`` (fits run by
+/// the multi-start), ``segments``, ``Ad``,
 /// ``Bd``, ``held_out_motion`` (per log, rad), ``covariance`` (9 x 9, of the log of the
-/// ``free`` values), ``values`` (those values: ``Jr``, ``Jp`` as the joint-axis inertias) and ``problems`` (the verdict: why not to trust the result, empty when
+/// ``free`` values), ``plant_covariance`` (9 x 9, of the ``free`` plant parameters in SI
+/// units), ``values`` (those values: ``Jr``, ``Jp`` as the joint-axis inertias), ``linear_entries``
+/// and ``linear_rse`` (relative standard errors of those entries of the continuous upright
+/// ``[A B]`` and, last, of its unstable eigenvalue) and ``problems`` (the verdict: why not to trust the result, empty when
 /// trusted; ``names`` name the logs in it). ``fixed`` (Python names of ``free``) are held at
 /// the start's values. Ctrl-C stops it (``KeyboardInterrupt``).
 #[pyfunction]
@@ -110,6 +115,7 @@ fn identify_logs<'py>(
     d.set_item("iterations", result.iterations)?;
     d.set_item("converged", result.converged)?;
     d.set_item("simulations", result.simulations)?;
+    d.set_item("starts", result.starts)?;
     d.set_item("segments", result.segments)?;
     d.set_item("Ad", mat_to_py(py, &result.ad))?;
     d.set_item("Bd", mat_to_py(py, &result.bd))?;
@@ -130,13 +136,44 @@ fn identify_logs<'py>(
             .map(<[f64]>::to_vec)
             .collect::<Vec<_>>(),
     )?;
+    d.set_item(
+        "plant_covariance",
+        result
+            .plant_covariance
+            .chunks(n)
+            .map(<[f64]>::to_vec)
+            .collect::<Vec<_>>(),
+    )?;
     d.set_item("problems", result.problems)?;
     d.set_item("values", result.values.to_vec())?;
+    d.set_item(
+        "linear_entries",
+        rip_core::identify::LINEAR_ENTRIES.to_vec(),
+    )?;
+    d.set_item("linear_rse", result.linear_rse.to_vec())?;
+    Ok(d)
+}
+
+/// The lab file at ``path`` (``rip_core::identify::lab``): a dict of its measured values
+/// (counts as int), only those given. Raises ``ConfigError`` naming the file and the key.
+#[pyfunction]
+fn read_lab_file<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bound<'py, PyDict>> {
+    let lab = Lab::load(&path).map_err(|e| crate::spec::ConfigError::new_err(e.to_string()))?;
+    let d = PyDict::new(py);
+    for (k, v) in lab.values {
+        if k.ends_with("_counts") {
+            d.set_item(k, v as i64)?;
+        } else {
+            d.set_item(k, v)?;
+        }
+    }
     Ok(d)
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(identify_logs, m)?)?;
+    m.add_function(wrap_pyfunction!(read_lab_file, m)?)?;
+    m.add("LAB_KEYS", rip_core::identify::lab::LAB_KEYS.to_vec())?;
     m.add("IDENTIFY_MAX_SAMPLES", rip_core::identify::MAX_SAMPLES)?;
     Ok(())
 }

@@ -34,6 +34,7 @@ except ImportError as exc:  # pragma: no cover - exercised only without the extr
 
 from riprs import _riprs
 from riprs._riprs import FurutaParams, InvalidParameterError, Plant, Spec, load_config
+from riprs.identify import identification_path
 from riprs.log import RtLog, load_log
 
 if sys.version_info >= (3, 11):
@@ -68,9 +69,17 @@ _SEED_LIMIT = 2**63
 
 
 def _covariance_from_file(path: str) -> tuple[list[str], list[list[float]]] | None:
-    """The ``[plant_covariance]`` table of a rig file (``parameters``, ``matrix``), if any."""
+    """The ``[plant_covariance]`` table (``parameters``, ``matrix``) of a rig file, or else of
+    the identification file ``riprs identify`` wrote beside it, if any."""
     with open(path, "rb") as f:
         table = tomllib.load(f).get("plant_covariance")
+    beside = identification_path(path)
+    if table is None and beside.is_file():
+        path = str(beside)
+        with open(beside, "rb") as f:
+            table = tomllib.load(f).get("plant_covariance")
+        if table is not None and not table.get("parameters"):
+            return None  # an identification that determined nothing: no draws from it
     if table is None:
         return None
     try:
@@ -88,8 +97,9 @@ def _spec_of(config: ConfigLike) -> tuple[Spec, tuple[list[str], list[list[float
         return config, None
     path = os.fspath(config)
     cov = _covariance_from_file(path)
-    if cov is None:
-        return load_config(path), None
+    with open(path, "rb") as f:
+        if cov is None or "plant_covariance" not in tomllib.load(f):
+            return load_config(path), cov
     # The covariance table is this module's hook (docs/gym.md); the rest is an experiment file.
     with open(path, "rb") as f:
         data = tomllib.load(f)

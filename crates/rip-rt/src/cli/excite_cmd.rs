@@ -3,8 +3,9 @@
 use std::path::PathBuf;
 
 use rip_core::excitation::{Excitation, ExcitationSettings, Signal, Sweep};
+use rip_core::identify::lab::Lab;
 use rip_core::RipError;
-use rip_rt::config::Config;
+use rip_rt::config::{Config, PendulumZero};
 use rip_rt::excite::{self, ExciteOptions};
 use rip_rt::log::LogWriter;
 use rip_rt::loop_core::LoopCore;
@@ -99,6 +100,10 @@ pub(crate) struct ExciteArgs {
     /// Pin the loop to this CPU, if permitted.
     #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = cpu)]
     cpu: Option<usize>,
+    /// Lab file of the rig's measured values (docs/rig.md): carried into the log's header
+    /// (`lab.mp: ...`), from which `riprs identify` reads it.
+    #[arg(long, value_name = "FILE.toml")]
+    lab: Option<PathBuf>,
     /// Only print the final summary.
     #[arg(long)]
     quiet: bool,
@@ -161,9 +166,11 @@ fn settings(args: &ExciteArgs, cfg: &Config) -> Result<Excitation, SetupError> {
     Ok(x)
 }
 
-fn header(args: &ExciteArgs, cfg: &Config, x: &Excitation) -> Vec<(&'static str, String)> {
+/// The log's header: the run's settings, and the sensor and device settings the rig was excited
+/// with (`riprs identify` writes them into the rig file), and the lab file's values.
+fn header(args: &ExciteArgs, cfg: &Config, x: &Excitation, lab: &Lab) -> Vec<(String, String)> {
     let s = x.settings();
-    let mut h = vec![
+    let mut h: Vec<(&str, String)> = vec![
         ("rip-rt", env!("CARGO_PKG_VERSION").to_string()),
         ("protocol", rip_rt::protocol::VERSION.to_string()),
         ("mode", "excite".to_string()),
@@ -194,8 +201,28 @@ fn header(args: &ExciteArgs, cfg: &Config, x: &Excitation) -> Vec<(&'static str,
         ("period_ms", cfg.loop_.period_ms.to_string()),
         ("voltage_limit", cfg.safety.voltage_limit.to_string()),
         ("arm_limit", cfg.safety.arm_limit.to_string()),
+        (
+            "arm_counts_per_rev",
+            cfg.device.arm_counts_per_rev.to_string(),
+        ),
+        (
+            "pendulum_counts_per_rev",
+            cfg.device.pendulum_counts_per_rev.to_string(),
+        ),
+        (
+            "pendulum_zero",
+            match cfg.device.pendulum_zero {
+                PendulumZero::Down => "down",
+                PendulumZero::Up => "up",
+            }
+            .to_string(),
+        ),
+        ("arm_sign", cfg.device.arm_sign.to_string()),
+        ("pendulum_sign", cfg.device.pendulum_sign.to_string()),
     ]);
-    h
+    let mut out: Vec<(String, String)> = h.into_iter().map(|(k, v)| (k.to_string(), v)).collect();
+    out.extend(lab.header());
+    out
 }
 
 /// Everything that can fail before the motor is enabled, in `rip-rt run`'s order.
@@ -207,10 +234,16 @@ fn prepare(
         None => Config::default(),
     };
     let excitation = settings(args, &cfg)?;
+    let lab = match &args.lab {
+        Some(path) => Lab::load(path).map_err(SetupError::Config)?,
+        None => Lab::default(),
+    };
     let core = LoopCore::open_loop(&cfg);
     stop::install_signal_handlers()?;
     let port = SerialPort::open(&args.port, args.baud).map_err(SetupError::Port)?;
-    let log = LogWriter::create(&args.log, &header(args, &cfg, &excitation), 0)?;
+    let head = header(args, &cfg, &excitation, &lab);
+    let head: Vec<(&str, String)> = head.iter().map(|(k, v)| (k.as_str(), v.clone())).collect();
+    let log = LogWriter::create(&args.log, &head, 0)?;
     Ok((cfg, excitation, core, port, log))
 }
 
