@@ -1,0 +1,145 @@
+//! The active stop's I/O: after a run stopped, the arm is driven to rest by the braking law of
+//! [`crate::envelope`] on the run's clock, then the caller sends the stop frame. The law, the
+//! envelope and the stop modes are [`crate::envelope`]'s (free of I/O); this module exchanges
+//! with the device.
+
+use rip_core::envelope::BrakingLaw;
+
+use crate::config::{Config, MAX_VOLTAGE_LIMIT};
+use crate::envelope::{
+    brake_mode, BrakeMode, BrakeReport, BLIND_PERIODS, MAX_BRAKE_S, REST_S, REST_TRAVEL,
+};
+use crate::loop_core::LoopCore;
+use crate::period::exchange;
+use crate::protocol::{encode, Command, Frame, Message, MAX_FRAME, STATUS_FAULT};
+use crate::serial::Fd;
+use crate::stop::{next_seq, StopReason};
+use crate::timing::Periodic;
+
+fn send(io: &Fd, command: Command) -> bool {
+    let mut out = [0u8; MAX_FRAME];
+    let n = encode(
+        &Frame {
+            seq: next_seq(),
+            message: Message::Command(command),
+        },
+        &mut out,
+    );
+    io.write_all(&out[..n]).is_ok()
+}
+
+/// Brings the arm to rest after the run stopped for `reason` (module docs), on the loop's
+/// grid `periodic`; the caller then sends the stop frame. `driven`: whether the run sent an
+/// enabling command (without one the arm was never driven, and nothing is sent). Returns at
+/// once when nothing can or need be braked.
+pub fn bring_to_rest(
+    io: &Fd,
+    core: &mut LoopCore,
+    cfg: &Config,
+    periodic: &mut Periodic,
+    reason: &StopReason,
+    driven: bool,
+) -> BrakeReport {
+    let mut mode = if driven {
+        brake_mode(reason)
+    } else {
+        BrakeMode::None
+    };
+    let mut report = BrakeReport {
+        mode,
+        seconds: 0.0,
+        max_rate: 0.0,
+        at_rest: mode == BrakeMode::None,
+    };
+    if mode == BrakeMode::None {
+        return report;
+    }
+    let period_s = cfg.period_s();
+    let voltage = cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT);
+    let law = BrakingLaw::new(&cfg.spec.plant.params(), voltage, period_s);
+    // One count per period and a half: below it the measured rate is the encoder's
+    // quantisation, and the law would chatter between ±its gain per count.
+    let dead_band =
+        1.5 * std::f64::consts::TAU / cfg.device.arm_counts_per_rev.max(1) as f64 / period_s;
+    let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
+    let rest_periods = (REST_S / period_s).ceil().max(1.0) as usize;
+    // The recent arm angles, for the rest test: a ring of the last `rest_periods + 1`.
+    let mut history = [f64::NAN; 64];
+    let ring = (rest_periods + 1).min(history.len());
+    let mut seen = 0usize;
+    let mut last: Option<(f64, u32)> = None;
+    let mut blind = 0u32;
+    let mut tx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; 512];
+    // A fresh grid: the run may have stopped in the middle of a period, or after a stall.
+    periodic.restart();
+    let start_ns = periodic.next_deadline_ns();
+    let end_ns = start_ns + (MAX_BRAKE_S * 1e9) as u64;
+    loop {
+        let tick = periodic.wait();
+        report.seconds = (tick.deadline_ns - start_ns) as f64 * 1e-9;
+        if tick.deadline_ns >= end_ns {
+            return report;
+        }
+        let reply = match exchange(io, core, periodic, &mut tx, &mut rx, reply_timeout_ns) {
+            Ok((_, reply)) => reply,
+            // The device is gone: nothing more can be sent.
+            Err(_) => return report,
+        };
+        let Some(reply) = reply else {
+            blind += 1;
+            if blind >= BLIND_PERIODS {
+                mode = BrakeMode::Short;
+                report.mode = mode;
+            }
+            // Without a fresh measurement the law has no rate: short the windings.
+            if !send(io, Command::BRAKE) {
+                return report;
+            }
+            continue;
+        };
+        blind = 0;
+        if reply.m.status & STATUS_FAULT != 0 {
+            // A faulted driver opens the windings itself; nothing to drive.
+            send(io, Command::BRAKE);
+            report.mode = BrakeMode::Short;
+            return report;
+        }
+        let (theta, _) = core.angles(&reply.m);
+        let now_us = reply.m.device_time_us;
+        let rate = match last.replace((theta, now_us)) {
+            Some((before, at)) if (1..u32::MAX / 2).contains(&now_us.wrapping_sub(at)) => {
+                (theta - before) / (now_us.wrapping_sub(at) as f64 * 1e-6)
+            }
+            _ => 0.0,
+        };
+        report.max_rate = report.max_rate.max(rate.abs());
+        history[seen % ring] = theta;
+        seen += 1;
+        if seen >= ring {
+            let (lo, hi) = history[..ring]
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+                    (lo.min(v), hi.max(v))
+                });
+            if hi - lo < REST_TRAVEL {
+                report.at_rest = true;
+                return report;
+            }
+        }
+        let command = match mode {
+            BrakeMode::Active => Command {
+                voltage_mv: if rate.abs() <= dead_band {
+                    0
+                } else {
+                    (law.voltage(rate) * 1000.0).round() as i16
+                },
+                flags: crate::protocol::COMMAND_ENABLE,
+            },
+            _ => Command::BRAKE,
+        };
+        if !send(io, command) {
+            return report;
+        }
+    }
+}
