@@ -163,8 +163,9 @@ fn estimators_stay_balanced_through_dropped_replies() {
 #[test]
 fn vanished_device_is_a_safe_stop_with_exit_code_3() {
     let _serial = one_at_a_time();
-    let emu = Emulator::start("vanish", &["--vanish-after", "1.0"]);
-    let r = run(&emu.device, "lqg", &["--duration", "10"]);
+    // The vanish is timed in simulated time: lockstep decides it without the machine's load.
+    let emu = Emulator::lockstep("vanish", &["--vanish-after", "1.0"]);
+    let r = run_lockstep(&emu.device, "lqg", &["--duration", "10"]);
     assert_eq!(r.status.code(), Some(3), "{}", r.stderr);
     assert!(r.stderr.contains("device lost"), "{}", r.stderr);
     // The device is gone, so the stop cannot be delivered: the message must say so.
