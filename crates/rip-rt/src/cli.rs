@@ -361,10 +361,12 @@ fn prepare(
         None => Config::default(),
     };
     let controller = if args.swing_up {
-        cfg.validate_swing_up().map_err(|e| match &args.config {
-            Some(path) => e.in_file(path),
-            None => e,
-        })?;
+        cfg.validate_swing_up()
+            .and_then(|()| rip_rt::envelope::check_swing_up(&cfg))
+            .map_err(|e| match &args.config {
+                Some(path) => e.in_file(path),
+                None => e,
+            })?;
         controllers::build_swing_up(args.controller, &cfg)
     } else {
         controllers::build(args.controller, &cfg)

@@ -14,7 +14,7 @@
 //! the limit. The position rule (`|θ| > safety.arm_limit`, [`StopReason::AngleLimit`]) stays
 //! as a last resort.
 //!
-//! # The active stop ([`bring_to_rest`])
+//! # The active stop ([`crate::braking::bring_to_rest`])
 //!
 //! Whatever ended the run, the arm is then braked to rest before the driver is disabled: the
 //! braking law of `rip_core::envelope` (full voltage against the arm's measured motion,
@@ -35,12 +35,7 @@ use rip_core::plant::{Plant, State};
 use rip_core::spec::SpecError;
 
 use crate::config::{Config, ConfigError, MAX_VOLTAGE_LIMIT};
-use crate::loop_core::LoopCore;
-use crate::period::exchange;
-use crate::protocol::{encode, Command, Frame, Message, MAX_FRAME, STATUS_FAULT};
-use crate::serial::Fd;
-use crate::stop::{next_seq, StopReason};
-use crate::timing::Periodic;
+use crate::stop::StopReason;
 use crate::witness::WitnessFault;
 
 /// Distance (rad) inside `safety.arm_limit` at which the stop envelope ends, for the rate's
@@ -57,7 +52,7 @@ pub const REST_TRAVEL: f64 = 0.01;
 pub const MAX_BRAKE_S: f64 = 3.0;
 /// Periods without a measurement after which the active stop gives up the law and brakes by
 /// shorting the windings.
-const BLIND_PERIODS: u32 = 3;
+pub const BLIND_PERIODS: u32 = 3;
 
 /// The stopping model of a configuration: its `[plant]`, `safety.voltage_limit`, two loop
 /// periods of latency (module docs).
@@ -482,125 +477,6 @@ impl std::fmt::Display for BrakeReport {
             "{how} {end} in {:.2} s (arm rate up to {:.2} rad/s)",
             self.seconds, self.max_rate
         )
-    }
-}
-
-fn send(io: &Fd, command: Command) -> bool {
-    let mut out = [0u8; MAX_FRAME];
-    let n = encode(
-        &Frame {
-            seq: next_seq(),
-            message: Message::Command(command),
-        },
-        &mut out,
-    );
-    io.write_all(&out[..n]).is_ok()
-}
-
-/// Brings the arm to rest after the run stopped for `reason` (module docs), on the loop's
-/// grid `periodic`; the caller then sends the stop frame. `driven`: whether the run sent an
-/// enabling command (without one the arm was never driven, and nothing is sent). Returns at
-/// once when nothing can or need be braked.
-pub fn bring_to_rest(
-    io: &Fd,
-    core: &mut LoopCore,
-    cfg: &Config,
-    periodic: &mut Periodic,
-    reason: &StopReason,
-    driven: bool,
-) -> BrakeReport {
-    let mode = if driven {
-        brake_mode(reason)
-    } else {
-        BrakeMode::None
-    };
-    let mut report = BrakeReport {
-        mode,
-        seconds: 0.0,
-        max_rate: 0.0,
-        at_rest: mode == BrakeMode::None,
-    };
-    if mode == BrakeMode::None {
-        return report;
-    }
-    let mut brake = if mode == BrakeMode::Modelled {
-        Brake::modelled(cfg, core.witness_estimate(), core.held_voltage())
-    } else {
-        Brake::new(cfg, mode)
-    };
-    let period_s = cfg.period_s();
-    let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
-    let mut rest = RestTest::new(period_s);
-    let mut last: Option<(f64, u32)> = None;
-    let mut blind = 0u32;
-    let mut tx = [0u8; MAX_FRAME];
-    let mut rx = [0u8; 512];
-    // A fresh grid: the run may have stopped in the middle of a period, or after a stall.
-    periodic.restart();
-    let start_ns = periodic.next_deadline_ns();
-    let end_ns = start_ns + (MAX_BRAKE_S * 1e9) as u64;
-    // After the law brought the arm to rest, the windings stay shorted until it rests
-    // there too (a swinging pendulum still pushes it), and only then open (module docs).
-    let mut holding = false;
-    loop {
-        let tick = periodic.wait();
-        report.seconds = (tick.deadline_ns - start_ns) as f64 * 1e-9;
-        report.mode = brake.mode();
-        if tick.deadline_ns >= end_ns {
-            return report;
-        }
-        let reply = match exchange(io, core, periodic, &mut tx, &mut rx, reply_timeout_ns) {
-            Ok((_, reply)) => reply,
-            // The device is gone: nothing more can be sent.
-            Err(_) => return report,
-        };
-        let Some(reply) = reply else {
-            blind += 1;
-            if blind >= BLIND_PERIODS {
-                brake.short();
-            }
-            // Without a fresh measurement the law has no rate: short the windings.
-            if !send(io, Command::BRAKE) {
-                return report;
-            }
-            continue;
-        };
-        blind = 0;
-        if reply.m.status & STATUS_FAULT != 0 {
-            // A faulted driver opens the windings itself; nothing to drive.
-            send(io, Command::BRAKE);
-            report.mode = BrakeMode::Short;
-            return report;
-        }
-        let (theta, _) = core.angles(&reply.m);
-        let now_us = reply.m.device_time_us;
-        let rate = match last.replace((theta, now_us)) {
-            Some((before, at)) if (1..u32::MAX / 2).contains(&now_us.wrapping_sub(at)) => {
-                (theta - before) / (now_us.wrapping_sub(at) as f64 * 1e-6)
-            }
-            _ => 0.0,
-        };
-        report.max_rate = report.max_rate.max(rate.abs());
-        // The model's arm while the stop runs on it: the reading is not the arm's.
-        if rest.observe(brake.model_arm().unwrap_or(theta)) {
-            if holding || brake.mode() == BrakeMode::Short {
-                report.at_rest = true;
-                return report;
-            }
-            holding = true;
-            brake.short();
-            rest = RestTest::new(period_s);
-        }
-        let command = match brake.command(Some(rate)) {
-            BrakeCommand::Volts(v) => Command {
-                voltage_mv: (v * 1000.0).round() as i16,
-                flags: crate::protocol::COMMAND_ENABLE,
-            },
-            BrakeCommand::Short => Command::BRAKE,
-        };
-        if !send(io, command) {
-            return report;
-        }
     }
 }
 

@@ -15,11 +15,14 @@
 //! - [`loop_core`] — the loop's logic without I/O: decoding, limits, the controller step,
 //!   command frames.
 //! - [`envelope`] — the arm's braking envelope (`safety.arm_limit` for the arm's stopping
-//!   point) and the active stop that brakes it to rest.
+//!   point) and the law of the active stop that brakes it to rest; [`braking`] runs that stop
+//!   on the device.
 //! - [`stop`] — stop reasons and exit codes, the stop frame on every exit path, signals.
+//! - [`step`] — what one period produced (the log's row data and status bits).
 //! - [`log`] — the CSV log and its writer thread.
 //! - [`timing`] — absolute-deadline scheduling, latency histograms, real-time settings.
-//! - [`calibrate`] — the rest check and the encoder zeros taken hanging down.
+//! - [`rest`] — the rest check and the encoder zeros taken hanging down, without I/O;
+//!   [`calibrate`] runs it on the device.
 //! - [`config`] — the TOML configuration.
 //! - [`serial`] — raw termios serial I/O and pseudo-terminals.
 //!
@@ -30,6 +33,7 @@
 // keeps those paths valid now that it lives here.
 extern crate self as rip_rt;
 
+pub mod braking;
 pub mod calibrate;
 pub mod cli;
 pub mod config;
@@ -41,10 +45,12 @@ pub mod log;
 pub mod loop_core;
 pub mod period;
 pub mod plant;
+pub mod rest;
 pub use rip_protocol as protocol;
 pub mod runner;
 pub mod serial;
 pub mod sign_check;
+pub mod step;
 pub mod stop;
 pub mod timing;
 pub mod witness;

@@ -15,7 +15,7 @@ use std::sync::mpsc::{self, Receiver, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
-use crate::loop_core::StepOutput;
+use crate::step::StepOutput;
 
 /// Largest state estimate a row carries.
 pub const MAX_ESTIMATES: usize = 32;

@@ -20,7 +20,7 @@
 //!    a period stop the run ([`Overrun::Misses`]).
 //!
 //! The stop path (the active stop of [`crate::envelope`], then the stop frame of
-//! [`crate::stop::StopGuard`]) is the caller's, on the same clock ([`Period::into_parts`]).
+//! [`crate::stop::StopGuard`]) is the caller's, on the same clock ([`Period::clock`]).
 
 use crate::config::{Config, MAX_BLIND_MS};
 use crate::log::{LogWriter, Row};

@@ -566,7 +566,7 @@ pub fn run(
     };
     let driven = driver.driven();
     let braking =
-        crate::envelope::bring_to_rest(io, driver.core, cfg, &mut driver.clock, &reason, driven);
+        crate::braking::bring_to_rest(io, driver.core, cfg, &mut driver.clock, &reason, driven);
     if !opts.quiet && braking.mode != crate::envelope::BrakeMode::None {
         crate::say!("rip-rt: stop: {braking}");
     }

@@ -9,7 +9,7 @@
 //!   signals, sends it with a bare `write(2)` on the registered descriptor, without locks or
 //!   allocation.
 //!
-//! An orderly stop first brings the arm to rest ([`crate::envelope::bring_to_rest`]) and then
+//! An orderly stop first brings the arm to rest ([`crate::braking::bring_to_rest`]) and then
 //! sends the stop frame. The paths that cannot run the braking law (a fatal signal, a panic)
 //! send the brake command instead (0 V, disabled, windings shorted: protocol.md rule 9), which
 //! a device that can brake holds until the next command, so that the arm is braked by its
@@ -231,7 +231,7 @@ pub enum StopReason {
     /// The rest check before a run that starts hanging found the rig moving, or resting away
     /// from hanging; the motor was never enabled.
     #[error("refusing to start: the rig is not at rest hanging down: {0}")]
-    NotAtRest(#[source] crate::calibrate::RestFault),
+    NotAtRest(#[source] crate::rest::RestFault),
     /// The motor-sign / encoder-direction check before an experiment failed.
     #[error("refusing to start the experiment: sign check failed: {0}")]
     SignCheck(#[source] crate::sign_check::SignFault),
@@ -640,7 +640,7 @@ mod tests {
                 budget_ms: 0.5,
                 steps: 3,
             },
-            StopReason::NotAtRest(crate::calibrate::RestFault::NotHanging {
+            StopReason::NotAtRest(crate::rest::RestFault::NotHanging {
                 offset: 1.0,
                 max: 0.5,
             }),

@@ -380,6 +380,28 @@ mod tests {
     }
 
     #[test]
+    fn a_lockstep_grid_moves_one_period_per_wait_and_never_sleeps() {
+        let mut p = Periodic::starting(10_000_000, ClockMode::Lockstep);
+        let first = p.next_deadline_ns();
+        assert_eq!(p.now_ns(), first - 10_000_000);
+        let wall = now_ns();
+        for k in 0..1000u64 {
+            let tick = p.wait();
+            assert_eq!(tick.deadline_ns, first + k * 10_000_000);
+            assert_eq!((tick.lateness_ns, tick.skipped), (0, 0));
+            // The clock stands still within the period, whatever the wall clock does.
+            assert_eq!(p.now_ns(), tick.deadline_ns);
+        }
+        // Ten simulated seconds took no ten seconds of wall time.
+        assert!(now_ns() - wall < 1_000_000_000);
+        assert_eq!(p.missed(), 0);
+        // A restart keeps the lockstep grid where it is (no period passes unexchanged).
+        let next = p.next_deadline_ns();
+        p.restart();
+        assert_eq!(p.next_deadline_ns(), next);
+    }
+
+    #[test]
     fn overrun_skips_whole_periods_and_counts_misses() {
         let start = now_ns() + 1_000_000;
         let mut p = Periodic::new(1_000_000, start);

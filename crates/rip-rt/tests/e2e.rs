@@ -163,8 +163,9 @@ fn estimators_stay_balanced_through_dropped_replies() {
 #[test]
 fn vanished_device_is_a_safe_stop_with_exit_code_3() {
     let _serial = one_at_a_time();
-    let emu = Emulator::start("vanish", &["--vanish-after", "1.0"]);
-    let r = run(&emu.device, "lqg", &["--duration", "10"]);
+    // The vanish is timed in simulated time: lockstep decides it without the machine's load.
+    let emu = Emulator::lockstep("vanish", &["--vanish-after", "1.0"]);
+    let r = run_lockstep(&emu.device, "lqg", &["--duration", "10"]);
     assert_eq!(r.status.code(), Some(3), "{}", r.stderr);
     assert!(r.stderr.contains("device lost"), "{}", r.stderr);
     // The device is gone, so the stop cannot be delivered: the message must say so.
@@ -722,4 +723,56 @@ fn a_log_that_blocks_cannot_hold_the_process() {
     );
     assert_eq!(commands.last(), Some(&(0, 0)));
     drop(reader);
+}
+
+/// Lockstep: the same seed gives the same run, period for period, however loaded the machine
+/// is (two `rip-rt excite` runs log the same measurements and commands), in far less wall
+/// time than the experiment lasts; and a run told `--lockstep` refuses a device that is not
+/// in lockstep, before any enabling command.
+#[test]
+fn lockstep_runs_are_reproducible_and_refuse_a_real_time_device() {
+    let _serial = one_at_a_time();
+    let excite = |name: &str| {
+        let emu = Emulator::lockstep(name, &["--start", "down", "--noise", "0.5", "--seed", "9"]);
+        let log = scratch(&format!("{name}.csv"));
+        let started = Instant::now();
+        let child = Command::new(BIN)
+            .args(["excite", "--port"])
+            .arg(&emu.device)
+            .args([
+                "--signal",
+                "chirp",
+                "--duration",
+                "4",
+                "--quiet",
+                "--lockstep",
+            ])
+            .arg("--log")
+            .arg(&log)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let r = wait_with_timeout(child, Duration::from_secs(30));
+        let wall = started.elapsed();
+        assert_eq!(r.status.code(), Some(0), "{}", r.stderr);
+        let log = Log::read(&log);
+        (log.col("theta"), log.col("alpha"), log.col("u"), wall)
+    };
+    let (theta, alpha, u, wall) = excite("lockstep-a");
+    let (theta_b, alpha_b, u_b, _) = excite("lockstep-b");
+    // The sign check (about 0.6 s) and 4 s of chirp: a row per period.
+    assert!(theta.len() >= 450, "{} rows", theta.len());
+    assert!(u.iter().any(|v| v.abs() > 0.5), "the chirp drove the motor");
+    assert_eq!(theta, theta_b);
+    assert_eq!(alpha, alpha_b);
+    assert_eq!(u, u_b);
+    // Faster than real time even on a loaded machine (the experiment lasts about 5 s).
+    assert!(wall < Duration::from_secs(4), "{wall:?}");
+
+    let emu = Emulator::start("lockstep-refused", &[]);
+    let r = run_lockstep(&emu.device, "lqr", &["--duration", "1"]);
+    assert_eq!(r.status.code(), Some(3), "{}", r.stderr);
+    assert!(r.stderr.contains("--lockstep"), "{}", r.stderr);
+    assert!(emu.commands().iter().all(|&(_, f)| f & 1 == 0));
 }

@@ -118,30 +118,10 @@ fn settle(mut emu: Emulator, child: std::process::Child) -> Outcome {
     }
 }
 
-fn swing_config(name: &str, extra: &str) -> std::path::PathBuf {
-    let path = scratch(&format!("{name}.toml"));
-    std::fs::write(
-        &path,
-        format!("[calibration]\nrest_window_s = 0.5\nrest_timeout_s = 4.0\n{extra}"),
-    )
-    .unwrap();
-    path
-}
-
 /// Starts `rip-rt run --swing-up` from hanging at rest.
 fn start_swing(name: &str, controller: &str, extra_cfg: &str) -> (Emulator, std::process::Child) {
-    let cfg = swing_config(name, extra_cfg);
-    let emu = Emulator::start(
-        name,
-        &[
-            "--start",
-            "down",
-            "--noise",
-            "0.3",
-            "--config",
-            cfg.to_str().unwrap(),
-        ],
-    );
+    let cfg = swing_config(name, 4.0, extra_cfg);
+    let emu = hanging_rig(name, &cfg, &[], false);
     let child = spawn_run(
         &emu.device,
         controller,

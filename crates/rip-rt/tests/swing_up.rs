@@ -126,13 +126,7 @@ const BALANCE_ANGLE: f64 = 0.6;
 
 /// A configuration file for the swing-up runs: a half-second rest window keeps them short.
 fn config(name: &str, extra: &str) -> std::path::PathBuf {
-    let path = scratch(&format!("{name}.toml"));
-    std::fs::write(
-        &path,
-        format!("[calibration]\nrest_window_s = 0.5\nrest_timeout_s = 2.0\n{extra}"),
-    )
-    .unwrap();
-    path
+    swing_config(name, 2.0, extra)
 }
 
 /// The commands before the first enabling one: the rest check's stop commands.
@@ -154,19 +148,7 @@ fn swing_up_and_balance(controller: &str, seed: &str) {
 /// simulates too (its `[plant]`).
 fn swing_up_and_balance_on(controller: &str, name: &str, seed: &str, spec: &str) {
     let cfg = config(name, spec);
-    let emu = Emulator::lockstep(
-        name,
-        &[
-            "--start",
-            "down",
-            "--noise",
-            "0.3",
-            "--seed",
-            seed,
-            "--config",
-            cfg.to_str().unwrap(),
-        ],
-    );
+    let emu = hanging_rig(name, &cfg, &["--seed", seed], true);
     let log_path = scratch(&format!("{name}.csv"));
     let r = run_lockstep(
         &emu.device,

@@ -253,6 +253,33 @@ pub fn run(device: &Path, controller: &str, extra: &[&str]) -> RunResult {
     )
 }
 
+/// A configuration for runs that start hanging at rest (`--swing-up`, `excite`): a quick rest
+/// check (a 0.5 s window, refused after `rest_timeout_s`) and `extra` (more TOML). The
+/// emulator reads the same file, so its `[plant]` is the run's.
+pub fn swing_config(name: &str, rest_timeout_s: f64, extra: &str) -> PathBuf {
+    let path = scratch(&format!("{name}.toml"));
+    std::fs::write(
+        &path,
+        format!("[calibration]\nrest_window_s = 0.5\nrest_timeout_s = {rest_timeout_s}\n{extra}"),
+    )
+    .unwrap();
+    path
+}
+
+/// The hanging rig of the swing-up tests: `rip-rt emulate --start down --noise 0.3` with the
+/// configuration `cfg` ([`swing_config`]) and `extra` flags; in lockstep when `lockstep` (then
+/// give the run [`LOCKSTEP`] too).
+pub fn hanging_rig(name: &str, cfg: &Path, extra: &[&str], lockstep: bool) -> Emulator {
+    let mut args = vec!["--start", "down", "--noise", "0.3", "--config"];
+    args.push(cfg.to_str().unwrap());
+    args.extend_from_slice(extra);
+    if lockstep {
+        Emulator::lockstep(name, &args)
+    } else {
+        Emulator::start(name, &args)
+    }
+}
+
 /// `rip-rt run` in lockstep with an [`Emulator::lockstep`].
 pub fn run_lockstep(device: &Path, controller: &str, extra: &[&str]) -> RunResult {
     run(device, controller, &with_lockstep(extra))
