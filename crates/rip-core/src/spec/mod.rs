@@ -8,7 +8,7 @@
 //! [reference]    # the arm step and the run length                       (ReferenceSpec)
 //! [lqr]          # eq. (13) weights shared by LQR and LQG, rate filter   (LqrSpec)
 //! [kalman]       # the estimator LQG and MPC share                       (KalmanSpec)
-//! [mpc]          # section 3's MPC                                       (MpcSpec)
+//! [mpc]          # section 3's MPC                                       (MpcSettings)
 //! [compensation] # dead zone and arm friction compensated                (CompensationSpec)
 //! [monte_carlo]  # runs over seeds and parameter perturbations           (MonteCarloSpec)
 //! [swing_up]     # swing-up from rest and catch                          (SwingUpSettings)
@@ -34,9 +34,10 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::mpc::{MpcSettings, QpSolver};
 pub use crate::plant::Param;
-pub use assembly::Design;
-pub use controllers::{CompensationSpec, KalmanSpec, LqrSpec, MpcSpec, Solver};
+pub use assembly::{Design, Start, SWING_UP_ALLOWANCE};
+pub use controllers::{CompensationSpec, KalmanSpec, LqrSpec};
 pub use sections::{
     ControllerKind, MonteCarloSpec, PlantSpec, Preset, ReferenceSpec, SensorSpec, MAX_DURATION,
     MAX_MONTE_CARLO_RUNS,
@@ -65,6 +66,13 @@ impl SpecError {
             key: key.into(),
             reason: reason.into(),
         }
+    }
+
+    /// A section's own error ([`KeyError`](crate::error::KeyError), keyed relative to the
+    /// section) at its key path in the file: `mpc` and `output_bounds[1]` give
+    /// `mpc.output_bounds[1]`.
+    pub fn in_section(section: &str, e: crate::error::KeyError) -> Self {
+        Self::new(format!("{section}.{}", e.key), e.reason)
     }
 
     /// The same error, located in `file`.
@@ -104,8 +112,10 @@ pub struct Spec {
     pub lqr: LqrSpec,
     /// `[kalman]`
     pub kalman: KalmanSpec,
-    /// `[mpc]`
-    pub mpc: MpcSpec,
+    /// `[mpc]`: the MPC's own settings ([`MpcSettings`], the paper profile by default); its
+    /// `output_disturbance` and `measurement_noise` come from `[kalman]`
+    /// ([`mpc_settings`](Self::mpc_settings)).
+    pub mpc: MpcSettings,
     /// `[compensation]`: dead zone and arm friction compensated on every controller's voltage
     pub compensation: CompensationSpec,
     /// `[monte_carlo]`
@@ -125,7 +135,7 @@ impl Default for Spec {
             reference: ReferenceSpec::default(),
             lqr: LqrSpec::default(),
             kalman: KalmanSpec::default(),
-            mpc: MpcSpec::default(),
+            mpc: MpcSettings::paper(),
             compensation: CompensationSpec::default(),
             monte_carlo: MonteCarloSpec::default(),
             swing_up: crate::swingup::SwingUpSettings::default(),
