@@ -165,3 +165,14 @@ def test_a_prbs_seed_is_a_u64_as_in_rip_rt():
             assert "seed" in str(e)
         else:
             raise AssertionError(f"seed {bad} accepted")
+
+
+def test_a_deeply_nested_array_is_one_line_naming_the_file(tmp_path, capsys):
+    from riprs.cli import main
+
+    f = tmp_path / "deep.toml"
+    f.write_text("[plant]\nmr = " + "[" * 3000 + "1" + "]" * 3000 + "\n[campaign]\nseeds = 1\n")
+    for argv in (["campaign", str(f), "--out", str(tmp_path / "out")], ["config", str(f)]):
+        assert main(argv) != 0
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and str(f) in err[0], err

@@ -336,8 +336,7 @@ impl PySpec {
     #[pyo3(signature = (Ts = rip_core::paper::TS))]
     #[allow(non_snake_case)]
     fn check(&self, py: Python<'_>, Ts: f64) -> PyResult<()> {
-        let d = self.design(py, Ts)?;
-        py.allow_threads(|| d.controllers().map(|_| ()))
+        py.allow_threads(|| self.inner.check(Ts))
             .map_err(config_err)
     }
 
@@ -538,13 +537,12 @@ impl PySpec {
 ///     that fail together in a design; the message names the file and the key.
 #[pyfunction]
 fn load_config(py: Python<'_>, path: PathBuf) -> PyResult<PySpec> {
-    let spec = Spec::load(&path).map_err(config_err)?;
-    let out = PySpec {
+    let spec = py
+        .allow_threads(|| Spec::load_checked(&path, rip_core::paper::TS))
+        .map_err(config_err)?;
+    Ok(PySpec {
         inner: spec.resolved(),
-    };
-    out.check(py, rip_core::paper::TS)
-        .map_err(|e| ConfigError::new_err(format!("{}: {}", path.display(), e.value(py))))?;
-    Ok(out)
+    })
 }
 
 /// The paper's Tab. 1 indices ``(arm, pendulum, voltage)`` of recorded signals: RMSE of the

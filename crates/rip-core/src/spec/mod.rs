@@ -181,10 +181,22 @@ pub fn from_value<T: serde::de::DeserializeOwned>(
     })
 }
 
-/// Parses TOML text into a table; a syntax error names no key.
+/// Parses TOML text into a table; a syntax error names no key and is one line (where, then
+/// what: the parser's excerpt with its caret is left out).
 pub fn parse_table(text: &str) -> Result<toml::Table, SpecError> {
-    text.parse::<toml::Table>()
-        .map_err(|e| SpecError::new("", format!("invalid TOML: {}", e.to_string().trim_end())))
+    text.parse::<toml::Table>().map_err(|e| {
+        let full = e.to_string();
+        let lines: Vec<&str> = full
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty())
+            .collect();
+        let reason = match (lines.first(), lines.last()) {
+            (Some(first), Some(last)) if lines.len() > 1 => format!("{first}: {last}"),
+            _ => full.trim().to_string(),
+        };
+        SpecError::new("", format!("invalid TOML: {reason}"))
+    })
 }
 
 impl Spec {
@@ -217,6 +229,20 @@ impl Spec {
     /// Reads, parses and checks a file; errors name it.
     pub fn load(path: &Path) -> Result<Self, SpecError> {
         Self::load_with_runtime(path).map(|(spec, _)| spec)
+    }
+
+    /// [`load`](Self::load), and [`check`](Self::check) at sample time `ts`: the file as
+    /// `riprs.load_config` reads it, refused if any controller cannot be designed.
+    pub fn load_checked(path: &Path, ts: f64) -> Result<Self, SpecError> {
+        let spec = Self::load(path)?;
+        spec.check(ts).map_err(|e| e.in_file(path))?;
+        Ok(spec)
+    }
+
+    /// Checks that every controller kind can be designed at sample time `ts` (s), naming the
+    /// key whose value makes a design fail.
+    pub fn check(&self, ts: f64) -> Result<(), SpecError> {
+        self.design(ts).and_then(|d| d.controllers().map(|_| ()))
     }
 
     /// [`load`](Self::load), also returning the runtime sections.
