@@ -86,7 +86,8 @@ def test_the_written_voltage_is_the_law_applied_to_the_planned_one(name):
     comp = c.compensation
     vf = plant["Cr"] * plant["Rm"] / plant["kt"]
     assert comp == pytest.approx({"dead_zone": 0.4, "friction_voltage": vf, "u_min": -12.0,
-                                  "u_max": 12.0})
+                                  "u_max": 12.0, "voltage_scale": 0.05,
+                                  "velocity_scale": 0.05})
     r = _run(spec, c)
     assert not r.fell
     # Replay the measurements through the controller object, whose step is the planned

@@ -73,3 +73,106 @@ def test_every_plant_key_reaches_the_plant_and_a_bad_one_is_named(tmp_path):
             assert f"plant.{name}" in str(e)
         else:
             raise AssertionError(f"plant.{name} = -1 accepted")
+
+
+def test_mpc_paper_is_the_specs_mpc():
+    import numpy as np
+
+    a = riprs.Mpc.paper()
+    b = riprs.Spec().build_controllers(0.01)["MPC"]
+    assert a.solver == b.solver == riprs.Spec().mpc.solver == "active_set"
+    assert a.prediction_horizon == b.prediction_horizon == 50
+    x0, u0 = np.array([0.1, 0.0, 0.05, 0.0, 0.0]), [0.5]
+    for x, y in zip(a.qp_matrices(x0, u0), b.qp_matrices(x0, u0), strict=True):
+        np.testing.assert_array_equal(x, y)
+    for k in range(200):
+        y = [0.4 * np.sin(0.05 * k), 0.05 * np.cos(0.2 * k)]
+        ua, ub = a.step(y, [1.0, 0.0]), b.step(y, [1.0, 0.0])
+        assert ua.tobytes() == ub.tobytes(), k
+    # MATLAB's defaults stay those of riprs.Mpc(...): P = 10, as MATLAB's mpc.
+    m = riprs.paper.discrete_model()
+    assert riprs.Mpc(m.A, m.B, m.C, 0.01).prediction_horizon == 10
+
+
+def _paper_lqr_gain():
+    import numpy as np
+    import scipy.linalg
+
+    m = riprs.paper.discrete_model()
+    q, r = np.diag([25.0, 0.0, 50.0, 0.0]), np.array([[0.1]])
+    x = scipy.linalg.solve_discrete_are(m.A, m.B, q, r)
+    return np.linalg.solve(r + m.B.T @ x @ m.B, m.B.T @ x @ m.A)[0]
+
+
+def test_compare_honours_the_encoder_offsets_as_an_offset_encoder_predicts(tmp_path):
+    import numpy as np
+
+    from riprs.compare import compare
+
+    # An encoder reading angle + o: LQR u = -K (x_measured - x_ref) comes to rest where u = 0
+    # with the pendulum upright (alpha = 0, the only equilibrium of the plant at u = 0), i.e.
+    # K0 (theta + o0 - r) + K2 o1 = 0: theta_ss = r - o0 - (K2 / K0) o1 (scipy's DARE gain).
+    k = _paper_lqr_gain()
+    offsets = (0.2, 0.1)
+    f = tmp_path / "offsets.toml"
+    f.write_text("controllers = ['LQR']\n[sensor]\nencoder_offsets = [0.2, 0.1]\n")
+    base = tmp_path / "base.toml"
+    base.write_text("controllers = ['LQR']\n")
+    runs = {}
+    for name, path in (("offsets", f), ("base", base)):
+        res = compare(path, plots=False, progress=False)
+        runs[name] = res.runs["LQR"]
+    r = riprs.Spec().reference.arm_step
+    predicted = r - offsets[0] - k[2] / k[0] * offsets[1]
+    tail = slice(-100, None)
+    arm = {n: float(np.mean(run.x[tail, 0])) for n, run in runs.items()}
+    assert abs(arm["base"] - r) < 0.01
+    assert abs(predicted - r) > 0.1  # the prediction is a real change
+    assert abs(arm["offsets"] - predicted) < 0.02, (arm, predicted)
+    # The measured angles carry the offsets (the true pendulum stays upright).
+    assert abs(float(np.mean(runs["offsets"].y[tail, 1])) - offsets[1]) < 0.01
+    assert abs(float(np.mean(runs["offsets"].x[tail, 2]))) < 0.01
+
+
+def test_compare_down_steps_reference_step_time_after_the_catch():
+    import numpy as np
+
+    spec = riprs.Spec.from_toml("[reference]\nstep_time = 0.5\n")
+    down = spec.simulation_options("down")
+    up = spec.simulation_options("up")
+    assert down["step_after_catch"] == 0.5 and up["reference_time"] == 0.5
+    assert down["duration"] == up["duration"] + riprs._riprs.SWING_UP_ALLOWANCE
+    assert list(down["x0"]) == [0.0, 0.0, float(np.pi), 0.0]
+
+
+def test_a_prbs_seed_is_a_u64_as_in_rip_rt():
+    import numpy as np
+
+    from riprs.excitation import excitation
+
+    # The register starts at 1 + seed mod (2^bits - 1): the largest u64 seed that
+    # `rip-rt excite --seed` takes regenerates, and equals the seed it reduces to.
+    big = 2**64 - 1
+    a = excitation("prbs", seed=big, prbs_bits=9)
+    b = excitation("prbs", seed=big % 511, prbs_bits=9)
+    c = excitation("prbs", seed=big % 511 + 1, prbs_bits=9)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+    for bad in (2**64, -1):
+        try:
+            excitation("prbs", seed=bad)
+        except riprs.InvalidParameterError as e:
+            assert "seed" in str(e)
+        else:
+            raise AssertionError(f"seed {bad} accepted")
+
+
+def test_a_deeply_nested_array_is_one_line_naming_the_file(tmp_path, capsys):
+    from riprs.cli import main
+
+    f = tmp_path / "deep.toml"
+    f.write_text("[plant]\nmr = " + "[" * 3000 + "1" + "]" * 3000 + "\n[campaign]\nseeds = 1\n")
+    for argv in (["campaign", str(f), "--out", str(tmp_path / "out")], ["config", str(f)]):
+        assert main(argv) != 0
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and str(f) in err[0], err

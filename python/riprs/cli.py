@@ -240,8 +240,17 @@ as `riprs config` prints it; `riprs config FILE` prints a file resolved the same
   0, the paper's setting, for none).
 - `[kalman]`: the one Kalman filter LQG and MPC share: the output-disturbance gain of eq. (1)
   and the measurement-noise diagonal of eq. (2).
-- `[mpc]`: section 3's MPC with Python's `riprs.Mpc` names; `input_bounds` (V) also clamps LQR
-  and LQG; `output_bounds` per output, `[-inf, inf]` for none.
+- `[mpc]`: section 3's MPC; the section is the MPC's own settings (`MpcSettings`, the keywords
+  of Python's `riprs.Mpc`), each missing key taking the paper profile (`riprs.Mpc.paper()`,
+  which is this section's default exactly, solver included; `riprs.Mpc(...)`'s own keyword
+  defaults are MATLAB's, e.g. `prediction_horizon = 10`). `input_bounds` (V) also clamps LQR
+  and LQG; `output_bounds` per output, `[-inf, inf]` for none, `[y, y]` a soft equality;
+  `input_target` is the input `input_weights` pull towards. `solver` is `active_set` (the
+  default everywhere) or `clarabel`: both solve the same strictly convex QP to the same
+  minimiser, so the choice is one of cost, and the active set warm-starts from the previous
+  working set, runs without allocating in the 100 Hz loop and costs about a hundredth of
+  Clarabel's interior-point solve per step; Clarabel is the reference the tests check it
+  against.
 - `[compensation]`: the dead zone and arm Coulomb friction compensated on the voltage of
   every controller and of the swing-up (dead-zone inverse and friction feed-forward,
   [design.md](design.md#dead-zone-and-friction-compensation)): `dead_zone` (V) and

@@ -19,10 +19,11 @@ over every sample of the run (a run that falls is cut at the fall and flagged).
 
 With ``start="down"`` (``riprs compare --start down``) every controller starts with the
 pendulum hanging at rest inside a :class:`riprs.SwingUp` (the ``[swing_up]`` settings of the
-spec): it swings up, catches, and ``riprs.STEP_AFTER_CATCH`` seconds (2 s) after the catch the
-arm reference steps 0 -> 1 rad; the run is ``reference.duration + riprs.SWING_UP_ALLOWANCE``
-seconds long. Its Tab. 1 indices are taken over the window that lines up with the paper's run
-(``reference.duration`` seconds from ``reference.step_time`` before the step, the pendulum angle
+spec): it swings up, catches, and ``reference.step_time`` seconds after the catch the arm
+reference steps 0 -> 1 rad, as ``rip-rt run --swing-up`` does on the rig, so that an overlay
+lines up; the run is ``reference.duration + riprs.SWING_UP_ALLOWANCE`` seconds long. Its Tab. 1
+indices are taken over the window that lines up with the paper's run (``reference.duration``
+seconds from the catch, i.e. from ``reference.step_time`` before the step, the pendulum angle
 wrapped). The table adds the time to upright (the catch), and the Monte Carlo reports per
 controller the success rate and the time-to-upright distribution (``rip-core``'s definitions,
 :attr:`riprs.SimResult.swing_up_succeeded`, :attr:`riprs.SimResult.time_to_upright`).
@@ -45,8 +46,6 @@ import numpy as np
 from riprs import _progress as _bars
 from riprs import paper
 from riprs._riprs import (
-    STEP_AFTER_CATCH,
-    SWING_UP_ALLOWANCE,
     RiprsError,
     SwingUp,
     table1_rmse,
@@ -274,20 +273,10 @@ def build_controllers(config: Spec | None = None) -> dict[str, Any]:
 
 
 def _sim_options(config: Spec, start: str = "up") -> dict[str, Any]:
-    options = {
-        "reference": config.reference.arm_step,
-        "reference_time": config.reference.step_time,
-        "Ts": paper.TS,
-        "substeps": config.plant.substeps,
-        "x0": config.plant.initial_state,
-        "encoder_counts": config.sensor.encoder_counts,
-        "noise_std": config.sensor.noise_std,
-        "u_limit": max(abs(b) for b in config.mpc.input_bounds[0]),
-        "fall_limit": config.plant.fall_limit,
-    }
-    if start == "down":
-        options["x0"] = [0.0, 0.0, float(np.pi), 0.0]
-        options["step_after_catch"] = STEP_AFTER_CATCH
+    """The :func:`riprs.simulate` keywords of a run of ``config`` (rip-core's one mapping of the
+    file onto a simulation), without ``duration``."""
+    options = config.simulation_options(start, paper.TS)
+    del options["duration"]
     return options
 
 
@@ -299,7 +288,8 @@ def _paper_window(traj: Trajectory, config: Spec) -> Trajectory:
     caught is taken whole."""
     if traj.catch_time is None or traj.t[0] == traj.catch_time:
         return traj
-    t0 = traj.catch_time + STEP_AFTER_CATCH - config.reference.step_time
+    # The step comes reference.step_time after the catch, so the window starts at the catch.
+    t0 = traj.catch_time
     window = (traj.t >= t0 - 1e-9) & (traj.t < t0 + config.reference.duration - 1e-9)
     wrapped = wrap_angle(traj.pendulum)
     return Trajectory(
@@ -314,8 +304,7 @@ def _paper_window(traj: Trajectory, config: Spec) -> Trajectory:
 
 
 def _duration(config: Spec, start: str) -> float:
-    extra = SWING_UP_ALLOWANCE if start == "down" else 0.0
-    return float(config.reference.duration) + extra
+    return float(config.simulation_options(start, paper.TS)["duration"])
 
 
 def _supervised(config: Spec, controllers: Mapping[str, Any]) -> dict[str, Any]:
@@ -371,7 +360,7 @@ def compare(
     start : {"up", "down"}
         ``"up"``: the paper's experiment, started near upright. ``"down"``: hanging at rest,
         swung up and caught by a :class:`riprs.SwingUp` around each controller, the arm step
-        ``riprs.STEP_AFTER_CATCH`` s after the catch (module docs).
+        ``reference.step_time`` after the catch (module docs).
 
     Returns
     -------

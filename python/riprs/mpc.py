@@ -5,8 +5,12 @@ output-disturbance model, a steady-state Kalman filter in current form designed 
 with ``Q = B B^T``, ``R = D D^T``, ``N = B D^T``, and at every sample a QP over the moves
 ``du(k..k+m-1)`` and one slack ``eps`` with weighted, scaled output, input and input-rate terms,
 hard input bounds and soft output bounds (equal concern). Two QP backends give the same move:
-``solver="clarabel"`` (interior point) and ``solver="active_set"`` (dense, warm-started, for
-these small problems).
+``solver="active_set"`` (dense, warm-started, allocation-free; the default everywhere) and
+``solver="clarabel"`` (interior point, the reference).
+
+``Mpc(...)``'s keyword defaults are MATLAB's ``mpc`` defaults (``P = 10``, ``m = 2``, ...), so
+a MATLAB design ports keyword for keyword; :func:`riprs.paper.mpc` (``Mpc.paper()``) is the
+paper's MPC and equals the experiment file's ``[mpc]`` defaults.
 
 Examples
 --------

@@ -136,7 +136,7 @@ def plant() -> _riprs.Plant:
     return _riprs.Plant.paper()
 
 
-def mpc(solver: str = "clarabel") -> _riprs.Mpc:
+def mpc(solver: str = "active_set") -> _riprs.Mpc:
     """The study's MPC (section 3) on :func:`discrete_model`.
 
     ``Ts = 0.01``, ``P = 50``, ``m = 3``, output weights ``(25, 50)``, input weight 0, input-rate
@@ -151,9 +151,13 @@ def mpc(solver: str = "clarabel") -> _riprs.Mpc:
     the reported arm tracking would not be possible without a large slack. ``+-pi/6`` on the
     pendulum is a "stay near upright" limit the controller can honour.
 
+    It is the experiment file's ``[mpc]`` default (``riprs.Spec().build_controllers()["MPC"]``)
+    and ``rip-rt``'s MPC: the same settings and the same solver.
+
     Parameters
     ----------
-    solver : {"clarabel", "active_set"}
-        QP backend.
+    solver : {"active_set", "clarabel"}
+        QP backend; the active set by default, as in the experiment file (both reach the same
+        minimiser, the active set about a hundred times faster and without allocating).
     """
     return _riprs.Mpc.paper(solver)

@@ -147,6 +147,7 @@ def _config(
     reference_time: float,
     encoder_counts: ArrayLike | None,
     noise_std: ArrayLike,
+    encoder_offsets: ArrayLike | None = None,
     output_disturbance: tuple[float, ArrayLike] | None,
     torque_disturbance: tuple[float, float] | None,
     u_limit: float,
@@ -165,6 +166,7 @@ def _config(
         "reference_sequence": None,
         "encoder_counts": encoder_counts,
         "noise_std": noise_std,
+        "encoder_offsets": encoder_offsets,
         "output_disturbance": None,
         "torque_disturbance": None,
         "u_limit": u_limit,
@@ -209,6 +211,7 @@ _DEFAULTS: dict[str, Any] = {
     "x0": None,
     "encoder_counts": None,
     "noise_std": 0.0,
+    "encoder_offsets": None,
     "output_disturbance": None,
     "torque_disturbance": None,
     "u_limit": _riprs.DEFAULT_U_LIMIT,
@@ -229,6 +232,7 @@ def simulate(
     x0: ArrayLike | None = None,
     encoder_counts: ArrayLike | None = None,
     noise_std: ArrayLike = 0.0,
+    encoder_offsets: ArrayLike | None = None,
     output_disturbance: tuple[float, ArrayLike] | None = None,
     torque_disturbance: tuple[float, float] | None = None,
     u_limit: float = _riprs.DEFAULT_U_LIMIT,
@@ -284,6 +288,9 @@ def simulate(
         Encoder counts per revolution of ``[theta, alpha]`` (e.g. 2048); exact angles if omitted.
     noise_std : float or array_like, shape (2,)
         Standard deviation of the white measurement noise (rad).
+    encoder_offsets : array_like, shape (2,), optional
+        Where each encoder's zero lies (rad): the sensor reads ``angle + offset`` (then
+        quantised, then the noise added), as ``[sensor] encoder_offsets``; 0 by default.
     output_disturbance : (time, size), optional
         Step added to the measured outputs from ``time`` on; ``size`` a scalar or (2,).
     torque_disturbance : (time, torque), optional
@@ -299,7 +306,7 @@ def simulate(
     step_after_catch : float, optional
         With a :class:`riprs.SwingUp`: the scalar ``reference`` step happens this many seconds
         after the catch instead of at ``reference_time`` (``riprs compare --start down`` uses
-        ``riprs.STEP_AFTER_CATCH``); no step in a run without a catch.
+        ``reference.step_time``, as the rig); no step in a run without a catch.
 
     Returns
     -------
@@ -322,6 +329,7 @@ def simulate(
         reference_time=reference_time,
         encoder_counts=encoder_counts,
         noise_std=noise_std,
+        encoder_offsets=encoder_offsets,
         output_disturbance=output_disturbance,
         torque_disturbance=torque_disturbance,
         u_limit=u_limit,

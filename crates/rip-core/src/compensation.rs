@@ -144,6 +144,11 @@ impl Compensation {
         self.friction_voltage
     }
 
+    /// The widths of the sign ramps: `(voltage_scale` (V), `velocity_scale` (rad/s)).
+    pub fn scales(&self) -> (f64, f64) {
+        (self.voltage_scale, self.velocity_scale)
+    }
+
     /// The bounds of the voltage actually written.
     pub fn bounds(&self) -> (f64, f64) {
         (self.u_min, self.u_max)

@@ -110,5 +110,59 @@ impl RipError {
     }
 }
 
+/// A setting out of range, located by its key path as data: relative to the settings type
+/// that found it (`prediction_horizon`, `output_bounds[1]`), which is the key of that type's
+/// section in the experiment file, so the spec names `mpc.output_bounds[1]` by prefixing the
+/// section ([`crate::spec::SpecError::in_section`]) and the Python API by the keyword.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct KeyError {
+    /// The key path within the section.
+    pub key: String,
+    /// Why the value is not accepted.
+    pub reason: String,
+    /// Whether the value is NaN or infinite where a finite one is needed (Python's
+    /// `NonFiniteError`, a `ValueError` like the others).
+    pub non_finite: bool,
+}
+
+impl KeyError {
+    /// `key` is out of range for `reason`.
+    pub fn new(key: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self {
+            key: key.into(),
+            reason: reason.into(),
+            non_finite: false,
+        }
+    }
+
+    /// `key` holds NaN or an infinity (`value`) where a finite value is needed.
+    pub fn non_finite(key: impl Into<String>, value: f64) -> Self {
+        Self {
+            key: key.into(),
+            reason: format!("must be finite, got {value}"),
+            non_finite: true,
+        }
+    }
+}
+
+impl std::fmt::Display for KeyError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}", self.key, self.reason)
+    }
+}
+
+impl From<KeyError> for RipError {
+    fn from(e: KeyError) -> Self {
+        if e.non_finite {
+            RipError::NonFinite { name: e.key }
+        } else {
+            RipError::InvalidParameter {
+                name: e.key,
+                reason: e.reason,
+            }
+        }
+    }
+}
+
 /// Result alias used throughout the crate.
 pub type Result<T> = std::result::Result<T, RipError>;

@@ -221,7 +221,7 @@ mod tests {
         let mpc = crate::mpc::paper::settings(crate::mpc::QpSolver::default());
         assert_eq!(mpc.input_bounds, vec![(-INPUT_LIMIT, INPUT_LIMIT)]);
         let spec = crate::spec::Spec::default();
-        assert_eq!(spec.mpc.input_bounds, [[-INPUT_LIMIT, INPUT_LIMIT]]);
+        assert_eq!(spec.mpc.input_bounds, vec![(-INPUT_LIMIT, INPUT_LIMIT)]);
         // A far-off reference drives the default regulators into their clamp.
         let mut u = [0.0];
         for mut c in [

@@ -284,7 +284,7 @@ fn voltage(input: &Input<'_>) -> Option<Finding> {
     let (v_mode, pole) = mode_voltage(&ac, &bc, &x0)?;
     let friction = if p.kt > 0.0 { p.cr * p.rm / p.kt } else { 0.0 };
     let need = v_mode + p.vd + friction;
-    let [lo, hi] = spec.mpc.input_bounds[0];
+    let (lo, hi) = spec.mpc.input_bounds[0];
     let bound = hi.min(-lo);
     let detail = format!(
         "from the start state (pendulum {:.3} rad) the unstable mode (pole {pole:.2} 1/s) needs \

@@ -68,15 +68,14 @@ impl From<ControllerKind> for Kind {
 fn design(kind: ControllerKind, cfg: &Config) -> Result<rip_core::spec::Design, String> {
     let mut spec = cfg.spec.clone();
     let v = cfg.safety.voltage_limit;
-    let [lo, hi] = spec.mpc.input_bounds[0];
-    let (lo, hi) = (lo.max(-v), hi.min(v));
+    let (lo0, hi0) = spec.input_bounds();
+    let (lo, hi) = (lo0.max(-v), hi0.min(v));
     if lo >= hi {
         return Err(format!(
-            "safety.voltage_limit: ±{v} V leaves nothing of mpc.input_bounds [{}, {}]",
-            spec.mpc.input_bounds[0][0], spec.mpc.input_bounds[0][1]
+            "safety.voltage_limit: ±{v} V leaves nothing of mpc.input_bounds [{lo0}, {hi0}]"
         ));
     }
-    spec.mpc.input_bounds[0] = [lo, hi];
+    spec.set_input_bounds(lo, hi);
     spec.design(cfg.period_s())
         .map_err(|e| format!("{kind} design: {e}"))
 }

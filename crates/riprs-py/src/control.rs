@@ -91,7 +91,8 @@ fn compensated_factory<C: Controller + Clone + 'static>(
 }
 
 /// The compensation as a dict (``dead_zone``, ``friction_voltage`` in V; ``u_min``,
-/// ``u_max``: the bounds of the written voltage), or ``None``.
+/// ``u_max``: the bounds of the written voltage; ``voltage_scale`` (V), ``velocity_scale``
+/// (rad/s): the widths of its sign ramps), or ``None``.
 pub(crate) fn compensation_dict<'py>(
     py: Python<'py>,
     c: Option<Compensation>,
@@ -103,6 +104,9 @@ pub(crate) fn compensation_dict<'py>(
     d.set_item("friction_voltage", c.friction_voltage())?;
     d.set_item("u_min", lo)?;
     d.set_item("u_max", hi)?;
+    let (voltage_scale, velocity_scale) = c.scales();
+    d.set_item("voltage_scale", voltage_scale)?;
+    d.set_item("velocity_scale", velocity_scale)?;
     Ok(Some(d))
 }
 

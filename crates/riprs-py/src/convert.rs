@@ -210,6 +210,41 @@ impl Count {
     }
 }
 
+/// A random seed: an integer in `[0, 2⁶⁴)`, the `u64` of every seed in rip-core and `rip-rt`
+/// (`rip-rt excite --seed`), so that any run's signal can be regenerated from Python.
+#[derive(Debug, Clone, Copy)]
+pub struct Seed(pub u64);
+
+impl Seed {
+    /// Extracts `ob` as a seed named `name` in the error.
+    pub fn extract(ob: &Bound<'_, PyAny>, name: &str) -> PyResult<u64> {
+        if ob.is_instance_of::<PyBool>()
+            || ob.is_instance_of::<PyFloat>()
+            || !(ob.is_instance_of::<PyInt>() || ob.hasattr("__index__")?)
+        {
+            return Err(PyTypeError::new_err(format!(
+                "{name} must be an integer, got {}",
+                ob.get_type().name()?
+            )));
+        }
+        ob.extract::<u64>().map_err(|_| {
+            to_py(RipError::invalid(
+                name,
+                format!(
+                    "must be in [0, 2**64), got {}",
+                    ob.str().map(|s| s.to_string()).unwrap_or_default()
+                ),
+            ))
+        })
+    }
+}
+
+impl<'py> FromPyObject<'py> for Seed {
+    fn extract_bound(ob: &Bound<'py, PyAny>) -> PyResult<Self> {
+        Seed::extract(ob, "seed").map(Seed)
+    }
+}
+
 impl<'py> FromPyObject<'py> for Count {
     fn extract_bound(ob: &Bound<'py, PyAny>) -> PyResult<Self> {
         if ob.is_instance_of::<PyBool>() || ob.is_instance_of::<PyFloat>() {

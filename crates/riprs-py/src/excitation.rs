@@ -8,7 +8,7 @@ use pyo3::types::PyDict;
 use rip_core::excitation::{Excitation, ExcitationSettings, Signal, Sweep};
 use rip_core::RipError;
 
-use crate::convert::{array_like, Count, Real};
+use crate::convert::{array_like, Count, Real, Seed};
 use crate::errors::ShapeError;
 use crate::errors::{to_py, IntoPyResult};
 
@@ -43,7 +43,7 @@ fn excitation<'py>(
     sweep: Option<&str>,
     prbs_bits: Option<Count>,
     prbs_clock: Option<Real>,
-    seed: Option<Count>,
+    seed: Option<Seed>,
     step_hold: Option<Real>,
     kick: Option<Real>,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
@@ -71,8 +71,8 @@ fn excitation<'py>(
     if let Some(bits) = prbs_bits {
         s.prbs_bits = u32::try_from(bits.get("prbs_bits")?).unwrap_or(u32::MAX);
     }
-    if let Some(seed) = seed {
-        s.seed = seed.get_u64("seed")?;
+    if let Some(Seed(seed)) = seed {
+        s.seed = seed;
     }
     let mut x = Excitation::new(s, dt.0).py()?;
     let times: Vec<f64> = match t {

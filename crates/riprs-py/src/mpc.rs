@@ -287,6 +287,11 @@ impl PyMpcSolution {
 /// If the QP fails, the previous plan's next move clamped to the bounds is applied and the
 /// solution says so (``fallback``); the input is never NaN.
 ///
+/// The keyword defaults are MATLAB's ``mpc`` defaults (``P = 10``, ``m = 2``, weights 1 / 0.1 / 0,
+/// ``ECR = 1e5``, no bounds, no disturbance model), as in ``rip_core::mpc::MpcSettings::default``,
+/// so that a MATLAB design ports keyword for keyword; :meth:`paper` is the paper's MPC, equal
+/// to the experiment file's ``[mpc]`` defaults (``MpcSettings::paper``), solver included.
+///
 /// Parameters
 /// ----------
 /// A, B, C : array_like, shapes (n, n), (n, nu), (ny, n)
@@ -314,8 +319,10 @@ impl PyMpcSolution {
 ///     ``(A_od, B_od, C_od)``; ``None`` for no disturbance model.
 /// measurement_noise : array_like or None
 ///     :math:`D_n` (ny, nv) on the scaled outputs; ``None`` for the identity.
-/// solver : {"clarabel", "active_set"}
-///     QP backend: Clarabel (interior point) or the dense active-set method with warm start.
+/// solver : {"active_set", "clarabel"}
+///     QP backend: the dense active-set method with warm start (default, allocation-free, the
+///     solver of the experiment file and ``rip-rt``) or Clarabel (interior point, the
+///     reference); both reach the same minimiser.
 /// max_iterations : int
 ///     Iteration limit of the QP solver, at most 10 000.
 ///
@@ -352,7 +359,7 @@ impl PyMpc {
         control_horizon=Count::of(rip_core::mpc::DEFAULT_CONTROL_HORIZON as i64), output_weights=None,
         input_rate_weights=None, input_weights=None, input_target=None, input_bounds=None,
         output_bounds=None, ecr_weight=Real(rip_core::mpc::DEFAULT_ECR_WEIGHT), input_scales=None,
-        output_scales=None, output_disturbance=None, measurement_noise=None, solver="clarabel",
+        output_scales=None, output_disturbance=None, measurement_noise=None, solver="active_set",
         max_iterations=Count::of(rip_core::mpc::DEFAULT_MAX_ITERATIONS as i64)
     ))]
     #[allow(non_snake_case, clippy::too_many_arguments)]
@@ -411,9 +418,11 @@ impl PyMpc {
         })
     }
 
-    /// The paper's MPC (section 3) on its model; see :func:`riprs.paper.mpc`.
+    /// The paper's MPC (section 3) on its model; see :func:`riprs.paper.mpc`. The same
+    /// controller (settings and solver) as ``riprs.Spec().build_controllers()["MPC"]`` and
+    /// ``rip-rt``'s default MPC.
     #[staticmethod]
-    #[pyo3(signature = (solver="clarabel"))]
+    #[pyo3(signature = (solver="active_set"))]
     fn paper(py: Python<'_>, solver: &str) -> PyResult<Self> {
         let solver = QpSolver::from_name(solver).py()?;
         let inner = py.allow_threads(|| paper::controller(solver)).py()?;

@@ -107,7 +107,10 @@ fn config_from_dict(d: &Bound<'_, PyDict>) -> PyResult<SimConfig> {
         sensor: SensorModel {
             counts_per_rev,
             noise_std: pair_arg(&item(d, "noise_std")?, "noise_std")?,
-            offsets: [0.0; 2],
+            offsets: match opt_item(d, "encoder_offsets")? {
+                Some(o) => pair_arg(&o, "encoder_offsets")?,
+                None => [0.0; 2],
+            },
         },
         output_disturbance,
         torque_disturbance,
@@ -414,14 +417,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("DEFAULT_SUBSTEPS", rip_core::sim::DEFAULT_SUBSTEPS)?;
     m.add("DEFAULT_U_LIMIT", rip_core::paper::INPUT_LIMIT)?;
     m.add("DEFAULT_FALL_LIMIT", rip_core::sim::DEFAULT_FALL_LIMIT)?;
-    m.add(
-        "STEP_AFTER_CATCH",
-        rip_core::swingup::study::STEP_AFTER_CATCH,
-    )?;
-    m.add(
-        "SWING_UP_ALLOWANCE",
-        rip_core::swingup::study::SWING_UP_ALLOWANCE,
-    )?;
+    m.add("SWING_UP_ALLOWANCE", rip_core::spec::SWING_UP_ALLOWANCE)?;
     m.add_function(wrap_pyfunction!(sim_run, m)?)?;
     m.add_function(wrap_pyfunction!(sim_batch, m)?)?;
     m.add_function(wrap_pyfunction!(sim_metrics, m)?)?;

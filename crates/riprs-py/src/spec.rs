@@ -168,6 +168,7 @@ pub struct PyMpcSpec {
     output_weights: Vec<f64>,
     input_rate_weights: Vec<f64>,
     input_weights: Vec<f64>,
+    input_target: Vec<f64>,
     input_bounds: Vec<(f64, f64)>,
     output_bounds: Vec<(f64, f64)>,
     ecr_weight: f64,
@@ -267,6 +268,65 @@ impl PySpec {
         self.inner.to_toml()
     }
 
+    /// The keyword arguments of :func:`riprs.simulate` (and ``simulate_metrics``) for a run
+    /// of this file: rip-core's one mapping of ``[plant]``, ``[sensor]`` and ``[reference]``
+    /// onto a simulation (``Spec::simulation``), ``duration`` included.
+    ///
+    /// Parameters
+    /// ----------
+    /// start : {"up", "down"}
+    ///     ``"up"``: at ``plant.initial_state``, the step at ``reference.step_time``;
+    ///     ``"down"``: hanging at rest, ``reference.duration + SWING_UP_ALLOWANCE`` long, the
+    ///     step ``reference.step_time`` after the catch (as ``rip-rt run --swing-up``).
+    /// Ts : float
+    ///     Control period (s).
+    #[pyo3(signature = (start = "up", Ts = rip_core::paper::TS))]
+    #[allow(non_snake_case)]
+    fn simulation_options<'py>(
+        &self,
+        py: Python<'py>,
+        start: &str,
+        Ts: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        use rip_core::sim::Reference;
+        use rip_core::spec::Start;
+        let start = match start {
+            "up" => Start::Upright,
+            "down" => Start::Hanging,
+            other => {
+                return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                    "start must be \"up\" or \"down\", got {other:?}"
+                )))
+            }
+        };
+        let c = self.inner.simulation(Ts, 0, start);
+        let d = PyDict::new(py);
+        d.set_item("duration", c.duration)?;
+        d.set_item("Ts", c.ts)?;
+        d.set_item("substeps", c.substeps)?;
+        d.set_item("x0", c.x0.to_vec())?;
+        match c.reference {
+            Reference::Step { time, value } => {
+                d.set_item("reference", value[0])?;
+                d.set_item("reference_time", time)?;
+            }
+            Reference::StepAfterCatch { delay, value } => {
+                d.set_item("reference", value[0])?;
+                d.set_item("step_after_catch", delay)?;
+            }
+            Reference::Sequence(_) => unreachable!("a spec's reference is a step"),
+        }
+        d.set_item(
+            "encoder_counts",
+            c.sensor.counts_per_rev.map(|v| v.to_vec()),
+        )?;
+        d.set_item("noise_std", c.sensor.noise_std.to_vec())?;
+        d.set_item("encoder_offsets", c.sensor.offsets.to_vec())?;
+        d.set_item("u_limit", c.u_limit)?;
+        d.set_item("fall_limit", c.fall_limit)?;
+        Ok(d)
+    }
+
     /// Check that every controller can be designed at sample time ``Ts`` (s).
     ///
     /// Raises
@@ -276,8 +336,7 @@ impl PySpec {
     #[pyo3(signature = (Ts = rip_core::paper::TS))]
     #[allow(non_snake_case)]
     fn check(&self, py: Python<'_>, Ts: f64) -> PyResult<()> {
-        let d = self.design(py, Ts)?;
-        py.allow_threads(|| d.controllers().map(|_| ()))
+        py.allow_threads(|| self.inner.check(Ts))
             .map_err(config_err)
     }
 
@@ -419,19 +478,19 @@ impl PySpec {
     #[getter]
     fn mpc(&self) -> PyMpcSpec {
         let m = &self.inner.mpc;
-        let pair = |b: &[f64; 2]| (b[0], b[1]);
         PyMpcSpec {
             prediction_horizon: m.prediction_horizon,
             control_horizon: m.control_horizon,
-            output_weights: m.output_weights.to_vec(),
-            input_rate_weights: m.input_rate_weights.to_vec(),
-            input_weights: m.input_weights.to_vec(),
-            input_bounds: m.input_bounds.iter().map(pair).collect(),
-            output_bounds: m.output_bounds.iter().map(pair).collect(),
+            output_weights: m.output_weights.clone(),
+            input_rate_weights: m.input_rate_weights.clone(),
+            input_weights: m.input_weights.clone(),
+            input_target: m.input_target.clone(),
+            input_bounds: m.input_bounds.clone(),
+            output_bounds: m.output_bounds.clone(),
             ecr_weight: m.ecr_weight,
-            input_scales: m.input_scales.to_vec(),
-            output_scales: m.output_scales.to_vec(),
-            solver: rip_core::mpc::QpSolver::from(m.solver).name().into(),
+            input_scales: m.input_scales.clone(),
+            output_scales: m.output_scales.clone(),
+            solver: m.solver.name().into(),
             max_iterations: m.max_iterations,
         }
     }
@@ -478,14 +537,12 @@ impl PySpec {
 ///     that fail together in a design; the message names the file and the key.
 #[pyfunction]
 fn load_config(py: Python<'_>, path: PathBuf) -> PyResult<PySpec> {
-    // The whole file, rip-rt's sections included: the check `rip-rt config` runs.
-    let (spec, _rig) = rip_core::spec::rig_sections::load_file(&path).map_err(config_err)?;
-    let out = PySpec {
+    let spec = py
+        .allow_threads(|| Spec::load_checked(&path, rip_core::paper::TS))
+        .map_err(config_err)?;
+    Ok(PySpec {
         inner: spec.resolved(),
-    };
-    out.check(py, rip_core::paper::TS)
-        .map_err(|e| ConfigError::new_err(format!("{}: {}", path.display(), e.value(py))))?;
-    Ok(out)
+    })
 }
 
 /// The paper's Tab. 1 indices ``(arm, pendulum, voltage)`` of recorded signals: RMSE of the

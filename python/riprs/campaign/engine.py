@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import concurrent.futures
 import contextlib
 import logging
 import os
@@ -304,7 +305,18 @@ def _on_dask(
     try:
         for fut in finished:
             _, c = futures.pop(fut.key)
-            result = fut.result()
+            try:
+                result = fut.result()
+            except (concurrent.futures.CancelledError, OSError, TimeoutError) as exc:
+                # The scheduler (or the connection to it) went away: Dask cancels every
+                # future. The chunks written so far stay; a rerun resumes after them.
+                futures.clear()
+                cause = str(exc).strip().splitlines()
+                raise CampaignError(
+                    f"the Dask scheduler stopped mid-run ({type(exc).__name__}"
+                    f"{': ' + cause[0] if cause else ''}); the finished chunks are kept and "
+                    "the same command resumes after them"
+                ) from None
             fut.release()
             nxt = submit()
             if nxt is not None:
@@ -312,7 +324,8 @@ def _on_dask(
             yield c, result
     finally:
         if futures:
-            client.cancel([f for f, _ in futures.values()])
+            with contextlib.suppress(Exception):
+                client.cancel([f for f, _ in futures.values()])
 
 
 def _dask_window(slots: int) -> int:

@@ -259,6 +259,10 @@ def load_spec(spec: PathLike | Mapping[str, Any]) -> Campaign:
             data = tomllib.load(fh)
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
             raise CampaignError(f"{path}: invalid TOML: {exc}") from None
+        except RecursionError:
+            raise CampaignError(
+                f"{path}: invalid TOML: arrays or tables nested too deeply"
+            ) from None
     try:
         return _parse(data)
     except RiprsError as exc:

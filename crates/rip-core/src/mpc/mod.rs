@@ -98,7 +98,7 @@ pub use backend::{QpSolver, QpStatus};
 use condense::{CondenseInput, Condensed};
 pub use estimator::EstimatorDesign;
 pub use model::AugmentedModel;
-use settings::{check_condensed_size, fill_bounds, fill_default};
+use settings::{fill_bounds, fill_default};
 pub use settings::{
     MpcSettings, MpcSettingsBuilder, OutputDisturbance, DEFAULT_CONTROL_HORIZON,
     DEFAULT_ECR_WEIGHT, DEFAULT_MAX_ITERATIONS, DEFAULT_PREDICTION_HORIZON, MAX_CONDENSED_ENTRIES,
@@ -190,6 +190,7 @@ impl Mpc {
         crate::linalg::check_sample_time("Ts", ts)?;
         design.check_settings(&settings)?;
         let (nu, ny) = (design.n_inputs(), design.n_outputs());
+        settings.check_sizes(nu, ny)?;
         let wy = fill_default("output_weights", &settings.output_weights, ny, 1.0)?;
         let wu = fill_default("input_weights", &settings.input_weights, nu, 0.0)?;
         let wdu = fill_default("input_rate_weights", &settings.input_rate_weights, nu, 0.1)?;
@@ -201,7 +202,7 @@ impl Mpc {
         let model = design.model().clone();
         let kalman = design.kalman().clone();
         let nx = model.a.nrows();
-        check_condensed_size(&settings, nx, nu, ny)?;
+        settings.check_condensed(nx, nu, ny)?;
         let estimator = CurrentEstimator::new(
             model.a.clone(),
             model.b.clone(),

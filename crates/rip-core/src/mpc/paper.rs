@@ -14,7 +14,7 @@
 
 use super::{Mpc, MpcSettings, OutputDisturbance, QpSolver};
 use crate::error::Result;
-use crate::paper::{INPUT_LIMIT, INPUT_SCALE, TS};
+use crate::paper::TS;
 
 /// Prediction horizon `P`.
 pub const PREDICTION_HORIZON: usize = 50;
@@ -36,45 +36,33 @@ pub fn output_disturbance() -> OutputDisturbance {
     OutputDisturbance::integrated_white_noise(2, DISTURBANCE_GAIN)
 }
 
-/// The paper's settings with the soft bound on output `bounded` (0 = arm, 1 = pendulum).
+/// The paper's settings ([`MpcSettings::paper`]) with the soft bound on output `bounded`
+/// (0 = arm, 1 = pendulum) instead, and the given solver.
 pub fn settings_with_bounded_output(bounded: usize, solver: QpSolver) -> MpcSettings {
     let mut output_bounds = vec![(f64::NEG_INFINITY, f64::INFINITY); 2];
     if let Some(b) = output_bounds.get_mut(bounded) {
         *b = (-OUTPUT_BOUND, OUTPUT_BOUND);
     }
     MpcSettings {
-        prediction_horizon: PREDICTION_HORIZON,
-        control_horizon: CONTROL_HORIZON,
-        output_weights: OUTPUT_WEIGHTS.to_vec(),
-        input_weights: vec![0.0],
-        input_rate_weights: vec![INPUT_RATE_WEIGHT],
-        input_target: vec![0.0],
-        input_scales: vec![INPUT_SCALE],
-        output_scales: vec![1.0, 1.0],
-        input_bounds: vec![(-INPUT_LIMIT, INPUT_LIMIT)],
         output_bounds,
-        ecr_weight: ECR_WEIGHT,
-        output_disturbance: Some(output_disturbance()),
-        measurement_noise: None,
         solver,
-        max_iterations: 200,
+        ..MpcSettings::paper()
     }
 }
 
-/// The paper's settings, soft bound on the pendulum angle (module docs).
+/// The paper's settings ([`MpcSettings::paper`], soft bound on the pendulum angle, module
+/// docs) with the given solver.
 pub fn settings(solver: QpSolver) -> MpcSettings {
-    settings_with_bounded_output(1, solver)
+    MpcSettings {
+        solver,
+        ..MpcSettings::paper()
+    }
 }
 
-/// The paper's MPC: the controller assembly ([`crate::spec`]) applied to the default spec
-/// with the given solver, i.e. [`settings`] on [`crate::paper::discrete_model`].
+/// The paper's MPC: [`MpcSettings::paper`] (with `solver`) on the paper's discrete model
+/// ([`crate::paper::discrete_model`]) at `Ts = 0.01 s`; the same controller as the default
+/// spec's MPC (`Spec::default().design(TS)?.mpc()`), which a test checks.
 pub fn controller(solver: QpSolver) -> Result<Mpc> {
-    let mut spec = crate::spec::Spec::default();
-    spec.mpc.solver = match solver {
-        QpSolver::ActiveSet => crate::spec::Solver::ActiveSet,
-        QpSolver::Clarabel => crate::spec::Solver::Clarabel,
-    };
-    spec.design(TS)
-        .and_then(|d| d.mpc())
-        .map_err(crate::regulators::spec_error)
+    let m = crate::paper::discrete_model();
+    Mpc::new(&m.a, &m.b, &m.c, TS, settings(solver))
 }

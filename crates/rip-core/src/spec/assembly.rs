@@ -35,6 +35,21 @@ use crate::plant::Plant;
 use crate::regulators::{Lqg, Lqr};
 use crate::sim::{Reference, SensorModel, SimConfig};
 
+/// How a simulated run of the spec starts ([`Spec::simulation`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Start {
+    /// At `plant.initial_state`, near upright: the paper's experiment.
+    #[default]
+    Upright,
+    /// Hanging at rest, swung up and caught by a supervisor; the arm step comes
+    /// `reference.step_time` after the catch, as `rip-rt run --swing-up` does on the rig.
+    Hanging,
+}
+
+/// Time (s) a run that starts hanging gets on top of `reference.duration`: about the 95th
+/// percentile of the time to upright over ±10 % parameter errors.
+pub const SWING_UP_ALLOWANCE: f64 = 10.0;
+
 /// A built controller and its kind.
 pub type Built = (ControllerKind, Box<dyn Controller>);
 
@@ -84,24 +99,6 @@ fn lqr_key(e: &RipError, spec: &super::LqrSpec) -> &'static str {
     }
 }
 
-/// Maps an MPC construction error onto the `[mpc]` (or `[kalman]`) key it names.
-fn mpc_key(e: &RipError) -> String {
-    let name = match e {
-        RipError::InvalidParameter { name, .. } | RipError::NonFinite { name } => name.as_str(),
-        RipError::Shape { name, .. } => name.as_str(),
-        _ => "",
-    };
-    let name = name.split('[').next().unwrap_or("");
-    match name {
-        "measurement_noise" => "kalman.measurement_noise".into(),
-        "A_od" | "B_od" | "C_od" => "kalman.disturbance_gain".into(),
-        n if !n.is_empty() && n.chars().all(|c| c.is_ascii_lowercase() || c == '_') => {
-            format!("mpc.{n}")
-        }
-        _ => "mpc".into(),
-    }
-}
-
 impl Spec {
     /// The nonlinear plant of `[plant]`, with its stiction (`plant.arm_breakaway`) if any.
     pub fn plant(&self) -> Result<Plant, SpecError> {
@@ -127,23 +124,10 @@ impl Spec {
         }
     }
 
-    /// The MPC settings of `[mpc]` and `[kalman]`.
+    /// The MPC settings: `[mpc]`, with the estimator model of `[kalman]`.
     pub fn mpc_settings(&self) -> MpcSettings {
-        let m = &self.mpc;
         let k = &self.kalman;
-        let pair = |b: [f64; 2]| (b[0], b[1]);
         MpcSettings {
-            prediction_horizon: m.prediction_horizon,
-            control_horizon: m.control_horizon,
-            output_weights: m.output_weights.to_vec(),
-            input_weights: m.input_weights.to_vec(),
-            input_rate_weights: m.input_rate_weights.to_vec(),
-            input_target: vec![0.0],
-            input_scales: m.input_scales.to_vec(),
-            output_scales: m.output_scales.to_vec(),
-            input_bounds: m.input_bounds.iter().copied().map(pair).collect(),
-            output_bounds: m.output_bounds.iter().copied().map(pair).collect(),
-            ecr_weight: m.ecr_weight,
             output_disturbance: Some(OutputDisturbance::integrated_white_noise(
                 2,
                 k.disturbance_gain,
@@ -155,9 +139,18 @@ impl Spec {
                     &k.measurement_noise,
                 )))
             },
-            solver: m.solver.into(),
-            max_iterations: m.max_iterations,
+            ..self.mpc.clone()
         }
+    }
+
+    /// The actuator range `[mpc] input_bounds` `(u_min, u_max)` (V) of every controller.
+    pub fn input_bounds(&self) -> (f64, f64) {
+        self.mpc.input_bounds[0]
+    }
+
+    /// Replaces the actuator range (checked by [`validate`](Self::validate), as in a file).
+    pub fn set_input_bounds(&mut self, lo: f64, hi: f64) {
+        self.mpc.input_bounds = vec![(lo, hi)];
     }
 
     /// The compensation of `[compensation]` (module docs of [`crate::compensation`]) for the
@@ -174,7 +167,7 @@ impl Spec {
         if vd == 0.0 && cr == 0.0 {
             return Ok(None);
         }
-        let [lo, hi] = self.mpc.input_bounds[0];
+        let (lo, hi) = self.input_bounds();
         Compensation::new(
             vd,
             cr * p.rm / p.kt,
@@ -192,18 +185,53 @@ impl Spec {
         })
     }
 
-    /// The simulation of `[plant]`, `[sensor]` and `[reference]` at sample time `ts`.
+    /// The simulation of `[plant]`, `[sensor]` and `[reference]` at sample time `ts`, started
+    /// upright ([`simulation`](Self::simulation) with [`Start::Upright`]).
     pub fn sim_config(&self, ts: f64, seed: u64) -> SimConfig {
-        let [lo, hi] = self.mpc.input_bounds[0];
+        self.simulation(ts, seed, Start::Upright)
+    }
+
+    /// The one mapping of the file onto a simulated run, used by `riprs compare`,
+    /// `riprs.simulate` through `Spec.simulation_options`, the campaigns and the vector
+    /// environments:
+    ///
+    /// ```text
+    /// plant.substeps, plant.fall_limit      the integration and the fall test
+    /// plant.initial_state                   x0 (Upright); [0, 0, π, 0] (Hanging)
+    /// sensor.encoder_counts                 the quantisation of each angle
+    /// sensor.noise_std, sensor.encoder_offsets   the measurement y = q(x + o) + n
+    /// reference.arm_step, reference.step_time   the step at step_time (Upright), or
+    ///                                       step_time after the catch (Hanging), as on the rig
+    /// reference.duration                    the run (+ SWING_UP_ALLOWANCE when Hanging)
+    /// mpc.input_bounds                      the actuator's saturation max(|u_min|, |u_max|)
+    /// ```
+    pub fn simulation(&self, ts: f64, seed: u64, start: Start) -> SimConfig {
+        let (lo, hi) = self.input_bounds();
+        let value = [self.reference.arm_step, 0.0];
+        let (duration, x0, reference) = match start {
+            Start::Upright => (
+                self.reference.duration,
+                self.plant.initial_state,
+                Reference::Step {
+                    time: self.reference.step_time,
+                    value,
+                },
+            ),
+            Start::Hanging => (
+                self.reference.duration + SWING_UP_ALLOWANCE,
+                [0.0, 0.0, std::f64::consts::PI, 0.0],
+                Reference::StepAfterCatch {
+                    delay: self.reference.step_time,
+                    value,
+                },
+            ),
+        };
         SimConfig {
-            duration: self.reference.duration,
+            duration,
             ts,
             substeps: self.plant.substeps,
-            x0: self.plant.initial_state,
-            reference: Reference::Step {
-                time: self.reference.step_time,
-                value: [self.reference.arm_step, 0.0],
-            },
+            x0,
+            reference,
             sensor: SensorModel {
                 counts_per_rev: Some(self.sensor.encoder_counts.map(f64::from)),
                 noise_std: self.sensor.noise_std,
@@ -261,13 +289,12 @@ impl Spec {
                 format!("the LQR gain is not finite with R = {}", self.lqr.R),
             ));
         }
+        // Every [mpc] and [kalman] value is checked by `validate`: what remains is the
+        // model's detectability, or the Kalman design itself.
         let estimator = EstimatorDesign::new(&a, &b, &c, &self.mpc_settings()).map_err(|e| {
             let key = match e {
-                RipError::NotDetectable { .. } => "plant".to_string(),
-                ref e => match mpc_key(e).as_str() {
-                    "mpc" => "kalman".to_string(),
-                    other => other.to_string(),
-                },
+                RipError::NotDetectable { .. } => "plant",
+                _ => "kalman",
             };
             SpecError::new(key, format!("the Kalman design fails: {e}"))
         })?;
@@ -315,10 +342,7 @@ impl Design {
     pub fn bounds(&self) -> (f64, f64) {
         match &self.compensation {
             Some(c) => c.inner_bounds(),
-            None => {
-                let [lo, hi] = self.spec.mpc.input_bounds[0];
-                (lo, hi)
-            }
+            None => self.spec.input_bounds(),
         }
     }
 
@@ -376,8 +400,16 @@ impl Design {
     pub fn mpc(&self) -> Result<Mpc, SpecError> {
         let mut settings = self.spec.mpc_settings();
         settings.input_bounds = vec![self.bounds()];
-        Mpc::with_estimator(&self.estimator, self.ts, settings)
-            .map_err(|e| SpecError::new(mpc_key(&e), format!("the MPC design fails: {e}")))
+        Mpc::with_estimator(&self.estimator, self.ts, settings).map_err(|e| {
+            // On checked settings, what remains is the condensed problem's conditioning,
+            // which `Mpc` reports as an `InvalidParameter` naming the `MpcSettings` field,
+            // i.e. the [mpc] key, at fault.
+            let key = match &e {
+                RipError::InvalidParameter { name, .. } => format!("mpc.{name}"),
+                _ => "mpc".to_string(),
+            };
+            SpecError::new(key, format!("the MPC design fails: {e}"))
+        })
     }
 
     /// The controller `kind` as it runs: [`balance`](Self::balance) with the compensation

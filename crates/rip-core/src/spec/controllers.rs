@@ -1,16 +1,12 @@
 //! The controller sections of the experiment file: `[lqr]`, `[kalman]` and `[mpc]`, each with
-//! its defaults (in its `Default`) and its value checks (in its `validate`, which names the key
-//! path).
-
-use std::f64::consts::FRAC_PI_6;
+//! its defaults (in its `Default`; `[mpc]` in [`MpcSettings::paper`]) and its value checks (in
+//! its `validate`, which names the key path).
 
 use serde::{Deserialize, Serialize};
 
 use super::sections::{bad, each, non_negative, positive};
 use super::SpecError;
-use crate::mpc::{QpSolver, MAX_PREDICTION_HORIZON};
-use crate::paper;
-use crate::paper::INPUT_LIMIT;
+use crate::mpc::MpcSettings;
 use crate::regulators::DEFAULT_RATE_CUTOFF_HZ;
 
 /// `[lqr]`: the weights of eq. (13), shared by LQR and LQG (`K = dlqr(A_d, B_d, diag(Q), R)`),
@@ -99,128 +95,32 @@ impl KalmanSpec {
     }
 }
 
-/// The QP solver of the MPC.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Solver {
-    /// The dense warm-started active-set method (about 2 µs per step).
-    #[default]
-    ActiveSet,
-    /// Clarabel's interior-point method (the reference, about 200 µs per step).
-    Clarabel,
-}
-
-impl From<Solver> for QpSolver {
-    fn from(s: Solver) -> Self {
-        match s {
-            Solver::ActiveSet => QpSolver::ActiveSet,
-            Solver::Clarabel => QpSolver::Clarabel,
-        }
+/// `[mpc]` is [`MpcSettings`] itself (its serde schema; missing keys take
+/// [`MpcSettings::paper`]). What the experiment adds to its own checks
+/// ([`MpcSettings::check`], [`MpcSettings::check_sizes`], [`MpcSettings::check_condensed`]):
+/// one input, two outputs, and `input_bounds` given and finite, since it is the actuator range
+/// `[u_min, u_max]` (V) of every controller: the MPC's hard constraint and the clamp of LQR
+/// and LQG. `output_bounds` holds `[y_min, y_max]` per output, `[-inf, inf]` for none; the
+/// default bounds the pendulum angle (see [`crate::mpc::paper`] for why).
+pub(super) fn validate_mpc(m: &MpcSettings) -> Result<(), SpecError> {
+    let in_mpc = |e| SpecError::in_section("mpc", e);
+    m.check().map_err(in_mpc)?;
+    m.check_sizes(1, 2).map_err(in_mpc)?;
+    // The estimator's model: 4 plant states and the one output-disturbance state.
+    m.check_condensed(5, 1, 2).map_err(in_mpc)?;
+    let Some(&(lo, hi)) = m.input_bounds.first() else {
+        return Err(bad(
+            "mpc.input_bounds",
+            "must give [u_min, u_max]: the actuator range of every controller",
+        ));
+    };
+    if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+        return Err(bad(
+            "mpc.input_bounds[0]",
+            format!("must be finite with u_min < u_max, got [{lo}, {hi}]"),
+        ));
     }
-}
-
-/// `[mpc]`: the MPC of section 3 (MATLAB MPC Toolbox semantics, [`crate::mpc`]); names as in
-/// Python's `riprs.Mpc`.
-///
-/// `input_bounds` is the actuator range `[u_min, u_max]` (V) for every controller: the MPC's
-/// hard constraint, and the clamp of LQR and LQG. `output_bounds` holds `[y_min, y_max]` per
-/// output, `[-inf, inf]` for none; the default bounds the pendulum angle (see
-/// [`crate::mpc::paper`] for why).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct MpcSpec {
-    /// Prediction horizon `P`.
-    pub prediction_horizon: usize,
-    /// Control horizon `m ≤ P`.
-    pub control_horizon: usize,
-    /// Output weights `w^y` (arm, pendulum).
-    pub output_weights: [f64; 2],
-    /// Input-rate weight `w^Δu`.
-    pub input_rate_weights: [f64; 1],
-    /// Input weight `w^u`.
-    pub input_weights: [f64; 1],
-    /// Hard input bounds `[u_min, u_max]` (V), finite.
-    pub input_bounds: [[f64; 2]; 1],
-    /// Soft output bounds `[y_min, y_max]` per output (rad).
-    pub output_bounds: [[f64; 2]; 2],
-    /// Slack weight `ρ_ε`.
-    pub ecr_weight: f64,
-    /// Input scale factor `s^u` (the paper's `L_su`).
-    pub input_scales: [f64; 1],
-    /// Output scale factors `s^y`.
-    pub output_scales: [f64; 2],
-    /// QP solver.
-    pub solver: Solver,
-    /// Iteration limit of the QP solver.
-    pub max_iterations: usize,
-}
-
-impl Default for MpcSpec {
-    fn default() -> Self {
-        use crate::mpc::paper as p;
-        let free = [f64::NEG_INFINITY, f64::INFINITY];
-        Self {
-            prediction_horizon: p::PREDICTION_HORIZON,
-            control_horizon: p::CONTROL_HORIZON,
-            output_weights: p::OUTPUT_WEIGHTS,
-            input_rate_weights: [p::INPUT_RATE_WEIGHT],
-            input_weights: [0.0],
-            input_bounds: [[-INPUT_LIMIT, INPUT_LIMIT]],
-            output_bounds: [free, [-FRAC_PI_6, FRAC_PI_6]],
-            ecr_weight: p::ECR_WEIGHT,
-            input_scales: [paper::INPUT_SCALE],
-            output_scales: [1.0, 1.0],
-            solver: Solver::ActiveSet,
-            max_iterations: 200,
-        }
-    }
-}
-
-impl MpcSpec {
-    pub(super) fn validate(&self) -> Result<(), SpecError> {
-        let (p, m) = (self.prediction_horizon, self.control_horizon);
-        if p == 0 || p > MAX_PREDICTION_HORIZON {
-            return Err(bad(
-                "mpc.prediction_horizon",
-                format!("must be in 1..={MAX_PREDICTION_HORIZON}, got {p}"),
-            ));
-        }
-        if m == 0 || m > p {
-            return Err(bad(
-                "mpc.control_horizon",
-                format!("must be in 1..=mpc.prediction_horizon ({p}), got {m}"),
-            ));
-        }
-        each("mpc.output_weights", &self.output_weights, non_negative)?;
-        each(
-            "mpc.input_rate_weights",
-            &self.input_rate_weights,
-            non_negative,
-        )?;
-        each("mpc.input_weights", &self.input_weights, non_negative)?;
-        let [lo, hi] = self.input_bounds[0];
-        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-            return Err(bad(
-                "mpc.input_bounds[0]",
-                format!("must be finite with u_min < u_max, got [{lo}, {hi}]"),
-            ));
-        }
-        for (i, &[lo, hi]) in self.output_bounds.iter().enumerate() {
-            if lo.is_nan() || hi.is_nan() || lo >= hi || lo == f64::INFINITY {
-                return Err(bad(
-                    format!("mpc.output_bounds[{i}]"),
-                    format!("must be [y_min, y_max] with y_min < y_max (±inf for none), got [{lo}, {hi}]"),
-                ));
-            }
-        }
-        positive("mpc.ecr_weight", self.ecr_weight)?;
-        each("mpc.input_scales", &self.input_scales, positive)?;
-        each("mpc.output_scales", &self.output_scales, positive)?;
-        if self.max_iterations == 0 {
-            return Err(bad("mpc.max_iterations", "must be at least 1, got 0"));
-        }
-        Ok(())
-    }
+    Ok(())
 }
 
 /// `[compensation]`: the dead-zone inverse and arm-friction feed-forward every controller's

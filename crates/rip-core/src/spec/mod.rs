@@ -8,7 +8,7 @@
 //! [reference]    # the arm step and the run length                       (ReferenceSpec)
 //! [lqr]          # eq. (13) weights shared by LQR and LQG, rate filter   (LqrSpec)
 //! [kalman]       # the estimator LQG and MPC share                       (KalmanSpec)
-//! [mpc]          # section 3's MPC                                       (MpcSpec)
+//! [mpc]          # section 3's MPC                                       (MpcSettings)
 //! [compensation] # dead zone and arm friction compensated                (CompensationSpec)
 //! [monte_carlo]  # runs over seeds and parameter perturbations           (MonteCarloSpec)
 //! [swing_up]     # swing-up from rest and catch                          (SwingUpSettings)
@@ -35,9 +35,10 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::mpc::{MpcSettings, QpSolver};
 pub use crate::plant::Param;
-pub use assembly::Design;
-pub use controllers::{CompensationSpec, KalmanSpec, LqrSpec, MpcSpec, Solver};
+pub use assembly::{Design, Start, SWING_UP_ALLOWANCE};
+pub use controllers::{CompensationSpec, KalmanSpec, LqrSpec};
 pub use sections::{
     ControllerKind, MonteCarloSpec, PlantSpec, Preset, ReferenceSpec, SensorSpec, MAX_DURATION,
     MAX_MONTE_CARLO_RUNS,
@@ -66,6 +67,13 @@ impl SpecError {
             key: key.into(),
             reason: reason.into(),
         }
+    }
+
+    /// A section's own error ([`KeyError`](crate::error::KeyError), keyed relative to the
+    /// section) at its key path in the file: `mpc` and `output_bounds[1]` give
+    /// `mpc.output_bounds[1]`.
+    pub fn in_section(section: &str, e: crate::error::KeyError) -> Self {
+        Self::new(format!("{section}.{}", e.key), e.reason)
     }
 
     /// The same error, located in `file`.
@@ -105,8 +113,10 @@ pub struct Spec {
     pub lqr: LqrSpec,
     /// `[kalman]`
     pub kalman: KalmanSpec,
-    /// `[mpc]`
-    pub mpc: MpcSpec,
+    /// `[mpc]`: the MPC's own settings ([`MpcSettings`], the paper profile by default); its
+    /// `output_disturbance` and `measurement_noise` come from `[kalman]`
+    /// ([`mpc_settings`](Self::mpc_settings)).
+    pub mpc: MpcSettings,
     /// `[compensation]`: dead zone and arm friction compensated on every controller's voltage
     pub compensation: CompensationSpec,
     /// `[monte_carlo]`
@@ -126,7 +136,7 @@ impl Default for Spec {
             reference: ReferenceSpec::default(),
             lqr: LqrSpec::default(),
             kalman: KalmanSpec::default(),
-            mpc: MpcSpec::default(),
+            mpc: MpcSettings::paper(),
             compensation: CompensationSpec::default(),
             monte_carlo: MonteCarloSpec::default(),
             swing_up: crate::swingup::SwingUpSettings::default(),
@@ -172,10 +182,22 @@ pub fn from_value<T: serde::de::DeserializeOwned>(
     })
 }
 
-/// Parses TOML text into a table; a syntax error names no key.
+/// Parses TOML text into a table; a syntax error names no key and is one line (where, then
+/// what: the parser's excerpt with its caret is left out).
 pub fn parse_table(text: &str) -> Result<toml::Table, SpecError> {
-    text.parse::<toml::Table>()
-        .map_err(|e| SpecError::new("", format!("invalid TOML: {}", e.to_string().trim_end())))
+    text.parse::<toml::Table>().map_err(|e| {
+        let full = e.to_string();
+        let lines: Vec<&str> = full
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty())
+            .collect();
+        let reason = match (lines.first(), lines.last()) {
+            (Some(first), Some(last)) if lines.len() > 1 => format!("{first}: {last}"),
+            _ => full.trim().to_string(),
+        };
+        SpecError::new("", format!("invalid TOML: {reason}"))
+    })
 }
 
 impl Spec {
@@ -208,6 +230,21 @@ impl Spec {
     /// Reads, parses and checks a file; errors name it.
     pub fn load(path: &Path) -> Result<Self, SpecError> {
         Self::load_with_runtime(path).map(|(spec, _)| spec)
+    }
+
+    /// The whole file as `riprs.load_config` and `rip-rt config` read it: rip-rt's sections
+    /// validated too ([`rig_sections::load_file`]), and [`check`](Self::check) at sample time
+    /// `ts`, refused if any controller cannot be designed.
+    pub fn load_checked(path: &Path, ts: f64) -> Result<Self, SpecError> {
+        let (spec, _rig) = rig_sections::load_file(path)?;
+        spec.check(ts).map_err(|e| e.in_file(path))?;
+        Ok(spec)
+    }
+
+    /// Checks that every controller kind can be designed at sample time `ts` (s), naming the
+    /// key whose value makes a design fail.
+    pub fn check(&self, ts: f64) -> Result<(), SpecError> {
+        self.design(ts).and_then(|d| d.controllers().map(|_| ()))
     }
 
     /// [`load`](Self::load), also returning the runtime sections.

@@ -513,7 +513,7 @@ pub(super) fn validate_sections(spec: &super::Spec) -> Result<(), SpecError> {
     spec.reference.validate()?;
     spec.lqr.validate()?;
     spec.kalman.validate()?;
-    spec.mpc.validate()?;
+    super::controllers::validate_mpc(&spec.mpc)?;
     spec.compensation.validate()?;
     spec.monte_carlo.validate()?;
     spec.swing_up.validate().map_err(|e| match e {

@@ -28,7 +28,7 @@ fn printed_spec_reads_back_equal_and_names_every_key() {
     let mut spec = Spec::default();
     spec.plant.preset = Preset::QubeServo2;
     spec.plant.set(Param::Lp, Some(0.2));
-    spec.mpc.solver = Solver::Clarabel;
+    spec.mpc.solver = QpSolver::Clarabel;
     spec.monte_carlo.parameters = vec![Param::Mp, Param::Lp];
     let text = spec.to_toml();
     let back = Spec::parse(&text).unwrap();
@@ -298,7 +298,7 @@ fn designs_that_fail_name_the_key() {
     let e = fails("[lqr]\nR = 1e308\n");
     assert_eq!(e.key, "lqr.R", "{e}");
     let e = fails("[mpc]\noutput_weights = [1e308, 1e308]\n");
-    assert!(e.key.starts_with("mpc."), "{e}");
+    assert_eq!(e.key, "mpc.output_weights", "{e}");
 }
 
 #[test]
@@ -423,4 +423,67 @@ fn bad_compensation_values_name_the_key() {
         .design(paper::TS)
         .unwrap_err();
     assert_eq!(e.key, "compensation.dead_zone", "{e}");
+}
+
+#[test]
+fn the_paper_mpc_is_the_default_specs_mpc() {
+    use crate::mpc::{paper as mpc_paper, MpcSettings, QpSolver};
+    // One profile: the file's [mpc] defaults, the spec's settings and the paper controller's.
+    let spec = Spec::default();
+    let mut from_spec = spec.design(paper::TS).unwrap().mpc().unwrap();
+    let mut paper_mpc = mpc_paper::controller(QpSolver::default()).unwrap();
+    assert_eq!(spec.mpc, MpcSettings::paper());
+    assert_eq!(from_spec.settings(), paper_mpc.settings());
+    assert_eq!(from_spec.settings().solver, QpSolver::ActiveSet);
+    assert_eq!(Spec::parse("").unwrap().mpc, MpcSettings::paper());
+    // ... and the same moves, bit for bit, along a step response that reaches the bounds.
+    let (mut ua, mut ub) = ([0.0], [0.0]);
+    for k in 0..300 {
+        let y = [0.4 * (k as f64 * 0.05).sin(), 0.05 * (k as f64 * 0.2).cos()];
+        let r = [1.0, 0.0];
+        from_spec.step(&y, &r, &mut ua);
+        paper_mpc.step(&y, &r, &mut ub);
+        assert_eq!(ua[0].to_bits(), ub[0].to_bits(), "step {k}");
+    }
+}
+
+#[test]
+fn mpc_keys_deserialise_into_the_mpc_settings() {
+    use crate::mpc::QpSolver;
+    let spec = Spec::parse(
+        "[mpc]\nprediction_horizon = 20\ncontrol_horizon = 4\noutput_weights = [1.0, 2.0]\n\
+         input_rate_weights = [0.5]\ninput_weights = [0.1]\ninput_bounds = [[-5.0, 6.0]]\n\
+         output_bounds = [[-1.0, 1.0], [-0.2, 0.2]]\necr_weight = 7.0\ninput_scales = [2.0]\n\
+         output_scales = [3.0, 4.0]\nsolver = \"clarabel\"\nmax_iterations = 50\n",
+    )
+    .unwrap();
+    let design = spec.design(paper::TS).unwrap();
+    let mpc = design.mpc().unwrap();
+    let s = mpc.settings();
+    assert_eq!((s.prediction_horizon, s.control_horizon), (20, 4));
+    assert_eq!(s.output_weights, [1.0, 2.0]);
+    assert_eq!(s.input_rate_weights, [0.5]);
+    assert_eq!(s.input_weights, [0.1]);
+    assert_eq!(s.input_bounds, [(-5.0, 6.0)]);
+    assert_eq!(s.output_bounds, [(-1.0, 1.0), (-0.2, 0.2)]);
+    assert_eq!(s.ecr_weight, 7.0);
+    assert_eq!(s.input_scales, [2.0]);
+    assert_eq!(s.output_scales, [3.0, 4.0]);
+    assert_eq!(s.solver, QpSolver::Clarabel);
+    assert_eq!(s.max_iterations, 50);
+    // Sizes and the condensed size are the spec's errors too, keyed.
+    for (text, key) in [
+        ("[mpc]\noutput_weights = [1.0]\n", "mpc.output_weights"),
+        ("[mpc]\ninput_bounds = []\n", "mpc.input_bounds"),
+        ("[mpc]\nmax_iterations = 0\n", "mpc.max_iterations"),
+        (
+            "[mpc]\nprediction_horizon = 10000\ncontrol_horizon = 5000\n",
+            "mpc.prediction_horizon",
+        ),
+        ("[mpc]\nunknown = 1\n", "mpc.unknown"),
+    ] {
+        assert_eq!(Spec::parse(text).unwrap_err().key, key, "{text}");
+    }
+    // A soft equality is allowed, in the file as in the Rust and Python API.
+    assert!(Spec::parse("[mpc]\noutput_bounds = [[-inf, inf], [0.0, 0.0]]\n").is_ok());
 }

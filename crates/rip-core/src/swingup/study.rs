@@ -13,9 +13,7 @@ use crate::spec::{ControllerKind, Design, Spec, SpecError};
 /// has died down by then (it lasts about 1 s on both presets).
 pub const STEP_AFTER_CATCH: f64 = 2.0;
 
-/// Time (s) a run that starts hanging gets on top of `reference.duration`: about the 95th
-/// percentile of the time to upright over ±10 % parameter errors.
-pub const SWING_UP_ALLOWANCE: f64 = 10.0;
+pub use crate::spec::SWING_UP_ALLOWANCE;
 
 /// The simulation of `spec` ([`Spec::sim_config`]) started hanging at rest, `x0 = [0, 0, π, 0]`,
 /// with the arm step [`STEP_AFTER_CATCH`] after the catch and
