@@ -47,6 +47,7 @@ pub mod metrics;
 pub mod mpc;
 pub mod paper;
 pub mod plant;
+mod presets;
 pub mod regulators;
 pub mod rig;
 pub mod sim;

@@ -76,5 +76,5 @@ pub fn controller(solver: QpSolver) -> Result<Mpc> {
     };
     spec.design(TS)
         .and_then(|d| d.mpc())
-        .map_err(crate::regulators::spec_error)
+        .map_err(crate::RipError::from)
 }
