@@ -1,5 +1,6 @@
-//! Reinforcement-learning environments on the nonlinear [`Plant`]: `N` independent pendulums
-//! stepped in one call ([`VecEnv`]), the engine behind `riprs.envs` (Gymnasium).
+//! Reinforcement-learning environments on the nonlinear [`Plant`](crate::plant::Plant): `N`
+//! independent pendulums stepped in one call ([`VecEnv`]), the engine behind `riprs.envs`
+//! (Gymnasium).
 //!
 //! # One environment
 //!
@@ -14,7 +15,7 @@
 //! o[k+1]   = [cos y₀, sin y₀, cos y₁, sin y₁, ω̂₀, ω̂₁]   delivered `l` periods late
 //! ```
 //!
-//! The rates `ω̂` are estimated the way the rig's LQR estimates them ([`crate::regulators::Lqr`]):
+//! The rates `ω̂` are the rig's LQR's ([`crate::regulators::RateFilter`], one definition):
 //! the backward difference of the measured angles through a first-order low-pass,
 //!
 //! ```text
@@ -63,11 +64,11 @@
 //! after the one that ended an episode resets that environment instead of stepping it, ignores
 //! its action and reports its first observation with reward 0 and neither flag set.
 //!
-//! Stepping allocates nothing; resets build the drawn [`Plant`] (which computes its RK4
-//! stability limit). [`VecEnv::step`] integrates [`LANES`] environments per call of
-//! [`Plant::advance_lanes`] (each in its own SIMD lane, with its own drawn plant: the bits of
-//! [`Plant::advance`]), and spreads these chunks over threads (rayon) from
-//! [`PARALLEL_MIN_ENVS`] environments on.
+//! Stepping allocates nothing; resets build the drawn [`Plant`](crate::plant::Plant) (which
+//! computes its RK4 stability limit). [`VecEnv::step`] integrates [`LANES`] environments per call
+//! of [`Plant::advance_lanes`](crate::plant::Plant::advance_lanes) (each in its own SIMD lane, with
+//! its own drawn plant: the bits of [`Plant::advance`](crate::plant::Plant::advance)), and spreads
+//! these chunks over threads (rayon) from [`PARALLEL_MIN_ENVS`] environments on.
 
 mod config;
 mod env;
