@@ -313,3 +313,34 @@ fn replay_fits_the_plants_own_trajectory_and_not_a_wrong_plants() {
         worse.nrmse
     );
 }
+
+#[test]
+fn observed_rates_are_the_filtered_difference_and_a_bad_sample_spans_two_periods() {
+    // The closed form of the module docs, written out: a first-order low-pass of the backward
+    // difference, and over a skipped (non-finite) sample the zero-order hold over 2 Ts.
+    let (ts, fc) = (0.01, 20.0);
+    let a = (-2.0 * std::f64::consts::PI * fc * ts).exp();
+    let mut obs = Observer::new(ts, fc);
+    let y = [[0.1, -0.2], [0.13, -0.18], [f64::NAN, 0.0], [0.2, -0.1]];
+    let o0 = obs.observe(y[0]);
+    assert_eq!((o0[4], o0[5]), (0.0, 0.0));
+    let o1 = obs.observe(y[1]);
+    let r1 = [0, 1].map(|j| (1.0 - a) * (y[1][j] - y[0][j]) / ts);
+    assert!((o1[4] - r1[0]).abs() < 1e-12 && (o1[5] - r1[1]).abs() < 1e-12);
+    let o2 = obs.observe(y[2]);
+    assert_eq!(
+        (o2[4], o2[5]),
+        (o1[4], o1[5]),
+        "a bad sample keeps the rates"
+    );
+    let o3 = obs.observe(y[3]);
+    for j in 0..2 {
+        let expected = a * a * r1[j] + (1.0 - a * a) * (y[3][j] - y[1][j]) / (2.0 * ts);
+        assert!(
+            (o3[4 + j] - expected).abs() < 1e-12,
+            "{j}: {} vs {expected}",
+            o3[4 + j]
+        );
+    }
+    assert!((o3[0] - 0.2f64.cos()).abs() < 1e-15 && (o3[3] - (-0.1f64).sin()).abs() < 1e-15);
+}
