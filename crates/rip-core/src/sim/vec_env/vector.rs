@@ -36,31 +36,27 @@ fn advance_chunk(
     Plant::advance_lanes(plants, x, u, &[0.0; LANES], ts, substeps);
 }
 
-/// [`advance_chunk`] compiled for AVX-512F.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-unsafe fn advance_chunk_avx512(
-    plants: [&Plant; LANES],
-    x: &mut [State; LANES],
-    u: &[f64; LANES],
-    ts: f64,
-    substeps: usize,
-) {
-    Plant::advance_lanes(plants, x, u, &[0.0; LANES], ts, substeps);
+/// Defines `$name`, [`advance_chunk`] compiled with the target feature `$feature` (the
+/// function the CPU test above calls; the attribute cannot be chosen at run time).
+macro_rules! advance_chunk_with {
+    ($name:ident, $feature:literal) => {
+        #[doc = concat!("[`advance_chunk`] compiled for `", $feature, "`.")]
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $feature)]
+        unsafe fn $name(
+            plants: [&Plant; LANES],
+            x: &mut [State; LANES],
+            u: &[f64; LANES],
+            ts: f64,
+            substeps: usize,
+        ) {
+            Plant::advance_lanes(plants, x, u, &[0.0; LANES], ts, substeps);
+        }
+    };
 }
 
-/// [`advance_chunk`] compiled for AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn advance_chunk_avx2(
-    plants: [&Plant; LANES],
-    x: &mut [State; LANES],
-    u: &[f64; LANES],
-    ts: f64,
-    substeps: usize,
-) {
-    Plant::advance_lanes(plants, x, u, &[0.0; LANES], ts, substeps);
-}
+advance_chunk_with!(advance_chunk_avx512, "avx512f");
+advance_chunk_with!(advance_chunk_avx2, "avx2");
 
 /// One [`VecEnv::step`] of up to [`LANES`] environments: each is reset or begins its step, the
 /// stepping ones are integrated together, then each finishes its step.
