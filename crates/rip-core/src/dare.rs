@@ -170,185 +170,19 @@ pub(crate) fn solve_dare_validated(
     s: Option<&Mat>,
     e: Option<&Mat>,
 ) -> std::result::Result<DareSolution, DareFailure> {
-    // Generalized problem → standard one in Y = EᵀXE with Â = E⁻¹A, B̂ = E⁻¹B.
-    let (a_hat, b_hat, e_inv) = match e {
-        Some(e) => {
-            let lu = e.clone().lu();
-            let e_inv = lu
-                .try_inverse()
-                .ok_or_else(|| DareFailure::NoSolution("E is singular".into()))?;
-            (&e_inv * a, &e_inv * b, Some(e_inv))
-        }
-        None => (a.clone(), b.clone(), None),
-    };
-    // A singular R (scipy's and SLICOT's DAREX examples 3 and 4) has no R⁻¹ for the doubling.
-    // The doubling then runs on R + δI, only to find a stabilizing gain; Newton's method,
-    // which needs BᵀXB + R invertible but never R⁻¹, finishes on the true R.
-    let r_true = r;
-    let regularised;
-    let r = match r.clone().cholesky() {
-        Some(_) => {
-            regularised = None;
-            r
-        }
-        None => {
-            let scale = r.norm().max(b_hat.norm_squared() * q.norm()).max(1e-12);
-            regularised = Some(r + Mat::identity(r.nrows(), r.nrows()) * (1e-6 * scale));
-            regularised.as_ref().expect("just set")
-        }
-    };
-    let r_chol = r
-        .clone()
-        .cholesky()
-        .ok_or_else(|| DareFailure::NoSolution("R + δI is not positive definite".into()))?;
-    let r_inv_bt = r_chol.solve(&b_hat.transpose());
-    let g0 = symmetrize(&(&b_hat * &r_inv_bt));
-    let (a0, h0) = match s {
-        Some(s) => {
-            let r_inv_st = r_chol.solve(&s.transpose());
-            (
-                &a_hat - &b_hat * &r_inv_st,
-                symmetrize(&(q - s * &r_inv_st)),
-            )
-        }
-        None => (a_hat.clone(), q.clone()),
-    };
-
-    let diagnose = |reason: String| match unreachable_unstable_mode(a, b, e) {
-        Some(z) => DareFailure::Unreachable(z),
-        None => DareFailure::NoSolution(reason),
-    };
-
-    let problem = StandardDare {
-        a: &a_hat,
-        b: &b_hat,
-        q,
-        r,
-        s,
-    };
-    // The doubling from H₀ converges to the stabilizing solution when (H₀, A₀) is detectable;
-    // otherwise (an unstable mode Q does not weigh) it may settle on another solution, and with
-    // an ill-conditioned R its G₀ = BR⁻¹Bᵀ limits the accuracy. Both are repaired by Newton's
-    // method from a stabilizing gain: the doubling's own when it stabilizes, else that of the
-    // doubling on H₀ + δI, which is detectable for any δ > 0.
-    let doubling = |h: &Mat| {
-        let (y, iterations) = sda_dispatch(&a0, &g0, h)?;
-        let y = symmetrize(&y);
-        let closed_loop = problem.closed_loop(&y)?;
-        Some(Candidate {
-            y,
-            closed_loop,
-            iterations,
-        })
-    };
-    let with_residual_for = |candidate: Candidate, r: &Mat| {
-        let x = unreduce(&candidate.y, e_inv.as_ref());
-        let residual = dare_relative_residual(a, b, q, r, s, e, &x);
-        (candidate, x, residual)
-    };
-    let with_residual = |candidate: Candidate| with_residual_for(candidate, r);
-    let main_path = || -> std::result::Result<(Candidate, Mat, f64), DareFailure> {
-        let doubled = doubling(&h0)
-            .filter(|c| c.closed_loop.radius < 1.0 - UNIT_CIRCLE_MARGIN)
-            .map(with_residual);
-        let (solution, x, relative_residual) = match doubled {
-            Some(done) if done.2 <= NEWTON_REFINEMENT_THRESHOLD => done,
-            doubled => {
-                let start = match doubled {
-                    Some((candidate, _, _)) => candidate,
-                    None => {
-                        let delta = 1e-6 * h0.norm().max(1.0);
-                        let h_reg = &h0 + Mat::identity(h0.nrows(), h0.nrows()) * delta;
-                        doubling(&h_reg)
-                            .filter(|c| c.closed_loop.radius < 1.0)
-                            .ok_or_else(|| {
-                                diagnose(
-                                "the doubling iteration found no stabilizing gain to start from"
-                                    .into(),
-                            )
-                            })?
-                    }
-                };
-                let (y, newton_steps) =
-                    problem.newton(start.closed_loop.gain).ok_or_else(|| {
-                        diagnose(
-                            "Newton's method did not converge to a stabilizing solution".into(),
-                        )
-                    })?;
-                let closed_loop = problem
-                    .closed_loop(&y)
-                    .ok_or_else(|| diagnose("BᵀXB + R is singular at the solution".into()))?;
-                with_residual(Candidate {
-                    y,
-                    closed_loop,
-                    iterations: start.iterations + newton_steps,
-                })
-            }
-        };
-        let (solution, x, relative_residual) = if regularised.is_none() {
-            (solution, x, relative_residual)
-        } else {
-            {
-                let exact = StandardDare {
-                    r: r_true,
-                    ..problem
-                };
-                let (y, newton_steps) =
-                    exact.newton(solution.closed_loop.gain).ok_or_else(|| {
-                        diagnose("Newton's method on the singular R did not converge".into())
-                    })?;
-                let closed_loop = exact
-                    .closed_loop(&y)
-                    .ok_or_else(|| diagnose("BᵀXB + R is singular at the solution".into()))?;
-                with_residual_for(
-                    Candidate {
-                        y,
-                        closed_loop,
-                        iterations: solution.iterations + newton_steps,
-                    },
-                    r_true,
-                )
-            }
-        };
-        Ok((solution, x, relative_residual))
-    };
+    let solve = Solve::new(Args { a, b, q, r, s, e })?;
     // The doubling needs R⁻¹ and converges to the stabilizing solution only where BᵀXB + R is
     // positive definite; where it is merely invertible (indefinite Q or a singular R with a
     // cross term, SLICOT's DAREX 1.2 and 1.4) it finds no stabilizing gain. Newton's method on
     // the true equation, started from the gain of the auxiliary problem Q = I, R = I, S = 0
     // (stabilizing whenever (A, B) is stabilizable), converges to the stabilizing solution
     // there; the same closed-loop and residual checks decide.
-    let acceptable = |done: &(Candidate, Mat, f64)| {
-        let (radius, residual) = (done.0.closed_loop.radius, done.2);
-        radius < 1.0 - UNIT_CIRCLE_MARGIN && residual <= DARE_RESIDUAL_TOLERANCE
-    };
-    let (solution, x, relative_residual) = match main_path() {
+    let (solution, x, relative_residual) = match solve.main_path() {
         Ok(done) if acceptable(&done) => done,
-        first => {
-            let exact = StandardDare {
-                r: r_true,
-                ..problem
-            };
-            let fallback = auxiliary_gain(&a_hat, &b_hat)
-                .and_then(|gain| exact.newton(gain))
-                .and_then(|(y, steps)| {
-                    let closed_loop = exact.closed_loop(&y)?;
-                    Some(with_residual_for(
-                        Candidate {
-                            y,
-                            closed_loop,
-                            iterations: steps,
-                        },
-                        r_true,
-                    ))
-                })
-                .filter(acceptable);
-            match (fallback, first) {
-                (Some(done), _) => done,
-                (None, Ok(done)) => done,
-                (None, Err(failure)) => return Err(failure),
-            }
-        }
+        first => match (solve.newton_on_auxiliary_gain(), first) {
+            (Some(done), _) | (None, Ok(done)) => done,
+            (None, Err(failure)) => return Err(failure),
+        },
     };
     let ClosedLoop {
         gain,
@@ -357,12 +191,12 @@ pub(crate) fn solve_dare_validated(
     } = solution.closed_loop;
     let iterations = solution.iterations;
     if radius.is_nan() || radius >= 1.0 - UNIT_CIRCLE_MARGIN {
-        return Err(diagnose(format!(
+        return Err(solve.diagnose(format!(
             "the closed loop has spectral radius {radius:.6} ≥ 1 (a mode on the unit circle?)"
         )));
     }
     if relative_residual.is_nan() || relative_residual > DARE_RESIDUAL_TOLERANCE {
-        return Err(diagnose(format!(
+        return Err(solve.diagnose(format!(
             "relative residual {relative_residual:.3e} exceeds {DARE_RESIDUAL_TOLERANCE:.0e}"
         )));
     }
@@ -373,6 +207,233 @@ pub(crate) fn solve_dare_validated(
         iterations,
         relative_residual,
     })
+}
+
+/// A candidate with its solution `X` of the original problem and that one's relative residual.
+type Checked = (Candidate, Mat, f64);
+
+/// Whether a checked candidate is the stabilizing solution to the required accuracy.
+fn acceptable(done: &Checked) -> bool {
+    let (radius, residual) = (done.0.closed_loop.radius, done.2);
+    radius < 1.0 - UNIT_CIRCLE_MARGIN && residual <= DARE_RESIDUAL_TOLERANCE
+}
+
+/// The arguments of [`solve_dare_validated`].
+#[derive(Clone, Copy)]
+struct Args<'a> {
+    a: &'a Mat,
+    b: &'a Mat,
+    q: &'a Mat,
+    /// The true `R`.
+    r: &'a Mat,
+    s: Option<&'a Mat>,
+    e: Option<&'a Mat>,
+}
+
+/// One DARE being solved: the arguments, their reduction to the standard problem and the
+/// doubling's starting matrices.
+struct Solve<'a> {
+    args: Args<'a>,
+    /// `R + δI` where `R` is singular (the doubling needs `R⁻¹`).
+    regularised: Option<Mat>,
+    a_hat: Mat,
+    b_hat: Mat,
+    e_inv: Option<Mat>,
+    a0: Mat,
+    g0: Mat,
+    h0: Mat,
+}
+
+impl<'a> Solve<'a> {
+    fn new(args: Args<'a>) -> std::result::Result<Self, DareFailure> {
+        let Args { a, b, q, r, s, e } = args;
+        // Generalized problem → standard one in Y = EᵀXE with Â = E⁻¹A, B̂ = E⁻¹B.
+        let (a_hat, b_hat, e_inv) = match e {
+            Some(e) => {
+                let lu = e.clone().lu();
+                let e_inv = lu
+                    .try_inverse()
+                    .ok_or_else(|| DareFailure::NoSolution("E is singular".into()))?;
+                (&e_inv * a, &e_inv * b, Some(e_inv))
+            }
+            None => (a.clone(), b.clone(), None),
+        };
+        // A singular R (scipy's and SLICOT's DAREX examples 3 and 4) has no R⁻¹ for the
+        // doubling. The doubling then runs on R + δI, only to find a stabilizing gain;
+        // Newton's method, which needs BᵀXB + R invertible but never R⁻¹, finishes on the
+        // true R.
+        let regularised = match r.clone().cholesky() {
+            Some(_) => None,
+            None => {
+                let scale = r.norm().max(b_hat.norm_squared() * q.norm()).max(1e-12);
+                Some(r + Mat::identity(r.nrows(), r.nrows()) * (1e-6 * scale))
+            }
+        };
+        let r_chol = regularised
+            .as_ref()
+            .unwrap_or(r)
+            .clone()
+            .cholesky()
+            .ok_or_else(|| DareFailure::NoSolution("R + δI is not positive definite".into()))?;
+        let r_inv_bt = r_chol.solve(&b_hat.transpose());
+        let g0 = symmetrize(&(&b_hat * &r_inv_bt));
+        let (a0, h0) = match s {
+            Some(s) => {
+                let r_inv_st = r_chol.solve(&s.transpose());
+                (
+                    &a_hat - &b_hat * &r_inv_st,
+                    symmetrize(&(q - s * &r_inv_st)),
+                )
+            }
+            None => (a_hat.clone(), q.clone()),
+        };
+        Ok(Self {
+            args,
+            regularised,
+            a_hat,
+            b_hat,
+            e_inv,
+            a0,
+            g0,
+            h0,
+        })
+    }
+
+    /// The `R` the doubling works with: the true one, or `R + δI` where that is singular.
+    fn doubling_r(&self) -> &Mat {
+        self.regularised.as_ref().unwrap_or(self.args.r)
+    }
+
+    /// The standard problem with weight `r`.
+    fn problem<'b>(&'b self, r: &'b Mat) -> StandardDare<'b> {
+        StandardDare {
+            a: &self.a_hat,
+            b: &self.b_hat,
+            q: self.args.q,
+            r,
+            s: self.args.s,
+        }
+    }
+
+    /// A failure: the unreachable unstable mode when there is one, else `reason`.
+    fn diagnose(&self, reason: String) -> DareFailure {
+        match unreachable_unstable_mode(self.args.a, self.args.b, self.args.e) {
+            Some(z) => DareFailure::Unreachable(z),
+            None => DareFailure::NoSolution(reason),
+        }
+    }
+
+    /// The doubling from `H₀ = h`, with the gain and closed loop of its result.
+    fn doubling(&self, h: &Mat) -> Option<Candidate> {
+        let (y, iterations) = sda_dispatch(&self.a0, &self.g0, h)?;
+        let y = symmetrize(&y);
+        let closed_loop = self.problem(self.doubling_r()).closed_loop(&y)?;
+        Some(Candidate {
+            y,
+            closed_loop,
+            iterations,
+        })
+    }
+
+    /// `candidate` with its `X` and that one's residual in the problem of weight `r`.
+    fn checked(&self, candidate: Candidate, r: &Mat) -> Checked {
+        let x = unreduce(&candidate.y, self.e_inv.as_ref());
+        let Args { a, b, q, s, e, .. } = self.args;
+        let residual = dare_relative_residual(a, b, q, r, s, e, &x);
+        (candidate, x, residual)
+    }
+
+    /// Newton's method on the problem of weight `r` from `start`'s gain, its steps added to
+    /// `start`'s, checked; `what` says which Newton run failed.
+    fn newton_from(
+        &self,
+        start: Candidate,
+        r: &Mat,
+        what: &str,
+    ) -> std::result::Result<Checked, DareFailure> {
+        let problem = self.problem(r);
+        let (y, newton_steps) = problem
+            .newton(start.closed_loop.gain)
+            .ok_or_else(|| self.diagnose(what.into()))?;
+        let closed_loop = problem
+            .closed_loop(&y)
+            .ok_or_else(|| self.diagnose("BᵀXB + R is singular at the solution".into()))?;
+        let candidate = Candidate {
+            y,
+            closed_loop,
+            iterations: start.iterations + newton_steps,
+        };
+        Ok(self.checked(candidate, r))
+    }
+
+    /// The doubling, refined by Newton's method where it is not accurate enough, and finished
+    /// on the true `R` where the doubling ran on `R + δI`.
+    ///
+    /// The doubling from H₀ converges to the stabilizing solution when (H₀, A₀) is detectable;
+    /// otherwise (an unstable mode Q does not weigh) it may settle on another solution, and
+    /// with an ill-conditioned R its G₀ = BR⁻¹Bᵀ limits the accuracy. Both are repaired by
+    /// Newton's method from a stabilizing gain: the doubling's own when it stabilizes, else
+    /// that of the doubling on H₀ + δI, which is detectable for any δ > 0.
+    fn main_path(&self) -> std::result::Result<Checked, DareFailure> {
+        let r = self.doubling_r();
+        let doubled = self
+            .doubling(&self.h0)
+            .filter(|c| c.closed_loop.radius < 1.0 - UNIT_CIRCLE_MARGIN)
+            .map(|c| self.checked(c, r));
+        let (solution, x, relative_residual) = match doubled {
+            Some(done) if done.2 <= NEWTON_REFINEMENT_THRESHOLD => done,
+            doubled => {
+                let start = match doubled {
+                    Some((candidate, _, _)) => candidate,
+                    None => {
+                        let delta = 1e-6 * self.h0.norm().max(1.0);
+                        let n = self.h0.nrows();
+                        let h_reg = &self.h0 + Mat::identity(n, n) * delta;
+                        self.doubling(&h_reg)
+                            .filter(|c| c.closed_loop.radius < 1.0)
+                            .ok_or_else(|| {
+                                self.diagnose(
+                                    "the doubling iteration found no stabilizing gain to start \
+                                     from"
+                                        .into(),
+                                )
+                            })?
+                    }
+                };
+                self.newton_from(
+                    start,
+                    r,
+                    "Newton's method did not converge to a stabilizing solution",
+                )?
+            }
+        };
+        if self.regularised.is_none() {
+            return Ok((solution, x, relative_residual));
+        }
+        self.newton_from(
+            solution,
+            self.args.r,
+            "Newton's method on the singular R did not converge",
+        )
+    }
+
+    /// Newton's method on the true equation from the auxiliary problem's gain, if that gives
+    /// an acceptable solution.
+    fn newton_on_auxiliary_gain(&self) -> Option<Checked> {
+        let exact = self.problem(self.args.r);
+        auxiliary_gain(&self.a_hat, &self.b_hat)
+            .and_then(|gain| exact.newton(gain))
+            .and_then(|(y, steps)| {
+                let closed_loop = exact.closed_loop(&y)?;
+                let candidate = Candidate {
+                    y,
+                    closed_loop,
+                    iterations: steps,
+                };
+                Some(self.checked(candidate, self.args.r))
+            })
+            .filter(acceptable)
+    }
 }
 
 /// `X = E⁻ᵀ Y E⁻¹`: the generalized problem's solution from the standard one's.

@@ -148,16 +148,8 @@ fn residual(
     r.iter().all(|v| v.is_finite()).then_some((r, ad, bd))
 }
 
-/// Fits the free physical parameters to a discrete linear model (module docs).
-///
-/// `ad` is 4×4 and `bd` 4×1 in the state order `[θ, θ̇, α, α̇]` with α = 0 upright; `ts` is
-/// their sample time.
-pub fn fit_params(ad: &Mat, bd: &Mat, ts: f64, options: &FitOptions) -> Result<FitReport> {
-    check_shape("Ad", ad, 4, 4)?;
-    check_shape("Bd", bd, 4, 1)?;
-    check_finite("Ad", ad)?;
-    check_finite("Bd", bd)?;
-    crate::linalg::check_sample_time("Ts", ts)?;
+/// Checks the options other than the parameters' own (`base.validate`).
+fn check_options(options: &FitOptions) -> Result<()> {
     options.base.validate()?;
     if options.max_iterations == 0 || options.max_iterations > MAX_FIT_ITERATIONS {
         return Err(RipError::invalid(
@@ -174,10 +166,13 @@ pub fn fit_params(ad: &Mat, bd: &Mat, ts: f64, options: &FitOptions) -> Result<F
             "must be positive and finite",
         ));
     }
-    let mut target = Mat::zeros(4, 5);
-    target.view_mut((0, 0), (4, 4)).copy_from(ad);
-    target.view_mut((0, 4), (4, 1)).copy_from(bd);
-    let w = match &options.weights {
+    Ok(())
+}
+
+/// The residual weights: the given ones, checked, or by default each entry's
+/// `1 / max(|target − [I 0]|, 1e-3 · max |target − [I 0]|)`.
+fn fit_weights(weights: Option<&Mat>, target: &Mat) -> Result<Mat> {
+    Ok(match weights {
         Some(w) => {
             check_shape("weights", w, 4, 5)?;
             check_finite("weights", w)?;
@@ -199,7 +194,24 @@ pub fn fit_params(ad: &Mat, bd: &Mat, ts: f64, options: &FitOptions) -> Result<F
             }
             dev.map(|d| 1.0 / d.max(floor))
         }
-    };
+    })
+}
+
+/// Fits the free physical parameters to a discrete linear model (module docs).
+///
+/// `ad` is 4×4 and `bd` 4×1 in the state order `[θ, θ̇, α, α̇]` with α = 0 upright; `ts` is
+/// their sample time.
+pub fn fit_params(ad: &Mat, bd: &Mat, ts: f64, options: &FitOptions) -> Result<FitReport> {
+    check_shape("Ad", ad, 4, 4)?;
+    check_shape("Bd", bd, 4, 1)?;
+    check_finite("Ad", ad)?;
+    check_finite("Bd", bd)?;
+    crate::linalg::check_sample_time("Ts", ts)?;
+    check_options(options)?;
+    let mut target = Mat::zeros(4, 5);
+    target.view_mut((0, 0), (4, 4)).copy_from(ad);
+    target.view_mut((0, 4), (4, 1)).copy_from(bd);
+    let w = fit_weights(options.weights.as_ref(), &target)?;
 
     let b = &options.base;
     // Friction may be zero in the base set; the log parameterisation needs a positive start.

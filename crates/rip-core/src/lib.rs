@@ -53,6 +53,7 @@ pub mod mpc;
 pub mod paper;
 pub mod plant;
 pub mod preflight;
+mod presets;
 pub mod regulators;
 pub mod rig;
 pub mod sim;

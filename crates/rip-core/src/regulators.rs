@@ -44,18 +44,6 @@ use crate::paper;
 /// Default cut-off (Hz) of [`Lqr`]'s rate filter.
 pub const DEFAULT_RATE_CUTOFF_HZ: f64 = 20.0;
 
-/// The default spec's design at the paper's sample time.
-fn paper_design() -> Result<crate::spec::Design> {
-    crate::spec::Spec::default()
-        .design(paper::TS)
-        .map_err(spec_error)
-}
-
-/// A spec error as the [`RipError`] of the key it names.
-pub(crate) fn spec_error(e: crate::spec::SpecError) -> RipError {
-    RipError::invalid(e.key, e.reason)
-}
-
 /// Number of plant states `[θ, θ̇, α, α̇]`.
 const NX: usize = 4;
 
@@ -190,13 +178,111 @@ pub struct Lqr {
     k: SMatrix<f64, 1, NX>,
     ts: f64,
     cutoff_hz: f64,
-    a: f64,
     bounds: (f64, f64),
+    /// `[θ, θ̇̂, α, α̇̂]`: the filter's last angles and rates.
     x_hat: SVector<f64, NX>,
+    filter: RateFilter,
+    integral: Option<Integral>,
+}
+
+/// The rate estimate of [`Lqr`] (its type docs give the equations) for the two angles
+/// `[θ, α]`: the backward difference through a first-order low-pass, over all the periods
+/// [held](Self::hold) since the last measured angle. The one definition of the rig's rate
+/// estimate: the reinforcement-learning environments observe the same
+/// ([`crate::sim::vec_env::Observer`]). Allocation-free and `Copy`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RateFilter {
+    /// `a = e^{−2π f_c Ts}`.
+    a: f64,
+    ts: f64,
+    angles: [f64; 2],
+    rates: [f64; 2],
     started: bool,
     /// Periods held since the last measured angle.
     held: u32,
-    integral: Option<Integral>,
+}
+
+impl RateFilter {
+    /// A filter for period `ts` (s, positive) and cut-off `cutoff_hz` (Hz, positive;
+    /// `f64::INFINITY` for the plain difference). The callers check both: [`Lqr::new`] and
+    /// [`EnvConfig::validate`](crate::sim::vec_env::EnvConfig::validate).
+    pub fn new(ts: f64, cutoff_hz: f64) -> Self {
+        Self {
+            a: (-2.0 * std::f64::consts::PI * cutoff_hz * ts).exp(),
+            ts,
+            angles: [0.0; 2],
+            rates: [0.0; 2],
+            started: false,
+            held: 0,
+        }
+    }
+
+    /// Takes the measured angles `y`; `false`, with nothing changed, when they or the rates
+    /// from them are not finite (one bad reading must not leave NaN in the filter for good).
+    /// The first sample after construction or [`reset`](Self::reset) gives zero rates.
+    #[inline]
+    pub fn update(&mut self, y: [f64; 2]) -> bool {
+        if !(y[0].is_finite() && y[1].is_finite()) {
+            return false;
+        }
+        if self.started {
+            let periods = self.held.saturating_add(1);
+            let dt = f64::from(periods) * self.ts;
+            let a = self.a.powi(i32::try_from(periods).unwrap_or(i32::MAX));
+            let mut rates = [0.0; 2];
+            for (rate, (yi, (prev, prev_rate))) in rates
+                .iter_mut()
+                .zip(y.iter().zip(self.angles.iter().zip(self.rates)))
+            {
+                let d = (yi - prev) / dt;
+                *rate = a * prev_rate + (1.0 - a) * d;
+            }
+            if !rates.iter().all(|v| v.is_finite()) {
+                return false;
+            }
+            self.rates = rates;
+        } else {
+            self.rates = [0.0; 2];
+            self.started = true;
+        }
+        self.held = 0;
+        self.angles = y;
+        true
+    }
+
+    /// Counts a period without a measured angle, so that the next difference spans it.
+    #[inline]
+    pub fn hold(&mut self) {
+        if self.started {
+            self.held = self.held.saturating_add(1);
+        }
+    }
+
+    /// Sets the angles and rates, as if just measured.
+    pub fn seed(&mut self, angles: [f64; 2], rates: [f64; 2]) {
+        self.angles = angles;
+        self.rates = rates;
+        self.started = true;
+        self.held = 0;
+    }
+
+    /// Forgets everything: the next sample starts the rates at zero.
+    pub fn reset(&mut self) {
+        self.angles = [0.0; 2];
+        self.rates = [0.0; 2];
+        self.started = false;
+        self.held = 0;
+    }
+
+    /// The last measured angles `[θ, α]`.
+    pub fn angles(&self) -> [f64; 2] {
+        self.angles
+    }
+
+    /// The rate estimates `[θ̇̂, α̇̂]`.
+    pub fn rates(&self) -> [f64; 2] {
+        self.rates
+    }
 }
 
 impl Lqr {
@@ -215,11 +301,9 @@ impl Lqr {
             k,
             ts,
             cutoff_hz: rate_cutoff_hz,
-            a: (-2.0 * std::f64::consts::PI * rate_cutoff_hz * ts).exp(),
             bounds: (-paper::INPUT_LIMIT, paper::INPUT_LIMIT),
             x_hat: SVector::zeros(),
-            started: false,
-            held: 0,
+            filter: RateFilter::new(ts, rate_cutoff_hz),
             integral: None,
         })
     }
@@ -237,13 +321,6 @@ impl Lqr {
         check_shape("B", bd, NX, 1)?;
         let design = dlqr(ad, bd, q, r, None)?;
         Self::new(&design.k, ts, rate_cutoff_hz)
-    }
-
-    /// The paper's LQR: the controller assembly ([`crate::spec`]) applied to the default
-    /// spec, i.e. eq. (13) weights on [`paper::discrete_model`], `Ts = 0.01 s`, default rate
-    /// filter and ±12 V.
-    pub fn paper() -> Result<Self> {
-        paper_design()?.lqr().map_err(spec_error)
     }
 
     /// Replaces the input bounds (must be finite with `u_min < u_max`).
@@ -286,44 +363,23 @@ impl Lqr {
     }
 
     fn count_held_period(&mut self) {
-        if self.started {
-            self.held = self.held.saturating_add(1);
-        }
+        self.filter.hold();
     }
-
     /// Updates `x̂` from the angles `y` (type docs); `false`, with `x̂` untouched, when the
     /// sample is unusable.
     fn update_estimate(&mut self, y: &[f64]) -> bool {
-        // A sample whose angles or rates are not finite is discarded as if it had not arrived:
-        // one bad reading must not leave NaN in the filter for good.
-        if !(y[0].is_finite() && y[1].is_finite()) {
+        if !self.filter.update([y[0], y[1]]) {
             return false;
         }
-        if self.started {
-            let periods = self.held.saturating_add(1);
-            let dt = f64::from(periods) * self.ts;
-            let a = self.a.powi(i32::try_from(periods).unwrap_or(i32::MAX));
-            let mut rates = [0.0; 2];
-            for (i, (q, rate)) in [(0usize, 1usize), (2, 3)].into_iter().enumerate() {
-                let d = (y[q / 2] - self.x_hat[q]) / dt;
-                rates[i] = a * self.x_hat[rate] + (1.0 - a) * d;
-            }
-            if !rates.iter().all(|v| v.is_finite()) {
-                return false;
-            }
-            self.x_hat[1] = rates[0];
-            self.x_hat[3] = rates[1];
-        } else {
-            self.x_hat[1] = 0.0;
-            self.x_hat[3] = 0.0;
-            self.started = true;
-        }
-        self.held = 0;
-        self.x_hat[0] = y[0];
-        self.x_hat[2] = y[1];
+        self.sync_estimate();
         true
     }
-
+    /// `x̂ = [θ, θ̇̂, α, α̇̂]` from the filter.
+    fn sync_estimate(&mut self) {
+        let ([theta, alpha], [theta_rate, alpha_rate]) =
+            (self.filter.angles(), self.filter.rates());
+        self.x_hat = SVector::<f64, NX>::new(theta, theta_rate, alpha, alpha_rate);
+    }
     /// The step for an unusable sample: `x̂` stays, the period counts as held, and the move is
     /// the feedback on the kept estimate (zero before the first usable sample).
     fn discard_sample(&mut self, r: &[f64], u: &mut [f64]) -> StepStatus {
@@ -382,9 +438,8 @@ impl Controller for Lqr {
     fn seed(&mut self, x: &[f64], _u: &[f64]) {
         clear(&mut self.integral);
         if x.len() >= NX && x[..NX].iter().all(|v| v.is_finite()) {
-            self.x_hat.copy_from_slice(&x[..NX]);
-            self.started = true;
-            self.held = 0;
+            self.filter.seed([x[0], x[2]], [x[1], x[3]]);
+            self.sync_estimate();
         } else {
             self.count_held_period();
         }
@@ -397,8 +452,7 @@ impl Controller for Lqr {
 
     fn reset(&mut self) {
         self.x_hat.fill(0.0);
-        self.started = false;
-        self.held = 0;
+        self.filter.reset();
         clear(&mut self.integral);
     }
 
@@ -495,15 +549,6 @@ impl Lqg {
             seed_buf: vec![0.0; n],
             integral: None,
         })
-    }
-
-    /// The paper's LQG: the controller assembly ([`crate::spec`]) applied to the default
-    /// spec, i.e. the eq. (13) gain on [`paper::discrete_model`] and the Kalman filter of
-    /// eq. (11) on the augmented model of eq. (3). The estimator predicts with the unscaled
-    /// `B_u = [B_d; 0]` (the `L_su` scaling of [`paper::augmented_model`] belongs to the noise
-    /// model only).
-    pub fn paper() -> Result<Self> {
-        paper_design()?.lqg().map_err(spec_error)
     }
 
     /// Replaces the input bounds (must be finite with `u_min < u_max`).

@@ -95,145 +95,26 @@ pub(crate) struct CondenseInput<'a> {
 
 impl Condensed {
     pub fn new(d: &CondenseInput<'_>) -> Self {
-        let nx = d.a.nrows();
-        let nu = d.b.ncols();
-        let ny = d.c.nrows();
-        let (p, m) = (d.p, d.m);
-        let nd = m * nu;
-        let nz = nd + 1;
-
-        // S_i = Σ_{j<i} Aʲ B and Aⁱ, i = 0..P.
-        let mut apow = Mat::identity(nx, nx);
-        let mut s = vec![Mat::zeros(nx, nu)];
-        let mut phi = Mat::zeros(p * ny, nx);
-        let mut gamma = Mat::zeros(p * ny, nu);
-        for i in 1..=p {
-            let next_s = &s[i - 1] + &apow * d.b;
-            apow = &apow * d.a;
-            phi.view_mut(((i - 1) * ny, 0), (ny, nx))
-                .copy_from(&(d.c * &apow));
-            gamma
-                .view_mut(((i - 1) * ny, 0), (ny, nu))
-                .copy_from(&(d.c * &next_s));
-            s.push(next_s);
-        }
-        let mut g = Mat::zeros(p * ny, nd);
-        for i in 1..=p {
-            for l in 0..m.min(i) {
-                g.view_mut(((i - 1) * ny, l * nu), (ny, nu))
-                    .copy_from(&(d.c * &s[i - l]));
-            }
-        }
-        let mut t = Mat::zeros(p * nu, nd);
-        for j in 0..p {
-            for l in 0..m.min(j + 1) {
-                t.view_mut((j * nu, l * nu), (nu, nu)).fill_diagonal(1.0);
-            }
-        }
-
-        let qy = DVector::from_fn(p * ny, |r, _| d.output_weights[r % ny].powi(2));
-        let qu = DVector::from_fn(p * nu, |r, _| {
-            (d.input_weights[r % nu] / d.input_scales[r % nu]).powi(2)
-        });
-        let rdu = DVector::from_fn(nd, |r, _| {
-            (d.input_rate_weights[r % nu] / d.input_scales[r % nu]).powi(2)
-        });
-        let qy_g = scale_rows(&g, &qy);
-        let qu_t = scale_rows(&t, &qu);
-
-        let mut h = Mat::zeros(nz, nz);
-        let h_dd = (g.transpose() * &qy_g + t.transpose() * &qu_t) * 2.0
-            + Mat::from_diagonal(&(rdu * 2.0));
-        h.view_mut((0, 0), (nd, nd)).copy_from(&h_dd);
-        h[(nd, nd)] = 2.0 * d.ecr_weight;
-        // Exact symmetry keeps the factorizations of both backends well defined.
-        let h = (&h + h.transpose()) * 0.5;
-
-        let mut fx = Mat::zeros(nz, nx);
-        fx.view_mut((0, 0), (nd, nx))
-            .copy_from(&(qy_g.transpose() * &phi * 2.0));
-        let mut fu = Mat::zeros(nz, nu);
-        let mut ones_u = Mat::zeros(p * nu, nu);
-        for j in 0..p {
-            ones_u.view_mut((j * nu, 0), (nu, nu)).fill_diagonal(1.0);
-        }
-        fu.view_mut((0, 0), (nd, nu))
-            .copy_from(&((qy_g.transpose() * &gamma + qu_t.transpose() * &ones_u) * 2.0));
-        let mut f0 = DVector::zeros(nz);
-        let target = DVector::from_column_slice(d.input_target);
-        f0.rows_mut(0, nd)
-            .copy_from(&(qu_t.transpose() * &ones_u * &target * -2.0));
-
-        let mut fr = Mat::zeros(nz, p * ny);
-        for col in 0..p * ny {
-            let w = 2.0 / d.output_scales[col % ny];
-            for row in 0..nd {
-                fr[(row, col)] = qy_g[(col, row)] * w;
-            }
-        }
-        let mut fr_tail = fr.clone();
-        for i in (0..p.saturating_sub(1)).rev() {
-            for o in 0..ny {
-                let next = fr_tail.column((i + 1) * ny + o).clone_owned();
-                let mut col = fr_tail.column_mut(i * ny + o);
-                col += next;
-            }
-        }
-
-        // Constraint rows.
-        let finite_sides = |bounds: &[(f64, f64)]| -> usize {
-            bounds
-                .iter()
-                .map(|&(lo, hi)| usize::from(lo.is_finite()) + usize::from(hi.is_finite()))
-                .sum()
-        };
-        let n_input = m * finite_sides(d.input_bounds);
-        let n_soft = p * finite_sides(d.output_bounds);
-        let ncon = n_input + n_soft + 1;
-        let mut a = Mat::zeros(ncon, nz);
-        let mut b0 = DVector::zeros(ncon);
-        let mut bx = Mat::zeros(ncon, nx);
-        let mut bu = Mat::zeros(ncon, nu);
-        let mut row = 0;
-        for j in 0..m {
-            for (c, &(lo, hi)) in d.input_bounds.iter().enumerate() {
-                for (bound, sign) in [(hi, 1.0), (lo, -1.0)] {
-                    if !bound.is_finite() {
-                        continue;
-                    }
-                    for l in 0..=j {
-                        a[(row, l * nu + c)] = sign;
-                    }
-                    b0[row] = sign * bound;
-                    bu[(row, c)] = -sign;
-                    row += 1;
-                }
-            }
-        }
-        for i in 0..p {
-            for (o, &(lo, hi)) in d.output_bounds.iter().enumerate() {
-                for (bound, sign) in [(hi, 1.0), (lo, -1.0)] {
-                    if !bound.is_finite() {
-                        continue;
-                    }
-                    let r = i * ny + o;
-                    for col in 0..nd {
-                        a[(row, col)] = sign * g[(r, col)];
-                    }
-                    a[(row, nd)] = -1.0;
-                    b0[row] = sign * bound / d.output_scales[o];
-                    for col in 0..nx {
-                        bx[(row, col)] = -sign * phi[(r, col)];
-                    }
-                    for col in 0..nu {
-                        bu[(row, col)] = -sign * gamma[(r, col)];
-                    }
-                    row += 1;
-                }
-            }
-        }
-        a[(row, nd)] = -1.0;
-        debug_assert_eq!(row + 1, ncon);
+        let Dims {
+            nx,
+            nu,
+            ny,
+            p,
+            m,
+            nz,
+            ..
+        } = Dims::of(d);
+        let Prediction { phi, gamma, g, t } = prediction(d);
+        let Cost {
+            h,
+            fx,
+            fu,
+            f0,
+            fr,
+            fr_tail,
+        } = cost(d, &phi, &gamma, &g, &t);
+        let (a, b0, bx, bu, rows) = constraints(d, &phi, &gamma, &g);
+        let ncon = a.nrows();
 
         Self {
             nx,
@@ -253,7 +134,7 @@ impl Condensed {
             b0,
             bx,
             bu,
-            rows: RowLayout { n_input, n_soft },
+            rows,
             phi,
             gamma,
             g,
@@ -298,6 +179,234 @@ impl Condensed {
             + &self.gamma * DVectorView::from_slice(u_prev, self.nu)
             + &self.g * DVectorView::from_slice(du, self.m * self.nu)
     }
+}
+
+/// The problem's sizes: states, inputs, outputs, horizons, moves `m·nu` and `nz = m·nu + 1`.
+#[derive(Debug, Clone, Copy)]
+struct Dims {
+    nx: usize,
+    nu: usize,
+    ny: usize,
+    p: usize,
+    m: usize,
+    nd: usize,
+    nz: usize,
+}
+
+impl Dims {
+    fn of(d: &CondenseInput<'_>) -> Self {
+        let nu = d.b.ncols();
+        Self {
+            nx: d.a.nrows(),
+            nu,
+            ny: d.c.nrows(),
+            p: d.p,
+            m: d.m,
+            nd: d.m * nu,
+            nz: d.m * nu + 1,
+        }
+    }
+}
+
+/// The prediction matrices `Φ`, `Γ`, `G` and the input map `T` (module docs, "Prediction").
+struct Prediction {
+    phi: Mat,
+    gamma: Mat,
+    g: Mat,
+    t: Mat,
+}
+
+fn prediction(d: &CondenseInput<'_>) -> Prediction {
+    let Dims {
+        nx,
+        nu,
+        ny,
+        p,
+        m,
+        nd,
+        ..
+    } = Dims::of(d);
+    // S_i = Σ_{j<i} Aʲ B and Aⁱ, i = 0..P.
+    let mut apow = Mat::identity(nx, nx);
+    let mut s = vec![Mat::zeros(nx, nu)];
+    let mut phi = Mat::zeros(p * ny, nx);
+    let mut gamma = Mat::zeros(p * ny, nu);
+    for i in 1..=p {
+        let next_s = &s[i - 1] + &apow * d.b;
+        apow = &apow * d.a;
+        phi.view_mut(((i - 1) * ny, 0), (ny, nx))
+            .copy_from(&(d.c * &apow));
+        gamma
+            .view_mut(((i - 1) * ny, 0), (ny, nu))
+            .copy_from(&(d.c * &next_s));
+        s.push(next_s);
+    }
+    let mut g = Mat::zeros(p * ny, nd);
+    for i in 1..=p {
+        for l in 0..m.min(i) {
+            g.view_mut(((i - 1) * ny, l * nu), (ny, nu))
+                .copy_from(&(d.c * &s[i - l]));
+        }
+    }
+    let mut t = Mat::zeros(p * nu, nd);
+    for j in 0..p {
+        for l in 0..m.min(j + 1) {
+            t.view_mut((j * nu, l * nu), (nu, nu)).fill_diagonal(1.0);
+        }
+    }
+    Prediction { phi, gamma, g, t }
+}
+
+/// `H` and the maps from `x`, `u⁻`, the reference and the input target to `f` (module docs,
+/// "Cost").
+struct Cost {
+    h: Mat,
+    fx: Mat,
+    fu: Mat,
+    f0: DVector<f64>,
+    fr: Mat,
+    fr_tail: Mat,
+}
+
+fn cost(d: &CondenseInput<'_>, phi: &Mat, gamma: &Mat, g: &Mat, t: &Mat) -> Cost {
+    let Dims {
+        nx,
+        nu,
+        ny,
+        p,
+        nd,
+        nz,
+        ..
+    } = Dims::of(d);
+    let qy = DVector::from_fn(p * ny, |r, _| d.output_weights[r % ny].powi(2));
+    let qu = DVector::from_fn(p * nu, |r, _| {
+        (d.input_weights[r % nu] / d.input_scales[r % nu]).powi(2)
+    });
+    let rdu = DVector::from_fn(nd, |r, _| {
+        (d.input_rate_weights[r % nu] / d.input_scales[r % nu]).powi(2)
+    });
+    let qy_g = scale_rows(g, &qy);
+    let qu_t = scale_rows(t, &qu);
+
+    let mut h = Mat::zeros(nz, nz);
+    let h_dd =
+        (g.transpose() * &qy_g + t.transpose() * &qu_t) * 2.0 + Mat::from_diagonal(&(rdu * 2.0));
+    h.view_mut((0, 0), (nd, nd)).copy_from(&h_dd);
+    h[(nd, nd)] = 2.0 * d.ecr_weight;
+    // Exact symmetry keeps the factorizations of both backends well defined.
+    let h = (&h + h.transpose()) * 0.5;
+
+    let mut fx = Mat::zeros(nz, nx);
+    fx.view_mut((0, 0), (nd, nx))
+        .copy_from(&(qy_g.transpose() * phi * 2.0));
+    let mut fu = Mat::zeros(nz, nu);
+    let mut ones_u = Mat::zeros(p * nu, nu);
+    for j in 0..p {
+        ones_u.view_mut((j * nu, 0), (nu, nu)).fill_diagonal(1.0);
+    }
+    fu.view_mut((0, 0), (nd, nu))
+        .copy_from(&((qy_g.transpose() * gamma + qu_t.transpose() * &ones_u) * 2.0));
+    let mut f0 = DVector::zeros(nz);
+    let target = DVector::from_column_slice(d.input_target);
+    f0.rows_mut(0, nd)
+        .copy_from(&(qu_t.transpose() * &ones_u * &target * -2.0));
+
+    let mut fr = Mat::zeros(nz, p * ny);
+    for col in 0..p * ny {
+        let w = 2.0 / d.output_scales[col % ny];
+        for row in 0..nd {
+            fr[(row, col)] = qy_g[(col, row)] * w;
+        }
+    }
+    let mut fr_tail = fr.clone();
+    for i in (0..p.saturating_sub(1)).rev() {
+        for o in 0..ny {
+            let next = fr_tail.column((i + 1) * ny + o).clone_owned();
+            let mut col = fr_tail.column_mut(i * ny + o);
+            col += next;
+        }
+    }
+    Cost {
+        h,
+        fx,
+        fu,
+        f0,
+        fr,
+        fr_tail,
+    }
+}
+
+/// `A_c`, `b₀`, `B_x`, `B_u` and the row layout (module docs, "Constraints").
+fn constraints(
+    d: &CondenseInput<'_>,
+    phi: &Mat,
+    gamma: &Mat,
+    g: &Mat,
+) -> (Mat, DVector<f64>, Mat, Mat, RowLayout) {
+    let Dims {
+        nx,
+        nu,
+        ny,
+        p,
+        m,
+        nd,
+        nz,
+    } = Dims::of(d);
+    // Constraint rows.
+    let finite_sides = |bounds: &[(f64, f64)]| -> usize {
+        bounds
+            .iter()
+            .map(|&(lo, hi)| usize::from(lo.is_finite()) + usize::from(hi.is_finite()))
+            .sum()
+    };
+    let n_input = m * finite_sides(d.input_bounds);
+    let n_soft = p * finite_sides(d.output_bounds);
+    let ncon = n_input + n_soft + 1;
+    let mut a = Mat::zeros(ncon, nz);
+    let mut b0 = DVector::zeros(ncon);
+    let mut bx = Mat::zeros(ncon, nx);
+    let mut bu = Mat::zeros(ncon, nu);
+    let mut row = 0;
+    for j in 0..m {
+        for (c, &(lo, hi)) in d.input_bounds.iter().enumerate() {
+            for (bound, sign) in [(hi, 1.0), (lo, -1.0)] {
+                if !bound.is_finite() {
+                    continue;
+                }
+                for l in 0..=j {
+                    a[(row, l * nu + c)] = sign;
+                }
+                b0[row] = sign * bound;
+                bu[(row, c)] = -sign;
+                row += 1;
+            }
+        }
+    }
+    for i in 0..p {
+        for (o, &(lo, hi)) in d.output_bounds.iter().enumerate() {
+            for (bound, sign) in [(hi, 1.0), (lo, -1.0)] {
+                if !bound.is_finite() {
+                    continue;
+                }
+                let r = i * ny + o;
+                for col in 0..nd {
+                    a[(row, col)] = sign * g[(r, col)];
+                }
+                a[(row, nd)] = -1.0;
+                b0[row] = sign * bound / d.output_scales[o];
+                for col in 0..nx {
+                    bx[(row, col)] = -sign * phi[(r, col)];
+                }
+                for col in 0..nu {
+                    bu[(row, col)] = -sign * gamma[(r, col)];
+                }
+                row += 1;
+            }
+        }
+    }
+    a[(row, nd)] = -1.0;
+    debug_assert_eq!(row + 1, ncon);
+    (a, b0, bx, bu, RowLayout { n_input, n_soft })
 }
 
 /// `diag(w) M`.
