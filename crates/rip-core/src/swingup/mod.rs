@@ -106,10 +106,13 @@
 //!   `ż = λ z + (wᵀ b) u`, which `|u| ≤ U` can return to 0 only while `|z| < |wᵀ b| U / λ`;
 //!   the catch needs `|z| ≤ catch_mode_fraction · |wᵀ b| U / λ`. A pendulum that is close to
 //!   upright but falling away from it (or rising too fast) is not caught. The balance
-//!   controller computes the move of that same sample. The arm reference is held at the
-//!   arm's angle at the catch, `θ_c`, until the external arm reference changes from the value
-//!   it had then; from that change on the external reference is passed through (so a later
-//!   0 → 1 rad step is tracked as given).
+//!   controller computes the move of that same sample. The arm reference starts at the
+//!   arm's angle at the catch, `θ_c` (a step from there to the external reference would be a
+//!   step of up to `catch_arm_angle` on top of any the user asks for), and moves back to the
+//!   external reference at [`SwingUpSettings::reference_return_rate`] until the external
+//!   reference changes from the value it had at the catch; from that change on the external
+//!   reference is passed through (so a later 0 → 1 rad step is tracked as given, from the
+//!   arm's place rather than from `θ_c`).
 //! - **Balance**: the balance controller runs on `[θ, wrap(α)]`. Leaving the balance region
 //!   (`|α| > balance_angle` or `|θ| > arm_limit`) is a fall: swing up again or stop
 //!   ([`OnFall`]).
@@ -285,7 +288,13 @@ impl<C: Controller> SwingUp<C> {
 
     fn balance_step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
         let theta_ref = match self.hold_reference {
-            Some((held, at_catch)) if r[0] == at_catch => held,
+            Some((held, at_catch)) if r[0] == at_catch => {
+                // Back to the external reference at a bounded rate (module docs, "Catch").
+                let step = self.settings.reference_return_rate * self.ts;
+                let next = held + (at_catch - held).clamp(-step, step);
+                self.hold_reference = Some((next, at_catch));
+                next
+            }
             Some(_) => {
                 self.hold_reference = None;
                 r[0]

@@ -106,6 +106,11 @@ pub struct SwingUpSettings {
     /// balance controller takes over with room to stop the arm inside `arm_limit`; default
     /// 0.7 rad (the balance controllers' catch transients move the arm by up to about 0.8 rad).
     pub catch_arm_angle: f64,
+    /// Rate (rad/s) at which the arm reference moves from the arm's angle at the catch back to
+    /// the external reference while that stays unchanged; default 0.5 rad/s, slow next to the
+    /// balance controllers' arm bandwidth, so the pendulum is not disturbed, and back within
+    /// 1.4 s from the widest catch (`catch_arm_angle`).
+    pub reference_return_rate: f64,
     /// Balance region: `|α|` up to this (rad from upright); leaving it (or the arm limit) after
     /// a catch is a fall. Default 0.6 rad (`rip-rt`'s default pendulum limit).
     pub balance_angle: f64,
@@ -147,6 +152,7 @@ impl Default for SwingUpSettings {
             catch_rate: 7.0,
             catch_arm_rate: 3.0,
             catch_arm_angle: 0.7,
+            reference_return_rate: 0.5,
             balance_angle: 0.6,
             estimator_window: 0.3,
             max_time: 20.0,
@@ -217,6 +223,14 @@ impl SwingUpSettings {
             self.arm_limit,
             true,
             false,
+        )?;
+        in_range(
+            "reference_return_rate",
+            self.reference_return_rate,
+            0.0,
+            inf,
+            false,
+            true,
         )?;
         in_range("balance_angle", self.balance_angle, 0.0, PI, true, false)?;
         if self.balance_angle < self.catch_angle {

@@ -47,3 +47,55 @@ pub fn supervised(
         e => SpecError::new("swing_up", e.to_string()),
     })
 }
+
+/// How a swing-up run approached upright, from its true state (not the supervisor's
+/// estimate): the figures of the first-arrival requirement.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Arrivals {
+    /// Arrivals near upright (the true `|wrap(α)|` entering `catch_angle`) while swinging up,
+    /// up to and including the one in which the catch happened.
+    pub before_catch: u32,
+    /// Whether the catch happened during the first arrival near upright.
+    pub caught_on_first: bool,
+    /// Passes of the pendulum over the top (the unwrapped α crossing a multiple of 2π) while
+    /// the supervisor was swinging up: each one is an arrival that was not caught.
+    pub over_tops: u32,
+    /// Largest true `|θ|` (rad) over the run.
+    pub peak_arm: f64,
+    /// Largest true `|θ|` (rad) from the first fall on; 0 without a fall.
+    pub peak_arm_after_fall: f64,
+}
+
+/// The [`Arrivals`] of `res`, a run of a swing-up supervisor, with `catch_angle` the
+/// supervisor's `swing_up.catch_angle`.
+pub fn arrivals(res: &crate::SimResult, catch_angle: f64) -> Arrivals {
+    use crate::controller::Phase;
+    use std::f64::consts::TAU;
+    let mut out = Arrivals::default();
+    let mut near = false;
+    let mut caught = false;
+    for k in 0..res.len() {
+        let x = res.x[k];
+        out.peak_arm = out.peak_arm.max(x[0].abs());
+        if res.fall_time.is_some_and(|t| res.t[k] >= t) {
+            out.peak_arm_after_fall = out.peak_arm_after_fall.max(x[0].abs());
+        }
+        let swinging = res.phase[k] == Phase::SwingUp;
+        let is_near = super::wrap_angle(x[2]).abs() <= catch_angle;
+        if is_near && !near && !caught && (swinging || res.phase[k] == Phase::Balance) {
+            out.before_catch += 1;
+        }
+        near = is_near;
+        if !caught && res.phase[k] == Phase::Balance {
+            caught = true;
+            out.caught_on_first = out.before_catch == 1;
+        }
+        if swinging && k + 1 < res.len() {
+            let (a, b) = (x[2] / TAU, res.x[k + 1][2] / TAU);
+            if a.floor() != b.floor() {
+                out.over_tops += 1;
+            }
+        }
+    }
+    out
+}
