@@ -85,7 +85,12 @@
 //! u = (a − θ̈(x, 0)) / (θ̈(x, 1) − θ̈(x, 0)),   clamped to ±U                                (4)
 //! ```
 //!
-//! and at the boundary `a = −a_b` with `a_b = 0.5 a_s` by default: half the stall acceleration is
+//! on the model's smooth part (no dead zone, no Coulomb friction): the voltage `v` the smooth
+//! model needs, which the compensation ([`crate::compensation`], applied around the whole
+//! supervisor) turns into the voltage the rig needs. Inverting the dead zone here instead
+//! would divide by its slope, which is 0 at rest when `V_d ≥ 1 V`.
+//!
+//! At the boundary `a = −a_b` with `a_b = 0.5 a_s` by default: half the stall acceleration is
 //! kept for back-EMF at the envelope's top speed `√(4 a_b θ_L)`, the pendulum's reaction on the
 //! arm and ±10 % model error. The simulation tests check `|θ| ≤ θ_L` over perturbed plants.
 //!

@@ -33,19 +33,27 @@ pub fn hanging_config(spec: &Spec, ts: f64, seed: u64) -> SimConfig {
     }
 }
 
-/// The supervisor around `design`'s controller `kind`, with the swing-up designed on `spec`'s
-/// `[plant]` and `[swing_up]` settings.
+/// The supervisor around `design`'s balance controller `kind`, with the swing-up designed on
+/// `spec`'s `[plant]` and `[swing_up]` settings, assembled as `rip-rt` and `riprs.SwingUp`
+/// assemble it: the law plans within the bounds the compensation leaves, and the
+/// compensation (when the design has one) is applied around the whole supervisor, to the
+/// swing-up's voltage as to the balance controller's.
 pub fn supervised(
     spec: &Spec,
     design: &Design,
     kind: ControllerKind,
-) -> Result<SwingUp<Box<dyn Controller>>, SpecError> {
+) -> Result<Box<dyn Controller>, SpecError> {
     let plant = spec.plant()?;
-    let balance = design.controller(kind)?;
-    SwingUp::new(balance, &plant, spec.swing_up.clone()).map_err(|e| match e {
+    let balance = design.balance(kind)?;
+    let mut settings = spec.swing_up.clone();
+    if let Some(c) = design.compensation() {
+        settings.max_voltage = c.planned_limit(settings.max_voltage);
+    }
+    let sup = SwingUp::new(balance, &plant, settings).map_err(|e| match e {
         RipError::InvalidParameter { name, reason } => SpecError::new(name, reason),
         e => SpecError::new("swing_up", e.to_string()),
-    })
+    })?;
+    Ok(design.compensate(Box::new(sup)))
 }
 
 /// How a swing-up run approached upright, from its true state (not the supervisor's

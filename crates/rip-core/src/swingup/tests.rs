@@ -337,3 +337,37 @@ fn the_swing_up_section_of_the_spec() {
     let err = crate::Spec::parse("[swing_up]\ncatch_speed = 1.0\n").unwrap_err();
     assert_eq!(err.key, "swing_up.catch_speed", "{err}");
 }
+
+#[test]
+fn a_dead_zone_of_a_volt_or_more_is_cleared_at_hanging_rest() {
+    // With V_d ≥ 1 V the law used to divide by the dead zone's slope (0 at rest) and write
+    // exactly 0 V to a pendulum hanging still. The compensated supervisor (as rip-rt and
+    // riprs.SwingUp assemble it) must write more than V_d at once, and the swing must rise.
+    for vd in [0.9, 1.0, 1.5] {
+        let spec =
+            Spec::parse(&format!("[plant]\npreset = \"qube_servo2\"\nVd = {vd}\n")).unwrap();
+        let design = spec.design(paper::TS).unwrap();
+        let mut sup = supervised(&spec, &design, ControllerKind::Lqr).unwrap();
+        let mut u = [0.0];
+        sup.step(&[0.0, PI], &[0.0, 0.0], &mut u);
+        sup.step(&[0.0, PI], &[0.0, 0.0], &mut u);
+        assert!(
+            u[0].abs() > vd + 1.0 && u[0].abs() <= spec.swing_up.max_voltage,
+            "Vd {vd}: u = {}",
+            u[0]
+        );
+        // The rig's dead zone is the model's: the pendulum leaves hanging within 2 s.
+        let truth = spec.plant().unwrap();
+        let config = SimConfig {
+            duration: 2.0,
+            ..hanging_config(&spec, paper::TS, 1)
+        };
+        let res = simulate(&truth, sup.as_mut(), &config).unwrap();
+        let swing = res
+            .x
+            .iter()
+            .map(|x| PI - wrap_angle(x[2]).abs())
+            .fold(0.0, f64::max);
+        assert!(swing > 0.5, "Vd {vd}: the pendulum swung {swing} rad");
+    }
+}
