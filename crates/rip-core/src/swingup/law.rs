@@ -156,6 +156,11 @@ impl EnergyLaw {
         self.target + self.dissipation * (1.0 - (0.5 * alpha).cos())
     }
 
+    /// `G = m_p g l_p / 2` (J).
+    pub(crate) fn gravity(&self) -> f64 {
+        self.grav
+    }
+
     /// The braking deceleration `a_b` (rad/s²).
     pub(crate) fn brake(&self) -> f64 {
         self.brake

@@ -127,9 +127,11 @@
 //! Every step is allocation-free when the balance controller's is.
 
 mod law;
+mod report;
 mod settings;
 pub mod study;
 
+pub use report::{SwingUpReport, STILL_ARM};
 pub use settings::{OnFall, SwingUpSettings, MAX_SWING_UP_TIME};
 
 use crate::controller::{Controller, Phase, StepStatus, StopCause};
@@ -166,6 +168,8 @@ pub struct SwingUp<C> {
     hold_reference: Option<(f64, f64)>,
     /// The last voltage the swing-up applied.
     u_swing: [f64; 1],
+    /// What the current swing-up has done so far.
+    report: SwingUpReport,
 }
 
 impl<C: Controller> SwingUp<C> {
@@ -204,6 +208,7 @@ impl<C: Controller> SwingUp<C> {
             swing_samples: 0,
             hold_reference: None,
             u_swing: [0.0],
+            report: SwingUpReport::start(0.0, 0.0, 0.0),
         };
         out.reset();
         Ok(out)
@@ -233,6 +238,18 @@ impl<C: Controller> SwingUp<C> {
     /// The pendulum energy `E` (J, 0 upright at rest) of the swing-up's estimate.
     pub fn energy(&self) -> f64 {
         self.law.energy(self.rates.state())
+    }
+
+    /// What the current swing-up (or the last, once balancing or stopped) has done: peak
+    /// energy against the target, the largest voltage asked for, the arm travel used.
+    pub fn report(&self) -> SwingUpReport {
+        self.report
+    }
+
+    fn start_report(&mut self) {
+        let grav = self.law.gravity();
+        self.report =
+            SwingUpReport::start(self.law.target(0.0), -2.0 * grav, self.settings.arm_limit);
     }
 
     /// The braking deceleration `a_b` (rad/s²) the arm-limit envelope reserves.
@@ -271,6 +288,9 @@ impl<C: Controller> SwingUp<C> {
         };
         self.u_swing[0] = value;
         u[0] = value;
+        if self.rates.started() {
+            self.report.record(self.law.energy(&x), x[0], x[2], value);
+        }
         if !usable {
             self.balance.hold(&self.u_swing);
             return StepStatus::Fallback;
@@ -346,6 +366,7 @@ impl<C: Controller> Controller for SwingUp<C> {
                         self.phase = Phase::SwingUp;
                         self.swing_samples = 0;
                         self.hold_reference = None;
+                        self.start_report();
                         self.swing(y, usable, u)
                     }
                 }
@@ -372,6 +393,7 @@ impl<C: Controller> Controller for SwingUp<C> {
         self.swing_samples = 0;
         self.hold_reference = None;
         self.u_swing = [0.0];
+        self.start_report();
     }
 
     fn state_estimate(&self) -> Option<&[f64]> {
@@ -380,6 +402,10 @@ impl<C: Controller> Controller for SwingUp<C> {
 
     fn sample_time(&self) -> Option<f64> {
         Some(self.ts)
+    }
+
+    fn swing_up_report(&self) -> Option<SwingUpReport> {
+        Some(self.report)
     }
 }
 
