@@ -126,11 +126,13 @@
 //!
 //! Every step is allocation-free when the balance controller's is.
 
+pub mod feasibility;
 mod law;
 mod report;
 mod settings;
 pub mod study;
 
+pub use feasibility::{feasibility, Feasibility, Verdict};
 pub use report::{SwingUpReport, STILL_ARM};
 pub use settings::{OnFall, SwingUpSettings, MAX_SWING_UP_TIME};
 
