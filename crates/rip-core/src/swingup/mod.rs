@@ -114,8 +114,8 @@
 //!   controller computes the move of that same sample. The arm reference starts at the
 //!   arm's angle at the catch, `θ_c` (a step from there to the external reference would be a
 //!   step of up to `catch_arm_angle` on top of any the user asks for), and moves back to the
-//!   external reference at [`SwingUpSettings::reference_return_rate`] until the external
-//!   reference changes from the value it had at the catch; from that change on the external
+//!   external reference at [`SwingUpSettings::reference_return_rate`] (0 by default: held
+//!   there) until the external reference changes from the value it had at the catch; from that change on the external
 //!   reference is passed through (so a later 0 → 1 rad step is tracked as given, from the
 //!   arm's place rather than from `θ_c`).
 //! - **Balance**: the balance controller runs on `[θ, wrap(α)]`. Leaving the balance region
