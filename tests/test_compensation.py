@@ -166,10 +166,11 @@ def test_bad_compensation_keys_are_named():
         Spec.from_dict({"compensation": {"gain": 1.0}})
 
 
-def test_swing_up_and_catch_succeed_more_often_compensated():
+def test_swing_up_and_catch_succeed_compensated_and_uncompensated():
     # Swing-up from hanging and catch on the QUBE-like rig with Vd 0.4 V, Cr 0.003 N m, ten
-    # noise seeds per controller: compensated 29 of 30 runs balance to the end (one LQR and
-    # one LQG catch fall), uncompensated 14 of 30 (LQG 2 of 10).
+    # noise seeds per controller: 30 of 30 runs balance to the end, compensated or not. (Until
+    # the swing-up law planned its voltage on the model's smooth part it inverted the dead zone
+    # itself, dividing by its slope, and uncompensated only 14 of 30 succeeded.)
     def successes(spec: Spec) -> dict[str, int]:
         out = {}
         for name, c in spec.build_controllers(TS).items():
@@ -185,8 +186,8 @@ def test_swing_up_and_catch_succeed_more_often_compensated():
 
     on = successes(_spec(RIGS["qube_like_vd_cr"]))
     off = successes(_spec(RIGS["qube_like_vd_cr"], {"enabled": False}))
-    assert all(n >= 8 for n in on.values()), on
-    assert sum(on.values()) >= sum(off.values()) + 10, (on, off)
+    assert all(n >= 9 for n in on.values()), on
+    assert all(n >= 8 for n in off.values()), off
 
 
 def _envelope_rig(rng: np.random.Generator) -> dict:

@@ -3,19 +3,19 @@
 //! parameter (all but `g`) is drawn uniformly within ±10 % of the preset's, with its own noise
 //! seed, 2048-count encoders and 1 mrad noise; the swing-up is designed on the nominal preset.
 //! The runs are [`rip_core::swingup::study`]'s experiment (the arm steps 0 → 1 rad 2 s after
-//! the catch) through the metrics-only batch; success and time to upright are
-//! [`rip_core::sim::swing_up_succeeded`] and the catch time.
+//! the catch); success and time to upright are [`rip_core::sim::swing_up_succeeded`] and the
+//! catch time, and [`rip_core::swingup::study::arrivals`] counts the arrivals near upright
+//! and the passes over the top of each run from its true state.
 //!
 //! ```text
-//! cargo run --release -p rip-core --example swingup_monte_carlo -- [N] [preset]
+//! cargo run --release -p rip-core --example swingup_monte_carlo -- [N] [preset] [swing_up settings]
 //! ```
 
-use std::sync::atomic::{AtomicBool, AtomicU64};
-
-use rip_core::batch::{simulate_metrics, MetricsOptions, MonteCarlo};
+use rip_core::batch::MonteCarlo;
+use rip_core::sim::simulate;
 use rip_core::spec::{ControllerKind, Param};
-use rip_core::swingup::study::{hanging_config, supervised};
-use rip_core::{Controller, Spec};
+use rip_core::swingup::study::{arrivals, hanging_config, supervised, Arrivals};
+use rip_core::Spec;
 
 fn percentile(sorted: &[f64], q: f64) -> f64 {
     if sorted.is_empty() {
@@ -25,13 +25,26 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
     sorted[i]
 }
 
+struct Run {
+    ok: bool,
+    caught: bool,
+    fell: bool,
+    upright: f64,
+    arrivals: Arrivals,
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let n: u64 = args
         .get(1)
         .map_or(200, |v| v.parse().expect("N is a count"));
     let preset = args.get(2).map_or("paper", String::as_str);
-    let spec = Spec::parse(&format!("[plant]\npreset = \"{preset}\"\n")).expect("a preset");
+    // Further `[swing_up]` settings, as TOML lines ("energy_margin = 0.1; catch_rate = 6").
+    let extra = args.get(3).map_or(String::new(), |v| v.replace(';', "\n"));
+    let spec = Spec::parse(&format!(
+        "[plant]\npreset = \"{preset}\"\n[swing_up]\n{extra}\n"
+    ))
+    .expect("a preset and valid [swing_up] settings");
     let ts = rip_core::paper::TS;
     let design = spec.design(ts).expect("the preset's design");
     let study = MonteCarlo {
@@ -41,39 +54,52 @@ fn main() {
         parameters: Param::ALL.to_vec(),
         seed: 2024,
     };
-    let config = hanging_config(&spec, ts, 0);
     let limit = spec.swing_up.arm_limit;
+    let catch_angle = spec.swing_up.catch_angle;
     println!("preset {preset}, {n} runs per controller, ±10 % on every physical parameter");
-    println!("controller  success  no catch  fell  upright median    p95   max|θ|  max|u|");
+    println!(
+        "controller  success  no catch  fell  first arrival  max over-tops  upright median    p95   max|θ|"
+    );
     for kind in ControllerKind::ALL {
-        let make = || -> Box<dyn Controller> {
-            Box::new(supervised(&spec, &design, kind).expect("the supervisor"))
+        let one = |i: u64| -> Run {
+            let (plant, seed) = study.run(i).expect("a perturbed plant");
+            let mut sup = supervised(&spec, &design, kind).expect("the supervisor");
+            let config = hanging_config(&spec, ts, seed);
+            let res = simulate(&plant, &mut sup, &config).expect("the run");
+            Run {
+                ok: res.swing_up_succeeded(),
+                caught: res.catch_time.is_some(),
+                fell: res.fell,
+                upright: res.catch_time.unwrap_or(f64::NAN),
+                arrivals: arrivals(&res, catch_angle),
+            }
         };
-        let runs = simulate_metrics(
-            0..n,
-            &config,
-            &MetricsOptions::default(),
-            &|i| study.run(i),
-            &make,
-            &AtomicU64::new(0),
-            &AtomicBool::new(false),
-        )
-        .expect("the runs");
-        let ok = runs.iter().filter(|m| m.swing_up_succeeded).count();
-        let no_catch = runs.iter().filter(|m| m.time_to_upright.is_nan()).count();
-        let fell = runs.iter().filter(|m| m.fell).count();
+        let half = n / 2;
+        let runs: Vec<Run> = std::thread::scope(|s| {
+            let a = s.spawn(|| (0..half).map(one).collect::<Vec<_>>());
+            let mut b: Vec<Run> = (half..n).map(one).collect();
+            let mut out = a.join().expect("the runs");
+            out.append(&mut b);
+            out
+        });
+        let count = |f: &dyn Fn(&Run) -> bool| runs.iter().filter(|r| f(r)).count();
+        let ok = count(&|r| r.ok);
+        let no_catch = count(&|r| !r.caught);
+        let fell = count(&|r| r.fell);
+        let first = count(&|r| r.arrivals.caught_on_first);
+        let over = runs.iter().map(|r| r.arrivals.over_tops).max().unwrap_or(0);
         let mut times: Vec<f64> = runs
             .iter()
-            .map(|m| m.time_to_upright)
+            .map(|r| r.upright)
             .filter(|t| t.is_finite())
             .collect();
         times.sort_by(f64::total_cmp);
-        let max_arm = runs.iter().fold(0.0f64, |a, m| a.max(m.peak_arm));
-        let max_u = runs.iter().fold(0.0f64, |a, m| a.max(m.peak_voltage));
+        let max_arm = runs.iter().fold(0.0f64, |a, r| a.max(r.arrivals.peak_arm));
         println!(
-            "{:<10} {:>6.1} % {no_catch:>8} {fell:>5} {:>11.2} s {:>6.2} s {max_arm:>7.3} {max_u:>6.2}",
+            "{:<10} {:>6.1} % {no_catch:>8} {fell:>5} {:>12.1} % {over:>14} {:>11.2} s {:>6.2} s {max_arm:>7.3}",
             kind.name(),
             100.0 * ok as f64 / n as f64,
+            100.0 * first as f64 / n as f64,
             percentile(&times, 0.5),
             percentile(&times, 0.95),
         );

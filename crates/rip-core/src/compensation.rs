@@ -313,6 +313,10 @@ impl<C: Controller> Controller for Compensated<C> {
     fn sample_time(&self) -> Option<f64> {
         self.inner.sample_time()
     }
+
+    fn swing_up_report(&self) -> Option<crate::swingup::SwingUpReport> {
+        self.inner.swing_up_report()
+    }
 }
 
 #[cfg(test)]

@@ -152,6 +152,12 @@ pub trait Controller: Send {
     fn sample_time(&self) -> Option<f64> {
         None
     }
+
+    /// What a swing-up supervisor's current (or last) swing-up did, for the message of one
+    /// that ends without a catch; `None` for a controller that does not swing up.
+    fn swing_up_report(&self) -> Option<crate::swingup::SwingUpReport> {
+        None
+    }
 }
 
 /// Forwards every method to the controller behind a pointer, so supervisors and loops can hold
@@ -197,6 +203,10 @@ macro_rules! forward_controller {
 
             fn sample_time(&self) -> Option<f64> {
                 (**self).sample_time()
+            }
+
+            fn swing_up_report(&self) -> Option<crate::swingup::SwingUpReport> {
+                (**self).swing_up_report()
             }
         }
     )*};

@@ -93,7 +93,21 @@ impl Config {
     /// them for a file that sets `[swing_up]`: what `rip-rt run --swing-up` requires whatever
     /// the file sets, before its braking envelope (`envelope::check_swing_up`).
     pub fn validate_swing_up(&self) -> Result<(), ConfigError> {
-        self.rig().validate_swing_up(&self.spec)
+        self.rig().validate_swing_up(&self.spec)?;
+        // Before the motor moves: a rig the voltage bound and the arm travel cannot swing up
+        // (rip-core's energy balance of the last swing) is refused, naming what it would need.
+        let s = &self.spec.swing_up;
+        let plant = self.spec.plant()?;
+        let f = rip_core::swingup::feasibility(&plant, s);
+        if f.verdict == rip_core::swingup::Verdict::Impossible {
+            let key = if f.voltage_needed.is_some() || f.arm_travel_needed.is_none() {
+                "swing_up.max_voltage"
+            } else {
+                "swing_up.arm_limit"
+            };
+            return Err(SpecError::new(key, f.to_string()));
+        }
+        Ok(())
     }
 
     /// The control period in nanoseconds.
@@ -118,6 +132,18 @@ mod tests {
         assert_eq!(cfg.period_ns(), 10_000_000);
         assert_eq!(cfg.spec.lqr.Q, [25.0, 0.0, 50.0, 0.0]);
         assert_eq!(cfg.safety.voltage_limit, 12.0);
+    }
+
+    #[test]
+    fn a_rig_that_cannot_be_swung_up_is_refused_naming_the_voltage_it_needs() {
+        let cfg = Config::from_toml("[swing_up]\nmax_voltage = 0.05\n").unwrap();
+        let e = cfg.validate_swing_up().unwrap_err().to_string();
+        assert!(e.contains("swing_up.max_voltage"), "{e}");
+        assert!(
+            e.contains("no swing-up is possible") && e.contains(" V "),
+            "{e}"
+        );
+        Config::default().validate_swing_up().unwrap();
     }
 
     #[test]

@@ -381,6 +381,7 @@ impl LoopCore {
             return Err(match cause {
                 StopCause::SwingUpTimeout => StopReason::SwingUpFailed {
                     max_time: self.max_swing_s,
+                    report: self.controller.swing_up_report(),
                 },
                 // The balance region bounds both joints: name the one that left it (the arm
                 // when it is past its bound, else the pendulum).

@@ -201,10 +201,12 @@ pub enum StopReason {
         limit: f64,
     },
     /// The swing-up did not bring the pendulum into its catch region in time.
-    #[error("the swing-up failed: no catch within swing_up.max_time ({max_time} s)")]
+    #[error("the swing-up failed: no catch within swing_up.max_time ({max_time} s){}", report.map_or(String::new(), |r| format!(": {r}")))]
     SwingUpFailed {
         /// `swing_up.max_time` (s).
         max_time: f64,
+        /// What the swing-up did (peak energy against the target, voltage, arm travel).
+        report: Option<rip_core::swingup::SwingUpReport>,
     },
     /// After falls with `swing_up.on_fall = "retry"`, the swing-ups together took
     /// `swing_up.max_time`: a rig that catches and drops the pendulum again and again (a wrong
@@ -644,7 +646,10 @@ mod tests {
                 offset: 1.0,
                 max: 0.5,
             }),
-            StopReason::SwingUpFailed { max_time: 20.0 },
+            StopReason::SwingUpFailed {
+                max_time: 20.0,
+                report: None,
+            },
             StopReason::SignCheck(crate::sign_check::SignFault::MotorReversed { arm: -10.0 }),
             StopReason::Panic,
         ];

@@ -686,3 +686,21 @@ fn a_reversed_motor_or_arm_encoder_is_refused_before_the_swing_with_exit_14() {
         assert_eq!(commands.last(), Some(&(0, 0)), "{fault}");
     }
 }
+
+#[test]
+fn a_rig_that_cannot_be_swung_up_is_refused_before_the_port_is_opened() {
+    // 0.05 V cannot make up the pendulum's friction over its last swing (rip-core's energy
+    // balance): the run ends with the configuration error, naming the voltage it would need,
+    // before the (nonexistent) port is touched, so before any enabling command.
+    let file = scratch("swing-impossible.toml");
+    std::fs::write(&file, "[swing_up]\nmax_voltage = 0.05\n").unwrap();
+    let r = run(
+        std::path::Path::new("/nonexistent"),
+        "lqr",
+        &["--swing-up", "--config", file.to_str().unwrap()],
+    );
+    assert_eq!(r.status.code(), Some(2), "{}", r.stderr);
+    assert!(r.stderr.contains("swing_up.max_voltage"), "{}", r.stderr);
+    assert!(r.stderr.contains("no swing-up is possible"), "{}", r.stderr);
+    assert!(!r.stderr.contains("/nonexistent"), "{}", r.stderr);
+}

@@ -139,8 +139,9 @@ impl Controller for Balance {
 /// ``catch_lookahead``, and ``catch_mode_fraction``: the upright's unstable mode small enough for
 /// the voltage bound to stop it) the balance controller takes over: its estimator
 /// has run on the measurements and the swing-up's voltage (``estimator_window``), the MPC's
-/// previous move is the swing-up's last voltage, and the arm reference is held where the arm
-/// was caught until the external arm reference changes. Leaving the balance region
+/// previous move is the swing-up's last voltage, and the arm reference starts where the arm
+/// was caught and returns to the external one at ``reference_return_rate`` until the external
+/// arm reference changes. Leaving the balance region
 /// (``balance_angle``, ``arm_limit``) swings up again (``on_fall="retry"``) or stops with 0 V
 /// (``"stop"``); after ``max_time`` s of swinging it stops with 0 V. The full derivation is in
 /// the ``rip_core::swingup`` documentation.
@@ -158,7 +159,8 @@ impl Controller for Balance {
 ///     ``arm_centering`` (rad/s), ``barrier_rate`` (1/s), ``rate_cutoff`` (Hz),
 ///     ``catch_angle`` (rad), ``catch_lookahead`` (s), ``catch_mode_fraction``,
 ///     ``catch_rate`` (rad/s),
-///     ``catch_arm_rate`` (rad/s), ``catch_arm_angle`` (rad), ``balance_angle`` (rad),
+///     ``catch_arm_rate`` (rad/s), ``catch_arm_angle`` (rad), ``reference_return_rate``
+///     (rad/s), ``balance_angle`` (rad),
 ///     ``estimator_window`` (rad), ``max_time`` (s), ``on_fall`` (``"retry"`` or ``"stop"``).
 ///
 /// Raises
@@ -200,6 +202,7 @@ fn apply_setting(s: &mut SwingUpSettings, key: &str, value: &Bound<'_, PyAny>) -
         "catch_rate" => &mut s.catch_rate,
         "catch_arm_rate" => &mut s.catch_arm_rate,
         "catch_arm_angle" => &mut s.catch_arm_angle,
+        "reference_return_rate" => &mut s.reference_return_rate,
         "balance_angle" => &mut s.balance_angle,
         "estimator_window" => &mut s.estimator_window,
         "max_time" => &mut s.max_time,
@@ -242,6 +245,7 @@ pub(crate) fn settings_dict<'py>(
         ("catch_rate", s.catch_rate),
         ("catch_arm_rate", s.catch_arm_rate),
         ("catch_arm_angle", s.catch_arm_angle),
+        ("reference_return_rate", s.reference_return_rate),
         ("balance_angle", s.balance_angle),
         ("estimator_window", s.estimator_window),
         ("max_time", s.max_time),

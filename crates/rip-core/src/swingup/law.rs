@@ -117,8 +117,19 @@ impl EnergyLaw {
         let brake = s.brake_fraction * stall;
         let top_speed = envelope_speed(brake, s.arm_limit);
         let margin = (top_speed * ts).max(ENVELOPE_MARGIN).min(0.5 * s.arm_limit);
+        // The law plans the voltage the smooth model needs; the dead zone and the arm's
+        // Coulomb friction are the compensation's to invert (module docs, eq. (4)). Inverting
+        // them here instead divides by the slope of the dead zone, 0 at rest when
+        // `V_d ≥ 1 V`, which left the law at 0 V with the pendulum hanging still.
+        let smooth = Plant::new(crate::plant::FurutaParams {
+            vd: 0.0,
+            cr: 0.0,
+            cp: 0.0,
+            ..*p
+        })
+        .unwrap_or(*plant);
         Self {
-            plant: *plant,
+            plant: smooth,
             ja,
             grav,
             target: s.energy_margin * grav,
@@ -143,6 +154,11 @@ impl EnergyLaw {
     /// takes on the way from `alpha` to upright, `E_t(α) = δ G + D (1 − cos(α/2))`.
     pub(crate) fn target(&self, alpha: f64) -> f64 {
         self.target + self.dissipation * (1.0 - (0.5 * alpha).cos())
+    }
+
+    /// `G = m_p g l_p / 2` (J).
+    pub(crate) fn gravity(&self) -> f64 {
+        self.grav
     }
 
     /// The braking deceleration `a_b` (rad/s²).
@@ -179,8 +195,9 @@ impl EnergyLaw {
         }
     }
 
-    /// The voltage that gives the arm acceleration `a` at `x` on the nominal model, clamped to
-    /// `±U`. `θ̈` is affine in `u`, so two evaluations of the equations of motion invert it.
+    /// The voltage that gives the arm acceleration `a` at `x` on the nominal model without its
+    /// dead zone and Coulomb friction, clamped to `±U`. `θ̈` is affine in `u`, so two
+    /// evaluations of the equations of motion invert it.
     pub(crate) fn voltage(&self, x: &State, a: f64) -> f64 {
         let at_zero = self.plant.derivative(x, 0.0, 0.0)[1];
         let per_volt = self.plant.derivative(x, 1.0, 0.0)[1] - at_zero;

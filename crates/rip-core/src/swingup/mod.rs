@@ -85,7 +85,12 @@
 //! u = (a − θ̈(x, 0)) / (θ̈(x, 1) − θ̈(x, 0)),   clamped to ±U                                (4)
 //! ```
 //!
-//! and at the boundary `a = −a_b` with `a_b = 0.5 a_s` by default: half the stall acceleration is
+//! on the model's smooth part (no dead zone, no Coulomb friction): the voltage `v` the smooth
+//! model needs, which the compensation ([`crate::compensation`], applied around the whole
+//! supervisor) turns into the voltage the rig needs. Inverting the dead zone here instead
+//! would divide by its slope, which is 0 at rest when `V_d ≥ 1 V`.
+//!
+//! At the boundary `a = −a_b` with `a_b = 0.5 a_s` by default: half the stall acceleration is
 //! kept for back-EMF at the envelope's top speed `√(4 a_b θ_L)`, the pendulum's reaction on the
 //! arm and ±10 % model error. The simulation tests check `|θ| ≤ θ_L` over perturbed plants.
 //!
@@ -106,10 +111,13 @@
 //!   `ż = λ z + (wᵀ b) u`, which `|u| ≤ U` can return to 0 only while `|z| < |wᵀ b| U / λ`;
 //!   the catch needs `|z| ≤ catch_mode_fraction · |wᵀ b| U / λ`. A pendulum that is close to
 //!   upright but falling away from it (or rising too fast) is not caught. The balance
-//!   controller computes the move of that same sample. The arm reference is held at the
-//!   arm's angle at the catch, `θ_c`, until the external arm reference changes from the value
-//!   it had then; from that change on the external reference is passed through (so a later
-//!   0 → 1 rad step is tracked as given).
+//!   controller computes the move of that same sample. The arm reference starts at the
+//!   arm's angle at the catch, `θ_c` (a step from there to the external reference would be a
+//!   step of up to `catch_arm_angle` on top of any the user asks for), and moves back to the
+//!   external reference at [`SwingUpSettings::reference_return_rate`] (0 by default: held
+//!   there) until the external reference changes from the value it had at the catch; from that change on the external
+//!   reference is passed through (so a later 0 → 1 rad step is tracked as given, from the
+//!   arm's place rather than from `θ_c`).
 //! - **Balance**: the balance controller runs on `[θ, wrap(α)]`. Leaving the balance region
 //!   (`|α| > balance_angle` or `|θ| > arm_limit`) is a fall: swing up again or stop
 //!   ([`OnFall`]).
@@ -118,10 +126,14 @@
 //!
 //! Every step is allocation-free when the balance controller's is.
 
+pub mod feasibility;
 mod law;
+mod report;
 mod settings;
 pub mod study;
 
+pub use feasibility::{feasibility, Feasibility, Verdict};
+pub use report::{SwingUpReport, STILL_ARM};
 pub use settings::{OnFall, SwingUpSettings, MAX_SWING_UP_TIME};
 
 use crate::controller::{Controller, Phase, StepStatus, StopCause};
@@ -158,6 +170,8 @@ pub struct SwingUp<C> {
     hold_reference: Option<(f64, f64)>,
     /// The last voltage the swing-up applied.
     u_swing: [f64; 1],
+    /// What the current swing-up has done so far.
+    report: SwingUpReport,
 }
 
 impl<C: Controller> SwingUp<C> {
@@ -196,6 +210,7 @@ impl<C: Controller> SwingUp<C> {
             swing_samples: 0,
             hold_reference: None,
             u_swing: [0.0],
+            report: SwingUpReport::start(0.0, 0.0, 0.0),
         };
         out.reset();
         Ok(out)
@@ -225,6 +240,18 @@ impl<C: Controller> SwingUp<C> {
     /// The pendulum energy `E` (J, 0 upright at rest) of the swing-up's estimate.
     pub fn energy(&self) -> f64 {
         self.law.energy(self.rates.state())
+    }
+
+    /// What the current swing-up (or the last, once balancing or stopped) has done: peak
+    /// energy against the target, the largest voltage asked for, the arm travel used.
+    pub fn report(&self) -> SwingUpReport {
+        self.report
+    }
+
+    fn start_report(&mut self) {
+        let grav = self.law.gravity();
+        self.report =
+            SwingUpReport::start(self.law.target(0.0), -2.0 * grav, self.settings.arm_limit);
     }
 
     /// The braking deceleration `a_b` (rad/s²) the arm-limit envelope reserves.
@@ -263,6 +290,9 @@ impl<C: Controller> SwingUp<C> {
         };
         self.u_swing[0] = value;
         u[0] = value;
+        if self.rates.started() {
+            self.report.record(self.law.energy(&x), x[0], x[2], value);
+        }
         if !usable {
             self.balance.hold(&self.u_swing);
             return StepStatus::Fallback;
@@ -285,7 +315,13 @@ impl<C: Controller> SwingUp<C> {
 
     fn balance_step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
         let theta_ref = match self.hold_reference {
-            Some((held, at_catch)) if r[0] == at_catch => held,
+            Some((held, at_catch)) if r[0] == at_catch => {
+                // Back to the external reference at a bounded rate (module docs, "Catch").
+                let step = self.settings.reference_return_rate * self.ts;
+                let next = held + (at_catch - held).clamp(-step, step);
+                self.hold_reference = Some((next, at_catch));
+                next
+            }
             Some(_) => {
                 self.hold_reference = None;
                 r[0]
@@ -332,6 +368,7 @@ impl<C: Controller> Controller for SwingUp<C> {
                         self.phase = Phase::SwingUp;
                         self.swing_samples = 0;
                         self.hold_reference = None;
+                        self.start_report();
                         self.swing(y, usable, u)
                     }
                 }
@@ -358,6 +395,7 @@ impl<C: Controller> Controller for SwingUp<C> {
         self.swing_samples = 0;
         self.hold_reference = None;
         self.u_swing = [0.0];
+        self.start_report();
     }
 
     fn state_estimate(&self) -> Option<&[f64]> {
@@ -366,6 +404,10 @@ impl<C: Controller> Controller for SwingUp<C> {
 
     fn sample_time(&self) -> Option<f64> {
         Some(self.ts)
+    }
+
+    fn swing_up_report(&self) -> Option<SwingUpReport> {
+        Some(self.report)
     }
 }
 

@@ -337,3 +337,96 @@ fn the_swing_up_section_of_the_spec() {
     let err = crate::Spec::parse("[swing_up]\ncatch_speed = 1.0\n").unwrap_err();
     assert_eq!(err.key, "swing_up.catch_speed", "{err}");
 }
+
+#[test]
+fn a_dead_zone_of_a_volt_or_more_is_cleared_at_hanging_rest() {
+    // With V_d ≥ 1 V the law used to divide by the dead zone's slope (0 at rest) and write
+    // exactly 0 V to a pendulum hanging still. The compensated supervisor (as rip-rt and
+    // riprs.SwingUp assemble it) must write more than V_d at once, and the swing must rise.
+    for vd in [0.9, 1.0, 1.5] {
+        let spec = Spec::parse(&format!("[plant]\npreset = \"qube_servo2\"\nVd = {vd}\n")).unwrap();
+        let design = spec.design(paper::TS).unwrap();
+        let mut sup = supervised(&spec, &design, ControllerKind::Lqr).unwrap();
+        let mut u = [0.0];
+        sup.step(&[0.0, PI], &[0.0, 0.0], &mut u);
+        sup.step(&[0.0, PI], &[0.0, 0.0], &mut u);
+        assert!(
+            u[0].abs() > vd + 1.0 && u[0].abs() <= spec.swing_up.max_voltage,
+            "Vd {vd}: u = {}",
+            u[0]
+        );
+        // The rig's dead zone is the model's: the pendulum leaves hanging within 2 s.
+        let truth = spec.plant().unwrap();
+        let config = SimConfig {
+            duration: 2.0,
+            ..hanging_config(&spec, paper::TS, 1)
+        };
+        let res = simulate(&truth, sup.as_mut(), &config).unwrap();
+        let swing = res
+            .x
+            .iter()
+            .map(|x| PI - wrap_angle(x[2]).abs())
+            .fold(0.0, f64::max);
+        assert!(swing > 0.5, "Vd {vd}: the pendulum swung {swing} rad");
+    }
+}
+
+#[test]
+fn a_swing_up_without_a_catch_says_what_it_did() {
+    let settings = SwingUpSettings {
+        max_voltage: 0.5,
+        max_time: 3.0,
+        ..SwingUpSettings::default()
+    };
+    let p = FurutaParams::paper();
+    let grav = p.mp * p.g * p.lp / 2.0;
+    // Too little voltage: the arm moves, the energy stays far below the target.
+    let mut sup = SwingUp::new(Lqr::paper().unwrap(), &Plant::paper(), settings.clone()).unwrap();
+    let res = simulate(&Plant::paper(), &mut sup, &hanging_run(5.0, 8.0, 0)).unwrap();
+    assert_eq!(res.stop_cause, Some(StopCause::SwingUpTimeout));
+    let report = Controller::swing_up_report(&sup).unwrap();
+    assert_eq!(report, sup.report());
+    // The peak energy against the energy of the true states (the estimate lags a little).
+    let ja = p.jp + p.mp * p.lp * p.lp / 4.0;
+    let true_peak = res
+        .x
+        .iter()
+        .map(|x| 0.5 * ja * x[3] * x[3] + grav * (x[2].cos() - 1.0))
+        .fold(f64::NEG_INFINITY, f64::max);
+    assert!(
+        (report.peak_energy - true_peak).abs() < 0.05 * grav,
+        "{} vs {true_peak}",
+        report.peak_energy
+    );
+    assert!((report.hanging_energy + 2.0 * grav).abs() < 1e-12);
+    assert!((report.target_energy - settings.energy_margin * grav).abs() < 1e-12);
+    assert!(report.energy_fraction() < 0.9, "{report}");
+    assert!((report.peak_voltage - 0.5).abs() < 1e-9, "{report}");
+    let true_travel = res
+        .x
+        .iter()
+        .map(|x| x[0])
+        .fold(0.0f64, |a, t| a.max(t.abs()));
+    let used = report.arm_travel[0].abs().max(report.arm_travel[1].abs());
+    assert!(
+        report.arm_moved() && (used - true_travel).abs() < 0.02,
+        "{report}: {used} vs {true_travel}"
+    );
+    let text = report.to_string();
+    assert!(
+        text.contains("0.5 V") && text.contains("swing_up.arm_limit"),
+        "{text}"
+    );
+    // A motor that does not drive (a dead zone the model does not know): the arm never
+    // moves, and the message says so.
+    let dead = Plant::new(FurutaParams { vd: 5.0, ..p }).unwrap();
+    let mut sup = SwingUp::new(Lqr::paper().unwrap(), &Plant::paper(), settings).unwrap();
+    simulate(&dead, &mut sup, &hanging_run(5.0, 8.0, 0)).unwrap();
+    let report = sup.report();
+    assert!(!report.arm_moved(), "{report}");
+    assert!(
+        report.to_string().contains("the arm never moved"),
+        "{report}"
+    );
+    assert!(report.energy_fraction() < 0.01, "{report}");
+}
