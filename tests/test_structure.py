@@ -18,75 +18,23 @@ import structure_rules as rules
 ROOT = Path(__file__).resolve().parents[1]
 
 # Files over rules.MAX_FILE_LINES non-blank non-test lines, with today's count.
-KNOWN_LONG_FILES: dict[str, int] = {
-    "crates/rip-core/src/identify/mod.rs": 1155,
-    "crates/rip-core/src/plant.rs": 808,
-}
+KNOWN_LONG_FILES: dict[str, int] = {}
 
 # Functions over rules.MAX_FUNCTION_LINES non-blank lines, with today's length.
-KNOWN_LONG_FUNCTIONS: dict[str, int] = {
-    "crates/rip-core/src/identify/mod.rs::identify": 443,
-}
+KNOWN_LONG_FUNCTIONS: dict[str, int] = {}
 
-# Module edges that lie on an import cycle today, per crate: (from, to).
+# Module edges that lie on an import cycle today, per crate: (from, to). The experiment spec,
+# the simulation and the swing-up still call each other (the swing-up study simulates specs).
 KNOWN_CYCLE_EDGES: dict[str, set[tuple[str, str]]] = {
     "rip-core": {
-        ("envelope", "plant"),
-        ("mpc", "spec"),
-        ("plant", "sim"),
-        ("sim", "plant"),
         ("sim", "spec"),
         ("sim", "swingup"),
-        ("spec", "mpc"),
-        ("spec", "plant"),
         ("spec", "sim"),
         ("spec", "swingup"),
-        ("swingup", "envelope"),
-        ("swingup", "plant"),
         ("swingup", "sim"),
         ("swingup", "spec"),
     },
-    "rip-rt": {
-        ("calibrate", "config"),
-        ("calibrate", "loop_core"),
-        ("calibrate", "runner"),
-        ("calibrate", "stop"),
-        ("config", "calibrate"),
-        ("config", "envelope"),
-        ("envelope", "config"),
-        ("envelope", "loop_core"),
-        ("envelope", "runner"),
-        ("envelope", "stop"),
-        ("excite", "calibrate"),
-        ("excite", "config"),
-        ("excite", "envelope"),
-        ("excite", "log"),
-        ("excite", "loop_core"),
-        ("excite", "runner"),
-        ("excite", "sign_check"),
-        ("excite", "stop"),
-        ("log", "loop_core"),
-        ("loop_core", "calibrate"),
-        ("loop_core", "config"),
-        ("loop_core", "envelope"),
-        ("loop_core", "stop"),
-        ("loop_core", "witness"),
-        ("runner", "calibrate"),
-        ("runner", "config"),
-        ("runner", "envelope"),
-        ("runner", "excite"),
-        ("runner", "log"),
-        ("runner", "loop_core"),
-        ("runner", "sign_check"),
-        ("runner", "stop"),
-        ("sign_check", "config"),
-        ("stop", "calibrate"),
-        ("stop", "config"),
-        ("stop", "log"),
-        ("stop", "sign_check"),
-        ("stop", "witness"),
-        ("witness", "config"),
-    },
+    "rip-rt": set(),
 }
 
 CRATES = {"rip-core": ("crate",), "rip-rt": ("crate", "rip_rt")}

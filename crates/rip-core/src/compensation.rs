@@ -314,7 +314,7 @@ impl<C: Controller> Controller for Compensated<C> {
         self.inner.sample_time()
     }
 
-    fn swing_up_report(&self) -> Option<crate::swingup::SwingUpReport> {
+    fn swing_up_report(&self) -> Option<crate::swing_report::SwingUpReport> {
         self.inner.swing_up_report()
     }
 }

@@ -155,7 +155,7 @@ pub trait Controller: Send {
 
     /// What a swing-up supervisor's current (or last) swing-up did, for the message of one
     /// that ends without a catch; `None` for a controller that does not swing up.
-    fn swing_up_report(&self) -> Option<crate::swingup::SwingUpReport> {
+    fn swing_up_report(&self) -> Option<crate::swing_report::SwingUpReport> {
         None
     }
 }
@@ -205,7 +205,7 @@ macro_rules! forward_controller {
                 (**self).sample_time()
             }
 
-            fn swing_up_report(&self) -> Option<crate::swingup::SwingUpReport> {
+            fn swing_up_report(&self) -> Option<crate::swing_report::SwingUpReport> {
                 (**self).swing_up_report()
             }
         }

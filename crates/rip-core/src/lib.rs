@@ -58,6 +58,7 @@ pub mod regulators;
 pub mod rig;
 pub mod sim;
 pub mod spec;
+pub mod swing_report;
 pub mod swingup;
 pub mod trig;
 pub mod tune;

@@ -490,6 +490,12 @@ impl Witness {
             self.measured += moved;
             self.disagreeing += 1;
         }
+        self.judge(theta)
+    }
+
+    /// The verdict on the statistics after the measurement `theta` (rad): the first limit
+    /// passed names the likely fault (module docs).
+    fn judge(&mut self, theta: f64) -> Result<(), WitnessFault> {
         let frozen = if self.unchanged >= FROZEN_PERIODS {
             (self.free[0] - theta).abs() / self.frozen_rad
         } else {

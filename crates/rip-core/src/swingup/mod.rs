@@ -128,12 +128,12 @@
 
 pub mod feasibility;
 mod law;
-mod report;
+
 mod settings;
 pub mod study;
 
+pub use crate::swing_report::{SwingUpReport, STILL_ARM};
 pub use feasibility::{feasibility, Feasibility, Verdict};
-pub use report::{SwingUpReport, STILL_ARM};
 pub use settings::{OnFall, SwingUpSettings, MAX_SWING_UP_TIME};
 
 use crate::controller::{Controller, Phase, StepStatus, StopCause};

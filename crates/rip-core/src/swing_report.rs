@@ -2,7 +2,7 @@
 
 /// What the current (or last) swing-up did, measured on the supervisor's own estimate: the
 /// peak pendulum energy against the catch target, the largest voltage the law asked for and
-/// the arm travel it used ([`SwingUp::report`](super::SwingUp::report)). Its
+/// the arm travel it used ([`SwingUp::report`](crate::swingup::SwingUp::report)). Its
 /// [`Display`](std::fmt::Display) is the sentence a failed swing-up ends with.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SwingUpReport {
