@@ -350,6 +350,41 @@ pub(crate) fn fail(code: i32, msg: impl std::fmt::Display) -> ExitCode {
     ExitCode::from(code as u8)
 }
 
+/// Completes `log` with its `footer` after the command (`what`: "run", "experiment") stopped
+/// for `stopped`. A log that cannot be completed turns a finished command into a log error
+/// (`code` and `reason`) and is added to any other stop's `reason`; after a log fault the
+/// reason already says what failed, and a second message about the same file would only
+/// repeat it.
+fn finish_log(
+    log: &mut LogWriter,
+    footer: &[(&str, String)],
+    stopped: &StopReason,
+    what: &str,
+    code: &mut i32,
+    reason: &mut String,
+) {
+    if let Err(e) = log.finish(footer) {
+        if !matches!(stopped, StopReason::LogError(_)) {
+            if *code == exit_code::FINISHED {
+                *code = exit_code::LOG_ERROR;
+                *reason = format!("{what} finished, but its log could not be completed: {e}");
+            } else {
+                *reason = format!("{reason}; the log could not be completed: {e}");
+            }
+        }
+    }
+}
+
+/// The level of the stop's line: "stop" for an orderly stop whose log was completed, else
+/// "FAULT".
+fn stop_level(stopped: &StopReason, code: i32) -> &'static str {
+    if stopped.is_orderly() && code != exit_code::LOG_ERROR {
+        "stop"
+    } else {
+        "FAULT"
+    }
+}
+
 /// Everything that can fail before the motor is enabled, in an order that leaves nothing
 /// behind on failure: configuration, controller design, signal dispositions, the port (a
 /// mistyped `--port` leaves an existing log untouched), the log with its header flushed.
@@ -504,24 +539,9 @@ fn cmd_run(args: RunArgs) -> ExitCode {
             ("catches", report.catches.to_string()),
             ("witness", witness_line.clone()),
         ];
-        // After a log fault the reason already says what failed; a second message about the
-        // same file would only repeat it.
-        if let Err(e) = log.finish(&footer) {
-            if !matches!(report.reason, StopReason::LogError(_)) {
-                if code == exit_code::FINISHED {
-                    code = exit_code::LOG_ERROR;
-                    reason = format!("run finished, but its log could not be completed: {e}");
-                } else {
-                    reason = format!("{reason}; the log could not be completed: {e}");
-                }
-            }
-        }
+        finish_log(log, &footer, &report.reason, "run", &mut code, &mut reason);
     }
-    let level = if report.reason.is_orderly() && code != exit_code::LOG_ERROR {
-        "stop"
-    } else {
-        "FAULT"
-    };
+    let level = stop_level(&report.reason, code);
     rip_rt::say!("rip-rt: {level}: {reason} — {stop_note}");
     rip_rt::say!("rip-rt: timing: {}", report.timing);
     rip_rt::say!("rip-rt: probe: {probe_line}");

@@ -11,9 +11,9 @@ use rip_rt::log::LogWriter;
 use rip_rt::loop_core::LoopCore;
 use rip_rt::serial::SerialPort;
 use rip_rt::sign_check::PULSE_VOLTAGE;
-use rip_rt::stop::{self, exit_code, SetupError, StopReason};
+use rip_rt::stop::{self, SetupError};
 
-use super::{apply_realtime, baud, cpu, fail, positive_seconds, ExitCode};
+use super::{apply_realtime, baud, cpu, fail, finish_log, positive_seconds, stop_level, ExitCode};
 
 pub(crate) const EXCITE_AFTER_HELP: &str = "\
 Stages: rest check and calibration (motor disabled), sign check (a short pulse, then 0 V),
@@ -311,21 +311,15 @@ pub(crate) fn cmd_excite(args: ExciteArgs) -> ExitCode {
         ("timing", report.timing.to_string()),
         ("link", link.clone()),
     ];
-    if let Err(e) = log.finish(&footer) {
-        if !matches!(report.reason, StopReason::LogError(_)) {
-            if code == exit_code::FINISHED {
-                code = exit_code::LOG_ERROR;
-                reason = format!("experiment finished, but its log could not be completed: {e}");
-            } else {
-                reason = format!("{reason}; the log could not be completed: {e}");
-            }
-        }
-    }
-    let level = if report.reason.is_orderly() && code != exit_code::LOG_ERROR {
-        "stop"
-    } else {
-        "FAULT"
-    };
+    finish_log(
+        &mut log,
+        &footer,
+        &report.reason,
+        "experiment",
+        &mut code,
+        &mut reason,
+    );
+    let level = stop_level(&report.reason, code);
     rip_rt::say!("rip-rt: {level}: {reason} — {stop_note}");
     rip_rt::say!("rip-rt: calibration: {calibration}");
     rip_rt::say!("rip-rt: sign check: {sign_check}");
