@@ -25,7 +25,12 @@ from riprs.compare import Trajectory, compare
 ROOT = Path(__file__).resolve().parents[1]
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--out", default="riprs-rig", help="output directory")
+parser.add_argument("--lockstep", action="store_true",
+                    help="run the emulator in lockstep with rip-rt (simulated time: the same log on a"
+                         " loaded machine; the test suite runs it so)")
 args = parser.parse_args()
+# Lockstep: no period waits for the wall clock; the emulator advances one period per command.
+lockstep = ["--lockstep"] if args.lockstep else []
 small = os.environ.get("RIPRS_EXAMPLES_SMALL") == "1"
 out = Path(args.out)
 out.mkdir(parents=True, exist_ok=True)
@@ -36,7 +41,7 @@ duration = "2" if small else "5"
 def balance(log_path: Path) -> subprocess.CompletedProcess:
     """One emulated rig and one `rip-rt run` of the MPC on it."""
     emulator = subprocess.Popen(
-        [str(rip_rt), "emulate", "--noise", "0.3", "--seed", "1"],
+        [str(rip_rt), "emulate", "--noise", "0.3", "--seed", "1", *lockstep],
         stdout=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
@@ -44,7 +49,7 @@ def balance(log_path: Path) -> subprocess.CompletedProcess:
         device = emulator.stdout.readline().strip().removeprefix("device: ")
         return subprocess.run(
             [str(rip_rt), "run", "--port", device, "--controller", "mpc",
-             "--duration", duration, "--log", str(log_path), "--rt-priority", "20"],
+             "--duration", duration, "--log", str(log_path), "--rt-priority", "20", *lockstep],
             capture_output=True, text=True, timeout=60,
         )  # fmt: skip
     finally:

@@ -28,7 +28,12 @@ from riprs._binaries import rip_rt_path
 ROOT = Path(__file__).resolve().parents[1]
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--out", default="riprs-excite", help="output directory")
+parser.add_argument("--lockstep", action="store_true",
+                    help="run the emulator in lockstep with rip-rt (simulated time: the same log on a"
+                         " loaded machine; the test suite runs it so)")
 args = parser.parse_args()
+# Lockstep: no period waits for the wall clock; the emulator advances one period per command.
+lockstep = ["--lockstep"] if args.lockstep else []
 small = os.environ.get("RIPRS_EXAMPLES_SMALL") == "1"
 out = Path(args.out)
 out.mkdir(parents=True, exist_ok=True)
@@ -54,14 +59,14 @@ def excite(log_path: Path) -> subprocess.CompletedProcess:
     """One emulated hidden rig and one `rip-rt excite --signal chirp` on it."""
     emulator = subprocess.Popen(
         [str(rip_rt), "emulate", "--config", str(hidden), "--start", "down",
-         "--noise", "0.3", "--seed", "1"],
+         "--noise", "0.3", "--seed", "1", *lockstep],
         stdout=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
         device = emulator.stdout.readline().strip().removeprefix("device: ")
         return subprocess.run(
             [str(rip_rt), "excite", "--port", device, "--signal", "chirp",
-             "--duration", duration, "--log", str(log_path), "--rt-priority", "20"],
+             "--duration", duration, "--log", str(log_path), "--rt-priority", "20", *lockstep],
             capture_output=True, text=True, timeout=120,
         )  # fmt: skip
     finally:

@@ -27,7 +27,12 @@ from riprs._binaries import rip_rt_path
 ROOT = Path(__file__).resolve().parents[1]
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--out", default="riprs-rig-swing-up", help="output directory")
+parser.add_argument("--lockstep", action="store_true",
+                    help="run the emulator in lockstep with rip-rt (simulated time: the same log on a"
+                         " loaded machine; the test suite runs it so)")
 args = parser.parse_args()
+# Lockstep: no period waits for the wall clock; the emulator advances one period per command.
+lockstep = ["--lockstep"] if args.lockstep else []
 small = os.environ.get("RIPRS_EXAMPLES_SMALL") == "1"
 out = Path(args.out)
 out.mkdir(parents=True, exist_ok=True)
@@ -39,14 +44,14 @@ duration = "1" if small else "4"
 def swing_up(log_path: Path) -> subprocess.CompletedProcess:
     """A hanging emulated pendulum, swung up and balanced by `rip-rt run --swing-up`."""
     emulator = subprocess.Popen(
-        [str(rip_rt), "emulate", "--start", "down", "--noise", "0.3", "--seed", "1"],
+        [str(rip_rt), "emulate", "--start", "down", "--noise", "0.3", "--seed", "1", *lockstep],
         stdout=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
         device = emulator.stdout.readline().strip().removeprefix("device: ")
         return subprocess.run(
             [str(rip_rt), "run", "--port", device, "--controller", "lqr", "--swing-up",
-             "--duration", duration, "--log", str(log_path), "--rt-priority", "20"],
+             "--duration", duration, "--log", str(log_path), "--rt-priority", "20", *lockstep],
             capture_output=True, text=True, timeout=120,
         )  # fmt: skip
     finally:
