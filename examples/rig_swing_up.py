@@ -27,9 +27,12 @@ from riprs._binaries import rip_rt_path
 ROOT = Path(__file__).resolve().parents[1]
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--out", default="riprs-rig-swing-up", help="output directory")
-parser.add_argument("--lockstep", action="store_true",
-                    help="run the emulator in lockstep with rip-rt (simulated time: the same log on a"
-                         " loaded machine; the test suite runs it so)")
+parser.add_argument(
+    "--lockstep",
+    action="store_true",
+    help="run the emulator in lockstep with rip-rt (simulated time: the same log on a loaded"
+    " machine; the test suite runs it so)",
+)
 args = parser.parse_args()
 # Lockstep: no period waits for the wall clock; the emulator advances one period per command.
 lockstep = ["--lockstep"] if args.lockstep else []
