@@ -29,8 +29,8 @@ WRITES = {
     "campaign": ["fall_rate_map.svg", "rmse_pendulum_map.svg"],
 }
 # The rig scripts run the emulator in lockstep here, so what they assert about the log (a
-# balance, an identified rig) does not depend on how loaded the machine is; the site runs them
-# in real time, and crates/rip-rt/tests keeps the real-time runs that test timing.
+# balance, an identified rig) does not depend on how loaded the machine is (the site runs them so
+# too); crates/rip-rt/tests keeps the real-time runs that test timing.
 LOCKSTEP = {"rig_emulator", "rig_swing_up", "rig_excite"}
 
 

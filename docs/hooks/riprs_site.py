@@ -43,15 +43,17 @@ offline = _sibling("offline")
 
 # Scripts run for the site, in this order, with extra arguments. The test suite runs every
 # script in examples/ (tests/test_examples.py) in its small size; the site runs them full size.
+# The rig scripts run the emulator in lockstep, so the pages show the same runs on any machine
+# (the real-time loop's timing is tested by crates/rip-rt/tests).
 EXAMPLES: dict[str, list[str]] = {
     "getting_started": [],
     "paper_model": [],
     "design_controllers": [],
     "matlab_conventions": [],
     "swing_up": [],
-    "rig_emulator": [],
-    "rig_swing_up": [],
-    "rig_excite": [],
+    "rig_emulator": ["--lockstep"],
+    "rig_swing_up": ["--lockstep"],
+    "rig_excite": ["--lockstep"],
     "campaign": [],
     "performance": [],
     "gym_balance": [],
