@@ -36,6 +36,7 @@ use rand::{Rng, SeedableRng};
 use crate::margins::Margins;
 use crate::metrics::table1_rmse;
 use crate::plant::{FurutaParams, Plant};
+use crate::preflight::{design_checksum, StoredPrediction, TuneRecord};
 use crate::sim::simulate;
 use crate::spec::{ControllerKind, Spec, SpecError};
 
@@ -172,6 +173,8 @@ pub struct Assessment {
     pub saturated: bool,
     /// Whether a run fell or diverged.
     pub fell: bool,
+    /// Largest `|θ|` over the runs (rad).
+    pub arm_max: f64,
     /// Steady-state arm peak-to-peak (rad).
     pub arm_peak_to_peak: f64,
     /// Steady-state largest `|α|` (rad).
@@ -274,6 +277,7 @@ fn assess_until(
             peak_voltage: 0.0,
             saturated: false,
             fell: false,
+            arm_max: 0.0,
             arm_peak_to_peak: 0.0,
             pendulum: 0.0,
             offset: 0.0,
@@ -287,6 +291,7 @@ fn assess_until(
                 a.rmse = table1_rmse(&run);
             }
             a.fell |= run.fell || run.diverged;
+            a.arm_max = run.x.iter().map(|x| x[0].abs()).fold(a.arm_max, f64::max);
             let peak = run.u.iter().map(|u| u.abs()).fold(0.0, f64::max);
             a.peak_voltage = a.peak_voltage.max(peak);
             // The written voltage exceeds the planned clamp by at most the compensation; the
@@ -440,6 +445,34 @@ pub fn tune(spec: &Spec, ts: f64, bar: &Bar) -> Result<Tuned, SpecError> {
         works: false,
         assessments,
         tried,
+    })
+}
+
+/// The record `riprs tune` writes beside the tuned file (crate::preflight::TuneRecord):
+/// the checksum of the tuned design at sample time `ts` and each controller's prediction.
+pub fn record(tuned: &Tuned, ts: f64, bar: &Bar) -> Result<TuneRecord, SpecError> {
+    let design = tuned.spec.design(ts)?;
+    Ok(TuneRecord {
+        inputs: design_checksum(&design),
+        runs: format!(
+            "noise seeds {SEEDS:?}, {} s each",
+            tuned.spec.reference.duration
+        ),
+        prediction: tuned
+            .assessments
+            .iter()
+            .map(|a| {
+                let p = StoredPrediction {
+                    fell: a.fell,
+                    arm_max: a.arm_max,
+                    arm_peak_to_peak: a.arm_peak_to_peak,
+                    pendulum: a.pendulum,
+                    disk_margin: a.margins.disk_margin,
+                    works: a.works(bar),
+                };
+                (a.kind.name().to_string(), p)
+            })
+            .collect(),
     })
 }
 
