@@ -81,7 +81,11 @@ fn meets_bar_with_a_fine_sensor(spec: &Spec, kind: ControllerKind, bar: &Bar) ->
 }
 
 /// How one rig came out: `Ok` with a line per controller, or `Err` with what is wrong.
-fn judge(name: &str, text: &str, bar: &Bar) -> Result<Vec<String>, String> {
+type Judged = Result<Vec<String>, String>;
+
+/// Tunes the rig of `text` and judges each controller: meets the bar, refused by the
+/// pre-flight, or short of the bar through its sensor (checked with a fine one).
+fn judge(name: &str, text: &str, bar: &Bar) -> Judged {
     let spec = Spec::parse(text).unwrap();
     let t = tune(&spec, 0.01, bar).unwrap();
     let design = t.spec.design(0.01).unwrap();
@@ -147,27 +151,24 @@ fn tuned_controllers_meet_the_bar_on_the_issue_rigs_and_generated_rigs() {
         ));
     }
     // Two at a time: the machines this runs on have two cores.
-    let results: Vec<(String, Option<u64>, Result<Vec<String>, String>)> =
-        std::thread::scope(|scope| {
-            let chunks: Vec<_> = rigs.chunks(rigs.len().div_ceil(2)).collect();
-            let handles: Vec<_> = chunks
-                .into_iter()
-                .map(|chunk| {
-                    scope.spawn(move || {
-                        chunk
-                            .iter()
-                            .map(|(name, text, seed)| {
-                                (name.clone(), *seed, judge(name, text, &bar))
-                            })
-                            .collect::<Vec<_>>()
-                    })
+    let results: Vec<(String, Option<u64>, Judged)> = std::thread::scope(|scope| {
+        let chunks: Vec<_> = rigs.chunks(rigs.len().div_ceil(2)).collect();
+        let handles: Vec<_> = chunks
+            .into_iter()
+            .map(|chunk| {
+                scope.spawn(move || {
+                    chunk
+                        .iter()
+                        .map(|(name, text, seed)| (name.clone(), *seed, judge(name, text, &bar)))
+                        .collect::<Vec<_>>()
                 })
-                .collect();
-            handles
-                .into_iter()
-                .flat_map(|h| h.join().unwrap())
-                .collect()
-        });
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap())
+            .collect()
+    });
     let mut failures = Vec::new();
     for (name, seed, r) in &results {
         let known = seed.and_then(|s| KNOWN_MISSES.iter().find(|(k, _)| *k == s));
@@ -282,7 +283,8 @@ fn diagnose() {
     let base = Spec::parse(&rig.to_toml()).unwrap();
     let t = tune(&base, 0.01, &Bar::default()).unwrap();
     println!("tuned {:?}", t.weights);
-    let variants: Vec<(&str, Box<dyn Fn(&mut Spec)>)> = vec![
+    type Variant = (&'static str, Box<dyn Fn(&mut Spec)>);
+    let variants: Vec<Variant> = vec![
         ("tuned", Box::new(|_s: &mut Spec| {})),
         (
             "no noise",
