@@ -196,12 +196,10 @@ def cmd_tune(args: argparse.Namespace) -> int:
     )
     print(result.report())
     out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staged = out.with_name(out.name + ".tmp")
-    staged.write_text(result.to_toml())
-    staged.replace(out)
+    side = result.write(out)
     print()
     print(f"wrote {out} (riprs compare --config, riprs campaign and rip-rt run --config read it)")
+    print(f"wrote {side} (the predictions rip-rt run's pre-flight reads while they are current)")
     return 0
 
 

@@ -35,6 +35,7 @@ __all__ = [
     "loop_response",
     "margins",
     "preflight",
+    "record_path",
     "tune",
 ]
 
@@ -102,6 +103,11 @@ class ControllerTuning:
         Steady state over the last 3 s (rad): arm peak-to-peak, largest ``|alpha|``, arm offset.
     margins_ok, works : bool
         Whether the margins, and everything of the bar, hold.
+    exact_sensor : tuple of float or None
+        For a controller that balances outside the steady-state bar: its steady state
+        ``(arm peak-to-peak, |alpha|, offset)`` with exact angles (no quantisation, no noise).
+    sensor_limited : bool
+        Whether the miss is the sensor's: with exact angles the same design meets the bar.
     balanced_fraction : float
         Fraction of the robustness runs (rigs drawn around this one) it balanced; NaN when
         none were run.
@@ -118,6 +124,8 @@ class ControllerTuning:
     offset: float
     margins_ok: bool
     works: bool
+    exact_sensor: Tuple[float, float, float] | None = None
+    sensor_limited: bool = False
     balanced_fraction: float = float("nan")
 
 
@@ -148,6 +156,10 @@ class TuneResult:
     header : list of str
         Comment lines of the input file kept at the top of the tuned file (an identification's
         ``# UNTRUSTED`` marker stays).
+    record : str
+        The tuning record (TOML) that :meth:`write` puts beside the tuned file: the checksum
+        of the tuned design and each controller's prediction, which ``rip-rt run``'s
+        pre-flight reads instead of simulating again while the checksum matches.
     """
 
     spec: Spec
@@ -159,6 +171,25 @@ class TuneResult:
     runs: int
     perturbation: str
     header: List[str] = field(default_factory=list)
+    record: str = ""
+
+    def write(self, out: PathLike) -> Path:
+        """Write the tuned file to ``out`` and its record beside it (``OUT.tune.toml``, the
+        name ``rip_core::preflight::tune_record_path`` gives), each replaced atomically.
+
+        Returns
+        -------
+        pathlib.Path
+            The record's path.
+        """
+        out = Path(os.fspath(out))
+        out.parent.mkdir(parents=True, exist_ok=True)
+        side = record_path(out)
+        for path, text in ((out, self.to_toml()), (side, self.record)):
+            staged = path.with_name(path.name + ".tmp")
+            staged.write_text(text)
+            staged.replace(path)
+        return side
 
     def report(self) -> str:
         """The per-controller table ``riprs tune`` prints."""
@@ -189,6 +220,11 @@ class TuneResult:
                 f"{m.disk_margin:5.2f} | {c.arm_peak_to_peak:7.3f} {c.pendulum:7.3f} "
                 f"{c.offset:6.3f} {c.peak_voltage:6.2f} | {frac} of {self.runs}"
                 + ("" if c.works else "  (misses the bar)")
+                + (
+                    f"; the sensor's: with exact angles arm p-p {c.exact_sensor[0]:.3f}"
+                    if c.sensor_limited and c.exact_sensor is not None
+                    else ""
+                )
             )
         lines.append("")
         lines.append(
@@ -230,6 +266,12 @@ class PreflightFinding:
     check: str
     verdict: str
     message: str
+
+
+def record_path(tuned: PathLike) -> Path:
+    """The tuning record beside a tuned file: ``tuned.toml`` -> ``tuned.tune.toml``."""
+    p = Path(os.fspath(tuned))
+    return p.with_name(f"{p.stem}.tune.toml")
 
 
 def _blocks(text: str) -> List[Tuple[str, str]]:
@@ -408,7 +450,7 @@ def tune(
     path = None if isinstance(rig, Spec) else Path(os.fspath(rig))
     spec = _spec(rig)
     bar = _progress.bar(progress, total=1 + runs, desc="riprs tune", unit="step")
-    tuned, weights, works, assessments, tried = tune_weights(spec, Ts)
+    tuned, weights, works, assessments, tried, record = tune_weights(spec, Ts)
     if bar is not None:
         bar.update(1)
     cov = _covariance(path)
@@ -447,6 +489,14 @@ def tune(
             offset=float(a["offset"]),
             margins_ok=bool(a["margins_ok"]),
             works=bool(a["works"]),
+            exact_sensor=None
+            if a["exact_sensor"] is None
+            else (
+                float(a["exact_sensor"][0]),
+                float(a["exact_sensor"][1]),
+                float(a["exact_sensor"][2]),
+            ),
+            sensor_limited=bool(a["sensor_limited"]),
             balanced_fraction=fractions.get(name, float("nan")),
         )
     kept = weights == {
@@ -468,4 +518,5 @@ def tune(
             "identification covariance" if cov is not None else f"+-{spread:.0%} per parameter"
         ),
         header=_header(path),
+        record=record,
     )

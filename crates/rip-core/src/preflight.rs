@@ -42,6 +42,8 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::DMatrix;
 
+use serde::{Deserialize, Serialize};
+
 use crate::linalg::Mat;
 use crate::sim::simulate;
 use crate::spec::{ControllerKind, Design};
@@ -306,7 +308,163 @@ fn voltage(input: &Input<'_>) -> Option<Finding> {
     })
 }
 
+/// The tuning record beside a tuned file: `tuned.toml` → `tuned.tune.toml`.
+pub fn tune_record_path(rig: &Path) -> PathBuf {
+    let stem = rig.file_stem().map(|s| s.to_string_lossy().into_owned());
+    rig.with_file_name(format!("{}.tune.toml", stem.unwrap_or_default()))
+}
+
+/// The checksum of everything a design's predicted behaviour depends on: the experiment
+/// (its canonical TOML, presets resolved), the sample time and the planned input bounds.
+/// 64-bit FNV-1a, written `fnv1a64:` and 16 hex digits; it detects edits, not tampering.
+pub fn design_checksum(design: &Design) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |bytes: &[u8]| {
+        for &b in bytes {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    };
+    eat(design.spec().resolved().to_toml().as_bytes());
+    let (lo, hi) = design.bounds();
+    for v in [design.ts(), lo, hi] {
+        eat(&v.to_bits().to_le_bytes());
+    }
+    format!("fnv1a64:{h:016x}")
+}
+
+/// What `riprs tune` predicted for one controller, as stored in its record.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StoredPrediction {
+    /// Whether a predicted run fell or diverged.
+    pub fell: bool,
+    /// Largest `|θ|` over the predicted runs (rad).
+    pub arm_max: f64,
+    /// Steady-state arm peak-to-peak (rad).
+    pub arm_peak_to_peak: f64,
+    /// Steady-state largest `|α|` (rad).
+    pub pendulum: f64,
+    /// Balanced disk margin at the plant input.
+    pub disk_margin: f64,
+    /// Whether it met the whole bar of the tuning.
+    pub works: bool,
+}
+
+/// The record `riprs tune` writes beside the tuned file ([`tune_record_path`]): the checksum
+/// of the inputs it was computed from and each controller's prediction. Other sections (a
+/// swing-up verdict) may sit beside these; readers ignore what they do not know.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TuneRecord {
+    /// [`design_checksum`] of the design the predictions were made on.
+    pub inputs: String,
+    /// Noise seeds and length of the predicted runs, for the message.
+    pub runs: String,
+    /// Per controller (`"LQR"`, `"LQG"`, `"MPC"`), its prediction.
+    pub prediction: std::collections::BTreeMap<String, StoredPrediction>,
+}
+
+impl TuneRecord {
+    /// The record as TOML, with a comment saying what it is.
+    pub fn to_toml(&self) -> String {
+        format!(
+            "# Written by riprs tune beside the tuned file: what it predicted for each controller.\n\
+             # rip-rt run's pre-flight reads it while `inputs` is the checksum of its design.\n{}",
+            toml::to_string(self).expect("every record value has a TOML form")
+        )
+    }
+
+    /// The record in the file at `path`, if there is one that parses.
+    pub fn read(path: &Path) -> Option<Self> {
+        toml::from_str(&std::fs::read_to_string(path).ok()?).ok()
+    }
+}
+
+/// The prediction finding from a stored record, when `input.rig_file` has one matching the
+/// design; otherwise `Err` with a note to add to a recomputed finding (empty when there is no
+/// record).
+fn stored_prediction(input: &Input<'_>) -> Result<Finding, String> {
+    let Some(rig) = input.rig_file else {
+        return Err(String::new());
+    };
+    let path = tune_record_path(rig);
+    if !path.exists() {
+        return Err(String::new());
+    }
+    let Some(record) = TuneRecord::read(&path) else {
+        return Err(format!(" ({} does not parse: recomputed)", path.display()));
+    };
+    let kind = input.controller;
+    let stored = record.prediction.get(kind.name());
+    let Some(p) = stored.filter(|_| record.inputs == design_checksum(input.design)) else {
+        return Err(format!(
+            " ({} is stale, from other inputs: recomputed)",
+            path.display()
+        ));
+    };
+    let from = format!(
+        "stored by riprs tune in {} ({})",
+        path.display(),
+        record.runs
+    );
+    if p.fell {
+        return Ok(Finding::new(
+            "prediction",
+            Verdict::Refuse,
+            format!(
+                "{} is predicted to fall on this rig: {from}; tune the rig again or pass --force",
+                kind.name()
+            ),
+        ));
+    }
+    if let Some(limit) = input.arm_limit {
+        if p.arm_max > limit {
+            return Ok(Finding::new(
+                "prediction",
+                Verdict::Refuse,
+                format!(
+                    "{} is predicted to carry the arm to {:.2} rad on this rig, past \
+                     safety.arm_limit ({limit:.2} rad): {from}; tune the rig or pass --force",
+                    kind.name(),
+                    p.arm_max
+                ),
+            ));
+        }
+    }
+    Ok(Finding::new(
+        "prediction",
+        if p.works {
+            Verdict::Pass
+        } else {
+            Verdict::Warn
+        },
+        format!(
+            "{} balances the rig's model: {from}: arm within {:.2} rad, steady-state arm \
+             peak-to-peak {:.3} rad, pendulum within {:.3} rad, disk margin {:.2}{}",
+            kind.name(),
+            p.arm_max,
+            p.arm_peak_to_peak,
+            p.pendulum,
+            p.disk_margin,
+            if p.works {
+                ""
+            } else {
+                "; it misses the tuning's bar"
+            }
+        ),
+    ))
+}
+
 fn prediction(input: &Input<'_>) -> Option<Finding> {
+    let note = match stored_prediction(input) {
+        Ok(finding) => return Some(finding),
+        Err(note) => note,
+    };
+    let mut finding = simulated_prediction(input)?;
+    finding.message.push_str(&note);
+    Some(finding)
+}
+
+fn simulated_prediction(input: &Input<'_>) -> Option<Finding> {
     let design = input.design;
     let spec = design.spec();
     let kind = input.controller;
@@ -335,7 +493,8 @@ fn prediction(input: &Input<'_>) -> Option<Finding> {
             "prediction",
             Verdict::Warn,
             format!(
-                "not predicted: {} takes {:.2} ms a step, {estimate:.1} s to simulate, more                  than the pre-flight's {PREDICTION_BUDGET} s",
+                "not predicted: {} takes {:.2} ms a step, {estimate:.1} s to simulate, more \
+                 than the pre-flight's {PREDICTION_BUDGET} s",
                 kind.name(),
                 per_step * 1e3
             ),

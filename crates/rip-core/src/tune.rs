@@ -36,6 +36,7 @@ use rand::{Rng, SeedableRng};
 use crate::margins::Margins;
 use crate::metrics::table1_rmse;
 use crate::plant::{FurutaParams, Plant};
+use crate::preflight::{design_checksum, StoredPrediction, TuneRecord};
 use crate::sim::simulate;
 use crate::spec::{ControllerKind, Spec, SpecError};
 
@@ -172,12 +173,19 @@ pub struct Assessment {
     pub saturated: bool,
     /// Whether a run fell or diverged.
     pub fell: bool,
+    /// Largest `|θ|` over the runs (rad).
+    pub arm_max: f64,
     /// Steady-state arm peak-to-peak (rad).
     pub arm_peak_to_peak: f64,
     /// Steady-state largest `|α|` (rad).
     pub pendulum: f64,
     /// Steady-state `|mean θ − θ_ref|` (rad).
     pub offset: f64,
+    /// The steady state `(arm peak-to-peak, |α|, offset)` of the same controller with exact
+    /// angles (no quantisation, no noise), measured by [`tune`] only for a controller that
+    /// balances outside the steady-state bar: when it meets the bar, the miss is the
+    /// sensor's ([`sensor_limited`](Self::sensor_limited)), not the weights'.
+    pub exact_sensor: Option<(f64, f64, f64)>,
 }
 
 impl Assessment {
@@ -193,6 +201,19 @@ impl Assessment {
             && self.arm_peak_to_peak <= bar.arm_peak_to_peak
             && self.pendulum <= bar.pendulum
             && self.offset <= bar.offset
+    }
+
+    /// Whether the controller misses the steady-state bar only through the rig's sensor: it
+    /// balances, and with exact angles ([`exact_sensor`](Self::exact_sensor)) it meets the
+    /// bar. A coarse pendulum encoder (or its noise) is read by the controller as a tilt
+    /// `δ`, which it balances by moving the arm about `(K_α / K_θ) δ`: with a few hundred
+    /// counts a revolution that alone exceeds the bar, whatever the shared weights.
+    pub fn sensor_limited(&self, bar: &Bar) -> bool {
+        !self.fell
+            && !self.balances(bar)
+            && self.exact_sensor.is_some_and(|(pp, alpha, offset)| {
+                pp <= bar.arm_peak_to_peak && alpha <= bar.pendulum && offset <= bar.offset
+            })
     }
 
     /// Whether everything of the bar holds (module docs).
@@ -256,9 +277,11 @@ fn assess_until(
             peak_voltage: 0.0,
             saturated: false,
             fell: false,
+            arm_max: 0.0,
             arm_peak_to_peak: 0.0,
             pendulum: 0.0,
             offset: 0.0,
+            exact_sensor: None,
         };
         for (i, seed) in SEEDS.into_iter().enumerate() {
             let cfg = spec.sim_config(ts, seed);
@@ -268,6 +291,7 @@ fn assess_until(
                 a.rmse = table1_rmse(&run);
             }
             a.fell |= run.fell || run.diverged;
+            a.arm_max = run.x.iter().map(|x| x[0].abs()).fold(a.arm_max, f64::max);
             let peak = run.u.iter().map(|u| u.abs()).fold(0.0, f64::max);
             a.peak_voltage = a.peak_voltage.max(peak);
             // The written voltage exceeds the planned clamp by at most the compensation; the
@@ -311,6 +335,54 @@ pub fn steady_state(run: &crate::sim::SimResult, window: f64) -> (f64, f64, f64)
         }
     }
     (hi - lo, alpha, (sum / n.max(1) as f64).abs())
+}
+
+/// The rig of `spec` read by exact sensors: no quantisation, no noise, no offsets.
+fn exact_sensor(spec: &Spec) -> Spec {
+    let mut s = spec.clone();
+    s.sensor.encoder_counts = [EXACT_COUNTS; 2];
+    s.sensor.noise_std = [0.0; 2];
+    s.sensor.encoder_offsets = [0.0; 2];
+    s
+}
+
+/// Counts a revolution of the "exact" encoder (a step of 6 nrad).
+const EXACT_COUNTS: u32 = 1 << 30;
+
+/// Fills [`Assessment::exact_sensor`] of every controller of `assessments` that balances
+/// outside the steady-state bar: the same design (same weights, same estimator) run on the
+/// rig read by exact sensors.
+fn explain_misses(
+    spec: &Spec,
+    ts: f64,
+    bar: &Bar,
+    assessments: &mut [Assessment],
+) -> Result<(), SpecError> {
+    if assessments.iter().all(|a| a.fell || a.balances(bar)) {
+        return Ok(());
+    }
+    let exact = exact_sensor(spec);
+    let design = spec.design(ts)?;
+    let plant = spec.plant()?;
+    for a in assessments
+        .iter_mut()
+        .filter(|a| !a.fell && !a.balances(bar))
+    {
+        let mut controller = design.controller(a.kind)?;
+        let mut worst = (0.0f64, 0.0f64, 0.0f64);
+        for seed in SEEDS {
+            let run = simulate(&plant, controller.as_mut(), &exact.sim_config(ts, seed))
+                .map_err(|e| SpecError::new("plant", format!("simulation: {e}")))?;
+            let s = if run.fell || run.diverged {
+                (f64::INFINITY, f64::INFINITY, f64::INFINITY)
+            } else {
+                steady_state(&run, bar.window)
+            };
+            worst = (worst.0.max(s.0), worst.1.max(s.1), worst.2.max(s.2));
+        }
+        a.exact_sensor = Some(worst);
+    }
+    Ok(())
 }
 
 /// The outcome of [`tune`].
@@ -365,13 +437,42 @@ pub fn tune(spec: &Spec, ts: f64, bar: &Bar) -> Result<Tuned, SpecError> {
         SpecError::new("lqr", "no candidate weights could be designed for this rig")
     })?;
     let spec = weights.apply(spec);
-    let assessments = assess(&spec, ts, bar)?;
+    let mut assessments = assess(&spec, ts, bar)?;
+    explain_misses(&spec, ts, bar, &mut assessments)?;
     Ok(Tuned {
         spec,
         weights,
         works: false,
         assessments,
         tried,
+    })
+}
+
+/// The record `riprs tune` writes beside the tuned file (crate::preflight::TuneRecord):
+/// the checksum of the tuned design at sample time `ts` and each controller's prediction.
+pub fn record(tuned: &Tuned, ts: f64, bar: &Bar) -> Result<TuneRecord, SpecError> {
+    let design = tuned.spec.design(ts)?;
+    Ok(TuneRecord {
+        inputs: design_checksum(&design),
+        runs: format!(
+            "noise seeds {SEEDS:?}, {} s each",
+            tuned.spec.reference.duration
+        ),
+        prediction: tuned
+            .assessments
+            .iter()
+            .map(|a| {
+                let p = StoredPrediction {
+                    fell: a.fell,
+                    arm_max: a.arm_max,
+                    arm_peak_to_peak: a.arm_peak_to_peak,
+                    pendulum: a.pendulum,
+                    disk_margin: a.margins.disk_margin,
+                    works: a.works(bar),
+                };
+                (a.kind.name().to_string(), p)
+            })
+            .collect(),
     })
 }
 

@@ -35,12 +35,18 @@ pub fn issue_rigs() -> Vec<(&'static str, String)> {
     ]
 }
 
-/// Generated rigs on which the tuned controllers meet the bar (seeds 1 and 3 do not yet: on
-/// seed 1 LQG and MPC reach 0.067–0.070 rad arm peak-to-peak, on seed 3 LQR 0.071 rad).
-const BALANCED_SEEDS: [u64; 7] = [2, 4, 5, 6, 7, 8, 10];
+/// The generated rigs, fixed before any was run: `Rig::random(1..=16)`.
+const SEEDS: std::ops::RangeInclusive<u64> = 1..=16;
 
-/// A generated rig whose MPC falls with every candidate tried: the pre-flight refuses it.
-const REFUSED_SEED: u64 = 9;
+/// Generated rigs on which some tuned controller still misses the bar for a reason that is
+/// neither its sensor nor a fall the pre-flight refuses (each named with what it misses).
+/// The test asserts that they still miss, so that a fix shows here.
+const KNOWN_MISSES: [(u64, &str); 1] = [(
+    9,
+    "a weak motor (k_t 0.020, R_m 9.9 ohm) against arm Coulomb friction worth 2.2 V: the \
+     tuned LQR and LQG balance in a 0.15 rad limit cycle at the clamp (with exact angles LQR \
+     falls), the MPC falls and the pre-flight refuses it",
+)];
 
 /// Whether an LQR with any of a range of weights balances the rig's model from its start:
 /// the independent evidence that it can be balanced at its voltage bound.
@@ -57,18 +63,95 @@ fn some_lqr_balances(spec: &Spec) -> bool {
     })
 }
 
+/// The tuned design of `spec`'s controller `kind` re-run, on other noise seeds than the
+/// tuning's, with the finest sensor of the envelope (8192 counts, 0.1 mrad noise): whether it
+/// then meets the steady-state bar (the check behind a "the sensor's" verdict).
+fn meets_bar_with_a_fine_sensor(spec: &Spec, kind: ControllerKind, bar: &Bar) -> bool {
+    let mut s = spec.clone();
+    s.sensor.encoder_counts = [8192, 8192];
+    s.sensor.noise_std = [1e-4, 1e-4];
+    let d = s.design(0.01).unwrap();
+    let plant = s.plant().unwrap();
+    [21, 22].into_iter().all(|seed| {
+        let mut c = d.controller(kind).unwrap();
+        let run = rip_core::simulate(&plant, c.as_mut(), &s.sim_config(0.01, seed)).unwrap();
+        let (pp, alpha, offset) = rip_core::tune::steady_state(&run, bar.window);
+        !run.fell && pp <= bar.arm_peak_to_peak && alpha <= bar.pendulum && offset <= bar.offset
+    })
+}
+
+/// How one rig came out: `Ok` with a line per controller, or `Err` with what is wrong.
+type Judged = Result<Vec<String>, String>;
+
+/// Tunes the rig of `text` and judges each controller: meets the bar, refused by the
+/// pre-flight, or short of the bar through its sensor (checked with a fine one).
+fn judge(name: &str, text: &str, bar: &Bar) -> Judged {
+    let spec = Spec::parse(text).unwrap();
+    let t = tune(&spec, 0.01, bar).unwrap();
+    let design = t.spec.design(0.01).unwrap();
+    let balanceable = some_lqr_balances(&spec);
+    let mut lines = Vec::new();
+    let mut bad = Vec::new();
+    for a in &t.assessments {
+        let verdict = if a.balances(bar) && !a.saturated {
+            "meets the bar".to_string()
+        } else if a.fell || !balanceable {
+            let report = preflight::run(&preflight::Input {
+                design: &design,
+                controller: a.kind,
+                rig_file: None,
+                arm_limit: Some(3.0),
+            });
+            if !report.refused() {
+                bad.push(format!(
+                    "{:?} falls but the pre-flight passes it: {report}",
+                    a.kind
+                ));
+            }
+            format!("refused by the pre-flight: {report}")
+        } else if a.sensor_limited(bar) && !a.saturated {
+            if !meets_bar_with_a_fine_sensor(&t.spec, a.kind, bar) {
+                bad.push(format!(
+                    "{:?}: said to be the sensor's, but misses the bar with a fine sensor too",
+                    a.kind
+                ));
+            }
+            format!(
+                "misses the bar through the sensor (exact: {:?})",
+                a.exact_sensor
+            )
+        } else {
+            bad.push(format!("{:?} misses the bar: {a:?}", a.kind));
+            "misses".to_string()
+        };
+        lines.push(format!(
+            "{name}: {:?} p-p {:.3} |alpha| {:.3} offset {:.3} peak {:.1} V disk {:.2}: {verdict}",
+            a.kind, a.arm_peak_to_peak, a.pendulum, a.offset, a.peak_voltage, a.margins.disk_margin
+        ));
+    }
+    if bad.is_empty() {
+        Ok(lines)
+    } else {
+        Err(format!("{}\n  {}", lines.join("\n"), bad.join("\n  ")))
+    }
+}
+
 #[test]
 fn tuned_controllers_meet_the_bar_on_the_issue_rigs_and_generated_rigs() {
     let bar = Bar::default();
-    let mut rigs: Vec<(String, String)> = issue_rigs()
+    let mut rigs: Vec<(String, String, Option<u64>)> = issue_rigs()
         .into_iter()
-        .map(|(n, t)| (n.to_string(), t))
+        .map(|(n, t)| (n.to_string(), t, None))
         .collect();
-    for seed in BALANCED_SEEDS {
-        rigs.push((format!("generated rig {seed}"), Rig::random(seed).to_toml()));
+    for seed in SEEDS {
+        rigs.push((
+            format!("generated rig {seed}"),
+            Rig::random(seed).to_toml(),
+            Some(seed),
+        ));
     }
     // Two at a time: the machines this runs on have two cores.
-    let results: Vec<(String, Result<(), String>)> = std::thread::scope(|scope| {
+    let results: Vec<(String, Option<u64>, Judged)> = std::thread::scope(|scope| {
         let chunks: Vec<_> = rigs.chunks(rigs.len().div_ceil(2)).collect();
         let handles: Vec<_> = chunks
             .into_iter()
@@ -76,24 +159,7 @@ fn tuned_controllers_meet_the_bar_on_the_issue_rigs_and_generated_rigs() {
                 scope.spawn(move || {
                     chunk
                         .iter()
-                        .map(|(name, text)| {
-                            let spec = Spec::parse(text).unwrap();
-                            assert!(some_lqr_balances(&spec), "{name}: no LQR balances it");
-                            let t = tune(&spec, 0.01, &bar).unwrap();
-                            let mut bad = Vec::new();
-                            for a in &t.assessments {
-                                println!(
-                                    "{name}: {:?} p-p {:.3} |alpha| {:.3} offset {:.3} peak {:.1} V disk {:.2}",
-                                    a.kind, a.arm_peak_to_peak, a.pendulum, a.offset,
-                                    a.peak_voltage, a.margins.disk_margin
-                                );
-                                if !a.balances(&bar) || a.saturated {
-                                    bad.push(format!("{:?}: {a:?}", a.kind));
-                                }
-                            }
-                            let r = if bad.is_empty() { Ok(()) } else { Err(bad.join("; ")) };
-                            (name.clone(), r)
-                        })
+                        .map(|(name, text, seed)| (name.clone(), *seed, judge(name, text, &bar)))
                         .collect::<Vec<_>>()
                 })
             })
@@ -103,27 +169,36 @@ fn tuned_controllers_meet_the_bar_on_the_issue_rigs_and_generated_rigs() {
             .flat_map(|h| h.join().unwrap())
             .collect()
     });
-    let failures: Vec<_> = results
-        .iter()
-        .filter_map(|(n, r)| r.as_ref().err().map(|e| format!("{n}: {e}")))
-        .collect();
+    let mut failures = Vec::new();
+    for (name, seed, r) in &results {
+        let known = seed.and_then(|s| KNOWN_MISSES.iter().find(|(k, _)| *k == s));
+        match (r, known) {
+            (Ok(lines), None) => println!("{}", lines.join("\n")),
+            (Err(e), Some((_, why))) => println!("{e}\n  (known: {why})"),
+            (Err(e), None) => failures.push(e.clone()),
+            (Ok(_), Some(_)) => failures.push(format!(
+                "{name} now meets the bar: drop it from KNOWN_MISSES"
+            )),
+        }
+    }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
 #[test]
 fn a_rig_whose_controller_falls_is_refused_by_the_preflight() {
-    let spec = Spec::parse(&Rig::random(REFUSED_SEED).to_toml()).unwrap();
+    // Seed 9: a weak motor (k_t 0.020, R_m 9.9 Ω) against arm friction worth 2.2 V.
+    let spec = Spec::parse(&Rig::random(9).to_toml()).unwrap();
     let t = tune(&spec, 0.01, &Bar::default()).unwrap();
-    let mpc = t
+    let falls = t
         .assessments
         .iter()
         .find(|a| a.kind == ControllerKind::Mpc)
         .unwrap();
-    assert!(mpc.fell, "{mpc:?}");
+    assert!(falls.fell, "{falls:?}");
     let design = t.spec.design(0.01).unwrap();
     let report = preflight::run(&preflight::Input {
         design: &design,
-        controller: ControllerKind::Mpc,
+        controller: falls.kind,
         rig_file: None,
         arm_limit: Some(3.0),
     });
@@ -140,7 +215,14 @@ fn explore() {
         .into_iter()
         .map(|(n, t)| (n.to_string(), t))
         .collect::<Vec<_>>();
-    for seed in 1..=10u64 {
+    let seeds: Vec<u64> = std::env::var("SEEDS")
+        .map(|v| v.split(',').map(|x| x.parse().unwrap()).collect())
+        .unwrap_or_else(|_| (1..=10).collect());
+    if std::env::var("SEEDS").is_ok() {
+        rigs.clear();
+    }
+    for seed in seeds {
+        println!("random {seed}: {:?}", Rig::random(seed).params);
         rigs.push((format!("random {seed}"), Rig::random(seed).to_toml()));
     }
     for (name, text) in rigs {
@@ -187,6 +269,115 @@ fn explore_kalman() {
                 println!("{name:20} g x{g} mn {mn}: LQG gm {:.1}/{:.1} pm {:.0} disk {:.2} | MPC gm {:.1}/{:.1} pm {:.0} disk {:.2}",
                     l.gain_margin_db, l.gain_reduction_db, l.phase_margin_deg, l.disk_margin,
                     m.gain_margin_db, m.gain_reduction_db, m.phase_margin_deg, m.disk_margin);
+            }
+        }
+    }
+}
+
+#[test]
+#[ignore]
+fn diagnose() {
+    let seed: u64 = std::env::var("SEED").unwrap().parse().unwrap();
+    let rig = Rig::random(seed);
+    println!("counts {:?} noise {:?}", rig.encoder_counts, rig.noise_std);
+    let base = Spec::parse(&rig.to_toml()).unwrap();
+    let t = tune(&base, 0.01, &Bar::default()).unwrap();
+    println!("tuned {:?}", t.weights);
+    type Variant = (&'static str, Box<dyn Fn(&mut Spec)>);
+    let variants: Vec<Variant> = vec![
+        ("tuned", Box::new(|_s: &mut Spec| {})),
+        (
+            "no noise",
+            Box::new(|s: &mut Spec| s.sensor.noise_std = [0.0, 0.0]),
+        ),
+        (
+            "no quant",
+            Box::new(|s: &mut Spec| s.sensor.encoder_counts = [1 << 30, 1 << 30]),
+        ),
+        (
+            "no noise/quant",
+            Box::new(|s: &mut Spec| {
+                s.sensor.noise_std = [0.0, 0.0];
+                s.sensor.encoder_counts = [1 << 30, 1 << 30];
+            }),
+        ),
+        (
+            "smooth plant",
+            Box::new(|s: &mut Spec| {
+                for n in ["Vd", "Cr", "Cp"] {
+                    s.plant
+                        .set(rip_core::spec::Param::from_name(n).unwrap(), Some(0.0));
+                }
+            }),
+        ),
+        ("20 s", Box::new(|s: &mut Spec| s.reference.duration = 20.0)),
+    ];
+    for (name, f) in variants {
+        let mut s = t.spec.clone();
+        f(&mut s);
+        let Ok(d) = s.design(0.01) else {
+            println!("{name}: design failed");
+            continue;
+        };
+        let plant = s.plant().unwrap();
+        for kind in ControllerKind::ALL {
+            let mut c = d.controller(kind).unwrap();
+            let run = rip_core::simulate(&plant, c.as_mut(), &s.sim_config(0.01, 11)).unwrap();
+            let ss = rip_core::tune::steady_state(&run, 3.0);
+            let n = run.len();
+            let tail: Vec<String> = (0..n)
+                .step_by(25)
+                .filter(|&k| run.t[k] >= run.t[n - 1] - 4.0)
+                .map(|k| format!("{:.3}", run.x[k][0]))
+                .collect();
+            println!(
+                "{name:14} {kind:?}: pp {:.3} a {:.3} off {:.3} fell {} | {}",
+                ss.0,
+                ss.1,
+                ss.2,
+                run.fell,
+                tail.join(" ")
+            );
+        }
+    }
+}
+
+#[test]
+#[ignore]
+fn grid() {
+    use rip_core::tune::Weights;
+    let seed: u64 = std::env::var("SEED").unwrap().parse().unwrap();
+    let base = Spec::parse(&Rig::random(seed).to_toml()).unwrap();
+    let bar = Bar::default();
+    for arm in [1.0, 4.0, 16.0, 64.0, 256.0] {
+        for input in [1.0, 3.0, 10.0, 30.0] {
+            for mn in [10.0, 1.0, 0.1, 0.01] {
+                let w = Weights {
+                    arm,
+                    pendulum: 1.0,
+                    input,
+                    integral_weight: 0.0,
+                    measurement_noise: mn,
+                };
+                let s = w.apply(&base);
+                let Ok(a) = assess(&s, 0.01, &bar) else {
+                    continue;
+                };
+                let line: Vec<String> = a
+                    .iter()
+                    .map(|a| {
+                        format!(
+                            "{:?} pp {:.3} a {:.3} {}{} disk {:.2}",
+                            a.kind,
+                            a.arm_peak_to_peak,
+                            a.pendulum,
+                            if a.fell { "F" } else { "" },
+                            if a.saturated { "S" } else { "" },
+                            a.margins.disk_margin
+                        )
+                    })
+                    .collect();
+                println!("arm {arm:5} R {input:4} mn {mn:5}: {}", line.join(" | "));
             }
         }
     }

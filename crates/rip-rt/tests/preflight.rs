@@ -101,3 +101,43 @@ fn a_rig_that_balances_passes() {
         "past the pre-flight, stopped by the missing port: {err}"
     );
 }
+
+#[test]
+fn the_preflight_reads_the_tuning_record_while_it_is_current() {
+    use rip_core::preflight::{design_checksum, tune_record_path, StoredPrediction, TuneRecord};
+    let dir = tempdir("record");
+    let text = "[plant]\npreset = \"qube_servo2\"\n";
+    let rig = write(&dir, "tuned.toml", text);
+    // A record of this design (at rip-rt's default 10 ms period and ±12 V) that says LQR
+    // falls: the rig balances, so only a pre-flight that reads the record refuses it.
+    let design = rip_core::spec::Spec::parse(text)
+        .unwrap()
+        .design(0.01)
+        .unwrap();
+    let falls = StoredPrediction {
+        fell: true,
+        arm_max: 3.0,
+        arm_peak_to_peak: f64::NAN,
+        pendulum: f64::NAN,
+        disk_margin: 0.7,
+        works: false,
+    };
+    let record = TuneRecord {
+        inputs: design_checksum(&design),
+        runs: "noise seeds [11, 12], 10 s each".into(),
+        prediction: [("LQR".to_string(), falls)].into_iter().collect(),
+    };
+    std::fs::write(tune_record_path(&rig), record.to_toml()).unwrap();
+    let (code, err) = run(&rig, false);
+    assert_eq!(code, 16, "{err}");
+    assert!(
+        err.contains("predicted to fall") && err.contains("stored by riprs tune"),
+        "{err}"
+    );
+    // The file edited after the tuning: the record is stale, the check simulates again and
+    // passes the run (stopped by the missing port), saying so.
+    write(&dir, "tuned.toml", &format!("{text}[lqr]\nR = 2.0\n"));
+    let (code, err) = run(&rig, false);
+    assert_eq!(code, 1, "{err}");
+    assert!(!err.contains("stored by riprs tune"), "{err}");
+}

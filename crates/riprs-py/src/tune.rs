@@ -65,6 +65,11 @@ fn assessment_dict<'py>(
     d.set_item("arm_peak_to_peak", a.arm_peak_to_peak)?;
     d.set_item("pendulum", a.pendulum)?;
     d.set_item("offset", a.offset)?;
+    d.set_item(
+        "exact_sensor",
+        a.exact_sensor.map(|(pp, alpha, off)| [pp, alpha, off]),
+    )?;
+    d.set_item("sensor_limited", a.sensor_limited(bar))?;
     d.set_item("margins_ok", a.margins_ok(bar))?;
     d.set_item("works", a.works(bar))?;
     Ok(d)
@@ -129,7 +134,8 @@ fn loop_response<'py>(
 }
 
 /// Chooses shared weights for the spec's rig (``rip_core::tune::tune``). Returns
-/// ``(tuned spec, weights, works, assessments, tried)``.
+/// ``(tuned spec, weights, works, assessments, tried, record)``, the record the TOML text of
+/// ``rip_core::preflight::TuneRecord`` that the pre-flight reads beside the tuned file.
 #[pyfunction]
 #[pyo3(signature = (spec, Ts = rip_core::paper::TS))]
 #[allow(non_snake_case)]
@@ -144,12 +150,17 @@ fn tune_weights<'py>(
     bool,
     Vec<Bound<'py, PyDict>>,
     usize,
+    String,
 )> {
     check_ts(Ts)?;
     let s = spec.inner.clone();
     let bar = Bar::default();
-    let t = py
-        .allow_threads(|| tune::tune(&s, Ts, &bar))
+    let (t, record) = py
+        .allow_threads(|| {
+            let t = tune::tune(&s, Ts, &bar)?;
+            let record = tune::record(&t, Ts, &bar)?;
+            Ok::<_, rip_core::spec::SpecError>((t, record))
+        })
         .map_err(config_err)?;
     let w = PyDict::new(py);
     let Weights {
@@ -177,6 +188,7 @@ fn tune_weights<'py>(
         t.works,
         list,
         t.tried,
+        record.to_toml(),
     ))
 }
 
