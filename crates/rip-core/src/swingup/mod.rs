@@ -119,8 +119,13 @@
 //!   reference is passed through (so a later 0 → 1 rad step is tracked as given, from the
 //!   arm's place rather than from `θ_c`).
 //! - **Balance**: the balance controller runs on `[θ, wrap(α)]`. Leaving the balance region
-//!   (`|α| > balance_angle` or `|θ| > arm_limit`) is a fall: swing up again or stop
-//!   ([`OnFall`]).
+//!   is a fall: swing up again or stop ([`OnFall`]). The region ends at `|α| > balance_angle`
+//!   and where the arm's stopping point, braked at the voltage bound
+//!   ([`crate::envelope`]'s stopping distance, one period of latency, half the deceleration
+//!   counted on), leaves `±arm_limit`, not only at `|θ| > arm_limit`: an arm that reaches the
+//!   limit still moving cannot be stopped there, while one handed to the swing-up law with
+//!   its stopping point inside is braked by the law's barrier (3), which asks for more than
+//!   the voltage bound gives outside its own envelope, so it brakes at the bound.
 //! - **Stopped** ([`StopCause`]): after [`SwingUpSettings::max_time`] in the swing-up, or a fall
 //!   with [`OnFall::Stop`]. The output is 0 V from then on.
 //!
@@ -137,6 +142,7 @@ pub use feasibility::{feasibility, Feasibility, Verdict};
 pub use settings::{OnFall, SwingUpSettings, MAX_SWING_UP_TIME};
 
 use crate::controller::{Controller, Phase, StepStatus, StopCause};
+use crate::envelope::StoppingModel;
 use crate::error::{Result, RipError};
 use crate::plant::Plant;
 
@@ -161,6 +167,9 @@ pub struct SwingUp<C> {
     settings: SwingUpSettings,
     law: EnergyLaw,
     mode: UnstableMode,
+    /// How far the arm still travels when braked at the voltage bound: the balance region
+    /// ends where that would take it beyond `arm_limit`.
+    stopping: StoppingModel,
     ts: f64,
     rates: RateEstimator,
     phase: Phase,
@@ -202,6 +211,7 @@ impl<C: Controller> SwingUp<C> {
         let mut out = Self {
             law: EnergyLaw::new(plant, &settings, ts),
             mode,
+            stopping: StoppingModel::new(plant.params(), settings.max_voltage, 1.0, ts),
             rates: RateEstimator::new(ts, settings.rate_cutoff),
             balance,
             settings,
@@ -273,7 +283,9 @@ impl<C: Controller> SwingUp<C> {
 
     fn in_balance_region(&self) -> bool {
         let x = self.rates.state();
-        x[2].abs() <= self.settings.balance_angle && x[0].abs() <= self.settings.arm_limit
+        let limit = self.settings.arm_limit;
+        let stop = x[0] + x[1].signum() * self.stopping.stopping_distance(x[1]);
+        x[2].abs() <= self.settings.balance_angle && x[0].abs() <= limit && stop.abs() <= limit
     }
 
     /// One swing-up sample: the law's voltage, the balance estimator kept in step, the clock.

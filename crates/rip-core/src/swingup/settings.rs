@@ -56,8 +56,9 @@ pub struct SwingUpSettings {
     /// limit, inside the paper's 12 V).
     pub max_voltage: f64,
     /// The arm stays within `±arm_limit` (rad) during the swing-up, by the law itself; default
-    /// 1.5 rad, inside the ±π/2 that many rigs' cables allow. The balance region ends there
-    /// too.
+    /// 1.5 rad, inside the ±π/2 that many rigs' cables allow. The balance region ends where
+    /// braking could no longer stop the arm inside it (module docs, "Balance"), so a fall is
+    /// braked inside it too.
     pub arm_limit: f64,
     /// Braking deceleration `a_b` reserved for the arm limit, as a fraction of `a_s`;
     /// default 0.5 (half the stall acceleration is kept in hand for model errors, back-EMF and
