@@ -121,8 +121,8 @@
 //! - **Balance**: the balance controller runs on `[θ, wrap(α)]`. Leaving the balance region
 //!   is a fall: swing up again or stop ([`OnFall`]). The region ends at `|α| > balance_angle`
 //!   and where the arm's stopping point, braked at the voltage bound
-//!   ([`crate::envelope`]'s stopping distance, one period of latency, half the deceleration
-//!   counted on), leaves `±arm_limit`, not only at `|θ| > arm_limit`: an arm that reaches the
+//!   ([`crate::envelope`]'s stopping point, one period of latency with the balance
+//!   controller's last voltage acting, the whole deceleration (1) counted on), leaves `±arm_limit`, not only at `|θ| > arm_limit`: an arm that reaches the
 //!   limit still moving cannot be stopped there, while one handed to the swing-up law with
 //!   its stopping point inside is braked by the law's barrier (3), which asks for more than
 //!   the voltage bound gives outside its own envelope, so it brakes at the bound.
@@ -179,6 +179,8 @@ pub struct SwingUp<C> {
     hold_reference: Option<(f64, f64)>,
     /// The last voltage the swing-up applied.
     u_swing: [f64; 1],
+    /// The last voltage the balance controller applied: it acts during the stop's latency.
+    u_balance: f64,
     /// What the current swing-up has done so far.
     report: SwingUpReport,
 }
@@ -220,6 +222,7 @@ impl<C: Controller> SwingUp<C> {
             swing_samples: 0,
             hold_reference: None,
             u_swing: [0.0],
+            u_balance: 0.0,
             report: SwingUpReport::start(0.0, 0.0, 0.0),
         };
         out.reset();
@@ -284,7 +287,7 @@ impl<C: Controller> SwingUp<C> {
     fn in_balance_region(&self) -> bool {
         let x = self.rates.state();
         let limit = self.settings.arm_limit;
-        let stop = x[0] + x[1].signum() * self.stopping.stopping_distance(x[1]);
+        let stop = self.stopping.stopping_point(x[0], x[1], self.u_balance);
         x[2].abs() <= self.settings.balance_angle && x[0].abs() <= limit && stop.abs() <= limit
     }
 
@@ -341,7 +344,9 @@ impl<C: Controller> SwingUp<C> {
             None => r[0],
         };
         let y_b = [y[0], wrap_angle(y[1])];
-        self.balance.step(&y_b, &[theta_ref, r[1]], u)
+        let status = self.balance.step(&y_b, &[theta_ref, r[1]], u);
+        self.u_balance = u[0];
+        status
     }
 }
 
@@ -364,6 +369,7 @@ impl<C: Controller> Controller for SwingUp<C> {
             Phase::SwingUp => {
                 if usable && self.in_catch_region() {
                     self.phase = Phase::Balance;
+                    self.u_balance = self.u_swing[0];
                     self.hold_reference = Some((self.rates.state()[0], r[0]));
                     self.balance_step(y, r, u)
                 } else {
@@ -407,6 +413,7 @@ impl<C: Controller> Controller for SwingUp<C> {
         self.swing_samples = 0;
         self.hold_reference = None;
         self.u_swing = [0.0];
+        self.u_balance = 0.0;
         self.start_report();
     }
 
