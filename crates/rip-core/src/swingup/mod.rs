@@ -118,7 +118,11 @@
 //!   there) until the external reference changes from the value it had at the catch; from that change on the external
 //!   reference is passed through (so a later 0 → 1 rad step is tracked as given, from the
 //!   arm's place rather than from `θ_c`).
-//! - **Balance**: the balance controller runs on `[θ, wrap(α)]`. Leaving the balance region
+//! - **Balance**: the balance controller runs on `[θ, wrap(α)]`. For
+//!   [`SwingUpSettings::handover_time`] after the catch its estimator is restarted every
+//!   sample, after it has computed its move, from the swing-up's estimate and that move
+//!   ([`Controller::seed`]), so a Kalman filter does not have to follow the catch transient,
+//!   which its linear model does not describe. Leaving the balance region
 //!   is a fall: swing up again or stop ([`OnFall`]). The region ends at `|α| > balance_angle`
 //!   and where the arm's stopping point, braked at the voltage bound
 //!   ([`crate::envelope`]'s stopping point, one period of latency with the balance
@@ -175,6 +179,8 @@ pub struct SwingUp<C> {
     phase: Phase,
     /// Samples spent in the current swing-up.
     swing_samples: u64,
+    /// Samples since the catch (0 while swinging up).
+    balance_samples: u64,
     /// The arm reference held since the catch, and the external one at the catch.
     hold_reference: Option<(f64, f64)>,
     /// The last voltage the swing-up applied.
@@ -220,6 +226,7 @@ impl<C: Controller> SwingUp<C> {
             ts,
             phase: Phase::SwingUp,
             swing_samples: 0,
+            balance_samples: 0,
             hold_reference: None,
             u_swing: [0.0],
             u_balance: 0.0,
@@ -346,6 +353,13 @@ impl<C: Controller> SwingUp<C> {
         let y_b = [y[0], wrap_angle(y[1])];
         let status = self.balance.step(&y_b, &[theta_ref, r[1]], u);
         self.u_balance = u[0];
+        // The handover (module docs, "Balance"): the swing-up's estimate carries the balance
+        // controller's estimator through the catch transient.
+        self.balance_samples += 1;
+        if (self.balance_samples as f64) * self.ts <= self.settings.handover_time {
+            let x = self.rates.state();
+            self.balance.seed(&[x[0], x[1], x[2], x[3]], &u[..1]);
+        }
         status
     }
 }
@@ -369,6 +383,7 @@ impl<C: Controller> Controller for SwingUp<C> {
             Phase::SwingUp => {
                 if usable && self.in_catch_region() {
                     self.phase = Phase::Balance;
+                    self.balance_samples = 0;
                     self.u_balance = self.u_swing[0];
                     self.hold_reference = Some((self.rates.state()[0], r[0]));
                     self.balance_step(y, r, u)
@@ -411,6 +426,7 @@ impl<C: Controller> Controller for SwingUp<C> {
         self.rates.reset();
         self.phase = Phase::SwingUp;
         self.swing_samples = 0;
+        self.balance_samples = 0;
         self.hold_reference = None;
         self.u_swing = [0.0];
         self.u_balance = 0.0;
