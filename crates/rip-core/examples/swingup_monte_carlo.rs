@@ -58,7 +58,7 @@ fn main() {
     let catch_angle = spec.swing_up.catch_angle;
     println!("preset {preset}, {n} runs per controller, ±10 % on every physical parameter");
     println!(
-        "controller  success  no catch  fell  first arrival  max over-tops  upright median    p95   max|θ|"
+        "controller  success  no catch  fell  first arrival  max over-tops  upright median    p95   max|θ|  after fall"
     );
     for kind in ControllerKind::ALL {
         let one = |i: u64| -> Run {
@@ -95,8 +95,11 @@ fn main() {
             .collect();
         times.sort_by(f64::total_cmp);
         let max_arm = runs.iter().fold(0.0f64, |a, r| a.max(r.arrivals.peak_arm));
+        let after_fall = runs
+            .iter()
+            .fold(0.0f64, |a, r| a.max(r.arrivals.peak_arm_after_fall));
         println!(
-            "{:<10} {:>6.1} % {no_catch:>8} {fell:>5} {:>12.1} % {over:>14} {:>11.2} s {:>6.2} s {max_arm:>7.3}",
+            "{:<10} {:>6.1} % {no_catch:>8} {fell:>5} {:>12.1} % {over:>14} {:>11.2} s {:>6.2} s {max_arm:>7.3} {after_fall:>11.3}",
             kind.name(),
             100.0 * ok as f64 / n as f64,
             100.0 * first as f64 / n as f64,

@@ -138,8 +138,9 @@ impl Controller for Balance {
 /// catch region (``catch_angle``, ``catch_rate``, ``catch_arm_rate``, ``catch_arm_angle``,
 /// ``catch_lookahead``, and ``catch_mode_fraction``: the upright's unstable mode small enough for
 /// the voltage bound to stop it) the balance controller takes over: its estimator
-/// has run on the measurements and the swing-up's voltage (``estimator_window``), the MPC's
-/// previous move is the swing-up's last voltage, and the arm reference starts where the arm
+/// has run on the measurements and the swing-up's voltage (``estimator_window``) and is
+/// restarted from the swing-up's estimate every sample for ``handover_time`` s after the catch,
+/// the MPC's previous move is the swing-up's last voltage, and the arm reference starts where the arm
 /// was caught and returns to the external one at ``reference_return_rate`` until the external
 /// arm reference changes. Leaving the balance region
 /// (``balance_angle``, ``arm_limit``) swings up again (``on_fall="retry"``) or stops with 0 V
@@ -161,7 +162,7 @@ impl Controller for Balance {
 ///     ``catch_rate`` (rad/s),
 ///     ``catch_arm_rate`` (rad/s), ``catch_arm_angle`` (rad), ``reference_return_rate``
 ///     (rad/s), ``balance_angle`` (rad),
-///     ``estimator_window`` (rad), ``max_time`` (s), ``on_fall`` (``"retry"`` or ``"stop"``).
+///     ``estimator_window`` (rad), ``handover_time`` (s), ``max_time`` (s), ``on_fall`` (``"retry"`` or ``"stop"``).
 ///
 /// Raises
 /// ------
@@ -205,6 +206,7 @@ fn apply_setting(s: &mut SwingUpSettings, key: &str, value: &Bound<'_, PyAny>) -
         "reference_return_rate" => &mut s.reference_return_rate,
         "balance_angle" => &mut s.balance_angle,
         "estimator_window" => &mut s.estimator_window,
+        "handover_time" => &mut s.handover_time,
         "max_time" => &mut s.max_time,
         _ => {
             return Err(PyTypeError::new_err(format!(
@@ -248,6 +250,7 @@ pub(crate) fn settings_dict<'py>(
         ("reference_return_rate", s.reference_return_rate),
         ("balance_angle", s.balance_angle),
         ("estimator_window", s.estimator_window),
+        ("handover_time", s.handover_time),
         ("max_time", s.max_time),
     ] {
         d.set_item(key, value)?;

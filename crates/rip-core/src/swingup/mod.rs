@@ -118,9 +118,18 @@
 //!   there) until the external reference changes from the value it had at the catch; from that change on the external
 //!   reference is passed through (so a later 0 → 1 rad step is tracked as given, from the
 //!   arm's place rather than from `θ_c`).
-//! - **Balance**: the balance controller runs on `[θ, wrap(α)]`. Leaving the balance region
-//!   (`|α| > balance_angle` or `|θ| > arm_limit`) is a fall: swing up again or stop
-//!   ([`OnFall`]).
+//! - **Balance**: the balance controller runs on `[θ, wrap(α)]`. For
+//!   [`SwingUpSettings::handover_time`] after the catch its estimator is restarted every
+//!   sample, after it has computed its move, from the swing-up's estimate and that move
+//!   ([`Controller::seed`]), so a Kalman filter does not have to follow the catch transient,
+//!   which its linear model does not describe. Leaving the balance region
+//!   is a fall: swing up again or stop ([`OnFall`]). The region ends at `|α| > balance_angle`
+//!   and where the arm's stopping point, braked at the voltage bound
+//!   ([`crate::envelope`]'s stopping point, one period of latency with the balance
+//!   controller's last voltage acting, the whole deceleration (1) counted on), leaves `±arm_limit`, not only at `|θ| > arm_limit`: an arm that reaches the
+//!   limit still moving cannot be stopped there, while one handed to the swing-up law with
+//!   its stopping point inside is braked by the law's barrier (3), which asks for more than
+//!   the voltage bound gives outside its own envelope, so it brakes at the bound.
 //! - **Stopped** ([`StopCause`]): after [`SwingUpSettings::max_time`] in the swing-up, or a fall
 //!   with [`OnFall::Stop`]. The output is 0 V from then on.
 //!
@@ -137,6 +146,7 @@ pub use feasibility::{feasibility, Feasibility, Verdict};
 pub use settings::{OnFall, SwingUpSettings, MAX_SWING_UP_TIME};
 
 use crate::controller::{Controller, Phase, StepStatus, StopCause};
+use crate::envelope::StoppingModel;
 use crate::error::{Result, RipError};
 use crate::plant::Plant;
 
@@ -161,15 +171,22 @@ pub struct SwingUp<C> {
     settings: SwingUpSettings,
     law: EnergyLaw,
     mode: UnstableMode,
+    /// How far the arm still travels when braked at the voltage bound: the balance region
+    /// ends where that would take it beyond `arm_limit`.
+    stopping: StoppingModel,
     ts: f64,
     rates: RateEstimator,
     phase: Phase,
     /// Samples spent in the current swing-up.
     swing_samples: u64,
+    /// Samples since the catch (0 while swinging up).
+    balance_samples: u64,
     /// The arm reference held since the catch, and the external one at the catch.
     hold_reference: Option<(f64, f64)>,
     /// The last voltage the swing-up applied.
     u_swing: [f64; 1],
+    /// The last voltage the balance controller applied: it acts during the stop's latency.
+    u_balance: f64,
     /// What the current swing-up has done so far.
     report: SwingUpReport,
 }
@@ -202,14 +219,17 @@ impl<C: Controller> SwingUp<C> {
         let mut out = Self {
             law: EnergyLaw::new(plant, &settings, ts),
             mode,
+            stopping: StoppingModel::new(plant.params(), settings.max_voltage, 1.0, ts),
             rates: RateEstimator::new(ts, settings.rate_cutoff),
             balance,
             settings,
             ts,
             phase: Phase::SwingUp,
             swing_samples: 0,
+            balance_samples: 0,
             hold_reference: None,
             u_swing: [0.0],
+            u_balance: 0.0,
             report: SwingUpReport::start(0.0, 0.0, 0.0),
         };
         out.reset();
@@ -273,7 +293,9 @@ impl<C: Controller> SwingUp<C> {
 
     fn in_balance_region(&self) -> bool {
         let x = self.rates.state();
-        x[2].abs() <= self.settings.balance_angle && x[0].abs() <= self.settings.arm_limit
+        let limit = self.settings.arm_limit;
+        let stop = self.stopping.stopping_point(x[0], x[1], self.u_balance);
+        x[2].abs() <= self.settings.balance_angle && x[0].abs() <= limit && stop.abs() <= limit
     }
 
     /// One swing-up sample: the law's voltage, the balance estimator kept in step, the clock.
@@ -329,7 +351,16 @@ impl<C: Controller> SwingUp<C> {
             None => r[0],
         };
         let y_b = [y[0], wrap_angle(y[1])];
-        self.balance.step(&y_b, &[theta_ref, r[1]], u)
+        let status = self.balance.step(&y_b, &[theta_ref, r[1]], u);
+        self.u_balance = u[0];
+        // The handover (module docs, "Balance"): the swing-up's estimate carries the balance
+        // controller's estimator through the catch transient.
+        self.balance_samples += 1;
+        if (self.balance_samples as f64) * self.ts <= self.settings.handover_time {
+            let x = self.rates.state();
+            self.balance.seed(&[x[0], x[1], x[2], x[3]], &u[..1]);
+        }
+        status
     }
 }
 
@@ -352,6 +383,8 @@ impl<C: Controller> Controller for SwingUp<C> {
             Phase::SwingUp => {
                 if usable && self.in_catch_region() {
                     self.phase = Phase::Balance;
+                    self.balance_samples = 0;
+                    self.u_balance = self.u_swing[0];
                     self.hold_reference = Some((self.rates.state()[0], r[0]));
                     self.balance_step(y, r, u)
                 } else {
@@ -393,8 +426,10 @@ impl<C: Controller> Controller for SwingUp<C> {
         self.rates.reset();
         self.phase = Phase::SwingUp;
         self.swing_samples = 0;
+        self.balance_samples = 0;
         self.hold_reference = None;
         self.u_swing = [0.0];
+        self.u_balance = 0.0;
         self.start_report();
     }
 

@@ -56,8 +56,9 @@ pub struct SwingUpSettings {
     /// limit, inside the paper's 12 V).
     pub max_voltage: f64,
     /// The arm stays within `±arm_limit` (rad) during the swing-up, by the law itself; default
-    /// 1.5 rad, inside the ±π/2 that many rigs' cables allow. The balance region ends there
-    /// too.
+    /// 1.5 rad, inside the ±π/2 that many rigs' cables allow. The balance region ends where
+    /// braking could no longer stop the arm inside it (module docs, "Balance"), so a fall is
+    /// braked inside it too.
     pub arm_limit: f64,
     /// Braking deceleration `a_b` reserved for the arm limit, as a fraction of `a_s`;
     /// default 0.5 (half the stall acceleration is kept in hand for model errors, back-EMF and
@@ -127,6 +128,17 @@ pub struct SwingUpSettings {
     /// [`Controller::observe`]: crate::Controller::observe
     /// [`Controller::seed`]: crate::Controller::seed
     pub estimator_window: f64,
+    /// For this long (s) after the catch, the balance controller's estimator is restarted
+    /// every sample, once it has computed its move, from the swing-up's own estimate (the
+    /// measured angles and filtered differences) and that move ([`Controller::seed`]); its own
+    /// estimate takes over after it. Default 1 s: the catch transient (the pendulum 0.3 rad
+    /// from upright, the arm turning at up to 10 rad/s) is outside the range where the
+    /// Kalman filter's linear model holds, and the paper's slow filter, left to itself there,
+    /// was 0.1 rad and 4 rad/s off the pendulum's state within 0.2 s, which made LQG lose a
+    /// quarter of its catches; after 1 s the transient has died down. 0 hands over at once.
+    ///
+    /// [`Controller::seed`]: crate::Controller::seed
+    pub handover_time: f64,
     /// Longest swing-up (s) before giving up with
     /// [`StopCause::SwingUpTimeout`](crate::controller::StopCause); default 20 s, at most
     /// [`MAX_SWING_UP_TIME`].
@@ -157,6 +169,7 @@ impl Default for SwingUpSettings {
             reference_return_rate: 0.0,
             balance_angle: 0.6,
             estimator_window: 0.3,
+            handover_time: 1.0,
             max_time: 20.0,
             on_fall: OnFall::Retry,
         }
@@ -252,6 +265,7 @@ impl SwingUpSettings {
             false,
             true,
         )?;
+        in_range("handover_time", self.handover_time, 0.0, 10.0, false, false)?;
         in_range(
             "max_time",
             self.max_time,
