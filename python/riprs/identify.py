@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Dict, List, Sequence, Tuple, Union
 
 import numpy as np
+import tomllib
 
 from riprs._log_checks import MAX_GAP as MAX_GAP
 from riprs._log_checks import MIN_TRAINING_SAMPLES as MIN_TRAINING_SAMPLES
@@ -333,6 +334,52 @@ def identification_path(rig: PathLike) -> Path:
     """The identification file beside a rig file: ``rig.toml`` -> ``rig.identification.toml``."""
     path = Path(rig)
     return path.with_name(f"{path.stem}.identification.toml")
+
+
+def read_plant_covariance(rig: PathLike) -> Tuple[List[str], np.ndarray] | None:
+    """The ``[plant_covariance]`` of a rig: ``(names, matrix)``, the covariance (SI units) of
+    the ``[plant]`` parameters ``names`` that identification determined.
+
+    Read from the rig file's own ``[plant_covariance]`` table, else from the identification
+    file ``riprs identify`` wrote beside it (:func:`identification_path`). The one reader of
+    the format: ``riprs tune``, ``riprs campaign`` and ``riprs.envs`` draw rigs from it.
+
+    Returns
+    -------
+    tuple of (list of str, ndarray) or None
+        None when neither file holds the table, or when it names no parameter (an
+        identification that determined nothing).
+
+    Raises
+    ------
+    IdentifyError
+        A table without ``parameters`` and a square ``matrix`` of their size, naming the file.
+    """
+    path = Path(os.fspath(rig))
+    with path.open("rb") as f:
+        table = tomllib.load(f).get("plant_covariance")
+    beside = identification_path(path)
+    if table is None and beside.is_file():
+        path = beside
+        with beside.open("rb") as f:
+            table = tomllib.load(f).get("plant_covariance")
+    if table is None:
+        return None
+    try:
+        names = [str(n) for n in table["parameters"]]
+        matrix = np.array([[float(v) for v in row] for row in table["matrix"]], dtype=float)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise IdentifyError(
+            f"{path}: plant_covariance: needs parameters = [names] and matrix = [[...]]: {exc}"
+        ) from None
+    if not names:
+        return None
+    if matrix.shape != (len(names), len(names)):
+        raise IdentifyError(
+            f"{path}: plant_covariance: matrix must be {len(names)} x {len(names)} (one row and "
+            f"column per parameter), got shape {matrix.shape}"
+        )
+    return names, matrix
 
 
 def _toml_float(value: float) -> str:
@@ -705,4 +752,5 @@ __all__ = [
     "identify",
     "plot_fit",
     "read_lab",
+    "read_plant_covariance",
 ]

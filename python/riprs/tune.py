@@ -13,11 +13,11 @@ from pathlib import Path
 from typing import Dict, List, Tuple, Union
 
 import numpy as np
-import tomllib
 
 from riprs import _progress
 from riprs._riprs import (
     TS,
+    ConfigError,
     Spec,
     load_config,
     loop_margins,
@@ -26,6 +26,7 @@ from riprs._riprs import (
     tune_robustness,
     tune_weights,
 )
+from riprs.identify import IdentifyError, identification_path, read_plant_covariance
 
 __all__ = [
     "ControllerTuning",
@@ -380,23 +381,31 @@ def _header(path: Path | None) -> List[str]:
     return out
 
 
-def _covariance(path: Path | None) -> Tuple[List[str], np.ndarray] | None:
-    """``(names, log_covariance)`` of the identification file beside ``path``, if any."""
+def _covariance(path: Path | None, spec: Spec) -> Tuple[List[str], np.ndarray] | None:
+    """``(names, log_covariance)`` of the rig's ``[plant_covariance]``
+    (:func:`riprs.identify.read_plant_covariance`: the rig file's or its identification
+    file's), converted to the covariance of the parameters' logarithms at the file's values,
+    ``C_ij / (p_i p_j)`` (first order); a parameter at zero (a friction identified as none) is
+    held there."""
     if path is None:
         return None
-    side = path.with_name(f"{path.stem}.identification.toml")
-    if not side.exists():
+    try:
+        found = read_plant_covariance(path)
+    except IdentifyError as exc:
+        raise ConfigError(str(exc)) from None
+    if found is None:
         return None
-    with side.open("rb") as f:
-        data = tomllib.load(f)
-    cov = data.get("covariance", {})
-    names, matrix = cov.get("parameters"), cov.get("log_covariance")
-    if not names or matrix is None:
-        return None
-    m = np.asarray(matrix, dtype=float)
-    if m.shape != (len(names), len(names)):
-        return None
-    return list(names), m
+    names, matrix = found
+    values = spec.params.to_dict()
+    unknown = [n for n in names if n not in values]
+    if unknown:
+        raise ConfigError(
+            f"{identification_path(path)}: plant_covariance: {unknown[0]!r} is not a [plant] "
+            "parameter"
+        )
+    v = np.array([float(values[n]) for n in names])
+    scale = np.divide(1.0, v, out=np.zeros_like(v), where=v > 0)
+    return names, matrix * np.outer(scale, scale)
 
 
 def tune(
@@ -453,7 +462,7 @@ def tune(
     tuned, weights, works, assessments, tried, record = tune_weights(spec, Ts)
     if bar is not None:
         bar.update(1)
-    cov = _covariance(path)
+    cov = _covariance(path, spec)
     fractions: Dict[str, float] = {}
     if runs > 0:
         counts = {n: 0.0 for n in CONTROLLERS}

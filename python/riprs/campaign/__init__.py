@@ -30,6 +30,10 @@ design; ``noise_std`` and ``initial_tilt`` are short for ``sensor.noise_std`` an
 ``scale`` multiplies the base value and the result column holds the factor; ``range`` and
 ``values`` give the value itself, which the column holds.
 
+An axis ``name = "plant_covariance"`` with ``file = "rig.toml"`` and ``samples = N`` runs each
+of ``N`` rigs drawn from that identified rig's ``[plant_covariance]`` (the identification's
+uncertainty as the perturbation; its column holds the draw's number).
+
 Runs are numbered ``run = (c * P + p) * S + s`` for controller ``c``, grid point ``p`` (axes in
 spec order, the last varying fastest) and seed index ``s`` out of ``S``; run ``run`` uses noise
 seed ``seed + p * S + s``, the same for every controller (common random numbers, so controllers

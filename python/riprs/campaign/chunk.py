@@ -114,7 +114,7 @@ def compute_chunk(
         columns[name] = np.empty(n, dtype=bool if name in ("fell", "diverged") else np.float64)
 
     settings = campaign.setting_axes()
-    plant_axes = [a for a in campaign.axes if a.parameter is not None]
+    plant_axes = [a for a in campaign.axes if a.parameter is not None or a.draws is not None]
     designs: dict[tuple[int, ...], tuple[Any, FurutaParams, dict[str, Any]]] = {}
     # Segment boundaries: where the controller or the grid point changes.
     cut = np.flatnonzero((np.diff(idx["controller"]) != 0) | (np.diff(idx["point"]) != 0)) + 1
@@ -130,6 +130,10 @@ def compute_chunk(
             nominal = params.to_dict()
             changes = {}
             for ax in plant_axes:
+                if ax.draws is not None:  # a rig drawn from an identification's covariance
+                    draw = ax.draws[idx[f"axis:{ax.name}"][a]]
+                    changes.update(zip(ax.draw_names, map(float, draw), strict=True))
+                    continue
                 v = float(ax.values[idx[f"axis:{ax.name}"][a]])
                 assert ax.parameter is not None
                 changes[ax.parameter] = nominal[ax.parameter] * v if ax.relative else v

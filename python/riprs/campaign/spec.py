@@ -132,7 +132,13 @@ class Axis:
         Whether :attr:`values` are factors on the base value (``scale``) or values (``range``,
         ``values``).
     values : ndarray
-        The axis values, as stored in the result column.
+        The axis values, as stored in the result column (for a ``plant_covariance`` axis: the
+        draw's number).
+    draws : ndarray or None
+        For a ``plant_covariance`` axis, shape ``(samples, len(draw_names))``: the plant
+        parameters of each drawn rig (SI units).
+    draw_names : tuple of str
+        The ``[plant]`` names of :attr:`draws`' columns.
     """
 
     name: str
@@ -140,6 +146,8 @@ class Axis:
     parameter: str | None
     relative: bool
     values: np.ndarray
+    draws: np.ndarray | None = None
+    draw_names: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return len(self.values)
@@ -264,7 +272,7 @@ def load_spec(spec: PathLike | Mapping[str, Any]) -> Campaign:
                 f"{path}: invalid TOML: arrays or tables nested too deeply"
             ) from None
     try:
-        return _parse(data)
+        return _parse(data, os.path.dirname(os.path.abspath(path)))
     except RiprsError as exc:
         raise type(exc)(f"{path}: {exc}") from None
 
@@ -277,10 +285,15 @@ _IGNORED_TOP = {
 # would label columns with values that change nothing.
 _NO_EFFECT = {"reference.duration": "set the run length with campaign.duration"}
 _CAMPAIGN_KEYS = ("axis", "chunk_size", "controllers", "duration", "seed", "seeds", "settle_band")
-_AXIS_KEYS = ("name", "points", "range", "samples", "scale", "values")
+_AXIS_KEYS = ("file", "name", "points", "range", "samples", "scale", "values")
+#: The name of the axis whose points are rigs drawn from an identification's covariance.
+COVARIANCE_AXIS = "plant_covariance"
+#: Draws of a ``plant_covariance`` axis tried per sample before the covariance is refused (a
+#: draw that is not a valid plant, e.g. a negative friction, is drawn again).
+MAX_REDRAWS = 100
 
 
-def _parse(data: dict[str, Any]) -> Campaign:
+def _parse(data: dict[str, Any], base_dir: str = ".") -> Campaign:
     if "campaign" not in data:
         raise CampaignError("missing [campaign] section (see `riprs campaign --example`)")
     section = data["campaign"]
@@ -332,7 +345,10 @@ def _parse(data: dict[str, Any]) -> Campaign:
     raw_axes = section.get("axis", [])
     if not isinstance(raw_axes, list):
         raise CampaignError("campaign.axis must be an array of tables ([[campaign.axis]])")
-    axes = [_parse_axis(a, f"campaign.axis[{i}]", i, seed, base) for i, a in enumerate(raw_axes)]
+    axes = [
+        _parse_axis(a, f"campaign.axis[{i}]", i, seed, base, base_dir)
+        for i, a in enumerate(raw_axes)
+    ]
     for i, axis in enumerate(axes):
         for a in axes[:i]:
             if _overlap(a, axis):
@@ -346,6 +362,9 @@ def _parse(data: dict[str, Any]) -> Campaign:
 
     hashed = copy.deepcopy(data)
     hashed["campaign"].pop("chunk_size", None)  # chunking never changes a result
+    for i, axis in enumerate(axes):
+        if axis.draws is not None:  # the drawn rigs, not only the file's name, fix the runs
+            hashed["campaign"]["axis"][i]["draws"] = axis.draws.tolist()
     spec_hash = hashlib.sha256(
         json.dumps(hashed, sort_keys=True, separators=(",", ":"), default=str).encode()
     ).hexdigest()
@@ -379,7 +398,9 @@ def _parse(data: dict[str, Any]) -> Campaign:
     return campaign
 
 
-def _parse_axis(raw: Any, key: str, index: int, seed: int, base: Any) -> Axis:
+def _parse_axis(
+    raw: Any, key: str, index: int, seed: int, base: Any, base_dir: str = "."
+) -> Axis:
     if not isinstance(raw, dict):
         raise CampaignError(f"{key} must be a table, got {raw!r}")
     unknown = sorted(set(raw) - set(_AXIS_KEYS))
@@ -390,6 +411,10 @@ def _parse_axis(raw: Any, key: str, index: int, seed: int, base: Any) -> Axis:
     name = raw.get("name")
     if not isinstance(name, str) or not name:
         raise CampaignError(f"{key}.name must be a string, got {name!r}")
+    if name == COVARIANCE_AXIS:
+        return _covariance_axis(raw, key, index, seed, base, base_dir)
+    if "file" in raw:
+        raise CampaignError(f"{key}.file goes with name = {COVARIANCE_AXIS!r} only")
     parameter = name if name in PLANT_PARAMETERS else None
     path = None if parameter else ALIASES.get(name, name)
     base_value: Any = None
@@ -465,6 +490,81 @@ def _parse_axis(raw: Any, key: str, index: int, seed: int, base: Any) -> Axis:
     return Axis(name=name, path=path, parameter=parameter, relative=relative, values=array)
 
 
+def _covariance_axis(
+    raw: dict[str, Any], key: str, index: int, seed: int, base: Any, base_dir: str
+) -> Axis:
+    """A ``plant_covariance`` axis: ``samples`` rigs drawn from the ``[plant_covariance]`` of
+    ``file`` (:func:`riprs.identify.read_plant_covariance`), ``[plant] + N(0, matrix)`` on the
+    named parameters, a draw that is not a valid plant drawn again (as ``riprs.envs`` draws)."""
+    from riprs._riprs import Plant
+    from riprs.identify import IdentifyError, read_plant_covariance
+
+    extra = sorted(set(raw) - {"name", "samples", "file"})
+    if extra:
+        raise CampaignError(
+            f"{key}.{extra[0]}: a {COVARIANCE_AXIS} axis takes file and samples only"
+        )
+    if "samples" not in raw:
+        raise CampaignError(f"{key} needs samples (the number of rigs drawn)")
+    n = _int(raw["samples"], f"{key}.samples", 1)
+    if n > 100_000:
+        raise CampaignError(f"{key}.samples must be at most 100000, got {n}")
+    file = raw.get("file")
+    if not isinstance(file, str) or not file:
+        raise CampaignError(
+            f"{key}.file must name the identified rig file (or its .identification.toml), "
+            f"got {file!r}"
+        )
+    path = os.path.join(base_dir, file)
+    if not os.path.isfile(path):
+        raise CampaignError(f"{key}.file: {path} does not exist")
+    try:
+        found = read_plant_covariance(path)
+    except IdentifyError as exc:
+        raise CampaignError(f"{key}.file: {exc}") from None
+    if found is None:
+        raise CampaignError(
+            f"{key}.file: {path} holds no [plant_covariance], nor does an identification file "
+            "beside it (riprs identify writes one)"
+        )
+    names, matrix = found
+    for name in names:
+        if name not in PLANT_PARAMETERS:
+            raise CampaignError(f"{key}.file: {path}: {name!r} is not a [plant] parameter")
+    # A symmetric square root that allows a semi-definite matrix (a parameter held at zero).
+    w, v = np.linalg.eigh(0.5 * (matrix + matrix.T))
+    if not (np.all(np.isfinite(w)) and w.min() >= -1e-9 * max(w.max(), 0.0)):
+        raise CampaignError(f"{key}.file: {path}: plant_covariance is not a covariance matrix")
+    root = v * np.sqrt(np.clip(w, 0.0, None))
+    nominal = base.params.to_dict()
+    mean = np.array([float(nominal[name]) for name in names])
+    rng = np.random.default_rng([seed, index])
+    draws = np.empty((n, len(names)))
+    for i in range(n):
+        for _ in range(MAX_REDRAWS):
+            x = mean + root @ rng.standard_normal(len(names))
+            try:
+                Plant(base.params.replace(**dict(zip(names, map(float, x), strict=True))))
+            except (RiprsError, ValueError):
+                continue
+            draws[i] = x
+            break
+        else:
+            raise CampaignError(
+                f"{key}.file: {path}: {MAX_REDRAWS} draws in a row from plant_covariance are "
+                "not valid plants; the covariance is too wide for this rig"
+            )
+    return Axis(
+        name=COVARIANCE_AXIS,
+        path=None,
+        parameter=None,
+        relative=False,
+        values=np.arange(n, dtype=np.float64),
+        draws=draws,
+        draw_names=tuple(names),
+    )
+
+
 _PATH = re.compile(r"^([A-Za-z_]\w*)\.([A-Za-z_]\w*)(?:\[(\d+)\])?$")
 
 
@@ -495,6 +595,9 @@ def _resolve(base: Any, path: str, key: str) -> Any:
 def _overlap(a: Axis, b: Axis) -> bool:
     """Whether two axes change the same setting (a list setting and one of its entries, or the
     same entry) or the same plant parameter."""
+    if a.draws is not None or b.draws is not None:
+        changed = [set(x.draw_names) | ({x.parameter} if x.parameter else set()) for x in (a, b)]
+        return bool(changed[0] & changed[1])
     if a.path is None or b.path is None:
         return a.parameter is not None and a.parameter == b.parameter
     ma, mb = _PATH.match(a.path), _PATH.match(b.path)

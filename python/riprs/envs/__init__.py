@@ -34,7 +34,7 @@ except ImportError as exc:  # pragma: no cover - exercised only without the extr
 
 from riprs import _riprs
 from riprs._riprs import FurutaParams, InvalidParameterError, Plant, Spec, load_config
-from riprs.identify import identification_path
+from riprs.identify import IdentifyError, read_plant_covariance
 from riprs.log import RtLog, load_log
 
 if sys.version_info >= (3, 11):
@@ -69,25 +69,15 @@ _SEED_LIMIT = 2**63
 
 
 def _covariance_from_file(path: str) -> tuple[list[str], list[list[float]]] | None:
-    """The ``[plant_covariance]`` table (``parameters``, ``matrix``) of a rig file, or else of
-    the identification file ``riprs identify`` wrote beside it, if any."""
-    with open(path, "rb") as f:
-        table = tomllib.load(f).get("plant_covariance")
-    beside = identification_path(path)
-    if table is None and beside.is_file():
-        path = str(beside)
-        with open(beside, "rb") as f:
-            table = tomllib.load(f).get("plant_covariance")
-        if table is not None and not table.get("parameters"):
-            return None  # an identification that determined nothing: no draws from it
-    if table is None:
-        return None
+    """The ``[plant_covariance]`` of a rig file, or else of the identification file beside it
+    (:func:`riprs.identify.read_plant_covariance`, the one reader of the format)."""
     try:
-        return list(table["parameters"]), [list(map(float, r)) for r in table["matrix"]]
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InvalidParameterError(
-            f"{path}: plant_covariance: needs parameters = [names] and matrix = [[...]]: {exc}"
-        ) from None
+        found = read_plant_covariance(path)
+    except IdentifyError as exc:
+        raise InvalidParameterError(str(exc)) from None
+    if found is None:
+        return None
+    return found[0], found[1].tolist()
 
 
 def _spec_of(config: ConfigLike) -> tuple[Spec, tuple[list[str], list[list[float]]] | None]:

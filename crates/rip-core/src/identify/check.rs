@@ -200,31 +200,45 @@ pub(super) fn verdict(v: &Verdict<'_>) -> (Vec<String>, bool) {
             ));
         }
     }
+    let swing = widest_free_swing(v.logs, v.names);
     for (e, entry) in LINEAR_ENTRIES.iter().enumerate() {
         let rse = v.linear_rse[e];
-        let damping = e == 2 || e == 6;
-        let limit = if damping {
-            MAX_DAMPING_RSE
-        } else {
-            MAX_ENTRY_RSE
-        };
-        if rse.is_nan() || rse > limit {
+        if rse.is_nan() || rse > MAX_ENTRY_RSE {
             uncertain += 1;
+            let advice = match e {
+                2 | 6 => match &swing {
+                    Some((name, peak, ..)) if *peak > std::f64::consts::PI => format!(
+                        "the pendulum's damping is not determined: the free swing {name} goes \
+                         over the top (the pendulum turns {peak:.1} rad from hanging); record \
+                         one with a smaller --kick or --amplitude that swings to about \
+                         {MIN_DAMPING_SWING} rad without going over"
+                    ),
+                    Some((name, peak, kick, volts)) => format!(
+                        "the pendulum's damping is not determined: the free swing {name} (a kick \
+                         of {volts:.1} V for {kick:.2} s) peaks at {peak:.2} rad from hanging; \
+                         record one that swings wider, to about {MIN_DAMPING_SWING} rad without \
+                         going over the top: rip-rt excite --signal free-swing --amplitude \
+                         {volts:.1} --kick {:.2} --duration 60 (the swing grows about as the \
+                         kick). A longer swing does not help as much: the decay is read against \
+                         the encoders' quantum",
+                        kick * (MIN_DAMPING_SWING / peak).clamp(1.2, 2.0)
+                    ),
+                    None => format!(
+                        "the pendulum's damping is not determined: add a free swing that swings \
+                         to about {MIN_DAMPING_SWING} rad from hanging (rip-rt excite --signal \
+                         free-swing --amplitude 6 --kick 0.3 --duration 60)"
+                    ),
+                },
+                1 | 5 => "add a free-swing log (the pendulum's frequency)".to_string(),
+                _ => "add a chirp or PRBS run with more amplitude (motor and arm)".to_string(),
+            };
             out.push(format!(
                 "{entry} of the upright linearisation has a relative standard error of {:.2} % \
-                 (at most {} %, so that it is known within {} % at two standard errors): {}",
+                 (at most {} %, so that it is known within {} % at two standard errors): \
+                 {advice}",
                 100.0 * rse,
-                100.0 * limit,
-                200.0 * limit,
-                match e {
-                    2 | 6 => {
-                        "the pendulum's damping is not determined; record a longer free swing \
-                         (rip-rt excite --signal free-swing --duration 60, a larger --amplitude), \
-                         until the pendulum nearly comes to rest"
-                    }
-                    1 | 5 => "add a free-swing log (the pendulum's frequency)",
-                    _ => "add a chirp or PRBS run with more amplitude (motor and arm)",
-                }
+                100.0 * MAX_ENTRY_RSE,
+                200.0 * MAX_ENTRY_RSE,
             ));
         }
     }
@@ -272,4 +286,38 @@ pub(super) fn verdict(v: &Verdict<'_>) -> (Vec<String>, bool) {
     }
     let restartable = out.len() > uncertain;
     (out, restartable)
+}
+
+/// The log with the widest free swing: its name, its peak (rad from hanging, over its coast:
+/// the largest deviation of the pendulum angle from its median there, the rest position), and
+/// its kick's half length (s) and voltage (from the voltage before the coast); `None` without
+/// a coast.
+fn widest_free_swing(logs: &[LogData], names: &[String]) -> Option<(String, f64, f64, f64)> {
+    let mut best: Option<(String, f64, f64, f64)> = None;
+    for (l, log) in logs.iter().enumerate() {
+        let end = log.u.len();
+        let c = super::coast_start(log, end);
+        if c >= end {
+            continue;
+        }
+        let mut alpha: Vec<f64> = log.y[c..].iter().map(|y| y[1]).collect();
+        let mid = alpha.len() / 2;
+        let (_, rest, _) = alpha.select_nth_unstable_by(mid, f64::total_cmp);
+        let rest = *rest;
+        let peak = log.y[c..]
+            .iter()
+            .map(|y| (y[1] - rest).abs())
+            .fold(0.0, f64::max);
+        let driven = log.u[..c].iter().filter(|u| **u != 0.0).count();
+        let kick = 0.5 * driven as f64 * log.ts;
+        let volts = log.u[..c].iter().map(|u| u.abs()).fold(0.0, f64::max);
+        if best.as_ref().map_or(true, |b| peak > b.1) {
+            let name = names
+                .get(l)
+                .cloned()
+                .unwrap_or_else(|| format!("logs[{l}]"));
+            best = Some((name, peak, kick, volts));
+        }
+    }
+    best
 }

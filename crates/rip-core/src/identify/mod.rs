@@ -48,6 +48,13 @@
 //! pendulum's simulation error from piling up over a long log, and free initial states keep
 //! noisy rate estimates from biasing the parameters).
 //!
+//! A free swing's coast (a stretch of exactly 0 V of at least [`MIN_COAST`] seconds to the end
+//! of the log's training part) is then fitted in longer segments, [`COAST_SEGMENTS`] in turn:
+//! a segment's free initial state absorbs the decay before it, so with short segments the
+//! damping is seen only within each, and a pendulum with a decay time of a minute decays by a
+//! few per cent in two seconds. Over the whole coast the swing's decay is one curve. (Each
+//! stage's frequency is close enough that the next, longer one stays within its basin.)
+//!
 //! # Method
 //!
 //! Levenberg–Marquardt on `log p` (positivity), projected onto bounds `[10⁻⁴ p₀, 10³ p₀]`
@@ -109,13 +116,13 @@
 //!   beyond that means the fixed values are not the rig's);
 //! - the dead zone is at most [`MAX_DEAD_ZONE_FRACTION`] of the logs' 95th percentile of `|u|`;
 //! - every entry of the continuous upright `[A B]` that is not a structural zero
-//!   ([`LINEAR_ENTRIES`]) has a relative standard error of at most [`MAX_ENTRY_RSE`] (the
-//!   pendulum-damping entries `A[1][3]`, `A[3][3]`: [`MAX_DAMPING_RSE`]), and the unstable
-//!   eigenvalue one of at most [`MAX_EIGENVALUE_RSE`], by the delta method `var f = ∇fᵀ Σ ∇f`
-//!   (`Σ` the covariance of `log p`, `∇f` by central differences): at two standard errors,
-//!   within 2 % (damping 10 %) and 1 %. A model that passes is known to that precision, not
-//!   merely fitted; a pendulum damped so lightly that the logs' free swing does not show its
-//!   decay is refused with the longer free swing that would determine it.
+//!   ([`LINEAR_ENTRIES`]) has a relative standard error of at most [`MAX_ENTRY_RSE`], the
+//!   pendulum-damping entries `A[1][3]`, `A[3][3]` included, and the unstable eigenvalue one of
+//!   at most [`MAX_EIGENVALUE_RSE`], by the delta method `var f = ∇fᵀ Σ ∇f` (`Σ` the
+//!   covariance of `log p`, `∇f` by central differences): at two standard errors, within 2 %
+//!   and 1 %. A model that passes is known to that precision, not merely fitted; a pendulum
+//!   whose free swing does not determine its damping is refused with the free swing that
+//!   would (a wider swing, [`MIN_DAMPING_SWING`], naming the peak the logs reached).
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
@@ -148,6 +155,22 @@ pub const NOT_IDENTIFIABLE_RSE: f64 = 0.5;
 
 /// Segment length (s) of the first, continuation stage (module docs).
 pub const SHORT_SEGMENT: f64 = 0.5;
+
+/// Segment lengths (s) of the last continuation stages over a free swing's coast (module
+/// docs): each stage's frequency error leaves the next one's phase drift well inside a cycle.
+pub const COAST_SEGMENTS: [f64; 2] = [8.0, 60.0];
+
+/// Least peak swing (rad from hanging) of a free swing's coast that the verdict's advice asks
+/// for when the pendulum's damping is not determined. The damping is read from the decay of
+/// the swing against the encoders' quantisation and noise, whose error repeats cycle after
+/// cycle of a nearly periodic swing: a longer swing adds little, a wider one shrinks the error
+/// relative to the swing. On the envelope's most lightly damped rigs a kick of 6 V for 0.3 s
+/// (peaks of 0.9–2 rad) brings the entries to about 1 %, the default kick's 0.2–0.7 rad to 2–5 %.
+pub const MIN_DAMPING_SWING: f64 = 1.5;
+
+/// Least length (s) of a log's stretch at exactly 0 V, to its training part's end, that counts
+/// as a free swing's coast (and is fitted in the longer segments of [`COAST_SEGMENTS`]).
+pub const MIN_COAST: f64 = 5.0;
 
 /// Largest accepted [`IdentifyOptions::max_iterations`].
 pub const MAX_ITERATIONS: usize = 500;
@@ -187,15 +210,10 @@ pub const MAX_DEAD_ZONE_FRACTION: f64 = 0.6;
 
 /// Largest relative standard error of an entry of the continuous upright `[A B]`
 /// ([`LINEAR_ENTRIES`], by the delta method from the covariance) for the result to be trusted:
-/// at two standard errors the entry is then known within 2 %.
+/// at two standard errors the entry is then known within 2 %. The pendulum-damping entries
+/// `A[1][3]`, `A[3][3]` (set by `dp`) are held to it too; they need a free swing that swings
+/// wide ([`MIN_DAMPING_SWING`]).
 pub const MAX_ENTRY_RSE: f64 = 0.01;
-
-/// Largest relative standard error of the pendulum-damping entries `A[1][3]`, `A[3][3]` (set
-/// by `dp` alone) for the result to be trusted: within 10 % at two standard errors. Looser than
-/// [`MAX_ENTRY_RSE`] because a lightly damped pendulum (a decay time of a minute or more, much of
-/// the envelope) shows too little of its decay in a minute's free swing to do better; these
-/// entries are the smallest of the model and the controllers' least sensitive.
-pub const MAX_DAMPING_RSE: f64 = 0.05;
 
 /// Largest relative standard error of the upright linearisation's unstable eigenvalue for the
 /// result to be trusted (within 1 % at two standard errors).
@@ -405,21 +423,51 @@ fn output_scales(logs: &[LogData]) -> Result<[f64; 2]> {
     Ok(w)
 }
 
-/// The training segments of `seg_len` samples, starting from the initial states of
-/// `previous` where a segment starts at the same sample, else from the measured state.
+/// First sample of `log`'s coast: from it to the end of the training part (`train` samples)
+/// the voltage is exactly 0 V (a free swing after its kick), for at least [`MIN_COAST`]
+/// seconds; `train` when the log has no such coast.
+pub(super) fn coast_start(log: &LogData, train: usize) -> usize {
+    let c = log.u[..train]
+        .iter()
+        .rposition(|&u| u != 0.0)
+        .map_or(0, |k| k + 1);
+    if (train - c) as f64 * log.ts >= MIN_COAST {
+        c
+    } else {
+        train
+    }
+}
+
+/// The training segments: `seg_len` samples each, but `coast_len` in a log's coast
+/// ([`coast_start`]; a coast that starts within `seg_len` of the log's start takes the whole
+/// log), each starting from the initial state of `previous` where a segment starts at the same
+/// sample, else from the measured state.
 fn segments_of(
     logs: &[LogData],
     holdout: f64,
     seg_len: usize,
+    coast_len: usize,
     previous: &[Segment],
 ) -> Vec<Segment> {
     let mut segments = Vec::new();
     for (l, log) in logs.iter().enumerate() {
         let train = ((1.0 - holdout) * log.u.len() as f64).floor() as usize;
-        let count = (train / seg_len).max(1);
-        for s in 0..count {
-            let k0 = s * seg_len;
-            let n = if s + 1 == count { train - k0 } else { seg_len };
+        let mut coast = coast_start(log, train);
+        if coast < seg_len {
+            coast = 0;
+        }
+        let mut pieces = Vec::new();
+        for (from, to, len) in [(0, coast, seg_len), (coast, train, coast_len)] {
+            if to <= from {
+                continue;
+            }
+            let count = ((to - from) / len).max(1);
+            for s in 0..count {
+                let k0 = from + s * len;
+                pieces.push((k0, if s + 1 == count { to - k0 } else { len }));
+            }
+        }
+        for (k0, n) in pieces {
             let x0 = previous
                 .iter()
                 .find(|p| p.log == l && p.k0 == k0)
@@ -473,17 +521,26 @@ fn fit(
         cancel,
     };
     // Continuation: short segments first (their criterion has fewer local minima, the
-    // simulation error has no time to pile up), then the requested length from there.
+    // simulation error has no time to pile up), then the requested length from there, then
+    // longer segments over the free swings' coasts: a segment's free initial state absorbs
+    // the decay before it, so the pendulum's damping is seen only within segments, and a
+    // lightly damped pendulum decays too little in a few seconds to determine it.
     let short = ((SHORT_SEGMENT / ts).round() as usize).max(20);
-    let stages: &[usize] = if short < seg_len {
-        &[short, seg_len]
-    } else {
-        &[seg_len]
-    };
+    let mut stages: Vec<(usize, usize)> = Vec::new();
+    if short < seg_len {
+        stages.push((short, short));
+    }
+    stages.push((seg_len, seg_len));
+    for coast in COAST_SEGMENTS {
+        let len = (coast / ts).round() as usize;
+        if len > seg_len {
+            stages.push((seg_len, len));
+        }
+    }
     let mut segments: Vec<Segment> = Vec::new();
     let (mut iterations, mut converged, mut cost) = (0, false, f64::INFINITY);
-    for &len in stages {
-        segments = segments_of(logs, options.holdout, len, &segments);
+    for &(len, coast) in &stages {
+        segments = segments_of(logs, options.holdout, len, coast, &segments);
         let stage = solve::stage(&cx, &mut segments, &mut logp)?;
         iterations += stage.iterations;
         converged = stage.converged;

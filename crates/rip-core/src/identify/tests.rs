@@ -200,12 +200,18 @@ fn a_held_out_part_at_rest_is_not_scored() {
 /// An excitation run of `rig` from hanging at rest as `rip-rt excite` drives it (module
 /// docs of [`crate::excitation`]), through the rig's encoders and angle noise.
 pub(crate) fn rig_run(rig: &crate::rig::Rig, signal: Signal, seed: u64) -> LogData {
+    rig_run_kicked(rig, signal, seed, 0.3)
+}
+
+/// [`rig_run`] with a free swing's kick of `kick` seconds.
+fn rig_run_kicked(rig: &crate::rig::Rig, signal: Signal, seed: u64, kick: f64) -> LogData {
     let ts = 0.01;
     let plant = Plant::new(rig.params).unwrap();
     let mut settings = ExcitationSettings::new(signal);
     if signal == Signal::FreeSwing {
         settings.duration = 60.0;
         settings.amplitude = 6.0;
+        settings.kick = kick;
     } else {
         settings.duration = 30.0;
         settings.amplitude = 2.5;
@@ -287,7 +293,7 @@ pub(crate) fn linear_error(got: &FurutaParams, truth: &FurutaParams) -> (f64, f6
 }
 
 /// The excitation the docs' rig path records: a chirp and a PRBS run of 30 s at 2.5 V, and a
-/// free swing of 60 s after a 6 V kick.
+/// free swing of 60 s after a kick of 6 V for 0.3 s (a wide swing, for the damping).
 pub(crate) fn rig_logs(rig: &crate::rig::Rig, seed: u64) -> [LogData; 3] {
     [
         rig_run(rig, Signal::Chirp, 10 * seed + 1),
@@ -296,17 +302,57 @@ pub(crate) fn rig_logs(rig: &crate::rig::Rig, seed: u64) -> [LogData; 3] {
     ]
 }
 
-/// Rigs of the shared generator across the envelope: from the lab file's values every trusted
-/// result meets the bar (every non-structural-zero entry of the continuous [A B] within 2 %,
-/// the unstable eigenvalue within 1 %), and so does every trusted result from the default
-/// start; a refusal names what to add or measure. The pendulum-damping entries have the
-/// verdict's looser bar of 10 % ([`MAX_DAMPING_RSE`]). Prints the table of errors.
+/// The `--kick` of the wider free swing a problem of the verdict asks for, if it asks for one.
+fn advised_kick(problem: &str) -> Option<f64> {
+    let rest = &problem[problem.find("swings wider")?..];
+    let after = &rest[rest.find("--kick ")? + "--kick ".len()..];
+    after.split_whitespace().next()?.parse().ok()
+}
+
+/// Of [`envelope_rigs`], how many at least are trusted from their lab file (with the verdict's
+/// remedy where it asks for a wider free swing): 9 of the 10 measure trusted from the first
+/// logs, the tenth (seed 4, a lightly damped pendulum) asks for the wider swing.
+const MIN_TRUSTED_FROM_LAB: usize = 9;
+
+/// The rigs of [`rigs_across_the_envelope_meet_the_bar_or_are_refused`]: eight of the shared
+/// generator and both presets (2048-count encoders, 0.5 mrad of noise).
+fn envelope_rigs() -> Vec<crate::rig::Rig> {
+    let mut rigs: Vec<_> = (1..=8u64).map(crate::rig::Rig::random).collect();
+    // RIPRS_ENVELOPE_SEEDS=4,6 runs only those (to look into one rig).
+    if let Ok(only) = std::env::var("RIPRS_ENVELOPE_SEEDS") {
+        let only: Vec<u64> = only
+            .split(',')
+            .filter_map(|v| v.trim().parse().ok())
+            .collect();
+        rigs.retain(|r| only.contains(&r.seed));
+        return rigs;
+    }
+    for (seed, params) in [
+        (101, FurutaParams::paper()),
+        (102, FurutaParams::qube_servo2()),
+    ] {
+        rigs.push(crate::rig::Rig {
+            seed,
+            params,
+            encoder_counts: [2048, 2048],
+            noise_std: [5e-4, 5e-4],
+        });
+    }
+    rigs
+}
+
+/// Rigs of the shared generator across the envelope and both presets: every trusted result,
+/// from the lab file's values or from the default start, meets the bar (every
+/// non-structural-zero entry of the continuous [A B] within 2 %, the pendulum-damping entries
+/// included, the unstable eigenvalue within 1 %); a refusal names what to add or measure.
+/// Prints the table of errors.
 #[test]
 fn rigs_across_the_envelope_meet_the_bar_or_are_refused() {
     let cancel = AtomicBool::new(false);
-    let mut trusted_from_lab = 0;
-    for seed in 1..=8u64 {
-        let rig = crate::rig::Rig::random(seed);
+    let mut trusted_from_lab = Vec::new();
+    let mut trusted_after_remedy = Vec::new();
+    for rig in envelope_rigs() {
+        let seed = rig.seed;
         let logs = rig_logs(&rig, seed);
         let names = vec!["chirp".into(), "prbs".into(), "free-swing".into()];
         let lab = IdentifyOptions {
@@ -353,8 +399,8 @@ fn rigs_across_the_envelope_meet_the_bar_or_are_refused() {
                 })
                 .fold(0.0, f64::max);
             eprintln!(
-                "rig {seed} {what}: {} [A B] {:.3} % (damping {:.3} %), eigenvalue {:.3} %, \
-                 [A_d B_d] {:.3} %, {} starts, {:.1} s{}",
+                "rig {seed} {what}: {} [A B] {:.3} % (damping {:.3} %, its rse {:.2} %), \
+                 eigenvalue {:.3} %, [A_d B_d] {:.3} %, {} starts, {:.1} s{}",
                 if r.problems.is_empty() {
                     "trusted"
                 } else {
@@ -362,6 +408,7 @@ fn rigs_across_the_envelope_meet_the_bar_or_are_refused() {
                 },
                 100.0 * worst,
                 100.0 * each[3].max(each[8]),
+                100.0 * r.linear_rse[2].max(r.linear_rse[6]),
                 100.0 * eig,
                 100.0 * worst_d,
                 r.starts,
@@ -373,23 +420,56 @@ fn rigs_across_the_envelope_meet_the_bar_or_are_refused() {
                 }
             );
             if r.problems.is_empty() {
-                // The damping column (each[3], each[8]) has the verdict's looser bar.
-                let others = (0..10)
-                    .filter(|&i| i != 3 && i != 8)
-                    .map(|i| each[i])
-                    .fold(0.0, f64::max);
-                let damping = each[3].max(each[8]);
                 assert!(
-                    others < 0.02 && damping < 0.1 && eig < 0.01,
-                    "rig {seed} {what}: {others} {damping} {eig}"
+                    worst < 0.02 && eig < 0.01,
+                    "rig {seed} {what}: trusted, [A B] {worst}, eigenvalue {eig}"
                 );
-                trusted_from_lab += usize::from(what == "lab");
+                if what == "lab" {
+                    trusted_from_lab.push(seed);
+                }
+            } else if let Some(kick) = (what == "lab")
+                .then(|| r.problems.iter().find_map(|p| advised_kick(p)))
+                .flatten()
+            {
+                // The verdict's remedy: the free swing it names, with a longer kick.
+                let mut wider = logs.clone();
+                wider[2] = rig_run_kicked(&rig, Signal::FreeSwing, 10 * seed + 4, kick);
+                let again = identify(&wider, o, &cancel).unwrap();
+                let (worst, eig, each) = linear_error(&again.params, &rig.params);
+                eprintln!(
+                    "rig {seed} lab, free swing kicked {kick} s: {} [A B] {:.3} % (damping {:.3} %, its \
+                     rse {:.2} %), eigenvalue {:.3} %{}",
+                    if again.problems.is_empty() {
+                        "trusted"
+                    } else {
+                        "refused"
+                    },
+                    100.0 * worst,
+                    100.0 * each[3].max(each[8]),
+                    100.0 * again.linear_rse[2].max(again.linear_rse[6]),
+                    100.0 * eig,
+                    if again.problems.is_empty() {
+                        String::new()
+                    } else {
+                        format!(": {}", again.problems.join(" | "))
+                    }
+                );
+                if again.problems.is_empty() {
+                    assert!(
+                        worst < 0.02 && eig < 0.01,
+                        "rig {seed}, wider swing: trusted, [A B] {worst}, eigenvalue {eig}"
+                    );
+                    trusted_after_remedy.push(seed);
+                }
             }
         }
     }
+    eprintln!("trusted from the lab file after the verdict's remedy: {trusted_after_remedy:?}");
+    eprintln!("trusted from the lab file: {trusted_from_lab:?}");
+    let filtered = std::env::var("RIPRS_ENVELOPE_SEEDS").is_ok();
     assert!(
-        trusted_from_lab >= 7,
-        "{trusted_from_lab} of 8 trusted from the lab file"
+        filtered || trusted_from_lab.len() + trusted_after_remedy.len() >= MIN_TRUSTED_FROM_LAB,
+        "trusted from the lab file: {trusted_from_lab:?}, after the remedy {trusted_after_remedy:?}"
     );
 }
 
