@@ -327,9 +327,7 @@ impl RestCheck {
     }
 }
 
-fn wrap_angle(a: f64) -> f64 {
-    rip_core::swingup::wrap_angle(a)
-}
+use rip_core::trig::wrap_angle;
 
 #[cfg(test)]
 mod tests {

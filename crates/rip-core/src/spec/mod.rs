@@ -29,6 +29,7 @@ mod assembly;
 mod controllers;
 pub mod rig_sections;
 mod sections;
+pub mod study;
 
 use std::fmt;
 use std::path::Path;
