@@ -180,3 +180,58 @@ def test_a_bad_value_names_its_key(key: str, tmp_path: Path) -> None:
     with pytest.raises(riprs.ConfigError) as info:
         load_config(f)
     assert f"{f}: {key}" in str(info.value), str(info.value)
+
+
+def _change(key: str, value: str) -> dict[str, Any]:
+    v = tomllib.loads(f"v = {value}")["v"]
+    if "." not in key:
+        return {key: v}
+    section, name = key.split(".", 1)
+    return {section: {name: v}}
+
+
+@pytest.mark.parametrize("key", KEYS)
+def test_an_update_is_the_file_with_the_change_and_prints_back(key: str, tmp_path: Path) -> None:
+    # Spec.updated merges Python values into a spec as the file would hold them, and the
+    # printed result (to_toml) loads back to the same spec.
+    value, base = CHANGES.get(key) or (_changed(key, _defaults()[key]), "")
+    before, after = tmp_path / "before.toml", tmp_path / "after.toml"
+    before.write_text(_merge(base))
+    after.write_text(_merge(base, _toml(key, value)))
+    updated = load_config(before).updated(_change(key, value))
+    assert updated == load_config(after), key
+    printed = tmp_path / "printed.toml"
+    printed.write_text(updated.to_toml())
+    assert load_config(printed) == updated, key
+
+
+@pytest.mark.parametrize(
+    ("change", "key"),
+    [
+        ({"mpc": {"horizon": 3}}, "mpc.horizon"),
+        ({"mpc": {"prediction_horizon": "x"}}, "mpc.prediction_horizon"),
+        ({"sensor": {"noise_std": [1e-3, object()]}}, "sensor.noise_std[1]"),
+        ({"sensor": {"encoder_counts": [2048, 2**70]}}, "sensor.encoder_counts[1]"),
+        ({"swing_up": {"max_voltage": True}}, "swing_up.max_voltage"),
+        ({"lqr": {"Q": [1.0, 2.0, -3.0, 4.0]}}, "lqr.Q[2]"),
+        ({"nonsense": {"a": 1}}, "nonsense"),
+        ({"device": {"arm_counts_per_rev": 1024}}, "device.arm_counts_per_rev"),
+    ],
+)
+def test_a_bad_update_names_its_key(change: dict[str, Any], key: str) -> None:
+    spec = riprs.Spec()
+    with pytest.raises(riprs.ConfigError) as info:
+        spec.updated(change)
+    assert str(info.value).startswith(f"{key}:"), str(info.value)
+    assert spec == riprs.Spec()
+
+
+def test_a_key_that_moved_names_its_new_key(tmp_path: Path) -> None:
+    f = tmp_path / "old.toml"
+    for n, key in enumerate(("arm_counts_per_rev", "pendulum_counts_per_rev")):
+        f.write_text(f"[device]\n{key} = 1024\n")
+        with pytest.raises(riprs.ConfigError) as info:
+            load_config(f)
+        assert str(info.value) == (
+            f"{f}: device.{key}: moved to sensor.encoder_counts[{n}]: set it there"
+        )

@@ -355,9 +355,8 @@ def test_the_rig_file_carries_the_headers_sensor_device_and_lab(heavy_logs, tmp_
     out = tmp_path / "rig.toml"
     assert main(["identify", *map(str, logs), "--out", str(out), "--no-plots"]) == 0
     doc = tomllib.loads(out.read_text())
+    # The counts per revolution are written once, as [sensor] encoder_counts.
     assert doc["device"] == {
-        "arm_counts_per_rev": 1024,
-        "pendulum_counts_per_rev": 4096,
         "pendulum_zero": "down",
         "arm_sign": 1.0,
         "pendulum_sign": -1.0,
@@ -373,7 +372,7 @@ def test_the_rig_file_carries_the_headers_sensor_device_and_lab(heavy_logs, tmp_
         [str(rip_rt), "config", str(out)], capture_output=True, text=True, timeout=60
     )
     assert checked.returncode == 0, checked.stderr
-    assert "arm_counts_per_rev = 1024" in checked.stdout
+    assert "encoder_counts = [1024, 4096]" in checked.stdout
     assert list(riprs.load_config(out).sensor.encoder_counts) == [1024, 4096]
 
 

@@ -176,3 +176,52 @@ def test_a_deeply_nested_array_is_one_line_naming_the_file(tmp_path, capsys):
         assert main(argv) != 0
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and str(f) in err[0], err
+
+
+def _python_sources():
+    return sorted(Path(riprs.__file__).parent.rglob("*.py"))
+
+
+def test_no_copy_of_the_parameter_table_in_the_package():
+    # The [plant] keys come from the core's Param table (riprs.config.PARAMETERS); a literal
+    # list of five or more of them is a second copy that can drift.
+    names = set(PARAMETERS)
+    copies = []
+    for path in _python_sources():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+                found = [
+                    e.value
+                    for e in node.elts
+                    if isinstance(e, ast.Constant) and e.value in names
+                ]
+                if len(found) >= 5:
+                    copies.append(f"{path.name}:{node.lineno}: {found}")
+    assert not copies, "\n".join(copies)
+
+
+def test_the_voltage_bound_has_one_definition():
+    # 12 V is rip-core's paper::INPUT_LIMIT (DEFAULT_U_LIMIT in Python); no default of a
+    # voltage setting in the core, rip-rt or the package writes the number again.
+    import re
+
+    root = Path(__file__).resolve().parents[1]
+    pattern = re.compile(
+        r"(volt|u_limit|u_max|_limit)\w*\s*[:=]\s*(?:\w+\s*=\s*)?-?12(\.0)?\b", re.IGNORECASE
+    )
+    sources = [*_python_sources()]
+    for crate in ("rip-core", "rip-rt", "riprs-py"):
+        sources += sorted((root / "crates" / crate / "src").rglob("*.rs"))
+    hits = []
+    for path in sources:
+        text = path.read_text()
+        if path.suffix == ".rs":
+            # Only the code before a file's tests.
+            text = text.split("#[cfg(test)]")[0]
+        for i, line in enumerate(text.splitlines(), 1):
+            code = line.split("//")[0] if path.suffix == ".rs" else line.split("#")[0]
+            if pattern.search(code):
+                hits.append(f"{path.relative_to(root)}:{i}: {line.strip()}")
+    assert hits == ["crates/rip-core/src/paper.rs:49: pub const INPUT_LIMIT: f64 = 12.0;"], (
+        "\n".join(hits)
+    )

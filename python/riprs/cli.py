@@ -229,8 +229,12 @@ as `riprs config` prints it; `riprs config FILE` prints a file resolved the same
   plant's linearisation at the loop period without friction and dead zone (the unchanged
   `paper` preset keeps the paper's recovered model). `substeps`, `initial_state`,
   `fall_limit` set up a simulated run.
-- `[sensor]`: encoder counts per revolution, white-noise standard deviation (rad) and encoder
-  zero offsets (rad; an encoder reads `angle + offset`).
+- `[sensor]`: the rig's encoders, simulated or real: counts per revolution (64 to 2^24; the
+  one resolution `rip-rt` turns counts into angles with, and the emulator counts in),
+  white-noise standard deviation (rad) and encoder zero offsets (rad; an encoder reads
+  `angle + offset`). `riprs compare` and `rip-rt emulate` simulate all three alike. The
+  former `[device] arm_counts_per_rev` and `pendulum_counts_per_rev` are refused, naming
+  `sensor.encoder_counts`.
 - `[reference]`: the arm step (rad), its time (s) and the run length (s).
 - `[lqr]`: `Q` (diagonal) and `R` of eq. (13), shared by LQR and LQG; LQR's rate-filter
   cut-off (Hz, `inf` for none); `integral_weight`, the weight of the integrated arm error in

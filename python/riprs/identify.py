@@ -36,13 +36,14 @@ from riprs._riprs import (
     read_lab_file,
 )
 from riprs._riprs import LAB_KEYS as _LAB_KEYS
+from riprs._riprs import PARAMETERS as _PARAMETERS
 from riprs.log import RtLog, load_log
 
 PathLike = Union[str, "os.PathLike[str]"]
 LogLike = Union[PathLike, RtLog]
 
 #: The order of ``[plant]`` keys written to an identified file.
-PLANT_KEYS = ("mr", "Lr", "Jr", "mp", "Lp", "Jp", "Dr", "Dp", "Rm", "kt", "km", "Cr", "Cp", "Vd")
+PLANT_KEYS = tuple(_PARAMETERS)
 
 
 class UntrustedIdentification(IdentifyError):
@@ -188,7 +189,7 @@ class IdentifyResult:
                 + (f" ({100 * se / value:.1f} %)" if value > 0 and math.isfinite(se) else "")
                 + note
             )
-        fixed = [n for n in ("mp", "Lp", "mr", "Rm", "km", "g") if n not in self.std_errors]
+        fixed = [n for n in self.params.to_dict() if n not in self.std_errors]
         lines.append(
             "  not estimated (start set; see the warnings if one changed): "
             + ", ".join(f"{n} = {getattr(self.params, n):.5g}" for n in fixed)
@@ -451,9 +452,9 @@ def _apply_lab(start: FurutaParams, lab: Dict[str, float]) -> FurutaParams:
     """The start set with the lab's measurements in place; centroidal inertias of measured
     links restart as those of uniform rods, ``km = kt`` (SI units) when only one is given."""
     d = start.to_dict()
-    for key in ("mp", "Lp", "mr", "Lr", "Rm", "km", "kt"):
-        if key in lab:
-            d[key] = float(lab[key])
+    for key, value in lab.items():
+        if key in d:  # the lab's [plant] keys (its encoder counts are not parameters)
+            d[key] = float(value)
     if "km" in lab and "kt" not in lab:
         d["kt"] = d["km"]
     if "kt" in lab and "km" not in lab:
@@ -518,11 +519,12 @@ def _header_settings(
                     f"{name}: header {key}: not a {kind.__name__}: {text!r}"
                 ) from None
             sections.setdefault(section, {})[field] = value
+    # The counts per revolution are the rig file's one resolution, [sensor] encoder_counts.
     device = sections.get("device", {})
-    if "arm_counts_per_rev" in device and "pendulum_counts_per_rev" in device:
-        sections["sensor"] = {
-            "encoder_counts": [device["arm_counts_per_rev"], device["pendulum_counts_per_rev"]]
-        }
+    names = ("arm_counts_per_rev", "pendulum_counts_per_rev")
+    counts = [device.pop(k) for k in names if k in device]
+    if len(counts) == 2:
+        sections["sensor"] = {"encoder_counts": counts}
     lab: Dict[str, float] = {}
     for key, (name, text) in found.items():
         if key.startswith("lab."):

@@ -81,7 +81,7 @@ def _smooth(params: _riprs.FurutaParams) -> tuple[_riprs.Plant, float]:
 def find_swing_up(
     plant: _riprs.Plant | _riprs.FurutaParams,
     *,
-    max_voltage: float = 12.0,
+    max_voltage: float = _riprs.DEFAULT_U_LIMIT,
     arm_limit: float = 1.5,
     horizon: float = 4.0,
     intervals: int = 60,
@@ -97,7 +97,7 @@ def find_swing_up(
     plant : Plant or FurutaParams
         The rig's model.
     max_voltage : float
-        Voltage bound (V).
+        Voltage bound (V); default the paper's ``|u| ≤ 12 V`` (``riprs._riprs.DEFAULT_U_LIMIT``).
     arm_limit : float
         The arm stays within ``±arm_limit`` (rad) at every node.
     horizon : float

@@ -2,9 +2,9 @@
 //! spec designs them), N runs from hanging at rest, each on a plant whose every physical
 //! parameter (all but `g`) is drawn uniformly within ±10 % of the preset's, with its own noise
 //! seed, 2048-count encoders and 1 mrad noise; the swing-up is designed on the nominal preset.
-//! The runs are [`rip_core::swingup::study`]'s experiment (the arm steps 0 → 1 rad 2 s after
+//! The runs are [`rip_core::spec::study`]'s experiment (the arm steps 0 → 1 rad 2 s after
 //! the catch); success and time to upright are [`rip_core::sim::swing_up_succeeded`] and the
-//! catch time, and [`rip_core::swingup::study::arrivals`] counts the arrivals near upright
+//! catch time, and [`rip_core::spec::study::arrivals`] counts the arrivals near upright
 //! and the passes over the top of each run from its true state.
 //!
 //! ```text
@@ -13,8 +13,8 @@
 
 use rip_core::batch::MonteCarlo;
 use rip_core::sim::simulate;
+use rip_core::spec::study::{arrivals, hanging_config, supervised, Arrivals};
 use rip_core::spec::{ControllerKind, Param};
-use rip_core::swingup::study::{arrivals, hanging_config, supervised, Arrivals};
 use rip_core::Spec;
 
 fn percentile(sorted: &[f64], q: f64) -> f64 {

@@ -410,8 +410,8 @@ mod tests {
 
     #[test]
     fn swing_up_metrics_match_the_full_record() {
+        use crate::spec::study::{hanging_config, supervised};
         use crate::spec::{ControllerKind, Spec};
-        use crate::swingup::study::{hanging_config, supervised};
         let spec = Spec::default();
         let design = spec.design(crate::paper::TS).unwrap();
         let config = SimConfig {
@@ -457,7 +457,7 @@ mod tests {
             // The step comes 2 s after the catch (study::STEP_AFTER_CATCH), never before.
             if let Some(tc) = res.catch_time {
                 for (t, r) in res.t.iter().zip(&res.r) {
-                    let stepped = *t >= tc + crate::swingup::study::STEP_AFTER_CATCH - 1e-9;
+                    let stepped = *t >= tc + crate::spec::study::STEP_AFTER_CATCH - 1e-9;
                     assert_eq!(r[0], if stepped { 1.0 } else { 0.0 }, "t {t}, catch {tc}");
                 }
             }

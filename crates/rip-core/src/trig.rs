@@ -123,6 +123,19 @@ pub fn sin_cos_lanes<const L: usize>(x: &[f64; L]) -> ([f64; L], [f64; L]) {
     (s, c)
 }
 
+/// `a` wrapped to (−π, π]: the one angle wrap of the plant, the simulation, the swing-up and
+/// `rip-rt`.
+#[inline]
+pub fn wrap_angle(a: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    let w = a - TAU * (a / TAU).round();
+    if w <= -PI {
+        w + TAU
+    } else {
+        w
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -248,9 +248,10 @@ struct EmulateArgs {
     /// file `rip-rt run --config` and `riprs compare --config` read.
     #[arg(long, value_name = "FILE.toml")]
     config: Option<PathBuf>,
-    /// Gaussian noise on each encoder reading, standard deviation in counts.
-    #[arg(long, allow_negative_numbers = true, value_name = "COUNTS", default_value_t = 0.0, value_parser = nonnegative)]
-    noise: f64,
+    /// Gaussian noise on each encoder reading, standard deviation in counts. Default: the
+    /// `[sensor] noise_std` of --config, else none.
+    #[arg(long, allow_negative_numbers = true, value_name = "COUNTS", value_parser = nonnegative)]
+    noise: Option<f64>,
     /// Probability that a measurement is not sent.
     #[arg(long, allow_negative_numbers = true, value_name = "P", default_value_t = 0.0, value_parser = probability)]
     drop_rate: f64,
@@ -578,7 +579,8 @@ fn make_link(link: &Path, target: &Path) -> std::io::Result<()> {
 fn cmd_emulate(args: EmulateArgs) -> ExitCode {
     let defaults = EmulatorConfig::default();
     // The pose: the flags, else the file's initial state, else the defaults (upright). A file
-    // also gives the plant's sensor: encoder resolutions and zero offsets.
+    // also gives the plant's sensor, as the simulation reads it (`Spec::simulation`): encoder
+    // resolutions, zero offsets and noise.
     let (model, sensor, mut initial_arm, mut initial_pendulum, period_s) = match &args.config {
         Some(path) => match Config::load(path) {
             Ok(c) => {
@@ -589,7 +591,7 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
                         Some(cs) => Model::Stiction(c.spec.plant.params(), cs),
                         None => Model::Params(c.spec.plant.params()),
                     },
-                    c.spec.sensor,
+                    c.spec.sim_config(period_s, 0).sensor,
                     x0[0],
                     x0[2],
                     period_s,
@@ -599,7 +601,10 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
         },
         None => (
             args.model,
-            rip_core::spec::SensorSpec::default(),
+            rip_core::sim::SensorModel {
+                noise_std: [0.0; 2],
+                ..rip_core::Spec::default().sim_config(0.01, 0).sensor
+            },
             defaults.initial_arm,
             defaults.initial_pendulum,
             Config::default().period_s(),
@@ -614,15 +619,11 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
     initial_arm = args.initial_arm.unwrap_or(initial_arm);
     let cfg = EmulatorConfig {
         model,
-        arm_counts_per_rev: sensor.encoder_counts[0],
-        pendulum_counts_per_rev: sensor.encoder_counts[1],
-        encoder_offsets: sensor.encoder_offsets,
         sim_rate_hz: args.sim_rate,
         initial_arm,
         initial_pendulum,
         hold_until_enabled: !args.no_hold,
         command_timeout_s: args.command_timeout,
-        noise_counts: args.noise,
         drop_rate: args.drop_rate,
         corrupt_rate: args.corrupt_rate,
         vanish_after_s: args.vanish_after,
@@ -640,6 +641,16 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
         fault_at_s: args.fault_at,
         lockstep_period_s: args.lockstep.then_some(period_s),
         ..EmulatorConfig::default()
+    }
+    .with_sensor(&sensor);
+    let cfg = match args.noise {
+        // --noise is in counts of each encoder.
+        Some(counts) => EmulatorConfig {
+            noise_std: [cfg.arm_counts_per_rev, cfg.pendulum_counts_per_rev]
+                .map(|n| counts * std::f64::consts::TAU / f64::from(n)),
+            ..cfg
+        },
+        None => cfg,
     };
     if let Err(e) = cfg.validate() {
         return fail(exit_code::USAGE, e);

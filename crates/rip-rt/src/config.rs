@@ -198,11 +198,16 @@ mod tests {
                 "loop.max_consecutive_misses",
             ),
             (
-                "[device]\narm_counts_per_rev = 1\n",
-                "device.arm_counts_per_rev",
+                "[sensor]\nencoder_counts = [1, 2048]\n",
+                "sensor.encoder_counts[0]",
             ),
             (
-                "[device]\npendulum_counts_per_rev = 4294967295\n",
+                "[sensor]\nencoder_counts = [2048, 4294967295]\n",
+                "sensor.encoder_counts[1]",
+            ),
+            // A key that moved is refused naming the one that replaced it.
+            (
+                "[device]\npendulum_counts_per_rev = 4096\n",
                 "device.pendulum_counts_per_rev",
             ),
             ("[safety]\nvoltage_limit = 30\n", "safety.voltage_limit"),

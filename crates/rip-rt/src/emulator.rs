@@ -21,7 +21,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
-use rand_distr::{Distribution, Normal};
+use rand_distr::{Distribution, StandardNormal};
 use rip_device::{Direction, Inputs};
 
 use crate::plant::{Model, PlantSim, Windings};
@@ -59,8 +59,10 @@ pub struct EmulatorConfig {
     pub voltage_limit: f64,
     /// H-bridge supply (V): the voltage at 100 % PWM duty.
     pub supply: f64,
-    /// Standard deviation of Gaussian noise added to each encoder reading (counts).
-    pub noise_counts: f64,
+    /// Standard deviation (rad) of the Gaussian noise on the arm and the pendulum angle
+    /// (`[sensor] noise_std`). As in the simulation's `SensorModel`, the noise is added to the
+    /// quantised angle; an encoder reports whole counts, so it arrives rounded to a count.
+    pub noise_std: [f64; 2],
     /// Probability that a measurement is not sent.
     pub drop_rate: f64,
     /// Probability that a measurement is corrupted on the wire (a flipped byte, or garbage
@@ -128,7 +130,7 @@ impl Default for EmulatorConfig {
             command_timeout_s: 0.05,
             voltage_limit: 24.0,
             supply: 24.0,
-            noise_counts: 0.0,
+            noise_std: [0.0; 2],
             drop_rate: 0.0,
             corrupt_rate: 0.0,
             vanish_after_s: None,
@@ -165,6 +167,22 @@ impl EmulatorConfigError {
 }
 
 impl EmulatorConfig {
+    /// The encoders of `sensor`, the simulation's sensor of a spec (`Spec::simulation`, the
+    /// one mapping of `[sensor]`): resolutions, zero offsets and noise.
+    pub fn with_sensor(self, sensor: &rip_core::sim::SensorModel) -> Self {
+        let [arm, pendulum] = sensor.counts_per_rev.map_or(
+            [self.arm_counts_per_rev, self.pendulum_counts_per_rev],
+            |c| c.map(|n| n as u32),
+        );
+        Self {
+            arm_counts_per_rev: arm,
+            pendulum_counts_per_rev: pendulum,
+            encoder_offsets: sensor.offsets,
+            noise_std: sensor.noise_std,
+            ..self
+        }
+    }
+
     /// Checks the values; the error names the command-line flag.
     pub fn validate(&self) -> Result<(), EmulatorConfigError> {
         let prob = |name: &str, p: f64| {
@@ -179,13 +197,10 @@ impl EmulatorConfig {
         };
         prob("--drop-rate", self.drop_rate)?;
         prob("--corrupt-rate", self.corrupt_rate)?;
-        if !(self.noise_counts.is_finite() && self.noise_counts >= 0.0) {
+        if !self.noise_std.iter().all(|s| s.is_finite() && *s >= 0.0) {
             return Err(EmulatorConfigError::new(
                 "--noise",
-                format!(
-                    "must be a non-negative number of counts, got {}",
-                    self.noise_counts
-                ),
+                format!("must be non-negative, got {:?} rad", self.noise_std),
             ));
         }
         if !(self.sim_rate_hz.is_finite() && (100.0..=100_000.0).contains(&self.sim_rate_hz)) {
@@ -297,7 +312,6 @@ pub struct Device {
     cfg: EmulatorConfig,
     plant: PlantSim,
     rng: StdRng,
-    noise: Normal<f64>,
     firmware: rip_device::Device,
     released: bool,
     commands_seen: bool,
@@ -330,7 +344,6 @@ impl Device {
         };
         let mut dev = Self {
             rng: StdRng::seed_from_u64(cfg.seed),
-            noise: Normal::new(0.0, cfg.noise_counts.max(0.0)).expect("validated"),
             plant,
             firmware: rip_device::Device::new(firmware_cfg, &Inputs::default()),
             released: !cfg.hold_until_enabled,
@@ -446,6 +459,14 @@ impl Device {
         }
     }
 
+    fn counts_per_rev(&self) -> [f64; 2] {
+        [
+            self.cfg.arm_counts_per_rev,
+            self.cfg.pendulum_counts_per_rev,
+        ]
+        .map(f64::from)
+    }
+
     /// The counts a correctly wired, noiseless encoder pair would read now (unrounded).
     fn true_counts(&self) -> [f64; 2] {
         let [theta, _, alpha, _] = self.plant.state();
@@ -472,8 +493,11 @@ impl Device {
             if w.encoder_reversed[j] {
                 *v = 2.0 * onset[j] - *v;
             }
-            if noisy && self.cfg.noise_counts > 0.0 {
-                *v += self.noise.sample(&mut self.rng);
+            *v = v.round();
+            let sigma = self.cfg.noise_std[j] * self.counts_per_rev()[j] / std::f64::consts::TAU;
+            if noisy && sigma > 0.0 {
+                let z: f64 = StandardNormal.sample(&mut self.rng);
+                *v += (sigma * z).round();
             }
         }
         c.map(|v| v.round().clamp(i32::MIN as f64, i32::MAX as f64) as i32)
@@ -901,5 +925,71 @@ mod tests {
         // Hanging down is zero: upright (initial 0.05 rad) is half a revolution, 1024 counts on.
         let pendulum = ((0.05 + std::f64::consts::PI) * 2048.0 / std::f64::consts::TAU).round();
         assert_eq!(m.pendulum_counts, pendulum as i32);
+    }
+
+    /// Mean and standard deviation of `v`.
+    fn stats(v: &[f64]) -> (f64, f64) {
+        let n = v.len() as f64;
+        let m = v.iter().sum::<f64>() / n;
+        (
+            m,
+            (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt(),
+        )
+    }
+
+    #[test]
+    fn the_encoders_read_the_sensor_section_as_the_simulation_measures_it() {
+        use rand::SeedableRng;
+        let text = "[sensor]\nencoder_counts = [4096, 1024]\nnoise_std = [2e-3, 5e-3]\n\
+                    encoder_offsets = [0.2, -0.1]\n";
+        let sensor = rip_core::Spec::parse(text)
+            .unwrap()
+            .sim_config(0.01, 0)
+            .sensor;
+        let (arm, pendulum) = (0.3, 0.05);
+        let cfg = EmulatorConfig {
+            initial_arm: arm,
+            initial_pendulum: pendulum,
+            seed: 5,
+            ..EmulatorConfig::default()
+        }
+        .with_sensor(&sensor);
+        assert_eq!(
+            (cfg.arm_counts_per_rev, cfg.pendulum_counts_per_rev),
+            (4096, 1024)
+        );
+        // The device (held still until enabled) read N times, in radians as rip-rt reads it.
+        let n = 4000;
+        let tau = std::f64::consts::TAU;
+        let mut dev = Device::new(cfg);
+        let (mut emulated, mut simulated) = ([vec![], vec![]], [vec![], vec![]]);
+        let mut rng = StdRng::seed_from_u64(11);
+        let x = [arm, 0.0, pendulum, 0.0];
+        for _ in 0..n {
+            let m = measure(&mut dev);
+            emulated[0].push(f64::from(m.arm_counts) * tau / 4096.0);
+            emulated[1].push(f64::from(m.pendulum_counts) * tau / 1024.0 - tau / 2.0);
+            let y = sensor.measure(&x, sensor.noise_std, &mut rng);
+            simulated[0].push(y[0]);
+            simulated[1].push(y[1]);
+        }
+        for j in 0..2 {
+            let (me, se) = stats(&emulated[j]);
+            let (ms, ss) = stats(&simulated[j]);
+            let sigma = sensor.noise_std[j];
+            // The same mean: the offset angle, quantised (4 standard errors of the difference).
+            assert!(
+                (me - ms).abs() < 4.0 * sigma * (2.0 / n as f64).sqrt(),
+                "{j}: {me} {ms}"
+            );
+            assert!(
+                (ms - x[2 * j] - sensor.offsets[j]).abs() < tau / 1024.0,
+                "{j}: {ms}"
+            );
+            // The same spread, within what rounding the noise to whole counts adds (the
+            // variance of a count's rounding, 1/12 count², is under 10 % of σ² here).
+            assert!((se / ss - 1.0).abs() < 0.1, "{j}: {se} {ss}");
+            assert!((ss / sigma - 1.0).abs() < 0.05, "{j}: {ss} {sigma}");
+        }
     }
 }

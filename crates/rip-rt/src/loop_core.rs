@@ -69,15 +69,7 @@ impl fmt::Debug for LoopCore {
     }
 }
 
-fn wrap_angle(a: f64) -> f64 {
-    let tau = std::f64::consts::TAU;
-    let w = a - tau * (a / tau).round();
-    if w <= -std::f64::consts::PI {
-        w + tau
-    } else {
-        w
-    }
-}
+use rip_core::trig::wrap_angle;
 
 impl LoopCore {
     /// Wraps `controller` (2 outputs: arm, pendulum angle; 1 input: voltage) with the settings

@@ -327,9 +327,7 @@ impl RestCheck {
     }
 }
 
-fn wrap_angle(a: f64) -> f64 {
-    rip_core::swingup::wrap_angle(a)
-}
+use rip_core::trig::wrap_angle;
 
 #[cfg(test)]
 mod tests {
@@ -526,7 +524,7 @@ mod tests {
                 "calibration.rest_pendulum_rate",
             ),
             (
-                "[device]\npendulum_counts_per_rev = 64\n[calibration]\nrest_pendulum_rate = 0.5\n",
+                "[sensor]\nencoder_counts = [2048, 64]\n[calibration]\nrest_pendulum_rate = 0.5\n",
                 "calibration.rest_pendulum_rate",
             ),
             (

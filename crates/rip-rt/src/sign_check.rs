@@ -83,7 +83,7 @@ pub enum SignFault {
     #[error(
         "the arm encoder did not count ({arm:.1} counts, at least {MIN_ARM_COUNTS} expected) \
          while the pendulum moved {pendulum:.1} counts: check the arm encoder's cable and \
-         device.arm_counts_per_rev"
+         sensor.encoder_counts[0]"
     )]
     ArmEncoderSilent {
         /// Largest arm movement (counts).
@@ -96,7 +96,7 @@ pub enum SignFault {
         "the pendulum encoder did not count ({pendulum:.1} counts, at least \
          {MIN_PENDULUM_COUNTS} expected) while the arm moved {arm:.1} counts, which swings a \
          hanging pendulum by reaction: check the pendulum encoder's cable and \
-         device.pendulum_counts_per_rev"
+         sensor.encoder_counts[1]"
     )]
     PendulumEncoderSilent {
         /// Largest arm movement (counts).

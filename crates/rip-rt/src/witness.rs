@@ -165,7 +165,7 @@ pub enum WitnessFault {
          {measured:+.3} rad over the last {window_s:.2} s where [plant] predicts \
          {predicted:+.3} rad (statistic {stat:.0} > {limit}): swapped motor leads, a reversed \
          arm encoder or device.arm_sign (rip-rt excite's sign check tells which), a wrong \
-         device.arm_counts_per_rev, a slipping arm, or a rig unlike [plant] (riprs identify)"
+         sensor.encoder_counts[0], a slipping arm, or a rig unlike [plant] (riprs identify)"
     )]
     ArmDisagrees {
         /// The measured arm motion since the disagreement began (rad).
@@ -183,7 +183,7 @@ pub enum WitnessFault {
     #[error(
         "the pendulum's motion disagrees with what the arm's motion must produce (statistic \
          {stat:.0} > {limit}): check the pendulum encoder (cable, device.pendulum_sign, \
-         device.pendulum_counts_per_rev) and the motor leads"
+         sensor.encoder_counts[1]) and the motor leads"
     )]
     PendulumDisagrees {
         /// The statistic at the trip.

@@ -276,8 +276,7 @@ fn emulate_config_simulates_a_plant_without_a_preset() {
     let text = "[plant]\npreset = \"qube_servo2\"\nmp = 0.04\nLp = 0.2\nJp = 0.00013\n\
                 mr = 0.08\nLr = 0.1\nJr = 0.00007\nDr = 0.001\nDp = 0.00004\nRm = 6.5\n\
                 kt = 0.036\nkm = 0.036\nCr = 0.0008\nCp = 0.00001\nVd = 0.4\n\
-                [sensor]\nencoder_counts = [4096, 2048]\nencoder_offsets = [0.4, 0.04]\n\
-                [device]\narm_counts_per_rev = 4096\n";
+                [sensor]\nencoder_counts = [4096, 2048]\nencoder_offsets = [0.4, 0.04]\n";
     let cfg: PathBuf = scratch("hidden-plant.toml");
     std::fs::write(&cfg, text).unwrap();
     let cfg_arg = cfg.display().to_string();

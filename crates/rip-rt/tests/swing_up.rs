@@ -631,7 +631,7 @@ fn a_wrong_pendulum_counts_per_rev_is_stopped_by_the_witness() {
     );
     assert_eq!(r.status.code(), Some(15), "{}", r.stderr);
     assert!(
-        r.stderr.contains("device.pendulum_counts_per_rev"),
+        r.stderr.contains("sensor.encoder_counts[1]"),
         "{}",
         r.stderr
     );

@@ -28,7 +28,8 @@ enum Fault {
     FreezeArmEncoder,
     /// `device.arm_sign = -1` on a correctly wired rig (from the start).
     ArmSign,
-    /// `device.arm_counts_per_rev` four times the encoder's (8192 on 2048; from the start).
+    /// The configured arm resolution (`sensor.encoder_counts[0]`) four times the encoder's (8192 on 2048;
+    /// from the start).
     ArmScale,
 }
 

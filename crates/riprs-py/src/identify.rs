@@ -10,14 +10,7 @@ use rip_core::RipError;
 use crate::convert::{mat_to_py, Count, Real};
 use crate::errors::{to_py, IntoPyResult};
 use crate::interrupt::interruptible;
-use crate::plant::{py_name, PyFurutaParams};
-
-/// The Rust name of a parameter given by its Python name (`Lr` -> `lr`).
-fn rust_name(name: &str) -> String {
-    FREE.iter()
-        .find(|n| py_name(n) == name)
-        .map_or_else(|| name.to_string(), |n| (*n).to_string())
-}
+use crate::plant::PyFurutaParams;
 
 /// Output-error identification of the nonlinear model (``rip_core::identify``).
 ///
@@ -76,11 +69,10 @@ fn identify_logs<'py>(
         max_iterations: max_iter.get("max_iter")?,
         substeps: substeps.get("substeps")?,
         names,
-        fixed: fixed.iter().map(|n| rust_name(n)).collect(),
+        fixed,
         ..Default::default()
     };
     let result = interruptible(py, |cancel| identify(&data, &options, cancel), |_| Ok(()))?.py()?;
-    let names = |v: &[&str]| v.iter().map(|n| py_name(n)).collect::<Vec<_>>();
     let d = PyDict::new(py);
     d.set_item(
         "params",
@@ -88,7 +80,7 @@ fn identify_logs<'py>(
             inner: result.params,
         },
     )?;
-    d.set_item("free", names(&FREE))?;
+    d.set_item("free", FREE.map(|p| p.name()).to_vec())?;
     d.set_item("std_errors", result.std_errors.to_vec())?;
     d.set_item(
         "fit_percent",
@@ -106,8 +98,8 @@ fn identify_logs<'py>(
             .map(|f| f.to_vec())
             .collect::<Vec<_>>(),
     )?;
-    d.set_item("not_identifiable", names(&result.not_identifiable))?;
-    d.set_item("at_bounds", names(&result.at_bounds))?;
+    d.set_item("not_identifiable", result.not_identifiable.clone())?;
+    d.set_item("at_bounds", result.at_bounds.clone())?;
     d.set_item("condition_number", result.condition_number)?;
     d.set_item("rank", result.rank)?;
     d.set_item("cost", result.cost)?;

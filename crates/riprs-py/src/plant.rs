@@ -16,15 +16,6 @@ use crate::errors::{to_py, IntoPyResult};
 type Py1<'py> = Bound<'py, PyArray1<f64>>;
 type Py2<'py> = Bound<'py, PyArray2<f64>>;
 
-/// The Python name of a field named in lower case (the identification's names), until the
-/// identification names its parameters by [`Param`] too.
-pub(crate) fn py_name(core: &str) -> String {
-    Param::FIELDS
-        .into_iter()
-        .find(|p| p.name().eq_ignore_ascii_case(core))
-        .map_or_else(|| core.to_string(), |p| p.name().to_string())
-}
-
 fn finite_scalar(v: f64, name: &str) -> PyResult<f64> {
     if v.is_finite() {
         Ok(v)

@@ -29,8 +29,9 @@ fn config_err(e: SpecError) -> PyErr {
     ConfigError::new_err(e.to_string())
 }
 
-/// Converts nested Python dicts, lists and scalars into a TOML value.
-fn to_toml(obj: &Bound<'_, PyAny>, key: &str) -> PyResult<toml::Value> {
+/// Converts nested Python dicts, lists and scalars into a TOML value; `key` is the key path
+/// of `obj`, named by the error of a value no TOML value holds.
+pub(crate) fn to_toml(obj: &Bound<'_, PyAny>, key: &str) -> PyResult<toml::Value> {
     if obj.is_instance_of::<PyBool>() {
         return Ok(toml::Value::Boolean(obj.extract()?));
     }
@@ -79,17 +80,6 @@ fn to_toml(obj: &Bound<'_, PyAny>, key: &str) -> PyResult<toml::Value> {
         if key.is_empty() { "configuration" } else { key },
         obj.get_type().name()?
     )))
-}
-
-fn merge(base: &mut toml::Table, changes: toml::Table) {
-    for (k, v) in changes {
-        match (base.get_mut(&k), v) {
-            (Some(toml::Value::Table(b)), toml::Value::Table(c)) => merge(b, c),
-            (_, v) => {
-                base.insert(k, v);
-            }
-        }
-    }
 }
 
 /// `[plant]` (read-only; ``params`` holds every parameter, resolved from the preset).
@@ -246,19 +236,21 @@ impl PySpec {
     }
 
     /// A copy with ``changes`` (nested dicts, e.g. ``{"monte_carlo": {"runs": 10}}``)
-    /// applied and checked as in a file.
+    /// merged in (``Spec::updated``: a dict changes only the keys it holds, any other value
+    /// replaces the old one; a new ``plant.preset`` brings its own parameters) and checked as
+    /// in a file.
+    ///
+    /// Raises
+    /// ------
+    /// ConfigError
+    ///     An unknown key, a value of the wrong type or out of range; the message names the
+    ///     key path.
     fn updated(&self, changes: &Bound<'_, PyDict>) -> PyResult<Self> {
         let toml::Value::Table(changes) = to_toml(changes.as_any(), "")? else {
             unreachable!("a dict converts to a table")
         };
-        let mut base = self
-            .inner
-            .to_toml()
-            .parse::<toml::Table>()
-            .expect("a printed spec parses");
-        merge(&mut base, changes);
         Ok(Self {
-            inner: Spec::from_table(base).map_err(config_err)?.resolved(),
+            inner: self.inner.updated(changes).map_err(config_err)?.resolved(),
         })
     }
 

@@ -6,9 +6,7 @@ use numpy::{IntoPyArray, PyArray1};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use rip_core::{
-    Controller, Lqg, Lqr, Mpc, OnFall, Phase, Plant, StepStatus, SwingUp, SwingUpSettings,
-};
+use rip_core::{Controller, Lqg, Lqr, Mpc, Phase, Plant, StepStatus, SwingUp, SwingUpSettings};
 
 use crate::control::{PyLqg, PyLqr};
 use crate::convert::vector_arg;
@@ -178,84 +176,55 @@ pub struct PySwingUp {
     pub(crate) compensation: Option<Compensation>,
 }
 
-fn apply_setting(s: &mut SwingUpSettings, key: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
-    if key == "on_fall" {
-        let name: String = value
-            .extract()
-            .map_err(|_| PyTypeError::new_err("on_fall must be 'retry' or 'stop'"))?;
-        s.on_fall = OnFall::from_name(&name).py()?;
-        return Ok(());
-    }
-    let slot = match key {
-        "max_voltage" => &mut s.max_voltage,
-        "arm_limit" => &mut s.arm_limit,
-        "brake_fraction" => &mut s.brake_fraction,
-        "pump_fraction" => &mut s.pump_fraction,
-        "pump_width" => &mut s.pump_width,
-        "energy_gain" => &mut s.energy_gain,
-        "energy_margin" => &mut s.energy_margin,
-        "arm_centering" => &mut s.arm_centering,
-        "barrier_rate" => &mut s.barrier_rate,
-        "rate_cutoff" => &mut s.rate_cutoff,
-        "catch_angle" => &mut s.catch_angle,
-        "catch_lookahead" => &mut s.catch_lookahead,
-        "catch_mode_fraction" => &mut s.catch_mode_fraction,
-        "catch_rate" => &mut s.catch_rate,
-        "catch_arm_rate" => &mut s.catch_arm_rate,
-        "catch_arm_angle" => &mut s.catch_arm_angle,
-        "reference_return_rate" => &mut s.reference_return_rate,
-        "balance_angle" => &mut s.balance_angle,
-        "estimator_window" => &mut s.estimator_window,
-        "handover_time" => &mut s.handover_time,
-        "max_time" => &mut s.max_time,
-        _ => {
+/// `s` with the keyword arguments `settings` applied: the keys and their kinds are those of
+/// [`SwingUpSettings`]'s serde form (the `[swing_up]` section), so there is no list of names
+/// here. An unknown key or a value of the wrong kind is a `TypeError`, a bad value of the
+/// right kind the settings' own error (`swing_up.KEY`).
+fn apply_settings(s: &SwingUpSettings, settings: &Bound<'_, PyDict>) -> PyResult<SwingUpSettings> {
+    let Ok(toml::Value::Table(mut table)) = toml::Value::try_from(s) else {
+        unreachable!("the swing-up settings serialise to a table")
+    };
+    for (key, value) in settings.iter() {
+        let key: String = key.extract()?;
+        let Some(old) = table.get(&key) else {
             return Err(PyTypeError::new_err(format!(
                 "SwingUp got an unexpected keyword argument {key:?}"
-            )))
+            )));
+        };
+        let new = crate::spec::to_toml(&value, &key)?;
+        let number = |v: &toml::Value| matches!(v, toml::Value::Float(_) | toml::Value::Integer(_));
+        let same_kind = std::mem::discriminant(old) == std::mem::discriminant(&new)
+            || (number(old) && number(&new));
+        if !same_kind {
+            return Err(PyTypeError::new_err(format!(
+                "{key} must be {}, got {}",
+                old.type_str(),
+                value.get_type().name()?
+            )));
         }
-    };
-    if value.is_instance_of::<pyo3::types::PyBool>() {
-        return Err(PyTypeError::new_err(format!(
-            "{key} must be a number, got a bool"
-        )));
+        table.insert(key, new);
     }
-    *slot = value
-        .extract()
-        .map_err(|_| PyTypeError::new_err(format!("{key} must be a number")))?;
-    Ok(())
+    rip_core::spec::from_value(toml::Value::Table(table), "swing_up")
+        .map_err(|e| crate::errors::InvalidParameterError::new_err(e.to_string()))
 }
 
+/// The settings as a dict of their `[swing_up]` keys.
 pub(crate) fn settings_dict<'py>(
     py: Python<'py>,
     s: &SwingUpSettings,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let Ok(toml::Value::Table(table)) = toml::Value::try_from(s) else {
+        unreachable!("the swing-up settings serialise to a table")
+    };
     let d = PyDict::new(py);
-    for (key, value) in [
-        ("max_voltage", s.max_voltage),
-        ("arm_limit", s.arm_limit),
-        ("brake_fraction", s.brake_fraction),
-        ("pump_fraction", s.pump_fraction),
-        ("pump_width", s.pump_width),
-        ("energy_gain", s.energy_gain),
-        ("energy_margin", s.energy_margin),
-        ("arm_centering", s.arm_centering),
-        ("barrier_rate", s.barrier_rate),
-        ("rate_cutoff", s.rate_cutoff),
-        ("catch_angle", s.catch_angle),
-        ("catch_lookahead", s.catch_lookahead),
-        ("catch_mode_fraction", s.catch_mode_fraction),
-        ("catch_rate", s.catch_rate),
-        ("catch_arm_rate", s.catch_arm_rate),
-        ("catch_arm_angle", s.catch_arm_angle),
-        ("reference_return_rate", s.reference_return_rate),
-        ("balance_angle", s.balance_angle),
-        ("estimator_window", s.estimator_window),
-        ("handover_time", s.handover_time),
-        ("max_time", s.max_time),
-    ] {
-        d.set_item(key, value)?;
+    for (key, value) in table {
+        match value {
+            toml::Value::Float(v) => d.set_item(key, v)?,
+            toml::Value::Integer(v) => d.set_item(key, v)?,
+            toml::Value::String(v) => d.set_item(key, v)?,
+            other => unreachable!("a swing-up setting is a number or a name, got {other}"),
+        }
     }
-    d.set_item("on_fall", s.on_fall.name())?;
     Ok(d)
 }
 
@@ -301,13 +270,10 @@ impl PySwingUp {
                 }
             }
         };
-        let mut s = SwingUpSettings::default();
-        if let Some(kw) = settings {
-            for (key, value) in kw.iter() {
-                let key: String = key.extract()?;
-                apply_setting(&mut s, &key, &value)?;
-            }
-        }
+        let mut s = match settings {
+            Some(kw) => apply_settings(&SwingUpSettings::default(), kw)?,
+            None => SwingUpSettings::default(),
+        };
         if let Some(c) = compensation {
             // The law plans within the bounds the compensation leaves, as the balance does.
             s.max_voltage = c.planned_limit(s.max_voltage);

@@ -90,10 +90,17 @@ pub(super) fn check(logs: &[LogData], o: &IdentifyOptions) -> Result<()> {
             format!("must be in 1..={MAX_ITERATIONS}, got {}", o.max_iterations),
         ));
     }
-    if let Some(name) = o.fixed.iter().find(|n| !FREE.contains(&n.as_str())) {
+    if let Some(name) = o
+        .fixed
+        .iter()
+        .find(|n| !FREE.iter().any(|p| p.name() == *n))
+    {
         return Err(RipError::invalid(
             "fixed",
-            format!("{name:?} is not one of the estimated parameters {FREE:?}"),
+            format!(
+                "{name:?} is not one of the estimated parameters {:?}",
+                FREE.map(Param::name)
+            ),
         ));
     }
     crate::plant::check_substeps(o.substeps)?;
@@ -170,31 +177,34 @@ pub(super) fn verdict(v: &Verdict<'_>) -> (Vec<String>, bool) {
             v.rank, v.condition_number
         ));
     }
-    for (k, name) in FREE.iter().enumerate() {
-        if LINEAR.contains(name) && (v.rse[k].is_nan() || v.rse[k] > MAX_RSE) {
+    for (k, &param) in FREE.iter().enumerate() {
+        let name = param.name();
+        if LINEAR.contains(&param) && (v.rse[k].is_nan() || v.rse[k] > MAX_RSE) {
             uncertain += 1;
             out.push(format!(
                 "{name} has a relative standard error of {:.1} % (at most {} %): the upright \
                  model is not determined; {}",
                 100.0 * v.rse[k],
                 100.0 * MAX_RSE,
-                if *name == "dp" || *name == "jp" {
+                if param == Param::Dp || param == Param::Jp {
                     "add a free-swing log (rip-rt excite --signal free-swing)"
                 } else {
                     "add a chirp or PRBS run with more amplitude"
                 }
             ));
         }
-        let structural = ["lr", "jr", "jp", "kt", "dr"].contains(name);
-        if v.at_upper[k] || (structural && v.at_bounds.contains(name)) {
+        // A bound on one of these (all of LINEAR but the pendulum's damping) contradicts the
+        // start set's measured values.
+        let structural = LINEAR[..5].contains(&param);
+        if v.at_upper[k] || (structural && v.at_bounds.contains(&name)) {
             out.push(format!(
                 "{name} ended on its bound ({:.4e}): the start set is inconsistent with the rig; \
                  {}",
                 get(v.params, k),
-                match *name {
-                    "dr" => "measure the motor's km (back-EMF) and Rm",
-                    "lr" | "jr" => "measure mr and Lr",
-                    "jp" => "measure mp and Lp",
+                match param {
+                    Param::Dr => "measure the motor's km (back-EMF) and Rm",
+                    Param::Lr | Param::Jr => "measure mr and Lr",
+                    Param::Jp => "measure mp and Lp",
                     _ => "measure Rm with a multimeter",
                 }
             ));

@@ -128,7 +128,7 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use crate::error::{Result, RipError};
 use crate::linalg::Mat;
-use crate::plant::{FurutaParams, State};
+use crate::plant::{FurutaParams, Param, State};
 
 mod check;
 pub mod lab;
@@ -145,9 +145,20 @@ use problem::{state_at, Problem, Segment};
 use solve::{Bounds, Context};
 pub use stats::LINEAR_ENTRIES;
 
-/// The parameters the fit estimates, as named in [`crate::plant::FurutaParams`]' fields. `mr`, `mp` and
-/// `lp` change too when the start's values leave no room for positive `jr`, `jp` (module docs).
-pub const FREE: [&str; 9] = ["lr", "jr", "jp", "kt", "dr", "dp", "cr", "cp", "vd"];
+/// The parameters the fit estimates, from the one parameter table ([`Param`]; results and
+/// options name them as files do, `Lr`). `mr`, `mp` and `Lp` change too when the start's
+/// values leave no room for positive `Jr`, `Jp` (module docs).
+pub const FREE: [Param; 9] = [
+    Param::Lr,
+    Param::Jr,
+    Param::Jp,
+    Param::Kt,
+    Param::Dr,
+    Param::Dp,
+    Param::Cr,
+    Param::Cp,
+    Param::Vd,
+];
 const NP: usize = FREE.len();
 
 /// Relative standard error above which a parameter counts as not identifiable.
@@ -202,7 +213,11 @@ pub const MAX_CONDITION: f64 = 1e6;
 pub const MAX_RSE: f64 = 0.2;
 
 /// The free parameters that enter the upright linearisation: each must be determined.
-pub const LINEAR: [&str; 6] = ["lr", "jr", "jp", "kt", "dr", "dp"];
+/// They are the first six of [`FREE`] (the friction and the dead zone do not enter it).
+pub const LINEAR: [Param; 6] = {
+    let [lr, jr, jp, kt, dr, dp, ..] = FREE;
+    [lr, jr, jp, kt, dr, dp]
+};
 
 /// Largest identified dead zone as a fraction of the logs' 95th percentile of `|u|`: a dead zone
 /// that swallows most of the excitation is not one the logs can show.
@@ -350,7 +365,7 @@ pub fn identify(
     cancel: &AtomicBool,
 ) -> Result<IdentifyResult> {
     check(logs, options)?;
-    let restarts: &[f64] = if options.fixed.iter().any(|n| n == "vd") {
+    let restarts: &[f64] = if options.fixed.iter().any(|n| n == Param::Vd.name()) {
         &[]
     } else {
         &RESTART_DEAD_ZONES
@@ -506,7 +521,7 @@ fn fit(
     let bounds = Bounds {
         lower: std::array::from_fn(|k| p0[k] * if (4..NP).contains(&k) { 1e-4 } else { 1e-2 }),
         upper: std::array::from_fn(|k| (p0[k] * 1e3).min(CEILING[k])),
-        held: std::array::from_fn(|k| options.fixed.iter().any(|n| n == FREE[k])),
+        held: std::array::from_fn(|k| options.fixed.iter().any(|n| n == FREE[k].name())),
     };
     let mut logp: [f64; NP] = p0.map(f64::ln);
     let params_of = |logp: &[f64; NP]| with(*start, &logp.map(f64::exp));

@@ -143,9 +143,9 @@ pub(super) fn uncertainty(segments: &[Segment], logp: &[f64; NP], bounds: &Bound
             continue;
         }
         if at_bound[k] {
-            at_bounds.push(FREE[k]);
+            at_bounds.push(FREE[k].name());
         } else if rse[k].is_nan() || rse[k] > NOT_IDENTIFIABLE_RSE {
-            not_identifiable.push(FREE[k]);
+            not_identifiable.push(FREE[k].name());
         }
     }
     let covariance = (0..NP * NP)

@@ -35,7 +35,7 @@ use rand_distr::{Distribution, StandardNormal};
 use crate::controller::{Controller, Phase, StepStatus, StopCause};
 use crate::error::{Result, RipError};
 use crate::plant::{Plant, State};
-use crate::swingup::wrap_angle;
+use crate::trig::wrap_angle;
 
 mod runs;
 pub mod vec_env;

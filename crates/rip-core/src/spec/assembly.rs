@@ -33,6 +33,7 @@ use crate::mpc::{EstimatorDesign, Mpc, MpcSettings, OutputDisturbance};
 use crate::paper;
 use crate::plant::Plant;
 use crate::regulators::{Lqg, Lqr};
+use crate::sim::vec_env::{EnvConfig, Task};
 use crate::sim::{Reference, SensorModel, SimConfig};
 
 /// How a simulated run of the spec starts ([`Spec::simulation`]).
@@ -440,5 +441,28 @@ impl Design {
         }
         out.sort_by_key(|(k, _)| self.spec.controllers.iter().position(|c| c == k));
         Ok(out)
+    }
+}
+
+impl EnvConfig {
+    /// The environment of an experiment file's `[plant]`, `[sensor]`, voltage bound
+    /// (`[mpc] input_bounds`), rate filter (`[lqr] rate_cutoff`) and arm limit
+    /// (`[swing_up] arm_limit`), as `riprs compare` simulates it at period `ts`; every other
+    /// setting at its default.
+    pub fn from_spec(spec: &Spec, task: Task, ts: f64) -> Self {
+        let sim = spec.sim_config(ts, 0);
+        Self {
+            task,
+            params: spec.plant.params(),
+            ts,
+            substeps: sim.substeps,
+            u_limit: sim.u_limit,
+            sensor: sim.sensor,
+            rate_cutoff_hz: spec.lqr.rate_cutoff,
+            max_steps: (crate::sim::DEFAULT_DURATION / ts).round().max(1.0) as u32,
+            fall_limit: sim.fall_limit,
+            arm_limit: spec.swing_up.arm_limit,
+            ..Self::default()
+        }
     }
 }

@@ -29,6 +29,7 @@ mod assembly;
 mod controllers;
 pub mod rig_sections;
 mod sections;
+pub mod study;
 
 use std::fmt;
 use std::path::Path;
@@ -43,6 +44,46 @@ pub use sections::{
     ControllerKind, MonteCarloSpec, PlantSpec, Preset, ReferenceSpec, SensorSpec, MAX_DURATION,
     MAX_MONTE_CARLO_RUNS,
 };
+
+/// Keys that moved, each with the key that replaced it: a file that still sets one is
+/// refused, naming the new key, whichever command reads it.
+pub const MOVED_KEYS: [(&str, &str); 2] = [
+    // One file describes the rig for the simulation, the emulator and rip-rt alike.
+    ("device.arm_counts_per_rev", "sensor.encoder_counts[0]"),
+    ("device.pendulum_counts_per_rev", "sensor.encoder_counts[1]"),
+];
+
+/// The first key of [`MOVED_KEYS`] that `table` (a whole file) sets, as an error naming the
+/// key that replaced it.
+fn refuse_moved_keys(table: &toml::Table) -> Result<(), SpecError> {
+    for (old, new) in MOVED_KEYS {
+        let mut node = Some(table);
+        let mut path = old.split('.').peekable();
+        while let Some(part) = path.next() {
+            let value = node.and_then(|t| t.get(part));
+            if path.peek().is_none() && value.is_some() {
+                return Err(SpecError::new(old, format!("moved to {new}: set it there")));
+            }
+            node = value.and_then(toml::Value::as_table);
+        }
+    }
+    Ok(())
+}
+
+/// The text of the file at `path`, the one reader of every experiment file: an unreadable
+/// file or one that is not UTF-8 is an error naming it; a leading byte-order mark is dropped.
+pub fn read_text(path: &Path) -> Result<String, SpecError> {
+    let bytes = std::fs::read(path)
+        .map_err(|e| SpecError::new("", format!("cannot read: {e}")).in_file(path))?;
+    let text = String::from_utf8(bytes).map_err(|e| {
+        SpecError::new("", format!("invalid TOML: not UTF-8 text ({e})")).in_file(path)
+    })?;
+    // Editors on some systems start a UTF-8 file with a byte-order mark.
+    Ok(match text.strip_prefix('\u{feff}') {
+        Some(rest) => rest.to_string(),
+        None => text,
+    })
+}
 
 /// Top-level tables that belong to `rip-rt` and are not checked here.
 pub const RUNTIME_SECTIONS: [&str; 4] = ["loop", "device", "safety", "calibration"];
@@ -182,6 +223,18 @@ pub fn from_value<T: serde::de::DeserializeOwned>(
     })
 }
 
+/// Merges `changes` into `base`: tables key by key, any other value replaced.
+fn merge(base: &mut toml::Table, changes: toml::Table) {
+    for (k, v) in changes {
+        match (base.get_mut(&k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(c)) => merge(b, c),
+            (_, v) => {
+                base.insert(k, v);
+            }
+        }
+    }
+}
+
 /// Parses TOML text into a table; a syntax error names no key and is one line (where, then
 /// what: the parser's excerpt with its caret is left out).
 pub fn parse_table(text: &str) -> Result<toml::Table, SpecError> {
@@ -210,6 +263,7 @@ impl Spec {
     /// ([`RUNTIME_SECTIONS`]) for `rip-rt` to read.
     pub fn parse_with_runtime(text: &str) -> Result<(Self, toml::Table), SpecError> {
         let mut table = parse_table(text)?;
+        refuse_moved_keys(&table)?;
         let mut runtime = toml::Table::new();
         for name in RUNTIME_SECTIONS {
             if let Some(v) = table.remove(name) {
@@ -249,14 +303,7 @@ impl Spec {
 
     /// [`load`](Self::load), also returning the runtime sections.
     pub fn load_with_runtime(path: &Path) -> Result<(Self, toml::Table), SpecError> {
-        let bytes = std::fs::read(path)
-            .map_err(|e| SpecError::new("", format!("cannot read: {e}")).in_file(path))?;
-        let text = std::str::from_utf8(&bytes).map_err(|e| {
-            SpecError::new("", format!("invalid TOML: not UTF-8 text ({e})")).in_file(path)
-        })?;
-        // Editors on some systems start a UTF-8 file with a byte-order mark.
-        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-        Self::parse_with_runtime(text).map_err(|e| e.in_file(path))
+        Self::parse_with_runtime(&read_text(path)?).map_err(|e| e.in_file(path))
     }
 
     /// Checks every value; the error names the first bad key. Values that are valid alone but
@@ -271,6 +318,31 @@ impl Spec {
             plant: self.plant.resolved(),
             ..self.clone()
         }
+    }
+
+    /// A copy with `changes` (tables shaped like a file's, e.g. `{monte_carlo = {runs = 10}}`)
+    /// merged in and checked as a file is; the error names the first bad or unknown key.
+    ///
+    /// The merge is deep: a table in `changes` changes only the keys it holds, any other value
+    /// (an array included) replaces the old one. A new `plant.preset` brings its own
+    /// parameters, except those `changes` sets.
+    pub fn updated(&self, changes: toml::Table) -> Result<Self, SpecError> {
+        refuse_moved_keys(&changes)?;
+        let mut base = match toml::Value::try_from(self.resolved()) {
+            Ok(toml::Value::Table(t)) => t,
+            _ => unreachable!("a spec serialises to a table"),
+        };
+        let new_preset = changes
+            .get("plant")
+            .and_then(toml::Value::as_table)
+            .is_some_and(|p| p.contains_key("preset"));
+        if let (true, Some(toml::Value::Table(plant))) = (new_preset, base.get_mut("plant")) {
+            for p in Param::ALL {
+                plant.remove(p.name());
+            }
+        }
+        merge(&mut base, changes);
+        Self::from_table(base)
     }
 
     /// The resolved spec as TOML (every default filled in); [`parse`](Self::parse) reads it

@@ -87,10 +87,13 @@ impl Default for LoopConfig {
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DeviceConfig {
-    /// Arm encoder counts per revolution (after quadrature decoding), in [`COUNTS_PER_REV`].
+    /// Arm encoder counts per revolution (after quadrature decoding). Not a key of
+    /// `[device]`: the file gives it once, as `[sensor] encoder_counts[0]`, and
+    /// [`parse_file`] copies it here.
+    #[serde(skip)]
     pub arm_counts_per_rev: u32,
-    /// Pendulum encoder counts per revolution (after quadrature decoding), in
-    /// [`COUNTS_PER_REV`].
+    /// Pendulum encoder counts per revolution: `[sensor] encoder_counts[1]`, as the arm's.
+    #[serde(skip)]
     pub pendulum_counts_per_rev: u32,
     /// Where the pendulum encoder reads zero.
     pub pendulum_zero: PendulumZero,
@@ -112,9 +115,7 @@ impl Default for DeviceConfig {
     }
 }
 
-/// Allowed encoder resolutions: below 64 counts per revolution (0.1 rad) the pendulum angle
-/// is too coarse to balance on; above 2²⁴ the multi-turn i32 count overflows within 128 turns.
-pub const COUNTS_PER_REV: std::ops::RangeInclusive<u32> = 64..=(1 << 24);
+pub use super::sections::COUNTS_PER_REV;
 /// Largest `safety.voltage_limit` (V): the rigs this loop is for have 12 V to 24 V motors.
 pub const MAX_VOLTAGE_LIMIT: f64 = 24.0;
 /// Largest `safety.pendulum_limit` (rad): past horizontal no balancing controller recovers.
@@ -458,21 +459,6 @@ impl RigSections {
 
     fn validate_device(&self) -> Result<(), SpecError> {
         let d = &self.device;
-        for (key, counts) in [
-            ("device.arm_counts_per_rev", d.arm_counts_per_rev),
-            ("device.pendulum_counts_per_rev", d.pendulum_counts_per_rev),
-        ] {
-            if !COUNTS_PER_REV.contains(&counts) {
-                return Err(err(
-                    key,
-                    format!(
-                        "must be in {}..={}, got {counts}",
-                        COUNTS_PER_REV.start(),
-                        COUNTS_PER_REV.end()
-                    ),
-                ));
-            }
-        }
         sign("device.arm_sign", d.arm_sign)?;
         sign("device.pendulum_sign", d.pendulum_sign)
     }
@@ -570,20 +556,18 @@ pub fn parse_file(text: &str) -> Result<(Spec, RigSections), SpecError> {
     // A TOML syntax error is reported as by the experiment's reader.
     parse_table(text)?;
     let (spec, runtime) = Spec::parse_with_runtime(text).map_err(name_every_section)?;
-    let rig = RigSections::from_runtime(runtime)?;
+    let mut rig = RigSections::from_runtime(runtime)?;
+    [
+        rig.device.arm_counts_per_rev,
+        rig.device.pendulum_counts_per_rev,
+    ] = spec.sensor.encoder_counts;
     rig.validate(&spec)?;
     Ok((spec, rig))
 }
 
 /// Reads and checks a whole file ([`parse_file`]); errors name it.
 pub fn load_file(path: &Path) -> Result<(Spec, RigSections), SpecError> {
-    let bytes =
-        std::fs::read(path).map_err(|e| err("", format!("cannot read: {e}")).in_file(path))?;
-    let text = std::str::from_utf8(&bytes)
-        .map_err(|e| err("", format!("invalid TOML: not UTF-8 text ({e})")).in_file(path))?;
-    // Editors on some systems start a UTF-8 file with a byte-order mark.
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    parse_file(text).map_err(|e| e.in_file(path))
+    parse_file(&super::read_text(path)?).map_err(|e| e.in_file(path))
 }
 
 #[cfg(test)]

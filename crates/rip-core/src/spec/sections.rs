@@ -347,7 +347,14 @@ impl PlantSpec {
     }
 }
 
-/// `[sensor]`: encoders and white measurement noise of a simulated run.
+/// Allowed encoder resolutions (`sensor.encoder_counts`): below 64 counts per revolution
+/// (0.1 rad) the pendulum angle is too coarse to balance on; above 2²⁴ the multi-turn i32
+/// count overflows within 128 turns.
+pub const COUNTS_PER_REV: std::ops::RangeInclusive<u32> = 64..=(1 << 24);
+
+/// `[sensor]`: the encoders and white measurement noise of the rig, simulated (`riprs
+/// compare`, `rip-rt emulate`) or real (`rip-rt` turns counts into angles with
+/// `encoder_counts`).
 ///
 /// The defaults model a 2048-count quadrature encoder on each joint (the QUBE-Servo 2's) and
 /// 1 mrad of white noise, about a third of one count: the paper does not state its sensors.
@@ -377,10 +384,14 @@ impl Default for SensorSpec {
 impl SensorSpec {
     fn validate(&self) -> Result<(), SpecError> {
         for (i, &c) in self.encoder_counts.iter().enumerate() {
-            if c == 0 {
+            if !COUNTS_PER_REV.contains(&c) {
                 return Err(bad(
                     format!("sensor.encoder_counts[{i}]"),
-                    "must be at least 1 count per revolution, got 0",
+                    format!(
+                        "must be in {}..={} counts per revolution, got {c}",
+                        COUNTS_PER_REV.start(),
+                        COUNTS_PER_REV.end()
+                    ),
                 ));
             }
         }

@@ -487,3 +487,68 @@ fn mpc_keys_deserialise_into_the_mpc_settings() {
     // A soft equality is allowed, in the file as in the Rust and Python API.
     assert!(Spec::parse("[mpc]\noutput_bounds = [[-inf, inf], [0.0, 0.0]]\n").is_ok());
 }
+
+#[test]
+fn a_key_that_moved_is_refused_naming_its_new_key() {
+    for (old, new) in super::MOVED_KEYS {
+        let (section, key) = old.split_once('.').unwrap();
+        let text = format!("[{section}]\n{key} = 4096\n");
+        let e = Spec::parse(&text).unwrap_err();
+        assert_eq!(e.key, old, "{e}");
+        assert!(e.reason.contains(new), "{e}");
+        let e = super::rig_sections::parse_file(&text).unwrap_err();
+        assert_eq!(e.key, old, "{e}");
+    }
+    // rip-rt's encoders are the file's one resolution, `[sensor] encoder_counts`.
+    let (_, rig) =
+        super::rig_sections::parse_file("[sensor]\nencoder_counts = [1024, 4096]\n").unwrap();
+    assert_eq!(
+        [
+            rig.device.arm_counts_per_rev,
+            rig.device.pendulum_counts_per_rev
+        ],
+        [1024, 4096]
+    );
+}
+
+#[test]
+fn an_update_is_a_deep_merge_checked_as_a_file() {
+    let base =
+        Spec::parse("[mpc]\nprediction_horizon = 20\n[sensor]\nnoise_std = [0.0, 0.0]\n").unwrap();
+    let changes: toml::Table = "[mpc]\ncontrol_horizon = 2\n[sensor]\nnoise_std = [1e-3, 2e-3]\n"
+        .parse()
+        .unwrap();
+    let updated = base.updated(changes).unwrap();
+    let file = Spec::parse(
+        "[mpc]\nprediction_horizon = 20\ncontrol_horizon = 2\n\
+         [sensor]\nnoise_std = [1e-3, 2e-3]\n",
+    )
+    .unwrap();
+    assert_eq!(updated.resolved(), file.resolved());
+    // A new preset brings its parameters, except those set with it.
+    let changes: toml::Table = "[plant]\npreset = \"qube_servo2\"\nmr = 0.1\n"
+        .parse()
+        .unwrap();
+    let updated = Spec::default().updated(changes).unwrap();
+    let file = Spec::parse("[plant]\npreset = \"qube_servo2\"\nmr = 0.1\n").unwrap();
+    assert_eq!(updated.resolved(), file.resolved());
+    // Bad and unknown keys are named, as in a file.
+    for (text, key) in [
+        ("[mpc]\nhorizon = 3\n", "mpc.horizon"),
+        (
+            "[mpc]\nprediction_horizon = \"x\"\n",
+            "mpc.prediction_horizon",
+        ),
+        (
+            "[sensor]\nnoise_std = [1e-3, -1.0]\n",
+            "sensor.noise_std[1]",
+        ),
+        (
+            "[device]\narm_counts_per_rev = 1024\n",
+            "device.arm_counts_per_rev",
+        ),
+    ] {
+        let e = Spec::default().updated(text.parse().unwrap()).unwrap_err();
+        assert_eq!(e.key, key, "{text}: {e}");
+    }
+}

@@ -360,7 +360,7 @@ mod tests {
                 continue;
             };
             let mut sup =
-                crate::swingup::study::supervised(&spec, &design, crate::spec::ControllerKind::Lqr)
+                crate::spec::study::supervised(&spec, &design, crate::spec::ControllerKind::Lqr)
                     .unwrap();
             let res = simulate(&plant, sup.as_mut(), &hanging(20.0)).unwrap();
             if res.catch_time.is_some() {

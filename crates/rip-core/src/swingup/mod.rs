@@ -139,9 +139,9 @@ pub mod feasibility;
 mod law;
 
 mod settings;
-pub mod study;
 
 pub use crate::swing_report::{SwingUpReport, STILL_ARM};
+pub use crate::trig::wrap_angle;
 pub use feasibility::{feasibility, Feasibility, Verdict};
 pub use settings::{OnFall, SwingUpSettings, MAX_SWING_UP_TIME};
 
@@ -151,18 +151,6 @@ use crate::error::{Result, RipError};
 use crate::plant::Plant;
 
 use law::{EnergyLaw, RateEstimator, UnstableMode};
-
-/// `a` wrapped to (−π, π].
-#[inline]
-pub fn wrap_angle(a: f64) -> f64 {
-    use std::f64::consts::{PI, TAU};
-    let w = a - TAU * (a / TAU).round();
-    if w <= -PI {
-        w + TAU
-    } else {
-        w
-    }
-}
 
 /// The swing-up supervisor around the balance controller `C` (module docs).
 #[derive(Debug, Clone)]

@@ -52,8 +52,8 @@ impl OnFall {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SwingUpSettings {
-    /// Largest voltage the swing-up applies, `U` (V); default 10 V (the QUBE-Servo's recommended
-    /// limit, inside the paper's 12 V).
+    /// Largest voltage the swing-up applies, `U` (V); default the paper's bound,
+    /// [`INPUT_LIMIT`](crate::paper::INPUT_LIMIT) (12 V).
     pub max_voltage: f64,
     /// The arm stays within `±arm_limit` (rad) during the swing-up, by the law itself; default
     /// 1.5 rad, inside the ±π/2 that many rigs' cables allow. The balance region ends where
@@ -150,7 +150,7 @@ pub struct SwingUpSettings {
 impl Default for SwingUpSettings {
     fn default() -> Self {
         Self {
-            max_voltage: 12.0,
+            max_voltage: crate::paper::INPUT_LIMIT,
             arm_limit: 1.5,
             brake_fraction: 0.5,
             pump_fraction: 3.0,

@@ -1,9 +1,9 @@
-use super::study::{hanging_config, supervised, STEP_AFTER_CATCH};
 use super::*;
 use crate::paper;
 use crate::plant::{FurutaParams, State};
 use crate::regulators::Lqr;
 use crate::sim::{simulate, Reference, SimConfig, SimResult};
+use crate::spec::study::{hanging_config, supervised, STEP_AFTER_CATCH};
 use crate::spec::{ControllerKind, Spec};
 use std::f64::consts::PI;
 

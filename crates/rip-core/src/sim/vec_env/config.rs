@@ -2,11 +2,11 @@
 
 use super::{Task, DEFAULT_ACTION_COST, DEFAULT_INIT_SPREAD, MAX_DELAY};
 use crate::error::{Result, RipError};
+use crate::plant::Param;
 use crate::plant::{FurutaParams, Plant, State};
 use crate::sim::{
     SensorModel, DEFAULT_DURATION, DEFAULT_FALL_LIMIT, DEFAULT_SUBSTEPS, MAX_NOISE_STD,
 };
-use crate::spec::Param;
 
 /// A parameter covariance (e.g. an identification's): the draw is `p = p̂ + L z`, `z ~ N(0, I)`,
 /// `L Lᵀ = Σ`, on the listed parameters about their values in the environment's plant.
@@ -94,29 +94,6 @@ impl Default for EnvConfig {
             init_spread: DEFAULT_INIT_SPREAD,
             action_cost: DEFAULT_ACTION_COST,
             randomisation: Randomisation::default(),
-        }
-    }
-}
-
-impl EnvConfig {
-    /// The environment of an experiment file's `[plant]`, `[sensor]`, voltage bound
-    /// (`[mpc] input_bounds`), rate filter (`[lqr] rate_cutoff`) and arm limit
-    /// (`[swing_up] arm_limit`), as `riprs compare` simulates it at period `ts`; every other
-    /// setting at its default.
-    pub fn from_spec(spec: &crate::spec::Spec, task: Task, ts: f64) -> Self {
-        let sim = spec.sim_config(ts, 0);
-        Self {
-            task,
-            params: spec.plant.params(),
-            ts,
-            substeps: sim.substeps,
-            u_limit: sim.u_limit,
-            sensor: sim.sensor,
-            rate_cutoff_hz: spec.lqr.rate_cutoff,
-            max_steps: (DEFAULT_DURATION / ts).round().max(1.0) as u32,
-            fall_limit: sim.fall_limit,
-            arm_limit: spec.swing_up.arm_limit,
-            ..Self::default()
         }
     }
 }

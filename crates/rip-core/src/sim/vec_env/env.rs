@@ -10,7 +10,7 @@ use super::{EnvConfig, Task, MAX_DELAY, MAX_OBS_RATE, MAX_REDRAWS, OBS_DIM};
 use crate::error::Result;
 use crate::plant::{FurutaParams, Plant, State};
 use crate::regulators::RateFilter;
-use crate::swingup::wrap_angle;
+use crate::trig::wrap_angle;
 
 /// A fixed-capacity ring of the last `MAX_DELAY + 1` values.
 #[derive(Debug, Clone, Copy)]

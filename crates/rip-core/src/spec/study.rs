@@ -3,17 +3,15 @@
 //! and catches it with the spec's balance controller, and [`STEP_AFTER_CATCH`] seconds after
 //! the catch the arm reference steps to `reference.arm_step` (the paper's 0 → 1 rad step).
 
-use super::SwingUp;
+use super::{ControllerKind, Design, Spec, SpecError, SWING_UP_ALLOWANCE};
 use crate::controller::Controller;
 use crate::error::RipError;
 use crate::sim::{Reference, SimConfig};
-use crate::spec::{ControllerKind, Design, Spec, SpecError};
+use crate::swingup::{wrap_angle, SwingUp};
 
 /// Time (s) from the catch to the arm step: the catch transient of every balance controller
 /// has died down by then (it lasts about 1 s on both presets).
 pub const STEP_AFTER_CATCH: f64 = 2.0;
-
-pub use crate::spec::SWING_UP_ALLOWANCE;
 
 /// The simulation of `spec` ([`Spec::sim_config`]) started hanging at rest, `x0 = [0, 0, π, 0]`,
 /// with the arm step [`STEP_AFTER_CATCH`] after the catch and
@@ -87,7 +85,7 @@ pub fn arrivals(res: &crate::SimResult, catch_angle: f64) -> Arrivals {
             out.peak_arm_after_fall = out.peak_arm_after_fall.max(x[0].abs());
         }
         let swinging = res.phase[k] == Phase::SwingUp;
-        let is_near = super::wrap_angle(x[2]).abs() <= catch_angle;
+        let is_near = wrap_angle(x[2]).abs() <= catch_angle;
         if is_near && !near && !caught && (swinging || res.phase[k] == Phase::Balance) {
             out.before_catch += 1;
         }
