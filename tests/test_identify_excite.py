@@ -77,13 +77,13 @@ def test_a_generated_rig_through_rip_rt_excite_is_identified_or_refused(
     truth = tmp_path / "truth.toml"
     truth.write_text(rig.to_toml())
     arm, pendulum = rig.encoder_counts
-    # What the lab knows without the rig's model: its encoders (the [device] settings) and the
+    # What the lab knows without the rig's model: its encoders ([sensor] encoder_counts) and the
     # lab file's measurements.
     config = tmp_path / "excite.toml"
     # Encoders this noisy (about 1.5 counts) span more than the default rest band at rest.
     rest = max(6, math.ceil(8 * rig.noise_counts()))
     config.write_text(
-        f"[device]\narm_counts_per_rev = {arm}\npendulum_counts_per_rev = {pendulum}\n"
+        f"[sensor]\nencoder_counts = [{arm}, {pendulum}]\n"
         f"[calibration]\nrest_counts = {rest}\n"
     )
     lab = tmp_path / "lab.toml"
