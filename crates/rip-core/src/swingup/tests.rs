@@ -457,7 +457,7 @@ fn after_a_fall_the_arm_stays_inside_its_limit_on_perturbed_plants() {
             &hanging_config(&spec, paper::TS, seed),
         )
         .unwrap();
-        let a = super::study::arrivals(&res, spec.swing_up.catch_angle);
+        let a = crate::spec::study::arrivals(&res, spec.swing_up.catch_angle);
         if res.fell {
             falls += 1;
             assert!(
