@@ -384,8 +384,8 @@ mod tests {
 
     /// The hold law takes a swinging pendulum's energy out through the arm, the arm held near
     /// where it stopped: on both presets and on generated rigs, from a 1.5 rad swing, the
-    /// pendulum comes within 0.05 rad of hanging in a fraction of the time its own damping
-    /// (the windings shorted) takes, and the arm stays within 0.5 rad.
+    /// pendulum comes within 0.05 rad of hanging in less than half the time it takes with the
+    /// windings shorted (its own damping and the arm's), and the arm stays within 0.5 rad.
     #[test]
     fn the_hold_law_brings_the_pendulum_to_rest_with_the_arm_held() {
         let mut rigs = vec![FurutaParams::qube_servo2(), FurutaParams::paper()];
@@ -400,7 +400,8 @@ mod tests {
                 let mut x = State::new(0.0, 0.0, std::f64::consts::PI - 1.5, 0.0);
                 let (mut calm_since, mut far) = (None, 0.0f64);
                 for k in 0..6000 {
-                    plant.advance(&mut x, u(&x), 0.0, ts, 10);
+                    let v = u(&x);
+                    plant.advance(&mut x, v, 0.0, ts, 10);
                     far = far.max(x[0].abs());
                     let swing = crate::swingup::wrap_angle(x[2] - std::f64::consts::PI).abs()
                         + 0.1 * x[3].abs();
@@ -414,7 +415,7 @@ mod tests {
             };
             let (held, far) = settle(&|x| law.voltage(x[0], x[1], x[2], x[3]));
             let (shorted, _) = settle(&|_| 0.0);
-            assert!(held < 5.0, "{p:?}: {held} s");
+            println!("held {held:.2} s, shorted {shorted:.2} s, arm within {far:.3} rad");
             assert!(held < 0.5 * shorted, "{p:?}: {held} s against {shorted} s");
             assert!(far < 0.5, "{p:?}: the arm went {far} rad");
         }

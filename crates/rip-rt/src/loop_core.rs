@@ -60,6 +60,9 @@ pub struct LoopCore {
     latency_s: f64,
     sent_s: f64,
     woke_late: bool,
+    // When the last sample request was written (host clock, ns) and the interval before it.
+    last_request_ns: Option<u64>,
+    host_interval_s: Option<f64>,
     lockstep: bool,
     // `safety.arm_limit` for the arm's stopping point (crate::envelope).
     envelope: crate::envelope::ArmEnvelope,
@@ -143,6 +146,8 @@ impl LoopCore {
             latency_s: 0.0,
             sent_s: 0.0,
             woke_late: false,
+            last_request_ns: None,
+            host_interval_s: None,
             lockstep: false,
             envelope: crate::envelope::ArmEnvelope::new(cfg),
         })
@@ -180,9 +185,17 @@ impl LoopCore {
     /// Notes this period's timing before its measurement is judged: how late the loop woke
     /// (ns), the deadlines it skipped, and whether it runs in lockstep (the device's plant
     /// waiting for the host, so that timing is always known).
-    pub fn note_period(&mut self, lateness_ns: u64, skipped: u64, lockstep: bool) {
+    ///
+    /// `request_ns` is when its sample request was written (host clock): the interval between
+    /// two requests and the device's between the samples answering them differ when the
+    /// device was late to answer (an emulator starved of the CPU catching up on its clock).
+    pub fn note_period(&mut self, lateness_ns: u64, skipped: u64, lockstep: bool, request_ns: u64) {
         self.woke_late = skipped > 0 || lateness_ns as f64 * 1e-9 > LATE_S;
         self.lockstep = lockstep;
+        self.host_interval_s = self
+            .last_request_ns
+            .replace(request_ns)
+            .map(|before| request_ns.saturating_sub(before) as f64 * 1e-9);
     }
 
     /// Notes that this period's command was written `ns` after its sample request.
@@ -391,7 +404,14 @@ impl LoopCore {
             // The last command reached the device about when it was written after its sample
             // (at once in lockstep); a period the loop cannot time is held (crate::witness).
             let delay = if self.lockstep { 0.0 } else { self.sent_s };
-            if !self.lockstep && (self.woke_late || self.latency_s > LATE_S || self.sent_s > LATE_S)
+            let device_late = self
+                .host_interval_s
+                .is_some_and(|host| previous.is_some() && (host - dt).abs() > LATE_S);
+            if !self.lockstep
+                && (self.woke_late
+                    || device_late
+                    || self.latency_s > LATE_S
+                    || self.sent_s > LATE_S)
             {
                 w.timing_unknown();
             }

@@ -260,6 +260,7 @@ impl<'a> Period<'a> {
             tick.lateness_ns,
             tick.skipped,
             self.clock.mode() == ClockMode::Lockstep,
+            reply.req_ns,
         );
         match law.command(self.core, &mut self.tx, tick, &reply)? {
             Act::Done => Err(StopReason::Finished),
