@@ -176,8 +176,8 @@ impl LoopCore {
         self.last_sample = None;
     }
 
-    /// Notes the request-to-reply time of the latest exchange (ns): the witness takes the
-    /// next command to reach the device about that long after the sample.
+    /// Notes the request-to-reply time of the latest exchange (ns): a slow reply leaves the
+    /// period's timing unknown to the witness (crate::witness, "Timing").
     pub fn note_latency(&mut self, ns: u64) {
         self.latency_s = ns as f64 * 1e-9;
     }

@@ -428,10 +428,9 @@ impl Witness {
         };
         let start = x[0];
         // The same period with the command arriving at the sample and TIMING_S after the
-        // expected delay: how much the prediction hangs on when the voltage changed. A slow
-        // exchange or a skipped period leaves the arrival unknown within the whole interval
-        // (a request-to-reply time on the host's clock need not be the device's: a starved
-        // emulator catches up on its own clock).
+        // expected delay: how much the prediction hangs on when the voltage changed. A period
+        // the loop could not time, or a skipped one, leaves the arrival unknown within the
+        // whole interval (module docs, "Timing").
         let unknown = std::mem::take(&mut self.unknown_next);
         let latest = if ARRIVAL_ANYWHERE || unknown || dt > 1.5 * self.ts {
             dt
