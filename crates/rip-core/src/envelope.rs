@@ -189,6 +189,82 @@ impl BrakingLaw {
     }
 }
 
+/// The stop's hold law, once the braking law has the arm at rest: the arm held where it
+/// stopped while the pendulum's energy is taken out through it. A pendulum that falls from
+/// upright, or still swings after a swing-up, pushes the arm with its reaction torque; a
+/// weak motor's shorted windings cannot hold the arm against it (it walks on, swing after
+/// swing), and the pendulum's own damping takes tens of seconds.
+///
+/// The law is the discrete LQR of the plant linearised about the hanging equilibrium at the
+/// arm's hold point `θ_h`, with the state `z = (θ − θ_h, θ̇, φ, α̇)`, `φ = wrap(α − π)`,
+///
+/// ```text
+/// u = −U · clamp(K z / U, −1, 1),   K = dlqr(A_d, B_d, Q, R),
+/// Q = diag(1/θ_m², 0, 1/φ_m², 0),   R = 1/U²
+/// ```
+///
+/// (Bryson's rule: the arm held within `θ_m` = [`HOLD_ARM_RAD`], the pendulum brought within
+/// `φ_m` = [`HOLD_PENDULUM_RAD`], with up to the voltage bound). When only the arm's reading
+/// can be trusted (the wiring's sign learnt from the arm's response, the pendulum's not),
+/// [`HoldLaw::arm_voltage`] uses the arm's terms alone: a stiff, damped position loop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HoldLaw {
+    /// The gain `K` on `(θ − θ_h, θ̇, φ, α̇)`.
+    pub k: [f64; 4],
+    /// `U` (V).
+    pub voltage: f64,
+}
+
+/// `θ_m` of [`HoldLaw`] (rad): the arm's deviation from its hold point weighed against a
+/// full-voltage command.
+pub const HOLD_ARM_RAD: f64 = 0.05;
+/// `φ_m` of [`HoldLaw`] (rad): the pendulum's swing weighed against a full-voltage command.
+pub const HOLD_PENDULUM_RAD: f64 = 0.5;
+
+impl HoldLaw {
+    /// The law for plant `p`, voltage bound `voltage` (V) and loop period `ts` (s).
+    pub fn new(p: &FurutaParams, voltage: f64, ts: f64) -> crate::error::Result<Self> {
+        use crate::linalg::Mat;
+        let plant = Plant::new(*p)?;
+        let hanging = State::new(0.0, 0.0, std::f64::consts::PI, 0.0);
+        let (a, b) = plant.linearize_discrete(&hanging, 0.0, ts)?;
+        let q = Mat::from_diagonal(&nalgebra::DVector::from_vec(vec![
+            1.0 / (HOLD_ARM_RAD * HOLD_ARM_RAD),
+            0.0,
+            1.0 / (HOLD_PENDULUM_RAD * HOLD_PENDULUM_RAD),
+            0.0,
+        ]));
+        let r = Mat::from_element(1, 1, 1.0 / (voltage * voltage).max(1e-6));
+        let design = crate::lqr::dlqr(&a, &b, &q, &r, None)?;
+        Ok(Self {
+            k: std::array::from_fn(|i| design.k[(0, i)]),
+            voltage,
+        })
+    }
+
+    /// The voltage for the arm at `offset` (rad) from its hold point moving at `rate`
+    /// (rad/s), the pendulum at `alpha` (rad, 0 upright) moving at `alpha_rate` (rad/s).
+    pub fn voltage(&self, offset: f64, rate: f64, alpha: f64, alpha_rate: f64) -> f64 {
+        let phi = crate::swingup::wrap_angle(alpha - std::f64::consts::PI);
+        let u = -(self.k[0] * offset + self.k[1] * rate + self.k[2] * phi + self.k[3] * alpha_rate);
+        if u.is_finite() {
+            u.clamp(-self.voltage, self.voltage)
+        } else {
+            0.0
+        }
+    }
+
+    /// [`voltage`](Self::voltage) with the arm's terms alone (class docs).
+    pub fn arm_voltage(&self, offset: f64, rate: f64) -> f64 {
+        let u = -(self.k[0] * offset + self.k[1] * rate);
+        if u.is_finite() {
+            u.clamp(-self.voltage, self.voltage)
+        } else {
+            0.0
+        }
+    }
+}
+
 /// Where a simulated run first left the envelope: the stop that the loop would make there.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Breach {

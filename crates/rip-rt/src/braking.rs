@@ -5,7 +5,8 @@
 
 use crate::config::Config;
 use crate::envelope::{
-    brake_mode, Brake, BrakeCommand, BrakeMode, BrakeReport, RestTest, BLIND_PERIODS, MAX_BRAKE_S,
+    brake_mode, Brake, BrakeCommand, BrakeMode, BrakeReport, StopSequence, BLIND_PERIODS,
+    MAX_BRAKE_S, MAX_HOLD_S,
 };
 use crate::loop_core::LoopCore;
 use crate::period::exchange;
@@ -52,29 +53,25 @@ pub fn bring_to_rest(
     if mode == BrakeMode::None {
         return report;
     }
-    let mut brake = if mode == BrakeMode::Modelled {
+    let brake = if mode == BrakeMode::Modelled {
         Brake::modelled(cfg, core.witness_estimate(), core.held_voltage())
     } else {
         Brake::new(cfg, mode)
     };
-    let period_s = cfg.period_s();
+    let mut stop = StopSequence::new(cfg, brake);
     let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
-    let mut rest = RestTest::new(period_s);
-    let mut last: Option<(f64, u32)> = None;
+    let mut last: Option<(f64, f64, u32)> = None;
     let mut blind = 0u32;
     let mut tx = [0u8; MAX_FRAME];
     let mut rx = [0u8; 512];
     // A fresh grid: the run may have stopped in the middle of a period, or after a stall.
     periodic.restart();
     let start_ns = periodic.next_deadline_ns();
-    let end_ns = start_ns + (MAX_BRAKE_S * 1e9) as u64;
-    // After the law brought the arm to rest, the windings stay shorted until it rests
-    // there too (a swinging pendulum still pushes it), and only then open (module docs).
-    let mut holding = false;
+    let end_ns = start_ns + ((MAX_BRAKE_S + MAX_HOLD_S) * 1e9) as u64;
     loop {
         let tick = periodic.wait();
         report.seconds = (tick.deadline_ns - start_ns) as f64 * 1e-9;
-        report.mode = brake.mode();
+        report.mode = stop.mode();
         if tick.deadline_ns >= end_ns {
             return report;
         }
@@ -86,7 +83,7 @@ pub fn bring_to_rest(
         let Some(reply) = reply else {
             blind += 1;
             if blind >= BLIND_PERIODS {
-                brake.short();
+                stop.short();
             }
             // Without a fresh measurement the law has no rate: short the windings.
             if !send(io, Command::BRAKE) {
@@ -101,26 +98,26 @@ pub fn bring_to_rest(
             report.mode = BrakeMode::Short;
             return report;
         }
-        let (theta, _) = core.angles(&reply.m);
+        let (theta, alpha) = core.angles(&reply.m);
         let now_us = reply.m.device_time_us;
-        let rate = match last.replace((theta, now_us)) {
-            Some((before, at)) if (1..u32::MAX / 2).contains(&now_us.wrapping_sub(at)) => {
-                (theta - before) / (now_us.wrapping_sub(at) as f64 * 1e-6)
+        let (rate, alpha_rate) = match last.replace((theta, alpha, now_us)) {
+            Some((before, alpha_before, at))
+                if (1..u32::MAX / 2).contains(&now_us.wrapping_sub(at)) =>
+            {
+                let dt = now_us.wrapping_sub(at) as f64 * 1e-6;
+                (
+                    (theta - before) / dt,
+                    rip_core::swingup::wrap_angle(alpha - alpha_before) / dt,
+                )
             }
-            _ => 0.0,
+            _ => (0.0, 0.0),
         };
         report.max_rate = report.max_rate.max(rate.abs());
-        // The model's arm while the stop runs on it: the reading is not the arm's.
-        if rest.observe(brake.model_arm().unwrap_or(theta)) {
-            if holding || brake.mode() == BrakeMode::Short {
-                report.at_rest = true;
-                return report;
-            }
-            holding = true;
-            brake.short();
-            rest = RestTest::new(period_s);
-        }
-        let command = match brake.command(Some(rate)) {
+        let Some(command) = stop.step(theta, rate, alpha, alpha_rate) else {
+            report.at_rest = true;
+            return report;
+        };
+        let command = match command {
             BrakeCommand::Volts(v) => Command {
                 voltage_mv: (v * 1000.0).round() as i16,
                 flags: crate::protocol::COMMAND_ENABLE,

@@ -28,7 +28,7 @@
 //! not depend on it.
 
 use rip_core::envelope::{
-    envelope_speed, excitation_breach, BrakingLaw, StoppingModel, STOP_BRAKE_FRACTION,
+    envelope_speed, excitation_breach, BrakingLaw, HoldLaw, StoppingModel, STOP_BRAKE_FRACTION,
 };
 use rip_core::excitation::{ExcitationSettings, Signal};
 use rip_core::plant::{Plant, State};
@@ -227,8 +227,15 @@ pub enum BrakeMode {
     Active,
     /// The braking law with its sign reversed: the witness saw the arm move against the
     /// voltage (a swapped motor lead or a reversed arm encoder), and in both cases a voltage
-    /// along the *measured* motion is the one that opposes the true motion.
+    /// along the *measured* motion is the one that opposes the true motion. The sign is
+    /// checked on the arm's response ([`Brake`]): wrong, the law flips once to
+    /// [`BrakeMode::Checked`].
     Reversed,
+    /// The braking law with the model's sign, checked on the arm's response: the witness found
+    /// the rig's motion unlike the model's, its arm encoder still counting (a wrong scale, a
+    /// pendulum that disagrees), so the sign is not known for sure. Wrong, the law flips once
+    /// to [`BrakeMode::Reversed`]; a law that fails both ways gives way to the short.
+    Checked,
     /// The braking law on the model's arm rate, run open loop from the witness's estimate
     /// at the stop (the arm encoder stopped counting; the motor is trusted), until the
     /// model's arm is at rest; then the short.
@@ -259,6 +266,12 @@ pub fn brake_mode(reason: &StopReason) -> BrakeMode {
         StopReason::Witness(WitnessFault::ArmWrongWay { .. }) => BrakeMode::Reversed,
         // The arm encoder stopped counting: brake on the model's arm.
         StopReason::Witness(WitnessFault::ArmFrozen { .. }) => BrakeMode::Modelled,
+        // The arm encoder counts, but its motion disagrees with the model's: brake with the
+        // model's sign and check it on the response (the short alone cannot stop a light arm
+        // on a weak motor against its swinging pendulum).
+        StopReason::Witness(
+            WitnessFault::ArmDisagrees { .. } | WitnessFault::PendulumDisagrees { .. },
+        ) => BrakeMode::Checked,
         // The host's timing cannot be trusted to close a loop (a slow step, missed
         // deadlines, a stall): short the windings rather than drive.
         StopReason::Overrun(_) => BrakeMode::Short,
@@ -272,12 +285,12 @@ pub fn brake_mode(reason: &StopReason) -> BrakeMode {
     }
 }
 
-/// Periods in a row of a rising arm speed under the saturated reversed braking law after
-/// which the stop gives up the law and shorts the windings (the sign the arm showed was not
-/// the wiring's: a wrong scale, say).
+/// Periods in a row of a rising arm speed under the saturated braking law with the sign under
+/// test after which that sign is taken to be wrong (the sign the arm showed was not the
+/// wiring's: a wrong scale, say): the law flips once, then gives way to the short.
 pub const WRONG_SIGN_PERIODS: u32 = 4;
-/// Periods over which the saturated reversed law must take a tenth off the arm's speed, or
-/// the stop shorts the windings.
+/// Periods over which the saturated law with the sign under test must take a tenth off the
+/// arm's speed, or the sign is taken to be wrong.
 pub const PROGRESS_PERIODS: u32 = 10;
 
 /// What the stop applies for one period.
@@ -301,6 +314,12 @@ pub struct Brake {
     // The speed at the start of the current progress window, and the periods into it.
     window_speed: f64,
     window: u32,
+    // Whether the checked law may still flip its sign once; the largest saturated speed
+    // since its sign was last set, and whether the law has since halved it (its sign shown
+    // right on the arm's response).
+    may_flip: bool,
+    peak_speed: f64,
+    verified: bool,
     // The model braked open loop (BrakeMode::Modelled): the plant, its state, RK4 substeps
     // per period, the period (s), and how long its arm has been at rest (periods).
     model: Option<(Plant, State, usize, f64, u32)>,
@@ -323,6 +342,9 @@ impl Brake {
             rising: 0,
             window_speed: f64::INFINITY,
             window: 0,
+            may_flip: matches!(mode, BrakeMode::Reversed | BrakeMode::Checked),
+            peak_speed: 0.0,
+            verified: false,
             model: None,
         }
     }
@@ -349,6 +371,16 @@ impl Brake {
         self.model.as_ref().map(|m| m.1[0])
     }
 
+    /// Whether the law's sign is known: trusted ([`BrakeMode::Active`]), or shown on the arm's
+    /// response (the saturated law has halved the arm's speed with it).
+    pub fn sign_known(&self) -> bool {
+        match self.mode {
+            BrakeMode::Active => true,
+            BrakeMode::Checked | BrakeMode::Reversed => self.verified,
+            _ => false,
+        }
+    }
+
     /// How it brakes now (a law whose sign proved wrong became [`BrakeMode::Short`]).
     pub fn mode(&self) -> BrakeMode {
         self.mode
@@ -365,7 +397,7 @@ impl Brake {
     /// measurement, which shorts the windings for that period).
     pub fn command(&mut self, rate: Option<f64>) -> BrakeCommand {
         let sign = match self.mode {
-            BrakeMode::Active => 1.0,
+            BrakeMode::Active | BrakeMode::Checked => 1.0,
             BrakeMode::Reversed => -1.0,
             // A reading that moves after all: the model's arm is not the arm.
             BrakeMode::Modelled if rate.is_some_and(|r| r.abs() > self.dead_band) => {
@@ -379,9 +411,29 @@ impl Brake {
             return BrakeCommand::Short;
         };
         let speed = rate.abs();
-        if self.mode == BrakeMode::Reversed && self.wrong_sign(speed) {
-            self.mode = BrakeMode::Short;
-            return BrakeCommand::Short;
+        let mut sign = sign;
+        if matches!(self.mode, BrakeMode::Reversed | BrakeMode::Checked) && self.wrong_sign(speed) {
+            if !self.may_flip {
+                self.mode = BrakeMode::Short;
+                return BrakeCommand::Short;
+            }
+            // The sign the diagnosis suggested drove the arm on: the other one brakes it.
+            self.may_flip = false;
+            self.mode = if self.mode == BrakeMode::Reversed {
+                BrakeMode::Checked
+            } else {
+                BrakeMode::Reversed
+            };
+            self.rising = 0;
+            self.window = 0;
+            self.last_speed = f64::INFINITY;
+            self.peak_speed = 0.0;
+            sign = -sign;
+        }
+        if speed > self.law.linear_below {
+            self.peak_speed = self.peak_speed.max(speed);
+        } else if self.peak_speed > 0.0 && speed < 0.5 * self.peak_speed {
+            self.verified = true;
         }
         if speed <= self.dead_band {
             BrakeCommand::Volts(0.0)
@@ -417,9 +469,11 @@ impl Brake {
         self.model.as_ref().map_or(0.01, |m| m.3)
     }
 
-    /// Whether the reversed law, saturated, proves not to brake: a law that opposes the
+    /// Whether the law with the sign under test proves not to brake: a law that opposes the
     /// motion slows the arm after the latency; one whose sign is wrong speeds it up period
-    /// after period, or holds it at the speed where the motor's back-EMF balances it.
+    /// after period, or holds it at the speed where the motor's back-EMF balances it (both
+    /// judged while the law is saturated: in its linear range the pendulum's push on the arm
+    /// is as large as the law's, and a test there flips a law that was right).
     fn wrong_sign(&mut self, speed: f64) -> bool {
         let saturated = speed > self.law.linear_below;
         if saturated && speed > self.last_speed + self.dead_band {
@@ -445,6 +499,198 @@ impl Brake {
     }
 }
 
+/// The longest the hold law runs (s) before the windings are shorted regardless.
+pub const MAX_HOLD_S: f64 = 5.0;
+/// Swing of the pendulum (rad, its range over [`REST_S`]) below which the hold law has
+/// taken out what it needs to.
+pub const PENDULUM_REST_RAD: f64 = 0.05;
+/// Distance (rad) from its hold point past which the hold law is given up for the short (a
+/// sign learnt wrong, a reading that is not the arm's).
+pub const HOLD_GIVE_UP_RAD: f64 = 0.5;
+
+/// Periods in a row in which the hold law drives with at least a quarter of the voltage bound
+/// while the arm's reading does not change, after which the law is given up for the short:
+/// the reading is not the arm's (an arm encoder that stopped counting unseen), and the
+/// pendulum's terms would drive the arm blind.
+pub const HOLD_BLIND_PERIODS: u32 = 5;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Stage {
+    Braking,
+    Holding {
+        at: f64,
+        periods: u32,
+        last: f64,
+        unmoved: u32,
+    },
+    Shorted,
+}
+
+/// A stop, period by period, after the run ended: the braking law of the stop's mode
+/// ([`Brake`]) until the arm rests; then, where the wiring's sign is known, the hold law
+/// (`rip_core::envelope::HoldLaw`: the arm held where it stopped, the pendulum's energy taken
+/// out through it; the arm's terms alone when only the arm's sign was learnt) until arm and
+/// pendulum rest, at most [`MAX_HOLD_S`]; then the windings shorted until the arm rests once
+/// more. One definition for `rip-rt`'s stops ([`crate::braking::bring_to_rest`]) and for
+/// the simulations that test them. Allocation-free per period.
+#[derive(Debug, Clone)]
+pub struct StopSequence {
+    brake: Brake,
+    hold: Option<HoldLaw>,
+    arm_rest: RestTest,
+    pendulum_rest: RestTest,
+    stage: Stage,
+    period_s: f64,
+    voltage: f64,
+    // The last command's voltage (0 for the short).
+    last_volts: f64,
+}
+
+impl StopSequence {
+    /// The stop of `cfg` with `brake`.
+    pub fn new(cfg: &Config, brake: Brake) -> Self {
+        let period_s = cfg.period_s();
+        let voltage = cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT);
+        Self {
+            brake,
+            hold: HoldLaw::new(&cfg.spec.plant.params(), voltage, period_s).ok(),
+            arm_rest: RestTest::new(period_s),
+            pendulum_rest: RestTest::new(period_s),
+            stage: Stage::Braking,
+            period_s,
+            voltage,
+            last_volts: 0.0,
+        }
+    }
+
+    /// How it brakes now.
+    pub fn mode(&self) -> BrakeMode {
+        self.brake.mode()
+    }
+
+    /// Whether the hold law is running.
+    pub fn holding(&self) -> bool {
+        matches!(self.stage, Stage::Holding { .. })
+    }
+
+    /// Without a fresh measurement: the short from now on.
+    pub fn short(&mut self) {
+        self.brake.short();
+        if self.holding() {
+            self.stage = Stage::Shorted;
+            self.arm_rest = RestTest::new(self.period_s);
+        }
+    }
+
+    /// The command for this period from the measured arm angle `theta` (rad) and rate `rate`
+    /// (rad/s), pendulum angle `alpha` (rad, 0 upright) and rate `alpha_rate` (rad/s);
+    /// `None` once the stop is done (the arm at rest with the windings shorted, or with the
+    /// short its only brake).
+    pub fn step(
+        &mut self,
+        theta: f64,
+        rate: f64,
+        alpha: f64,
+        alpha_rate: f64,
+    ) -> Option<BrakeCommand> {
+        // The model's arm while the stop runs on it: the reading is not the arm's.
+        let arm_rests = self
+            .arm_rest
+            .observe(self.brake.model_arm().unwrap_or(theta));
+        match self.stage {
+            Stage::Braking if arm_rests => {
+                if self.brake.mode() == BrakeMode::Short {
+                    return None;
+                }
+                if self.hold.is_some() && self.hold_sign().is_some() {
+                    self.stage = Stage::Holding {
+                        at: theta,
+                        periods: 0,
+                        last: theta,
+                        unmoved: 0,
+                    };
+                    self.pendulum_rest = RestTest::new(self.period_s);
+                } else {
+                    self.brake.short();
+                    self.stage = Stage::Shorted;
+                }
+                self.arm_rest = RestTest::new(self.period_s);
+            }
+            Stage::Holding {
+                at,
+                periods,
+                last,
+                unmoved,
+            } => {
+                let driven = self.last_volts.abs() >= 0.25 * self.voltage;
+                let unmoved = if driven && theta == last {
+                    unmoved + 1
+                } else {
+                    0
+                };
+                let phi = rip_core::swingup::wrap_angle(alpha - std::f64::consts::PI);
+                let pendulum_rests = self.pendulum_rest.observe_within(phi, PENDULUM_REST_RAD);
+                let done = (arm_rests && pendulum_rests)
+                    || f64::from(periods + 1) * self.period_s >= MAX_HOLD_S
+                    || (theta - at).abs() > HOLD_GIVE_UP_RAD
+                    || unmoved >= HOLD_BLIND_PERIODS
+                    || !theta.is_finite();
+                if done {
+                    self.brake.short();
+                    self.stage = Stage::Shorted;
+                    self.arm_rest = RestTest::new(self.period_s);
+                } else {
+                    self.stage = Stage::Holding {
+                        at,
+                        periods: periods + 1,
+                        last: theta,
+                        unmoved,
+                    };
+                }
+            }
+            Stage::Shorted if arm_rests => return None,
+            _ => {}
+        }
+        let command = match (self.stage, self.hold, self.hold_sign()) {
+            (Stage::Braking, ..) => self.brake.command(Some(rate)),
+            (Stage::Holding { at, .. }, Some(law), Some((sign, full))) => {
+                // The pendulum's terms are the linearisation's about hanging: in the upper
+                // half (a pendulum still falling from upright) they would drive the arm hard
+                // on a state they do not describe.
+                let lower = alpha.cos() < 0.0;
+                let v = if full && lower {
+                    law.voltage(theta - at, rate, alpha, alpha_rate)
+                } else {
+                    law.arm_voltage(theta - at, rate)
+                };
+                BrakeCommand::Volts(sign * v)
+            }
+            _ => BrakeCommand::Short,
+        };
+        self.last_volts = match command {
+            BrakeCommand::Volts(v) => v,
+            BrakeCommand::Short => 0.0,
+        };
+        Some(command)
+    }
+
+    /// The hold law's sign and whether it may use the pendulum's terms, by the brake's mode:
+    /// the model's sign with both angles when the wiring is trusted; the sign the arm showed,
+    /// arm terms alone, once the braking law proved it on the arm's response; none otherwise
+    /// (an unproven sign could drive the arm off its hold point).
+    fn hold_sign(&self) -> Option<(f64, bool)> {
+        if !self.brake.sign_known() {
+            return None;
+        }
+        match self.brake.mode() {
+            BrakeMode::Active => Some((1.0, true)),
+            BrakeMode::Checked => Some((1.0, false)),
+            BrakeMode::Reversed => Some((-1.0, false)),
+            _ => None,
+        }
+    }
+}
+
 /// What an active stop did.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BrakeReport {
@@ -463,6 +709,9 @@ impl std::fmt::Display for BrakeReport {
         let how = match self.mode {
             BrakeMode::Active => "braked at the voltage bound",
             BrakeMode::Reversed => "braked at the voltage bound with the sign the arm showed",
+            BrakeMode::Checked => {
+                "braked at the voltage bound, the sign checked on the arm's response"
+            }
             BrakeMode::Modelled => "braked at the voltage bound on the model's arm",
             BrakeMode::Short => "braked with the windings shorted",
             BrakeMode::None => return write!(f, "no braking (motor not driven)"),
@@ -502,6 +751,12 @@ impl RestTest {
 
     /// Takes the next measured arm angle (rad); whether the arm is at rest.
     pub fn observe(&mut self, theta: f64) -> bool {
+        self.observe_within(theta, REST_TRAVEL)
+    }
+
+    /// Takes the next angle (rad); whether it moved less than `travel` (rad) over
+    /// [`REST_S`].
+    pub fn observe_within(&mut self, theta: f64, travel: f64) -> bool {
         self.history[self.seen % self.ring] = theta;
         self.seen += 1;
         if self.seen < self.ring {
@@ -512,7 +767,7 @@ impl RestTest {
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
                 (lo.min(v), hi.max(v))
             });
-        hi - lo < REST_TRAVEL
+        hi - lo < travel
     }
 }
 

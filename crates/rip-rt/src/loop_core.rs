@@ -13,7 +13,7 @@ use crate::protocol::{
 };
 use crate::rest::Calibration;
 use crate::stop::{next_seq, SetupError, StopReason};
-use crate::witness::{Witness, WitnessLimits};
+use crate::witness::{Witness, WitnessLimits, LATE_S};
 
 pub use crate::step::{StepOutput, FLAG_CLAMPED, FLAG_DEADLINE_MISS, FLAG_FALLBACK, FLAG_NO_REPLY};
 
@@ -54,8 +54,16 @@ pub struct LoopCore {
     witness: Option<Witness>,
     // The previous measurement's device clock (µs) and the voltage it reported applied.
     last_sample: Option<(u32, f64)>,
-    // Request to reply (s) of the latest exchange: about when the command reaches the device.
+    // Request to reply (s) of the latest exchange; request to command (s) of the last command
+    // sent (about when it reached the device after its sample); whether this period woke
+    // late or skipped deadlines; whether the loop runs in lockstep (crate::witness, "Timing").
     latency_s: f64,
+    sent_s: f64,
+    woke_late: bool,
+    // When the last sample request was written (host clock, ns) and the interval before it.
+    last_request_ns: Option<u64>,
+    host_interval_s: Option<f64>,
+    lockstep: bool,
     // `safety.arm_limit` for the arm's stopping point (crate::envelope).
     envelope: crate::envelope::ArmEnvelope,
 }
@@ -128,6 +136,11 @@ impl LoopCore {
             witness: Witness::new(cfg, WitnessLimits::default()).ok(),
             last_sample: None,
             latency_s: 0.0,
+            sent_s: 0.0,
+            woke_late: false,
+            last_request_ns: None,
+            host_interval_s: None,
+            lockstep: false,
             envelope: crate::envelope::ArmEnvelope::new(cfg),
         })
     }
@@ -155,10 +168,31 @@ impl LoopCore {
         self.last_sample = None;
     }
 
-    /// Notes the request-to-reply time of the latest exchange (ns): the witness takes the
-    /// next command to reach the device about that long after the sample.
+    /// Notes the request-to-reply time of the latest exchange (ns): a slow reply leaves the
+    /// period's timing unknown to the witness (crate::witness, "Timing").
     pub fn note_latency(&mut self, ns: u64) {
         self.latency_s = ns as f64 * 1e-9;
+    }
+
+    /// Notes this period's timing before its measurement is judged: how late the loop woke
+    /// (ns), the deadlines it skipped, and whether it runs in lockstep (the device's plant
+    /// waiting for the host, so that timing is always known).
+    ///
+    /// `request_ns` is when its sample request was written (host clock): the interval between
+    /// two requests and the device's between the samples answering them differ when the
+    /// device was late to answer (an emulator starved of the CPU catching up on its clock).
+    pub fn note_period(&mut self, lateness_ns: u64, skipped: u64, lockstep: bool, request_ns: u64) {
+        self.woke_late = skipped > 0 || lateness_ns as f64 * 1e-9 > LATE_S;
+        self.lockstep = lockstep;
+        self.host_interval_s = self
+            .last_request_ns
+            .replace(request_ns)
+            .map(|before| request_ns.saturating_sub(before) as f64 * 1e-9);
+    }
+
+    /// Notes that this period's command was written `ns` after its sample request.
+    pub fn note_sent(&mut self, ns: u64) {
+        self.sent_s = ns as f64 * 1e-9;
     }
 
     /// Turns the witness off (open-loop drives, tests of other rules).
@@ -359,7 +393,21 @@ impl LoopCore {
                 (f64::from(m.device_time_us.wrapping_sub(us)) * 1e-6, v)
             });
             let volts = (before, commanded);
-            w.observe(theta, alpha, volts, dt, self.latency_s)
+            // The last command reached the device about when it was written after its sample
+            // (at once in lockstep); a period the loop cannot time is held (crate::witness).
+            let delay = if self.lockstep { 0.0 } else { self.sent_s };
+            let device_late = self
+                .host_interval_s
+                .is_some_and(|host| previous.is_some() && (host - dt).abs() > LATE_S);
+            if !self.lockstep
+                && (self.woke_late
+                    || device_late
+                    || self.latency_s > LATE_S
+                    || self.sent_s > LATE_S)
+            {
+                w.timing_unknown();
+            }
+            w.observe(theta, alpha, volts, dt, delay)
                 .map_err(StopReason::Witness)?;
         }
         self.envelope

@@ -256,6 +256,12 @@ impl<'a> Period<'a> {
             return self.no_reply(law, tick, seq);
         };
         self.missing_in_row = 0;
+        self.core.note_period(
+            tick.lateness_ns,
+            tick.skipped,
+            self.clock.mode() == ClockMode::Lockstep,
+            reply.req_ns,
+        );
         match law.command(self.core, &mut self.tx, tick, &reply)? {
             Act::Done => Err(StopReason::Finished),
             Act::Stop => {
@@ -273,6 +279,8 @@ impl<'a> Period<'a> {
                 self.check_fresh(reply.req_ns)?;
                 self.based_on_ns = reply.req_ns;
                 self.send(logged.step.len)?;
+                self.core
+                    .note_sent(self.clock.now_ns().saturating_sub(reply.req_ns));
                 self.compute.record(compute_ns);
                 if tick.skipped > 0 {
                     logged.step.flags |= FLAG_DEADLINE_MISS;

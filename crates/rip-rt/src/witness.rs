@@ -87,6 +87,19 @@
 //! ([`WitnessFault::ArmWrongWay`]); anything else is named with every likely cause
 //! ([`WitnessFault::ArmDisagrees`]).
 //!
+//! # Timing
+//!
+//! The model predicts each period from the device's sampling instants (its clock) and the
+//! command's arrival, `delay` after the sample: the loop passes the time from the sample
+//! request to the command's write on the host's clock (0 in lockstep, where the device's
+//! plant waits for the host). A period whose timing the loop cannot vouch for — a late
+//! wake-up, a skipped deadline, a slow reply, a command sent late: a machine under load
+//! delays the device (an emulator catching up on its own clock applies commands late) as
+//! much as the loop — is reported with [`Witness::timing_unknown`]: the observer takes the
+//! arrival within the interval that best fits both angles, and the statistics are held for
+//! that period and the [`HELD_AFTER_UNKNOWN`] after it, so that a late period is no evidence
+//! of a fault (docs/rip-rt.md, "The witness").
+//!
 //! Everything is allocation-free per step: the plant's RK4 on stack vectors and a few scalars.
 
 use rip_core::plant::{Plant, State};
@@ -102,6 +115,14 @@ pub const GAIN_RATE: f64 = 0.1;
 /// loop's grid: wake-up jitter, the reply's latency, the command's delay. A joint moving at
 /// rate ω reads up to `ω τ` off the model's sample instant.
 pub const TIMING_S: f64 = 1e-3;
+/// A period's wake-up lateness, reply time (request to reply) or command delay (request to
+/// command) beyond which the loop reports its timing unknown ([`Witness::timing_unknown`]):
+/// twice [`TIMING_S`].
+pub const LATE_S: f64 = 2.0 * TIMING_S;
+/// Periods after one of unknown timing whose statistics are held too: a command that
+/// arrived late acts into the next interval, and the observer takes a few periods to settle
+/// on the rates it left.
+pub const HELD_AFTER_UNKNOWN: u32 = 2;
 /// Whether the command may have arrived anywhere in the interval between two samples: a
 /// device that does not run in real time (an emulator starved of the CPU catches up on its
 /// own clock before it reads the serial line) applies it late without any sign on the host.
@@ -245,8 +266,12 @@ pub struct Witness {
     sign_expected: [f64; 2],
     sign_response: [f64; 2],
     sign_periods: u32,
-    // Whether the last period's command arrival was unknown.
+    // Whether the last period's command arrival was unknown; whether the loop reported the
+    // timing of the coming observation unknown ([`Witness::timing_unknown`]), and of the
+    // last one.
     arrival_unknown: bool,
+    unknown_next: bool,
+    unknown_left: u32,
     // The weighted sums of the regression of the response on the voltage's part.
     response: [f64; 2],
     // The last two arm readings (newest first), the interval between them, and the model's
@@ -300,6 +325,8 @@ impl Witness {
             sign_periods: 0,
             response: [0.0; 2],
             arrival_unknown: false,
+            unknown_next: false,
+            unknown_left: 0,
             readings: [0.0; 2],
             interval: 0.0,
             rate_change: [0.0; 2],
@@ -325,6 +352,8 @@ impl Witness {
         self.sign_periods = 0;
         self.response = [0.0; 2];
         self.history = 0;
+        self.unknown_next = false;
+        self.unknown_left = 0;
     }
 
     /// The largest statistics since construction: the arm's and the pendulum's CUSUM (σ), and
@@ -353,6 +382,14 @@ impl Witness {
             self.cusum[0][0].max(self.cusum[0][1]),
             self.cusum[1][0].max(self.cusum[1][1]),
         ]
+    }
+
+    /// Reports the timing of the next observation unknown: the loop woke late, skipped a
+    /// deadline, waited long for the reply or sent the command late, so that neither the
+    /// sampling instant nor the command's arrival at the device is known to [`TIMING_S`]
+    /// (module docs, "Timing"). Its statistics are held for that period and the next.
+    pub fn timing_unknown(&mut self) {
+        self.unknown_next = true;
     }
 
     /// Advances `x` by `dt` seconds: `before` (V) for the first `delay` of them, then `after`.
@@ -391,11 +428,11 @@ impl Witness {
         };
         let start = x[0];
         // The same period with the command arriving at the sample and TIMING_S after the
-        // expected delay: how much the prediction hangs on when the voltage changed. A slow
-        // exchange or a skipped period leaves the arrival unknown within the whole interval
-        // (a request-to-reply time on the host's clock need not be the device's: a starved
-        // emulator catches up on its own clock).
-        let latest = if ARRIVAL_ANYWHERE || delay > TIMING_S || dt > 1.5 * self.ts {
+        // expected delay: how much the prediction hangs on when the voltage changed. A period
+        // the loop could not time, or a skipped one, leaves the arrival unknown within the
+        // whole interval (module docs, "Timing").
+        let unknown = std::mem::take(&mut self.unknown_next);
+        let latest = if ARRIVAL_ANYWHERE || unknown || dt > 1.5 * self.ts {
             dt
         } else {
             delay + TIMING_S
@@ -404,6 +441,24 @@ impl Witness {
         self.predict(&mut early, volts, dt, 0.0);
         self.predict(&mut late, volts, dt, latest);
         self.predict(&mut x, volts, dt, delay);
+        if unknown {
+            // The arrival the measurements show: the point between the command at the sample
+            // and at the next one that fits both angles best (in units of their noise), so that
+            // the observer leaves the period with the rates the late command gave the rig.
+            let d = [
+                (late[0] - early[0]) / self.sigma[0],
+                wrap_angle(late[2] - early[2]) / self.sigma[1],
+            ];
+            let m = [
+                (theta - early[0]) / self.sigma[0],
+                wrap_angle(alpha - early[2]) / self.sigma[1],
+            ];
+            let norm = d[0] * d[0] + d[1] * d[1];
+            if norm > 0.0 {
+                let f = ((m[0] * d[0] + m[1] * d[1]) / norm).clamp(0.0, 1.0);
+                x = early + (late - early) * f;
+            }
+        }
         // The same period at 0 V: what the voltage adds to the arm's motion, by the model.
         let mut coast = self.x.unwrap_or(x);
         self.predict(&mut coast, (0.0, 0.0), dt, delay);
@@ -451,7 +506,15 @@ impl Witness {
         self.x = Some(x);
         // An interval off the grid (a skipped period, a device catching up on its clock)
         // leaves the innovation unreliable: the observer takes it, the statistic does not.
-        let on_time = dt >= 0.5 * self.ts && dt <= 1.5 * self.ts;
+        // So does a period whose timing the loop reported unknown, and the
+        // HELD_AFTER_UNKNOWN after it.
+        let held = unknown || self.unknown_left > 0;
+        self.unknown_left = if unknown {
+            HELD_AFTER_UNKNOWN
+        } else {
+            self.unknown_left.saturating_sub(1)
+        };
+        let on_time = dt >= 0.5 * self.ts && dt <= 1.5 * self.ts && !held;
         let k = self.limits.drift;
         for j in 0..2 {
             let timing = TIMING_S * rate[j];

@@ -332,3 +332,31 @@ fn ctrl_c_at_the_swings_arm_envelope_leaves_the_arm_inside_its_limit() {
     assert_eq!(out.code, Some(130), "{}", out.stderr);
     out.assert_safe("SIGINT at the swing's arm envelope", ARM_LIMIT);
 }
+
+#[test]
+fn a_fall_cycle_that_uses_up_the_swing_up_time_leaves_the_arm_inside_its_limit() {
+    let _serial = one_at_a_time();
+    // A second after every catch a 1.6 rad arm step takes the arm past `swing_up.arm_limit`
+    // (1.5 rad), a fall, and the default `on_fall = "retry"` swings the pendulum up again:
+    // catch, fall, swing-up, … until the swing-ups
+    // have taken `swing_up.max_time` in total (exit 13). In lockstep: the stops and their
+    // braking are the subject, not the timing; the emulator's plant runs on in real time after
+    // the run, so the arm's rest is judged on it.
+    let name = "stop-fall-cycle";
+    let cfg = swing_config(
+        name,
+        4.0,
+        "[swing_up]\nmax_time = 10\n[reference]\narm_step = 1.6\nstep_time = 1.0\n",
+    );
+    let emu = hanging_rig(name, &cfg, &[], true);
+    let child = spawn_run(
+        &emu.device,
+        "lqr",
+        &with_lockstep(&["--swing-up", "--force", "--config", cfg.to_str().unwrap()]),
+    );
+    let out = settle(emu, child);
+    assert_eq!(out.code, Some(13), "{}", out.stderr);
+    assert!(out.stderr.contains("fell"), "{}", out.stderr);
+    assert!(out.stderr.contains("stop: braked"), "{}", out.stderr);
+    out.assert_safe("fall cycle until swing_up.max_time", ARM_LIMIT);
+}

@@ -8,14 +8,16 @@
 //! measurement behind the thresholds (docs/rip-rt.md, "The witness").
 
 use rand::rngs::StdRng;
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use rip_core::plant::{Plant, State};
 use rip_core::rig::Rig;
 use rip_core::Phase;
 use rip_rt::config::Config;
 use rip_rt::controllers::{self, ControllerKind};
-use rip_rt::envelope::{brake_mode, Brake, BrakeCommand, BrakeMode, RestTest, MAX_BRAKE_S};
+use rip_rt::envelope::{
+    brake_mode, Brake, BrakeCommand, BrakeMode, StopSequence, MAX_BRAKE_S, MAX_HOLD_S,
+};
 use rip_rt::plant::{Model, PlantSim, Windings};
 use rip_rt::stop::StopReason;
 use rip_rt::witness::{Witness, WitnessFault, WitnessLimits};
@@ -41,7 +43,21 @@ struct Case {
     /// Seconds after the start (`None`: the fault is there from the start).
     fault_at: Option<f64>,
     seed: u64,
+    /// Share of periods whose command reaches the plant late, by 2–9.5 ms (a loaded machine:
+    /// the loop, or the device, starved of the CPU), and whether the witness is told.
+    late: Late,
 }
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Late {
+    share: f64,
+    told: bool,
+}
+
+const ON_TIME: Late = Late {
+    share: 0.0,
+    told: true,
+};
 
 #[derive(Debug)]
 struct Outcome {
@@ -116,6 +132,8 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
         tau / f64::from(cfg.device.pendulum_counts_per_rev),
     ];
     let mut rng = StdRng::seed_from_u64(case.seed);
+    let mut late_rng = StdRng::seed_from_u64(case.seed ^ 0x1a7e);
+    let mut late_now = false;
     let noise = [
         Normal::new(0.0, r.noise[0].max(1e-12)).unwrap(),
         Normal::new(0.0, r.noise[1].max(1e-12)).unwrap(),
@@ -171,6 +189,9 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
                 + std::f64::consts::PI,
         );
         let dt = if k == 0 { 0.0 } else { ts };
+        if late_now && case.late.told {
+            witness.timing_unknown();
+        }
         if let Err(f) = witness.observe(theta, alpha, (u_prev2, u_prev), dt, 0.0) {
             trip = Some((t, f));
             ended = "witness";
@@ -200,7 +221,14 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
         } else {
             v
         };
-        plant.advance(&mut x, applied, 0.0, ts, substeps);
+        late_now = late_rng.gen::<f64>() < case.late.share;
+        if late_now {
+            let d = late_rng.gen_range(2e-3..9.5e-3);
+            plant.advance(&mut x, applied_last, 0.0, d, substeps);
+            plant.advance(&mut x, applied, 0.0, ts - d, substeps);
+        } else {
+            plant.advance(&mut x, applied, 0.0, ts, substeps);
+        }
         applied_last = applied;
         u_prev2 = u_prev;
         u_prev = v;
@@ -213,7 +241,7 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
         None => StopReason::Finished,
     };
     let mode = brake_mode(&reason);
-    let mut brake = if mode == BrakeMode::Modelled {
+    let brake = if mode == BrakeMode::Modelled {
         Brake::modelled(cfg, witness.estimate(), u_prev)
     } else {
         Brake::new(cfg, mode)
@@ -228,22 +256,26 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
         }
         *max_abs = max_abs.max(x[0].abs());
     };
-    let mut rest = RestTest::new(ts);
-    let mut holding = false;
+    let mut stop = StopSequence::new(cfg, brake);
+    let read_alpha = |x: [f64; 4], rng: &mut StdRng| {
+        rip_core::swingup::wrap_angle(
+            ((x[2] - std::f64::consts::PI + noise[1].sample(rng)) / q[1]).round() * q[1]
+                + std::f64::consts::PI,
+        )
+    };
     let mut last_theta = measure_arm(sim.state()[0], onset, &mut rng);
-    for _ in 0..(MAX_BRAKE_S / ts) as usize {
+    let mut last_alpha = read_alpha(sim.state(), &mut rng);
+    for _ in 0..((MAX_BRAKE_S + MAX_HOLD_S) / ts) as usize {
         let theta = measure_arm(sim.state()[0], onset, &mut rng);
+        let alpha = read_alpha(sim.state(), &mut rng);
         let rate = (theta - last_theta) / ts;
+        let alpha_rate = rip_core::swingup::wrap_angle(alpha - last_alpha) / ts;
         last_theta = theta;
-        if rest.observe(brake.model_arm().unwrap_or(theta)) {
-            if holding || brake.mode() == BrakeMode::Short {
-                break;
-            }
-            holding = true;
-            brake.short();
-            rest = RestTest::new(ts);
-        }
-        let w = match brake.command(Some(rate)) {
+        last_alpha = alpha;
+        let Some(command) = stop.step(theta, rate, alpha, alpha_rate) else {
+            break;
+        };
+        let w = match command {
             BrakeCommand::Volts(v) if case.fault == Fault::ReverseMotor && onset.is_some() => {
                 Windings::Driven(-v)
             }
@@ -265,7 +297,7 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
         max_abs_arm: max_abs,
         max_abs_braked: max_braked,
         arm_at_end: (end[0], end[1]),
-        brake: brake.mode(),
+        brake: stop.mode(),
         peak: witness.peak(),
         caught,
         arm_at_fault,
@@ -300,6 +332,7 @@ fn rigs(n_generated: usize) -> Vec<(String, Rigged)> {
                 fault: Fault::None,
                 fault_at: None,
                 seed,
+                late: ON_TIME,
             },
             15.0,
         );
@@ -322,12 +355,76 @@ fn normal_runs_never_trip_the_witness() {
                     fault: Fault::None,
                     fault_at: None,
                     seed: 1,
+                    late: ON_TIME,
                 };
                 let o = simulate(&r, case, if swing_up { 15.0 } else { 5.0 });
                 assert!(o.trip.is_none(), "{name} {kind} swing_up={swing_up}: {o:?}");
             }
         }
     }
+}
+
+/// A loaded machine: the commands of 5 % of the periods reach the plant 2–9.5 ms late (the
+/// worst wake-up of the real-time false stop in CI was 9.5 ms late).
+const LOADED: f64 = 0.05;
+
+/// Told which periods the loop could not time (`Witness::timing_unknown`), the witness never
+/// trips on a normal run of a loaded machine; not told, the same runs trip (the false stop
+/// seen in real time), which shows the late commands matter.
+#[test]
+fn late_commands_are_no_evidence_of_a_fault() {
+    let mut untold = Vec::new();
+    for (name, r) in rigs(2) {
+        for kind in KINDS {
+            for swing_up in [false, true] {
+                for told in [true, false] {
+                    let case = Case {
+                        kind,
+                        swing_up,
+                        fault: Fault::None,
+                        fault_at: None,
+                        seed: 1,
+                        late: Late {
+                            share: LOADED,
+                            told,
+                        },
+                    };
+                    let o = simulate(&r, case, if swing_up { 15.0 } else { 5.0 });
+                    if told {
+                        assert!(o.trip.is_none(), "{name} {kind} swing_up={swing_up}: {o:?}");
+                    } else if let Some((t, f)) = o.trip {
+                        untold.push(format!(
+                            "{name} {kind} swing_up={swing_up} at {t:.2} s: {f}"
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    println!("untold: {untold:#?}");
+    assert!(!untold.is_empty(), "the late commands never mattered");
+}
+
+/// ... and on that machine each wiring fault is still stopped before the arm moves half a
+/// radian from where the fault found it.
+#[test]
+fn each_wiring_fault_on_a_loaded_machine_is_stopped_before_the_arm_moves_half_a_radian() {
+    wiring_faults_are_stopped_in(
+        0,
+        false,
+        Late {
+            share: LOADED,
+            told: true,
+        },
+    );
+    wiring_faults_are_stopped_in(
+        GENERATED,
+        false,
+        Late {
+            share: LOADED,
+            told: true,
+        },
+    );
 }
 
 fn fault_cases() -> Vec<(Fault, bool, Option<f64>)> {
@@ -343,6 +440,11 @@ fn fault_cases() -> Vec<(Fault, bool, Option<f64>)> {
     }
     v.push((Fault::ArmSign, false, None));
     v
+}
+
+/// A wrong `arm_counts_per_rev` through the swing-up (the arm read at a quarter of its motion).
+fn scale_mid_swing() -> (Fault, bool, Option<f64>) {
+    (Fault::ArmScale, true, None)
 }
 
 fn scale_cases() -> Vec<(Fault, bool, Option<f64>)> {
@@ -363,11 +465,10 @@ fn each_wiring_fault_on_a_generated_rig_is_stopped_before_the_arm_moves_half_a_r
     wiring_faults_are_stopped_in_time(GENERATED, false);
 }
 
-/// ... and their stops keep the true arm inside `safety.arm_limit`: not yet true on every
-/// generated rig (an arm encoder that stops counting mid-swing leaves only the short to brake
-/// the arm, too weak on a light arm with a weak motor; docs/rip-rt.md, "The witness").
+/// ... and their stops keep the true arm inside `safety.arm_limit` (through the run, the stop
+/// and 3 s with the windings open), a wrong `arm_counts_per_rev` through the swing-up too.
+/// `SEED=n` draws other noise, `ONLY=text` runs the matching cases alone.
 #[test]
-#[ignore]
 fn each_wiring_fault_on_a_generated_rig_is_stopped_inside_the_arm_limit() {
     wiring_faults_are_stopped_in_time(GENERATED, true);
 }
@@ -377,30 +478,54 @@ const GENERATED: usize = 8;
 
 /// The limit holds for the true arm: never past `safety.arm_limit` through the run, its stop
 /// and 3 s with the windings open after it.
-fn inside_the_limit(cfg: &Config, o: &Outcome, what: &str) {
-    assert!(
-        o.max_abs_arm < cfg.safety.arm_limit,
-        "the arm went past safety.arm_limit: {what}"
-    );
+fn inside_the_limit(cfg: &Config, o: &Outcome, what: &str, failures: &mut Vec<String>) {
+    if o.max_abs_arm >= cfg.safety.arm_limit {
+        failures.push(format!("the arm went past safety.arm_limit: {what}"));
+    }
 }
 
 fn wiring_faults_are_stopped_in_time(n_generated: usize, inside: bool) {
+    wiring_faults_are_stopped_in(n_generated, inside, ON_TIME);
+}
+
+fn wiring_faults_are_stopped_in(n_generated: usize, inside: bool, late: Late) {
     let rigs = rigs(n_generated);
+    let only = std::env::var("ONLY").ok();
     let rigs = if n_generated > 0 {
         &rigs[2..]
     } else {
         &rigs[..]
     };
+    let mut failures = Vec::new();
+    // A wrong counts-per-revolution is judged on the arm's stop only (it cannot be told
+    // from a different rig within half a radian: module docs of the witness).
+    let cases = if inside {
+        fault_cases()
+            .into_iter()
+            .chain([scale_mid_swing()])
+            .collect()
+    } else {
+        fault_cases()
+    };
     for (name, r) in rigs {
         for kind in KINDS {
-            for (fault, swing_up, fault_at) in fault_cases() {
+            for &(fault, swing_up, fault_at) in &cases {
                 let case = Case {
                     kind,
                     swing_up,
                     fault,
                     fault_at,
-                    seed: 2,
+                    seed: std::env::var("SEED")
+                        .ok()
+                        .and_then(|s| s.parse().ok())
+                        .unwrap_or(2),
+                    late,
                 };
+                if let Some(only) = &only {
+                    if !format!("{name} {kind} {fault:?} {swing_up}").contains(only.as_str()) {
+                        continue;
+                    }
+                }
                 let o = simulate(r, case, 10.0);
                 let what = format!("{name} {kind} {fault:?} swing_up={swing_up}: {o:?}");
                 if !o.faulted {
@@ -414,17 +539,21 @@ fn wiring_faults_are_stopped_in_time(n_generated: usize, inside: bool) {
                     // the arm, judged on its true position, never went half a radian from where
                     // the fault found it while the run went on.
                     assert!(
-                        o.excursion_to_trip < 0.5,
+                        o.excursion_to_trip < 0.5 || fault == Fault::ArmScale,
                         "not stopped, and the arm moved: {what}"
                     );
                     if inside {
-                        inside_the_limit(&r.cfg, &o, &what);
+                        inside_the_limit(&r.cfg, &o, &what, &mut failures);
                     }
                     continue;
                 }
-                assert!(o.excursion_to_trip < 0.5, "too late: {what}");
+                // A wrong scale is held to the limit only: the arm read at a quarter of its
+                // motion looks like a rig four times as stiff until the pendulum disagrees.
+                if fault != Fault::ArmScale {
+                    assert!(o.excursion_to_trip < 0.5, "too late: {what}");
+                }
                 if inside {
-                    inside_the_limit(&r.cfg, &o, &what);
+                    inside_the_limit(&r.cfg, &o, &what, &mut failures);
                 }
                 let f = o.trip.unwrap().1;
                 let named = match fault {
@@ -432,12 +561,16 @@ fn wiring_faults_are_stopped_in_time(n_generated: usize, inside: bool) {
                         f,
                         WitnessFault::ArmFrozen { .. } | WitnessFault::PendulumDisagrees { .. }
                     ),
+                    // A quarter of the motion measured: a counter that lags looks like one
+                    // that stopped, and either name sends the lab to the arm encoder.
+                    Fault::ArmScale => true,
                     _ => !matches!(f, WitnessFault::ArmFrozen { .. }),
                 };
                 assert!(named, "misnamed: {what}");
             }
         }
     }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
 /// The measurement behind the thresholds: the statistics' maxima over normal runs, and each
@@ -460,6 +593,7 @@ fn measure() {
                         fault: Fault::None,
                         fault_at: None,
                         seed,
+                        late: ON_TIME,
                     };
                     let o = simulate(r, case, if swing_up { 15.0 } else { 5.0 });
                     runs += 1;
@@ -491,6 +625,7 @@ fn measure() {
                         fault,
                         fault_at,
                         seed: 3,
+                        late: ON_TIME,
                     },
                     10.0,
                 );
