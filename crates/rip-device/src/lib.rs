@@ -54,6 +54,8 @@
 #![no_std]
 #![forbid(unsafe_code)]
 
+pub mod law;
+
 use rip_protocol::{
     crc32, encode, Ack, Command, Event, Frame, Measurement, Message, OnboardStart, Parser,
     Rejection, Telemetry, UploadChunk, UploadCommit, ACK_BAD_SETTINGS, ACK_BUSY, ACK_CRC_MISMATCH,
