@@ -304,6 +304,12 @@ impl<R: Real> Controller<R> {
         &self.plan[..self.design.control_horizon]
     }
 
+    /// The MPC's last QP solution `z = [Δu(k) … Δu(k+m−1), ε]` (the fallback law's
+    /// unconstrained minimiser after a failed solve; empty for the regulators).
+    pub fn qp_solution(&self) -> &[R] {
+        self.qp.as_ref().map_or(&[], |q| q.solution())
+    }
+
     /// The integrator state `x_i` of the integral action.
     pub fn integrator(&self) -> R {
         self.integral
