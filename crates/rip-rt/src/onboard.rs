@@ -11,7 +11,7 @@
 
 use std::time::{Duration, Instant};
 
-use rip_control::{Design as OnboardDesign, Kind};
+use rip_control::Design as OnboardDesign;
 use rip_device::law::{write_image, Sensor};
 use rip_protocol::{
     crc32, encode, Command, Frame, Measurement, Message, OnboardStart, Parser, Telemetry,
@@ -35,42 +35,32 @@ const RETRIES: u32 = 5;
 /// Host periods without a reply after which the device counts as gone.
 const MISSING_LIMIT: u32 = 10;
 
-/// rip-control's design of `kind` as `rip-rt run` would build it (the one assembly, at the
-/// loop period, inside `±safety.voltage_limit`).
+/// rip-control's design of `kind` as `rip-rt run` would build it: the one assembly at the
+/// loop period inside `±safety.voltage_limit` ([`crate::controllers`]), converted by rip-core
+/// ([`rip_core::onboard`]), with the `[compensation]` law where there is one.
 ///
 /// # Errors
-/// The design's error, or a controller the onboard image cannot carry yet.
+/// The design's error, naming the controller.
 pub fn design(kind: ControllerKind, cfg: &Config) -> Result<OnboardDesign, String> {
     let d = controllers::design(kind, cfg)?;
-    match kind {
-        ControllerKind::Lqr => {
-            let lqr = d.lqr().map_err(|e| format!("lqr design: {e}"))?;
-            let k = lqr.gain();
-            let (lo, hi) = d.bounds();
-            let mut out = OnboardDesign {
-                kind: Kind::Lqr,
-                ts: lqr.ts(),
-                input_bounds: [lo, hi],
-                integral_gain: lqr.integral_gain().unwrap_or(0.0),
-                rate_cutoff_hz: lqr.rate_cutoff_hz(),
-                ..OnboardDesign::default()
-            };
-            for j in 0..4 {
-                out.k[j] = k[(0, j)];
-            }
-            if d.compensation().is_some() {
-                return Err(
-                    "--onboard: [compensation] is not carried to the device yet; remove it \
-                     or run without --onboard"
-                        .into(),
-                );
-            }
-            Ok(out)
-        }
-        other => Err(format!(
-            "--onboard: the {other} design is not carried to the device yet (lqr is)"
-        )),
-    }
+    let err = |e: &dyn std::fmt::Display| format!("{kind} design for the device: {e}");
+    let out = match kind {
+        ControllerKind::Lqr => d.lqr().map_err(|e| err(&e))?.control_design(),
+        ControllerKind::Lqg => d
+            .lqg()
+            .map_err(|e| err(&e))?
+            .control_design()
+            .map_err(|e| err(&e))?,
+        ControllerKind::Mpc => d
+            .mpc()
+            .map_err(|e| err(&e))?
+            .control_design()
+            .map_err(|e| err(&e))?,
+    };
+    Ok(match d.compensation() {
+        Some(law) => rip_core::onboard::with_compensation(out, law),
+        None => out,
+    })
 }
 
 /// The onboard image of `design` with the conversion of `cfg`'s `[device]` and the

@@ -9,6 +9,7 @@ use std::time::Duration;
 use common::*;
 
 fn onboard_run(device: &std::path::Path, extra: &[&str]) -> RunResult {
+    // LQR: the tests of the device's stops hold for any controller.
     let mut args = vec!["--onboard"];
     args.extend_from_slice(extra);
     run(device, "lqr", &args)
@@ -26,75 +27,82 @@ fn rms_alpha_and_final_theta(truth: &[Truth]) -> (f64, f64) {
 }
 
 #[test]
-fn the_onboard_lqr_balances_through_the_reference_step_as_the_host_loop_does() {
+fn lqr_lqg_and_mpc_balance_onboard_through_the_reference_step_as_on_the_host() {
     let _one = one_at_a_time();
-    // The reference: the same rig and noise with the controller on the host (protocol v1).
-    let mut emu = Emulator::lockstep("host-step", &["--noise", "0.3"]);
-    let r = run_lockstep(&emu.device, "lqr", &["--duration", "8"]);
-    assert_eq!(r.status.code(), Some(0), "{}", r.stderr);
-    let (host_rms, host_theta) = rms_alpha_and_final_theta(&emu.finish());
+    for controller in ["lqr", "lqg", "mpc"] {
+        // The reference: the same rig and noise with the controller on the host (protocol v1).
+        let mut emu = Emulator::lockstep(&format!("host-{controller}"), &["--noise", "0.3"]);
+        let r = run_lockstep(&emu.device, controller, &["--duration", "8"]);
+        assert_eq!(r.status.code(), Some(0), "{controller}: {}", r.stderr);
+        let (host_rms, host_theta) = rms_alpha_and_final_theta(&emu.finish());
 
-    let mut emu = Emulator::lockstep("onboard-step", &["--noise", "0.3"]);
-    let log = scratch("onboard-step.csv");
-    let r = onboard_run(
-        &emu.device,
-        &[
-            "--lockstep",
-            "--duration",
-            "8",
-            "--log",
-            log.to_str().unwrap(),
-        ],
-    );
-    assert_eq!(r.status.code(), Some(0), "{}", r.stderr);
-    assert!(r.stderr.contains("steps=800"), "{}", r.stderr);
-    let truth = emu.finish();
-    let worst_alpha = truth
-        .iter()
-        .filter(|t| t.t > 0.5)
-        .fold(0.0f64, |m, t| m.max(t.alpha.abs()));
-    assert!(worst_alpha < 0.2, "pendulum reached {worst_alpha} rad");
-    let (rms, theta) = rms_alpha_and_final_theta(&truth);
-    // The default reference steps the arm to 1 rad; it settles there, as on the host.
-    assert!(
-        (theta - 1.0).abs() < 0.05,
-        "arm at {theta} rad after the step"
-    );
-    assert!(
-        (host_theta - 1.0).abs() < 0.05,
-        "host: arm at {host_theta} rad"
-    );
-    // The same design on the device: the pendulum's RMS within 5 % of the host loop's
-    // (measured: 0.02211 onboard, 0.02218 host).
-    assert!(
-        (rms / host_rms - 1.0).abs() < 0.05,
-        "pendulum RMS {rms} onboard, {host_rms} on the host"
-    );
-    // After the run the motor is no longer driven.
-    assert_ne!(truth.last().unwrap().driver, "drive");
+        let mut emu = Emulator::lockstep(&format!("onboard-{controller}"), &["--noise", "0.3"]);
+        let log = scratch(&format!("onboard-{controller}.csv"));
+        let r = run(
+            &emu.device,
+            controller,
+            &[
+                "--onboard",
+                "--lockstep",
+                "--duration",
+                "8",
+                "--log",
+                log.to_str().unwrap(),
+            ],
+        );
+        assert_eq!(r.status.code(), Some(0), "{controller}: {}", r.stderr);
+        assert!(r.stderr.contains("steps=800"), "{controller}: {}", r.stderr);
+        let truth = emu.finish();
+        let worst_alpha = truth
+            .iter()
+            .filter(|t| t.t > 0.5)
+            .fold(0.0f64, |m, t| m.max(t.alpha.abs()));
+        assert!(
+            worst_alpha < 0.2,
+            "{controller}: pendulum reached {worst_alpha} rad"
+        );
+        let (rms, theta) = rms_alpha_and_final_theta(&truth);
+        // The default reference steps the arm to 1 rad; it settles there, as on the host.
+        assert!(
+            (theta - 1.0).abs() < 0.05,
+            "{controller}: arm at {theta} rad"
+        );
+        assert!(
+            (host_theta - 1.0).abs() < 0.05,
+            "{controller} host: arm at {host_theta} rad"
+        );
+        // The same design on the device: the pendulum's RMS within 5 % of the host loop's.
+        assert!(
+            (rms / host_rms - 1.0).abs() < 0.05,
+            "{controller}: pendulum RMS {rms} onboard, {host_rms} on the host"
+        );
+        // After the run the motor is no longer driven.
+        assert_ne!(truth.last().unwrap().driver, "drive", "{controller}");
 
-    // The log has the usual columns, one row per device step, and its angles are the
-    // encoders' view of the true state.
-    let log = Log::read(&log);
-    assert_eq!(log.meta("onboard"), Some("true"));
-    assert_eq!(log.rows.len(), 800);
-    let t = log.col("t");
-    let th = log.col("theta");
-    let k = t
-        .iter()
-        .position(|&x| (x - 7.5).abs() < 1e-6)
-        .expect("row at 7.5 s");
-    let true_theta = truth
-        .iter()
-        .min_by(|a, b| (a.t - 7.5).abs().total_cmp(&(b.t - 7.5).abs()))
-        .unwrap()
-        .theta;
-    // 2048 counts per revolution and 0.3 counts of noise: within a few counts.
-    assert!(
-        (th[k] - true_theta).abs() < 0.02,
-        "{} vs {true_theta}",
-        th[k]
-    );
+        // The log has the usual columns, one row per device step, and its angles are the
+        // encoders' view of the true state.
+        let log = Log::read(&log);
+        assert_eq!(log.meta("onboard"), Some("true"));
+        assert_eq!(log.rows.len(), 800);
+        let t = log.col("t");
+        let th = log.col("theta");
+        let k = t
+            .iter()
+            .position(|&x| (x - 7.5).abs() < 1e-6)
+            .expect("row at 7.5 s");
+        let true_theta = truth
+            .iter()
+            .min_by(|a, b| (a.t - 7.5).abs().total_cmp(&(b.t - 7.5).abs()))
+            .unwrap()
+            .theta;
+        // 2048 counts per revolution and 0.3 counts of noise: within a few counts.
+        assert!(
+            (th[k] - true_theta).abs() < 0.02,
+            "{controller}: {} vs {true_theta}",
+            th[k]
+        );
+        eprintln!("{controller}: pendulum RMS {rms:.5} onboard, {host_rms:.5} host");
+    }
 }
 
 #[test]
