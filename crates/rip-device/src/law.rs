@@ -139,9 +139,12 @@ pub fn write_image<R: Real>(sensor: &Sensor, design: &Design<R>, out: &mut [u8])
 pub struct ControlLaw<R: Real, const N: usize> {
     buf: [u8; N],
     sensor: Sensor,
+    // The design read from the image, kept here rather than on the stack while the
+    // controller is built from it (a firmware's stack is small).
+    scratch: Option<Design<R>>,
     controller: Option<Controller<R>>,
     step: u32,
-    last: rip_control::Move<R>,
+    last: Option<rip_control::Move<R>>,
 }
 
 impl<R: Real, const N: usize> Default for ControlLaw<R, N> {
@@ -151,14 +154,22 @@ impl<R: Real, const N: usize> Default for ControlLaw<R, N> {
 }
 
 impl<R: Real, const N: usize> ControlLaw<R, N> {
-    /// No design loaded.
-    pub fn new() -> Self {
+    /// No design loaded (`const`, for a firmware's static).
+    pub const fn new() -> Self {
         Self {
             buf: [0; N],
-            sensor: Sensor::default(),
+            sensor: Sensor {
+                arm_rad_per_count: 0.0,
+                pendulum_rad_per_count: 0.0,
+                arm_offset: 0.0,
+                pendulum_offset: 0.0,
+                arm_step: 0.0,
+                step_time: 0.0,
+            },
+            scratch: None,
             controller: None,
             step: 0,
-            last: rip_control::Move::default(),
+            last: None,
         }
     }
 
@@ -173,7 +184,7 @@ impl<R: Real, const N: usize> ControlLaw<R, N> {
     }
 
     /// The last step's move (its status and QP iterations).
-    pub fn last_move(&self) -> rip_control::Move<R> {
+    pub fn last_move(&self) -> Option<rip_control::Move<R>> {
         self.last
     }
 
@@ -205,13 +216,18 @@ impl<R: Real, const N: usize> Onboard for ControlLaw<R, N> {
         self.controller = None;
         let bytes = self.buf.get(..len).ok_or(DesignRefused)?;
         let sensor = Sensor::read(bytes).ok_or(DesignRefused)?;
-        let design =
-            Design::<R>::from_bytes(&bytes[IMAGE_HEADER_LEN..]).map_err(|_| DesignRefused)?;
+        if len <= IMAGE_HEADER_LEN {
+            return Err(DesignRefused);
+        }
+        let design = self.scratch.get_or_insert_with(Design::default);
+        design
+            .read_from(&self.buf[IMAGE_HEADER_LEN..len])
+            .map_err(|_| DesignRefused)?;
         let ts = design.ts.to_f64();
         if !(1e-4..=1.0).contains(&ts) {
             return Err(DesignRefused);
         }
-        self.controller = Some(Controller::new(&design).map_err(|_| DesignRefused)?);
+        self.controller = Some(Controller::new(design).map_err(|_| DesignRefused)?);
         self.sensor = sensor;
         Ok(())
     }
@@ -229,15 +245,16 @@ impl<R: Real, const N: usize> Onboard for ControlLaw<R, N> {
         }
     }
 
-    fn step(&mut self, positions: [i32; 2]) -> f32 {
+    fn step(&mut self, positions: [i32; 2]) -> f64 {
         let m = self.measurement(self.step, positions);
         self.step = self.step.wrapping_add(1);
         match self.controller.as_mut() {
             Some(c) => {
-                self.last = c.step(m);
-                self.last.voltage.to_f64() as f32
+                let mv = c.step(m);
+                self.last = Some(mv);
+                mv.voltage.to_f64()
             }
-            None => f32::NAN,
+            None => f64::NAN,
         }
     }
 }

@@ -57,13 +57,14 @@
 pub mod law;
 
 use rip_protocol::{
-    crc32, encode, Ack, Command, Event, Frame, Measurement, Message, OnboardStart, Parser,
-    Rejection, Telemetry, UploadChunk, UploadCommit, ACK_BAD_SETTINGS, ACK_BUSY, ACK_CRC_MISMATCH,
-    ACK_DESIGN_REFUSED, ACK_LENGTH_MISMATCH, ACK_NO_DESIGN, ACK_NO_UPLOAD, ACK_OK,
-    ACK_OUT_OF_ORDER, ACK_REFUSED, ACK_TOO_LARGE, COMMAND_BRAKE, COMMAND_ENABLE, MAX_FRAME,
+    crc32, encode, Ack, Command, Event, Frame, Measurement, Message, OnboardStart, Parser, PilMove,
+    PilStep, Rejection, Telemetry, UploadChunk, UploadCommit, ACK_BAD_SETTINGS, ACK_BUSY,
+    ACK_CRC_MISMATCH, ACK_DESIGN_REFUSED, ACK_LENGTH_MISMATCH, ACK_NO_DESIGN, ACK_NO_UPLOAD,
+    ACK_OK, ACK_OUT_OF_ORDER, ACK_REFUSED, ACK_TOO_LARGE, COMMAND_BRAKE, COMMAND_ENABLE, MAX_FRAME,
     ONBOARD_ARM_LIMIT, ONBOARD_BAD_MOVE, ONBOARD_DRIVER_FAULT, ONBOARD_HOST_SILENT, ONBOARD_IDLE,
     ONBOARD_OVERRUN, ONBOARD_PENDULUM_LIMIT, ONBOARD_PROTOCOL, ONBOARD_RUNNING, ONBOARD_STOPPED,
-    STATUS_BRAKING, STATUS_ENABLED, STATUS_FAULT, STATUS_ONBOARD, STATUS_RX_ERROR, STATUS_WATCHDOG,
+    PIL_RESET, STATUS_BRAKING, STATUS_ENABLED, STATUS_FAULT, STATUS_ONBOARD, STATUS_RX_ERROR,
+    STATUS_WATCHDOG,
 };
 
 /// The design image was intact but the controller cannot run it ([`Onboard::load`]).
@@ -84,7 +85,7 @@ pub trait Onboard {
     /// initial state, no previous move.
     fn reset(&mut self, positions: [i32; 2]);
     /// One step from the encoder positions (arm, pendulum, counts): the move, volts.
-    fn step(&mut self, positions: [i32; 2]) -> f32;
+    fn step(&mut self, positions: [i32; 2]) -> f64;
 }
 
 /// The device without an onboard controller (the v1 device): every upload is refused as too
@@ -103,7 +104,7 @@ impl Onboard for NoOnboard {
         0
     }
     fn reset(&mut self, _positions: [i32; 2]) {}
-    fn step(&mut self, _positions: [i32; 2]) -> f32 {
+    fn step(&mut self, _positions: [i32; 2]) -> f64 {
         0.0
     }
 }
@@ -288,6 +289,9 @@ pub struct Device<C = NoOnboard> {
     design_loaded: bool,
     run: Option<Run>,
     onboard_state: u8,
+    pil_steps: u32,
+    // A free-running up-counter and the shift that turns its differences into cycles.
+    cycle_counter: Option<(fn() -> u32, u8)>,
 }
 
 impl Device {
@@ -323,7 +327,43 @@ impl<C: Onboard> Device<C> {
             design_loaded: false,
             run: None,
             onboard_state: ONBOARD_IDLE,
+            pil_steps: 0,
+            cycle_counter: None,
         }
+    }
+
+    /// The device at power-up with encoder readings and positions 0 at time 0 (a `const`
+    /// constructor, so that a firmware can hold a large controller in a static without a
+    /// copy on its stack).
+    pub const fn at_power_up(cfg: Config, onboard: C) -> Self {
+        Self {
+            cfg: cfg.sanitized(),
+            seq: 0,
+            command: Command::STOP,
+            last_command_us: 0,
+            watchdog: false,
+            rx_error: false,
+            fault: false,
+            brake: false,
+            arm: EncoderCounter::new(0, 0),
+            pendulum: EncoderCounter::new(0, 0),
+            commands: 0,
+            onboard,
+            upload: None,
+            design_loaded: false,
+            run: None,
+            onboard_state: ONBOARD_IDLE,
+            pil_steps: 0,
+            cycle_counter: None,
+        }
+    }
+
+    /// Gives the device a cycle counter for the [`PilStep`](rip_protocol::PilStep)'s
+    /// timing: `counter` counts up and wraps at 2³², and `(b − a) >> shift` is the cycles
+    /// between two readings `a`, `b` (a 24-bit down-counter such as SysTick is read as
+    /// `(0xFF_FFFF − value) << 8` with `shift` 8).
+    pub fn set_cycle_counter(&mut self, counter: fn() -> u32, shift: u8) {
+        self.cycle_counter = Some((counter, shift.min(31)));
     }
 
     /// The settings in force.
@@ -391,9 +431,17 @@ impl<C: Onboard> Device<C> {
                 };
                 Some(self.next_frame(Message::Measurement(m)))
             }
+            Event::Frame(Frame {
+                seq,
+                message: Message::PilStep(p),
+            }) => Some(self.pil_step(seq, p)),
             // Device frames: from the host they are a protocol error.
             Event::Frame(Frame {
-                message: Message::Measurement(_) | Message::Ack(_) | Message::Telemetry(_),
+                message:
+                    Message::Measurement(_)
+                    | Message::Ack(_)
+                    | Message::Telemetry(_)
+                    | Message::PilMove(_),
                 ..
             }) => {
                 self.rx_error = true;
@@ -434,6 +482,41 @@ impl<C: Onboard> Device<C> {
         let seq = self.seq;
         self.seq = self.seq.wrapping_add(1);
         Frame { seq, message }
+    }
+
+    /// A processor-in-the-loop step (protocol docs of `PilStep`): the controller's move on
+    /// the given positions, timed, without driving the motor.
+    fn pil_step(&mut self, seq: u16, p: PilStep) -> Frame {
+        let code = if self.run.is_some() {
+            ACK_BUSY
+        } else if !self.design_loaded {
+            ACK_NO_DESIGN
+        } else {
+            ACK_OK
+        };
+        let mut out = PilMove {
+            ack_seq: seq,
+            step: self.pil_steps,
+            voltage_bits: f64::NAN.to_bits(),
+            cycles: 0,
+            code,
+        };
+        if code == ACK_OK {
+            let positions = [p.arm_counts, p.pendulum_counts];
+            if p.flags & PIL_RESET != 0 {
+                self.onboard.reset(positions);
+                self.pil_steps = 0;
+            }
+            let t0 = self.cycle_counter.map_or(0, |(c, _)| c());
+            let u = self.onboard.step(positions);
+            if let Some((c, shift)) = self.cycle_counter {
+                out.cycles = c().wrapping_sub(t0) >> shift;
+            }
+            self.pil_steps = self.pil_steps.wrapping_add(1);
+            out.step = self.pil_steps;
+            out.voltage_bits = u.to_bits();
+        }
+        self.next_frame(Message::PilMove(out))
     }
 
     /// Handles a v2 host request: the ack's code and value.
@@ -601,7 +684,7 @@ impl<C: Onboard> Device<C> {
             if !u.is_finite() {
                 return Some((ONBOARD_BAD_MOVE, true));
             }
-            let limit = self.cfg.voltage_limit_mv.min(i16::MAX as u16) as f32;
+            let limit = self.cfg.voltage_limit_mv.min(i16::MAX as u16) as f64;
             let mv = (u * 1000.0).clamp(-limit, limit);
             self.command = Command {
                 voltage_mv: libm_round(mv) as i16,
@@ -794,10 +877,10 @@ impl<C: Onboard> Device<C> {
     }
 }
 
-/// `x` rounded half away from zero, without `std` (`f32::round` needs it); exact for the
+/// `x` rounded half away from zero, without `std` (`f64::round` needs it); exact for the
 /// millivolt range.
-fn libm_round(x: f32) -> f32 {
-    let t = x as i32 as f32;
+fn libm_round(x: f64) -> f64 {
+    let t = x as i32 as f64;
     let d = x - t;
     if d >= 0.5 {
         t + 1.0

@@ -59,12 +59,12 @@ impl Onboard for Law {
     fn reset(&mut self, positions: [i32; 2]) {
         self.reset_at = Some(positions);
     }
-    fn step(&mut self, p: [i32; 2]) -> f32 {
+    fn step(&mut self, p: [i32; 2]) -> f64 {
         self.steps.push(p);
         if self.nan {
-            return f32::NAN;
+            return f64::NAN;
         }
-        self.k[0] * p[0] as f32 + self.k[1] * (p[1] - 2048) as f32
+        (self.k[0] * p[0] as f32 + self.k[1] * (p[1] - 2048) as f32) as f64
     }
 }
 

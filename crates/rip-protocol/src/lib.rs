@@ -84,6 +84,10 @@ pub const TYPE_ONBOARD_START: u8 = 0x13;
 /// Message type of an onboard stop (host → device, v2): one byte of `COMMAND_*` flags, of
 /// which only [`COMMAND_BRAKE`] counts.
 pub const TYPE_ONBOARD_STOP: u8 = 0x14;
+/// Message type of a [`PilStep`] (host → device, v2).
+pub const TYPE_PIL_STEP: u8 = 0x15;
+/// Message type of a [`PilMove`] (device → host, v2).
+pub const TYPE_PIL_MOVE: u8 = 0x22;
 /// Message type of an [`Ack`] (device → host, v2).
 pub const TYPE_ACK: u8 = 0x20;
 /// Message type of a [`Telemetry`] record (device → host, v2).
@@ -103,6 +107,12 @@ pub const UPLOAD_COMMIT_LEN: usize = 8;
 pub const ONBOARD_START_LEN: usize = 20;
 /// Payload length of an onboard stop.
 pub const ONBOARD_STOP_LEN: usize = 1;
+/// Payload length of a PIL step.
+pub const PIL_STEP_LEN: usize = 9;
+/// Payload length of a PIL move.
+pub const PIL_MOVE_LEN: usize = 19;
+/// [`PilStep`] flag: reset the controller (a new run) before this step.
+pub const PIL_RESET: u8 = 1 << 0;
 /// Payload length of an ack.
 pub const ACK_LEN: usize = 8;
 /// Payload length of a telemetry record.
@@ -262,6 +272,43 @@ pub struct OnboardStart {
     pub pendulum_limit: u32,
 }
 
+/// Host → device (v2): processor-in-the-loop. Step the loaded controller once on these
+/// encoder positions (in place of the device's own) and answer with a [`PilMove`]. The motor
+/// is not driven: the move is only reported. Refused while onboard mode runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PilStep {
+    /// Arm position, counts.
+    pub arm_counts: i32,
+    /// Pendulum position, counts.
+    pub pendulum_counts: i32,
+    /// `PIL_*` flags.
+    pub flags: u8,
+}
+
+/// Device → host (v2): the move of a [`PilStep`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PilMove {
+    /// Sequence number of the step request answered.
+    pub ack_seq: u16,
+    /// Controller steps since the last reset (this one included).
+    pub step: u32,
+    /// The move (V) as the bits of an `f64` ([`voltage`](Self::voltage)), exactly as the
+    /// controller computed it (an `f32` controller's value is exact in `f64`); NaN when
+    /// refused. Bits, so that frames compare exactly.
+    pub voltage_bits: u64,
+    /// The step's duration in the device's cycle counter's units (0 without one).
+    pub cycles: u32,
+    /// `ACK_*` result code.
+    pub code: u8,
+}
+
+impl PilMove {
+    /// The move (V).
+    pub fn voltage(&self) -> f64 {
+        f64::from_bits(self.voltage_bits)
+    }
+}
+
 /// Device → host (v2): the answer to an upload, commit, start or stop frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Ack {
@@ -370,6 +417,10 @@ pub enum Message {
         /// `COMMAND_*` flags: [`COMMAND_BRAKE`] brakes.
         flags: u8,
     },
+    /// Host → device (v2).
+    PilStep(PilStep),
+    /// Device → host (v2).
+    PilMove(PilMove),
     /// Device → host (v2).
     Ack(Ack),
     /// Device → host (v2).
@@ -396,6 +447,8 @@ impl Message {
             Message::UploadCommit(_) => TYPE_UPLOAD_COMMIT,
             Message::OnboardStart(_) => TYPE_ONBOARD_START,
             Message::OnboardStop { .. } => TYPE_ONBOARD_STOP,
+            Message::PilStep(_) => TYPE_PIL_STEP,
+            Message::PilMove(_) => TYPE_PIL_MOVE,
             Message::Ack(_) => TYPE_ACK,
             Message::Telemetry(_) => TYPE_TELEMETRY,
         }
@@ -503,6 +556,22 @@ pub fn encode(frame: &Frame, out: &mut [u8; MAX_FRAME]) -> usize {
             out[HEADER_LEN] = flags;
             (TYPE_ONBOARD_STOP, ONBOARD_STOP_LEN)
         }
+        Message::PilStep(s) => {
+            let p = &mut out[HEADER_LEN..HEADER_LEN + PIL_STEP_LEN];
+            p[0..4].copy_from_slice(&s.arm_counts.to_le_bytes());
+            p[4..8].copy_from_slice(&s.pendulum_counts.to_le_bytes());
+            p[8] = s.flags;
+            (TYPE_PIL_STEP, PIL_STEP_LEN)
+        }
+        Message::PilMove(m) => {
+            let p = &mut out[HEADER_LEN..HEADER_LEN + PIL_MOVE_LEN];
+            p[0..2].copy_from_slice(&m.ack_seq.to_le_bytes());
+            p[2..6].copy_from_slice(&m.step.to_le_bytes());
+            p[6..14].copy_from_slice(&m.voltage_bits.to_le_bytes());
+            p[14..18].copy_from_slice(&m.cycles.to_le_bytes());
+            p[18] = m.code;
+            (TYPE_PIL_MOVE, PIL_MOVE_LEN)
+        }
         Message::Ack(a) => {
             let p = &mut out[HEADER_LEN..HEADER_LEN + ACK_LEN];
             p[0..2].copy_from_slice(&a.ack_seq.to_le_bytes());
@@ -577,6 +646,18 @@ fn decode_payload(version: u8, kind: u8, p: &[u8]) -> Option<Message> {
             pendulum_limit: u32_at(16),
         })),
         (TYPE_ONBOARD_STOP, ONBOARD_STOP_LEN) => Some(Message::OnboardStop { flags: p[0] }),
+        (TYPE_PIL_STEP, PIL_STEP_LEN) => Some(Message::PilStep(PilStep {
+            arm_counts: u32_at(0) as i32,
+            pendulum_counts: u32_at(4) as i32,
+            flags: p[8],
+        })),
+        (TYPE_PIL_MOVE, PIL_MOVE_LEN) => Some(Message::PilMove(PilMove {
+            ack_seq: u16_at(0),
+            step: u32_at(2),
+            voltage_bits: u32_at(6) as u64 | (u32_at(10) as u64) << 32,
+            cycles: u32_at(14),
+            code: p[18],
+        })),
         (TYPE_ACK, ACK_LEN) => Some(Message::Ack(Ack {
             ack_seq: u16_at(0),
             request: p[2],

@@ -3,7 +3,8 @@
 
 use rip_protocol::{
     crc16, crc32, crc32_update, encode, Ack, Command, Event, Frame, Measurement, Message,
-    OnboardStart, Parser, Rejection, Telemetry, UploadBegin, UploadChunk, UploadCommit, MAX_FRAME,
+    OnboardStart, Parser, PilMove, PilStep, Rejection, Telemetry, UploadBegin, UploadChunk,
+    UploadCommit, MAX_FRAME,
 };
 use toml::Value;
 
@@ -89,6 +90,18 @@ fn frame_of(v: &Value) -> Frame {
             step_cycles: int(v, "step_cycles") as u32,
             overruns: int(v, "overruns") as u16,
         }),
+        "pil_step" => Message::PilStep(PilStep {
+            arm_counts: int(v, "arm_counts") as i32,
+            pendulum_counts: int(v, "pendulum_counts") as i32,
+            flags: int(v, "flags") as u8,
+        }),
+        "pil_move" => Message::PilMove(PilMove {
+            ack_seq: int(v, "ack_seq") as u16,
+            step: int(v, "step") as u32,
+            voltage_bits: v["voltage"].as_float().expect("voltage").to_bits(),
+            cycles: int(v, "cycles") as u32,
+            code: int(v, "code") as u8,
+        }),
         other => panic!("unknown type {other}"),
     };
     Frame {
@@ -171,6 +184,8 @@ fn every_message_type_has_a_frame_vector() {
         "onboard_stop",
         "ack",
         "telemetry",
+        "pil_step",
+        "pil_move",
     ] {
         assert!(types.contains(kind), "no frame vector of {kind}");
     }

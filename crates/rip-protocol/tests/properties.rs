@@ -5,7 +5,8 @@ use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
 use rip_protocol::{
     crc16, crc32, encode, Ack, Command, Event, Frame, Measurement, Message, OnboardStart, Parser,
-    Telemetry, UploadBegin, UploadChunk, UploadCommit, CHUNK_MAX, MAX_FRAME, SYNC0, SYNC1,
+    PilMove, PilStep, Telemetry, UploadBegin, UploadChunk, UploadCommit, CHUNK_MAX, MAX_FRAME,
+    SYNC0, SYNC1,
 };
 
 fn message() -> impl Strategy<Value = Message> {
@@ -67,6 +68,29 @@ fn v2_message() -> impl Strategy<Value = Message> {
                 })
             }),
         any::<u8>().prop_map(|flags| Message::OnboardStop { flags }),
+        (any::<i32>(), any::<i32>(), any::<u8>()).prop_map(|(a, p, flags)| {
+            Message::PilStep(PilStep {
+                arm_counts: a,
+                pendulum_counts: p,
+                flags,
+            })
+        }),
+        (
+            any::<u16>(),
+            any::<u32>(),
+            any::<u64>(),
+            any::<u32>(),
+            any::<u8>()
+        )
+            .prop_map(
+                |(ack_seq, step, voltage_bits, cycles, code)| Message::PilMove(PilMove {
+                    ack_seq,
+                    step,
+                    voltage_bits,
+                    cycles,
+                    code
+                })
+            ),
         (any::<u16>(), any::<u8>(), any::<u8>(), any::<u32>()).prop_map(
             |(ack_seq, request, code, value)| Message::Ack(Ack {
                 ack_seq,
