@@ -358,6 +358,16 @@ impl<C: Onboard> Device<C> {
         }
     }
 
+    /// Takes the hardware readings `inputs` as the power-up state: the encoder readings stand
+    /// for positions 0, the watchdog counts from `inputs.now_us` (for a device made by
+    /// [`at_power_up`](Self::at_power_up) before the hardware could be read).
+    pub fn rebase(&mut self, inputs: &Inputs) {
+        self.arm = EncoderCounter::new(inputs.encoders[0], 0);
+        self.pendulum = EncoderCounter::new(inputs.encoders[1], 0);
+        self.last_command_us = inputs.now_us;
+        self.fault = inputs.driver_fault;
+    }
+
     /// Gives the device a cycle counter for the [`PilStep`](rip_protocol::PilStep)'s
     /// timing: `counter` counts up and wraps at 2³², and `(b − a) >> shift` is the cycles
     /// between two readings `a`, `b` (a 24-bit down-counter such as SysTick is read as
