@@ -41,7 +41,7 @@ use stm32f4xx_hal::pac::{self, interrupt};
 use stm32f4xx_hal::prelude::*;
 use stm32f4xx_hal::timer::{Event as TimerEvent, Flag};
 
-/// Bytes of the design buffer: the paper's MPC (P = 50, m = 3) takes 10 558.
+/// Bytes of the design buffer: the paper's MPC (P = 50, m = 3) takes 10 506.
 pub const DESIGN_BUFFER: usize = 12 * 1024;
 /// Shortest and longest onboard step period (µs): 1 kHz down to 100 Hz.
 pub const PERIOD_RANGE_US: core::ops::RangeInclusive<u32> = 1_000..=10_000;
