@@ -130,17 +130,23 @@ fn the_device_enforces_the_angle_limits_itself() {
 #[test]
 fn a_host_that_dies_leaves_the_device_to_stop_the_motor() {
     let _one = one_at_a_time();
-    // Real time: the subject is the device's own host-silence watchdog.
-    let emu = Emulator::start("onboard-silent", &[]);
-    let child = spawn_run(&emu.device, "lqr", &["--onboard", "--duration", "30"]);
-    std::thread::sleep(Duration::from_millis(1500));
+    // In lockstep until the host dies, so that a loaded machine cannot starve the host into a
+    // silence before then; the emulator then runs on in real time (after 0.5 s without a host
+    // frame) and the device's own host timeout must stop the motor.
+    let emu = Emulator::lockstep("onboard-silent", &[]);
+    let child = spawn_run(
+        &emu.device,
+        "lqr",
+        &["--onboard", "--lockstep", "--duration", "120"],
+    );
+    std::thread::sleep(Duration::from_millis(500));
     let pid = child.id() as i32;
     // SIGKILL: no stop frame can be sent.
     unsafe { libc::kill(pid, libc::SIGKILL) };
     let r = wait_with_timeout(child, Duration::from_secs(5));
     assert_eq!(r.status.code(), None);
     let killed_at = emu.truth_so_far().last().map_or(0.0, |t| t.t);
-    std::thread::sleep(Duration::from_millis(800));
+    std::thread::sleep(Duration::from_millis(1500));
     let truth = emu.truth_so_far();
     let driven: Vec<&Truth> = truth.iter().filter(|t| t.driver == "drive").collect();
     assert!(!driven.is_empty(), "the onboard run never drove the motor");
@@ -156,9 +162,14 @@ fn a_host_that_dies_leaves_the_device_to_stop_the_motor() {
 #[test]
 fn a_signal_ends_the_onboard_run_with_the_motor_stopped() {
     let _one = one_at_a_time();
-    let mut emu = Emulator::start("onboard-signal", &[]);
-    let child = spawn_run(&emu.device, "lqr", &["--onboard", "--duration", "30"]);
-    std::thread::sleep(Duration::from_millis(1500));
+    // In lockstep: the subject is the signal's handling, not timing.
+    let mut emu = Emulator::lockstep("onboard-signal", &[]);
+    let child = spawn_run(
+        &emu.device,
+        "lqr",
+        &["--onboard", "--lockstep", "--duration", "120"],
+    );
+    std::thread::sleep(Duration::from_millis(500));
     unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
     let r = wait_with_timeout(child, Duration::from_secs(5));
     assert_eq!(r.status.code(), Some(130), "{}", r.stderr);
