@@ -14,7 +14,7 @@
 //! current `i = −k_m ω / R_m` and the torque `−k_t k_m ω / R_m` opposes the motion (the same
 //! as driving 0 V). [`Pwm`] says which of the three the bridge does; a board that cannot
 //! brake sets [`Config::can_brake`] false and its motor is open whenever it is not driven.
-//! The device brakes on [`COMMAND_BRAKE`](rip_protocol::COMMAND_BRAKE), and on its own when
+//! The device brakes on [`COMMAND_BRAKE`], and on its own when
 //! it stops the motor itself (the command watchdog, a frame of another version), so that a
 //! host that went silent while the arm moved does not leave it to coast; a plain disabled
 //! command (the stop frame, power-up) leaves the windings open; a driver fault opens them.
@@ -368,7 +368,7 @@ impl<C: Onboard> Device<C> {
         self.fault = inputs.driver_fault;
     }
 
-    /// Gives the device a cycle counter for the [`PilStep`](rip_protocol::PilStep)'s
+    /// Gives the device a cycle counter for the [`PilStep`]'s
     /// timing: `counter` counts up and wraps at 2³², and `(b − a) >> shift` is the cycles
     /// between two readings `a`, `b` (a 24-bit down-counter such as SysTick is read as
     /// `(0xFF_FFFF − value) << 8` with `shift` 8).

@@ -29,11 +29,11 @@ use crate::step::StepOutput;
 pub const MAX_IMAGE: usize = crate::emulator::ONBOARD_BUFFER;
 
 /// How long the host waits for an ack before repeating the request.
-const ACK_TIMEOUT: Duration = Duration::from_millis(300);
+pub const ACK_TIMEOUT: Duration = Duration::from_millis(300);
 /// Repeats of one request before the upload is given up.
-const RETRIES: u32 = 5;
+pub const RETRIES: u32 = 5;
 /// Host periods without a reply after which the device counts as gone.
-const MISSING_LIMIT: u32 = 10;
+pub const MISSING_LIMIT: u32 = 10;
 
 /// rip-control's design of `kind` as `rip-rt run` would build it: the one assembly at the
 /// loop period inside `±safety.voltage_limit` ([`crate::controllers`]), converted by rip-core
