@@ -21,6 +21,7 @@
 //! | USB (CN5 micro-USB)          | PA11 / PA12| OTG FS, CDC-ACM             |
 //! | USART (feature `usart`)      | PB6 / PB7  | USART1 TX/RX, 115200 8N1    |
 //! | microsecond clock            | —          | TIM5, 32-bit free-running   |
+//! | onboard controller step      | —          | TIM2 update interrupt       |
 
 use rip_device::{Direction, Pwm};
 use stm32f4xx_hal::gpio::{Input, Output, Pin, PushPull};
@@ -41,6 +42,10 @@ pub const PWM_HZ: u32 = 20_000;
 /// Hardware watchdog period (ms): the main loop feeds it every pass, so only a hung or
 /// panicked firmware lets it expire, and the reset disables the motor.
 pub const IWDG_MS: u32 = 100;
+
+/// Core clock (Hz) of the build: the budget of a controller step in cycles is its period
+/// times this ([`clocks`]).
+pub const SYSCLK_HZ: u32 = if cfg!(feature = "usart") { 16_000_000 } else { 168_000_000 };
 
 /// Clocks: the Discovery's 8 MHz crystal, 168 MHz core, 48 MHz for USB. The USART build for
 /// QEMU runs on the internal 16 MHz oscillator, because QEMU does not model the RCC's ready flags
@@ -128,6 +133,8 @@ pub struct Board {
     pub pendulum: Qei<pac::TIM8>,
     /// Free-running microsecond clock.
     pub clock: CounterUs<pac::TIM5>,
+    /// The onboard controller's step timer (its update interrupt steps the controller).
+    pub step_timer: CounterUs<pac::TIM2>,
     /// The H-bridge.
     pub bridge: Bridge,
     /// Status LEDs.
@@ -194,10 +201,13 @@ pub fn take(dp: pac::Peripherals) -> (Board, LinkParts) {
             .unwrap_or_else(|_| panic!("USART1"))
     };
 
+    let step_timer = dp.TIM2.counter_us(rcc);
+
     let board = Board {
         arm,
         pendulum,
         clock,
+        step_timer,
         bridge: Bridge {
             pwm,
             direction,

@@ -1,15 +1,25 @@
 //! Firmware for the rotary inverted pendulum rig's STM32F407 (STM32F4-Discovery by default).
 //!
-//! One loop, no interrupts: read the hardware (clock, encoder counters, driver fault line),
-//! let `rip-device` handle whatever bytes arrived on the link, drive the H-bridge from its
-//! output, show the state on the LEDs and feed the hardware watchdog. The protocol code is
+//! The main loop reads the hardware (clock, encoder counters, driver fault line), lets
+//! `rip-device` handle whatever bytes arrived on the link, drives the H-bridge from its output,
+//! shows the state on the LEDs and feeds the hardware watchdog. The protocol code is
 //! `rip-protocol` and the device behaviour `rip-device`, exactly what `rip-rt emulate` runs on
 //! the PC, so the end-to-end tests against the emulator test this logic.
 //!
-//! Safety: the driver's enable line is low from reset until the PC sends an enabling command;
-//! the command watchdog of `rip-device` stops driving when commands stop for 50 ms (and
-//! brakes: the bridge shorts the windings, see `board`); the IWDG resets
-//! the MCU (and so drops it) if the loop hangs; a panic drops it and halts.
+//! Onboard mode (protocol v2): the host uploads a design into the device's buffer and starts
+//! it; then the TIM2 update interrupt, at the design's rate (1 kHz down to 100 Hz; any other
+//! period is refused by stopping at once), steps rip-control's controller in `f32` (the
+//! Cortex-M4F's FPU; `f64` is emulated in software) on the device's own encoder counts,
+//! measures the step with the DWT cycle counter, and stops the motor on an overrun (a step
+//! longer than its period). The telemetry it streams is queued for the main loop to send.
+//! Processor-in-the-loop steps (`PilStep`) are timed with the DWT counter on the board and
+//! with SysTick in the USART build for QEMU, whose DWT counter reads 0.
+//!
+//! Safety: the driver's enable line is low from reset until the PC sends an enabling command
+//! or starts onboard mode; the command watchdog of `rip-device` stops driving when commands
+//! stop for 50 ms (and brakes: the bridge shorts the windings, see `board`), onboard mode
+//! stops on the host's silence, the angle limits, a driver fault and an overrun; the IWDG
+//! resets the MCU (and so drops it) if the loop hangs; a panic drops it and halts.
 
 #![no_std]
 #![no_main]
@@ -18,11 +28,77 @@
 mod board;
 mod link;
 
+use core::cell::RefCell;
+
+use cortex_m::interrupt::{free, Mutex};
+use cortex_m::peripheral::syst::SystClkSource;
+use cortex_m::peripheral::{DWT, SYST};
 use cortex_m_rt::entry;
-use rip_device::{Config, Device, Inputs};
-use rip_protocol::Parser;
-use stm32f4xx_hal::pac;
+use rip_device::law::ControlLaw;
+use rip_device::{Config, Device, Inputs, Onboard};
+use rip_protocol::{encode, Event, Frame, Message, Parser, COMMAND_BRAKE, MAX_FRAME};
+use stm32f4xx_hal::pac::{self, interrupt};
 use stm32f4xx_hal::prelude::*;
+use stm32f4xx_hal::timer::{Event as TimerEvent, Flag};
+
+/// Bytes of the design buffer: the paper's MPC (P = 50, m = 3) takes 10 506.
+pub const DESIGN_BUFFER: usize = 12 * 1024;
+/// Shortest and longest onboard step period (µs): 1 kHz down to 100 Hz.
+pub const PERIOD_RANGE_US: core::ops::RangeInclusive<u32> = 1_000..=10_000;
+
+type Law = ControlLaw<f32, DESIGN_BUFFER>;
+
+const CFG: Config = Config {
+    voltage_limit_mv: board::VOLTAGE_LIMIT_MV,
+    supply_mv: board::SUPPLY_MV,
+    can_brake: board::CAN_BRAKE,
+    ..Config::DEFAULT
+};
+
+// In statics, built at compile time: the controller is tens of kilobytes, more than a copy
+// on the stack could spare.
+static DEVICE: Mutex<RefCell<Device<Law>>> =
+    Mutex::new(RefCell::new(Device::at_power_up(CFG, Law::new())));
+static BOARD: Mutex<RefCell<Option<board::Board>>> = Mutex::new(RefCell::new(None));
+static OUTBOX: Mutex<RefCell<Outbox>> = Mutex::new(RefCell::new(Outbox::new()));
+
+/// Encoded frames waiting for the main loop to send them (replies and telemetry); a frame
+/// that does not fit is dropped (the host counts telemetry steps).
+struct Outbox {
+    buf: [u8; 1024],
+    len: usize,
+}
+
+impl Outbox {
+    const fn new() -> Self {
+        Self {
+            buf: [0; 1024],
+            len: 0,
+        }
+    }
+
+    fn push(&mut self, frame: &Frame) {
+        let mut out = [0u8; MAX_FRAME];
+        let n = encode(frame, &mut out);
+        self.push_bytes(&out[..n]);
+    }
+
+    fn push_bytes(&mut self, bytes: &[u8]) {
+        if let Some(dst) = self.buf.get_mut(self.len..self.len + bytes.len()) {
+            dst.copy_from_slice(bytes);
+            self.len += bytes.len();
+        }
+    }
+
+    /// Moves up to `out.len()` bytes out.
+    fn take(&mut self, out: &mut [u8]) -> usize {
+        let n = self.len.min(out.len());
+        out[..n].copy_from_slice(&self.buf[..n]);
+        self.buf.copy_within(n..self.len, 0);
+        self.len -= n;
+        n
+    }
+}
 
 #[panic_handler]
 fn panic(_: &core::panic::PanicInfo) -> ! {
@@ -33,43 +109,142 @@ fn panic(_: &core::panic::PanicInfo) -> ! {
     }
 }
 
+fn read(b: &board::Board) -> Inputs {
+    Inputs {
+        now_us: b.now_us(),
+        encoders: b.encoders(),
+        driver_fault: b.bridge.fault(),
+    }
+}
+
+/// SysTick as a 32-bit up-counter in units of 1/256 cycle (`rip-device`'s cycle counter with
+/// shift 8): QEMU models it, on its virtual clock, where the DWT counter reads 0.
+fn systick_counter() -> u32 {
+    (0x00FF_FFFF - SYST::get_current()) << 8
+}
+
+fn dwt_counter() -> u32 {
+    DWT::cycle_count()
+}
+
 #[entry]
 fn main() -> ! {
     let Some(dp) = pac::Peripherals::take() else {
         panic!("peripherals taken twice");
     };
+    let Some(mut cp) = cortex_m::Peripherals::take() else {
+        panic!("core peripherals taken twice");
+    };
+    cp.DCB.enable_trace();
+    cp.DWT.enable_cycle_counter();
+    cp.SYST.set_clock_source(SystClkSource::Core);
+    cp.SYST.set_reload(0x00FF_FFFF);
+    cp.SYST.clear_current();
+    cp.SYST.enable_counter();
+
     let (mut board, link) = board::take(dp);
     board.iwdg.start(board::IWDG_MS.millis());
+    free(|cs| {
+        let mut dev = DEVICE.borrow(cs).borrow_mut();
+        // The counters' readings at power-up stand for position 0.
+        let inputs = read(&board);
+        dev.rebase(&inputs);
+        if cfg!(feature = "usart") {
+            dev.set_cycle_counter(systick_counter, 8);
+        } else {
+            dev.set_cycle_counter(dwt_counter, 0);
+        }
+        BOARD.borrow(cs).replace(Some(board));
+    });
+    // SAFETY: the handler only touches the statics above, inside critical sections.
+    unsafe { cortex_m::peripheral::NVIC::unmask(pac::Interrupt::TIM2) };
 
-    let cfg = Config {
-        voltage_limit_mv: board::VOLTAGE_LIMIT_MV,
-        supply_mv: board::SUPPLY_MV,
-        can_brake: board::CAN_BRAKE,
-        ..Config::DEFAULT
-    };
-    let read = |b: &board::Board| Inputs {
-        now_us: b.now_us(),
-        encoders: b.encoders(),
-        driver_fault: b.bridge.fault(),
-    };
-    let mut device = Device::new(cfg, &read(&board));
     let mut parser = Parser::new();
     let mut link = link::Link::new(link);
     let mut rx = [0u8; 64];
+    let mut tx = [0u8; 128];
+    let mut timer_period_us = 0u32;
 
     loop {
-        board.iwdg.feed();
-        let inputs = read(&board);
-        device.tick(&inputs);
         let n = link.read(&mut rx);
-        if n > 0 {
-            // Sampled again: the encoders are read as close to the request as possible.
-            let inputs = read(&board);
-            device.receive(&mut parser, &rx[..n], &inputs, |reply| link.write(reply));
+        free(|cs| {
+            let mut b = BOARD.borrow(cs).borrow_mut();
+            let Some(board) = b.as_mut() else {
+                return;
+            };
+            board.iwdg.feed();
+            let mut dev = DEVICE.borrow(cs).borrow_mut();
+            let mut outbox = OUTBOX.borrow(cs).borrow_mut();
+            let inputs = read(board);
+            dev.tick(&inputs);
+            if n > 0 {
+                dev.receive(&mut parser, &rx[..n], &inputs, |reply| {
+                    outbox.push_bytes(reply)
+                });
+            }
+            // The step timer runs exactly while onboard mode does, at the design's period.
+            let want = if dev.onboard_running() {
+                dev.onboard().period_us()
+            } else {
+                0
+            };
+            if want != timer_period_us {
+                board.step_timer.unlisten(TimerEvent::Update);
+                let _ = board.step_timer.cancel();
+                timer_period_us = 0;
+                if want != 0 && PERIOD_RANGE_US.contains(&want) {
+                    if board.step_timer.start(want.micros()).is_ok() {
+                        board.step_timer.listen(TimerEvent::Update);
+                        timer_period_us = want;
+                    }
+                } else if want != 0 {
+                    // A rate this firmware does not run: stop as the host would.
+                    let stop = Frame {
+                        seq: 0,
+                        message: Message::OnboardStop {
+                            flags: COMMAND_BRAKE,
+                        },
+                    };
+                    let _ = dev.handle(Event::Frame(stop), &inputs);
+                }
+            }
+            board.bridge.apply(dev.pwm(board.bridge.max_duty()));
+            let status = dev.status();
+            let alarm = status & (rip_protocol::STATUS_WATCHDOG | rip_protocol::STATUS_FAULT) != 0;
+            board.leds.show(dev.enabled(), alarm, inputs.now_us);
+        });
+        // Written outside the critical section: a blocking USART write must not hold off the
+        // step interrupt.
+        loop {
+            let k = free(|cs| OUTBOX.borrow(cs).borrow_mut().take(&mut tx));
+            if k == 0 {
+                break;
+            }
+            link.write(&tx[..k]);
         }
-        board.bridge.apply(device.pwm(board.bridge.max_duty()));
-        let status = device.status();
-        let alarm = status & (rip_protocol::STATUS_WATCHDOG | rip_protocol::STATUS_FAULT) != 0;
-        board.leds.show(device.enabled(), alarm, inputs.now_us);
     }
+}
+
+/// One onboard controller step: the device's own encoder counts, the move on the bridge at
+/// once, the step's cycles against its period's budget (an overrun stops onboard mode).
+#[interrupt]
+fn TIM2() {
+    free(|cs| {
+        let mut b = BOARD.borrow(cs).borrow_mut();
+        let Some(board) = b.as_mut() else {
+            return;
+        };
+        board.step_timer.clear_flags(Flag::Update);
+        let mut dev = DEVICE.borrow(cs).borrow_mut();
+        let inputs = read(board);
+        let start = DWT::cycle_count();
+        let frame = dev.onboard_step(&inputs);
+        let cycles = DWT::cycle_count().wrapping_sub(start);
+        let budget = dev.onboard().period_us().saturating_mul(board::SYSCLK_HZ / 1_000_000);
+        dev.record_step_cycles(cycles, budget);
+        board.bridge.apply(dev.pwm(board.bridge.max_duty()));
+        if let Some(f) = frame {
+            OUTBOX.borrow(cs).borrow_mut().push(&f);
+        }
+    });
 }

@@ -305,6 +305,11 @@ impl CurrentEstimator {
         &self.prior
     }
 
+    /// The model and gains `(A, B, C, L, M)` the estimator runs.
+    pub fn matrices(&self) -> (&Mat, &Mat, &Mat, &Mat, &Mat) {
+        (&self.a, &self.b, &self.c, &self.l, &self.m)
+    }
+
     /// The last innovation `e[k]`.
     pub fn innovation(&self) -> &DVector<f64> {
         &self.innovation

@@ -50,6 +50,7 @@ pub mod lqr;
 pub mod margins;
 pub mod metrics;
 pub mod mpc;
+pub mod onboard;
 pub mod paper;
 pub mod plant;
 pub mod preflight;

@@ -39,6 +39,7 @@ use crate::error::{Result, RipError};
 use crate::kalman::CurrentEstimator;
 use crate::linalg::{check_finite, check_shape, Mat};
 use crate::lqr::dlqr;
+use crate::onboard::{put, refused, ControlDesign, ControlKind};
 use crate::paper;
 
 /// Default cut-off (Hz) of [`Lqr`]'s rate filter.
@@ -365,6 +366,20 @@ impl Lqr {
     fn count_held_period(&mut self) {
         self.filter.hold();
     }
+
+    /// The design rip-control runs for this regulator ([`crate::onboard`]).
+    pub fn control_design(&self) -> ControlDesign {
+        let mut d = ControlDesign {
+            kind: ControlKind::Lqr,
+            ts: self.ts,
+            input_bounds: [self.bounds.0, self.bounds.1],
+            rate_cutoff_hz: self.cutoff_hz,
+            integral_gain: self.integral.map_or(0.0, |i| i.gain),
+            ..ControlDesign::default()
+        };
+        d.k.copy_from_slice(self.k.as_slice());
+        d
+    }
     /// Updates `x̂` from the angles `y` (type docs); `false`, with `x̂` untouched, when the
     /// sample is unusable.
     fn update_estimate(&mut self, y: &[f64]) -> bool {
@@ -573,6 +588,33 @@ impl Lqg {
     /// The gain `K` (1×4).
     pub fn gain(&self) -> Mat {
         Mat::from_fn(1, NX, |_, j| self.k[(0, j)])
+    }
+
+    /// The design rip-control runs for this regulator ([`crate::onboard`]).
+    ///
+    /// # Errors
+    /// More estimator states than rip-control holds ([`rip_control::MAX_NX`]), naming `A`.
+    pub fn control_design(&self) -> Result<ControlDesign> {
+        let mut d = ControlDesign {
+            kind: ControlKind::Lqg,
+            ts: self.ts,
+            input_bounds: [self.bounds.0, self.bounds.1],
+            integral_gain: self.integral.map_or(0.0, |i| i.gain),
+            ..ControlDesign::default()
+        };
+        d.k.copy_from_slice(self.k.as_slice());
+        let (a, b, c, l, m) = self.estimator.matrices();
+        let n = a.nrows();
+        let cap = rip_control::MAX_NX;
+        put("A", &mut d.a, a, cap, cap)?;
+        put("B", &mut d.b, b, cap, 1)?;
+        put("C", &mut d.c, c, rip_control::MAX_NY, cap)?;
+        put("L", &mut d.l, l, cap, rip_control::MAX_NY)?;
+        put("M", &mut d.m, m, cap, rip_control::MAX_NY)?;
+        d.nx = n;
+        d.ny = 2;
+        d.validate().map_err(refused)?;
+        Ok(d)
     }
 
     /// Predictor gain `L` (n×2).

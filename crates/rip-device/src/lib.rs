@@ -14,7 +14,7 @@
 //! current `i = −k_m ω / R_m` and the torque `−k_t k_m ω / R_m` opposes the motion (the same
 //! as driving 0 V). [`Pwm`] says which of the three the bridge does; a board that cannot
 //! brake sets [`Config::can_brake`] false and its motor is open whenever it is not driven.
-//! The device brakes on [`COMMAND_BRAKE`](rip_protocol::COMMAND_BRAKE), and on its own when
+//! The device brakes on [`COMMAND_BRAKE`], and on its own when
 //! it stops the motor itself (the command watchdog, a frame of another version), so that a
 //! host that went silent while the arm moved does not leave it to coast; a plain disabled
 //! command (the stop frame, power-up) leaves the windings open; a driver fault opens them.
@@ -27,14 +27,106 @@
 //! millisecond or so (and in any case more often than every 2³¹ µs, half the wrap of the
 //! microsecond clock), feeds received bytes through [`Device::receive`], and drives the
 //! H-bridge from [`Device::pwm`].
+//!
+//! # Onboard mode (protocol v2)
+//!
+//! A device built with an [`Onboard`] controller also runs the control law itself. The host
+//! uploads a design image in chunks into the controller's buffer ([`Onboard::buffer`]):
+//! `UploadBegin` announces its length (refused beyond the buffer), each `UploadChunk` must
+//! start exactly where the previous one ended (an out-of-order or repeated chunk is refused and
+//! the ack names the expected offset, so the host resumes there), a chunk running past the
+//! announced length is refused, and `UploadCommit` carries the image's length and CRC-32: the
+//! device recomputes the CRC over what it holds and only then hands the image to
+//! [`Onboard::load`]. `OnboardStart` starts the loop with the device's own limits.
+//!
+//! Each controller step ([`Device::onboard_step`], from a timer interrupt on the firmware)
+//! works from the device's own encoder positions and checks, in this order, that the driver
+//! reports no fault, that a valid host frame arrived within the host timeout, that the arm and
+//! the pendulum are inside their limits, and that the move is finite; it then applies the move
+//! clamped to the device's voltage limit. Any failed check stops onboard mode: 0 V, the driver
+//! disabled, and the brake where the board has one (not on a driver fault, as for v1), and the
+//! stop's reason is sent in a final telemetry record. A command frame from the host also ends
+//! onboard mode (so v1's stop frame stops it), and so does a frame of another version. A step
+//! that overruns its period ([`Device::record_step_cycles`]) is a fault too. Should the steps
+//! themselves stop (a hung interrupt), the v1 command watchdog stops the motor, since each step
+//! counts as the command that the watchdog waits for.
 
 #![no_std]
 #![forbid(unsafe_code)]
 
+pub mod law;
+
 use rip_protocol::{
-    encode, Command, Event, Frame, Measurement, Message, Parser, Rejection, MAX_FRAME,
-    STATUS_BRAKING, STATUS_ENABLED, STATUS_FAULT, STATUS_RX_ERROR, STATUS_WATCHDOG,
+    crc32, encode, Ack, Command, Event, Frame, Measurement, Message, OnboardStart, Parser, PilMove,
+    PilStep, Rejection, Telemetry, UploadChunk, UploadCommit, ACK_BAD_SETTINGS, ACK_BUSY,
+    ACK_CRC_MISMATCH, ACK_DESIGN_REFUSED, ACK_LENGTH_MISMATCH, ACK_NO_DESIGN, ACK_NO_UPLOAD,
+    ACK_OK, ACK_OUT_OF_ORDER, ACK_REFUSED, ACK_TOO_LARGE, COMMAND_BRAKE, COMMAND_ENABLE, MAX_FRAME,
+    ONBOARD_ARM_LIMIT, ONBOARD_BAD_MOVE, ONBOARD_DRIVER_FAULT, ONBOARD_HOST_SILENT, ONBOARD_IDLE,
+    ONBOARD_OVERRUN, ONBOARD_PENDULUM_LIMIT, ONBOARD_PROTOCOL, ONBOARD_RUNNING, ONBOARD_STOPPED,
+    PIL_RESET, STATUS_BRAKING, STATUS_ENABLED, STATUS_FAULT, STATUS_ONBOARD, STATUS_RX_ERROR,
+    STATUS_WATCHDOG,
 };
+
+/// The design image was intact but the controller cannot run it ([`Onboard::load`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DesignRefused;
+
+/// An onboard controller as the device sees it: a buffer for the uploaded design image, and a
+/// law from encoder positions to a voltage (module docs, "Onboard mode").
+pub trait Onboard {
+    /// The buffer the design image is uploaded into; its length is the largest image the
+    /// device accepts.
+    fn buffer(&mut self) -> &mut [u8];
+    /// Loads the image in `buffer()[..len]`, whose length and CRC-32 the device has checked.
+    fn load(&mut self, len: usize) -> Result<(), DesignRefused>;
+    /// The loaded design's step period, µs (the firmware's timer period).
+    fn period_us(&self) -> u32;
+    /// Prepares a run from the encoder positions (arm, pendulum) at the start: the estimator's
+    /// initial state, no previous move.
+    fn reset(&mut self, positions: [i32; 2]);
+    /// One step from the encoder positions (arm, pendulum, counts): the move, volts.
+    fn step(&mut self, positions: [i32; 2]) -> f64;
+}
+
+/// The device without an onboard controller (the v1 device): every upload is refused as too
+/// large, and onboard mode cannot start.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct NoOnboard;
+
+impl Onboard for NoOnboard {
+    fn buffer(&mut self) -> &mut [u8] {
+        &mut []
+    }
+    fn load(&mut self, _len: usize) -> Result<(), DesignRefused> {
+        Err(DesignRefused)
+    }
+    fn period_us(&self) -> u32 {
+        0
+    }
+    fn reset(&mut self, _positions: [i32; 2]) {}
+    fn step(&mut self, _positions: [i32; 2]) -> f64 {
+        0.0
+    }
+}
+
+/// An upload in progress.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Upload {
+    total: u32,
+    next: u32,
+}
+
+/// An onboard run in progress.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Run {
+    settings: OnboardStart,
+    // Device time at which the next step is due (used by `onboard_tick`).
+    due_us: u32,
+    step: u32,
+    last_host_us: u32,
+    last_cycles: u32,
+    overruns: u16,
+}
 
 /// The device's fixed settings.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -175,9 +267,10 @@ impl Pwm {
     };
 }
 
-/// The device: command state, watchdog, status and encoder positions.
+/// The device: command state, watchdog, status and encoder positions, and with an [`Onboard`]
+/// controller `C` the design upload and the onboard loop.
 #[derive(Debug, Clone)]
-pub struct Device {
+pub struct Device<C = NoOnboard> {
     cfg: Config,
     seq: u16,
     command: Command,
@@ -191,6 +284,14 @@ pub struct Device {
     arm: EncoderCounter,
     pendulum: EncoderCounter,
     commands: u32,
+    onboard: C,
+    upload: Option<Upload>,
+    design_loaded: bool,
+    run: Option<Run>,
+    onboard_state: u8,
+    pil_steps: u32,
+    // A free-running up-counter and the shift that turns its differences into cycles.
+    cycle_counter: Option<(fn() -> u32, u8)>,
 }
 
 impl Device {
@@ -201,6 +302,14 @@ impl Device {
 
     /// A device whose current encoder readings stand for `positions` (arm, pendulum).
     pub fn with_positions(cfg: Config, inputs: &Inputs, positions: [i32; 2]) -> Self {
+        Device::with_onboard(cfg, inputs, positions, NoOnboard)
+    }
+}
+
+impl<C: Onboard> Device<C> {
+    /// A device with the onboard controller `onboard`, whose current encoder readings stand
+    /// for `positions` (arm, pendulum).
+    pub fn with_onboard(cfg: Config, inputs: &Inputs, positions: [i32; 2], onboard: C) -> Self {
         Self {
             cfg: cfg.sanitized(),
             seq: 0,
@@ -213,7 +322,58 @@ impl Device {
             arm: EncoderCounter::new(inputs.encoders[0], positions[0]),
             pendulum: EncoderCounter::new(inputs.encoders[1], positions[1]),
             commands: 0,
+            onboard,
+            upload: None,
+            design_loaded: false,
+            run: None,
+            onboard_state: ONBOARD_IDLE,
+            pil_steps: 0,
+            cycle_counter: None,
         }
+    }
+
+    /// The device at power-up with encoder readings and positions 0 at time 0 (a `const`
+    /// constructor, so that a firmware can hold a large controller in a static without a
+    /// copy on its stack).
+    pub const fn at_power_up(cfg: Config, onboard: C) -> Self {
+        Self {
+            cfg: cfg.sanitized(),
+            seq: 0,
+            command: Command::STOP,
+            last_command_us: 0,
+            watchdog: false,
+            rx_error: false,
+            fault: false,
+            brake: false,
+            arm: EncoderCounter::new(0, 0),
+            pendulum: EncoderCounter::new(0, 0),
+            commands: 0,
+            onboard,
+            upload: None,
+            design_loaded: false,
+            run: None,
+            onboard_state: ONBOARD_IDLE,
+            pil_steps: 0,
+            cycle_counter: None,
+        }
+    }
+
+    /// Takes the hardware readings `inputs` as the power-up state: the encoder readings stand
+    /// for positions 0, the watchdog counts from `inputs.now_us` (for a device made by
+    /// [`at_power_up`](Self::at_power_up) before the hardware could be read).
+    pub fn rebase(&mut self, inputs: &Inputs) {
+        self.arm = EncoderCounter::new(inputs.encoders[0], 0);
+        self.pendulum = EncoderCounter::new(inputs.encoders[1], 0);
+        self.last_command_us = inputs.now_us;
+        self.fault = inputs.driver_fault;
+    }
+
+    /// Gives the device a cycle counter for the [`PilStep`]'s
+    /// timing: `counter` counts up and wraps at 2³², and `(b − a) >> shift` is the cycles
+    /// between two readings `a`, `b` (a 24-bit down-counter such as SysTick is read as
+    /// `(0xFF_FFFF − value) << 8` with `shift` 8).
+    pub fn set_cycle_counter(&mut self, counter: fn() -> u32, shift: u8) {
+        self.cycle_counter = Some((counter, shift.min(31)));
     }
 
     /// The settings in force.
@@ -246,11 +406,20 @@ impl Device {
     /// measurement frame to send.
     pub fn handle(&mut self, event: Event, inputs: &Inputs) -> Option<Frame> {
         self.tick(inputs);
+        if let (Event::Frame(_), Some(run)) = (event, self.run.as_mut()) {
+            // Any valid frame shows the host is there (the host-silence watchdog).
+            run.last_host_us = inputs.now_us;
+        }
         match event {
             Event::Frame(Frame {
                 message: Message::Command(c),
                 ..
             }) => {
+                if self.run.is_some() {
+                    // The host takes over: its stop frame stops onboard mode too.
+                    self.run = None;
+                    self.onboard_state = ONBOARD_STOPPED;
+                }
                 self.commands = self.commands.wrapping_add(1);
                 self.last_command_us = inputs.now_us;
                 self.watchdog = false;
@@ -270,22 +439,38 @@ impl Device {
                     status: self.take_status(),
                     device_time_us: inputs.now_us,
                 };
-                let seq = self.seq;
-                self.seq = self.seq.wrapping_add(1);
-                Some(Frame {
-                    seq,
-                    message: Message::Measurement(m),
-                })
+                Some(self.next_frame(Message::Measurement(m)))
             }
-            // A measurement is a device frame: from the host it is a protocol error.
             Event::Frame(Frame {
-                message: Message::Measurement(_),
+                seq,
+                message: Message::PilStep(p),
+            }) => Some(self.pil_step(seq, p)),
+            // Device frames: from the host they are a protocol error.
+            Event::Frame(Frame {
+                message:
+                    Message::Measurement(_)
+                    | Message::Ack(_)
+                    | Message::Telemetry(_)
+                    | Message::PilMove(_),
                 ..
             }) => {
                 self.rx_error = true;
                 None
             }
+            Event::Frame(Frame { seq, message }) => {
+                let (code, value) = self.onboard_request(message, inputs);
+                Some(self.next_frame(Message::Ack(Ack {
+                    ack_seq: seq,
+                    request: message.kind(),
+                    code,
+                    value,
+                })))
+            }
             Event::Rejected(Rejection::Version(_)) => {
+                if self.run.is_some() {
+                    self.run = None;
+                    self.onboard_state = ONBOARD_PROTOCOL;
+                }
                 // The peer speaks another protocol: none of its frames can be trusted. Stop
                 // the arm as on a watchdog trip.
                 if self.command.enabled() {
@@ -300,6 +485,296 @@ impl Device {
                 None
             }
         }
+    }
+
+    /// The device's next frame: its own sequence number and `message`.
+    fn next_frame(&mut self, message: Message) -> Frame {
+        let seq = self.seq;
+        self.seq = self.seq.wrapping_add(1);
+        Frame { seq, message }
+    }
+
+    /// A processor-in-the-loop step (protocol docs of `PilStep`): the controller's move on
+    /// the given positions, timed, without driving the motor.
+    fn pil_step(&mut self, seq: u16, p: PilStep) -> Frame {
+        let code = if self.run.is_some() {
+            ACK_BUSY
+        } else if !self.design_loaded {
+            ACK_NO_DESIGN
+        } else {
+            ACK_OK
+        };
+        let mut out = PilMove {
+            ack_seq: seq,
+            step: self.pil_steps,
+            voltage_bits: f64::NAN.to_bits(),
+            cycles: 0,
+            code,
+        };
+        if code == ACK_OK {
+            let positions = [p.arm_counts, p.pendulum_counts];
+            if p.flags & PIL_RESET != 0 {
+                self.onboard.reset(positions);
+                self.pil_steps = 0;
+            }
+            let t0 = self.cycle_counter.map_or(0, |(c, _)| c());
+            let u = self.onboard.step(positions);
+            if let Some((c, shift)) = self.cycle_counter {
+                out.cycles = c().wrapping_sub(t0) >> shift;
+            }
+            self.pil_steps = self.pil_steps.wrapping_add(1);
+            out.step = self.pil_steps;
+            out.voltage_bits = u.to_bits();
+        }
+        self.next_frame(Message::PilMove(out))
+    }
+
+    /// Handles a v2 host request: the ack's code and value.
+    fn onboard_request(&mut self, message: Message, inputs: &Inputs) -> (u8, u32) {
+        match message {
+            Message::UploadBegin(_) | Message::UploadChunk(_) | Message::UploadCommit(_)
+                if self.run.is_some() =>
+            {
+                (ACK_BUSY, 0)
+            }
+            Message::UploadBegin(b) => {
+                // A new upload overwrites the buffer: the loaded design is gone.
+                self.design_loaded = false;
+                self.onboard_state = ONBOARD_IDLE;
+                if b.total_len as usize > self.onboard.buffer().len() || b.total_len == 0 {
+                    self.upload = None;
+                    return (ACK_TOO_LARGE, 0);
+                }
+                self.upload = Some(Upload {
+                    total: b.total_len,
+                    next: 0,
+                });
+                (ACK_OK, 0)
+            }
+            Message::UploadChunk(c) => self.chunk(&c),
+            Message::UploadCommit(c) => self.commit(&c),
+            Message::OnboardStart(s) => self.start(s, inputs),
+            Message::OnboardStop { flags } => {
+                if self.run.is_some() {
+                    self.stop_onboard(ONBOARD_STOPPED, flags & COMMAND_BRAKE != 0);
+                } else {
+                    self.command = Command::STOP;
+                    self.brake = flags & COMMAND_BRAKE != 0 && !self.fault;
+                }
+                (ACK_OK, self.onboard_state as u32)
+            }
+            _ => (ACK_REFUSED, 0),
+        }
+    }
+
+    fn chunk(&mut self, c: &UploadChunk) -> (u8, u32) {
+        let Some(up) = self.upload.as_mut() else {
+            return (ACK_NO_UPLOAD, 0);
+        };
+        if c.offset != up.next {
+            return (ACK_OUT_OF_ORDER, up.next);
+        }
+        let bytes = c.bytes();
+        let end = up.next as u64 + bytes.len() as u64;
+        if end > up.total as u64 {
+            return (ACK_TOO_LARGE, up.next);
+        }
+        let at = up.next as usize;
+        up.next = end as u32;
+        let next = up.next;
+        // `total` was checked against the buffer's length at the begin.
+        if let Some(dst) = self.onboard.buffer().get_mut(at..at + bytes.len()) {
+            dst.copy_from_slice(bytes);
+        }
+        (ACK_OK, next)
+    }
+
+    fn commit(&mut self, c: &UploadCommit) -> (u8, u32) {
+        let Some(up) = self.upload else {
+            return (ACK_NO_UPLOAD, 0);
+        };
+        if c.len != up.next || c.len != up.total {
+            return (ACK_LENGTH_MISMATCH, up.next);
+        }
+        let len = up.next as usize;
+        let crc = self.onboard.buffer().get(..len).map_or(!c.crc32, crc32);
+        self.upload = None;
+        if crc != c.crc32 {
+            return (ACK_CRC_MISMATCH, crc);
+        }
+        match self.onboard.load(len) {
+            Ok(()) => {
+                self.design_loaded = true;
+                (ACK_OK, crc)
+            }
+            Err(DesignRefused) => (ACK_DESIGN_REFUSED, crc),
+        }
+    }
+
+    fn start(&mut self, s: OnboardStart, inputs: &Inputs) -> (u8, u32) {
+        if !self.design_loaded || self.onboard.period_us() == 0 {
+            return (ACK_NO_DESIGN, self.onboard_state as u32);
+        }
+        if s.decimation == 0 || s.host_timeout_ms == 0 {
+            return (ACK_BAD_SETTINGS, self.onboard_state as u32);
+        }
+        let positions = self.positions();
+        if self.fault || Self::outside_limits(&s, positions).is_some() {
+            return (ACK_REFUSED, self.onboard_state as u32);
+        }
+        self.onboard.reset(positions);
+        self.run = Some(Run {
+            settings: s,
+            due_us: inputs.now_us,
+            step: 0,
+            last_host_us: inputs.now_us,
+            last_cycles: 0,
+            overruns: 0,
+        });
+        self.watchdog = false;
+        self.onboard_state = ONBOARD_RUNNING;
+        (ACK_OK, ONBOARD_RUNNING as u32)
+    }
+
+    /// The limit the positions exceed, if any: arm first.
+    fn outside_limits(s: &OnboardStart, [arm, pendulum]: [i32; 2]) -> Option<u8> {
+        let off = |p: i32, c: i32| (p as i64 - c as i64).unsigned_abs();
+        if off(arm, s.arm_center) > s.arm_limit as u64 {
+            Some(ONBOARD_ARM_LIMIT)
+        } else if off(pendulum, s.pendulum_center) > s.pendulum_limit as u64 {
+            Some(ONBOARD_PENDULUM_LIMIT)
+        } else {
+            None
+        }
+    }
+
+    /// Ends onboard mode with `state`: 0 V, driver disabled, braking if `brake` (and no fault).
+    fn stop_onboard(&mut self, state: u8, brake: bool) {
+        self.run = None;
+        self.onboard_state = state;
+        self.command = Command::STOP;
+        self.brake = brake && !self.fault;
+        if state == ONBOARD_HOST_SILENT {
+            self.watchdog = true;
+        }
+    }
+
+    /// Steps the onboard controller if a step is due at `inputs.now_us` (one
+    /// [`Onboard::period_us`] after the previous one): for a main loop or a simulation that
+    /// calls the device more often than the controller's period. Returns what
+    /// [`onboard_step`](Self::onboard_step) returns, or `None` when no step was due.
+    pub fn onboard_tick(&mut self, inputs: &Inputs) -> Option<Frame> {
+        let due = self.run?.due_us;
+        if (inputs.now_us.wrapping_sub(due) as i32) < 0 {
+            self.tick(inputs);
+            return None;
+        }
+        self.onboard_step(inputs)
+    }
+
+    /// One onboard controller step at the instant `inputs` was read (the firmware's timer
+    /// interrupt): the checks of the module docs, the controller's move applied, and a
+    /// telemetry frame to send every `decimation` steps and on the step that stops the run.
+    /// Without a run in progress it only ticks and returns `None`.
+    pub fn onboard_step(&mut self, inputs: &Inputs) -> Option<Frame> {
+        self.tick(inputs);
+        let mut run = self.run?;
+        let positions = self.positions();
+        let silent = inputs.now_us.wrapping_sub(run.last_host_us)
+            > run.settings.host_timeout_ms as u32 * 1000;
+        let stop = if self.fault {
+            Some((ONBOARD_DRIVER_FAULT, false))
+        } else if silent {
+            Some((ONBOARD_HOST_SILENT, true))
+        } else {
+            Self::outside_limits(&run.settings, positions).map(|s| (s, true))
+        };
+        let stop = stop.or_else(|| {
+            let u = self.onboard.step(positions);
+            if !u.is_finite() {
+                return Some((ONBOARD_BAD_MOVE, true));
+            }
+            let limit = self.cfg.voltage_limit_mv.min(i16::MAX as u16) as f64;
+            let mv = (u * 1000.0).clamp(-limit, limit);
+            self.command = Command {
+                voltage_mv: libm_round(mv) as i16,
+                flags: COMMAND_ENABLE,
+            };
+            self.brake = false;
+            // Each step is the command the v1 watchdog waits for (module docs).
+            self.last_command_us = inputs.now_us;
+            None
+        });
+        let period = self.onboard.period_us().max(1);
+        run.due_us = run.due_us.wrapping_add(period);
+        if (inputs.now_us.wrapping_sub(run.due_us) as i32) > 0 {
+            // Far behind: resume from now rather than catch up with a burst of steps.
+            run.due_us = inputs.now_us.wrapping_add(period);
+        }
+        let step = run.step;
+        run.step = run.step.wrapping_add(1);
+        self.run = Some(run);
+        if let Some((state, brake)) = stop {
+            self.stop_onboard(state, brake);
+        }
+        let report = stop.is_some() || step % run.settings.decimation.max(1) as u32 == 0;
+        report.then(|| self.telemetry(&run, step, positions, inputs.now_us))
+    }
+
+    fn telemetry(&mut self, run: &Run, step: u32, positions: [i32; 2], now_us: u32) -> Frame {
+        let t = Telemetry {
+            step,
+            device_time_us: now_us,
+            arm_counts: positions[0],
+            pendulum_counts: positions[1],
+            applied_mv: self.voltage_mv(),
+            status: self.status(),
+            onboard: self.onboard_state,
+            step_cycles: run.last_cycles,
+            overruns: run.overruns,
+        };
+        self.next_frame(Message::Telemetry(t))
+    }
+
+    /// Records how long the last controller step took, `cycles` processor cycles, against
+    /// its `budget` (the period's cycles): a step over budget is an overrun, which stops
+    /// onboard mode (module docs). Returns whether it overran.
+    pub fn record_step_cycles(&mut self, cycles: u32, budget: u32) -> bool {
+        let Some(run) = self.run.as_mut() else {
+            return false;
+        };
+        run.last_cycles = cycles;
+        if cycles <= budget {
+            return false;
+        }
+        run.overruns = run.overruns.saturating_add(1);
+        self.stop_onboard(ONBOARD_OVERRUN, true);
+        true
+    }
+
+    /// The `ONBOARD_*` state: running, idle, or why the last run stopped.
+    pub fn onboard_state(&self) -> u8 {
+        self.onboard_state
+    }
+
+    /// Whether onboard mode runs.
+    pub fn onboard_running(&self) -> bool {
+        self.run.is_some()
+    }
+
+    /// Whether a committed design is loaded.
+    pub fn design_loaded(&self) -> bool {
+        self.design_loaded
+    }
+
+    /// The onboard controller.
+    pub fn onboard(&self) -> &C {
+        &self.onboard
+    }
+
+    /// The onboard controller, mutable (to read or replace its design outside the protocol).
+    pub fn onboard_mut(&mut self) -> &mut C {
+        &mut self.onboard
     }
 
     /// Feeds received bytes through `parser`, handles every event and passes each encoded reply
@@ -384,6 +859,9 @@ impl Device {
         if self.braking() {
             s |= STATUS_BRAKING;
         }
+        if self.run.is_some() {
+            s |= STATUS_ONBOARD;
+        }
         s
     }
 
@@ -406,5 +884,19 @@ impl Device {
     /// The sequence number of the next measurement.
     pub fn next_seq(&self) -> u16 {
         self.seq
+    }
+}
+
+/// `x` rounded half away from zero, without `std` (`f64::round` needs it); exact for the
+/// millivolt range.
+fn libm_round(x: f64) -> f64 {
+    let t = x as i32 as f64;
+    let d = x - t;
+    if d >= 0.5 {
+        t + 1.0
+    } else if d <= -0.5 {
+        t - 1.0
+    } else {
+        t
     }
 }

@@ -1,8 +1,15 @@
 //! # rip-protocol
 //!
-//! Wire protocol v1 between the PC (host) and the pendulum's microcontroller (device). The PC's
+//! Wire protocol v2 between the PC (host) and the pendulum's microcontroller (device). The PC's
 //! control loop (`rip-rt`), its device emulator and the STM32 firmware all use this crate, so
 //! both ends of the wire run the same code.
+//!
+//! Version 2 adds onboard control (the controller runs on the device): a controller design
+//! uploaded in chunks and committed with its CRC-32, start and stop of onboard mode, the
+//! device's acknowledgements and its telemetry stream. Version 1's frames (measurement,
+//! command, sample request) are unchanged and still carry version byte 1, so a v1 peer and a v2
+//! peer interoperate on them; a v2 parser accepts them with version byte 1 or 2. The new frames
+//! carry version byte 2: a v1 device rejects them as another version, which stops its motor.
 //!
 //! The byte-level specification lives in `docs/protocol.md`; this crate is its reference
 //! implementation and `crates/rip-protocol/vectors.toml` holds the conformance vectors that both
@@ -12,7 +19,7 @@
 //! offset  size  field
 //! 0       1     sync 0xA5
 //! 1       1     sync 0x5A
-//! 2       1     protocol version (1)
+//! 2       1     protocol version (1 for v1's messages, 2 for v2's)
 //! 3       1     message type
 //! 4       2     sequence number, u16 little-endian (each side counts its own frames)
 //! 6       1     payload length n (≤ MAX_PAYLOAD)
@@ -44,15 +51,18 @@
 pub const SYNC0: u8 = 0xA5;
 /// Second sync byte.
 pub const SYNC1: u8 = 0x5A;
-/// Protocol version carried in every frame.
-pub const VERSION: u8 = 1;
+/// The newest protocol version: the version byte of v2's messages (upload, onboard, ack,
+/// telemetry).
+pub const VERSION: u8 = 2;
+/// The version byte of v1's messages (measurement, command, sample request), which v2 keeps.
+pub const VERSION_1: u8 = 1;
 /// Offset of the version byte.
 const VERSION_AT: usize = 2;
 /// Bytes before the payload.
 pub const HEADER_LEN: usize = 7;
 /// Bytes after the payload (the CRC).
 pub const TRAILER_LEN: usize = 2;
-/// Largest payload a v1 parser accepts; longer length fields are treated as corruption.
+/// Largest payload a parser accepts; longer length fields are treated as corruption.
 pub const MAX_PAYLOAD: usize = 32;
 /// Largest frame on the wire.
 pub const MAX_FRAME: usize = HEADER_LEN + MAX_PAYLOAD + TRAILER_LEN;
@@ -63,11 +73,50 @@ pub const TYPE_MEASUREMENT: u8 = 0x01;
 pub const TYPE_COMMAND: u8 = 0x02;
 /// Message type of a sample request (host → device, empty payload).
 pub const TYPE_SAMPLE_REQUEST: u8 = 0x03;
+/// Message type of an [`UploadBegin`] (host → device, v2).
+pub const TYPE_UPLOAD_BEGIN: u8 = 0x10;
+/// Message type of an [`UploadChunk`] (host → device, v2).
+pub const TYPE_UPLOAD_CHUNK: u8 = 0x11;
+/// Message type of an [`UploadCommit`] (host → device, v2).
+pub const TYPE_UPLOAD_COMMIT: u8 = 0x12;
+/// Message type of an [`OnboardStart`] (host → device, v2).
+pub const TYPE_ONBOARD_START: u8 = 0x13;
+/// Message type of an onboard stop (host → device, v2): one byte of `COMMAND_*` flags, of
+/// which only [`COMMAND_BRAKE`] counts.
+pub const TYPE_ONBOARD_STOP: u8 = 0x14;
+/// Message type of a [`PilStep`] (host → device, v2).
+pub const TYPE_PIL_STEP: u8 = 0x15;
+/// Message type of a [`PilMove`] (device → host, v2).
+pub const TYPE_PIL_MOVE: u8 = 0x22;
+/// Message type of an [`Ack`] (device → host, v2).
+pub const TYPE_ACK: u8 = 0x20;
+/// Message type of a [`Telemetry`] record (device → host, v2).
+pub const TYPE_TELEMETRY: u8 = 0x21;
 
 /// Payload length of a measurement.
 pub const MEASUREMENT_LEN: usize = 17;
 /// Payload length of a command.
 pub const COMMAND_LEN: usize = 3;
+/// Payload length of an upload begin.
+pub const UPLOAD_BEGIN_LEN: usize = 4;
+/// Largest number of design bytes in one [`UploadChunk`]: the payload less its 4-byte offset.
+pub const CHUNK_MAX: usize = MAX_PAYLOAD - 4;
+/// Payload length of an upload commit.
+pub const UPLOAD_COMMIT_LEN: usize = 8;
+/// Payload length of an onboard start.
+pub const ONBOARD_START_LEN: usize = 20;
+/// Payload length of an onboard stop.
+pub const ONBOARD_STOP_LEN: usize = 1;
+/// Payload length of a PIL step.
+pub const PIL_STEP_LEN: usize = 9;
+/// Payload length of a PIL move.
+pub const PIL_MOVE_LEN: usize = 19;
+/// [`PilStep`] flag: reset the controller (a new run) before this step.
+pub const PIL_RESET: u8 = 1 << 0;
+/// Payload length of an ack.
+pub const ACK_LEN: usize = 8;
+/// Payload length of a telemetry record.
+pub const TELEMETRY_LEN: usize = 26;
 
 /// Device status bit: the motor driver is enabled and applying the commanded voltage.
 pub const STATUS_ENABLED: u8 = 1 << 0;
@@ -89,6 +138,10 @@ pub const STATUS_BRAKING: u8 = 1 << 4;
 /// time. Bit 5 was reserved (sent as 0) before lockstep was defined; a real device never sets
 /// it, and the host refuses to run in lockstep against a device that does not.
 pub const STATUS_LOCKSTEP: u8 = 1 << 5;
+
+/// Device status bit: the device runs its onboard controller (v2). Bit 6 was reserved (sent
+/// as 0) in v1.
+pub const STATUS_ONBOARD: u8 = 1 << 6;
 
 /// Command flag bit: enable the motor driver. Without it the device applies 0 V.
 pub const COMMAND_ENABLE: u8 = 1 << 0;
@@ -149,6 +202,199 @@ impl Command {
     }
 }
 
+/// Host → device (v2): a design upload of `total_len` bytes begins; the device forgets any
+/// earlier upload and expects the chunk at offset 0.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct UploadBegin {
+    /// Length of the whole design image, bytes.
+    pub total_len: u32,
+}
+
+/// Host → device (v2): `len` bytes of the design image at byte `offset`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct UploadChunk {
+    /// Offset of the first byte in the design image.
+    pub offset: u32,
+    /// Number of valid bytes in `data`, `1 ..= CHUNK_MAX`.
+    pub len: u8,
+    /// The bytes; those past `len` are not sent and decode as 0.
+    pub data: [u8; CHUNK_MAX],
+}
+
+impl UploadChunk {
+    /// The chunk carrying `bytes` (at most [`CHUNK_MAX`]; more are cut off) at `offset`.
+    pub fn new(offset: u32, bytes: &[u8]) -> Self {
+        let n = bytes.len().min(CHUNK_MAX);
+        let mut data = [0u8; CHUNK_MAX];
+        data[..n].copy_from_slice(&bytes[..n]);
+        Self {
+            offset,
+            len: n as u8,
+            data,
+        }
+    }
+
+    /// The chunk's bytes.
+    pub fn bytes(&self) -> &[u8] {
+        &self.data[..(self.len as usize).min(CHUNK_MAX)]
+    }
+}
+
+/// Host → device (v2): the upload is complete; the device checks that it received exactly
+/// `len` bytes whose [`crc32`] is `crc32`, then loads the design.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct UploadCommit {
+    /// Length of the design image, bytes.
+    pub len: u32,
+    /// CRC-32 (ISO-HDLC) of the image.
+    pub crc32: u32,
+}
+
+/// Host → device (v2): run the loaded design onboard, with the device's own safety limits.
+///
+/// Positions are encoder counts as in a [`Measurement`]; the device stops (0 V, driver
+/// disabled, brake where it can) as soon as `|arm − arm_center| > arm_limit` or
+/// `|pendulum − pendulum_center| > pendulum_limit`, or no valid host frame arrived for
+/// `host_timeout_ms`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct OnboardStart {
+    /// Send one [`Telemetry`] record every this many controller steps (≥ 1).
+    pub decimation: u16,
+    /// Host-silence watchdog, milliseconds (≥ 1).
+    pub host_timeout_ms: u16,
+    /// Arm position of the arm limit's centre, counts.
+    pub arm_center: i32,
+    /// Arm limit, counts from `arm_center`.
+    pub arm_limit: u32,
+    /// Pendulum position of the pendulum limit's centre (upright), counts.
+    pub pendulum_center: i32,
+    /// Pendulum limit, counts from `pendulum_center`.
+    pub pendulum_limit: u32,
+}
+
+/// Host → device (v2): processor-in-the-loop. Step the loaded controller once on these
+/// encoder positions (in place of the device's own) and answer with a [`PilMove`]. The motor
+/// is not driven: the move is only reported. Refused while onboard mode runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PilStep {
+    /// Arm position, counts.
+    pub arm_counts: i32,
+    /// Pendulum position, counts.
+    pub pendulum_counts: i32,
+    /// `PIL_*` flags.
+    pub flags: u8,
+}
+
+/// Device → host (v2): the move of a [`PilStep`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PilMove {
+    /// Sequence number of the step request answered.
+    pub ack_seq: u16,
+    /// Controller steps since the last reset (this one included).
+    pub step: u32,
+    /// The move (V) as the bits of an `f64` ([`voltage`](Self::voltage)), exactly as the
+    /// controller computed it (an `f32` controller's value is exact in `f64`); NaN when
+    /// refused. Bits, so that frames compare exactly.
+    pub voltage_bits: u64,
+    /// The step's duration in the device's cycle counter's units (0 without one).
+    pub cycles: u32,
+    /// `ACK_*` result code.
+    pub code: u8,
+}
+
+impl PilMove {
+    /// The move (V).
+    pub fn voltage(&self) -> f64 {
+        f64::from_bits(self.voltage_bits)
+    }
+}
+
+/// Device → host (v2): the answer to an upload, commit, start or stop frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Ack {
+    /// Sequence number of the host frame answered.
+    pub ack_seq: u16,
+    /// Message type of the host frame answered.
+    pub request: u8,
+    /// `ACK_*` result code.
+    pub code: u8,
+    /// For a chunk or a begin: the offset the device expects next. For a commit: the CRC-32
+    /// the device computed over what it received. For a start or a stop: the
+    /// `ONBOARD_*` state after it.
+    pub value: u32,
+}
+
+/// Ack code: accepted.
+pub const ACK_OK: u8 = 0;
+/// Ack code: a chunk whose offset is not the next expected one (out of order or a duplicate);
+/// the ack's value is the expected offset.
+pub const ACK_OUT_OF_ORDER: u8 = 1;
+/// Ack code: the image does not fit the device's design buffer, or a chunk runs past the
+/// length announced by the begin.
+pub const ACK_TOO_LARGE: u8 = 2;
+/// Ack code: a chunk or commit without an upload begun.
+pub const ACK_NO_UPLOAD: u8 = 3;
+/// Ack code: the commit's length is not the number of bytes received.
+pub const ACK_LENGTH_MISMATCH: u8 = 4;
+/// Ack code: the commit's CRC-32 is not that of the bytes received.
+pub const ACK_CRC_MISMATCH: u8 = 5;
+/// Ack code: the image is intact but the device's controller refused it (another design
+/// format version, a dimension it cannot hold, a value out of range).
+pub const ACK_DESIGN_REFUSED: u8 = 6;
+/// Ack code: onboard start without a committed design.
+pub const ACK_NO_DESIGN: u8 = 7;
+/// Ack code: an upload while onboard mode runs (stop it first).
+pub const ACK_BUSY: u8 = 8;
+/// Ack code: onboard start refused because the driver reports a fault, or a limit is already
+/// exceeded.
+pub const ACK_REFUSED: u8 = 9;
+/// Ack code: onboard start with a zero decimation or host timeout.
+pub const ACK_BAD_SETTINGS: u8 = 10;
+
+/// Onboard state: no onboard run since power-up or the last upload.
+pub const ONBOARD_IDLE: u8 = 0;
+/// Onboard state: the controller runs.
+pub const ONBOARD_RUNNING: u8 = 1;
+/// Onboard state: stopped by the host (an onboard stop or a command frame).
+pub const ONBOARD_STOPPED: u8 = 2;
+/// Onboard state: stopped on the arm limit.
+pub const ONBOARD_ARM_LIMIT: u8 = 3;
+/// Onboard state: stopped on the pendulum limit.
+pub const ONBOARD_PENDULUM_LIMIT: u8 = 4;
+/// Onboard state: stopped because the host went silent.
+pub const ONBOARD_HOST_SILENT: u8 = 5;
+/// Onboard state: stopped because a controller step overran its period.
+pub const ONBOARD_OVERRUN: u8 = 6;
+/// Onboard state: stopped because the driver reported a fault.
+pub const ONBOARD_DRIVER_FAULT: u8 = 7;
+/// Onboard state: stopped because the controller returned a non-finite move.
+pub const ONBOARD_BAD_MOVE: u8 = 8;
+/// Onboard state: stopped on a frame of another protocol version.
+pub const ONBOARD_PROTOCOL: u8 = 9;
+
+/// Device → host (v2): one onboard controller step, streamed every `decimation` steps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Telemetry {
+    /// Controller steps since the onboard start (wraps).
+    pub step: u32,
+    /// Device clock at the step's sampling instant, microseconds (wraps).
+    pub device_time_us: u32,
+    /// Arm encoder position the step used, counts.
+    pub arm_counts: i32,
+    /// Pendulum encoder position the step used, counts.
+    pub pendulum_counts: i32,
+    /// The voltage applied from this step on, millivolts (0 once stopped).
+    pub applied_mv: i16,
+    /// `STATUS_*` bits.
+    pub status: u8,
+    /// `ONBOARD_*` state.
+    pub onboard: u8,
+    /// Duration of the previous step, processor cycles (0 where the device cannot count).
+    pub step_cycles: u32,
+    /// Steps that overran their period since the start.
+    pub overruns: u16,
+}
+
 /// A decoded message.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Message {
@@ -158,6 +404,55 @@ pub enum Message {
     Command(Command),
     /// Host → device: sample the encoders now and answer with a [`Measurement`].
     SampleRequest,
+    /// Host → device (v2).
+    UploadBegin(UploadBegin),
+    /// Host → device (v2).
+    UploadChunk(UploadChunk),
+    /// Host → device (v2).
+    UploadCommit(UploadCommit),
+    /// Host → device (v2).
+    OnboardStart(OnboardStart),
+    /// Host → device (v2): stop onboard mode, 0 V; brake where the flags ask for it.
+    OnboardStop {
+        /// `COMMAND_*` flags: [`COMMAND_BRAKE`] brakes.
+        flags: u8,
+    },
+    /// Host → device (v2).
+    PilStep(PilStep),
+    /// Device → host (v2).
+    PilMove(PilMove),
+    /// Device → host (v2).
+    Ack(Ack),
+    /// Device → host (v2).
+    Telemetry(Telemetry),
+}
+
+impl Message {
+    /// The version byte this message is sent with: v1's messages keep 1 (module docs).
+    pub fn version(&self) -> u8 {
+        match self {
+            Message::Measurement(_) | Message::Command(_) | Message::SampleRequest => VERSION_1,
+            _ => VERSION,
+        }
+    }
+
+    /// The message type byte.
+    pub fn kind(&self) -> u8 {
+        match self {
+            Message::Measurement(_) => TYPE_MEASUREMENT,
+            Message::Command(_) => TYPE_COMMAND,
+            Message::SampleRequest => TYPE_SAMPLE_REQUEST,
+            Message::UploadBegin(_) => TYPE_UPLOAD_BEGIN,
+            Message::UploadChunk(_) => TYPE_UPLOAD_CHUNK,
+            Message::UploadCommit(_) => TYPE_UPLOAD_COMMIT,
+            Message::OnboardStart(_) => TYPE_ONBOARD_START,
+            Message::OnboardStop { .. } => TYPE_ONBOARD_STOP,
+            Message::PilStep(_) => TYPE_PIL_STEP,
+            Message::PilMove(_) => TYPE_PIL_MOVE,
+            Message::Ack(_) => TYPE_ACK,
+            Message::Telemetry(_) => TYPE_TELEMETRY,
+        }
+    }
 }
 
 /// A decoded frame: the sender's sequence number and the message.
@@ -186,6 +481,30 @@ pub fn crc16(data: &[u8]) -> u16 {
     crc
 }
 
+/// CRC-32/ISO-HDLC (the zlib and Ethernet CRC): reflected polynomial 0xEDB88320, initial value
+/// and final XOR 0xFFFFFFFF (check value `crc32(b"123456789") == 0xCBF43926`). It checks a
+/// whole uploaded design image ([`UploadCommit`]).
+pub fn crc32(data: &[u8]) -> u32 {
+    crc32_update(0, data)
+}
+
+/// Continues a [`crc32`] over `data`: `crc32_update(crc32(a), b) == crc32(a ++ b)`, so that
+/// an image can be checked chunk by chunk.
+pub fn crc32_update(crc: u32, data: &[u8]) -> u32 {
+    let mut crc = !crc;
+    for &byte in data {
+        crc ^= byte as u32;
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0xEDB8_8320
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
+}
+
 /// Writes `frame` into `out` and returns the number of bytes used.
 pub fn encode(frame: &Frame, out: &mut [u8; MAX_FRAME]) -> usize {
     let (kind, len) = match frame.message {
@@ -206,10 +525,78 @@ pub fn encode(frame: &Frame, out: &mut [u8; MAX_FRAME]) -> usize {
             (TYPE_COMMAND, COMMAND_LEN)
         }
         Message::SampleRequest => (TYPE_SAMPLE_REQUEST, 0),
+        Message::UploadBegin(b) => {
+            out[HEADER_LEN..HEADER_LEN + 4].copy_from_slice(&b.total_len.to_le_bytes());
+            (TYPE_UPLOAD_BEGIN, UPLOAD_BEGIN_LEN)
+        }
+        Message::UploadChunk(c) => {
+            let data = c.bytes();
+            let p = &mut out[HEADER_LEN..HEADER_LEN + 4 + data.len()];
+            p[0..4].copy_from_slice(&c.offset.to_le_bytes());
+            p[4..].copy_from_slice(data);
+            (TYPE_UPLOAD_CHUNK, 4 + data.len())
+        }
+        Message::UploadCommit(c) => {
+            let p = &mut out[HEADER_LEN..HEADER_LEN + UPLOAD_COMMIT_LEN];
+            p[0..4].copy_from_slice(&c.len.to_le_bytes());
+            p[4..8].copy_from_slice(&c.crc32.to_le_bytes());
+            (TYPE_UPLOAD_COMMIT, UPLOAD_COMMIT_LEN)
+        }
+        Message::OnboardStart(s) => {
+            let p = &mut out[HEADER_LEN..HEADER_LEN + ONBOARD_START_LEN];
+            p[0..2].copy_from_slice(&s.decimation.to_le_bytes());
+            p[2..4].copy_from_slice(&s.host_timeout_ms.to_le_bytes());
+            p[4..8].copy_from_slice(&s.arm_center.to_le_bytes());
+            p[8..12].copy_from_slice(&s.arm_limit.to_le_bytes());
+            p[12..16].copy_from_slice(&s.pendulum_center.to_le_bytes());
+            p[16..20].copy_from_slice(&s.pendulum_limit.to_le_bytes());
+            (TYPE_ONBOARD_START, ONBOARD_START_LEN)
+        }
+        Message::OnboardStop { flags } => {
+            out[HEADER_LEN] = flags;
+            (TYPE_ONBOARD_STOP, ONBOARD_STOP_LEN)
+        }
+        Message::PilStep(s) => {
+            let p = &mut out[HEADER_LEN..HEADER_LEN + PIL_STEP_LEN];
+            p[0..4].copy_from_slice(&s.arm_counts.to_le_bytes());
+            p[4..8].copy_from_slice(&s.pendulum_counts.to_le_bytes());
+            p[8] = s.flags;
+            (TYPE_PIL_STEP, PIL_STEP_LEN)
+        }
+        Message::PilMove(m) => {
+            let p = &mut out[HEADER_LEN..HEADER_LEN + PIL_MOVE_LEN];
+            p[0..2].copy_from_slice(&m.ack_seq.to_le_bytes());
+            p[2..6].copy_from_slice(&m.step.to_le_bytes());
+            p[6..14].copy_from_slice(&m.voltage_bits.to_le_bytes());
+            p[14..18].copy_from_slice(&m.cycles.to_le_bytes());
+            p[18] = m.code;
+            (TYPE_PIL_MOVE, PIL_MOVE_LEN)
+        }
+        Message::Ack(a) => {
+            let p = &mut out[HEADER_LEN..HEADER_LEN + ACK_LEN];
+            p[0..2].copy_from_slice(&a.ack_seq.to_le_bytes());
+            p[2] = a.request;
+            p[3] = a.code;
+            p[4..8].copy_from_slice(&a.value.to_le_bytes());
+            (TYPE_ACK, ACK_LEN)
+        }
+        Message::Telemetry(t) => {
+            let p = &mut out[HEADER_LEN..HEADER_LEN + TELEMETRY_LEN];
+            p[0..4].copy_from_slice(&t.step.to_le_bytes());
+            p[4..8].copy_from_slice(&t.device_time_us.to_le_bytes());
+            p[8..12].copy_from_slice(&t.arm_counts.to_le_bytes());
+            p[12..16].copy_from_slice(&t.pendulum_counts.to_le_bytes());
+            p[16..18].copy_from_slice(&t.applied_mv.to_le_bytes());
+            p[18] = t.status;
+            p[19] = t.onboard;
+            p[20..24].copy_from_slice(&t.step_cycles.to_le_bytes());
+            p[24..26].copy_from_slice(&t.overruns.to_le_bytes());
+            (TYPE_TELEMETRY, TELEMETRY_LEN)
+        }
     };
     out[0] = SYNC0;
     out[1] = SYNC1;
-    out[2] = VERSION;
+    out[2] = frame.message.version();
     out[3] = kind;
     out[4..6].copy_from_slice(&frame.seq.to_le_bytes());
     out[6] = len as u8;
@@ -219,8 +606,9 @@ pub fn encode(frame: &Frame, out: &mut [u8; MAX_FRAME]) -> usize {
     end + TRAILER_LEN
 }
 
-/// Decodes the payload of a CRC-valid frame; `None` for an unknown type or a wrong length.
-fn decode_payload(kind: u8, p: &[u8]) -> Option<Message> {
+/// Decodes the payload of a CRC-valid frame of version byte `version` (1 or 2); `None` for an
+/// unknown type, a wrong length, or a v2 message with version byte 1.
+fn decode_payload(version: u8, kind: u8, p: &[u8]) -> Option<Message> {
     let u16_at = |i: usize| u16::from_le_bytes([p[i], p[i + 1]]);
     let i16_at = |i: usize| i16::from_le_bytes([p[i], p[i + 1]]);
     let u32_at = |i: usize| u32::from_le_bytes([p[i], p[i + 1], p[i + 2], p[i + 3]]);
@@ -238,6 +626,55 @@ fn decode_payload(kind: u8, p: &[u8]) -> Option<Message> {
             flags: p[2],
         })),
         (TYPE_SAMPLE_REQUEST, 0) => Some(Message::SampleRequest),
+        _ if version == VERSION_1 => None,
+        (TYPE_UPLOAD_BEGIN, UPLOAD_BEGIN_LEN) => Some(Message::UploadBegin(UploadBegin {
+            total_len: u32_at(0),
+        })),
+        (TYPE_UPLOAD_CHUNK, n) if (5..=MAX_PAYLOAD).contains(&n) => {
+            Some(Message::UploadChunk(UploadChunk::new(u32_at(0), &p[4..])))
+        }
+        (TYPE_UPLOAD_COMMIT, UPLOAD_COMMIT_LEN) => Some(Message::UploadCommit(UploadCommit {
+            len: u32_at(0),
+            crc32: u32_at(4),
+        })),
+        (TYPE_ONBOARD_START, ONBOARD_START_LEN) => Some(Message::OnboardStart(OnboardStart {
+            decimation: u16_at(0),
+            host_timeout_ms: u16_at(2),
+            arm_center: u32_at(4) as i32,
+            arm_limit: u32_at(8),
+            pendulum_center: u32_at(12) as i32,
+            pendulum_limit: u32_at(16),
+        })),
+        (TYPE_ONBOARD_STOP, ONBOARD_STOP_LEN) => Some(Message::OnboardStop { flags: p[0] }),
+        (TYPE_PIL_STEP, PIL_STEP_LEN) => Some(Message::PilStep(PilStep {
+            arm_counts: u32_at(0) as i32,
+            pendulum_counts: u32_at(4) as i32,
+            flags: p[8],
+        })),
+        (TYPE_PIL_MOVE, PIL_MOVE_LEN) => Some(Message::PilMove(PilMove {
+            ack_seq: u16_at(0),
+            step: u32_at(2),
+            voltage_bits: u32_at(6) as u64 | (u32_at(10) as u64) << 32,
+            cycles: u32_at(14),
+            code: p[18],
+        })),
+        (TYPE_ACK, ACK_LEN) => Some(Message::Ack(Ack {
+            ack_seq: u16_at(0),
+            request: p[2],
+            code: p[3],
+            value: u32_at(4),
+        })),
+        (TYPE_TELEMETRY, TELEMETRY_LEN) => Some(Message::Telemetry(Telemetry {
+            step: u32_at(0),
+            device_time_us: u32_at(4),
+            arm_counts: u32_at(8) as i32,
+            pendulum_counts: u32_at(12) as i32,
+            applied_mv: i16_at(16),
+            status: p[18],
+            onboard: p[19],
+            step_cycles: u32_at(20),
+            overruns: u16_at(24),
+        })),
         _ => None,
     }
 }
@@ -273,9 +710,10 @@ pub enum Rejection {
     Crc,
     /// The length field exceeds [`MAX_PAYLOAD`].
     BadHeader,
-    /// A CRC-valid frame of another protocol version: the peer speaks another protocol.
+    /// A CRC-valid frame of a version other than 1 and 2: the peer speaks another protocol.
     Version(u8),
-    /// A CRC-valid frame with an unknown type, or a payload length that does not fit its type.
+    /// A CRC-valid frame with an unknown type, a payload length that does not fit its type, or
+    /// a v2 message with version byte 1.
     Unknown {
         /// The message type byte.
         kind: u8,
@@ -403,8 +841,9 @@ impl Parser {
             let version = self.buf[VERSION_AT];
             let kind = self.buf[3];
             let seq = u16::from_le_bytes([self.buf[4], self.buf[5]]);
-            let decoded = if version == VERSION {
-                decode_payload(kind, &self.buf[HEADER_LEN..end])
+            let known = version == VERSION_1 || version == VERSION;
+            let decoded = if known {
+                decode_payload(version, kind, &self.buf[HEADER_LEN..end])
             } else {
                 None
             };
@@ -415,7 +854,7 @@ impl Parser {
                     self.stats.frames += 1;
                     Event::Frame(Frame { seq, message })
                 }
-                None if version != VERSION => {
+                None if !known => {
                     self.stats.version_mismatches += 1;
                     Event::Rejected(Rejection::Version(version))
                 }

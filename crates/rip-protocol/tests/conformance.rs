@@ -2,7 +2,9 @@
 //! encoder, the CRC and the parser.
 
 use rip_protocol::{
-    crc16, encode, Command, Event, Frame, Measurement, Message, Parser, Rejection, MAX_FRAME,
+    crc16, crc32, crc32_update, encode, Ack, Command, Event, Frame, Measurement, Message,
+    OnboardStart, Parser, PilMove, PilStep, Rejection, Telemetry, UploadBegin, UploadChunk,
+    UploadCommit, MAX_FRAME,
 };
 use toml::Value;
 
@@ -49,6 +51,57 @@ fn frame_of(v: &Value) -> Frame {
             status: int(v, "status") as u8,
             device_time_us: int(v, "device_time_us") as u32,
         }),
+        "upload_begin" => Message::UploadBegin(UploadBegin {
+            total_len: int(v, "total_len") as u32,
+        }),
+        "upload_chunk" => Message::UploadChunk(UploadChunk::new(
+            int(v, "offset") as u32,
+            &hex(v["data"].as_str().expect("data")),
+        )),
+        "upload_commit" => Message::UploadCommit(UploadCommit {
+            len: int(v, "len") as u32,
+            crc32: int(v, "crc32") as u32,
+        }),
+        "onboard_start" => Message::OnboardStart(OnboardStart {
+            decimation: int(v, "decimation") as u16,
+            host_timeout_ms: int(v, "host_timeout_ms") as u16,
+            arm_center: int(v, "arm_center") as i32,
+            arm_limit: int(v, "arm_limit") as u32,
+            pendulum_center: int(v, "pendulum_center") as i32,
+            pendulum_limit: int(v, "pendulum_limit") as u32,
+        }),
+        "onboard_stop" => Message::OnboardStop {
+            flags: int(v, "flags") as u8,
+        },
+        "ack" => Message::Ack(Ack {
+            ack_seq: int(v, "ack_seq") as u16,
+            request: int(v, "request") as u8,
+            code: int(v, "code") as u8,
+            value: int(v, "value") as u32,
+        }),
+        "telemetry" => Message::Telemetry(Telemetry {
+            step: int(v, "step") as u32,
+            device_time_us: int(v, "device_time_us") as u32,
+            arm_counts: int(v, "arm_counts") as i32,
+            pendulum_counts: int(v, "pendulum_counts") as i32,
+            applied_mv: int(v, "applied_mv") as i16,
+            status: int(v, "status") as u8,
+            onboard: int(v, "onboard") as u8,
+            step_cycles: int(v, "step_cycles") as u32,
+            overruns: int(v, "overruns") as u16,
+        }),
+        "pil_step" => Message::PilStep(PilStep {
+            arm_counts: int(v, "arm_counts") as i32,
+            pendulum_counts: int(v, "pendulum_counts") as i32,
+            flags: int(v, "flags") as u8,
+        }),
+        "pil_move" => Message::PilMove(PilMove {
+            ack_seq: int(v, "ack_seq") as u16,
+            step: int(v, "step") as u32,
+            voltage_bits: v["voltage"].as_float().expect("voltage").to_bits(),
+            cycles: int(v, "cycles") as u32,
+            code: int(v, "code") as u8,
+        }),
         other => panic!("unknown type {other}"),
     };
     Frame {
@@ -89,6 +142,52 @@ fn crc_vectors() {
             None => hex(v["hex"].as_str().unwrap()),
         };
         assert_eq!(crc16(&data), int(v, "crc") as u16, "{}", name(v));
+    }
+}
+
+#[test]
+fn crc32_vectors_also_chunk_by_chunk() {
+    let t = vectors();
+    let vs = entries(&t, "crc32");
+    assert!(vs.len() >= 3);
+    for v in vs {
+        let data = match v.get("ascii") {
+            Some(s) => s.as_str().unwrap().as_bytes().to_vec(),
+            None => hex(v["hex"].as_str().unwrap()),
+        };
+        let want = int(v, "crc") as u32;
+        assert_eq!(crc32(&data), want, "{}", name(v));
+        // An image checked in upload-sized pieces gives the same value.
+        let mut c = 0;
+        for piece in data.chunks(5) {
+            c = crc32_update(c, piece);
+        }
+        assert_eq!(c, want, "{} in pieces", name(v));
+    }
+}
+
+#[test]
+fn every_message_type_has_a_frame_vector() {
+    let t = vectors();
+    let types: std::collections::BTreeSet<&str> = entries(&t, "frame")
+        .iter()
+        .map(|v| v["type"].as_str().unwrap())
+        .collect();
+    for kind in [
+        "command",
+        "sample_request",
+        "measurement",
+        "upload_begin",
+        "upload_chunk",
+        "upload_commit",
+        "onboard_start",
+        "onboard_stop",
+        "ack",
+        "telemetry",
+        "pil_step",
+        "pil_move",
+    ] {
+        assert!(types.contains(kind), "no frame vector of {kind}");
     }
 }
 
@@ -164,9 +263,9 @@ fn the_version_rejection_reports_the_version() {
     let t = vectors();
     let v = entries(&t, "stream")
         .iter()
-        .find(|v| name(v).contains("version 2 is rejected whole"))
+        .find(|v| name(v).contains("version 3 is rejected whole"))
         .expect("version vector");
     let (ev, parser) = events(&hex(v["hex"].as_str().unwrap()));
-    assert_eq!(ev[0], Event::Rejected(Rejection::Version(2)));
+    assert_eq!(ev[0], Event::Rejected(Rejection::Version(3)));
     assert_eq!(parser.stats().version_mismatches, 1);
 }

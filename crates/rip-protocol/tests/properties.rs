@@ -4,7 +4,9 @@
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
 use rip_protocol::{
-    crc16, encode, Command, Event, Frame, Measurement, Message, Parser, MAX_FRAME, SYNC0, SYNC1,
+    crc16, crc32, encode, Ack, Command, Event, Frame, Measurement, Message, OnboardStart, Parser,
+    PilMove, PilStep, Telemetry, UploadBegin, UploadChunk, UploadCommit, CHUNK_MAX, MAX_FRAME,
+    SYNC0, SYNC1,
 };
 
 fn message() -> impl Strategy<Value = Message> {
@@ -32,6 +34,96 @@ fn message() -> impl Strategy<Value = Message> {
         (any::<i16>(), any::<u8>())
             .prop_map(|(voltage_mv, flags)| Message::Command(Command { voltage_mv, flags })),
         Just(Message::SampleRequest),
+        v2_message(),
+    ]
+}
+
+/// The messages protocol v2 added (onboard control).
+fn v2_message() -> impl Strategy<Value = Message> {
+    prop_oneof![
+        any::<u32>().prop_map(|total_len| Message::UploadBegin(UploadBegin { total_len })),
+        (
+            any::<u32>(),
+            proptest::collection::vec(any::<u8>(), 1..=CHUNK_MAX)
+        )
+            .prop_map(|(offset, data)| Message::UploadChunk(UploadChunk::new(offset, &data))),
+        (any::<u32>(), any::<u32>())
+            .prop_map(|(len, crc32)| Message::UploadCommit(UploadCommit { len, crc32 })),
+        (
+            any::<u16>(),
+            any::<u16>(),
+            any::<i32>(),
+            any::<u32>(),
+            any::<i32>(),
+            any::<u32>()
+        )
+            .prop_map(|(decimation, host_timeout_ms, ac, al, pc, pl)| {
+                Message::OnboardStart(OnboardStart {
+                    decimation,
+                    host_timeout_ms,
+                    arm_center: ac,
+                    arm_limit: al,
+                    pendulum_center: pc,
+                    pendulum_limit: pl,
+                })
+            }),
+        any::<u8>().prop_map(|flags| Message::OnboardStop { flags }),
+        (any::<i32>(), any::<i32>(), any::<u8>()).prop_map(|(a, p, flags)| {
+            Message::PilStep(PilStep {
+                arm_counts: a,
+                pendulum_counts: p,
+                flags,
+            })
+        }),
+        (
+            any::<u16>(),
+            any::<u32>(),
+            any::<u64>(),
+            any::<u32>(),
+            any::<u8>()
+        )
+            .prop_map(
+                |(ack_seq, step, voltage_bits, cycles, code)| Message::PilMove(PilMove {
+                    ack_seq,
+                    step,
+                    voltage_bits,
+                    cycles,
+                    code
+                })
+            ),
+        (any::<u16>(), any::<u8>(), any::<u8>(), any::<u32>()).prop_map(
+            |(ack_seq, request, code, value)| Message::Ack(Ack {
+                ack_seq,
+                request,
+                code,
+                value
+            })
+        ),
+        (
+            (any::<u32>(), any::<u32>(), any::<i32>(), any::<i32>()),
+            (
+                any::<i16>(),
+                any::<u8>(),
+                any::<u8>(),
+                any::<u32>(),
+                any::<u16>()
+            )
+        )
+            .prop_map(
+                |((step, t, arm, pend), (mv, status, onboard, cycles, overruns))| {
+                    Message::Telemetry(Telemetry {
+                        step,
+                        device_time_us: t,
+                        arm_counts: arm,
+                        pendulum_counts: pend,
+                        applied_mv: mv,
+                        status,
+                        onboard,
+                        step_cycles: cycles,
+                        overruns,
+                    })
+                }
+            ),
     ]
 }
 
@@ -207,4 +299,50 @@ fn crc_covers_version_to_payload() {
     assert_eq!(b.len(), 9);
     assert_eq!(&b[..7], &[0xA5, 0x5A, 0x01, 0x03, 0xEF, 0xBE, 0x00]);
     assert_eq!(u16::from_le_bytes([b[7], b[8]]), crc16(&b[2..7]));
+}
+
+proptest! {
+    #![proptest_config(config())]
+
+    /// A design image split into chunks and reassembled at the chunks' offsets is the image, and
+    /// its CRC-32 computed piecewise is that of the whole.
+    #[test]
+    fn an_image_sent_in_chunks_reassembles(image in proptest::collection::vec(any::<u8>(), 1..600)) {
+        let mut stream = Vec::new();
+        for (i, piece) in image.chunks(CHUNK_MAX).enumerate() {
+            let f = Frame {
+                seq: i as u16,
+                message: Message::UploadChunk(UploadChunk::new((i * CHUNK_MAX) as u32, piece)),
+            };
+            stream.extend(bytes_of(&f));
+        }
+        let (frames, _) = parse_all(&stream);
+        let mut rebuilt = vec![0u8; image.len()];
+        for f in &frames {
+            let Message::UploadChunk(c) = f.message else { panic!("{f:?}") };
+            let at = c.offset as usize;
+            rebuilt[at..at + c.bytes().len()].copy_from_slice(c.bytes());
+        }
+        prop_assert_eq!(frames.len(), image.len().div_ceil(CHUNK_MAX));
+        prop_assert_eq!(&rebuilt, &image);
+        let mut c = 0;
+        for piece in image.chunks(CHUNK_MAX) {
+            c = rip_protocol::crc32_update(c, piece);
+        }
+        prop_assert_eq!(c, crc32(&image));
+    }
+}
+
+#[test]
+fn v2_messages_carry_version_2_and_v1_messages_version_1() {
+    let v2 = Frame {
+        seq: 1,
+        message: Message::OnboardStop { flags: 0 },
+    };
+    assert_eq!(bytes_of(&v2)[2], 2);
+    let v1 = Frame {
+        seq: 1,
+        message: Message::Command(Command::STOP),
+    };
+    assert_eq!(bytes_of(&v1)[2], 1);
 }

@@ -230,6 +230,10 @@ struct RunArgs {
     /// the emulator advances its plant one period per exchange (refused by any other device).
     #[arg(long)]
     lockstep: bool,
+    /// Run the controller on the device (protocol v2): upload the design, verify its
+    /// checksum, start onboard mode, then supervise and log the device's telemetry.
+    #[arg(long, conflicts_with = "swing_up")]
+    onboard: bool,
     /// Run even when the pre-flight check refuses (an untrusted identification, a rig no
     /// controller can balance at the voltage bound, a controller predicted to fall; exit 16).
     #[arg(long)]
@@ -461,6 +465,19 @@ pub(crate) fn apply_realtime(rt_priority: Option<i32>, cpu: Option<usize>) {
 }
 
 fn cmd_run(args: RunArgs) -> ExitCode {
+    if args.onboard {
+        let code = rip_rt::onboard::command(&rip_rt::onboard::OnboardArgs {
+            port: &args.port,
+            baud: args.baud,
+            controller: args.controller,
+            config: args.config.as_deref(),
+            duration: args.duration,
+            log: args.log.as_deref(),
+            quiet: args.quiet,
+            lockstep: args.lockstep,
+        });
+        return ExitCode::from(code as u8);
+    }
     let (cfg, mut core, port, mut log) = match prepare(&args) {
         Ok(ready) => ready,
         Err(e) => return fail(e.exit_code(), e),

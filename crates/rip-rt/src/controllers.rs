@@ -65,7 +65,7 @@ impl From<ControllerKind> for Kind {
 
 /// The one assembly's design for `kind` at the loop period, with `[mpc] input_bounds` inside
 /// `±safety.voltage_limit`.
-fn design(kind: ControllerKind, cfg: &Config) -> Result<rip_core::spec::Design, String> {
+pub(crate) fn design(kind: ControllerKind, cfg: &Config) -> Result<rip_core::spec::Design, String> {
     let mut spec = cfg.spec.clone();
     let v = cfg.safety.voltage_limit;
     let (lo0, hi0) = spec.input_bounds();

@@ -312,7 +312,9 @@ pub struct Device {
     cfg: EmulatorConfig,
     plant: PlantSim,
     rng: StdRng,
-    firmware: rip_device::Device,
+    firmware: Box<rip_device::Device<OnboardLaw>>,
+    // Frames the firmware sent on its own (onboard telemetry), waiting to be written.
+    outgoing: Vec<Frame>,
     released: bool,
     commands_seen: bool,
     time_ns: u64,
@@ -321,6 +323,26 @@ pub struct Device {
     // The wiring faults' onset: the true counts then (before noise and rounding), from which
     // a reversed encoder counts backwards and at which a frozen one stays. `None` before it.
     fault_onset: Option<[f64; 2]>,
+}
+
+/// The emulated firmware's onboard controller: rip-control's in `f64`, with room for the
+/// largest design rip-control can hold.
+pub type OnboardLaw = rip_device::law::ControlLaw<f64, ONBOARD_BUFFER>;
+
+/// Bytes of the emulated firmware's design buffer.
+pub const ONBOARD_BUFFER: usize = 96 * 1024;
+
+fn firmware(
+    cfg: rip_device::Config,
+    inputs: &Inputs,
+    positions: [i32; 2],
+) -> Box<rip_device::Device<OnboardLaw>> {
+    Box::new(rip_device::Device::with_onboard(
+        cfg,
+        inputs,
+        positions,
+        OnboardLaw::new(),
+    ))
 }
 
 /// What the device did with a frame.
@@ -345,7 +367,8 @@ impl Device {
         let mut dev = Self {
             rng: StdRng::seed_from_u64(cfg.seed),
             plant,
-            firmware: rip_device::Device::new(firmware_cfg, &Inputs::default()),
+            firmware: firmware(firmware_cfg, &Inputs::default(), [0, 0]),
+            outgoing: Vec::with_capacity(64),
             released: !cfg.hold_until_enabled,
             commands_seen: false,
             time_ns: 0,
@@ -362,7 +385,7 @@ impl Device {
             encoders: [arm as u16, pendulum as u16],
             driver_fault: false,
         };
-        dev.firmware = rip_device::Device::with_positions(firmware_cfg, &inputs, [arm, pendulum]);
+        dev.firmware = firmware(firmware_cfg, &inputs, [arm, pendulum]);
         dev
     }
 
@@ -382,7 +405,7 @@ impl Device {
     }
 
     /// The firmware's state.
-    pub fn firmware(&self) -> &rip_device::Device {
+    pub fn firmware(&self) -> &rip_device::Device<OnboardLaw> {
         &self.firmware
     }
 
@@ -525,7 +548,17 @@ impl Device {
             }
         }
         let inputs = self.inputs();
-        self.firmware.tick(&inputs);
+        if self.firmware.onboard_running() {
+            if let Some(frame) = self.firmware.onboard_tick(&inputs) {
+                self.outgoing.push(frame);
+            }
+            if self.firmware.enabled() {
+                self.released = true;
+                self.enabled_at_ns.get_or_insert(self.time_ns);
+            }
+        } else {
+            self.firmware.tick(&inputs);
+        }
         let w = self.windings();
         if self.released {
             self.plant.step_windings(w, dt_ns as f64 * 1e-9);
@@ -560,6 +593,15 @@ impl Device {
             }
             None => Reply::None,
         }
+    }
+
+    /// The next frame the firmware sent on its own (onboard telemetry), encoded into `out`.
+    pub fn take_outgoing(&mut self, out: &mut [u8; MAX_FRAME]) -> Option<usize> {
+        if self.outgoing.is_empty() {
+            return None;
+        }
+        let frame = self.outgoing.remove(0);
+        Some(encode(&frame, out))
     }
 
     /// Applies the configured faults to an outgoing frame and writes what remains into `wire`
@@ -737,6 +779,7 @@ fn serve(
             if let Some(exit) = clock.step(device, truth)? {
                 return Ok(exit);
             }
+            send_outgoing(device, io, &mut out, &mut wire)?;
             next_tick += dt_ns;
             if now > next_tick + 100 * dt_ns {
                 // Far behind (the machine stalled): resume from now rather than fast-forward.
@@ -772,6 +815,9 @@ fn serve(
                                 return Ok(exit);
                             }
                         }
+                        if let Err(e) = send_outgoing(device, io, &mut out, &mut wire) {
+                            error.get_or_insert(e);
+                        }
                     }
                     let t = device.time_s();
                     if clock.first_command_at.is_none()
@@ -797,6 +843,22 @@ fn serve(
             return Err(e);
         }
     }
+}
+
+/// Writes the frames the firmware sent on its own, through the configured faults.
+fn send_outgoing(
+    device: &mut Device,
+    io: &Fd,
+    out: &mut [u8; MAX_FRAME],
+    wire: &mut Vec<u8>,
+) -> io::Result<()> {
+    while let Some(len) = device.take_outgoing(out) {
+        device.inject_faults(&out[..len], wire);
+        if !wire.is_empty() {
+            io.write_all(wire)?;
+        }
+    }
+    Ok(())
 }
 
 /// The simulation's own clock: one step of the plant and the ends it can bring (the

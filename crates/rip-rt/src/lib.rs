@@ -43,6 +43,7 @@ pub mod envelope;
 pub mod excite;
 pub mod log;
 pub mod loop_core;
+pub mod onboard;
 pub mod period;
 pub mod plant;
 pub mod rest;

@@ -173,6 +173,73 @@ impl Condensed {
         b.gemv(1.0, &self.bu, &uv, 1.0);
     }
 
+    /// Fills the QP part of a rip-control design: `H`, the linear-term maps (the reference
+    /// map is the one of a constant reference, the first block of the suffix sums) and the
+    /// rows. Errors name what exceeds the onboard capacity.
+    pub fn fill_control(&self, d: &mut rip_control::Design) -> crate::error::Result<()> {
+        use crate::onboard::put;
+        use rip_control::{MAX_NCON, MAX_NX, MAX_NY, MAX_NZ};
+        if self.nu != 1 {
+            return Err(crate::error::RipError::invalid(
+                "B",
+                "the onboard MPC has one input",
+            ));
+        }
+        if self.p > rip_control::MAX_PREDICTION_HORIZON {
+            return Err(crate::error::RipError::invalid(
+                "prediction_horizon",
+                format!(
+                    "{} exceeds the onboard capacity {}",
+                    self.p,
+                    rip_control::MAX_PREDICTION_HORIZON
+                ),
+            ));
+        }
+        if self.m > rip_control::MAX_CONTROL_HORIZON {
+            return Err(crate::error::RipError::invalid(
+                "control_horizon",
+                format!(
+                    "{} exceeds the onboard capacity {}",
+                    self.m,
+                    rip_control::MAX_CONTROL_HORIZON
+                ),
+            ));
+        }
+        put("H", &mut d.h, &self.h, MAX_NZ, MAX_NZ)?;
+        put(
+            "f0",
+            &mut d.f0,
+            &Mat::from_column_slice(self.nz, 1, self.f0.as_slice()),
+            MAX_NZ,
+            1,
+        )?;
+        put("F_x", &mut d.fx, &self.fx, MAX_NZ, MAX_NX)?;
+        put("F_u", &mut d.fu, &self.fu, MAX_NZ, 1)?;
+        put(
+            "F_r",
+            &mut d.fr,
+            &self.fr_tail.columns(0, self.ny).into_owned(),
+            MAX_NZ,
+            MAX_NY,
+        )?;
+        put("A_c", &mut d.ac, &self.a, MAX_NCON, MAX_NZ)?;
+        put(
+            "b0",
+            &mut d.b0,
+            &Mat::from_column_slice(self.ncon, 1, self.b0.as_slice()),
+            MAX_NCON,
+            1,
+        )?;
+        put("B_x", &mut d.bx, &self.bx, MAX_NCON, MAX_NX)?;
+        put("B_u", &mut d.bu, &self.bu, MAX_NCON, 1)?;
+        d.horizon = self.p;
+        d.control_horizon = self.m;
+        d.ncon = self.ncon;
+        d.n_input_rows = self.rows.n_input;
+        d.n_soft_rows = self.rows.n_soft;
+        Ok(())
+    }
+
     /// Predicted scaled outputs `Y = Φ x + Γ u⁻ + G Δ` (P·ny, stacked by step).
     pub fn predict(&self, x: &[f64], u_prev: &[f64], du: &[f64]) -> DVector<f64> {
         &self.phi * DVectorView::from_slice(x, self.nx)

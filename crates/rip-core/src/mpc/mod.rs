@@ -618,6 +618,41 @@ impl Mpc {
         self.backend.reset();
     }
 
+    /// The design rip-control runs for this controller ([`crate::onboard`]): the estimator,
+    /// the condensed QP for a constant reference, the input bounds and the iteration bound.
+    ///
+    /// # Errors
+    /// A size beyond rip-control's capacities (one input, `P ≤ 100`, `m ≤ 4`, 8 states),
+    /// naming it.
+    pub fn control_design(&self) -> Result<rip_control::Design> {
+        use crate::onboard::put;
+        use rip_control::{MAX_NX, MAX_NY};
+        let mut d = rip_control::Design {
+            kind: rip_control::Kind::Mpc,
+            ts: self.ts,
+            ..rip_control::Design::default()
+        };
+        if self.qp.nu != 1 {
+            return Err(RipError::invalid("B", "the onboard MPC has one input"));
+        }
+        d.input_bounds = [self.u_lo[0], self.u_hi[0]];
+        let (a, b, c, l, m) = self.estimator.matrices();
+        put("A", &mut d.a, a, MAX_NX, MAX_NX)?;
+        put("B", &mut d.b, b, MAX_NX, 1)?;
+        put("C", &mut d.c, c, MAX_NY, MAX_NX)?;
+        put("L", &mut d.l, l, MAX_NX, MAX_NY)?;
+        put("M", &mut d.m, m, MAX_NX, MAX_NY)?;
+        d.nx = a.nrows();
+        d.ny = c.nrows();
+        d.output_scales[..d.ny].copy_from_slice(&self.output_scales);
+        self.qp.fill_control(&mut d)?;
+        d.max_iterations = u32::try_from(self.settings.max_iterations)
+            .unwrap_or(u32::MAX)
+            .min(rip_control::MAX_QP_ITERATIONS);
+        d.validate().map_err(crate::onboard::refused)?;
+        Ok(d)
+    }
+
     /// The estimator (its posterior `x̂[k|k]` and prior `x̂[k+1|k]`).
     pub fn estimator(&self) -> &CurrentEstimator {
         &self.estimator

@@ -1,0 +1,634 @@
+//! The complete controller design the host computes and the device runs ([`Design`]), its
+//! validation, and its byte layout ([`Design::to_bytes`], [`Design::from_bytes`]; the layout is
+//! documented in the crate docs).
+
+use crate::real::Real;
+
+/// Most plant inputs: the rig has one motor.
+pub const MAX_NU: usize = 1;
+/// Most outputs (arm and pendulum angle).
+pub const MAX_NY: usize = 2;
+/// Most estimator states: the four plant states and up to four disturbance states.
+pub const MAX_NX: usize = 8;
+/// Most moves of the MPC's control horizon `m`.
+pub const MAX_CONTROL_HORIZON: usize = 4;
+/// Most steps of the MPC's prediction horizon `P`.
+pub const MAX_PREDICTION_HORIZON: usize = 100;
+/// Most QP variables `m·nu + 1` (the moves and the slack `ε`).
+pub const MAX_NZ: usize = MAX_CONTROL_HORIZON * MAX_NU + 1;
+/// Most QP constraint rows: the hard input bounds of the `m` moves, two soft rows per output
+/// and prediction step, and `−ε ≤ 0`.
+pub const MAX_NCON: usize =
+    2 * MAX_CONTROL_HORIZON * MAX_NU + 2 * MAX_PREDICTION_HORIZON * MAX_NY + 1;
+/// Most dual active-set iterations a design may ask for.
+pub const MAX_QP_ITERATIONS: u32 = 1000;
+/// Number of plant states `[θ, θ̇, α, α̇]` the regulators feed back.
+pub const NX_PLANT: usize = 4;
+
+/// The version of the byte layout written by [`Design::to_bytes`].
+pub const LAYOUT_VERSION: u16 = 1;
+/// The first four bytes of every encoded design.
+pub const MAGIC: [u8; 4] = *b"RIPD";
+/// Bytes before the body: magic, version, kind, flags, total length.
+pub const HEADER_LEN: usize = 12;
+
+/// Which controller a [`Design`] is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Kind {
+    /// LQR on measured angles, rates from a filtered difference.
+    #[default]
+    Lqr,
+    /// The LQR gain on the plant part of the steady-state Kalman filter's current estimate.
+    Lqg,
+    /// Constrained MPC on the condensed QP, with the same Kalman filter.
+    Mpc,
+}
+
+impl Kind {
+    /// The byte that stands for the kind in the layout.
+    pub fn code(self) -> u8 {
+        match self {
+            Self::Lqr => 1,
+            Self::Lqg => 2,
+            Self::Mpc => 3,
+        }
+    }
+
+    /// The kind of a layout byte.
+    pub fn from_code(code: u8) -> Option<Self> {
+        match code {
+            1 => Some(Self::Lqr),
+            2 => Some(Self::Lqg),
+            3 => Some(Self::Mpc),
+            _ => None,
+        }
+    }
+
+    /// `"lqr"`, `"lqg"` or `"mpc"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Lqr => "lqr",
+            Self::Lqg => "lqg",
+            Self::Mpc => "mpc",
+        }
+    }
+}
+
+/// Why a design was refused, naming the field (as in the layout and the crate docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DesignError {
+    /// The output buffer cannot hold the encoded design; `needed` bytes are.
+    BufferTooSmall {
+        /// Bytes the encoding needs.
+        needed: usize,
+    },
+    /// The bytes end before the layout does.
+    Truncated,
+    /// The first four bytes are not [`MAGIC`].
+    BadMagic,
+    /// A layout version this build does not read.
+    UnsupportedVersion(u16),
+    /// The length field disagrees with the bytes given.
+    LengthMismatch,
+    /// The CRC-32 does not match the bytes.
+    BadChecksum,
+    /// An unknown kind byte.
+    UnknownKind(u8),
+    /// A size exceeds this build's capacity or is inconsistent.
+    BadSize(&'static str),
+    /// A number is not finite (or not positive where it must be).
+    BadValue(&'static str),
+}
+
+impl core::fmt::Display for DesignError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::BufferTooSmall { needed } => write!(f, "buffer too small: {needed} bytes needed"),
+            Self::Truncated => f.write_str("design bytes end early"),
+            Self::BadMagic => f.write_str("not a design (bad magic)"),
+            Self::UnsupportedVersion(v) => write!(f, "unsupported design layout version {v}"),
+            Self::LengthMismatch => f.write_str("design length field does not match"),
+            Self::BadChecksum => f.write_str("design CRC-32 does not match"),
+            Self::UnknownKind(k) => write!(f, "unknown controller kind {k}"),
+            Self::BadSize(name) => write!(f, "{name}: size out of range"),
+            Self::BadValue(name) => write!(f, "{name}: invalid value"),
+        }
+    }
+}
+
+/// The voltage dead-zone and arm-friction compensation (rip-core's `compensation` module docs
+/// give the law); all zero for none.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CompensationDesign<R: Real = f64> {
+    /// Dead zone `V_d` (V, ≥ 0).
+    pub dead_zone: R,
+    /// Arm Coulomb friction as a voltage `V_f = C_r R_m / k_t` (V, ≥ 0).
+    pub friction_voltage: R,
+    /// Width `v_s` of the dead-zone sign ramp (V, > 0).
+    pub voltage_scale: R,
+    /// Width `ω_s` of the friction sign ramp (rad/s, > 0).
+    pub velocity_scale: R,
+}
+
+impl<R: Real> CompensationDesign<R> {
+    /// Whether there is anything to compensate.
+    pub fn is_active(&self) -> bool {
+        self.dead_zone != R::ZERO || self.friction_voltage != R::ZERO
+    }
+}
+
+/// A complete controller design: everything a [`Controller`](crate::Controller) needs, made on
+/// the host (DARE, Kalman design, condensing in rip-core) and run wherever the controller runs.
+///
+/// Matrices are row-major in fixed-capacity arrays; only the leading `rows × cols` entries
+/// given by the sizes are used (and encoded). Fields a kind does not use are zero.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Design<R: Real = f64> {
+    /// Which controller.
+    pub kind: Kind,
+    /// Sample time `Ts` (s, > 0).
+    pub ts: R,
+    /// Bounds `[u_min, u_max]` of the written voltage (finite, `u_min < u_max`). The regulators
+    /// and the MPC plan within them (the MPC's own hard bounds are in its rows); the
+    /// compensation's final clamp uses them too.
+    pub input_bounds: [R; 2],
+    /// LQR/LQG gain `K` (1×4, `u = −K (x − x_ref)`).
+    pub k: [R; NX_PLANT],
+    /// Integral gain `k_i` on the arm error (0: none).
+    pub integral_gain: R,
+    /// LQR rate-filter cut-off (Hz, > 0; `+∞` for the plain difference).
+    pub rate_cutoff_hz: R,
+    /// Estimator states `n` (LQG: ≥ 4; MPC: the augmented model's).
+    pub nx: usize,
+    /// Outputs `ny` (2 for the rig).
+    pub ny: usize,
+    /// Estimator `A` (n×n).
+    pub a: [R; MAX_NX * MAX_NX],
+    /// Estimator `B_u` (n×1).
+    pub b: [R; MAX_NX],
+    /// Estimator `C` (ny×n), on the scaled outputs `y / s_y`.
+    pub c: [R; MAX_NY * MAX_NX],
+    /// Predictor gain `L` (n×ny).
+    pub l: [R; MAX_NX * MAX_NY],
+    /// Innovation gain `M` (n×ny).
+    pub m: [R; MAX_NX * MAX_NY],
+    /// Output scales `s_y` (the estimator sees `y / s_y`; 1 for the LQG).
+    pub output_scales: [R; MAX_NY],
+    /// MPC prediction horizon `P`.
+    pub horizon: usize,
+    /// MPC control horizon `m`.
+    pub control_horizon: usize,
+    /// QP constraint rows in use.
+    pub ncon: usize,
+    /// Hard input rows (first) of the constraints.
+    pub n_input_rows: usize,
+    /// Soft output rows (next); the last row is `−ε ≤ 0`.
+    pub n_soft_rows: usize,
+    /// QP Hessian `H` (nz×nz, nz = m + 1).
+    pub h: [R; MAX_NZ * MAX_NZ],
+    /// `f = f0 + F_x x + F_u u⁻ − F_r r` (nz).
+    pub f0: [R; MAX_NZ],
+    /// `F_x` (nz×n).
+    pub fx: [R; MAX_NZ * MAX_NX],
+    /// `F_u` (nz×1).
+    pub fu: [R; MAX_NZ],
+    /// `F_r` (nz×ny): the map of a constant reference held over the horizon.
+    pub fr: [R; MAX_NZ * MAX_NY],
+    /// Constraint matrix `A_c` (ncon×nz).
+    pub ac: [R; MAX_NCON * MAX_NZ],
+    /// `b = b0 + B_x x + B_u u⁻` (ncon).
+    pub b0: [R; MAX_NCON],
+    /// `B_x` (ncon×n).
+    pub bx: [R; MAX_NCON * MAX_NX],
+    /// `B_u` (ncon×1).
+    pub bu: [R; MAX_NCON],
+    /// Dual active-set iteration bound (1..=[`MAX_QP_ITERATIONS`]); the fallback law applies
+    /// when it is hit.
+    pub max_iterations: u32,
+    /// The compensation (zero: none).
+    pub compensation: CompensationDesign<R>,
+}
+
+impl<R: Real> Default for Design<R> {
+    fn default() -> Self {
+        let z = R::ZERO;
+        Self {
+            kind: Kind::Lqr,
+            ts: R::from_f64(0.01),
+            input_bounds: [R::from_f64(-12.0), R::from_f64(12.0)],
+            k: [z; NX_PLANT],
+            integral_gain: z,
+            rate_cutoff_hz: R::from_f64(20.0),
+            nx: 0,
+            ny: 0,
+            a: [z; MAX_NX * MAX_NX],
+            b: [z; MAX_NX],
+            c: [z; MAX_NY * MAX_NX],
+            l: [z; MAX_NX * MAX_NY],
+            m: [z; MAX_NX * MAX_NY],
+            output_scales: [R::ONE; MAX_NY],
+            horizon: 0,
+            control_horizon: 0,
+            ncon: 0,
+            n_input_rows: 0,
+            n_soft_rows: 0,
+            h: [z; MAX_NZ * MAX_NZ],
+            f0: [z; MAX_NZ],
+            fx: [z; MAX_NZ * MAX_NX],
+            fu: [z; MAX_NZ],
+            fr: [z; MAX_NZ * MAX_NY],
+            ac: [z; MAX_NCON * MAX_NZ],
+            b0: [z; MAX_NCON],
+            bx: [z; MAX_NCON * MAX_NX],
+            bu: [z; MAX_NCON],
+            max_iterations: 200,
+            compensation: CompensationDesign::default(),
+        }
+    }
+}
+
+fn finite<R: Real>(name: &'static str, v: &[R]) -> Result<(), DesignError> {
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(DesignError::BadValue(name))
+    }
+}
+
+impl<R: Real> Design<R> {
+    /// QP variables `m + 1`.
+    pub fn nz(&self) -> usize {
+        self.control_horizon * MAX_NU + 1
+    }
+
+    /// Checks sizes against the capacities and every number for what it must be; the error
+    /// names the field. [`Controller::new`](crate::Controller::new) and
+    /// [`from_bytes`](Self::from_bytes) call it.
+    pub fn validate(&self) -> Result<(), DesignError> {
+        use DesignError::{BadSize, BadValue};
+        if !(self.ts.is_finite() && self.ts > R::ZERO) {
+            return Err(BadValue("ts"));
+        }
+        let [lo, hi] = self.input_bounds;
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            return Err(BadValue("input_bounds"));
+        }
+        finite("k", &self.k)?;
+        finite("integral_gain", &[self.integral_gain])?;
+        let c = self.compensation;
+        finite("compensation", &[c.dead_zone, c.friction_voltage])?;
+        if c.dead_zone < R::ZERO || c.friction_voltage < R::ZERO {
+            return Err(BadValue("compensation"));
+        }
+        if c.is_active() && !(c.voltage_scale > R::ZERO && c.velocity_scale > R::ZERO) {
+            return Err(BadValue("compensation.scales"));
+        }
+        match self.kind {
+            Kind::Lqr => {
+                // NaN fails the comparison; +∞ is the plain difference.
+                if self.rate_cutoff_hz.partial_cmp(&R::ZERO) != Some(core::cmp::Ordering::Greater) {
+                    return Err(BadValue("rate_cutoff_hz"));
+                }
+                return Ok(());
+            }
+            Kind::Lqg => {
+                if self.nx < NX_PLANT || self.nx > MAX_NX {
+                    return Err(BadSize("nx"));
+                }
+                if self.ny != 2 {
+                    return Err(BadSize("ny"));
+                }
+            }
+            Kind::Mpc => {
+                if self.nx == 0 || self.nx > MAX_NX {
+                    return Err(BadSize("nx"));
+                }
+                if self.ny == 0 || self.ny > MAX_NY {
+                    return Err(BadSize("ny"));
+                }
+            }
+        }
+        let (n, ny) = (self.nx, self.ny);
+        finite("a", &self.a[..n * n])?;
+        finite("b", &self.b[..n])?;
+        finite("c", &self.c[..ny * n])?;
+        finite("l", &self.l[..n * ny])?;
+        finite("m", &self.m[..n * ny])?;
+        if !self.output_scales[..ny]
+            .iter()
+            .all(|s| s.is_finite() && *s > R::ZERO)
+        {
+            return Err(BadValue("output_scales"));
+        }
+        if self.kind != Kind::Mpc {
+            return Ok(());
+        }
+        if self.horizon == 0 || self.horizon > MAX_PREDICTION_HORIZON {
+            return Err(BadSize("horizon"));
+        }
+        if self.control_horizon == 0
+            || self.control_horizon > MAX_CONTROL_HORIZON
+            || self.control_horizon > self.horizon
+        {
+            return Err(BadSize("control_horizon"));
+        }
+        if self.ncon == 0
+            || self.ncon > MAX_NCON
+            || self.n_input_rows + self.n_soft_rows + 1 != self.ncon
+        {
+            return Err(BadSize("ncon"));
+        }
+        if self.max_iterations == 0 || self.max_iterations > MAX_QP_ITERATIONS {
+            return Err(BadSize("max_iterations"));
+        }
+        let nz = self.nz();
+        finite("h", &self.h[..nz * nz])?;
+        finite("f0", &self.f0[..nz])?;
+        finite("fx", &self.fx[..nz * n])?;
+        finite("fu", &self.fu[..nz])?;
+        finite("fr", &self.fr[..nz * ny])?;
+        finite("ac", &self.ac[..self.ncon * nz])?;
+        finite("b0", &self.b0[..self.ncon])?;
+        finite("bx", &self.bx[..self.ncon * n])?;
+        finite("bu", &self.bu[..self.ncon])?;
+        Ok(())
+    }
+
+    /// Bytes [`to_bytes`](Self::to_bytes) writes for this design.
+    pub fn encoded_len(&self) -> usize {
+        let mut w = Sizer(0);
+        self.write_body(&mut w);
+        HEADER_LEN + w.0 + 4
+    }
+
+    /// Writes the design in the documented layout (crate docs) into `buf`; returns the length.
+    ///
+    /// # Errors
+    /// [`DesignError::BufferTooSmall`] with the length needed; an invalid design (see
+    /// [`validate`](Self::validate)) is refused as well, so only valid designs travel.
+    pub fn to_bytes(&self, buf: &mut [u8]) -> Result<usize, DesignError> {
+        self.validate()?;
+        let needed = self.encoded_len();
+        if buf.len() < needed {
+            return Err(DesignError::BufferTooSmall { needed });
+        }
+        buf[..4].copy_from_slice(&MAGIC);
+        buf[4..6].copy_from_slice(&LAYOUT_VERSION.to_le_bytes());
+        buf[6] = self.kind.code();
+        buf[7] = 0;
+        let total = u32::try_from(needed).map_err(|_| DesignError::BadSize("length"))?;
+        buf[8..12].copy_from_slice(&total.to_le_bytes());
+        let mut w = Writer {
+            buf: &mut buf[HEADER_LEN..needed - 4],
+            pos: 0,
+        };
+        self.write_body(&mut w);
+        let crc = crc32(&buf[..needed - 4]);
+        buf[needed - 4..needed].copy_from_slice(&crc.to_le_bytes());
+        Ok(needed)
+    }
+
+    /// Reads a design written by [`to_bytes`](Self::to_bytes) (the numbers travel as `f64`
+    /// and are rounded to `R`), checking magic, version, length, CRC-32 and then
+    /// [`validate`](Self::validate).
+    ///
+    /// # Errors
+    /// The first check that fails.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, DesignError> {
+        let mut d = Self::default();
+        d.read_from(bytes)?;
+        Ok(d)
+    }
+
+    /// [`from_bytes`](Self::from_bytes) into an existing design, for a device that keeps its
+    /// one design in a static rather than on the stack. On error `self` is unspecified but
+    /// valid to overwrite; do not run it.
+    ///
+    /// # Errors
+    /// As [`from_bytes`](Self::from_bytes).
+    pub fn read_from(&mut self, bytes: &[u8]) -> Result<(), DesignError> {
+        if bytes.len() < HEADER_LEN + 4 {
+            return Err(DesignError::Truncated);
+        }
+        if bytes[..4] != MAGIC {
+            return Err(DesignError::BadMagic);
+        }
+        let version = u16::from_le_bytes([bytes[4], bytes[5]]);
+        if version != LAYOUT_VERSION {
+            return Err(DesignError::UnsupportedVersion(version));
+        }
+        let total = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
+        if total != bytes.len() {
+            return Err(DesignError::LengthMismatch);
+        }
+        let crc = u32::from_le_bytes([
+            bytes[total - 4],
+            bytes[total - 3],
+            bytes[total - 2],
+            bytes[total - 1],
+        ]);
+        if crc != crc32(&bytes[..total - 4]) {
+            return Err(DesignError::BadChecksum);
+        }
+        let kind = Kind::from_code(bytes[6]).ok_or(DesignError::UnknownKind(bytes[6]))?;
+        *self = Self {
+            kind,
+            ..Self::default()
+        };
+        let mut r = Reader {
+            buf: &bytes[HEADER_LEN..total - 4],
+            pos: 0,
+        };
+        self.read_body(&mut r)?;
+        if r.pos != r.buf.len() {
+            return Err(DesignError::LengthMismatch);
+        }
+        self.validate()
+    }
+
+    fn write_body(&self, w: &mut impl Sink) {
+        w.real(self.ts);
+        w.reals(&self.input_bounds);
+        let c = self.compensation;
+        w.reals(&[
+            c.dead_zone,
+            c.friction_voltage,
+            c.voltage_scale,
+            c.velocity_scale,
+        ]);
+        w.reals(&self.k);
+        w.real(self.integral_gain);
+        if self.kind == Kind::Lqr {
+            w.real(self.rate_cutoff_hz);
+            return;
+        }
+        let (n, ny) = (self.nx, self.ny);
+        w.u16(n as u16);
+        w.u16(ny as u16);
+        w.reals(&self.a[..n * n]);
+        w.reals(&self.b[..n]);
+        w.reals(&self.c[..ny * n]);
+        w.reals(&self.l[..n * ny]);
+        w.reals(&self.m[..n * ny]);
+        w.reals(&self.output_scales[..ny]);
+        if self.kind != Kind::Mpc {
+            return;
+        }
+        w.u16(self.horizon as u16);
+        w.u16(self.control_horizon as u16);
+        w.u16(self.n_input_rows as u16);
+        w.u16(self.n_soft_rows as u16);
+        w.u16(u16::try_from(self.max_iterations).unwrap_or(u16::MAX));
+        let nz = self.nz();
+        w.reals(&self.h[..nz * nz]);
+        w.reals(&self.f0[..nz]);
+        w.reals(&self.fx[..nz * n]);
+        w.reals(&self.fu[..nz]);
+        w.reals(&self.fr[..nz * ny]);
+        w.reals(&self.ac[..self.ncon * nz]);
+        w.reals(&self.b0[..self.ncon]);
+        w.reals(&self.bx[..self.ncon * n]);
+        w.reals(&self.bu[..self.ncon]);
+    }
+
+    fn read_body(&mut self, r: &mut Reader<'_>) -> Result<(), DesignError> {
+        use DesignError::BadSize;
+        self.ts = r.real()?;
+        r.reals(&mut self.input_bounds)?;
+        let mut comp = [R::ZERO; 4];
+        r.reals(&mut comp)?;
+        self.compensation = CompensationDesign {
+            dead_zone: comp[0],
+            friction_voltage: comp[1],
+            voltage_scale: comp[2],
+            velocity_scale: comp[3],
+        };
+        r.reals(&mut self.k)?;
+        self.integral_gain = r.real()?;
+        if self.kind == Kind::Lqr {
+            self.rate_cutoff_hz = r.real()?;
+            return Ok(());
+        }
+        let n = usize::from(r.u16()?);
+        let ny = usize::from(r.u16()?);
+        if n == 0 || n > MAX_NX {
+            return Err(BadSize("nx"));
+        }
+        if ny == 0 || ny > MAX_NY {
+            return Err(BadSize("ny"));
+        }
+        self.nx = n;
+        self.ny = ny;
+        r.reals(&mut self.a[..n * n])?;
+        r.reals(&mut self.b[..n])?;
+        r.reals(&mut self.c[..ny * n])?;
+        r.reals(&mut self.l[..n * ny])?;
+        r.reals(&mut self.m[..n * ny])?;
+        r.reals(&mut self.output_scales[..ny])?;
+        if self.kind != Kind::Mpc {
+            return Ok(());
+        }
+        self.horizon = usize::from(r.u16()?);
+        self.control_horizon = usize::from(r.u16()?);
+        self.n_input_rows = usize::from(r.u16()?);
+        self.n_soft_rows = usize::from(r.u16()?);
+        self.max_iterations = u32::from(r.u16()?);
+        if self.control_horizon == 0 || self.control_horizon > MAX_CONTROL_HORIZON {
+            return Err(BadSize("control_horizon"));
+        }
+        self.ncon = self.n_input_rows + self.n_soft_rows + 1;
+        if self.ncon > MAX_NCON {
+            return Err(BadSize("ncon"));
+        }
+        let nz = self.nz();
+        let ncon = self.ncon;
+        r.reals(&mut self.h[..nz * nz])?;
+        r.reals(&mut self.f0[..nz])?;
+        r.reals(&mut self.fx[..nz * n])?;
+        r.reals(&mut self.fu[..nz])?;
+        r.reals(&mut self.fr[..nz * ny])?;
+        r.reals(&mut self.ac[..ncon * nz])?;
+        r.reals(&mut self.b0[..ncon])?;
+        r.reals(&mut self.bx[..ncon * n])?;
+        r.reals(&mut self.bu[..ncon])?;
+        Ok(())
+    }
+}
+
+trait Sink {
+    fn bytes(&mut self, b: &[u8]);
+    fn real<R: Real>(&mut self, v: R) {
+        self.bytes(&v.to_f64().to_le_bytes());
+    }
+    fn reals<R: Real>(&mut self, v: &[R]) {
+        for &x in v {
+            self.real(x);
+        }
+    }
+    fn u16(&mut self, v: u16) {
+        self.bytes(&v.to_le_bytes());
+    }
+}
+
+struct Sizer(usize);
+
+impl Sink for Sizer {
+    fn bytes(&mut self, b: &[u8]) {
+        self.0 += b.len();
+    }
+}
+
+struct Writer<'a> {
+    buf: &'a mut [u8],
+    pos: usize,
+}
+
+impl Sink for Writer<'_> {
+    fn bytes(&mut self, b: &[u8]) {
+        // The caller sized the buffer with `encoded_len`.
+        self.buf[self.pos..self.pos + b.len()].copy_from_slice(b);
+        self.pos += b.len();
+    }
+}
+
+struct Reader<'a> {
+    buf: &'a [u8],
+    pos: usize,
+}
+
+impl Reader<'_> {
+    fn take<const N: usize>(&mut self) -> Result<[u8; N], DesignError> {
+        let end = self.pos + N;
+        let s = self.buf.get(self.pos..end).ok_or(DesignError::Truncated)?;
+        self.pos = end;
+        let mut out = [0u8; N];
+        out.copy_from_slice(s);
+        Ok(out)
+    }
+    fn real<R: Real>(&mut self) -> Result<R, DesignError> {
+        Ok(R::from_f64(f64::from_le_bytes(self.take::<8>()?)))
+    }
+    fn reals<R: Real>(&mut self, out: &mut [R]) -> Result<(), DesignError> {
+        for v in out {
+            *v = self.real()?;
+        }
+        Ok(())
+    }
+    fn u16(&mut self) -> Result<u16, DesignError> {
+        Ok(u16::from_le_bytes(self.take::<2>()?))
+    }
+}
+
+/// CRC-32 (IEEE 802.3: reflected polynomial `0xEDB88320`, initial value and final XOR
+/// `0xFFFFFFFF`; `crc32(b"123456789") = 0xCBF43926`), bitwise, so no table in flash.
+pub fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = 0xFFFF_FFFFu32;
+    for &b in bytes {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            let mask = (crc & 1).wrapping_neg();
+            crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
+        }
+    }
+    !crc
+}

@@ -1,0 +1,274 @@
+//! rip-control, the one run-time implementation, against rip-core's controllers and solvers:
+//! the regulators step for step, the MPC's dual active-set QP against Clarabel and against
+//! the dense primal active set on closed-loop simulations of both presets, and the bytes a
+//! design travels in.
+
+use nalgebra::DVector;
+use rand::{rngs::StdRng, Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+use rip_control::{Controller as Step, Measurement, Status};
+type CDesign = rip_control::Design<f64>;
+use rip_core::controller::{Controller, StepStatus};
+use rip_core::mpc::QpSolver;
+use rip_core::spec::Spec;
+
+fn specs() -> Vec<(&'static str, Spec)> {
+    vec![
+        ("paper", Spec::default()),
+        (
+            "qube_servo2",
+            Spec::parse("[plant]\npreset = 'qube_servo2'\n").unwrap(),
+        ),
+    ]
+}
+
+/// Angles that move like a balancing run, with noise, NaN samples and held periods.
+fn measurement(k: usize, rng: &mut StdRng) -> Option<[f64; 2]> {
+    if k % 97 == 13 {
+        return None;
+    }
+    let t = k as f64 * 0.01;
+    let n = Normal::new(0.0, 1e-3).unwrap();
+    let mut y = [
+        0.4 * (1.3 * t).sin() + n.sample(rng),
+        0.05 * (4.1 * t).cos() + n.sample(rng),
+    ];
+    if k % 89 == 7 {
+        y[1] = f64::NAN;
+    }
+    Some(y)
+}
+
+#[test]
+fn the_regulators_step_as_rip_core_did() {
+    let mut worst = 0.0f64;
+    for (name, spec) in specs() {
+        let design = spec.design(0.01).unwrap();
+        for integral in [false, true] {
+            let mut lqr = design.lqr().unwrap();
+            let mut lqg = design.lqg().unwrap();
+            if integral {
+                lqr = lqr.with_integral_action(-3.0).unwrap();
+                lqg = lqg.with_integral_action(-3.0).unwrap();
+            }
+            let mut s_lqr = Step::new(&lqr.control_design()).unwrap();
+            let mut s_lqg = Step::new(&lqg.control_design().unwrap()).unwrap();
+            let mut rng = StdRng::seed_from_u64(7);
+            let mut u = [0.0];
+            for k in 0..3000 {
+                let r = [if k < 1000 { 0.0 } else { 1.0 }, 0.0];
+                let Some(y) = measurement(k, &mut rng) else {
+                    let held = 0.3;
+                    lqr.hold(&[held]);
+                    lqg.hold(&[held]);
+                    s_lqr.hold(held);
+                    s_lqg.hold(held);
+                    continue;
+                };
+                for (core, onboard) in [
+                    (&mut lqr as &mut dyn Controller, &mut s_lqr),
+                    (&mut lqg, &mut s_lqg),
+                ] {
+                    let status = core.step(&y, &r, &mut u);
+                    let mv = onboard.step(Measurement {
+                        angles: y,
+                        reference: r,
+                    });
+                    let d = (mv.voltage - u[0]).abs();
+                    worst = worst.max(d);
+                    assert!(d <= 1e-12, "{name} k={k}: {} vs {}", mv.voltage, u[0]);
+                    assert_eq!(
+                        status == StepStatus::Nominal,
+                        mv.status == Status::Nominal,
+                        "{name} k={k}"
+                    );
+                }
+            }
+        }
+    }
+    eprintln!("regulators: worst |Δu| = {worst:e} V");
+}
+
+struct QpStats {
+    qps: usize,
+    worst_vs_active_set: f64,
+    worst_vs_clarabel: f64,
+    max_iterations: u32,
+    active_soft: usize,
+    saturated: usize,
+    restarts: usize,
+    /// Solves where a reference did not report success (not compared).
+    reference_failures: usize,
+    /// Clarabel's reduced-accuracy solutions among them.
+    clarabel_almost: usize,
+    /// The largest relative excess of the onboard cost over the better reference's.
+    worst_cost_excess: f64,
+}
+
+/// A closed loop on the nonlinear plant driven by the onboard MPC, through the 0 → 1 rad arm
+/// step with sensor noise and random torque kicks; at every step rip-core solves the same QP
+/// (the onboard estimate and previous move) with Clarabel and with its active set.
+fn mpc_loop(spec: &Spec, seed: u64, steps: usize, stats: &mut QpStats) {
+    let design = spec.design(0.01).unwrap();
+    let mut cl_spec = spec.clone();
+    cl_spec.mpc.solver = QpSolver::Clarabel;
+    let mut clarabel = cl_spec.design(0.01).unwrap().mpc().unwrap();
+    let mut active = design.mpc().unwrap();
+    let cdesign = active.control_design().unwrap();
+    let mut onboard = Step::new(&cdesign).unwrap();
+    let plant = spec.plant().unwrap();
+    let mut rng = StdRng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, 5e-4).unwrap();
+    let start = |rng: &mut StdRng| {
+        rip_core::plant::State::new(0.0, 0.0, rng.gen_range(-0.6..0.6), rng.gen_range(-1.0..1.0))
+    };
+    let mut x = start(&mut rng);
+    let mut kick = 0.0;
+    for k in 0..steps {
+        let r = [if k % 600 < 300 { 0.0 } else { 1.0 }, 0.0];
+        let y = [x[0] + noise.sample(&mut rng), x[2] + noise.sample(&mut rng)];
+        let u_prev = onboard.last_input();
+        let mv = onboard.step(Measurement {
+            angles: y,
+            reference: r,
+        });
+        assert_eq!(mv.status, Status::Nominal, "seed {seed} k={k}");
+        let xhat = onboard.estimate().to_vec();
+        let a = active.solve(&xhat, &[u_prev], &r).unwrap().u[0];
+        let c = clarabel.solve(&xhat, &[u_prev], &r).unwrap().u[0];
+        let a_ok = active.last_solution().status.is_usable();
+        let c_ok = clarabel.last_solution().status == rip_core::mpc::QpStatus::Solved;
+        stats.reference_failures += usize::from(!a_ok) + usize::from(!c_ok);
+        stats.clarabel_almost +=
+            usize::from(clarabel.last_solution().status == rip_core::mpc::QpStatus::AlmostSolved);
+        // The arbiter where they differ: feasibility and cost on the QP itself.
+        let (h, f, ac, b) = active.qp_matrices(&xhat, &[u_prev], &r).unwrap();
+        let z_of = |sol: &rip_core::mpc::MpcSolution| {
+            let mut z = DVector::zeros(h.nrows());
+            let nd = h.nrows() - 1;
+            z.rows_mut(0, nd).copy_from(&sol.du);
+            z[0] = sol.u[0] - u_prev;
+            z[nd] = sol.slack;
+            z
+        };
+        let z_on = DVector::from_column_slice(onboard.qp_solution());
+        let cost = |z: &DVector<f64>| 0.5 * z.dot(&(&h * z)) + f.dot(z);
+        let viol = (&ac * &z_on - &b).max();
+        assert!(
+            viol <= 1e-9 * (1.0 + b.amax()),
+            "k={k}: infeasible by {viol:e}"
+        );
+        let mut best = f64::INFINITY;
+        if a_ok {
+            best = best.min(cost(&z_of(active.last_solution())));
+            stats.worst_vs_active_set = stats.worst_vs_active_set.max((mv.planned - a).abs());
+        }
+        if c_ok {
+            best = best.min(cost(&z_of(clarabel.last_solution())));
+            stats.worst_vs_clarabel = stats.worst_vs_clarabel.max((mv.planned - c).abs());
+        }
+        let c_on = cost(&z_on);
+        stats.worst_cost_excess = stats
+            .worst_cost_excess
+            .max((c_on - best) / best.abs().max(1.0));
+        stats.qps += 1;
+        stats.max_iterations = stats.max_iterations.max(mv.iterations);
+        stats.saturated += usize::from(mv.planned.abs() > 12.0 - 1e-9);
+        stats.active_soft += usize::from(active.last_solution().slack > 1e-9);
+        if k % 150 == 0 {
+            kick = rng.gen_range(-0.03..0.03);
+        } else if k % 150 == 10 {
+            kick = 0.0;
+        }
+        for _ in 0..10 {
+            plant.rk4_step(&mut x, mv.voltage, kick, 0.001);
+        }
+        if x[2].abs() > 1.0 {
+            // The QPs are the subject, not the balance: start again from a new tilt.
+            stats.restarts += 1;
+            x = start(&mut rng);
+            onboard.reset();
+        }
+    }
+}
+
+#[test]
+fn the_dual_active_set_mpc_agrees_with_clarabel_on_ten_thousand_qps() {
+    for (name, spec) in specs() {
+        let mut s = QpStats {
+            qps: 0,
+            worst_vs_active_set: 0.0,
+            worst_vs_clarabel: 0.0,
+            max_iterations: 0,
+            active_soft: 0,
+            saturated: 0,
+            restarts: 0,
+            reference_failures: 0,
+            clarabel_almost: 0,
+            worst_cost_excess: f64::NEG_INFINITY,
+        };
+        for seed in 0..5 {
+            mpc_loop(&spec, seed, 1200, &mut s);
+        }
+        eprintln!(
+            "{name}: {} QPs, worst |Δu| vs active set {:e} V, vs Clarabel {:e} V, \
+             max iterations {}, soft bound active {}, saturated {}, restarts {}, cost excess {:e}, reference failures {} (Clarabel almost-solved {})",
+            s.qps, s.worst_vs_active_set, s.worst_vs_clarabel, s.max_iterations, s.active_soft, s.saturated, s.restarts, s.worst_cost_excess, s.reference_failures, s.clarabel_almost
+        );
+        assert!(s.qps >= 6000);
+        assert!(
+            s.saturated > 0 && s.active_soft > 0,
+            "{name}: constraints never active"
+        );
+        // The decisive check: no onboard solution costs more than the better reference's, to
+        // round-off. The moves then differ only along directions the cost hardly weighs (the
+        // slack's, at ρ_ε = 100 beside output terms of 10⁴): by the primal active set's
+        // feasibility tolerance 1e-9 (1 + |b|) and by Clarabel's interior-point accuracy.
+        assert!(
+            s.worst_cost_excess < 1e-10,
+            "{name}: cost excess {:e}",
+            s.worst_cost_excess
+        );
+        assert!(
+            s.worst_vs_active_set < 1e-6,
+            "{name}: {:e}",
+            s.worst_vs_active_set
+        );
+        assert!(
+            s.worst_vs_clarabel < 1e-5,
+            "{name}: {:e}",
+            s.worst_vs_clarabel
+        );
+    }
+}
+
+#[test]
+fn a_design_travels_in_bytes_unchanged_and_corruption_is_refused() {
+    let spec = Spec::default();
+    let design = spec.design(0.01).unwrap();
+    let designs: Vec<CDesign> = vec![
+        design.lqr().unwrap().control_design(),
+        design.lqg().unwrap().control_design().unwrap(),
+        design.mpc().unwrap().control_design().unwrap(),
+    ];
+    let mut buf = vec![0u8; 20_000];
+    for d in &designs {
+        let n = d.to_bytes(&mut buf).unwrap();
+        assert_eq!(n, d.encoded_len());
+        let back = CDesign::from_bytes(&buf[..n]).unwrap();
+        assert_eq!(&back, d, "{:?}", d.kind);
+        eprintln!("{}: {n} bytes", d.kind.name());
+        // Every single-bit flip is refused (CRC-32 detects all of them).
+        for i in (0..n).step_by(7) {
+            buf[i] ^= 0x10;
+            assert!(CDesign::from_bytes(&buf[..n]).is_err(), "flip at {i}");
+            buf[i] ^= 0x10;
+        }
+        assert!(CDesign::from_bytes(&buf[..n - 1]).is_err());
+        assert!(matches!(
+            d.to_bytes(&mut buf[..n - 1]),
+            Err(rip_control::DesignError::BufferTooSmall { needed }) if needed == n
+        ));
+    }
+    assert_eq!(rip_control::crc32(b"123456789"), 0xCBF4_3926);
+}

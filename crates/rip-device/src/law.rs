@@ -1,0 +1,260 @@
+//! The onboard controller of the rig: rip-control's [`Controller`] behind the device's
+//! [`Onboard`] interface, with the conversion from encoder counts to the controller's angles
+//! and the reference step, which the host uploads ahead of the design.
+//!
+//! # Onboard image (version 1)
+//!
+//! The bytes the host uploads are a header followed by the design in rip-control's layout
+//! ([`Design::to_bytes`], which has its own magic, length and CRC-32):
+//!
+//! | offset | size | field |
+//! |---|---|---|
+//! | 0 | 4 | magic `"RIPO"` |
+//! | 4 | 8 | arm radians per count `s_θ` (`f64`, signed: the encoder's direction) |
+//! | 12 | 8 | pendulum radians per count `s_α` |
+//! | 20 | 8 | arm offset `o_θ` (rad) |
+//! | 28 | 8 | pendulum offset `o_α` (rad) |
+//! | 36 | 8 | reference step height `r_θ` (rad) |
+//! | 44 | 8 | reference step time `t_r` (s after the start) |
+//! | 52 | … | the design |
+//!
+//! At step `k` of a run (time `t = k T_s`), from positions `(n_θ, n_α)`:
+//!
+//! ```text
+//! θ = n_θ s_θ − o_θ,   α = wrap(n_α s_α − o_α) ∈ (−π, π],   r = [r_θ if t ≥ t_r else 0, 0]
+//! ```
+//!
+//! the same conversion as rip-rt's loop on the host.
+
+use rip_control::{Controller, Design, Measurement, Real};
+
+use crate::{DesignRefused, Onboard};
+
+/// Magic of an onboard image.
+pub const IMAGE_MAGIC: [u8; 4] = *b"RIPO";
+/// Length of the onboard image's header (module docs).
+pub const IMAGE_HEADER_LEN: usize = 52;
+
+/// Counts → angles and the reference: the onboard image's header (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Sensor {
+    /// Arm radians per count (signed).
+    pub arm_rad_per_count: f64,
+    /// Pendulum radians per count (signed).
+    pub pendulum_rad_per_count: f64,
+    /// Subtracted from the arm's scaled counts: θ = 0.
+    pub arm_offset: f64,
+    /// Subtracted from the pendulum's scaled counts: α = 0 upright.
+    pub pendulum_offset: f64,
+    /// Arm reference step (rad).
+    pub arm_step: f64,
+    /// When the step comes, s after the start.
+    pub step_time: f64,
+}
+
+impl Sensor {
+    fn fields(&self) -> [f64; 6] {
+        [
+            self.arm_rad_per_count,
+            self.pendulum_rad_per_count,
+            self.arm_offset,
+            self.pendulum_offset,
+            self.arm_step,
+            self.step_time,
+        ]
+    }
+
+    /// Writes the header into `out[..IMAGE_HEADER_LEN]`; `false` if `out` is shorter.
+    pub fn write(&self, out: &mut [u8]) -> bool {
+        let Some(h) = out.get_mut(..IMAGE_HEADER_LEN) else {
+            return false;
+        };
+        h[..4].copy_from_slice(&IMAGE_MAGIC);
+        for (i, v) in self.fields().iter().enumerate() {
+            h[4 + 8 * i..12 + 8 * i].copy_from_slice(&v.to_le_bytes());
+        }
+        true
+    }
+
+    /// Reads a header; `None` for another magic, a short input or a non-finite field (a zero
+    /// scale is refused too: it would hide the encoder).
+    pub fn read(bytes: &[u8]) -> Option<Sensor> {
+        let h = bytes.get(..IMAGE_HEADER_LEN)?;
+        if h[..4] != IMAGE_MAGIC {
+            return None;
+        }
+        let f = |i: usize| {
+            let mut b = [0u8; 8];
+            b.copy_from_slice(&h[4 + 8 * i..12 + 8 * i]);
+            f64::from_le_bytes(b)
+        };
+        let s = Sensor {
+            arm_rad_per_count: f(0),
+            pendulum_rad_per_count: f(1),
+            arm_offset: f(2),
+            pendulum_offset: f(3),
+            arm_step: f(4),
+            step_time: f(5),
+        };
+        let ok = s.fields().iter().all(|v| v.is_finite())
+            && s.arm_rad_per_count != 0.0
+            && s.pendulum_rad_per_count != 0.0;
+        ok.then_some(s)
+    }
+
+    /// The angles `[θ, α]` of the positions (module docs).
+    pub fn angles(&self, [arm, pendulum]: [i32; 2]) -> [f64; 2] {
+        let theta = arm as f64 * self.arm_rad_per_count - self.arm_offset;
+        [
+            theta,
+            wrap(pendulum as f64 * self.pendulum_rad_per_count - self.pendulum_offset),
+        ]
+    }
+}
+
+/// `a` wrapped into (−π, π] (as rip-rt's loop).
+fn wrap(a: f64) -> f64 {
+    let tau = core::f64::consts::TAU;
+    let w = a - tau * libm::round(a / tau);
+    if w <= -core::f64::consts::PI {
+        w + tau
+    } else {
+        w
+    }
+}
+
+/// An onboard image assembled on the host: `sensor`'s header, then `design`'s bytes, into
+/// `out`; returns the length, or `None` if `out` is too short or the design is invalid.
+pub fn write_image<R: Real>(sensor: &Sensor, design: &Design<R>, out: &mut [u8]) -> Option<usize> {
+    if !sensor.write(out) {
+        return None;
+    }
+    let n = design.to_bytes(out.get_mut(IMAGE_HEADER_LEN..)?).ok()?;
+    Some(IMAGE_HEADER_LEN + n)
+}
+
+/// rip-control's controller in scalar `R` as the device's [`Onboard`] law, with a design
+/// buffer of `N` bytes.
+#[derive(Debug, Clone)]
+pub struct ControlLaw<R: Real, const N: usize> {
+    buf: [u8; N],
+    sensor: Sensor,
+    // The design read from the image, kept here rather than on the stack while the
+    // controller is built from it (a firmware's stack is small).
+    scratch: Option<Design<R>>,
+    controller: Option<Controller<R>>,
+    step: u32,
+    last: Option<rip_control::Move<R>>,
+}
+
+impl<R: Real, const N: usize> Default for ControlLaw<R, N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<R: Real, const N: usize> ControlLaw<R, N> {
+    /// No design loaded (`const`, for a firmware's static).
+    pub const fn new() -> Self {
+        Self {
+            buf: [0; N],
+            sensor: Sensor {
+                arm_rad_per_count: 0.0,
+                pendulum_rad_per_count: 0.0,
+                arm_offset: 0.0,
+                pendulum_offset: 0.0,
+                arm_step: 0.0,
+                step_time: 0.0,
+            },
+            scratch: None,
+            controller: None,
+            step: 0,
+            last: None,
+        }
+    }
+
+    /// The loaded controller, if any.
+    pub fn controller(&self) -> Option<&Controller<R>> {
+        self.controller.as_ref()
+    }
+
+    /// The loaded image's counts → angles conversion and reference.
+    pub fn sensor(&self) -> &Sensor {
+        &self.sensor
+    }
+
+    /// The last step's move (its status and QP iterations).
+    pub fn last_move(&self) -> Option<rip_control::Move<R>> {
+        self.last
+    }
+
+    /// The controller's measurement at step `k` from the positions (module docs).
+    pub fn measurement(&self, k: u32, positions: [i32; 2]) -> Measurement<R> {
+        let [theta, alpha] = self.sensor.angles(positions);
+        let ts = self
+            .controller
+            .as_ref()
+            .map_or(0.0, |c| c.design().ts.to_f64());
+        let r = if k as f64 * ts >= self.sensor.step_time {
+            self.sensor.arm_step
+        } else {
+            0.0
+        };
+        Measurement {
+            angles: [R::from_f64(theta), R::from_f64(alpha)],
+            reference: [R::from_f64(r), R::ZERO],
+        }
+    }
+}
+
+impl<R: Real, const N: usize> Onboard for ControlLaw<R, N> {
+    fn buffer(&mut self) -> &mut [u8] {
+        &mut self.buf
+    }
+
+    fn load(&mut self, len: usize) -> Result<(), DesignRefused> {
+        self.controller = None;
+        let bytes = self.buf.get(..len).ok_or(DesignRefused)?;
+        let sensor = Sensor::read(bytes).ok_or(DesignRefused)?;
+        if len <= IMAGE_HEADER_LEN {
+            return Err(DesignRefused);
+        }
+        let design = self.scratch.get_or_insert_with(Design::default);
+        design
+            .read_from(&self.buf[IMAGE_HEADER_LEN..len])
+            .map_err(|_| DesignRefused)?;
+        let ts = design.ts.to_f64();
+        if !(1e-4..=1.0).contains(&ts) {
+            return Err(DesignRefused);
+        }
+        self.controller = Some(Controller::new(design).map_err(|_| DesignRefused)?);
+        self.sensor = sensor;
+        Ok(())
+    }
+
+    fn period_us(&self) -> u32 {
+        self.controller
+            .as_ref()
+            .map_or(0, |c| libm::round(c.design().ts.to_f64() * 1e6) as u32)
+    }
+
+    fn reset(&mut self, _positions: [i32; 2]) {
+        self.step = 0;
+        if let Some(c) = self.controller.as_mut() {
+            c.reset();
+        }
+    }
+
+    fn step(&mut self, positions: [i32; 2]) -> f64 {
+        let m = self.measurement(self.step, positions);
+        self.step = self.step.wrapping_add(1);
+        match self.controller.as_mut() {
+            Some(c) => {
+                let mv = c.step(m);
+                self.last = Some(mv);
+                mv.voltage.to_f64()
+            }
+            None => f64::NAN,
+        }
+    }
+}

@@ -1,0 +1,683 @@
+//! `rip-rt run --onboard`: the controller runs on the device (protocol v2, `rip-device`'s
+//! onboard mode). The host makes the design from the experiment file with the same assembly
+//! as `rip-run` ([`crate::controllers`]), uploads it as an onboard image
+//! ([`rip_device::law`]: the counts → angles conversion and the reference step, then
+//! rip-control's design bytes) in acknowledged chunks, commits it with its CRC-32 and checks
+//! the CRC the device computed, starts onboard mode with the device's own limits in counts, and
+//! then only supervises: every period it sends a sample request (the heartbeat the device's
+//! host-silence watchdog waits for), logs the telemetry the device streams, and on any end —
+//! `--duration`, a signal, a device stop, a silent device — sends the onboard stop and the v1
+//! stop frame (0 V, disabled).
+
+use std::time::{Duration, Instant};
+
+use rip_control::Design as OnboardDesign;
+use rip_device::law::{write_image, Sensor};
+use rip_protocol::{
+    crc32, encode, Command, Frame, Measurement, Message, OnboardStart, Parser, Telemetry,
+    UploadBegin, UploadChunk, UploadCommit, ACK_OK, ACK_OUT_OF_ORDER, CHUNK_MAX, COMMAND_BRAKE,
+    MAX_FRAME, ONBOARD_RUNNING, STATUS_LOCKSTEP,
+};
+
+use crate::config::Config;
+use crate::controllers::{self, ControllerKind};
+use crate::log::{LogWriter, Row};
+use crate::serial::{Fd, Readiness};
+use crate::step::StepOutput;
+
+/// Largest onboard image the host builds (the emulator's buffer holds it).
+pub const MAX_IMAGE: usize = crate::emulator::ONBOARD_BUFFER;
+
+/// How long the host waits for an ack before repeating the request.
+pub const ACK_TIMEOUT: Duration = Duration::from_millis(300);
+/// Repeats of one request before the upload is given up.
+pub const RETRIES: u32 = 5;
+/// Host periods without a reply after which the device counts as gone.
+pub const MISSING_LIMIT: u32 = 10;
+
+/// rip-control's design of `kind` as `rip-rt run` would build it: the one assembly at the
+/// loop period inside `±safety.voltage_limit` ([`crate::controllers`]), converted by rip-core
+/// ([`rip_core::onboard`]), with the `[compensation]` law where there is one.
+///
+/// # Errors
+/// The design's error, naming the controller.
+pub fn design(kind: ControllerKind, cfg: &Config) -> Result<OnboardDesign, String> {
+    let d = controllers::design(kind, cfg)?;
+    let err = |e: &dyn std::fmt::Display| format!("{kind} design for the device: {e}");
+    let out = match kind {
+        ControllerKind::Lqr => d.lqr().map_err(|e| err(&e))?.control_design(),
+        ControllerKind::Lqg => d
+            .lqg()
+            .map_err(|e| err(&e))?
+            .control_design()
+            .map_err(|e| err(&e))?,
+        ControllerKind::Mpc => d
+            .mpc()
+            .map_err(|e| err(&e))?
+            .control_design()
+            .map_err(|e| err(&e))?,
+    };
+    Ok(match d.compensation() {
+        Some(law) => rip_core::onboard::with_compensation(out, law),
+        None => out,
+    })
+}
+
+/// The onboard image of `design` with the conversion of `cfg`'s `[device]` and the
+/// `[reference]` step.
+///
+/// # Errors
+/// A design the layout refuses, or an image beyond [`MAX_IMAGE`].
+pub fn image(design: &OnboardDesign, cfg: &Config) -> Result<Vec<u8>, String> {
+    let tau = std::f64::consts::TAU;
+    let d = &cfg.device;
+    let sensor = Sensor {
+        arm_rad_per_count: d.arm_sign * tau / d.arm_counts_per_rev as f64,
+        pendulum_rad_per_count: d.pendulum_sign * tau / d.pendulum_counts_per_rev as f64,
+        arm_offset: 0.0,
+        pendulum_offset: match d.pendulum_zero {
+            crate::config::PendulumZero::Down => std::f64::consts::PI,
+            crate::config::PendulumZero::Up => 0.0,
+        },
+        arm_step: cfg.spec.reference.arm_step,
+        step_time: cfg.spec.reference.step_time,
+    };
+    let mut buf = vec![0u8; MAX_IMAGE];
+    let n = write_image(&sensor, design, &mut buf)
+        .ok_or_else(|| format!("--onboard: the design does not fit {MAX_IMAGE} bytes"))?;
+    buf.truncate(n);
+    Ok(buf)
+}
+
+/// The device's limits in counts around the pendulum's upright position nearest to the
+/// measurement `m` (the host's `safety.arm_limit` and `safety.pendulum_limit`).
+pub fn start_settings(cfg: &Config, m: &Measurement, decimation: u16) -> OnboardStart {
+    let tau = std::f64::consts::TAU;
+    let d = &cfg.device;
+    let s_arm = tau / d.arm_counts_per_rev as f64;
+    let s_pend = d.pendulum_sign * tau / d.pendulum_counts_per_rev as f64;
+    let offset = match d.pendulum_zero {
+        crate::config::PendulumZero::Down => std::f64::consts::PI,
+        crate::config::PendulumZero::Up => 0.0,
+    };
+    let raw = m.pendulum_counts as f64 * s_pend - offset;
+    let alpha = raw - tau * (raw / tau).round();
+    let center = m.pendulum_counts as f64 - alpha / s_pend;
+    OnboardStart {
+        decimation: decimation.max(1),
+        host_timeout_ms: host_timeout_ms(cfg),
+        arm_center: 0,
+        arm_limit: (cfg.safety.arm_limit / s_arm).floor() as u32,
+        pendulum_center: center.round() as i32,
+        pendulum_limit: (cfg.safety.pendulum_limit / s_pend.abs()).floor() as u32,
+    }
+}
+
+/// The device's host-silence watchdog: v1's command watchdog (`rip-device`'s
+/// [`Config::DEFAULT`](rip_device::Config::DEFAULT), 50 ms), or five host periods where those
+/// are longer, so that a heartbeat may be lost without a stop.
+pub fn host_timeout_ms(cfg: &Config) -> u16 {
+    let v1 = rip_device::Config::DEFAULT.command_timeout_us as f64 / 1000.0;
+    (5.0 * cfg.loop_.period_ms)
+        .max(v1)
+        .min(u16::MAX as f64)
+        .round() as u16
+}
+
+/// Why an onboard run ended.
+#[derive(Debug)]
+pub enum OnboardEnd {
+    /// `--duration` elapsed.
+    Duration,
+    /// A stop signal.
+    Signal(crate::stop::StopReason),
+    /// The device stopped on its own, with this `ONBOARD_*` state.
+    Device(u8),
+    /// No reply for [`MISSING_LIMIT`] periods.
+    Silent,
+    /// The upload, commit or start failed.
+    Setup(String),
+    /// The port failed.
+    Io(String),
+    /// The log could not be written.
+    Log(String),
+}
+
+impl OnboardEnd {
+    /// The process exit code (rip-rt's one table, [`crate::stop::exit_code`]).
+    pub fn exit_code(&self) -> i32 {
+        use crate::stop::exit_code as x;
+        use rip_protocol as p;
+        match self {
+            OnboardEnd::Duration => x::FINISHED,
+            OnboardEnd::Signal(r) => r.exit_code(),
+            OnboardEnd::Device(p::ONBOARD_ARM_LIMIT | p::ONBOARD_PENDULUM_LIMIT) => x::ANGLE_LIMIT,
+            OnboardEnd::Device(p::ONBOARD_HOST_SILENT) => x::WATCHDOG,
+            OnboardEnd::Device(p::ONBOARD_OVERRUN) => x::OVERRUN,
+            OnboardEnd::Device(p::ONBOARD_BAD_MOVE) => x::CONTROLLER_FAULT,
+            OnboardEnd::Device(_) => x::DEVICE_FAULT,
+            OnboardEnd::Silent | OnboardEnd::Io(_) => x::DEVICE_LOST,
+            OnboardEnd::Setup(_) => x::SETUP,
+            OnboardEnd::Log(_) => x::LOG_ERROR,
+        }
+    }
+}
+
+impl std::fmt::Display for OnboardEnd {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use rip_protocol as p;
+        match self {
+            OnboardEnd::Duration => f.write_str("finished (--duration)"),
+            OnboardEnd::Signal(r) => write!(f, "{r}"),
+            OnboardEnd::Device(s) => f.write_str(match *s {
+                p::ONBOARD_ARM_LIMIT => "the device stopped: arm limit (safety.arm_limit)",
+                p::ONBOARD_PENDULUM_LIMIT => {
+                    "the device stopped: pendulum limit (safety.pendulum_limit)"
+                }
+                p::ONBOARD_HOST_SILENT => "the device stopped: the host went silent",
+                p::ONBOARD_OVERRUN => "the device stopped: a controller step overran its period",
+                p::ONBOARD_DRIVER_FAULT => "the device stopped: the motor driver reports a fault",
+                p::ONBOARD_BAD_MOVE => "the device stopped: the controller's move was not finite",
+                p::ONBOARD_PROTOCOL => "the device stopped: a frame of another protocol version",
+                _ => "the device left onboard mode",
+            }),
+            OnboardEnd::Silent => write!(f, "no reply from the device for {MISSING_LIMIT} periods"),
+            OnboardEnd::Setup(e) => write!(f, "refusing to start onboard mode: {e}"),
+            OnboardEnd::Io(e) => write!(f, "the port failed: {e}"),
+            OnboardEnd::Log(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+/// The host side of the wire: frames out with the host's sequence numbers, frames in.
+pub struct Link<'a> {
+    io: &'a Fd,
+    parser: Parser,
+    seq: u16,
+    rx: [u8; 256],
+    /// Telemetry received, in order.
+    pub telemetry: Vec<Telemetry>,
+    /// The latest measurement received.
+    pub last_measurement: Option<Measurement>,
+}
+
+impl<'a> Link<'a> {
+    /// A link on `io`.
+    pub fn new(io: &'a Fd) -> Self {
+        Self {
+            io,
+            parser: Parser::new(),
+            seq: 0,
+            rx: [0; 256],
+            telemetry: Vec::new(),
+            last_measurement: None,
+        }
+    }
+
+    /// Sends `message`; returns its sequence number.
+    pub fn send(&mut self, message: Message) -> std::io::Result<u16> {
+        let seq = self.seq;
+        self.seq = self.seq.wrapping_add(1);
+        let mut out = [0u8; MAX_FRAME];
+        let n = encode(&Frame { seq, message }, &mut out);
+        self.io.write_all(&out[..n])?;
+        Ok(seq)
+    }
+
+    /// Reads until `want` accepts a frame or `timeout` passes, keeping telemetry and
+    /// measurements as they come.
+    pub fn wait(
+        &mut self,
+        timeout: Duration,
+        mut want: impl FnMut(&Message) -> bool,
+    ) -> std::io::Result<Option<Message>> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(None);
+            }
+            let left = (deadline - now).as_nanos() as u64;
+            match self.io.wait_readable(left)? {
+                Readiness::Readable => {}
+                Readiness::Timeout | Readiness::Interrupted => continue,
+            }
+            let n = self.io.read_available(&mut self.rx)?;
+            let mut found = None;
+            for i in 0..n {
+                self.parser.push(self.rx[i]);
+                while let Some(f) = self.parser.poll() {
+                    match f.message {
+                        Message::Telemetry(t) => self.telemetry.push(t),
+                        Message::Measurement(m) => self.last_measurement = Some(m),
+                        _ => {}
+                    }
+                    if found.is_none() && want(&f.message) {
+                        found = Some(f.message);
+                    }
+                }
+            }
+            if found.is_some() {
+                return Ok(found);
+            }
+        }
+    }
+
+    /// Sends `message` and waits for its ack, repeating it on silence: `(code, value)`.
+    pub fn request(&mut self, message: Message) -> Result<(u8, u32), String> {
+        for _ in 0..RETRIES {
+            let seq = self.send(message).map_err(|e| e.to_string())?;
+            let got = self
+                .wait(
+                    ACK_TIMEOUT,
+                    |m| matches!(m, Message::Ack(a) if a.ack_seq == seq),
+                )
+                .map_err(|e| e.to_string())?;
+            if let Some(Message::Ack(a)) = got {
+                return Ok((a.code, a.value));
+            }
+        }
+        Err(format!(
+            "the device did not acknowledge a {:#04x} frame after {RETRIES} tries (a v1 firmware \
+             does not know protocol v2's onboard frames)",
+            message.kind()
+        ))
+    }
+
+    /// A sample request and its measurement.
+    pub fn sample(&mut self, timeout: Duration) -> std::io::Result<Option<Measurement>> {
+        let seq = self.send(Message::SampleRequest)?;
+        Ok(
+            match self.wait(
+                timeout,
+                |m| matches!(m, Message::Measurement(x) if x.ack_seq == seq),
+            )? {
+                Some(Message::Measurement(m)) => Some(m),
+                _ => None,
+            },
+        )
+    }
+
+    /// Uploads `image` in chunks, resuming where an out-of-order ack says, and commits it;
+    /// checks the CRC-32 the device computed against the image's.
+    ///
+    /// # Errors
+    /// A refusal (named by its ack code) or silence.
+    pub fn upload(&mut self, image: &[u8]) -> Result<(), String> {
+        let total = u32::try_from(image.len()).map_err(|_| "image too large".to_string())?;
+        let (code, _) = self.request(Message::UploadBegin(UploadBegin { total_len: total }))?;
+        if code != ACK_OK {
+            return Err(format!(
+                "the device refused the upload of {total} bytes (ack code {code})"
+            ));
+        }
+        let mut offset = 0u32;
+        let mut refusals = 0;
+        while offset < total {
+            let end = (offset as usize + CHUNK_MAX).min(image.len());
+            let chunk = UploadChunk::new(offset, &image[offset as usize..end]);
+            let (code, next) = self.request(Message::UploadChunk(chunk))?;
+            match code {
+                ACK_OK => offset = next,
+                // A repeated chunk whose first ack was lost: continue where the device is.
+                ACK_OUT_OF_ORDER if next <= total && refusals < RETRIES => {
+                    refusals += 1;
+                    offset = next;
+                }
+                _ => {
+                    return Err(format!(
+                        "the device refused the chunk at {offset} (ack code {code})"
+                    ))
+                }
+            }
+        }
+        let crc = crc32(image);
+        let (code, device_crc) = self.request(Message::UploadCommit(UploadCommit {
+            len: total,
+            crc32: crc,
+        }))?;
+        if code != ACK_OK || device_crc != crc {
+            return Err(format!(
+                "the device refused the design (ack code {code}; its CRC-32 {device_crc:#010x}, \
+                 the image's {crc:#010x})"
+            ));
+        }
+        Ok(())
+    }
+
+    /// The stop: the onboard stop (braking) and v1's stop frame, 0 V and disabled.
+    pub fn stop(&mut self) -> bool {
+        let a = self.send(Message::OnboardStop {
+            flags: COMMAND_BRAKE,
+        });
+        let b = self.send(Message::Command(Command::STOP));
+        a.is_ok() && b.is_ok()
+    }
+}
+
+/// What an onboard run returns.
+#[derive(Debug)]
+pub struct OnboardReport {
+    /// Why it ended.
+    pub end: OnboardEnd,
+    /// Whether the stop frames were written.
+    pub stop_sent: bool,
+    /// Telemetry records received.
+    pub telemetry: Vec<Telemetry>,
+    /// Bytes uploaded.
+    pub image_len: usize,
+}
+
+/// Uploads, starts and supervises an onboard run on `io` (module docs). `lockstep`: the
+/// device is `rip-rt emulate --lockstep` (one period per sample request, no wall-clock waits).
+pub fn run(
+    io: &Fd,
+    cfg: &Config,
+    image: &[u8],
+    duration_s: Option<f64>,
+    lockstep: bool,
+    decimation: u16,
+    mut log: Option<&mut LogWriter>,
+) -> OnboardReport {
+    let mut link = Link::new(io);
+    let mut report = OnboardReport {
+        end: OnboardEnd::Duration,
+        stop_sent: false,
+        telemetry: Vec::new(),
+        image_len: image.len(),
+    };
+    let mut logged = 0;
+    let mut end = supervise(
+        &mut link,
+        cfg,
+        image,
+        duration_s,
+        lockstep,
+        decimation,
+        &mut |link: &Link<'_>| {
+            let Some(log) = log.as_deref_mut() else {
+                return Ok(());
+            };
+            log_rows(log, cfg, image, &link.telemetry[logged..])?;
+            logged = link.telemetry.len();
+            Ok(())
+        },
+    );
+    // Every exit path: stop frames, then the last telemetry the device sends.
+    report.stop_sent = link.stop();
+    let _ = link.wait(Duration::from_millis(50), |_| false);
+    if let Some(log) = log {
+        if let Err(e) = log_rows(log, cfg, image, &link.telemetry[logged..]) {
+            if matches!(end, OnboardEnd::Duration) {
+                end = OnboardEnd::Log(e);
+            }
+        }
+    }
+    report.end = end;
+    report.telemetry = std::mem::take(&mut link.telemetry);
+    report
+}
+
+/// Log rows of telemetry records, in the usual columns: the angles converted as the device
+/// converts them, the applied voltage, the status bits, and the step's time at 168 MHz as the
+/// compute time.
+fn log_rows(
+    log: &mut LogWriter,
+    cfg: &Config,
+    image: &[u8],
+    records: &[Telemetry],
+) -> Result<(), String> {
+    let Some(sensor) = Sensor::read(image) else {
+        return Ok(());
+    };
+    for t in records {
+        let [theta, alpha] = sensor.angles([t.arm_counts, t.pendulum_counts]);
+        let time = t.step as f64 * cfg.period_s();
+        let row = Row {
+            t: time,
+            seq: t.step as u16,
+            step: StepOutput {
+                theta,
+                alpha,
+                reference: if time >= sensor.step_time {
+                    sensor.arm_step
+                } else {
+                    0.0
+                },
+                voltage: t.applied_mv as f64 / 1000.0,
+                flags: t.status as u32,
+                len: 0,
+                phase: rip_core::Phase::Balance,
+            },
+            estimate: None,
+            compute_us: t.step_cycles as f64 / 168.0,
+            jitter_us: 0.0,
+            phase: "onboard",
+        };
+        // A burst beyond the queue waits for the writer rather than failing the run.
+        let mut tries = 0;
+        loop {
+            match log.push(row) {
+                Ok(()) => break,
+                Err(crate::log::LogError::Behind(_)) if tries < 100 => {
+                    tries += 1;
+                    std::thread::sleep(Duration::from_millis(2));
+                }
+                Err(e) => return Err(e.to_string()),
+            }
+        }
+    }
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn supervise(
+    link: &mut Link<'_>,
+    cfg: &Config,
+    image: &[u8],
+    duration_s: Option<f64>,
+    lockstep: bool,
+    decimation: u16,
+    log: &mut dyn FnMut(&Link<'_>) -> Result<(), String>,
+) -> OnboardEnd {
+    // The heartbeat: every period in lockstep (each sample request is one period of the
+    // emulator's plant), else at most every 10 ms, which any link sustains.
+    let period = if lockstep {
+        Duration::from_secs_f64(cfg.period_s())
+    } else {
+        Duration::from_secs_f64(cfg.period_s().max(0.01))
+    };
+    if let Err(e) = link.upload(image) {
+        return OnboardEnd::Setup(e);
+    }
+    let first = match link.sample(ACK_TIMEOUT) {
+        Ok(Some(m)) => m,
+        Ok(None) => return OnboardEnd::Setup("no measurement before the start".into()),
+        Err(e) => return OnboardEnd::Io(e.to_string()),
+    };
+    if lockstep && first.status & STATUS_LOCKSTEP == 0 {
+        return OnboardEnd::Setup("--lockstep: the device is not an emulator in lockstep".into());
+    }
+    let settings = start_settings(cfg, &first, decimation);
+    match link.request(Message::OnboardStart(settings)) {
+        Ok((ACK_OK, _)) => {}
+        Ok((code, _)) => {
+            return OnboardEnd::Setup(format!(
+                "the device refused to start (ack code {code}: the pendulum must be upright \
+                 and the arm inside safety.arm_limit)"
+            ))
+        }
+        Err(e) => return OnboardEnd::Setup(e),
+    }
+    let periods = duration_s.map(|d| (d / period.as_secs_f64()).round() as u64);
+    let mut missing = 0;
+    let mut next = Instant::now() + period;
+    let mut k = 0u64;
+    loop {
+        if let Some(reason) = crate::stop::requested_stop() {
+            return OnboardEnd::Signal(reason);
+        }
+        if periods.is_some_and(|n| k >= n) {
+            return OnboardEnd::Duration;
+        }
+        if !lockstep {
+            let now = Instant::now();
+            if next > now {
+                std::thread::sleep(next - now);
+            }
+            next += period;
+        }
+        let timeout = if lockstep { ACK_TIMEOUT } else { period };
+        match link.sample(timeout) {
+            Ok(Some(_)) => missing = 0,
+            Ok(None) => {
+                missing += 1;
+                if missing >= MISSING_LIMIT {
+                    return OnboardEnd::Silent;
+                }
+            }
+            Err(e) => return OnboardEnd::Io(e.to_string()),
+        }
+        if let Err(e) = log(link) {
+            return OnboardEnd::Log(e);
+        }
+        if let Some(t) = link.telemetry.last() {
+            if t.onboard != ONBOARD_RUNNING {
+                return OnboardEnd::Device(t.onboard);
+            }
+        }
+        k += 1;
+    }
+}
+
+/// Telemetry every this many steps: at most 100 records a second, which a 115 200-baud link
+/// carries with room to spare (35 bytes each, about 330 a second fit).
+pub fn telemetry_decimation(cfg: &Config) -> u16 {
+    (0.01 / cfg.period_s()).round().clamp(1.0, u16::MAX as f64) as u16
+}
+
+/// `rip-rt run --onboard`'s settings (from the command line).
+#[derive(Debug, Clone)]
+pub struct OnboardArgs<'a> {
+    /// The device.
+    pub port: &'a std::path::Path,
+    /// Its baud rate.
+    pub baud: u32,
+    /// The controller.
+    pub controller: ControllerKind,
+    /// The experiment file.
+    pub config: Option<&'a std::path::Path>,
+    /// Stop after this many seconds.
+    pub duration: Option<f64>,
+    /// The CSV log.
+    pub log: Option<&'a std::path::Path>,
+    /// Only the summary.
+    pub quiet: bool,
+    /// Against `rip-rt emulate --lockstep`.
+    pub lockstep: bool,
+}
+
+/// Runs `rip-rt run --onboard`; returns the exit code.
+pub fn command(a: &OnboardArgs<'_>) -> i32 {
+    use crate::stop::exit_code;
+    let fail = |code: i32, msg: &dyn std::fmt::Display| {
+        crate::say!("rip-rt: error: {msg}");
+        code
+    };
+    let cfg = match a.config {
+        Some(path) => match Config::load(path) {
+            Ok(c) => c,
+            Err(e) => return fail(exit_code::SETUP, &e),
+        },
+        None => Config::default(),
+    };
+    let img = match design(a.controller, &cfg).and_then(|d| image(&d, &cfg)) {
+        Ok(i) => i,
+        Err(e) => return fail(exit_code::SETUP, &e),
+    };
+    if let Err(e) = crate::stop::install_signal_handlers() {
+        return fail(e.exit_code(), &e);
+    }
+    let port = match crate::serial::SerialPort::open(a.port, a.baud) {
+        Ok(p) => p,
+        Err(e) => return fail(exit_code::SETUP, &format!("{}: {e}", a.port.display())),
+    };
+    let mut log = match a.log {
+        Some(path) => {
+            let header = [
+                ("rip-rt", env!("CARGO_PKG_VERSION").to_string()),
+                ("protocol", rip_protocol::VERSION.to_string()),
+                ("controller", a.controller.to_string()),
+                ("onboard", "true".to_string()),
+                ("port", a.port.display().to_string()),
+                ("period_ms", cfg.loop_.period_ms.to_string()),
+                ("voltage_limit", cfg.safety.voltage_limit.to_string()),
+            ];
+            match LogWriter::create(path, &header, 0) {
+                Ok(l) => Some(l),
+                Err(e) => return fail(exit_code::LOG_ERROR, &e),
+            }
+        }
+        None => None,
+    };
+    crate::stop::install_panic_hook();
+    if !a.quiet {
+        crate::say!(
+            "rip-rt: {} onboard on {} every {} ms ({} bytes of design); Ctrl-C stops",
+            a.controller,
+            a.port.display(),
+            cfg.loop_.period_ms,
+            img.len()
+        );
+    }
+    let guard = crate::stop::StopGuard::new(port.io().raw());
+    let report = run(
+        port.io(),
+        &cfg,
+        &img,
+        a.duration,
+        a.lockstep,
+        telemetry_decimation(&cfg),
+        log.as_mut(),
+    );
+    drop(guard);
+    let mut end = report.end;
+    if let Some(log) = log.as_mut() {
+        let footer = [
+            ("stop", end.to_string()),
+            ("telemetry", report.telemetry.len().to_string()),
+        ];
+        if let Err(e) = log.finish(&footer) {
+            if matches!(end, OnboardEnd::Duration) {
+                end = OnboardEnd::Log(e.to_string());
+            }
+        }
+    }
+    let steps = report.telemetry.last().map_or(0, |t| t.step as u64 + 1);
+    let max_cycles = report
+        .telemetry
+        .iter()
+        .map(|t| t.step_cycles)
+        .max()
+        .unwrap_or(0);
+    let code = end.exit_code();
+    crate::say!(
+        "rip-rt: {}: {end}; {} (0 V, disabled)",
+        if code == exit_code::FINISHED {
+            "stop"
+        } else {
+            "FAULT"
+        },
+        if report.stop_sent {
+            "stop frames sent"
+        } else {
+            "stop frames could not be written (the device's watchdog stops the motor)"
+        }
+    );
+    crate::say!(
+        "rip-rt: onboard: image={} bytes steps={steps} telemetry={} max_step_cycles={max_cycles}",
+        report.image_len,
+        report.telemetry.len()
+    );
+    code
+}

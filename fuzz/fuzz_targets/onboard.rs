@@ -1,0 +1,139 @@
+//! Onboard mode (protocol v2) on arbitrary traffic: uploads, commits, starts, stops, PIL
+//! steps, v1 commands and controller steps in any order, with the encoders moving and the
+//! fault line toggling. The device never panics, never drives beyond its limit, drives only
+//! while onboard mode runs or after a host's enabling command, and never while faulted.
+//!
+//! Input layout: records of a control byte and a payload. Control bits 0–3 pick the action
+//! (a v2 frame from the following bytes, a chunk of a real LQR image, a controller step, a
+//! v1 command), bit 7 is the fault line, bits 4–6 advance the clock.
+
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use rip_control::{Design, Kind};
+use rip_device::law::{write_image, ControlLaw, Sensor};
+use rip_device::{Config, Device, Inputs};
+use rip_protocol::{
+    crc32, Command, Event, Frame, Message, OnboardStart, PilStep, UploadBegin, UploadChunk,
+    UploadCommit, CHUNK_MAX,
+};
+
+fn image() -> ([u8; 512], usize) {
+    let design = Design {
+        kind: Kind::Lqr,
+        ts: 0.001,
+        k: [-3.0, -2.0, 40.0, 4.0],
+        ..Design::default()
+    };
+    let sensor = Sensor {
+        arm_rad_per_count: 0.003,
+        pendulum_rad_per_count: 0.003,
+        pendulum_offset: 3.14159,
+        ..Sensor::default()
+    };
+    let mut out = [0u8; 512];
+    let n = write_image(&sensor, &design, &mut out).expect("image");
+    (out, n)
+}
+
+fuzz_target!(|data: &[u8]| {
+    let (img, img_len) = image();
+    let cfg = Config::DEFAULT;
+    let mut now = u32::MAX - 50_000;
+    let mut enc = [0u16, 1024];
+    let at = |now: u32, enc: [u16; 2], fault: bool| Inputs {
+        now_us: now,
+        encoders: enc,
+        driver_fault: fault,
+    };
+    let mut dev = Device::with_onboard(
+        cfg,
+        &at(now, enc, false),
+        [0, 1024],
+        ControlLaw::<f64, 1024>::new(),
+    );
+    let mut host_enabled = false;
+    let mut rest = data;
+    let mut seq = 0u16;
+    while let Some((&ctl, tail)) = rest.split_first() {
+        rest = tail;
+        let mut take = |n: usize| -> [u8; 8] {
+            let mut b = [0u8; 8];
+            let k = n.min(rest.len());
+            b[..k].copy_from_slice(&rest[..k]);
+            rest = &rest[k..];
+            b
+        };
+        now = now.wrapping_add(((ctl >> 4) & 7) as u32 * 700);
+        let fault = ctl & 0x80 != 0;
+        let p = take(8);
+        enc[0] = enc[0].wrapping_add(p[0] as i8 as u16);
+        enc[1] = enc[1].wrapping_add(p[1] as i8 as u16);
+        let inputs = at(now, enc, fault);
+        let u32_of = |i: usize| u32::from_le_bytes([p[i], p[i + 1], p[i + 2], p[i + 3]]);
+        let message = match ctl & 0x0F {
+            0 => Message::UploadBegin(UploadBegin {
+                total_len: if p[2] & 1 == 0 { img_len as u32 } else { u32_of(4) },
+            }),
+            1 | 2 => {
+                let off = (p[2] as usize % img_len.div_ceil(CHUNK_MAX)) * CHUNK_MAX;
+                let end = (off + CHUNK_MAX).min(img_len);
+                Message::UploadChunk(UploadChunk::new(off as u32, &img[off..end]))
+            }
+            3 => Message::UploadCommit(UploadCommit {
+                len: if p[2] & 1 == 0 { img_len as u32 } else { u32_of(4) },
+                crc32: if p[3] & 1 == 0 { crc32(&img[..img_len]) } else { u32_of(4) },
+            }),
+            4 => Message::OnboardStart(OnboardStart {
+                decimation: p[2] as u16,
+                host_timeout_ms: p[3] as u16,
+                arm_center: 0,
+                arm_limit: p[4] as u32 * 8,
+                pendulum_center: 1024,
+                pendulum_limit: p[5] as u32 * 4,
+            }),
+            5 => Message::OnboardStop { flags: p[2] },
+            6 => Message::PilStep(PilStep {
+                arm_counts: u32_of(2) as i32,
+                pendulum_counts: u32_of(4) as i32,
+                flags: p[6],
+            }),
+            7 => Message::Command(Command {
+                voltage_mv: i16::from_le_bytes([p[2], p[3]]),
+                flags: p[4],
+            }),
+            8 => {
+                dev.record_step_cycles(u32_of(2), u32_of(4));
+                check(&dev, host_enabled, fault, cfg);
+                continue;
+            }
+            _ => {
+                let _ = dev.onboard_tick(&inputs);
+                if !dev.onboard_running() && !dev.enabled() {
+                    host_enabled = false;
+                }
+                check(&dev, host_enabled, fault, cfg);
+                continue;
+            }
+        };
+        match message {
+            Message::Command(c) => host_enabled = c.enabled(),
+            Message::OnboardStop { .. } | Message::OnboardStart(_) => host_enabled = false,
+            _ => {}
+        }
+        seq = seq.wrapping_add(1);
+        let _ = dev.handle(Event::Frame(Frame { seq, message }), &inputs);
+        if !dev.enabled() {
+            host_enabled = false;
+        }
+        check(&dev, host_enabled, fault, cfg);
+    }
+});
+
+fn check(dev: &Device<ControlLaw<f64, 1024>>, host_enabled: bool, fault: bool, cfg: Config) {
+    assert!(dev.voltage_mv().unsigned_abs() <= cfg.voltage_limit_mv);
+    if dev.enabled() {
+        assert!(dev.onboard_running() || host_enabled);
+        assert!(!fault);
+    }
+}
