@@ -1,5 +1,4 @@
-//! rip-control, the one run-time implementation, against rip-core's controllers and solvers:
-//! the regulators step for step, the MPC's dual active-set QP against Clarabel and against
+//! rip-control, the one run-time implementation, against rip-core's references: the MPC's dual active-set QP against Clarabel and against
 //! the dense primal active set on closed-loop simulations of both presets, and the bytes a
 //! design travels in.
 
@@ -8,7 +7,6 @@ use rand::{rngs::StdRng, Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use rip_control::{Controller as Step, Measurement, Status};
 type CDesign = rip_control::Design<f64>;
-use rip_core::controller::{Controller, StepStatus};
 use rip_core::mpc::QpSolver;
 use rip_core::spec::Spec;
 
@@ -20,73 +18,6 @@ fn specs() -> Vec<(&'static str, Spec)> {
             Spec::parse("[plant]\npreset = 'qube_servo2'\n").unwrap(),
         ),
     ]
-}
-
-/// Angles that move like a balancing run, with noise, NaN samples and held periods.
-fn measurement(k: usize, rng: &mut StdRng) -> Option<[f64; 2]> {
-    if k % 97 == 13 {
-        return None;
-    }
-    let t = k as f64 * 0.01;
-    let n = Normal::new(0.0, 1e-3).unwrap();
-    let mut y = [
-        0.4 * (1.3 * t).sin() + n.sample(rng),
-        0.05 * (4.1 * t).cos() + n.sample(rng),
-    ];
-    if k % 89 == 7 {
-        y[1] = f64::NAN;
-    }
-    Some(y)
-}
-
-#[test]
-fn the_regulators_step_as_rip_core_did() {
-    let mut worst = 0.0f64;
-    for (name, spec) in specs() {
-        let design = spec.design(0.01).unwrap();
-        for integral in [false, true] {
-            let mut lqr = design.lqr().unwrap();
-            let mut lqg = design.lqg().unwrap();
-            if integral {
-                lqr = lqr.with_integral_action(-3.0).unwrap();
-                lqg = lqg.with_integral_action(-3.0).unwrap();
-            }
-            let mut s_lqr = Step::new(&lqr.control_design()).unwrap();
-            let mut s_lqg = Step::new(&lqg.control_design().unwrap()).unwrap();
-            let mut rng = StdRng::seed_from_u64(7);
-            let mut u = [0.0];
-            for k in 0..3000 {
-                let r = [if k < 1000 { 0.0 } else { 1.0 }, 0.0];
-                let Some(y) = measurement(k, &mut rng) else {
-                    let held = 0.3;
-                    lqr.hold(&[held]);
-                    lqg.hold(&[held]);
-                    s_lqr.hold(held);
-                    s_lqg.hold(held);
-                    continue;
-                };
-                for (core, onboard) in [
-                    (&mut lqr as &mut dyn Controller, &mut s_lqr),
-                    (&mut lqg, &mut s_lqg),
-                ] {
-                    let status = core.step(&y, &r, &mut u);
-                    let mv = onboard.step(Measurement {
-                        angles: y,
-                        reference: r,
-                    });
-                    let d = (mv.voltage - u[0]).abs();
-                    worst = worst.max(d);
-                    assert!(d <= 1e-12, "{name} k={k}: {} vs {}", mv.voltage, u[0]);
-                    assert_eq!(
-                        status == StepStatus::Nominal,
-                        mv.status == Status::Nominal,
-                        "{name} k={k}"
-                    );
-                }
-            }
-        }
-    }
-    eprintln!("regulators: worst |Δu| = {worst:e} V");
 }
 
 struct QpStats {
