@@ -1,7 +1,7 @@
 //! The run-time controller: one [`Controller`] for the three kinds of [`Design`].
 
 use crate::design::{Design, DesignError, Kind, MAX_NCON, MAX_NX, MAX_NY, MAX_NZ, NX_PLANT};
-use crate::qp::{DualActiveSet, QpOutcome};
+use crate::qp::{FixedQp, QpOutcome};
 use crate::real::Real;
 
 /// One sample's input to [`Controller::step`].
@@ -205,7 +205,7 @@ pub struct Controller<R: Real = f64> {
     plan: [R; MAX_NZ],
     f: [R; MAX_NZ],
     b: [R; MAX_NCON],
-    qp: Option<DualActiveSet<R>>,
+    qp: Option<FixedQp<R>>,
     last_written: R,
     last_planned: R,
     stats: Stats,
@@ -228,7 +228,7 @@ impl<R: Real> Controller<R> {
         }
         let qp = if design.kind == Kind::Mpc {
             Some(
-                DualActiveSet::new(
+                FixedQp::new(
                     &design.h,
                     &design.ac,
                     design.nz(),

@@ -1,6 +1,9 @@
-//! rip-control, the one run-time implementation, against rip-core's references: the MPC's dual active-set QP against Clarabel and against
-//! the dense primal active set on closed-loop simulations of both presets, and the bytes a
+//! rip-control, the one run-time implementation, against independent references: the MPC's
+//! dual active-set QP against Clarabel and against the dense primal active set rip-core used
+//! before (`primal/`), on closed-loop simulations of both presets, and the bytes a
 //! design travels in.
+
+mod primal;
 
 use nalgebra::DVector;
 use rand::{rngs::StdRng, Rng, SeedableRng};
@@ -38,14 +41,20 @@ struct QpStats {
 
 /// A closed loop on the nonlinear plant driven by the onboard MPC, through the 0 → 1 rad arm
 /// step with sensor noise and random torque kicks; at every step rip-core solves the same QP
-/// (the onboard estimate and previous move) with Clarabel and with its active set.
+/// (the onboard estimate and previous move) with Clarabel and with the primal active set.
 fn mpc_loop(spec: &Spec, seed: u64, steps: usize, stats: &mut QpStats) {
     let design = spec.design(0.01).unwrap();
     let mut cl_spec = spec.clone();
     cl_spec.mpc.solver = QpSolver::Clarabel;
     let mut clarabel = cl_spec.design(0.01).unwrap().mpc().unwrap();
-    let mut active = design.mpc().unwrap();
-    let cdesign = active.control_design().unwrap();
+    let cdesign = design.mpc().unwrap().control_design().unwrap();
+    let nx = clarabel.n_states();
+    let (h0, _, a0, _) = clarabel
+        .qp_matrices(&vec![0.0; nx], &[0.0], &[0.0, 0.0])
+        .unwrap();
+    let mut primal = primal::ActiveSetSolver::new(&h0, &a0, Some(h0.nrows() - 1), 200).unwrap();
+    let (lo, hi) = (clarabel.input_bounds().0[0], clarabel.input_bounds().1[0]);
+    let m = clarabel.control_horizon();
     let mut onboard = Step::new(&cdesign).unwrap();
     let plant = spec.plant().unwrap();
     let mut rng = StdRng::seed_from_u64(seed);
@@ -65,15 +74,28 @@ fn mpc_loop(spec: &Spec, seed: u64, steps: usize, stats: &mut QpStats) {
         });
         assert_eq!(mv.status, Status::Nominal, "seed {seed} k={k}");
         let xhat = onboard.estimate().to_vec();
-        let a = active.solve(&xhat, &[u_prev], &r).unwrap().u[0];
+        let (h, f, ac, b) = clarabel.qp_matrices(&xhat, &[u_prev], &r).unwrap();
+        let out = primal.solve(&f, &b, |z| {
+            primal::project_inputs(z, &[u_prev], &[lo], &[hi], m)
+        });
+        // Its plan clamped to the bounds, as the controller applies it (the solver's hard
+        // rows hold to its feasibility tolerance only).
+        let mut z_primal = primal.solution().clone();
+        let (mut acc, mut prev) = (u_prev, u_prev);
+        for j in 0..m {
+            acc += primal.solution()[j];
+            let v = acc.clamp(lo, hi);
+            z_primal[j] = v - prev;
+            prev = v;
+        }
+        let a = (u_prev + z_primal[0]).clamp(lo, hi);
         let c = clarabel.solve(&xhat, &[u_prev], &r).unwrap().u[0];
-        let a_ok = active.last_solution().status.is_usable();
+        let a_ok = out.status == rip_core::mpc::QpStatus::Solved;
         let c_ok = clarabel.last_solution().status == rip_core::mpc::QpStatus::Solved;
         stats.reference_failures += usize::from(!a_ok) + usize::from(!c_ok);
         stats.clarabel_almost +=
             usize::from(clarabel.last_solution().status == rip_core::mpc::QpStatus::AlmostSolved);
         // The arbiter where they differ: feasibility and cost on the QP itself.
-        let (h, f, ac, b) = active.qp_matrices(&xhat, &[u_prev], &r).unwrap();
         let z_of = |sol: &rip_core::mpc::MpcSolution| {
             let mut z = DVector::zeros(h.nrows());
             let nd = h.nrows() - 1;
@@ -83,7 +105,17 @@ fn mpc_loop(spec: &Spec, seed: u64, steps: usize, stats: &mut QpStats) {
             z
         };
         let z_on = DVector::from_column_slice(onboard.qp_solution());
-        let cost = |z: &DVector<f64>| 0.5 * z.dot(&(&h * z)) + f.dot(z);
+        // Each plan's cost with its optimal slack for its moves (the largest soft violation),
+        // so that a reference's tolerance in ε does not count as a better plan.
+        let (n_input, n_soft) = clarabel.constraint_layout();
+        let cost = |z: &DVector<f64>| {
+            let mut z = z.clone();
+            let nd = z.len() - 1;
+            z[nd] = 0.0;
+            let az = &ac * &z - &b;
+            z[nd] = (n_input..n_input + n_soft).fold(0.0f64, |e, i| e.max(az[i]));
+            0.5 * z.dot(&(&h * &z)) + f.dot(&z)
+        };
         let viol = (&ac * &z_on - &b).max();
         assert!(
             viol <= 1e-9 * (1.0 + b.amax()),
@@ -91,7 +123,7 @@ fn mpc_loop(spec: &Spec, seed: u64, steps: usize, stats: &mut QpStats) {
         );
         let mut best = f64::INFINITY;
         if a_ok {
-            best = best.min(cost(&z_of(active.last_solution())));
+            best = best.min(cost(&z_primal));
             stats.worst_vs_active_set = stats.worst_vs_active_set.max((mv.planned - a).abs());
         }
         if c_ok {
@@ -105,7 +137,7 @@ fn mpc_loop(spec: &Spec, seed: u64, steps: usize, stats: &mut QpStats) {
         stats.qps += 1;
         stats.max_iterations = stats.max_iterations.max(mv.iterations);
         stats.saturated += usize::from(mv.planned.abs() > 12.0 - 1e-9);
-        stats.active_soft += usize::from(active.last_solution().slack > 1e-9);
+        stats.active_soft += usize::from(onboard.qp_solution()[m] > 1e-9);
         if k % 150 == 0 {
             kick = rng.gen_range(-0.03..0.03);
         } else if k % 150 == 10 {
@@ -202,4 +234,40 @@ fn a_design_travels_in_bytes_unchanged_and_corruption_is_refused() {
         ));
     }
     assert_eq!(rip_control::crc32(b"123456789"), 0xCBF4_3926);
+}
+
+#[test]
+fn at_the_iteration_bound_the_fallback_is_the_clamped_unconstrained_move_and_is_counted() {
+    let mpc = Spec::default().design(0.01).unwrap().mpc().unwrap();
+    let mut d = mpc.control_design().unwrap();
+    d.max_iterations = 1;
+    let mut onboard = Step::new(&d).unwrap();
+    let mut limited = 0;
+    for k in 0..50 {
+        // A large tilt: the soft bound and the voltage bound are active, so one iteration
+        // cannot finish.
+        let y = [0.0, if k < 5 { 0.45 } else { 0.0 }];
+        let u_prev = onboard.last_input();
+        let mv = onboard.step(Measurement {
+            angles: y,
+            reference: [0.0, 0.0],
+        });
+        assert!(mv.voltage.is_finite() && mv.voltage.abs() <= 12.0);
+        if mv.status != Status::IterationLimit {
+            continue;
+        }
+        limited += 1;
+        let (h, f, _, _) = mpc
+            .qp_matrices(onboard.estimate(), &[u_prev], &[0.0, 0.0])
+            .unwrap();
+        let z = -h.cholesky().unwrap().solve(&f);
+        let want = (u_prev + z[0]).clamp(-12.0, 12.0);
+        assert!(
+            (mv.voltage - want).abs() < 1e-9,
+            "k={k}: {} vs {want}",
+            mv.voltage
+        );
+    }
+    assert!(limited > 0);
+    assert_eq!(onboard.stats().iteration_limits, limited);
 }
