@@ -271,3 +271,70 @@ fn at_the_iteration_bound_the_fallback_is_the_clamped_unconstrained_move_and_is_
     assert!(limited > 0);
     assert_eq!(onboard.stats().iteration_limits, limited);
 }
+
+/// The design rounded to `f32` by the bytes it travels in, as a single-precision device reads it.
+fn in_f32(d: &CDesign) -> rip_control::Design<f32> {
+    let mut buf = vec![0u8; d.encoded_len()];
+    d.to_bytes(&mut buf).unwrap();
+    rip_control::Design::<f32>::from_bytes(&buf).unwrap()
+}
+
+/// The measurement behind the number format: each controller in `f32` follows the same
+/// measurements as in `f64` over a 15 s nonlinear loop (0 → 1 rad step). The LQRs stay within
+/// 30–60 µV; the estimators drift (paper LQG 12 V, MPC 17 V and 8 V apart by the end: the
+/// slow Kalman error modes integrate `f32` round-off), so the device runs `f64`, where the moves
+/// are the host's bit for bit. Should a better-conditioned `f32` form ever pass, this test
+/// says so and the choice is to be revisited.
+#[test]
+fn single_precision_meets_one_millivolt_for_the_lqr_but_not_for_the_mpc() {
+    let mut results = Vec::new();
+    for (name, spec) in specs() {
+        let design = spec.design(0.01).unwrap();
+        let designs = [
+            design.lqr().unwrap().control_design(),
+            design.lqg().unwrap().control_design().unwrap(),
+            design.mpc().unwrap().control_design().unwrap(),
+        ];
+        let plant = spec.plant().unwrap();
+        for d in &designs {
+            let mut c64 = Step::new(d).unwrap();
+            let mut c32 = Step::new(&in_f32(d)).unwrap();
+            let mut rng = StdRng::seed_from_u64(3);
+            let noise = Normal::new(0.0, 5e-4).unwrap();
+            let mut x = rip_core::plant::State::new(0.0, 0.0, 0.1, 0.0);
+            let mut worst = 0.0f64;
+            for k in 0..1500 {
+                let r = [if k < 300 { 0.0 } else { 1.0 }, 0.0];
+                let y = [x[0] + noise.sample(&mut rng), x[2] + noise.sample(&mut rng)];
+                let m64 = c64.step(Measurement {
+                    angles: y,
+                    reference: r,
+                });
+                // The f32 controller's own estimate runs on: the comparison is of the two
+                // arithmetics over a whole run, not of one step from a shared state.
+                #[allow(clippy::cast_possible_truncation)]
+                let m32 = c32.step(Measurement {
+                    angles: y.map(|v| v as f32),
+                    reference: r.map(|v| v as f32),
+                });
+                let diff = (m64.voltage - f64::from(m32.voltage)).abs();
+                worst = worst.max(diff);
+                for _ in 0..10 {
+                    plant.rk4_step(&mut x, m64.voltage, 0.0, 0.001);
+                }
+            }
+            eprintln!(
+                "{name} {}: worst |u_f64 − u_f32| = {worst:e} V",
+                d.kind.name()
+            );
+            results.push((name, d.kind, worst));
+        }
+    }
+    for &(name, kind, worst) in &results {
+        match kind {
+            rip_control::Kind::Lqr => assert!(worst < 1e-3, "{name} LQR in f32: {worst:e} V"),
+            rip_control::Kind::Mpc => assert!(worst > 1e-3, "{name} MPC in f32 now agrees"),
+            rip_control::Kind::Lqg => {}
+        }
+    }
+}
