@@ -1,7 +1,7 @@
 //! The run-time controller: one [`Controller`] for the three kinds of [`Design`].
 
 use crate::design::{Design, DesignError, Kind, MAX_NCON, MAX_NX, MAX_NY, MAX_NZ, NX_PLANT};
-use crate::qp::{DualActiveSet, QpOutcome};
+use crate::qp::{FixedQp, QpOutcome};
 use crate::real::Real;
 
 /// One sample's input to [`Controller::step`].
@@ -205,7 +205,7 @@ pub struct Controller<R: Real = f64> {
     plan: [R; MAX_NZ],
     f: [R; MAX_NZ],
     b: [R; MAX_NCON],
-    qp: Option<DualActiveSet<R>>,
+    qp: Option<FixedQp<R>>,
     last_written: R,
     last_planned: R,
     stats: Stats,
@@ -228,7 +228,7 @@ impl<R: Real> Controller<R> {
         }
         let qp = if design.kind == Kind::Mpc {
             Some(
-                DualActiveSet::new(
+                FixedQp::new(
                     &design.h,
                     &design.ac,
                     design.nz(),
@@ -369,13 +369,13 @@ impl<R: Real> Controller<R> {
             return v;
         }
         let rate = self.arm_rate();
-        let raw = unclamped(&c, v, rate);
+        let raw = c.unclamped(v, rate);
         let [lo, hi] = self.design.input_bounds;
         let written = raw.clamp(lo, hi);
         self.last_planned = if raw == written {
             v
         } else {
-            effective(&c, written, rate)
+            c.effective(written, rate)
         };
         self.last_written = written;
         written
@@ -389,7 +389,7 @@ impl<R: Real> Controller<R> {
         } else if u == self.last_written {
             self.last_planned
         } else if u.is_finite() {
-            effective(&c, u, rate)
+            c.effective(u, rate)
         } else {
             u
         }
@@ -743,33 +743,4 @@ impl<R: Real> Controller<R> {
         self.predict_guarded();
         (u, status, iterations)
     }
-}
-
-/// `w = v + V_f σ(θ̇̂/ω_s)`, `u = w + V_d σ(w/v_s)` (before the final clamp).
-#[inline]
-fn unclamped<R: Real>(c: &crate::CompensationDesign<R>, v: R, arm_rate: R) -> R {
-    let rate = if arm_rate.is_finite() {
-        arm_rate
-    } else {
-        R::ZERO
-    };
-    let w = v + c.friction_voltage * ramp_sign(rate / c.velocity_scale);
-    w + c.dead_zone * ramp_sign(w / c.voltage_scale)
-}
-
-/// `z(u) − V_f σ(θ̇̂/ω_s)`: the voltage the linear model sees when `u` is written.
-#[inline]
-fn effective<R: Real>(c: &crate::CompensationDesign<R>, u: R, arm_rate: R) -> R {
-    let rate = if arm_rate.is_finite() {
-        arm_rate
-    } else {
-        R::ZERO
-    };
-    let z = u - u.clamp(-c.dead_zone, c.dead_zone);
-    z - c.friction_voltage * ramp_sign(rate / c.velocity_scale)
-}
-
-#[inline]
-fn ramp_sign<R: Real>(s: R) -> R {
-    s.clamp(-R::ONE, R::ONE)
 }

@@ -135,6 +135,38 @@ impl<R: Real> CompensationDesign<R> {
     pub fn is_active(&self) -> bool {
         self.dead_zone != R::ZERO || self.friction_voltage != R::ZERO
     }
+
+    /// `w = v + V_f σ(θ̇̂/ω_s)`, `u = w + V_d σ(w/v_s)`, before the final clamp to the input
+    /// bounds (crate docs, "Compensation"). A non-finite rate counts as zero.
+    #[inline]
+    pub fn unclamped(&self, v: R, arm_rate: R) -> R {
+        let rate = if arm_rate.is_finite() {
+            arm_rate
+        } else {
+            R::ZERO
+        };
+        let w = v + self.friction_voltage * ramp_sign(rate / self.velocity_scale);
+        w + self.dead_zone * ramp_sign(w / self.voltage_scale)
+    }
+
+    /// `z(u) − V_f σ(θ̇̂/ω_s)`: the voltage the linear model sees when `u` is written (the
+    /// inverse of the law outside the ramps). A non-finite rate counts as zero.
+    #[inline]
+    pub fn effective(&self, u: R, arm_rate: R) -> R {
+        let rate = if arm_rate.is_finite() {
+            arm_rate
+        } else {
+            R::ZERO
+        };
+        let z = u - u.clamp(-self.dead_zone, self.dead_zone);
+        z - self.friction_voltage * ramp_sign(rate / self.velocity_scale)
+    }
+}
+
+/// A continuous sign: `clamp(s, −1, 1)`.
+#[inline]
+fn ramp_sign<R: Real>(s: R) -> R {
+    s.clamp(-R::ONE, R::ONE)
 }
 
 /// A complete controller design: everything a [`Controller`](crate::Controller) needs, made on

@@ -25,11 +25,15 @@
 //! 3. otherwise `λ` steps towards `λ*` until the first component reaches zero, and that row
 //!    leaves `W`.
 //!
-//! `|W| ≤ n ≤` [`MAX_NZ`](crate::MAX_NZ), so each subproblem is a Cholesky factorisation of
-//! at most a 5 × 5 matrix, refactored from scratch (cheaper than DAQP's recursive LDLᵀ update
-//! at this size, and simpler). The working set of the last solve is the warm start of the
+//! `|W| ≤ n`, so each subproblem is a Cholesky factorisation of at most an `n × n` matrix
+//! (5 × 5 on the device), refactored from scratch: cheaper than DAQP's recursive LDLᵀ update
+//! at this size, and simpler. The working set of the last solve is the warm start of the
 //! next, with `λ = 0` (always dual feasible). The iteration count is bounded by the design's
 //! `max_iterations`; nothing is allocated.
+//!
+//! The solver works in caller-provided storage ([`DualActiveSet::new_in`], its length from
+//! [`DualActiveSet::storage_len`]): fixed arrays on the device ([`FixedQp`]), vectors for the
+//! host's larger problems.
 
 use crate::design::{MAX_NCON, MAX_NZ};
 use crate::real::Real;
@@ -48,61 +52,134 @@ pub enum QpOutcome {
     NumericalTrouble,
 }
 
-/// The solver: the factors of one QP's `H` and `A`, and its warm start.
+/// Reals of storage the device's largest QP needs ([`DualActiveSet::storage_len`]).
+pub const FIXED_STORAGE: usize = 2 * MAX_NZ * MAX_NZ + (MAX_NZ + 2) * MAX_NCON + 8 * MAX_NZ;
+
+/// The device's solver: storage in fixed arrays sized for [`MAX_NZ`] and [`MAX_NCON`].
+pub type FixedQp<R> = DualActiveSet<R, [R; FIXED_STORAGE], [usize; MAX_NZ]>;
+
+/// The solver: the factors of one QP's `H` and `A` and its warm start, in storage `B` (reals)
+/// and `W` (the working set).
 #[derive(Debug, Clone)]
-pub struct DualActiveSet<R: Real> {
+pub struct DualActiveSet<R: Real, B, W> {
     n: usize,
     ncon: usize,
-    /// `R⁻¹` (upper triangular, n × n, row-major).
-    rinv: [R; MAX_NZ * MAX_NZ],
-    /// `M = A R⁻¹` (ncon × n, row-major).
-    m: [R; MAX_NCON * MAX_NZ],
-    /// `‖M_i‖²`.
-    norm2: [R; MAX_NCON],
     max_iter: u32,
-    working: [usize; MAX_NZ],
     nw: usize,
-    lambda: [R; MAX_NZ],
-    lambda_star: [R; MAX_NZ],
-    chol: [R; MAX_NZ * MAX_NZ],
-    d: [R; MAX_NCON],
-    u: [R; MAX_NZ],
-    v: [R; MAX_NZ],
-    z: [R; MAX_NZ],
-    tmp: [R; MAX_NZ],
+    buf: B,
+    working: W,
+    _real: core::marker::PhantomData<R>,
 }
 
-impl<R: Real> DualActiveSet<R> {
-    /// Factors `H` (n × n, row-major, positive definite) and forms `M = A R⁻¹` for the
-    /// `ncon × n` row-major `a`. `None` when `H` is not numerically positive definite.
+/// The solver's storage split into its arrays.
+struct Parts<'a, R> {
+    /// `R⁻¹` (upper triangular, n × n, row-major).
+    rinv: &'a mut [R],
+    /// `M = A R⁻¹` (ncon × n, row-major).
+    m: &'a mut [R],
+    /// `‖M_i‖²`.
+    norm2: &'a mut [R],
+    d: &'a mut [R],
+    chol: &'a mut [R],
+    lambda: &'a mut [R],
+    lambda_star: &'a mut [R],
+    u: &'a mut [R],
+    v: &'a mut [R],
+    z: &'a mut [R],
+    tmp: &'a mut [R],
+    c: &'a mut [R],
+    g: &'a mut [R],
+}
+
+fn split<R>(buf: &mut [R], n: usize, ncon: usize) -> Parts<'_, R> {
+    let (rinv, rest) = buf.split_at_mut(n * n);
+    let (m, rest) = rest.split_at_mut(ncon * n);
+    let (norm2, rest) = rest.split_at_mut(ncon);
+    let (d, rest) = rest.split_at_mut(ncon);
+    let (chol, rest) = rest.split_at_mut(n * n);
+    let (lambda, rest) = rest.split_at_mut(n);
+    let (lambda_star, rest) = rest.split_at_mut(n);
+    let (u, rest) = rest.split_at_mut(n);
+    let (v, rest) = rest.split_at_mut(n);
+    let (z, rest) = rest.split_at_mut(n);
+    let (tmp, rest) = rest.split_at_mut(n);
+    let (c, rest) = rest.split_at_mut(n);
+    let (g, _) = rest.split_at_mut(n);
+    Parts {
+        rinv,
+        m,
+        norm2,
+        d,
+        chol,
+        lambda,
+        lambda_star,
+        u,
+        v,
+        z,
+        tmp,
+        c,
+        g,
+    }
+}
+
+impl<R: Real> FixedQp<R> {
+    /// [`new_in`](DualActiveSet::new_in) with the device's fixed storage; `None` also when
+    /// the sizes exceed [`MAX_NZ`] or [`MAX_NCON`].
     pub fn new(h: &[R], a: &[R], n: usize, ncon: usize, max_iter: u32) -> Option<Self> {
-        let mut s = Self {
+        if n > MAX_NZ || ncon > MAX_NCON {
+            return None;
+        }
+        Self::new_in(
+            h,
+            a,
             n,
             ncon,
-            rinv: [R::ZERO; MAX_NZ * MAX_NZ],
-            m: [R::ZERO; MAX_NCON * MAX_NZ],
-            norm2: [R::ZERO; MAX_NCON],
             max_iter,
-            working: [0; MAX_NZ],
-            nw: 0,
-            lambda: [R::ZERO; MAX_NZ],
-            lambda_star: [R::ZERO; MAX_NZ],
-            chol: [R::ZERO; MAX_NZ * MAX_NZ],
-            d: [R::ZERO; MAX_NCON],
-            u: [R::ZERO; MAX_NZ],
-            v: [R::ZERO; MAX_NZ],
-            z: [R::ZERO; MAX_NZ],
-            tmp: [R::ZERO; MAX_NZ],
-        };
+            [R::ZERO; FIXED_STORAGE],
+            [0; MAX_NZ],
+        )
+    }
+}
+
+impl<R: Real, B: AsRef<[R]> + AsMut<[R]>, W: AsRef<[usize]> + AsMut<[usize]>>
+    DualActiveSet<R, B, W>
+{
+    /// Reals of storage a QP with `n` variables and `ncon` rows needs.
+    pub const fn storage_len(n: usize, ncon: usize) -> usize {
+        2 * n * n + (n + 2) * ncon + 8 * n
+    }
+
+    /// Factors `H` (n × n, row-major, positive definite) and forms `M = A R⁻¹` for the
+    /// `ncon × n` row-major `a`, in `buf` (at least [`storage_len`](Self::storage_len) reals)
+    /// and `working` (at least `n`). `None` when `H` is not numerically positive definite or
+    /// the storage is short.
+    pub fn new_in(
+        h: &[R],
+        a: &[R],
+        n: usize,
+        ncon: usize,
+        max_iter: u32,
+        mut buf: B,
+        working: W,
+    ) -> Option<Self> {
+        if buf.as_ref().len() < Self::storage_len(n, ncon)
+            || working.as_ref().len() < n
+            || h.len() < n * n
+            || a.len() < ncon * n
+        {
+            return None;
+        }
+        let p = split(buf.as_mut(), n, ncon);
         // Lower Cholesky factor L of H (so R = Lᵀ), in `chol`.
-        let l = &mut s.chol;
-        l[..n * n].copy_from_slice(&h[..n * n]);
+        let l = p.chol;
+        l.copy_from_slice(&h[..n * n]);
         if !cholesky(l, n, R::from_f64(1e-13)) {
             return None;
         }
-        // R⁻¹ = (Lᵀ)⁻¹ = (L⁻¹)ᵀ: invert L column by column (forward substitution on eⱼ).
+        // R⁻¹ = (Lᵀ)⁻¹ = (L⁻¹)ᵀ: row j of R⁻¹ is column j of L⁻¹ (forward substitution on eⱼ).
         for j in 0..n {
-            let mut col = [R::ZERO; MAX_NZ];
+            let col = &mut p.rinv[j * n..j * n + n];
+            col.fill(R::ZERO);
             col[j] = R::ONE;
             for i in 0..n {
                 let mut acc = col[i];
@@ -111,37 +188,54 @@ impl<R: Real> DualActiveSet<R> {
                 }
                 col[i] = acc / l[i * n + i];
             }
-            // col = L⁻¹ eⱼ, i.e. column j of L⁻¹ = row j of R⁻¹.
-            s.rinv[j * n..j * n + n].copy_from_slice(&col[..n]);
         }
         for i in 0..ncon {
             let mut nrm = R::ZERO;
             for j in 0..n {
                 let mut acc = R::ZERO;
                 for c in 0..n {
-                    acc += a[i * n + c] * s.rinv[c * n + j];
+                    acc += a[i * n + c] * p.rinv[c * n + j];
                 }
-                s.m[i * n + j] = acc;
+                p.m[i * n + j] = acc;
                 nrm += acc * acc;
             }
-            s.norm2[i] = nrm;
+            p.norm2[i] = nrm;
         }
-        Some(s)
+        p.z.fill(R::ZERO);
+        Some(Self {
+            n,
+            ncon,
+            max_iter,
+            nw: 0,
+            buf,
+            working,
+            _real: core::marker::PhantomData,
+        })
+    }
+
+    fn z_offset(&self) -> usize {
+        let (n, ncon) = (self.n, self.ncon);
+        2 * n * n + (n + 2) * ncon + 4 * n
     }
 
     /// The last solution `z` (the unconstrained minimiser `−H⁻¹ f` after a failed solve).
     pub fn solution(&self) -> &[R] {
-        &self.z[..self.n]
+        let o = self.z_offset();
+        &self.buf.as_ref()[o..o + self.n]
     }
 
-    /// The unconstrained minimiser `−H⁻¹ f = −R⁻¹ R⁻ᵀ f` of the last solve.
+    /// The unconstrained minimiser `−H⁻¹ f = −R⁻¹ R⁻ᵀ f` of the last solve, into `out`.
     pub fn unconstrained(&self, out: &mut [R]) {
-        self.r_inverse_times(&self.v, out, true);
+        let (n, ncon) = (self.n, self.ncon);
+        let buf = self.buf.as_ref();
+        let rinv = &buf[..n * n];
+        let vo = 2 * n * n + (n + 2) * ncon + 3 * n;
+        r_inverse_times(rinv, &buf[vo..vo + n], out, n, true);
     }
 
     /// Rows in the working set after the last solve.
     pub fn working_set(&self) -> &[usize] {
-        &self.working[..self.nw]
+        &self.working.as_ref()[..self.nw]
     }
 
     /// Forgets the warm start.
@@ -149,237 +243,241 @@ impl<R: Real> DualActiveSet<R> {
         self.nw = 0;
     }
 
-    /// `out = ±R⁻¹ x`.
-    fn r_inverse_times(&self, x: &[R], out: &mut [R], negate: bool) {
-        let n = self.n;
-        for i in 0..n {
-            let mut acc = R::ZERO;
-            for c in i..n {
-                acc += self.rinv[i * n + c] * x[c];
-            }
-            out[i] = if negate { -acc } else { acc };
-        }
-    }
-
     /// Solves for `f` (n) and `b` (ncon); returns the outcome and the iterations used.
     pub fn solve(&mut self, f: &[R], b: &[R]) -> (QpOutcome, u32) {
-        let (n, ncon) = (self.n, self.ncon);
-        // v = R⁻ᵀ f: (R⁻¹)ᵀ is lower triangular.
-        for i in 0..n {
-            let mut acc = R::ZERO;
-            for c in 0..=i {
-                acc += self.rinv[c * n + i] * f[c];
-            }
-            self.v[i] = acc;
-        }
-        let mut dscale = R::ONE;
-        for i in 0..ncon {
-            let mut acc = b[i];
-            for j in 0..n {
-                acc += self.m[i * n + j] * self.v[j];
-            }
-            self.d[i] = acc;
-            dscale = dscale.max(acc.abs());
-        }
-        let eps = R::EPSILON;
-        let k = R::from_f64(1e3);
-        let primal_tol = k * eps * dscale;
-        let dual_tol = k * eps;
-        let pivot_tol = k * eps;
-        self.lambda[..self.nw].fill(R::ZERO);
-        let mut iter = 0u32;
-        let outcome = loop {
-            iter += 1;
-            if iter > self.max_iter {
-                iter -= 1;
-                break QpOutcome::IterationLimit;
-            }
-            if !self.solve_equality() {
-                break QpOutcome::NumericalTrouble;
-            }
-            let nw = self.nw;
-            let mut all_nonneg = true;
-            for j in 0..nw {
-                if self.lambda_star[j] < -dual_tol {
-                    all_nonneg = false;
-                }
-            }
-            if all_nonneg {
-                self.lambda[..nw].copy_from_slice(&self.lambda_star[..nw]);
-                self.primal_from_dual();
-                // The most violated row outside W.
-                let mut worst = None;
-                let mut worst_val = primal_tol;
-                for i in 0..ncon {
-                    if self.working[..nw].contains(&i) {
-                        continue;
-                    }
-                    let mut mu = -self.d[i];
-                    for j in 0..n {
-                        mu += self.m[i * n + j] * self.u[j];
-                    }
-                    if !mu.is_finite() {
-                        return self.fail(QpOutcome::NumericalTrouble, iter);
-                    }
-                    if mu > worst_val {
-                        worst_val = mu;
-                        worst = Some(i);
-                    }
-                }
-                match worst {
-                    None => break QpOutcome::Solved,
-                    Some(i) => {
-                        if !self.add(i, pivot_tol) {
-                            break QpOutcome::Infeasible;
-                        }
-                    }
-                }
-            } else {
-                // Step from λ towards λ*: the first component to reach zero leaves W.
-                let mut alpha = R::ONE;
-                let mut leave = 0;
-                for j in 0..nw {
-                    let ls = self.lambda_star[j];
-                    if ls < -dual_tol {
-                        let t = self.lambda[j] / (self.lambda[j] - ls);
-                        if t < alpha {
-                            alpha = t;
-                            leave = j;
-                        }
-                    }
-                }
-                for j in 0..nw {
-                    let l = self.lambda[j];
-                    self.lambda[j] = l + alpha * (self.lambda_star[j] - l);
-                }
-                self.remove(leave);
-            }
-        };
-        if outcome != QpOutcome::Solved {
-            return self.fail(outcome, iter);
-        }
-        // z = R⁻¹ (u − v).
-        for j in 0..n {
-            self.tmp[j] = self.u[j] - self.v[j];
-        }
-        let tmp = self.tmp;
-        let mut z = [R::ZERO; MAX_NZ];
-        self.r_inverse_times(&tmp, &mut z, false);
-        self.z = z;
-        if self.z[..n].iter().all(|x| x.is_finite()) {
-            (QpOutcome::Solved, iter)
-        } else {
-            self.fail(QpOutcome::NumericalTrouble, iter)
-        }
-    }
-
-    fn fail(&mut self, outcome: QpOutcome, iter: u32) -> (QpOutcome, u32) {
-        let v = self.v;
-        let mut z = [R::ZERO; MAX_NZ];
-        self.r_inverse_times(&v, &mut z, true);
-        self.z = z;
-        self.nw = 0;
+        let (n, ncon, max_iter) = (self.n, self.ncon, self.max_iter);
+        let mut nw = self.nw;
+        let working = &mut self.working.as_mut()[..n];
+        let p = split(self.buf.as_mut(), n, ncon);
+        let (outcome, iter) = solve_in(p, working, &mut nw, n, ncon, max_iter, f, b);
+        self.nw = nw;
         (outcome, iter)
     }
+}
 
-    /// `u = −M_Wᵀ λ_W`.
-    fn primal_from_dual(&mut self) {
-        let n = self.n;
-        self.u[..n].fill(R::ZERO);
-        for (w, &row) in self.working[..self.nw].iter().enumerate() {
-            let l = self.lambda[w];
-            for j in 0..n {
-                self.u[j] -= self.m[row * n + j] * l;
-            }
-        }
-    }
-
-    fn dot_rows(&self, r1: usize, r2: usize) -> R {
-        let n = self.n;
+/// `out = ±R⁻¹ x` for the upper-triangular row-major `rinv`.
+fn r_inverse_times<R: Real>(rinv: &[R], x: &[R], out: &mut [R], n: usize, negate: bool) {
+    for i in 0..n {
         let mut acc = R::ZERO;
+        for c in i..n {
+            acc += rinv[i * n + c] * x[c];
+        }
+        out[i] = if negate { -acc } else { acc };
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn solve_in<R: Real>(
+    mut p: Parts<'_, R>,
+    working: &mut [usize],
+    nw: &mut usize,
+    n: usize,
+    ncon: usize,
+    max_iter: u32,
+    f: &[R],
+    b: &[R],
+) -> (QpOutcome, u32) {
+    // v = R⁻ᵀ f: (R⁻¹)ᵀ is lower triangular.
+    for i in 0..n {
+        let mut acc = R::ZERO;
+        for c in 0..=i {
+            acc += p.rinv[c * n + i] * f[c];
+        }
+        p.v[i] = acc;
+    }
+    let mut dscale = R::ONE;
+    for i in 0..ncon {
+        let mut acc = b[i];
         for j in 0..n {
-            acc += self.m[r1 * n + j] * self.m[r2 * n + j];
+            acc += p.m[i * n + j] * p.v[j];
         }
-        acc
+        p.d[i] = acc;
+        dscale = dscale.max(acc.abs());
     }
-
-    /// Factors `M_W M_Wᵀ` into `chol` and solves `λ* = −(M_W M_Wᵀ)⁻¹ d_W`.
-    fn solve_equality(&mut self) -> bool {
-        let k = self.nw;
-        for a in 0..k {
-            for c in 0..=a {
-                self.chol[a * k + c] = self.dot_rows(self.working[a], self.working[c]);
-            }
+    let eps = R::EPSILON;
+    let k = R::from_f64(1e3);
+    let primal_tol = k * eps * dscale;
+    let dual_tol = k * eps;
+    let pivot_tol = k * eps;
+    p.lambda[..*nw].fill(R::ZERO);
+    let mut iter = 0u32;
+    let outcome = loop {
+        iter += 1;
+        if iter > max_iter {
+            iter -= 1;
+            break QpOutcome::IterationLimit;
         }
-        if !cholesky(&mut self.chol, k, R::EPSILON) {
-            return false;
+        let k = *nw;
+        if !solve_equality(&mut p, working, k, n) {
+            break QpOutcome::NumericalTrouble;
         }
-        for a in 0..k {
-            self.lambda_star[a] = -self.d[self.working[a]];
-        }
-        let mut rhs = self.lambda_star;
-        cholesky_solve(&self.chol, k, &mut rhs[..k]);
-        self.lambda_star = rhs;
-        self.lambda_star[..k].iter().all(|x| x.is_finite())
-    }
-
-    /// Adds row `i` to W, first exchanging it for a row it depends on (module docs, step 2);
-    /// `false` when it depends on W with no exchange possible (infeasible).
-    fn add(&mut self, i: usize, pivot_tol: R) -> bool {
-        let k = self.nw;
-        // c = (M_W M_Wᵀ)⁻¹ M_W M_iᵀ with the factor of the last `solve_equality`; the pivot
-        // of the extended factor is ‖M_i‖² − (M_W M_iᵀ)ᵀ c.
-        let mut c = [R::ZERO; MAX_NZ];
-        for a in 0..k {
-            c[a] = self.dot_rows(self.working[a], i);
-        }
-        let g = c;
-        cholesky_solve(&self.chol, k, &mut c[..k]);
-        let mut proj = R::ZERO;
-        for a in 0..k {
-            proj += g[a] * c[a];
-        }
-        let pivot = self.norm2[i] - proj;
-        if k < self.n && pivot > pivot_tol * self.norm2[i] {
-            self.working[k] = i;
-            self.lambda[k] = R::ZERO;
-            self.nw = k + 1;
-            return true;
-        }
-        // Dependent: move λ along (−c, 1) until a λ_j with c_j > 0 reaches zero.
-        let mut t = None::<R>;
-        let mut leave = 0;
-        for a in 0..k {
-            if c[a] > R::ZERO {
-                let ta = self.lambda[a] / c[a];
-                if t.map_or(true, |t| ta < t) {
-                    t = Some(ta);
-                    leave = a;
+        if p.lambda_star[..k].iter().all(|&l| l >= -dual_tol) {
+            p.lambda[..k].copy_from_slice(&p.lambda_star[..k]);
+            // u = −M_Wᵀ λ_W.
+            p.u.fill(R::ZERO);
+            for (w, &row) in working[..k].iter().enumerate() {
+                let l = p.lambda[w];
+                for j in 0..n {
+                    p.u[j] -= p.m[row * n + j] * l;
                 }
             }
+            // The most violated row outside W.
+            let mut worst = None;
+            let mut worst_val = primal_tol;
+            let mut finite = true;
+            for i in 0..ncon {
+                if working[..k].contains(&i) {
+                    continue;
+                }
+                let mut mu = -p.d[i];
+                for j in 0..n {
+                    mu += p.m[i * n + j] * p.u[j];
+                }
+                finite &= mu.is_finite();
+                if mu > worst_val {
+                    worst_val = mu;
+                    worst = Some(i);
+                }
+            }
+            if !finite {
+                break QpOutcome::NumericalTrouble;
+            }
+            match worst {
+                None => break QpOutcome::Solved,
+                Some(i) => {
+                    if !add(&mut p, working, nw, n, i, pivot_tol) {
+                        break QpOutcome::Infeasible;
+                    }
+                }
+            }
+        } else {
+            // Step from λ towards λ*: the first component to reach zero leaves W.
+            let mut alpha = R::ONE;
+            let mut leave = 0;
+            for j in 0..k {
+                let ls = p.lambda_star[j];
+                if ls < -dual_tol {
+                    let t = p.lambda[j] / (p.lambda[j] - ls);
+                    if t < alpha {
+                        alpha = t;
+                        leave = j;
+                    }
+                }
+            }
+            for j in 0..k {
+                let l = p.lambda[j];
+                p.lambda[j] = l + alpha * (p.lambda_star[j] - l);
+            }
+            remove(p.lambda, working, nw, leave);
         }
-        let Some(t) = t else {
-            return false;
-        };
-        for a in 0..k {
-            self.lambda[a] -= t * c[a];
+    };
+    if outcome == QpOutcome::Solved {
+        // z = R⁻¹ (u − v).
+        for j in 0..n {
+            p.tmp[j] = p.u[j] - p.v[j];
         }
-        self.remove(leave);
-        let k = self.nw;
-        self.working[k] = i;
-        self.lambda[k] = t;
-        self.nw = k + 1;
-        true
+        r_inverse_times(p.rinv, p.tmp, p.z, n, false);
+        if p.z.iter().all(|x| x.is_finite()) {
+            return (QpOutcome::Solved, iter);
+        }
     }
+    r_inverse_times(p.rinv, p.v, p.z, n, true);
+    *nw = 0;
+    let outcome = if outcome == QpOutcome::Solved {
+        QpOutcome::NumericalTrouble
+    } else {
+        outcome
+    };
+    (outcome, iter)
+}
 
-    fn remove(&mut self, idx: usize) {
-        let k = self.nw;
-        for a in idx..k - 1 {
-            self.working[a] = self.working[a + 1];
-            self.lambda[a] = self.lambda[a + 1];
-        }
-        self.nw = k - 1;
+fn dot_rows<R: Real>(m: &[R], n: usize, r1: usize, r2: usize) -> R {
+    let mut acc = R::ZERO;
+    for j in 0..n {
+        acc += m[r1 * n + j] * m[r2 * n + j];
     }
+    acc
+}
+
+/// Factors `M_W M_Wᵀ` into `chol` and solves `λ* = −(M_W M_Wᵀ)⁻¹ d_W`.
+fn solve_equality<R: Real>(p: &mut Parts<'_, R>, working: &[usize], k: usize, n: usize) -> bool {
+    for a in 0..k {
+        for c in 0..=a {
+            p.chol[a * k + c] = dot_rows(p.m, n, working[a], working[c]);
+        }
+    }
+    if !cholesky(p.chol, k, R::EPSILON) {
+        return false;
+    }
+    for a in 0..k {
+        p.lambda_star[a] = -p.d[working[a]];
+    }
+    cholesky_solve(p.chol, k, &mut p.lambda_star[..k]);
+    p.lambda_star[..k].iter().all(|x| x.is_finite())
+}
+
+/// Adds row `i` to W, first exchanging it for a row it depends on (module docs, step 2);
+/// `false` when it depends on W with no exchange possible (infeasible).
+fn add<R: Real>(
+    p: &mut Parts<'_, R>,
+    working: &mut [usize],
+    nw: &mut usize,
+    n: usize,
+    i: usize,
+    pivot_tol: R,
+) -> bool {
+    let k = *nw;
+    // c = (M_W M_Wᵀ)⁻¹ M_W M_iᵀ with the factor of the last `solve_equality`; the pivot of
+    // the extended factor is ‖M_i‖² − (M_W M_iᵀ)ᵀ c.
+    for a in 0..k {
+        p.g[a] = dot_rows(p.m, n, working[a], i);
+    }
+    p.c[..k].copy_from_slice(&p.g[..k]);
+    cholesky_solve(p.chol, k, &mut p.c[..k]);
+    let mut proj = R::ZERO;
+    for a in 0..k {
+        proj += p.g[a] * p.c[a];
+    }
+    let pivot = p.norm2[i] - proj;
+    if k < n && pivot > pivot_tol * p.norm2[i] {
+        working[k] = i;
+        p.lambda[k] = R::ZERO;
+        *nw = k + 1;
+        return true;
+    }
+    // Dependent: move λ along (−c, 1) until a λ_j with c_j > 0 reaches zero.
+    let mut t = None::<R>;
+    let mut leave = 0;
+    for a in 0..k {
+        if p.c[a] > R::ZERO {
+            let ta = p.lambda[a] / p.c[a];
+            if t.map_or(true, |t| ta < t) {
+                t = Some(ta);
+                leave = a;
+            }
+        }
+    }
+    let Some(t) = t else {
+        return false;
+    };
+    for a in 0..k {
+        p.lambda[a] -= t * p.c[a];
+    }
+    remove(p.lambda, working, nw, leave);
+    let k = *nw;
+    working[k] = i;
+    p.lambda[k] = t;
+    *nw = k + 1;
+    true
+}
+
+fn remove<R: Real>(lambda: &mut [R], working: &mut [usize], nw: &mut usize, idx: usize) {
+    let k = *nw;
+    for a in idx..k - 1 {
+        working[a] = working[a + 1];
+        lambda[a] = lambda[a + 1];
+    }
+    *nw = k - 1;
 }
 
 /// In-place lower Cholesky of the row-major `k × k` matrix (lower triangle read); `false`

@@ -19,7 +19,8 @@
 //! continuous (a ramp of width `v_s` volts and `ω_s` rad/s) instead of a jump: an exact
 //! `sgn` would switch by `2 V_d` on every zero crossing of the command, and the measurement
 //! noise makes those crossings many at rest, which is chatter. A ramp (rather than `tanh`)
-//! needs no floating-point library, so the law runs unchanged without `std`.
+//! needs no floating-point library, so the law runs unchanged without `std`: it is
+//! rip-control's ([`rip_control::CompensationDesign`]), the code the device runs too.
 //!
 //! The controller itself plans with the bounds shrunk by the largest correction,
 //! `[u_min + V_d + V_f, u_max − V_d − V_f]` ([`Compensation::inner_bounds`]), so that the
@@ -63,12 +64,6 @@ pub struct Compensation {
     velocity_scale: f64,
     u_min: f64,
     u_max: f64,
-}
-
-/// A continuous sign: `clamp(s, −1, 1)`.
-#[inline]
-fn ramp_sign(s: f64) -> f64 {
-    s.clamp(-1.0, 1.0)
 }
 
 impl Compensation {
@@ -177,18 +172,25 @@ impl Compensation {
 
     #[inline]
     fn unclamped(&self, v: f64, arm_rate: f64) -> f64 {
-        let rate = if arm_rate.is_finite() { arm_rate } else { 0.0 };
-        let w = v + self.friction_voltage * ramp_sign(rate / self.velocity_scale);
-        w + self.dead_zone * ramp_sign(w / self.voltage_scale)
+        self.as_control().unclamped(v, arm_rate)
+    }
+
+    /// The law as rip-control runs it (one definition for the host and the device).
+    #[inline]
+    fn as_control(&self) -> rip_control::CompensationDesign<f64> {
+        rip_control::CompensationDesign {
+            dead_zone: self.dead_zone,
+            friction_voltage: self.friction_voltage,
+            voltage_scale: self.voltage_scale,
+            velocity_scale: self.velocity_scale,
+        }
     }
 
     /// The voltage the linear model sees when `u` is written at the arm rate `arm_rate`:
     /// `z(u) − V_f σ(θ̇̂/ω_s)`, the inverse of [`apply`](Self::apply) outside the ramps.
     #[inline]
     pub fn effective(&self, u: f64, arm_rate: f64) -> f64 {
-        let rate = if arm_rate.is_finite() { arm_rate } else { 0.0 };
-        let z = u - u.clamp(-self.dead_zone, self.dead_zone);
-        z - self.friction_voltage * ramp_sign(rate / self.velocity_scale)
+        self.as_control().effective(u, arm_rate)
     }
 }
 

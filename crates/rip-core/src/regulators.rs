@@ -31,15 +31,20 @@
 //! after construction, [`reset`](Controller::reset), [`seed`](Controller::seed) and every
 //! [`observe`](Controller::observe) (a sample whose input someone else chose, such as the
 //! swing-up's), so the first own move after a catch is the plain `−K_x(x̂ − x_ref)`.
+//!
+//! # One implementation
+//!
+//! Both step with [`rip_control::Controller`], the `no_std` code `rip-rt` and the firmware run
+//! too: these types check their arguments, build the [`rip_control::Design`]
+//! ([`Lqr::control_design`], [`Lqg::control_design`]) and convert at the boundary.
 
-use nalgebra::{DVector, SMatrix, SVector};
+use nalgebra::SMatrix;
 
 use crate::controller::{Controller, StepStatus};
 use crate::error::{Result, RipError};
-use crate::kalman::CurrentEstimator;
 use crate::linalg::{check_finite, check_shape, Mat};
 use crate::lqr::dlqr;
-use crate::onboard::{put, refused, ControlDesign, ControlKind};
+use crate::onboard::{put, refused, ControlDesign, ControlKind, ControlStep};
 use crate::paper;
 
 /// Default cut-off (Hz) of [`Lqr`]'s rate filter.
@@ -47,6 +52,13 @@ pub const DEFAULT_RATE_CUTOFF_HZ: f64 = 20.0;
 
 /// Number of plant states `[θ, θ̇, α, α̇]`.
 const NX: usize = 4;
+
+/// The rate estimate of [`Lqr`] (its type docs give the equations) for the two angles
+/// `[θ, α]`: the backward difference through a first-order low-pass, over all the periods
+/// held since the last measured angle. The one definition of the rig's rate estimate
+/// (rip-control's): the reinforcement-learning environments observe the same
+/// ([`crate::sim::vec_env::Observer`]). Allocation-free and `Copy`.
+pub type RateFilter = rip_control::RateFilter<f64>;
 
 fn check_bounds(u_min: f64, u_max: f64) -> Result<()> {
     if !(u_min.is_finite() && u_max.is_finite() && u_min < u_max) {
@@ -58,93 +70,49 @@ fn check_bounds(u_min: f64, u_max: f64) -> Result<()> {
     Ok(())
 }
 
+fn check_integral_gain(gain: f64) -> Result<()> {
+    if !gain.is_finite() {
+        return Err(RipError::invalid(
+            "integral_gain",
+            format!("must be finite, got {gain}"),
+        ));
+    }
+    Ok(())
+}
+
 fn gain_row(k: &Mat) -> Result<SMatrix<f64, 1, NX>> {
     check_shape("K", k, 1, NX)?;
     check_finite("K", k)?;
     Ok(SMatrix::<f64, 1, NX>::from_fn(|_, j| k[(0, j)]))
 }
 
-/// The integrator of the arm error and its gain (module docs, "Integral action").
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Integral {
-    gain: f64,
-    ts: f64,
-    state: f64,
+/// The rip-control controller of `design` (already checked field by field here).
+fn runner(design: &ControlDesign) -> Result<Box<ControlStep<f64>>> {
+    ControlStep::new(design).map(Box::new).map_err(refused)
 }
 
-impl Integral {
-    /// The integrator of gain `gain`, or none for a zero gain (no integral action): the one
-    /// rule behind both regulators' `with_integral_action`.
-    fn with_gain(gain: f64, ts: f64) -> Result<Option<Self>> {
-        if gain == 0.0 {
-            Ok(None)
-        } else {
-            Self::new(gain, ts).map(Some)
-        }
-    }
-
-    fn new(gain: f64, ts: f64) -> Result<Self> {
-        if !gain.is_finite() {
-            return Err(RipError::invalid(
-                "integral_gain",
-                format!("must be finite, got {gain}"),
-            ));
-        }
-        Ok(Self {
-            gain,
-            ts,
-            state: 0.0,
-        })
-    }
-
-    /// Integrates the arm error `error = θ_ref − θ̂` after a move whose unclamped value was
-    /// `v` and written value `u`, except in the direction that deepens a saturation.
-    #[inline]
-    fn update(&mut self, error: f64, v: f64, u: f64) {
-        let push = -self.gain * self.ts * error;
-        if (v > u && push > 0.0) || (v < u && push < 0.0) {
-            return;
-        }
-        let next = self.state + self.ts * error;
-        if next.is_finite() {
-            self.state = next;
-        }
-    }
-}
-
-/// Zeroes the integrator, if any (the bumpless start).
-fn clear(integral: &mut Option<Integral>) {
-    if let Some(i) = integral {
-        i.state = 0.0;
-    }
-}
-
-/// `sat(−K (x − x_ref) − k_i x_i)` (the integral term when there is one), then the
-/// integrator's update with the measured arm angle `arm`; a non-finite value (only possible from non-finite measurements)
-/// becomes 0 and is reported as [`StepStatus::Fallback`], and leaves the integrator as it was.
+/// The step of either regulator through rip-control: the move into `u[0]` and the status.
 #[inline]
-fn feedback(
-    k: &SMatrix<f64, 1, NX>,
-    x: &SVector<f64, NX>,
-    r: &[f64],
-    bounds: (f64, f64),
-    integral: &mut Option<Integral>,
-    arm: f64,
-) -> (f64, StepStatus) {
-    let err = SVector::<f64, NX>::new(x[0] - r[0], x[1], x[2] - r[1], x[3]);
-    let mut v = -(k * err)[0];
-    if let Some(i) = integral {
-        v -= i.gain * i.state;
-    }
-    if v.is_finite() {
-        let u = v.clamp(bounds.0, bounds.1);
-        if let Some(i) = integral {
-            i.update(r[0] - arm, v, u);
-        }
-        (u, StepStatus::Nominal)
+fn step_with(inner: &mut ControlStep<f64>, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
+    let mv = inner.step(rip_control::Measurement {
+        angles: [y[0], y[1]],
+        reference: [r[0], r[1]],
+    });
+    u[0] = mv.voltage;
+    if mv.status.is_nominal() {
+        StepStatus::Nominal
     } else {
-        (0.0f64.clamp(bounds.0, bounds.1), StepStatus::Fallback)
+        StepStatus::Fallback
     }
+}
+
+/// `x` as the four plant states, NaN when it is short (a seed that is then a held period).
+fn plant_state(x: &[f64]) -> [f64; NX] {
+    let mut s = [f64::NAN; NX];
+    if x.len() >= NX {
+        s.copy_from_slice(&x[..NX]);
+    }
+    s
 }
 
 /// LQR on measured angles with rates from a filtered difference (the paper's section 4: "the
@@ -176,114 +144,7 @@ fn feedback(
 /// [`StepStatus::Fallback`].
 #[derive(Debug, Clone)]
 pub struct Lqr {
-    k: SMatrix<f64, 1, NX>,
-    ts: f64,
-    cutoff_hz: f64,
-    bounds: (f64, f64),
-    /// `[θ, θ̇̂, α, α̇̂]`: the filter's last angles and rates.
-    x_hat: SVector<f64, NX>,
-    filter: RateFilter,
-    integral: Option<Integral>,
-}
-
-/// The rate estimate of [`Lqr`] (its type docs give the equations) for the two angles
-/// `[θ, α]`: the backward difference through a first-order low-pass, over all the periods
-/// [held](Self::hold) since the last measured angle. The one definition of the rig's rate
-/// estimate: the reinforcement-learning environments observe the same
-/// ([`crate::sim::vec_env::Observer`]). Allocation-free and `Copy`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RateFilter {
-    /// `a = e^{−2π f_c Ts}`.
-    a: f64,
-    ts: f64,
-    angles: [f64; 2],
-    rates: [f64; 2],
-    started: bool,
-    /// Periods held since the last measured angle.
-    held: u32,
-}
-
-impl RateFilter {
-    /// A filter for period `ts` (s, positive) and cut-off `cutoff_hz` (Hz, positive;
-    /// `f64::INFINITY` for the plain difference). The callers check both: [`Lqr::new`] and
-    /// [`EnvConfig::validate`](crate::sim::vec_env::EnvConfig::validate).
-    pub fn new(ts: f64, cutoff_hz: f64) -> Self {
-        Self {
-            a: (-2.0 * std::f64::consts::PI * cutoff_hz * ts).exp(),
-            ts,
-            angles: [0.0; 2],
-            rates: [0.0; 2],
-            started: false,
-            held: 0,
-        }
-    }
-
-    /// Takes the measured angles `y`; `false`, with nothing changed, when they or the rates
-    /// from them are not finite (one bad reading must not leave NaN in the filter for good).
-    /// The first sample after construction or [`reset`](Self::reset) gives zero rates.
-    #[inline]
-    pub fn update(&mut self, y: [f64; 2]) -> bool {
-        if !(y[0].is_finite() && y[1].is_finite()) {
-            return false;
-        }
-        if self.started {
-            let periods = self.held.saturating_add(1);
-            let dt = f64::from(periods) * self.ts;
-            let a = self.a.powi(i32::try_from(periods).unwrap_or(i32::MAX));
-            let mut rates = [0.0; 2];
-            for (rate, (yi, (prev, prev_rate))) in rates
-                .iter_mut()
-                .zip(y.iter().zip(self.angles.iter().zip(self.rates)))
-            {
-                let d = (yi - prev) / dt;
-                *rate = a * prev_rate + (1.0 - a) * d;
-            }
-            if !rates.iter().all(|v| v.is_finite()) {
-                return false;
-            }
-            self.rates = rates;
-        } else {
-            self.rates = [0.0; 2];
-            self.started = true;
-        }
-        self.held = 0;
-        self.angles = y;
-        true
-    }
-
-    /// Counts a period without a measured angle, so that the next difference spans it.
-    #[inline]
-    pub fn hold(&mut self) {
-        if self.started {
-            self.held = self.held.saturating_add(1);
-        }
-    }
-
-    /// Sets the angles and rates, as if just measured.
-    pub fn seed(&mut self, angles: [f64; 2], rates: [f64; 2]) {
-        self.angles = angles;
-        self.rates = rates;
-        self.started = true;
-        self.held = 0;
-    }
-
-    /// Forgets everything: the next sample starts the rates at zero.
-    pub fn reset(&mut self) {
-        self.angles = [0.0; 2];
-        self.rates = [0.0; 2];
-        self.started = false;
-        self.held = 0;
-    }
-
-    /// The last measured angles `[θ, α]`.
-    pub fn angles(&self) -> [f64; 2] {
-        self.angles
-    }
-
-    /// The rate estimates `[θ̇̂, α̇̂]`.
-    pub fn rates(&self) -> [f64; 2] {
-        self.rates
-    }
+    inner: Box<ControlStep<f64>>,
 }
 
 impl Lqr {
@@ -298,15 +159,15 @@ impl Lqr {
                 format!("must be positive (or infinite), got {rate_cutoff_hz}"),
             ));
         }
-        Ok(Self {
-            k,
+        let mut d = ControlDesign {
+            kind: ControlKind::Lqr,
             ts,
-            cutoff_hz: rate_cutoff_hz,
-            bounds: (-paper::INPUT_LIMIT, paper::INPUT_LIMIT),
-            x_hat: SVector::zeros(),
-            filter: RateFilter::new(ts, rate_cutoff_hz),
-            integral: None,
-        })
+            input_bounds: [-paper::INPUT_LIMIT, paper::INPUT_LIMIT],
+            rate_cutoff_hz,
+            ..ControlDesign::default()
+        };
+        d.k.copy_from_slice(k.as_slice());
+        Ok(Self { inner: runner(&d)? })
     }
 
     /// Designs `K = dlqr(A_d, B_d, Q, R)` and builds the regulator.
@@ -324,93 +185,61 @@ impl Lqr {
         Self::new(&design.k, ts, rate_cutoff_hz)
     }
 
-    /// Replaces the input bounds (must be finite with `u_min < u_max`).
-    pub fn with_input_bounds(mut self, u_min: f64, u_max: f64) -> Result<Self> {
-        check_bounds(u_min, u_max)?;
-        self.bounds = (u_min, u_max);
+    fn rebuilt(mut self, edit: impl FnOnce(&mut ControlDesign)) -> Result<Self> {
+        let mut d = self.inner.design().clone();
+        edit(&mut d);
+        self.inner = runner(&d)?;
         Ok(self)
+    }
+
+    /// Replaces the input bounds (must be finite with `u_min < u_max`).
+    pub fn with_input_bounds(self, u_min: f64, u_max: f64) -> Result<Self> {
+        check_bounds(u_min, u_max)?;
+        self.rebuilt(|d| d.input_bounds = [u_min, u_max])
     }
 
     /// Adds integral action on the arm error with gain `k_i` (module docs): `K` is then the
     /// state part `K_x` of the augmented design. A zero gain is no integral action.
-    pub fn with_integral_action(mut self, k_i: f64) -> Result<Self> {
-        self.integral = Integral::with_gain(k_i, self.ts)?;
-        Ok(self)
+    pub fn with_integral_action(self, k_i: f64) -> Result<Self> {
+        check_integral_gain(k_i)?;
+        self.rebuilt(|d| d.integral_gain = k_i)
     }
 
     /// The integral gain `k_i`, when the regulator has integral action.
     pub fn integral_gain(&self) -> Option<f64> {
-        self.integral.map(|i| i.gain)
+        let g = self.inner.design().integral_gain;
+        (g != 0.0).then_some(g)
     }
 
     /// The gain `K` (1×4).
     pub fn gain(&self) -> Mat {
-        Mat::from_fn(1, NX, |_, j| self.k[(0, j)])
+        Mat::from_row_slice(1, NX, &self.inner.design().k)
     }
 
     /// Sample time (s).
     pub fn ts(&self) -> f64 {
-        self.ts
+        self.inner.design().ts
     }
 
     /// Rate-filter cut-off (Hz).
     pub fn rate_cutoff_hz(&self) -> f64 {
-        self.cutoff_hz
+        self.inner.design().rate_cutoff_hz
     }
 
     /// Input bounds `(u_min, u_max)`.
     pub fn input_bounds(&self) -> (f64, f64) {
-        self.bounds
-    }
-
-    fn count_held_period(&mut self) {
-        self.filter.hold();
+        let [lo, hi] = self.inner.design().input_bounds;
+        (lo, hi)
     }
 
     /// The design rip-control runs for this regulator ([`crate::onboard`]).
     pub fn control_design(&self) -> ControlDesign {
-        let mut d = ControlDesign {
-            kind: ControlKind::Lqr,
-            ts: self.ts,
-            input_bounds: [self.bounds.0, self.bounds.1],
-            rate_cutoff_hz: self.cutoff_hz,
-            integral_gain: self.integral.map_or(0.0, |i| i.gain),
-            ..ControlDesign::default()
-        };
-        d.k.copy_from_slice(self.k.as_slice());
-        d
+        self.inner.design().clone()
     }
-    /// Updates `x̂` from the angles `y` (type docs); `false`, with `x̂` untouched, when the
-    /// sample is unusable.
-    fn update_estimate(&mut self, y: &[f64]) -> bool {
-        if !self.filter.update([y[0], y[1]]) {
-            return false;
-        }
-        self.sync_estimate();
-        true
-    }
-    /// `x̂ = [θ, θ̇̂, α, α̇̂]` from the filter.
-    fn sync_estimate(&mut self) {
-        let ([theta, alpha], [theta_rate, alpha_rate]) =
-            (self.filter.angles(), self.filter.rates());
-        self.x_hat = SVector::<f64, NX>::new(theta, theta_rate, alpha, alpha_rate);
-    }
-    /// The step for an unusable sample: `x̂` stays, the period counts as held, and the move is
-    /// the feedback on the kept estimate (zero before the first usable sample).
-    fn discard_sample(&mut self, r: &[f64], u: &mut [f64]) -> StepStatus {
-        self.count_held_period();
-        // No measurement of the arm error: the integral term acts, the integrator stays.
-        let mut frozen = self.integral;
-        u[0] = feedback(
-            &self.k,
-            &self.x_hat,
-            r,
-            self.bounds,
-            &mut frozen,
-            self.x_hat[0],
-        )
-        .0;
-        StepStatus::Fallback
+
+    /// The integrator state `x_i` (zero without integral action).
+    pub fn integrator(&self) -> f64 {
+        self.inner.integrator()
     }
 }
 
@@ -424,51 +253,27 @@ impl Controller for Lqr {
     }
 
     fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
-        if !self.update_estimate(y) {
-            return self.discard_sample(r, u);
-        }
-        let arm = self.x_hat[0];
-        let (value, status) = feedback(
-            &self.k,
-            &self.x_hat,
-            r,
-            self.bounds,
-            &mut self.integral,
-            arm,
-        );
-        u[0] = value;
-        status
+        step_with(&mut self.inner, y, r, u)
     }
 
     /// The estimate update of [`step`](Controller::step) (an unusable sample counts as held);
     /// the input plays no part in it.
-    fn observe(&mut self, y: &[f64], _u: &[f64]) {
-        if !self.update_estimate(y) {
-            self.count_held_period();
-        }
-        clear(&mut self.integral);
+    fn observe(&mut self, y: &[f64], u: &[f64]) {
+        self.inner.observe([y[0], y[1]], u[0]);
     }
 
     /// `x̂ = x`, the next rate difference taken from this sample's angles.
-    fn seed(&mut self, x: &[f64], _u: &[f64]) {
-        clear(&mut self.integral);
-        if x.len() >= NX && x[..NX].iter().all(|v| v.is_finite()) {
-            self.filter.seed([x[0], x[2]], [x[1], x[3]]);
-            self.sync_estimate();
-        } else {
-            self.count_held_period();
-        }
+    fn seed(&mut self, x: &[f64], u: &[f64]) {
+        self.inner.seed(plant_state(x), u[0]);
     }
 
     /// Counts the period, so that the next rate difference spans it (type docs).
-    fn hold(&mut self, _u: &[f64]) {
-        self.count_held_period();
+    fn hold(&mut self, u: &[f64]) {
+        self.inner.hold(u[0]);
     }
 
     fn reset(&mut self) {
-        self.x_hat.fill(0.0);
-        self.filter.reset();
-        clear(&mut self.integral);
+        self.inner.reset();
     }
 
     fn sample_time(&self) -> Option<f64> {
@@ -476,7 +281,7 @@ impl Controller for Lqr {
     }
 
     fn state_estimate(&self) -> Option<&[f64]> {
-        Some(self.x_hat.as_slice())
+        Some(self.inner.estimate())
     }
 }
 
@@ -498,28 +303,21 @@ impl Controller for Lqr {
 ///
 /// A [held](Controller::hold) period with input `u_h` has no measurement, so `e = 0`:
 /// `x̂[k|k] = x̂[k|k−1]` and `x̂[k+1|k] = A x̂[k|k−1] + B_u u_h`
-/// ([`CurrentEstimator::predict_without_measurement`]). A sample with non-finite angles, or
+/// (rip-control's time update without innovation). A sample with non-finite angles, or
 /// whose correction overflows, is discarded the same way (`e = 0`), the move computed on
 /// `x̂[k|k−1]` and reported as [`StepStatus::Fallback`].
 #[derive(Debug, Clone)]
 pub struct Lqg {
-    k: SMatrix<f64, 1, NX>,
-    estimator: CurrentEstimator,
+    inner: Box<ControlStep<f64>>,
     l: Mat,
     m: Mat,
-    ts: f64,
-    bounds: (f64, f64),
-    plant_estimate: SVector<f64, NX>,
-    u_buf: [f64; 1],
-    /// The full estimator state written by [`Controller::seed`].
-    seed_buf: Vec<f64>,
-    integral: Option<Integral>,
 }
 
 impl Lqg {
     /// Builds the LQG from the gain `k` (1×4), the estimator model `a` (n×n), `b_u` (n×1), `c`
     /// (2×n) and the Kalman gains `l` (predictor) and `m` (innovation), both n×2, as returned by
-    /// [`kalman`](crate::kalman::kalman). Input bounds ±12 V.
+    /// [`kalman`](crate::kalman::kalman). Input bounds ±12 V. At most
+    /// [`rip_control::MAX_NX`] states.
     #[allow(clippy::too_many_arguments)]
     pub fn new(k: &Mat, a: &Mat, b_u: &Mat, c: &Mat, l: &Mat, m: &Mat, ts: f64) -> Result<Self> {
         let k = gain_row(k)?;
@@ -543,78 +341,74 @@ impl Lqg {
         check_shape("C", c, 2, n)?;
         check_shape("L", l, n, 2)?;
         check_shape("M", m, n, 2)?;
-        let estimator = CurrentEstimator::new(
-            a.clone(),
-            b_u.clone(),
-            c.clone(),
-            None,
-            l.clone(),
-            m.clone(),
-            DVector::zeros(n),
-        )?;
+        for (name, x) in [("A", a), ("B", b_u), ("C", c), ("L", l), ("M", m)] {
+            check_finite(name, x)?;
+        }
+        let mut d = ControlDesign {
+            kind: ControlKind::Lqg,
+            ts,
+            input_bounds: [-paper::INPUT_LIMIT, paper::INPUT_LIMIT],
+            nx: n,
+            ny: 2,
+            ..ControlDesign::default()
+        };
+        d.k.copy_from_slice(k.as_slice());
+        let cap = rip_control::MAX_NX;
+        put("A", &mut d.a, a, cap, cap)?;
+        put("B", &mut d.b, b_u, cap, 1)?;
+        put("C", &mut d.c, c, rip_control::MAX_NY, cap)?;
+        put("L", &mut d.l, l, cap, rip_control::MAX_NY)?;
+        put("M", &mut d.m, m, cap, rip_control::MAX_NY)?;
         Ok(Self {
-            k,
-            estimator,
+            inner: runner(&d)?,
             l: l.clone(),
             m: m.clone(),
-            ts,
-            bounds: (-paper::INPUT_LIMIT, paper::INPUT_LIMIT),
-            plant_estimate: SVector::zeros(),
-            u_buf: [0.0],
-            seed_buf: vec![0.0; n],
-            integral: None,
         })
     }
 
-    /// Replaces the input bounds (must be finite with `u_min < u_max`).
-    pub fn with_input_bounds(mut self, u_min: f64, u_max: f64) -> Result<Self> {
-        check_bounds(u_min, u_max)?;
-        self.bounds = (u_min, u_max);
+    fn rebuilt(mut self, edit: impl FnOnce(&mut ControlDesign)) -> Result<Self> {
+        let mut d = self.inner.design().clone();
+        edit(&mut d);
+        self.inner = runner(&d)?;
         Ok(self)
+    }
+
+    /// Replaces the input bounds (must be finite with `u_min < u_max`).
+    pub fn with_input_bounds(self, u_min: f64, u_max: f64) -> Result<Self> {
+        check_bounds(u_min, u_max)?;
+        self.rebuilt(|d| d.input_bounds = [u_min, u_max])
     }
 
     /// Adds integral action on the arm error with gain `k_i` (module docs): `K` is then the
     /// state part `K_x` of the augmented design. A zero gain is no integral action.
-    pub fn with_integral_action(mut self, k_i: f64) -> Result<Self> {
-        self.integral = Integral::with_gain(k_i, self.ts)?;
-        Ok(self)
+    pub fn with_integral_action(self, k_i: f64) -> Result<Self> {
+        check_integral_gain(k_i)?;
+        self.rebuilt(|d| d.integral_gain = k_i)
     }
 
     /// The integral gain `k_i`, when the regulator has integral action.
     pub fn integral_gain(&self) -> Option<f64> {
-        self.integral.map(|i| i.gain)
+        let g = self.inner.design().integral_gain;
+        (g != 0.0).then_some(g)
     }
 
     /// The gain `K` (1×4).
     pub fn gain(&self) -> Mat {
-        Mat::from_fn(1, NX, |_, j| self.k[(0, j)])
+        Mat::from_row_slice(1, NX, &self.inner.design().k)
     }
 
     /// The design rip-control runs for this regulator ([`crate::onboard`]).
     ///
     /// # Errors
-    /// More estimator states than rip-control holds ([`rip_control::MAX_NX`]), naming `A`.
+    /// None today (the constructor checked the capacity); kept fallible for designs that
+    /// grow.
     pub fn control_design(&self) -> Result<ControlDesign> {
-        let mut d = ControlDesign {
-            kind: ControlKind::Lqg,
-            ts: self.ts,
-            input_bounds: [self.bounds.0, self.bounds.1],
-            integral_gain: self.integral.map_or(0.0, |i| i.gain),
-            ..ControlDesign::default()
-        };
-        d.k.copy_from_slice(self.k.as_slice());
-        let (a, b, c, l, m) = self.estimator.matrices();
-        let n = a.nrows();
-        let cap = rip_control::MAX_NX;
-        put("A", &mut d.a, a, cap, cap)?;
-        put("B", &mut d.b, b, cap, 1)?;
-        put("C", &mut d.c, c, rip_control::MAX_NY, cap)?;
-        put("L", &mut d.l, l, cap, rip_control::MAX_NY)?;
-        put("M", &mut d.m, m, cap, rip_control::MAX_NY)?;
-        d.nx = n;
-        d.ny = 2;
-        d.validate().map_err(refused)?;
-        Ok(d)
+        Ok(self.inner.design().clone())
+    }
+
+    /// The integrator state `x_i` (zero without integral action).
+    pub fn integrator(&self) -> f64 {
+        self.inner.integrator()
     }
 
     /// Predictor gain `L` (n×2).
@@ -634,40 +428,13 @@ impl Lqg {
 
     /// Sample time (s).
     pub fn ts(&self) -> f64 {
-        self.ts
+        self.inner.design().ts
     }
 
     /// Input bounds `(u_min, u_max)`.
     pub fn input_bounds(&self) -> (f64, f64) {
-        self.bounds
-    }
-
-    /// The measurement update of a step; `false` when `y` was unusable and the sample was
-    /// taken as having no measurement (type docs).
-    fn correct(&mut self, y: &[f64]) -> bool {
-        let mut usable = y.iter().all(|v| v.is_finite());
-        if usable {
-            let posterior = self.estimator.correct(y, &self.u_buf);
-            usable = posterior.iter().all(|v| v.is_finite());
-        }
-        if !usable {
-            // Discarded as if it had not arrived (e = 0, x̂[k|k] = x̂[k|k−1]): one bad reading
-            // must not leave NaN or Inf in the estimator for good.
-            self.estimator.correct_without_measurement();
-        }
-        let posterior = self.estimator.posterior();
-        for i in 0..NX {
-            self.plant_estimate[i] = posterior[i];
-        }
-        usable
-    }
-
-    /// Records `u` as the applied input. A non-finite one would poison the estimator for
-    /// good; the last applied input is the best remaining guess of what the plant received.
-    fn set_applied(&mut self, u: &[f64]) {
-        if let Some(&applied) = u.first().filter(|v| v.is_finite()) {
-            self.u_buf[0] = applied;
-        }
+        let [lo, hi] = self.inner.design().input_bounds;
+        (lo, hi)
     }
 }
 
@@ -681,75 +448,28 @@ impl Controller for Lqg {
     }
 
     fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
-        let usable = self.correct(y);
-        // An unusable sample is no measurement of the arm error: nothing to integrate.
-        let mut frozen = self.integral;
-        let integral = if usable {
-            &mut self.integral
-        } else {
-            &mut frozen
-        };
-        // The measured arm angle, as `lqi` integrates the output: the plant part of the
-        // estimate leaves out what the output-disturbance state has taken up.
-        let (value, status) = feedback(
-            &self.k,
-            &self.plant_estimate,
-            r,
-            self.bounds,
-            integral,
-            y[0],
-        );
-        self.u_buf[0] = value;
-        u[0] = value;
-        self.estimator.predict(&self.u_buf);
-        if usable {
-            status
-        } else {
-            StepStatus::Fallback
-        }
+        step_with(&mut self.inner, y, r, u)
     }
 
     /// The correction of [`step`](Controller::step) with `y`, then the prediction with the
     /// applied `u` (a non-finite `u` keeps the last applied input, as in
     /// [`hold`](Controller::hold)).
     fn observe(&mut self, y: &[f64], u: &[f64]) {
-        clear(&mut self.integral);
-        self.correct(y);
-        self.set_applied(u);
-        self.estimator.predict(&self.u_buf);
+        self.inner.observe([y[0], y[1]], u[0]);
     }
 
     /// `x̂[k|k] = [x; 0]`, then `x̂[k+1|k] = A x̂[k|k] + B_u u`.
     fn seed(&mut self, x: &[f64], u: &[f64]) {
-        clear(&mut self.integral);
-        if x.len() < NX || !x[..NX].iter().all(|v| v.is_finite()) {
-            self.hold(u);
-            return;
-        }
-        self.seed_buf.fill(0.0);
-        self.seed_buf[..NX].copy_from_slice(&x[..NX]);
-        self.estimator.set_prior(&self.seed_buf);
-        self.estimator.correct_without_measurement();
-        self.plant_estimate.copy_from_slice(&x[..NX]);
-        self.set_applied(u);
-        self.estimator.predict(&self.u_buf);
+        self.inner.seed(plant_state(x), u[0]);
     }
 
     /// Advances the estimator over the period with `u` and no innovation (type docs).
     fn hold(&mut self, u: &[f64]) {
-        self.set_applied(u);
-        self.estimator.predict_without_measurement(&self.u_buf);
-        let posterior = self.estimator.posterior();
-        for i in 0..NX {
-            self.plant_estimate[i] = posterior[i];
-        }
+        self.inner.hold(u[0]);
     }
 
     fn reset(&mut self) {
-        self.estimator.reset();
-        self.plant_estimate.fill(0.0);
-        self.u_buf[0] = 0.0;
-        clear(&mut self.integral);
+        self.inner.reset();
     }
 
     fn sample_time(&self) -> Option<f64> {
@@ -757,13 +477,14 @@ impl Controller for Lqg {
     }
 
     fn state_estimate(&self) -> Option<&[f64]> {
-        Some(self.estimator.posterior().as_slice())
+        Some(self.inner.estimate())
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::DVector;
 
     #[test]
     fn an_unusable_sample_leaves_no_nan_behind() {
@@ -997,9 +718,9 @@ mod tests {
         for _ in 0..50 {
             g.step(&[0.0, 0.0], &[1.0, 0.0], &mut u);
         }
-        assert!(g.integral.unwrap().state > 0.0);
+        assert!(g.integrator() > 0.0);
         g.seed(&[0.0; 4], &[0.0]);
-        assert_eq!(g.integral.unwrap().state, 0.0);
+        assert_eq!(g.integrator(), 0.0);
     }
 
     fn lqr_without_integral_has_none() -> bool {

@@ -1,14 +1,15 @@
-//! rip-control, the one run-time implementation, against rip-core's controllers and solvers:
-//! the regulators step for step, the MPC's dual active-set QP against Clarabel and against
-//! the dense primal active set on closed-loop simulations of both presets, and the bytes a
+//! rip-control, the one run-time implementation, against independent references: the MPC's
+//! dual active-set QP against Clarabel and against the dense primal active set rip-core used
+//! before (`primal/`), on closed-loop simulations of both presets, and the bytes a
 //! design travels in.
+
+mod primal;
 
 use nalgebra::DVector;
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use rip_control::{Controller as Step, Measurement, Status};
 type CDesign = rip_control::Design<f64>;
-use rip_core::controller::{Controller, StepStatus};
 use rip_core::mpc::QpSolver;
 use rip_core::spec::Spec;
 
@@ -20,73 +21,6 @@ fn specs() -> Vec<(&'static str, Spec)> {
             Spec::parse("[plant]\npreset = 'qube_servo2'\n").unwrap(),
         ),
     ]
-}
-
-/// Angles that move like a balancing run, with noise, NaN samples and held periods.
-fn measurement(k: usize, rng: &mut StdRng) -> Option<[f64; 2]> {
-    if k % 97 == 13 {
-        return None;
-    }
-    let t = k as f64 * 0.01;
-    let n = Normal::new(0.0, 1e-3).unwrap();
-    let mut y = [
-        0.4 * (1.3 * t).sin() + n.sample(rng),
-        0.05 * (4.1 * t).cos() + n.sample(rng),
-    ];
-    if k % 89 == 7 {
-        y[1] = f64::NAN;
-    }
-    Some(y)
-}
-
-#[test]
-fn the_regulators_step_as_rip_core_did() {
-    let mut worst = 0.0f64;
-    for (name, spec) in specs() {
-        let design = spec.design(0.01).unwrap();
-        for integral in [false, true] {
-            let mut lqr = design.lqr().unwrap();
-            let mut lqg = design.lqg().unwrap();
-            if integral {
-                lqr = lqr.with_integral_action(-3.0).unwrap();
-                lqg = lqg.with_integral_action(-3.0).unwrap();
-            }
-            let mut s_lqr = Step::new(&lqr.control_design()).unwrap();
-            let mut s_lqg = Step::new(&lqg.control_design().unwrap()).unwrap();
-            let mut rng = StdRng::seed_from_u64(7);
-            let mut u = [0.0];
-            for k in 0..3000 {
-                let r = [if k < 1000 { 0.0 } else { 1.0 }, 0.0];
-                let Some(y) = measurement(k, &mut rng) else {
-                    let held = 0.3;
-                    lqr.hold(&[held]);
-                    lqg.hold(&[held]);
-                    s_lqr.hold(held);
-                    s_lqg.hold(held);
-                    continue;
-                };
-                for (core, onboard) in [
-                    (&mut lqr as &mut dyn Controller, &mut s_lqr),
-                    (&mut lqg, &mut s_lqg),
-                ] {
-                    let status = core.step(&y, &r, &mut u);
-                    let mv = onboard.step(Measurement {
-                        angles: y,
-                        reference: r,
-                    });
-                    let d = (mv.voltage - u[0]).abs();
-                    worst = worst.max(d);
-                    assert!(d <= 1e-12, "{name} k={k}: {} vs {}", mv.voltage, u[0]);
-                    assert_eq!(
-                        status == StepStatus::Nominal,
-                        mv.status == Status::Nominal,
-                        "{name} k={k}"
-                    );
-                }
-            }
-        }
-    }
-    eprintln!("regulators: worst |Δu| = {worst:e} V");
 }
 
 struct QpStats {
@@ -107,14 +41,20 @@ struct QpStats {
 
 /// A closed loop on the nonlinear plant driven by the onboard MPC, through the 0 → 1 rad arm
 /// step with sensor noise and random torque kicks; at every step rip-core solves the same QP
-/// (the onboard estimate and previous move) with Clarabel and with its active set.
+/// (the onboard estimate and previous move) with Clarabel and with the primal active set.
 fn mpc_loop(spec: &Spec, seed: u64, steps: usize, stats: &mut QpStats) {
     let design = spec.design(0.01).unwrap();
     let mut cl_spec = spec.clone();
     cl_spec.mpc.solver = QpSolver::Clarabel;
     let mut clarabel = cl_spec.design(0.01).unwrap().mpc().unwrap();
-    let mut active = design.mpc().unwrap();
-    let cdesign = active.control_design().unwrap();
+    let cdesign = design.mpc().unwrap().control_design().unwrap();
+    let nx = clarabel.n_states();
+    let (h0, _, a0, _) = clarabel
+        .qp_matrices(&vec![0.0; nx], &[0.0], &[0.0, 0.0])
+        .unwrap();
+    let mut primal = primal::ActiveSetSolver::new(&h0, &a0, Some(h0.nrows() - 1), 200).unwrap();
+    let (lo, hi) = (clarabel.input_bounds().0[0], clarabel.input_bounds().1[0]);
+    let m = clarabel.control_horizon();
     let mut onboard = Step::new(&cdesign).unwrap();
     let plant = spec.plant().unwrap();
     let mut rng = StdRng::seed_from_u64(seed);
@@ -134,15 +74,28 @@ fn mpc_loop(spec: &Spec, seed: u64, steps: usize, stats: &mut QpStats) {
         });
         assert_eq!(mv.status, Status::Nominal, "seed {seed} k={k}");
         let xhat = onboard.estimate().to_vec();
-        let a = active.solve(&xhat, &[u_prev], &r).unwrap().u[0];
+        let (h, f, ac, b) = clarabel.qp_matrices(&xhat, &[u_prev], &r).unwrap();
+        let out = primal.solve(&f, &b, |z| {
+            primal::project_inputs(z, &[u_prev], &[lo], &[hi], m)
+        });
+        // Its plan clamped to the bounds, as the controller applies it (the solver's hard
+        // rows hold to its feasibility tolerance only).
+        let mut z_primal = primal.solution().clone();
+        let (mut acc, mut prev) = (u_prev, u_prev);
+        for j in 0..m {
+            acc += primal.solution()[j];
+            let v = acc.clamp(lo, hi);
+            z_primal[j] = v - prev;
+            prev = v;
+        }
+        let a = (u_prev + z_primal[0]).clamp(lo, hi);
         let c = clarabel.solve(&xhat, &[u_prev], &r).unwrap().u[0];
-        let a_ok = active.last_solution().status.is_usable();
+        let a_ok = out.status == rip_core::mpc::QpStatus::Solved;
         let c_ok = clarabel.last_solution().status == rip_core::mpc::QpStatus::Solved;
         stats.reference_failures += usize::from(!a_ok) + usize::from(!c_ok);
         stats.clarabel_almost +=
             usize::from(clarabel.last_solution().status == rip_core::mpc::QpStatus::AlmostSolved);
         // The arbiter where they differ: feasibility and cost on the QP itself.
-        let (h, f, ac, b) = active.qp_matrices(&xhat, &[u_prev], &r).unwrap();
         let z_of = |sol: &rip_core::mpc::MpcSolution| {
             let mut z = DVector::zeros(h.nrows());
             let nd = h.nrows() - 1;
@@ -152,7 +105,17 @@ fn mpc_loop(spec: &Spec, seed: u64, steps: usize, stats: &mut QpStats) {
             z
         };
         let z_on = DVector::from_column_slice(onboard.qp_solution());
-        let cost = |z: &DVector<f64>| 0.5 * z.dot(&(&h * z)) + f.dot(z);
+        // Each plan's cost with its optimal slack for its moves (the largest soft violation),
+        // so that a reference's tolerance in ε does not count as a better plan.
+        let (n_input, n_soft) = clarabel.constraint_layout();
+        let cost = |z: &DVector<f64>| {
+            let mut z = z.clone();
+            let nd = z.len() - 1;
+            z[nd] = 0.0;
+            let az = &ac * &z - &b;
+            z[nd] = (n_input..n_input + n_soft).fold(0.0f64, |e, i| e.max(az[i]));
+            0.5 * z.dot(&(&h * &z)) + f.dot(&z)
+        };
         let viol = (&ac * &z_on - &b).max();
         assert!(
             viol <= 1e-9 * (1.0 + b.amax()),
@@ -160,7 +123,7 @@ fn mpc_loop(spec: &Spec, seed: u64, steps: usize, stats: &mut QpStats) {
         );
         let mut best = f64::INFINITY;
         if a_ok {
-            best = best.min(cost(&z_of(active.last_solution())));
+            best = best.min(cost(&z_primal));
             stats.worst_vs_active_set = stats.worst_vs_active_set.max((mv.planned - a).abs());
         }
         if c_ok {
@@ -174,7 +137,7 @@ fn mpc_loop(spec: &Spec, seed: u64, steps: usize, stats: &mut QpStats) {
         stats.qps += 1;
         stats.max_iterations = stats.max_iterations.max(mv.iterations);
         stats.saturated += usize::from(mv.planned.abs() > 12.0 - 1e-9);
-        stats.active_soft += usize::from(active.last_solution().slack > 1e-9);
+        stats.active_soft += usize::from(onboard.qp_solution()[m] > 1e-9);
         if k % 150 == 0 {
             kick = rng.gen_range(-0.03..0.03);
         } else if k % 150 == 10 {
@@ -271,4 +234,107 @@ fn a_design_travels_in_bytes_unchanged_and_corruption_is_refused() {
         ));
     }
     assert_eq!(rip_control::crc32(b"123456789"), 0xCBF4_3926);
+}
+
+#[test]
+fn at_the_iteration_bound_the_fallback_is_the_clamped_unconstrained_move_and_is_counted() {
+    let mpc = Spec::default().design(0.01).unwrap().mpc().unwrap();
+    let mut d = mpc.control_design().unwrap();
+    d.max_iterations = 1;
+    let mut onboard = Step::new(&d).unwrap();
+    let mut limited = 0;
+    for k in 0..50 {
+        // A large tilt: the soft bound and the voltage bound are active, so one iteration
+        // cannot finish.
+        let y = [0.0, if k < 5 { 0.45 } else { 0.0 }];
+        let u_prev = onboard.last_input();
+        let mv = onboard.step(Measurement {
+            angles: y,
+            reference: [0.0, 0.0],
+        });
+        assert!(mv.voltage.is_finite() && mv.voltage.abs() <= 12.0);
+        if mv.status != Status::IterationLimit {
+            continue;
+        }
+        limited += 1;
+        let (h, f, _, _) = mpc
+            .qp_matrices(onboard.estimate(), &[u_prev], &[0.0, 0.0])
+            .unwrap();
+        let z = -h.cholesky().unwrap().solve(&f);
+        let want = (u_prev + z[0]).clamp(-12.0, 12.0);
+        assert!(
+            (mv.voltage - want).abs() < 1e-9,
+            "k={k}: {} vs {want}",
+            mv.voltage
+        );
+    }
+    assert!(limited > 0);
+    assert_eq!(onboard.stats().iteration_limits, limited);
+}
+
+/// The design rounded to `f32` by the bytes it travels in, as a single-precision device reads it.
+fn in_f32(d: &CDesign) -> rip_control::Design<f32> {
+    let mut buf = vec![0u8; d.encoded_len()];
+    d.to_bytes(&mut buf).unwrap();
+    rip_control::Design::<f32>::from_bytes(&buf).unwrap()
+}
+
+/// The measurement behind the number format: each controller in `f32` follows the same
+/// measurements as in `f64` over a 15 s nonlinear loop (0 → 1 rad step). The LQRs stay within
+/// 30–60 µV; the estimators drift (paper LQG 12 V, MPC 17 V and 8 V apart by the end: the
+/// slow Kalman error modes integrate `f32` round-off), so the device runs `f64`, where the moves
+/// are the host's bit for bit. Should a better-conditioned `f32` form ever pass, this test
+/// says so and the choice is to be revisited.
+#[test]
+fn single_precision_meets_one_millivolt_for_the_lqr_but_not_for_the_mpc() {
+    let mut results = Vec::new();
+    for (name, spec) in specs() {
+        let design = spec.design(0.01).unwrap();
+        let designs = [
+            design.lqr().unwrap().control_design(),
+            design.lqg().unwrap().control_design().unwrap(),
+            design.mpc().unwrap().control_design().unwrap(),
+        ];
+        let plant = spec.plant().unwrap();
+        for d in &designs {
+            let mut c64 = Step::new(d).unwrap();
+            let mut c32 = Step::new(&in_f32(d)).unwrap();
+            let mut rng = StdRng::seed_from_u64(3);
+            let noise = Normal::new(0.0, 5e-4).unwrap();
+            let mut x = rip_core::plant::State::new(0.0, 0.0, 0.1, 0.0);
+            let mut worst = 0.0f64;
+            for k in 0..1500 {
+                let r = [if k < 300 { 0.0 } else { 1.0 }, 0.0];
+                let y = [x[0] + noise.sample(&mut rng), x[2] + noise.sample(&mut rng)];
+                let m64 = c64.step(Measurement {
+                    angles: y,
+                    reference: r,
+                });
+                // The f32 controller's own estimate runs on: the comparison is of the two
+                // arithmetics over a whole run, not of one step from a shared state.
+                #[allow(clippy::cast_possible_truncation)]
+                let m32 = c32.step(Measurement {
+                    angles: y.map(|v| v as f32),
+                    reference: r.map(|v| v as f32),
+                });
+                let diff = (m64.voltage - f64::from(m32.voltage)).abs();
+                worst = worst.max(diff);
+                for _ in 0..10 {
+                    plant.rk4_step(&mut x, m64.voltage, 0.0, 0.001);
+                }
+            }
+            eprintln!(
+                "{name} {}: worst |u_f64 − u_f32| = {worst:e} V",
+                d.kind.name()
+            );
+            results.push((name, d.kind, worst));
+        }
+    }
+    for &(name, kind, worst) in &results {
+        match kind {
+            rip_control::Kind::Lqr => assert!(worst < 1e-3, "{name} LQR in f32: {worst:e} V"),
+            rip_control::Kind::Mpc => assert!(worst > 1e-3, "{name} MPC in f32 now agrees"),
+            rip_control::Kind::Lqg => {}
+        }
+    }
 }

@@ -3,7 +3,6 @@
 
 use nalgebra::DVector;
 
-use super::active_set::ActiveSetSolver;
 use super::clarabel_backend::ClarabelBackend;
 use super::condense::Condensed;
 use serde::{Deserialize, Serialize};
@@ -16,8 +15,8 @@ use crate::error::{Result, RipError};
 /// [`MpcSettings`](super::MpcSettings)'s both profiles, Python's `riprs.Mpc`): both solve the
 /// same strictly convex QP to the same minimiser (agreeing to the solvers' tolerances, which
 /// the MPC tests check along the paper's loop), so the choice changes speed, not the
-/// controller. The active set warm-starts from the previous working set and solves in a few
-/// microseconds without allocating, which a 100 Hz loop and a Monte Carlo study both need
+/// controller. The active set (rip-control's dual method) warm-starts from the previous working
+/// set and solves in a few microseconds without allocating, which a 100 Hz loop and a Monte Carlo study both need
 /// (about 50× Clarabel's throughput in `simulate_metrics`); Clarabel, the interior-point
 /// reference, allocates inside its solve and costs about a hundred times more per step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -26,10 +25,10 @@ pub enum QpSolver {
     /// Clarabel interior-point solver (the reference). Clarabel allocates inside its `solve`,
     /// so a step with this backend is not allocation-free.
     Clarabel,
-    /// Dense primal active-set solver with warm start (module `active_set`); solves
-    /// without allocating. A problem whose nearly dependent constraints make its working-set
-    /// systems singular (rare: none along the paper's loop) is handed to Clarabel, which
-    /// allocates.
+    /// The dual active-set solver of rip-control ([`rip_control::qp`], in the manner of
+    /// DAQP) with warm start and a bounded iteration count: the same code the device runs.
+    /// Nearly dependent rows are exchanged within the method, so no problem is handed to
+    /// another solver; solves without allocating.
     #[default]
     ActiveSet,
 }
@@ -94,19 +93,21 @@ impl QpStatus {
     }
 }
 
+/// rip-control's dual active set in vectors (the host's problems can exceed the device's
+/// fixed capacities).
+type DualSolver = rip_control::qp::DualActiveSet<f64, Vec<f64>, Vec<usize>>;
+
 pub(crate) enum Backend {
     Clarabel(Box<ClarabelBackend>),
-    /// The active-set solver, and Clarabel on the same QP for the rare problem whose nearly
-    /// dependent constraints (output rows late in a long horizon converge to the steady-state
-    /// gain) make its working-set systems singular.
-    ActiveSet(Box<ActiveSetSolver>, Box<ClarabelBackend>),
+    /// The dual active-set solver.
+    ActiveSet(Box<DualSolver>),
 }
 
 impl Clone for Backend {
     fn clone(&self) -> Self {
         match self {
             Self::Clarabel(c) => Self::Clarabel(c.clone()),
-            Self::ActiveSet(a, rescue) => Self::ActiveSet(a.clone(), rescue.clone()),
+            Self::ActiveSet(a) => Self::ActiveSet(a.clone()),
         }
     }
 }
@@ -115,7 +116,7 @@ impl std::fmt::Debug for Backend {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::Clarabel(c) => c.fmt(f),
-            Self::ActiveSet(..) => f.write_str("ActiveSetSolver"),
+            Self::ActiveSet(..) => f.write_str("DualActiveSet"),
         }
     }
 }
@@ -129,70 +130,62 @@ impl Backend {
                 &qp.a,
                 max_iterations,
             )?)),
-            QpSolver::ActiveSet => Self::ActiveSet(
-                Box::new(
-                    ActiveSetSolver::new(&qp.h, &qp.a, Some(qp.nz - 1), max_iterations)
-                        .ok_or_else(|| RipError::NotPositiveDefinite {
-                            name: "QP Hessian".into(),
-                        })?,
-                ),
-                Box::new(ClarabelBackend::new(&qp.h, &qp.a, max_iterations)?),
-            ),
+            QpSolver::ActiveSet => {
+                let (n, ncon) = (qp.nz, qp.ncon);
+                let row_major = |m: &crate::linalg::Mat| {
+                    let mut v = Vec::with_capacity(m.nrows() * m.ncols());
+                    for i in 0..m.nrows() {
+                        v.extend(m.row(i).iter());
+                    }
+                    v
+                };
+                let iterations = u32::try_from(max_iterations).unwrap_or(u32::MAX);
+                Self::ActiveSet(Box::new(
+                    DualSolver::new_in(
+                        &row_major(&qp.h),
+                        &row_major(&qp.a),
+                        n,
+                        ncon,
+                        iterations,
+                        vec![0.0; DualSolver::storage_len(n, ncon)],
+                        vec![0; n],
+                    )
+                    .ok_or_else(|| RipError::NotPositiveDefinite {
+                        name: "QP Hessian".into(),
+                    })?,
+                ))
+            }
         })
     }
 
     /// Solves `min ½zᵀHz + fᵀz` s.t. `A_c z ≤ b` into `z`; returns the status and iterations.
-    /// `u_prev`, `bounds` and `m` let the active-set solver start from a move that respects the
-    /// input bounds.
     pub(crate) fn solve(
         &mut self,
         f: &DVector<f64>,
         b: &DVector<f64>,
-        u_prev: &[f64],
-        (lo, hi): (&[f64], &[f64]),
-        m: usize,
         z: &mut DVector<f64>,
     ) -> (QpStatus, usize) {
         match self {
             Self::Clarabel(solver) => solver.solve(f, b, z),
-            Self::ActiveSet(solver, rescue) => {
-                let out = solver.solve(f, b, |z| project_inputs(z, u_prev, lo, hi, m));
-                z.copy_from(solver.solution());
-                let status = if out.status.is_usable() && z.iter().any(|v| !v.is_finite()) {
-                    QpStatus::NumericalTrouble
-                } else {
-                    out.status
+            Self::ActiveSet(solver) => {
+                use rip_control::qp::QpOutcome;
+                let (outcome, iterations) = solver.solve(f.as_slice(), b.as_slice());
+                z.copy_from_slice(solver.solution());
+                let status = match outcome {
+                    QpOutcome::Solved => QpStatus::Solved,
+                    QpOutcome::IterationLimit => QpStatus::MaxIterations,
+                    QpOutcome::Infeasible => QpStatus::Infeasible,
+                    QpOutcome::NumericalTrouble => QpStatus::NumericalTrouble,
                 };
-                if status == QpStatus::NumericalTrouble {
-                    let (status, iterations) = rescue.solve(f, b, z);
-                    (status, out.iterations + iterations)
-                } else {
-                    (status, out.iterations)
-                }
+                (status, iterations as usize)
             }
         }
     }
 
     /// Forgets the warm start.
     pub(crate) fn reset(&mut self) {
-        if let Self::ActiveSet(s, _) = self {
+        if let Self::ActiveSet(s) = self {
             s.reset();
-        }
-    }
-}
-
-/// Moves `Δ` so that every blocked input `u(k+j) = u⁻ + Σ_{l≤j} Δu(k+l)` lies in its bounds:
-/// the running sums are clamped and the moves recomputed from them.
-fn project_inputs(z: &mut [f64], u_prev: &[f64], lo: &[f64], hi: &[f64], m: usize) {
-    let nu = u_prev.len();
-    for c in 0..nu {
-        let mut target = u_prev[c];
-        let mut prev = u_prev[c];
-        for j in 0..m {
-            target += z[j * nu + c];
-            let v = target.max(lo[c]).min(hi[c]);
-            z[j * nu + c] = v - prev;
-            prev = v;
         }
     }
 }

@@ -73,7 +73,6 @@
 //! `P ≤` [`MAX_PREDICTION_HORIZON`] ([`MpcSettings::validate`]) and at most
 //! [`MAX_CONDENSED_ENTRIES`] entries in the largest condensed matrix ([`Mpc::new`]).
 
-mod active_set;
 mod backend;
 mod clarabel_backend;
 mod condense;
@@ -541,9 +540,7 @@ impl Mpc {
             if !(all_finite(self.f.as_slice()) && all_finite(self.b.as_slice())) {
                 (QpStatus::InvalidInput, 0)
             } else {
-                let bounds = (self.u_lo.as_slice(), self.u_hi.as_slice());
-                self.backend
-                    .solve(&self.f, &self.b, u_prev, bounds, m, &mut self.z)
+                self.backend.solve(&self.f, &self.b, &mut self.z)
             }
         } else {
             (pre_status, 0)

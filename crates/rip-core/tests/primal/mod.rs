@@ -1,4 +1,6 @@
-//! A dense primal active-set QP solver for the small condensed MPC problem.
+#![allow(dead_code)]
+//! The dense primal active-set QP solver rip-core used before rip-control's dual method (kept
+//! here as an independent reference for the tests).
 //!
 //! Solves
 //!
@@ -34,12 +36,12 @@
 
 use nalgebra::DVector;
 
-use super::QpStatus;
-use crate::linalg::Mat;
+use rip_core::linalg::Mat;
+use rip_core::mpc::QpStatus;
 
 /// Outcome of one [`ActiveSetSolver::solve`].
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct ActiveSetOutcome {
+pub struct ActiveSetOutcome {
     pub status: QpStatus,
     /// Subproblems solved (working-set changes plus one).
     pub iterations: usize,
@@ -47,7 +49,7 @@ pub(crate) struct ActiveSetOutcome {
 
 /// Dense primal active-set solver with warm start (module docs).
 #[derive(Debug, Clone)]
-pub(crate) struct ActiveSetSolver {
+pub struct ActiveSetSolver {
     n: usize,
     ncon: usize,
     a: Mat,
@@ -339,5 +341,20 @@ fn cholesky_solve(l: &[f64], k: usize, rhs: &mut [f64]) {
             v -= l[r * k + i] * rhs[r];
         }
         rhs[i] = v / l[i * k + i];
+    }
+}
+/// Moves `Δ` so that every blocked input `u(k+j) = u⁻ + Σ_{l≤j} Δu(k+l)` lies in its bounds:
+/// the running sums are clamped and the moves recomputed from them.
+pub fn project_inputs(z: &mut [f64], u_prev: &[f64], lo: &[f64], hi: &[f64], m: usize) {
+    let nu = u_prev.len();
+    for c in 0..nu {
+        let mut target = u_prev[c];
+        let mut prev = u_prev[c];
+        for j in 0..m {
+            target += z[j * nu + c];
+            let v = target.max(lo[c]).min(hi[c]);
+            z[j * nu + c] = v - prev;
+            prev = v;
+        }
     }
 }
