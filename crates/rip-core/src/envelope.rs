@@ -245,7 +245,7 @@ impl HoldLaw {
     /// The voltage for the arm at `offset` (rad) from its hold point moving at `rate`
     /// (rad/s), the pendulum at `alpha` (rad, 0 upright) moving at `alpha_rate` (rad/s).
     pub fn voltage(&self, offset: f64, rate: f64, alpha: f64, alpha_rate: f64) -> f64 {
-        let phi = crate::swingup::wrap_angle(alpha - std::f64::consts::PI);
+        let phi = crate::trig::wrap_angle(alpha - std::f64::consts::PI);
         let u = -(self.k[0] * offset + self.k[1] * rate + self.k[2] * phi + self.k[3] * alpha_rate);
         if u.is_finite() {
             u.clamp(-self.voltage, self.voltage)

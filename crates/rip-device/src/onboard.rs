@@ -1,0 +1,357 @@
+//! Onboard mode (protocol v2): the controller interface, the upload state machine, the
+//! controller steps and their telemetry (crate docs, "Onboard mode").
+
+// The device's private state and the protocol names it uses.
+use super::*;
+
+/// The design image was intact but the controller cannot run it ([`Onboard::load`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DesignRefused;
+
+/// An onboard controller as the device sees it: a buffer for the uploaded design image, and a
+/// law from encoder positions to a voltage (module docs, "Onboard mode").
+pub trait Onboard {
+    /// The buffer the design image is uploaded into; its length is the largest image the
+    /// device accepts.
+    fn buffer(&mut self) -> &mut [u8];
+    /// Loads the image in `buffer()[..len]`, whose length and CRC-32 the device has checked.
+    fn load(&mut self, len: usize) -> Result<(), DesignRefused>;
+    /// The loaded design's step period, µs (the firmware's timer period).
+    fn period_us(&self) -> u32;
+    /// Prepares a run from the encoder positions (arm, pendulum) at the start: the estimator's
+    /// initial state, no previous move.
+    fn reset(&mut self, positions: [i32; 2]);
+    /// One step from the encoder positions (arm, pendulum, counts): the move, volts.
+    fn step(&mut self, positions: [i32; 2]) -> f64;
+}
+
+/// The device without an onboard controller (the v1 device): every upload is refused as too
+/// large, and onboard mode cannot start.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct NoOnboard;
+
+impl Onboard for NoOnboard {
+    fn buffer(&mut self) -> &mut [u8] {
+        &mut []
+    }
+    fn load(&mut self, _len: usize) -> Result<(), DesignRefused> {
+        Err(DesignRefused)
+    }
+    fn period_us(&self) -> u32 {
+        0
+    }
+    fn reset(&mut self, _positions: [i32; 2]) {}
+    fn step(&mut self, _positions: [i32; 2]) -> f64 {
+        0.0
+    }
+}
+
+/// An upload in progress.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Upload {
+    pub(crate) total: u32,
+    pub(crate) next: u32,
+}
+
+/// An onboard run in progress.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Run {
+    pub(crate) settings: OnboardStart,
+    // Device time at which the next step is due (used by `onboard_tick`).
+    pub(crate) due_us: u32,
+    pub(crate) step: u32,
+    pub(crate) last_host_us: u32,
+    pub(crate) last_cycles: u32,
+    pub(crate) overruns: u16,
+}
+
+impl<C: Onboard> Device<C> {
+    /// A processor-in-the-loop step (protocol docs of `PilStep`): the controller's move on
+    /// the given positions, timed, without driving the motor.
+    pub(crate) fn pil_step(&mut self, seq: u16, p: PilStep) -> Frame {
+        let code = if self.run.is_some() {
+            ACK_BUSY
+        } else if !self.design_loaded {
+            ACK_NO_DESIGN
+        } else {
+            ACK_OK
+        };
+        let mut out = PilMove {
+            ack_seq: seq,
+            step: self.pil_steps,
+            voltage_bits: f64::NAN.to_bits(),
+            cycles: 0,
+            code,
+        };
+        if code == ACK_OK {
+            let positions = [p.arm_counts, p.pendulum_counts];
+            if p.flags & PIL_RESET != 0 {
+                self.onboard.reset(positions);
+                self.pil_steps = 0;
+            }
+            let t0 = self.cycle_counter.map_or(0, |(c, _)| c());
+            let u = self.onboard.step(positions);
+            if let Some((c, shift)) = self.cycle_counter {
+                out.cycles = c().wrapping_sub(t0) >> shift;
+            }
+            self.pil_steps = self.pil_steps.wrapping_add(1);
+            out.step = self.pil_steps;
+            out.voltage_bits = u.to_bits();
+        }
+        self.next_frame(Message::PilMove(out))
+    }
+
+    /// Handles a v2 host request: the ack's code and value.
+    pub(crate) fn onboard_request(&mut self, message: Message, inputs: &Inputs) -> (u8, u32) {
+        match message {
+            Message::UploadBegin(_) | Message::UploadChunk(_) | Message::UploadCommit(_)
+                if self.run.is_some() =>
+            {
+                (ACK_BUSY, 0)
+            }
+            Message::UploadBegin(b) => {
+                // A new upload overwrites the buffer: the loaded design is gone.
+                self.design_loaded = false;
+                self.onboard_state = ONBOARD_IDLE;
+                if b.total_len as usize > self.onboard.buffer().len() || b.total_len == 0 {
+                    self.upload = None;
+                    return (ACK_TOO_LARGE, 0);
+                }
+                self.upload = Some(Upload {
+                    total: b.total_len,
+                    next: 0,
+                });
+                (ACK_OK, 0)
+            }
+            Message::UploadChunk(c) => self.chunk(&c),
+            Message::UploadCommit(c) => self.commit(&c),
+            Message::OnboardStart(s) => self.start(s, inputs),
+            Message::OnboardStop { flags } => {
+                if self.run.is_some() {
+                    self.stop_onboard(ONBOARD_STOPPED, flags & COMMAND_BRAKE != 0);
+                } else {
+                    self.command = Command::STOP;
+                    self.brake = flags & COMMAND_BRAKE != 0 && !self.fault;
+                }
+                (ACK_OK, self.onboard_state as u32)
+            }
+            _ => (ACK_REFUSED, 0),
+        }
+    }
+
+    pub(crate) fn chunk(&mut self, c: &UploadChunk) -> (u8, u32) {
+        let Some(up) = self.upload.as_mut() else {
+            return (ACK_NO_UPLOAD, 0);
+        };
+        if c.offset != up.next {
+            return (ACK_OUT_OF_ORDER, up.next);
+        }
+        let bytes = c.bytes();
+        let end = up.next as u64 + bytes.len() as u64;
+        if end > up.total as u64 {
+            return (ACK_TOO_LARGE, up.next);
+        }
+        let at = up.next as usize;
+        up.next = end as u32;
+        let next = up.next;
+        // `total` was checked against the buffer's length at the begin.
+        if let Some(dst) = self.onboard.buffer().get_mut(at..at + bytes.len()) {
+            dst.copy_from_slice(bytes);
+        }
+        (ACK_OK, next)
+    }
+
+    pub(crate) fn commit(&mut self, c: &UploadCommit) -> (u8, u32) {
+        let Some(up) = self.upload else {
+            return (ACK_NO_UPLOAD, 0);
+        };
+        if c.len != up.next || c.len != up.total {
+            return (ACK_LENGTH_MISMATCH, up.next);
+        }
+        let len = up.next as usize;
+        let crc = self.onboard.buffer().get(..len).map_or(!c.crc32, crc32);
+        self.upload = None;
+        if crc != c.crc32 {
+            return (ACK_CRC_MISMATCH, crc);
+        }
+        match self.onboard.load(len) {
+            Ok(()) => {
+                self.design_loaded = true;
+                (ACK_OK, crc)
+            }
+            Err(DesignRefused) => (ACK_DESIGN_REFUSED, crc),
+        }
+    }
+
+    pub(crate) fn start(&mut self, s: OnboardStart, inputs: &Inputs) -> (u8, u32) {
+        if !self.design_loaded || self.onboard.period_us() == 0 {
+            return (ACK_NO_DESIGN, self.onboard_state as u32);
+        }
+        if s.decimation == 0 || s.host_timeout_ms == 0 {
+            return (ACK_BAD_SETTINGS, self.onboard_state as u32);
+        }
+        let positions = self.positions();
+        if self.fault || Self::outside_limits(&s, positions).is_some() {
+            return (ACK_REFUSED, self.onboard_state as u32);
+        }
+        self.onboard.reset(positions);
+        self.run = Some(Run {
+            settings: s,
+            due_us: inputs.now_us,
+            step: 0,
+            last_host_us: inputs.now_us,
+            last_cycles: 0,
+            overruns: 0,
+        });
+        self.watchdog = false;
+        self.onboard_state = ONBOARD_RUNNING;
+        (ACK_OK, ONBOARD_RUNNING as u32)
+    }
+
+    /// The limit the positions exceed, if any: arm first.
+    pub(crate) fn outside_limits(s: &OnboardStart, [arm, pendulum]: [i32; 2]) -> Option<u8> {
+        let off = |p: i32, c: i32| (p as i64 - c as i64).unsigned_abs();
+        if off(arm, s.arm_center) > s.arm_limit as u64 {
+            Some(ONBOARD_ARM_LIMIT)
+        } else if off(pendulum, s.pendulum_center) > s.pendulum_limit as u64 {
+            Some(ONBOARD_PENDULUM_LIMIT)
+        } else {
+            None
+        }
+    }
+
+    /// Ends onboard mode with `state`: 0 V, driver disabled, braking if `brake` (and no fault).
+    pub(crate) fn stop_onboard(&mut self, state: u8, brake: bool) {
+        self.run = None;
+        self.onboard_state = state;
+        self.command = Command::STOP;
+        self.brake = brake && !self.fault;
+        if state == ONBOARD_HOST_SILENT {
+            self.watchdog = true;
+        }
+    }
+
+    /// Steps the onboard controller if a step is due at `inputs.now_us` (one
+    /// [`Onboard::period_us`] after the previous one): for a main loop or a simulation that
+    /// calls the device more often than the controller's period. Returns what
+    /// [`onboard_step`](Self::onboard_step) returns, or `None` when no step was due.
+    pub fn onboard_tick(&mut self, inputs: &Inputs) -> Option<Frame> {
+        let due = self.run?.due_us;
+        if (inputs.now_us.wrapping_sub(due) as i32) < 0 {
+            self.tick(inputs);
+            return None;
+        }
+        self.onboard_step(inputs)
+    }
+
+    /// One onboard controller step at the instant `inputs` was read (the firmware's timer
+    /// interrupt): the checks of the module docs, the controller's move applied, and a
+    /// telemetry frame to send every `decimation` steps and on the step that stops the run.
+    /// Without a run in progress it only ticks and returns `None`.
+    pub fn onboard_step(&mut self, inputs: &Inputs) -> Option<Frame> {
+        self.tick(inputs);
+        let mut run = self.run?;
+        let positions = self.positions();
+        let silent = inputs.now_us.wrapping_sub(run.last_host_us)
+            > run.settings.host_timeout_ms as u32 * 1000;
+        let stop = if self.fault {
+            Some((ONBOARD_DRIVER_FAULT, false))
+        } else if silent {
+            Some((ONBOARD_HOST_SILENT, true))
+        } else {
+            Self::outside_limits(&run.settings, positions).map(|s| (s, true))
+        };
+        let stop = stop.or_else(|| {
+            let u = self.onboard.step(positions);
+            if !u.is_finite() {
+                return Some((ONBOARD_BAD_MOVE, true));
+            }
+            let limit = self.cfg.voltage_limit_mv.min(i16::MAX as u16) as f64;
+            let mv = (u * 1000.0).clamp(-limit, limit);
+            self.command = Command {
+                voltage_mv: libm_round(mv) as i16,
+                flags: COMMAND_ENABLE,
+            };
+            self.brake = false;
+            // Each step is the command the v1 watchdog waits for (module docs).
+            self.last_command_us = inputs.now_us;
+            None
+        });
+        let period = self.onboard.period_us().max(1);
+        run.due_us = run.due_us.wrapping_add(period);
+        if (inputs.now_us.wrapping_sub(run.due_us) as i32) > 0 {
+            // Far behind: resume from now rather than catch up with a burst of steps.
+            run.due_us = inputs.now_us.wrapping_add(period);
+        }
+        let step = run.step;
+        run.step = run.step.wrapping_add(1);
+        self.run = Some(run);
+        if let Some((state, brake)) = stop {
+            self.stop_onboard(state, brake);
+        }
+        let report = stop.is_some() || step % run.settings.decimation.max(1) as u32 == 0;
+        report.then(|| self.telemetry(&run, step, positions, inputs.now_us))
+    }
+
+    pub(crate) fn telemetry(
+        &mut self,
+        run: &Run,
+        step: u32,
+        positions: [i32; 2],
+        now_us: u32,
+    ) -> Frame {
+        let t = Telemetry {
+            step,
+            device_time_us: now_us,
+            arm_counts: positions[0],
+            pendulum_counts: positions[1],
+            applied_mv: self.voltage_mv(),
+            status: self.status(),
+            onboard: self.onboard_state,
+            step_cycles: run.last_cycles,
+            overruns: run.overruns,
+        };
+        self.next_frame(Message::Telemetry(t))
+    }
+
+    /// Records how long the last controller step took, `cycles` processor cycles, against
+    /// its `budget` (the period's cycles): a step over budget is an overrun, which stops
+    /// onboard mode (module docs). Returns whether it overran.
+    pub fn record_step_cycles(&mut self, cycles: u32, budget: u32) -> bool {
+        let Some(run) = self.run.as_mut() else {
+            return false;
+        };
+        run.last_cycles = cycles;
+        if cycles <= budget {
+            return false;
+        }
+        run.overruns = run.overruns.saturating_add(1);
+        self.stop_onboard(ONBOARD_OVERRUN, true);
+        true
+    }
+
+    /// The `ONBOARD_*` state: running, idle, or why the last run stopped.
+    pub fn onboard_state(&self) -> u8 {
+        self.onboard_state
+    }
+
+    /// Whether onboard mode runs.
+    pub fn onboard_running(&self) -> bool {
+        self.run.is_some()
+    }
+
+    /// Whether a committed design is loaded.
+    pub fn design_loaded(&self) -> bool {
+        self.design_loaded
+    }
+
+    /// The onboard controller.
+    pub fn onboard(&self) -> &C {
+        &self.onboard
+    }
+
+    /// The onboard controller, mutable (to read or replace its design outside the protocol).
+    pub fn onboard_mut(&mut self) -> &mut C {
+        &mut self.onboard
+    }
+}
