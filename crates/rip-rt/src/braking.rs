@@ -5,7 +5,7 @@
 
 use crate::config::Config;
 use crate::envelope::{
-    brake_mode, Brake, BrakeCommand, BrakeMode, BrakeReport, StopSequence, BLIND_PERIODS,
+    stop_mode, Brake, BrakeCommand, BrakeMode, BrakeReport, StopSequence, BLIND_PERIODS,
     MAX_BRAKE_S, MAX_HOLD_S,
 };
 use crate::loop_core::LoopCore;
@@ -29,8 +29,9 @@ fn send(io: &Fd, command: Command) -> bool {
 
 /// Brings the arm to rest after the run stopped for `reason` (module docs), on the loop's
 /// grid `periodic`; the caller then sends the stop frame. `driven`: whether the run sent an
-/// enabling command (without one the arm was never driven, and nothing is sent). Returns at
-/// once when nothing can or need be braked.
+/// enabling command (without one the arm was never driven, and nothing is sent).
+/// `wiring_checked`: whether the wiring's sign is known, i.e. the run has no sign check or
+/// its sign check passed ([`stop_mode`]). Returns at once when nothing can or need be braked.
 pub fn bring_to_rest(
     io: &Fd,
     core: &mut LoopCore,
@@ -38,12 +39,9 @@ pub fn bring_to_rest(
     periodic: &mut Periodic,
     reason: &StopReason,
     driven: bool,
+    wiring_checked: bool,
 ) -> BrakeReport {
-    let mode = if driven {
-        brake_mode(reason)
-    } else {
-        BrakeMode::None
-    };
+    let mode = stop_mode(reason, driven, wiring_checked);
     let mut report = BrakeReport {
         mode,
         seconds: 0.0,

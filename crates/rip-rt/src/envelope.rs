@@ -285,6 +285,19 @@ pub fn brake_mode(reason: &StopReason) -> BrakeMode {
     }
 }
 
+/// How the stop after `reason` brakes a run that was `driven` (else nothing is sent:
+/// [`BrakeMode::None`]) and whose wiring's sign is `wiring_checked` or not. Before a sign
+/// check has passed, a reversed motor lead or arm encoder is as likely as a right one, so a
+/// law that would trust the sign ([`BrakeMode::Active`]) brakes as [`BrakeMode::Checked`]
+/// instead: with the model's sign, flipped once if the arm speeds up under it, then the short.
+pub fn stop_mode(reason: &StopReason, driven: bool, wiring_checked: bool) -> BrakeMode {
+    match brake_mode(reason) {
+        _ if !driven => BrakeMode::None,
+        BrakeMode::Active if !wiring_checked => BrakeMode::Checked,
+        mode => mode,
+    }
+}
+
 /// Periods in a row of a rising arm speed under the saturated braking law with the sign under
 /// test after which that sign is taken to be wrong (the sign the arm showed was not the
 /// wiring's: a wrong scale, say): the law flips once, then gives way to the short.
@@ -823,6 +836,28 @@ mod tests {
         assert!(v.abs() < 1.0, "{v}");
         assert!(travel < 1.4 * short, "{travel} vs {short}");
         assert!(short > 2.0 * right, "{short} {right}");
+    }
+
+    #[test]
+    fn a_stop_before_the_sign_check_passed_checks_the_sign_and_stops_a_reversed_rig() {
+        let cfg = Config::from_toml("").unwrap();
+        // A watchdog stop during the sign-check pulse: the trusted law would be used.
+        let reason = StopReason::Watchdog(3);
+        assert_eq!(stop_mode(&reason, true, true), BrakeMode::Active);
+        assert_eq!(stop_mode(&reason, true, false), BrakeMode::Checked);
+        assert_eq!(stop_mode(&reason, false, false), BrakeMode::None);
+        assert_eq!(
+            stop_mode(&StopReason::Finished, true, true),
+            BrakeMode::Active
+        );
+        // On a rig with its motor leads swapped, the trusted law drives the arm away; the
+        // checked law flips and stops it, within a few times the travel of a right rig.
+        let (right, _) = braked(Brake::new(&cfg, BrakeMode::Active), false, 10.0);
+        let (away, _) = braked(Brake::new(&cfg, BrakeMode::Active), true, 10.0);
+        let (checked, v) = braked(Brake::new(&cfg, BrakeMode::Checked), true, 10.0);
+        assert!(v.abs() < 1.0, "{v}");
+        assert!(away > 5.0 * right, "{away} vs {right}");
+        assert!(checked < 0.5 * away, "{checked} vs {away}");
     }
 
     #[test]

@@ -266,8 +266,16 @@ pub fn run(
             }
         };
     let driven = driver.driven();
-    let braking =
-        crate::braking::bring_to_rest(io, driver.core, cfg, &mut driver.clock, &reason, driven);
+    let wiring_checked = exciter.as_ref().is_some_and(|e| e.sign_report.is_some());
+    let braking = crate::braking::bring_to_rest(
+        io,
+        driver.core,
+        cfg,
+        &mut driver.clock,
+        &reason,
+        driven,
+        wiring_checked,
+    );
     if !opts.quiet && braking.mode != crate::envelope::BrakeMode::None {
         crate::say!("rip-rt: stop: {braking}");
     }

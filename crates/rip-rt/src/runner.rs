@@ -565,8 +565,17 @@ pub fn run(
         }
     };
     let driven = driver.driven();
-    let braking =
-        crate::braking::bring_to_rest(io, driver.core, cfg, &mut driver.clock, &reason, driven);
+    // A swing-up run drives its sign-check pulse before the wiring is known.
+    let wiring_checked = !driver.core.supervises_swing_up() || sign_check.is_some();
+    let braking = crate::braking::bring_to_rest(
+        io,
+        driver.core,
+        cfg,
+        &mut driver.clock,
+        &reason,
+        driven,
+        wiring_checked,
+    );
     if !opts.quiet && braking.mode != crate::envelope::BrakeMode::None {
         crate::say!("rip-rt: stop: {braking}");
     }
