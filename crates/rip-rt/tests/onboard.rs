@@ -162,13 +162,10 @@ fn a_host_that_dies_leaves_the_device_to_stop_the_motor() {
 #[test]
 fn a_signal_ends_the_onboard_run_with_the_motor_stopped() {
     let _one = one_at_a_time();
-    // In lockstep: the subject is the signal's handling, not timing.
+    // In lockstep: the subject is the signal's handling, not timing. No --duration: a lockstep
+    // run outpaces the wall clock (120 s of it ended before the signal), so it runs until one.
     let mut emu = Emulator::lockstep("onboard-signal", &[]);
-    let child = spawn_run(
-        &emu.device,
-        "lqr",
-        &["--onboard", "--lockstep", "--duration", "120"],
-    );
+    let child = spawn_run(&emu.device, "lqr", &["--onboard", "--lockstep"]);
     std::thread::sleep(Duration::from_millis(500));
     unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
     let r = wait_with_timeout(child, Duration::from_secs(5));
