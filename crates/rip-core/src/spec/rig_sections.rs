@@ -172,6 +172,11 @@ pub struct RigSections {
 
 /// The span (s) over which rates are taken from encoder differences (module docs).
 pub const RATE_SPAN_S: f64 = 0.1;
+/// Default rest-rate threshold (rad/s) of `[calibration]`, on encoders fine enough for it.
+pub const DEFAULT_REST_RATE: f64 = 0.2;
+/// The default rest-rate threshold on an encoder too coarse for [`DEFAULT_REST_RATE`]:
+/// this many counts per [`RATE_SPAN_S`] (one count more than the validation's floor of 2).
+pub const DEFAULT_REST_RATE_COUNTS: f64 = 3.0;
 /// Allowed `calibration.rest_window_s` (s): at least a few rate spans, at most a patient wait.
 pub const REST_WINDOW_S: std::ops::RangeInclusive<f64> = 0.2..=10.0;
 /// Longest `calibration.rest_timeout_s` (s); the motor stays disabled while waiting.
@@ -208,10 +213,11 @@ pub struct CalibrationConfig {
     /// [`rest_window_s`]: Self::rest_window_s
     pub settle_timeout_s: f64,
     /// Largest arm rate (rad/s) over any [`RATE_SPAN_S`] of the window, in
-    /// (2 counts per span, [`MAX_REST_RATE`]]. Default 0.2 rad/s.
+    /// (2 counts per span, [`MAX_REST_RATE`]]. Default 0.2 rad/s, or 3 counts per span on an
+    /// encoder too coarse for that ([`CalibrationConfig::resolve_default_rates`]).
     pub rest_arm_rate: f64,
-    /// Largest pendulum rate (rad/s), as [`rest_arm_rate`](Self::rest_arm_rate). Default
-    /// 0.2 rad/s.
+    /// Largest pendulum rate (rad/s), as [`rest_arm_rate`](Self::rest_arm_rate), with the
+    /// same default.
     pub rest_pendulum_rate: f64,
     /// Largest spread (max − min, counts) of either encoder over the window, in
     /// [`REST_COUNTS`]. Default 6 counts (2048 counts per revolution: 18 mrad).
@@ -230,8 +236,8 @@ impl Default for CalibrationConfig {
             rest_window_s: 1.0,
             rest_timeout_s: 3.0,
             settle_timeout_s: 30.0,
-            rest_arm_rate: 0.2,
-            rest_pendulum_rate: 0.2,
+            rest_arm_rate: DEFAULT_REST_RATE,
+            rest_pendulum_rate: DEFAULT_REST_RATE,
             rest_counts: 6,
             max_pendulum_offset: 0.05,
         }
@@ -239,6 +245,24 @@ impl Default for CalibrationConfig {
 }
 
 impl CalibrationConfig {
+    /// The rest rates the file did not set (`given` false), for encoders of `counts` per
+    /// revolution (arm, pendulum): the default [`DEFAULT_REST_RATE`], or
+    /// [`DEFAULT_REST_RATE_COUNTS`] counts per [`RATE_SPAN_S`] where that is more (an encoder
+    /// under about 940 counts per revolution), so that the default stays a count above the
+    /// validation's floor of 2 counts per span on every encoder of the rig envelope (512
+    /// counts and up; at 512 the floor, 0.245 rad/s, is above 0.2 rad/s).
+    pub fn resolve_default_rates(&mut self, counts: [u32; 2], given: [bool; 2]) {
+        let rates = [&mut self.rest_arm_rate, &mut self.rest_pendulum_rate];
+        for ((rate, counts), given) in rates.into_iter().zip(counts).zip(given) {
+            if !given {
+                let coarse = DEFAULT_REST_RATE_COUNTS * std::f64::consts::TAU
+                    / f64::from(counts.max(1))
+                    / RATE_SPAN_S;
+                *rate = DEFAULT_REST_RATE.max(coarse).min(MAX_REST_RATE);
+            }
+        }
+    }
+
     /// Checks every value against its range (and the rate thresholds against the encoders'
     /// resolution in `device`); the error names the key.
     pub fn validate(&self, device: &DeviceConfig) -> Result<(), SpecError> {
@@ -554,13 +578,18 @@ fn name_every_section(e: SpecError) -> SpecError {
 /// and rip-rt's ([`RigSections::validate`]).
 pub fn parse_file(text: &str) -> Result<(Spec, RigSections), SpecError> {
     // A TOML syntax error is reported as by the experiment's reader.
-    parse_table(text)?;
+    let table = parse_table(text)?;
     let (spec, runtime) = Spec::parse_with_runtime(text).map_err(name_every_section)?;
     let mut rig = RigSections::from_runtime(runtime)?;
     [
         rig.device.arm_counts_per_rev,
         rig.device.pendulum_counts_per_rev,
     ] = spec.sensor.encoder_counts;
+    let given = |key: &str| table.get("calibration").and_then(|c| c.get(key)).is_some();
+    rig.calibration.resolve_default_rates(
+        spec.sensor.encoder_counts,
+        [given("rest_arm_rate"), given("rest_pendulum_rate")],
+    );
     rig.validate(&spec)?;
     Ok((spec, rig))
 }
@@ -576,6 +605,22 @@ mod tests {
 
     fn key_of(text: &str) -> String {
         parse_file(text).unwrap_err().key
+    }
+
+    #[test]
+    fn the_default_rest_rates_follow_a_coarse_encoder_and_a_given_rate_is_checked() {
+        let tau = std::f64::consts::TAU;
+        let (_, rig) = parse_file("[sensor]\nencoder_counts = [512, 4096]\n").unwrap();
+        let c = &rig.calibration;
+        assert!((c.rest_arm_rate - 3.0 * tau / 512.0 / RATE_SPAN_S).abs() < 1e-12);
+        assert_eq!(c.rest_pendulum_rate, DEFAULT_REST_RATE);
+        let (_, rig) = parse_file("").unwrap();
+        assert_eq!(rig.calibration.rest_arm_rate, DEFAULT_REST_RATE);
+        // A rate the file sets is used as given, and refused below the encoder's floor.
+        let text = "[sensor]\nencoder_counts = [512, 4096]\n[calibration]\nrest_arm_rate = 0.2\n";
+        assert_eq!(key_of(text), "calibration.rest_arm_rate");
+        let text = "[sensor]\nencoder_counts = [512, 4096]\n[calibration]\nrest_arm_rate = 0.5\n";
+        assert_eq!(parse_file(text).unwrap().1.calibration.rest_arm_rate, 0.5);
     }
 
     #[test]
