@@ -65,7 +65,15 @@ fn case(controller: &str, fault: &str, fault_at: Option<f64>) -> (i32, String, E
             args.extend(["--fault-at", at]);
         }
     }
-    let mut emu = Emulator::start(&name, &args);
+    // Mid-run faults in lockstep: the subject is the witness's verdict on the rig's motion;
+    // in real time a late period shifts the fault's onset against the loop (a frozen encoder
+    // mid-swing then moved 0.61-0.63 rad before the stop). The faults before the swing stay
+    // real time.
+    let mut emu = if fault_at.is_some() {
+        Emulator::lockstep(&name, &args)
+    } else {
+        Emulator::start(&name, &args)
+    };
     let cfg = scratch(&format!("{name}.toml"));
     let device = if fault == "arm_sign" {
         "[device]\narm_sign = -1\n"
@@ -74,19 +82,20 @@ fn case(controller: &str, fault: &str, fault_at: Option<f64>) -> (i32, String, E
     };
     std::fs::write(&cfg, device).unwrap();
     let log = scratch(&format!("{name}.csv"));
-    let r = run(
-        &emu.device,
-        controller,
-        &[
-            "--swing-up",
-            "--duration",
-            "5",
-            "--config",
-            cfg.to_str().unwrap(),
-            "--log",
-            log.to_str().unwrap(),
-        ],
-    );
+    let args = &[
+        "--swing-up",
+        "--duration",
+        "5",
+        "--config",
+        cfg.to_str().unwrap(),
+        "--log",
+        log.to_str().unwrap(),
+    ];
+    let r = if fault_at.is_some() {
+        run_lockstep(&emu.device, controller, &args[..])
+    } else {
+        run(&emu.device, controller, &args[..])
+    };
     std::thread::sleep(std::time::Duration::from_millis(1500));
     let Some(enabled) = first_enabling(&emu) else {
         panic!("{name}: the motor was never enabled: {}", r.stderr);
