@@ -53,6 +53,8 @@ fuzz_target!(|data: &[u8]| {
         ControlLaw::<f64, 1024>::new(),
     );
     let mut host_enabled = false;
+    // The fault line as the device last read it (each tick and frame passes it the inputs).
+    let mut seen_fault = false;
     let mut rest = data;
     let mut seq = 0u16;
     while let Some((&ctl, tail)) = rest.split_first() {
@@ -73,7 +75,11 @@ fuzz_target!(|data: &[u8]| {
         let u32_of = |i: usize| u32::from_le_bytes([p[i], p[i + 1], p[i + 2], p[i + 3]]);
         let message = match ctl & 0x0F {
             0 => Message::UploadBegin(UploadBegin {
-                total_len: if p[2] & 1 == 0 { img_len as u32 } else { u32_of(4) },
+                total_len: if p[2] & 1 == 0 {
+                    img_len as u32
+                } else {
+                    u32_of(4)
+                },
             }),
             1 | 2 => {
                 let off = (p[2] as usize % img_len.div_ceil(CHUNK_MAX)) * CHUNK_MAX;
@@ -81,8 +87,16 @@ fuzz_target!(|data: &[u8]| {
                 Message::UploadChunk(UploadChunk::new(off as u32, &img[off..end]))
             }
             3 => Message::UploadCommit(UploadCommit {
-                len: if p[2] & 1 == 0 { img_len as u32 } else { u32_of(4) },
-                crc32: if p[3] & 1 == 0 { crc32(&img[..img_len]) } else { u32_of(4) },
+                len: if p[2] & 1 == 0 {
+                    img_len as u32
+                } else {
+                    u32_of(4)
+                },
+                crc32: if p[3] & 1 == 0 {
+                    crc32(&img[..img_len])
+                } else {
+                    u32_of(4)
+                },
             }),
             4 => Message::OnboardStart(OnboardStart {
                 decimation: p[2] as u16,
@@ -103,12 +117,18 @@ fuzz_target!(|data: &[u8]| {
                 flags: p[4],
             }),
             8 => {
+                // No inputs reach the device here: judge it on the fault line it last read.
                 dev.record_step_cycles(u32_of(2), u32_of(4));
-                check(&dev, host_enabled, fault, cfg);
+                check(&dev, host_enabled, seen_fault, cfg);
                 continue;
             }
             _ => {
+                // Without a run the tick returns before reading the inputs.
+                let ran = dev.onboard_running();
                 let _ = dev.onboard_tick(&inputs);
+                if ran {
+                    seen_fault = fault;
+                }
                 if !dev.onboard_running() && !dev.enabled() {
                     host_enabled = false;
                 }
@@ -123,6 +143,7 @@ fuzz_target!(|data: &[u8]| {
         }
         seq = seq.wrapping_add(1);
         let _ = dev.handle(Event::Frame(Frame { seq, message }), &inputs);
+        seen_fault = fault;
         if !dev.enabled() {
             host_enabled = false;
         }
