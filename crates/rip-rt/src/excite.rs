@@ -265,20 +265,8 @@ pub fn run(
                 (driver.run(law), Some(cal.to_string()))
             }
         };
-    let driven = driver.driven();
     let wiring_checked = exciter.as_ref().is_some_and(|e| e.sign_report.is_some());
-    let braking = crate::braking::bring_to_rest(
-        io,
-        driver.core,
-        cfg,
-        &mut driver.clock,
-        &reason,
-        driven,
-        wiring_checked,
-    );
-    if !opts.quiet && braking.mode != crate::envelope::BrakeMode::None {
-        crate::say!("rip-rt: stop: {braking}");
-    }
+    driver.bring_to_rest(cfg, &reason, wiring_checked);
     let stop_sent = guard.stop();
     drop(guard);
     let (sign_check, excited_s, max_arm) = match exciter {

@@ -224,6 +224,32 @@ impl<'a> Period<'a> {
         self.last.is_some()
     }
 
+    /// Brings the arm to rest after the run stopped for `reason`
+    /// ([`crate::braking::bring_to_rest`], driven or not as this run was), on this run's
+    /// clock, and says how unless quiet; the caller then sends the stop frame.
+    /// `wiring_checked`: the run has no sign check or its sign check passed.
+    pub fn bring_to_rest(
+        &mut self,
+        cfg: &Config,
+        reason: &StopReason,
+        wiring_checked: bool,
+    ) -> crate::envelope::BrakeReport {
+        let driven = self.driven();
+        let braking = crate::braking::bring_to_rest(
+            self.io,
+            self.core,
+            cfg,
+            &mut self.clock,
+            reason,
+            driven,
+            wiring_checked,
+        );
+        if !self.quiet && braking.mode != crate::envelope::BrakeMode::None {
+            crate::say!("rip-rt: stop: {braking}");
+        }
+        braking
+    }
+
     /// The log, for the caller's own rows.
     pub fn log(&mut self) -> Option<&mut LogWriter> {
         self.log.as_deref_mut()

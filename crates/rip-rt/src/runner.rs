@@ -564,21 +564,9 @@ pub fn run(
             (reason, Some(probe))
         }
     };
-    let driven = driver.driven();
     // A swing-up run drives its sign-check pulse before the wiring is known.
     let wiring_checked = !driver.core.supervises_swing_up() || sign_check.is_some();
-    let braking = crate::braking::bring_to_rest(
-        io,
-        driver.core,
-        cfg,
-        &mut driver.clock,
-        &reason,
-        driven,
-        wiring_checked,
-    );
-    if !opts.quiet && braking.mode != crate::envelope::BrakeMode::None {
-        crate::say!("rip-rt: stop: {braking}");
-    }
+    driver.bring_to_rest(cfg, &reason, wiring_checked);
     let stop_sent = guard.stop();
     drop(guard);
     RunReport {
