@@ -38,7 +38,10 @@ struct Excursion {
 }
 
 fn excursion(truth: &[Truth], onset: f64) -> Excursion {
-    let after: Vec<&Truth> = truth.iter().filter(|r| r.t >= onset).collect();
+    // Strictly after: a row stamped with the command's own time was sampled by the step
+    // before the command arrived (rows come from plant steps, commands between them), so it
+    // shows the bridge as it was, not as the command left it.
+    let after: Vec<&Truth> = truth.iter().filter(|r| r.t > onset).collect();
     let at = after.first().map_or(0.0, |r| r.theta);
     let stop = after
         .iter()
