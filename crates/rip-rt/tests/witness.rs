@@ -68,15 +68,11 @@ fn case(controller: &str, fault: &str, fault_at: Option<f64>) -> (i32, String, E
             args.extend(["--fault-at", at]);
         }
     }
-    // Mid-run faults in lockstep: the subject is the witness's verdict on the rig's motion;
-    // in real time a late period shifts the fault's onset against the loop (a frozen encoder
-    // mid-swing then moved 0.61-0.63 rad before the stop). The faults before the swing stay
-    // real time.
-    let mut emu = if fault_at.is_some() {
-        Emulator::lockstep(&name, &args)
-    } else {
-        Emulator::start(&name, &args)
-    };
+    // In lockstep: the subject is the sign check's and the witness's verdict on the rig's
+    // motion, not the loop's timing. In real time a late period shifts a fault's onset against
+    // the loop (a frozen encoder mid-swing then moved 0.61-0.63 rad before the stop), and on a
+    // loaded machine missed replies end a run by the watchdog (exit 4) before the verdict.
+    let mut emu = Emulator::lockstep(&name, &args);
     let cfg = scratch(&format!("{name}.toml"));
     let device = if fault == "arm_sign" {
         "[device]\narm_sign = -1\n"
@@ -94,11 +90,7 @@ fn case(controller: &str, fault: &str, fault_at: Option<f64>) -> (i32, String, E
         "--log",
         log.to_str().unwrap(),
     ];
-    let r = if fault_at.is_some() {
-        run_lockstep(&emu.device, controller, &args[..])
-    } else {
-        run(&emu.device, controller, &args[..])
-    };
+    let r = run_lockstep(&emu.device, controller, &args[..]);
     std::thread::sleep(std::time::Duration::from_millis(1500));
     let Some(enabled) = first_enabling(&emu) else {
         panic!("{name}: the motor was never enabled: {}", r.stderr);
