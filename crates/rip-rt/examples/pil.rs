@@ -260,9 +260,13 @@ fn main() {
         ok &= pass;
         println!(
             "pil: {name} detail: image={} bytes ts={ts} s pendulum_rms={rms:.5} host_f64_rms={ref_rms:.5} \
-             est_step_us_at_168MHz={est_us:.1} (CPI {CPI_MARGIN}) period_us={}",
+             est_step_us_at_168MHz={est_us:.1} (CPI {CPI_MARGIN}) period_us={} \
+             qp_max_iterations={}",
             img.len(),
-            (ts * 1e6).round()
+            (ts * 1e6).round(),
+            host32
+                .controller()
+                .map_or(0, |c| c.stats().max_iterations)
         );
         lines.push(format!(
             "pil: {name} steps={steps} max_du={max_du:.3e} max_instr={max_instr} balanced={}",
