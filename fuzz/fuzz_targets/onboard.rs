@@ -123,7 +123,9 @@ fuzz_target!(|data: &[u8]| {
                 continue;
             }
             _ => {
-                // Without a run the tick returns before reading the inputs.
+                // Without a run the tick returns before reading the inputs, so the device is
+                // judged on the fault line it last read: a host-enabled device that has not
+                // yet seen a fault may stay enabled.
                 let ran = dev.onboard_running();
                 let _ = dev.onboard_tick(&inputs);
                 if ran {
@@ -132,17 +134,22 @@ fuzz_target!(|data: &[u8]| {
                 if !dev.onboard_running() && !dev.enabled() {
                     host_enabled = false;
                 }
-                check(&dev, host_enabled, fault, cfg);
+                check(&dev, host_enabled, seen_fault, cfg);
                 continue;
             }
         };
         match message {
             Message::Command(c) => host_enabled = c.enabled(),
-            Message::OnboardStop { .. } | Message::OnboardStart(_) => host_enabled = false,
+            Message::OnboardStop { .. } => host_enabled = false,
             _ => {}
         }
         seq = seq.wrapping_add(1);
         let _ = dev.handle(Event::Frame(Frame { seq, message }), &inputs);
+        // A start the device accepted takes over from the host's command (and its end
+        // disables); a refused one changes nothing.
+        if matches!(message, Message::OnboardStart(_)) && dev.onboard_running() {
+            host_enabled = false;
+        }
         seen_fault = fault;
         if !dev.enabled() {
             host_enabled = false;

@@ -178,13 +178,35 @@ struct Estimator<R: Real> {
 /// (the order nalgebra's `gemv` uses, so the host's earlier results are reproduced bit for bit).
 #[inline]
 fn gemv_acc<R: Real>(out: &mut [R], a: &[R], x: &[R], rows: usize, cols: usize, sign: R) {
-    for i in 0..rows {
-        let mut acc = out[i];
-        for j in 0..cols {
-            acc += (sign * x[j]) * a[i * cols + j];
-        }
-        out[i] = acc;
+    if cols == 0 {
+        return;
     }
+    // `sign` is ±1, so `sign · x_j` is exact and taken once per column.
+    let mut sx = [R::ZERO; MAX_NX];
+    for (s, &xj) in sx.iter_mut().zip(&x[..cols]) {
+        *s = sign * xj;
+    }
+    let sx = &sx[..cols];
+    for (o, row) in out[..rows].iter_mut().zip(a.chunks_exact(cols)) {
+        let mut acc = *o;
+        for (&s, &aij) in sx.iter().zip(row) {
+            acc += s * aij;
+        }
+        *o = acc;
+    }
+}
+
+/// The parts of a [`Controller::step`], in the order they run: [`Controller::step_probed`]
+/// reports the end of each one the step goes through. After the last comes the rest of the
+/// step (the MPC's plan and the estimator's time update, the compensation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phase {
+    /// The measurement update: the rate filter (LQR) or the Kalman correction (LQG, MPC).
+    Estimate,
+    /// The MPC's QP data `f` and `b` from the estimate (MPC only).
+    Linear,
+    /// The MPC's QP solve (MPC only).
+    Qp,
 }
 
 /// The run-time controller of a [`Design`] (crate docs). Allocation-free; every step runs in
@@ -339,10 +361,20 @@ impl<R: Real> Controller<R> {
 
     /// One sample: the estimate from `measurement`, the move, the compensation.
     pub fn step(&mut self, measurement: Measurement<R>) -> Move<R> {
+        self.step_probed(measurement, |_| {})
+    }
+
+    /// [`step`](Self::step), calling `probe` at the end of each [`Phase`] it goes through
+    /// (to time them; the move is the same).
+    pub fn step_probed(
+        &mut self,
+        measurement: Measurement<R>,
+        mut probe: impl FnMut(Phase),
+    ) -> Move<R> {
         let (v, status, iterations) = match self.design.kind {
-            Kind::Lqr => self.step_lqr(&measurement),
-            Kind::Lqg => self.step_lqg(&measurement),
-            Kind::Mpc => self.step_mpc(&measurement),
+            Kind::Lqr => self.step_lqr(&measurement, &mut probe),
+            Kind::Lqg => self.step_lqg(&measurement, &mut probe),
+            Kind::Mpc => self.step_mpc(&measurement, &mut probe),
         };
         self.stats.steps = self.stats.steps.saturating_add(1);
         match status {
@@ -526,8 +558,10 @@ impl<R: Real> Controller<R> {
         (u, true)
     }
 
-    fn step_lqr(&mut self, m: &Measurement<R>) -> (R, Status, u32) {
-        if !self.update_lqr_estimate(&m.angles) {
+    fn step_lqr(&mut self, m: &Measurement<R>, probe: &mut impl FnMut(Phase)) -> (R, Status, u32) {
+        let fresh = self.update_lqr_estimate(&m.angles);
+        probe(Phase::Estimate);
+        if !fresh {
             self.filter.hold();
             let (u, _) = self.feedback(&m.reference, self.x_hat[0], false);
             return (u, Status::InvalidMeasurement, 0);
@@ -545,11 +579,12 @@ impl<R: Real> Controller<R> {
         )
     }
 
-    fn step_lqg(&mut self, m: &Measurement<R>) -> (R, Status, u32) {
+    fn step_lqg(&mut self, m: &Measurement<R>, probe: &mut impl FnMut(Phase)) -> (R, Status, u32) {
         let usable = self.correct(&m.angles);
         if !usable {
             self.correct_without_measurement();
         }
+        probe(Phase::Estimate);
         self.sync_plant_estimate();
         let (u, ok) = self.feedback(&m.reference, m.angles[0], usable);
         self.u_prev = u;
@@ -664,10 +699,15 @@ impl<R: Real> Controller<R> {
         gemv_acc(&mut self.b, &d.bu, &u, ncon, 1, R::ONE);
     }
 
-    fn step_mpc(&mut self, meas: &Measurement<R>) -> (R, Status, u32) {
+    fn step_mpc(
+        &mut self,
+        meas: &Measurement<R>,
+        probe: &mut impl FnMut(Phase),
+    ) -> (R, Status, u32) {
         let (nz, ncon, ny) = (self.design.nz(), self.design.ncon, self.design.ny);
         let r_ok = meas.reference[..ny].iter().all(|v| v.is_finite());
         let mut measured = self.correct(&meas.angles);
+        probe(Phase::Estimate);
         if measured {
             // A finite but huge estimate can still overflow the QP data (tested even when the
             // reference is unusable, with a zero one).
@@ -683,6 +723,7 @@ impl<R: Real> Controller<R> {
         if !measured {
             self.correct_without_measurement();
         }
+        probe(Phase::Linear);
         let m = self.design.control_horizon;
         let [lo, hi] = self.plan_bounds;
         let u_prev = self.u_prev;
@@ -698,6 +739,7 @@ impl<R: Real> Controller<R> {
         } else {
             (Status::InvalidMeasurement, 0)
         };
+        probe(Phase::Qp);
         self.shift_plan();
         match status {
             Status::Nominal => {

@@ -122,7 +122,7 @@ mod design;
 pub mod qp;
 mod real;
 
-pub use controller::{Controller, Measurement, Move, RateFilter, Stats, Status};
+pub use controller::{Controller, Measurement, Move, Phase, RateFilter, Stats, Status};
 pub use design::{
     crc32, CompensationDesign, Design, DesignError, Kind, HEADER_LEN, LAYOUT_VERSION, MAGIC,
     MAX_CONTROL_HORIZON, MAX_NCON, MAX_NU, MAX_NX, MAX_NY, MAX_NZ, MAX_PREDICTION_HORIZON,

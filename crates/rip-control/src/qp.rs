@@ -286,12 +286,14 @@ fn solve_in<R: Real>(
         p.v[i] = acc;
     }
     let mut dscale = R::ONE;
-    for i in 0..ncon {
-        let mut acc = b[i];
-        for j in 0..n {
-            acc += p.m[i * n + j] * p.v[j];
-        }
-        p.d[i] = acc;
+    let v = &p.v[..n];
+    for ((d, &bi), row) in p.d[..ncon]
+        .iter_mut()
+        .zip(&b[..ncon])
+        .zip(p.m.chunks_exact(n))
+    {
+        let acc = dot_from(bi, row, v);
+        *d = acc;
         dscale = dscale.max(acc.abs());
     }
     let eps = R::EPSILON;
@@ -315,26 +317,24 @@ fn solve_in<R: Real>(
             p.lambda[..k].copy_from_slice(&p.lambda_star[..k]);
             // u = −M_Wᵀ λ_W.
             p.u.fill(R::ZERO);
-            for (w, &row) in working[..k].iter().enumerate() {
-                let l = p.lambda[w];
-                for j in 0..n {
-                    p.u[j] -= p.m[row * n + j] * l;
+            for (&row, &l) in working[..k].iter().zip(&p.lambda[..k]) {
+                for (uj, &mj) in p.u.iter_mut().zip(&p.m[row * n..row * n + n]) {
+                    *uj -= mj * l;
                 }
             }
-            // The most violated row outside W.
+            // The most violated row outside W. The rows of W are skipped only where they
+            // would matter (a candidate, a non-finite value): rare, and the outcome is the
+            // same as skipping them first.
             let mut worst = None;
             let mut worst_val = primal_tol;
             let mut finite = true;
-            for i in 0..ncon {
-                if working[..k].contains(&i) {
-                    continue;
-                }
-                let mut mu = -p.d[i];
-                for j in 0..n {
-                    mu += p.m[i * n + j] * p.u[j];
-                }
-                finite &= mu.is_finite();
-                if mu > worst_val {
+            let u = &p.u[..n];
+            let in_w = |i: usize| working[..k].contains(&i);
+            for (i, (&di, row)) in p.d[..ncon].iter().zip(p.m.chunks_exact(n)).enumerate() {
+                let mu = dot_from(-di, row, u);
+                if !mu.is_finite() {
+                    finite &= in_w(i);
+                } else if mu > worst_val && !in_w(i) {
                     worst_val = mu;
                     worst = Some(i);
                 }
@@ -392,9 +392,16 @@ fn solve_in<R: Real>(
 }
 
 fn dot_rows<R: Real>(m: &[R], n: usize, r1: usize, r2: usize) -> R {
-    let mut acc = R::ZERO;
-    for j in 0..n {
-        acc += m[r1 * n + j] * m[r2 * n + j];
+    dot_from(R::ZERO, &m[r1 * n..r1 * n + n], &m[r2 * n..r2 * n + n])
+}
+
+/// `init + Σ a_j x_j`, accumulated left to right: the solver's inner loop, over slices so
+/// that no index is checked inside it.
+#[inline(always)]
+fn dot_from<R: Real>(init: R, a: &[R], x: &[R]) -> R {
+    let mut acc = init;
+    for (&aj, &xj) in a.iter().zip(x) {
+        acc += aj * xj;
     }
     acc
 }

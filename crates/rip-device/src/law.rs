@@ -26,7 +26,8 @@
 //!
 //! the same conversion as rip-rt's loop on the host.
 
-use rip_control::{Controller, Design, Measurement, Real};
+use rip_control::{Controller, Design, Measurement, Phase, Real};
+use rip_protocol::{PIL_PHASE_CONVERT, PIL_PHASE_ESTIMATE, PIL_PHASE_LINEAR, PIL_PHASE_QP};
 
 use crate::{DesignRefused, Onboard};
 
@@ -246,11 +247,28 @@ impl<R: Real, const N: usize> Onboard for ControlLaw<R, N> {
     }
 
     fn step(&mut self, positions: [i32; 2]) -> f64 {
+        self.step_with(positions, |_| {})
+    }
+
+    fn step_probed(&mut self, positions: [i32; 2], probe: &mut dyn FnMut(u8)) -> f64 {
+        self.step_with(positions, probe)
+    }
+}
+
+impl<R: Real, const N: usize> ControlLaw<R, N> {
+    fn step_with(&mut self, positions: [i32; 2], mut probe: impl FnMut(u8)) -> f64 {
         let m = self.measurement(self.step, positions);
         self.step = self.step.wrapping_add(1);
+        probe(PIL_PHASE_CONVERT);
         match self.controller.as_mut() {
             Some(c) => {
-                let mv = c.step(m);
+                let mv = c.step_probed(m, |p| {
+                    probe(match p {
+                        Phase::Estimate => PIL_PHASE_ESTIMATE,
+                        Phase::Linear => PIL_PHASE_LINEAR,
+                        Phase::Qp => PIL_PHASE_QP,
+                    })
+                });
                 self.last = Some(mv);
                 mv.voltage.to_f64()
             }

@@ -23,6 +23,13 @@ pub trait Onboard {
     fn reset(&mut self, positions: [i32; 2]);
     /// One step from the encoder positions (arm, pendulum, counts): the move, volts.
     fn step(&mut self, positions: [i32; 2]) -> f64;
+    /// [`step`](Self::step), calling `probe(p)` at the end of each part `p` it goes through
+    /// (`PIL_PHASE_*`, in increasing order; the last part needs no call). The default marks
+    /// none.
+    fn step_probed(&mut self, positions: [i32; 2], probe: &mut dyn FnMut(u8)) -> f64 {
+        let _ = probe;
+        self.step(positions)
+    }
 }
 
 /// The device without an onboard controller (the v1 device): every upload is refused as too
@@ -89,11 +96,37 @@ impl<C: Onboard> Device<C> {
                 self.onboard.reset(positions);
                 self.pil_steps = 0;
             }
-            let t0 = self.cycle_counter.map_or(0, |(c, _)| c());
-            let u = self.onboard.step(positions);
-            if let Some((c, shift)) = self.cycle_counter {
-                out.cycles = c().wrapping_sub(t0) >> shift;
-            }
+            let phase = (p.flags & PIL_PHASE_MASK) >> PIL_PHASE_SHIFT;
+            let u = match self.cycle_counter {
+                None => self.onboard.step(positions),
+                Some((c, shift)) if phase == 0 => {
+                    let t0 = c();
+                    let u = self.onboard.step(positions);
+                    out.cycles = c().wrapping_sub(t0) >> shift;
+                    u
+                }
+                Some((c, shift)) => {
+                    // The counter at the end of each part; a part the step skipped ends
+                    // where the one before it did.
+                    let mut ends = [None::<u32>; PIL_PHASES + 1];
+                    ends[0] = Some(c());
+                    let u = self.onboard.step_probed(positions, &mut |q| {
+                        if let Some(e) = ends.get_mut(usize::from(q)) {
+                            *e = Some(c());
+                        }
+                    });
+                    ends[PIL_PHASES] = Some(c());
+                    let mut last = ends[0].unwrap_or(0);
+                    let mut at = [0u32; PIL_PHASES + 1];
+                    for (a, e) in at.iter_mut().zip(ends) {
+                        last = e.unwrap_or(last);
+                        *a = last;
+                    }
+                    let k = usize::from(phase).min(PIL_PHASES);
+                    out.cycles = at[k].wrapping_sub(at[k - 1]) >> shift;
+                    u
+                }
+            };
             self.pil_steps = self.pil_steps.wrapping_add(1);
             out.step = self.pil_steps;
             out.voltage_bits = u.to_bits();

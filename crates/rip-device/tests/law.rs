@@ -3,10 +3,10 @@
 
 use rip_control::{Controller, Design, Kind, Measurement};
 use rip_device::law::{write_image, ControlLaw, Sensor};
-use rip_device::{Config, Device, Inputs};
+use rip_device::{Config, Device, Inputs, Onboard};
 use rip_protocol::{
     crc32, Event, Frame, Message, PilStep, UploadBegin, UploadChunk, UploadCommit, ACK_NO_DESIGN,
-    ACK_OK, CHUNK_MAX, PIL_RESET,
+    ACK_OK, CHUNK_MAX, PIL_PHASE_SHIFT, PIL_RESET,
 };
 
 fn lqr() -> Design {
@@ -118,5 +118,76 @@ fn pil_steps_match_the_controller_on_independently_converted_angles() {
         );
         // The PIL step never drives the motor.
         assert!(!dev.enabled());
+    }
+}
+
+static READS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+
+/// A cycle counter that advances by one on every read, so each part's count is the number of
+/// part boundaries the device marked inside it.
+fn counting() -> u32 {
+    READS.fetch_add(1, std::sync::atomic::Ordering::SeqCst)
+}
+
+#[test]
+fn pil_phase_flags_time_one_part_each_and_leave_the_move_unchanged() {
+    let mut img = vec![0u8; 4096];
+    let n = write_image(&sensor(), &lqr(), &mut img).unwrap();
+    img.truncate(n);
+    let mut dev = Device::with_onboard(
+        Config::DEFAULT,
+        &Inputs::default(),
+        [0, 0],
+        ControlLaw::<f64, 4096>::new(),
+    );
+    dev.set_cycle_counter(counting, 0);
+    send(
+        &mut dev,
+        Message::UploadBegin(UploadBegin {
+            total_len: n as u32,
+        }),
+    );
+    for (i, c) in img.chunks(CHUNK_MAX).enumerate() {
+        send(
+            &mut dev,
+            Message::UploadChunk(UploadChunk::new((i * CHUNK_MAX) as u32, c)),
+        );
+    }
+    send(
+        &mut dev,
+        Message::UploadCommit(UploadCommit {
+            len: n as u32,
+            crc32: crc32(&img),
+        }),
+    );
+    let mut reference = ControlLaw::<f64, 4096>::new();
+    reference.buffer()[..n].copy_from_slice(&img);
+    reference.load(n).unwrap();
+    // An LQR step: the conversion, the rate filter, then the rest; it has no QP data or solve.
+    let expected = [1, 1, 1, 0, 0, 1];
+    for k in 0..24u32 {
+        let phase = (k % 6) as u8;
+        let c = [(k as i32 * 5) % 40 - 20, -2048 + (k as i32 % 7) - 3];
+        if k == 0 {
+            reference.reset(c);
+        }
+        let want = reference.step(c);
+        let Some(Frame {
+            message: Message::PilMove(m),
+            ..
+        }) = send(
+            &mut dev,
+            Message::PilStep(PilStep {
+                arm_counts: c[0],
+                pendulum_counts: c[1],
+                flags: (if k == 0 { PIL_RESET } else { 0 }) | phase << PIL_PHASE_SHIFT,
+            }),
+        )
+        else {
+            panic!()
+        };
+        assert_eq!(m.code, ACK_OK);
+        assert_eq!(m.voltage().to_bits(), want.to_bits(), "step {k}");
+        assert_eq!(m.cycles, expected[phase as usize], "step {k}, part {phase}");
     }
 }

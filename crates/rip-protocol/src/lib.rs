@@ -113,6 +113,23 @@ pub const PIL_STEP_LEN: usize = 9;
 pub const PIL_MOVE_LEN: usize = 19;
 /// [`PilStep`] flag: reset the controller (a new run) before this step.
 pub const PIL_RESET: u8 = 1 << 0;
+/// [`PilStep`] flags, bits 1–3: which part of the step the answer's `cycles` covers (0, the
+/// default, the whole step; `PIL_PHASE_*`, one part), to find where a step's time goes.
+pub const PIL_PHASE_MASK: u8 = 0b1110;
+/// The first bit of [`PIL_PHASE_MASK`].
+pub const PIL_PHASE_SHIFT: u32 = 1;
+/// `PIL_PHASE_*` part: the encoder counts to the controller's angles and reference.
+pub const PIL_PHASE_CONVERT: u8 = 1;
+/// `PIL_PHASE_*` part: the measurement update (rate filter or Kalman correction).
+pub const PIL_PHASE_ESTIMATE: u8 = 2;
+/// `PIL_PHASE_*` part: the MPC's QP data from the estimate.
+pub const PIL_PHASE_LINEAR: u8 = 3;
+/// `PIL_PHASE_*` part: the MPC's QP solve.
+pub const PIL_PHASE_QP: u8 = 4;
+/// `PIL_PHASE_*` part: the rest (the plan, the time update, the compensation).
+pub const PIL_PHASE_REST: u8 = 5;
+/// Number of `PIL_PHASE_*` parts.
+pub const PIL_PHASES: usize = 5;
 /// Payload length of an ack.
 pub const ACK_LEN: usize = 8;
 /// Payload length of a telemetry record.

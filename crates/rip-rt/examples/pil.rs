@@ -17,8 +17,14 @@
 //! and the arm within 0.05 rad of the 1 rad reference step over the last second, and the
 //! pendulum's RMS angle within 5 % of the same closed loop with the host's `f64` controller.
 //!
-//! Usage: `cargo run --release -p rip-rt --example pil -- IMAGE [STEPS]`; the last lines are
-//! `pil: <controller> steps=N max_du=X max_instr=Y balanced=yes|no`. Exit 1 if any check fails.
+//! Usage: `cargo run --release -p rip-rt --example pil -- IMAGE [STEPS [CONTROLLER]]`; the last
+//! lines are `pil: <controller> steps=N max_du=X max_instr=Y balanced=yes|no`. Exit 1 if any
+//! check fails.
+//!
+//! With `PIL_PHASES=1` each step's count covers one part of the step instead (`PIL_PHASE_*`,
+//! in turn; `PIL_PHASES=qp`, or another part's name, that part on every step), and a `pil: <controller> phases:` line gives the worst count of each part over
+//! the steps that measured it, and the QP's worst count per number of its iterations (the
+//! iterations from the host's `f32` copy, which computes the same).
 
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
@@ -26,7 +32,7 @@ use std::time::Duration;
 
 use rip_device::law::ControlLaw;
 use rip_device::Onboard;
-use rip_protocol::{Message, PilStep, PIL_RESET};
+use rip_protocol::{Message, PilStep, PIL_PHASES, PIL_PHASE_QP, PIL_PHASE_SHIFT, PIL_RESET};
 use rip_rt::config::Config;
 use rip_rt::controllers::ControllerKind;
 use rip_rt::emulator::EmulatorConfig;
@@ -114,10 +120,17 @@ fn judge(xs: &[[f64; 4]], ts: f64) -> (bool, f64) {
 
 fn main() {
     let mut args = std::env::args().skip(1);
-    let image = args.next().expect("usage: pil IMAGE [STEPS]");
+    let image = args.next().expect("usage: pil IMAGE [STEPS [CONTROLLER]]");
     let min_steps: usize = args.next().map_or(10_000, |s| s.parse().expect("STEPS"));
     let only = args.next();
-    let (_qemu, pty) = boot(&image);
+    const PARTS: [&str; PIL_PHASES] = ["convert", "estimate", "linear", "qp", "rest"];
+    // 0: the whole step; PIL_PHASES + 1: each part in turn; else that part on every step.
+    let phases = match std::env::var("PIL_PHASES").as_deref() {
+        Ok("1") => PIL_PHASES + 1,
+        Ok(part) => PARTS.iter().position(|p| *p == part).map_or(0, |i| i + 1),
+        Err(_) => 0,
+    };
+    let (qemu, pty) = boot(&image);
     let port = SerialPort::open(std::path::Path::new(&pty), 115_200).expect("pty");
     let mut link = Link::new(port.io());
     // Wait for the firmware to boot and answer.
@@ -164,6 +177,8 @@ fn main() {
         let steps = min_steps.max((10.0 / ts) as usize);
         let mut max_du = 0.0f64;
         let mut max_ticks = 0u32;
+        let mut phase_max = [0u32; PIL_PHASES];
+        let mut qp_by_iter = std::collections::BTreeMap::<u32, u32>::new();
         let mut failed = None;
         let xs = closed_loop(steps, ts, |k, c| {
             if failed.is_some() {
@@ -173,10 +188,15 @@ fn main() {
                 host32.reset(c);
             }
             let want = host32.step(c);
+            let phase = match phases {
+                0 => 0,
+                p if p > PIL_PHASES => (k % PIL_PHASES) as u8 + 1,
+                p => p as u8,
+            };
             let step = PilStep {
                 arm_counts: c[0],
                 pendulum_counts: c[1],
-                flags: if k == 0 { PIL_RESET } else { 0 },
+                flags: (if k == 0 { PIL_RESET } else { 0 }) | phase << PIL_PHASE_SHIFT,
             };
             let got = link.send(Message::PilStep(step)).and_then(|seq| {
                 link.wait(
@@ -187,7 +207,17 @@ fn main() {
             match got {
                 Ok(Some(Message::PilMove(m))) if m.code == 0 => {
                     max_du = max_du.max((m.voltage() - want).abs());
-                    max_ticks = max_ticks.max(m.cycles);
+                    if phase == 0 {
+                        max_ticks = max_ticks.max(m.cycles);
+                    } else {
+                        let w = &mut phase_max[usize::from(phase) - 1];
+                        *w = (*w).max(m.cycles);
+                        if phase == PIL_PHASE_QP {
+                            let it = host32.last_move().map_or(0, |mv| mv.iterations);
+                            let w = qp_by_iter.entry(it).or_default();
+                            *w = (*w).max(m.cycles);
+                        }
+                    }
                     m.voltage()
                 }
                 other => {
@@ -212,15 +242,31 @@ fn main() {
         let (balanced, rms) = judge(&xs, ts);
         let (ref_balanced, ref_rms) = judge(&reference, ts);
         let same = (rms / ref_rms - 1.0).abs() < 0.05;
+        if phases != 0 {
+            let instr = |t: u32| (t as f64 * INSTR_PER_TICK).round();
+            let mut line = format!("pil: {name} phases (worst instructions):");
+            for (p, t) in PARTS.iter().zip(phase_max) {
+                line += &format!(" {p}={}", instr(t));
+            }
+            line += " | qp by iterations:";
+            for (it, t) in &qp_by_iter {
+                line += &format!(" {it}:{}", instr(*t));
+            }
+            println!("{line}");
+        }
         let max_instr = (max_ticks as f64 * INSTR_PER_TICK).round();
         let est_us = max_instr * CPI_MARGIN / 168.0;
         let pass = balanced && ref_balanced && same && max_du <= 1e-3;
         ok &= pass;
         println!(
             "pil: {name} detail: image={} bytes ts={ts} s pendulum_rms={rms:.5} host_f64_rms={ref_rms:.5} \
-             est_step_us_at_168MHz={est_us:.1} (CPI {CPI_MARGIN}) period_us={}",
+             est_step_us_at_168MHz={est_us:.1} (CPI {CPI_MARGIN}) period_us={} \
+             qp_max_iterations={}",
             img.len(),
-            (ts * 1e6).round()
+            (ts * 1e6).round(),
+            host32
+                .controller()
+                .map_or(0, |c| c.stats().max_iterations)
         );
         lines.push(format!(
             "pil: {name} steps={steps} max_du={max_du:.3e} max_instr={max_instr} balanced={}",
@@ -230,5 +276,7 @@ fn main() {
     for l in &lines {
         println!("{l}");
     }
+    // `exit` runs no destructors: QEMU is stopped first, or it would outlive the check.
+    drop(qemu);
     std::process::exit(if ok { 0 } else { 1 });
 }

@@ -298,7 +298,8 @@ impl<'a> Link<'a> {
         )
     }
 
-    /// Uploads `image` in chunks, resuming where an out-of-order ack says, and commits it;
+    /// Uploads `image` in chunks, resuming where an out-of-order ack says (at most
+    /// [`RETRIES`] times in a row), and commits it;
     /// checks the CRC-32 the device computed against the image's.
     ///
     /// # Errors
@@ -318,8 +319,12 @@ impl<'a> Link<'a> {
             let chunk = UploadChunk::new(offset, &image[offset as usize..end]);
             let (code, next) = self.request(Message::UploadChunk(chunk))?;
             match code {
-                ACK_OK => offset = next,
-                // A repeated chunk whose first ack was lost: continue where the device is.
+                ACK_OK => {
+                    offset = next;
+                    refusals = 0;
+                }
+                // A repeated chunk whose first ack was lost (or a chunk that arrived
+                // damaged): continue where the device is, up to RETRIES times in a row.
                 ACK_OUT_OF_ORDER if next <= total && refusals < RETRIES => {
                     refusals += 1;
                     offset = next;
