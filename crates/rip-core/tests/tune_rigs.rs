@@ -51,9 +51,11 @@ const KNOWN_MISSES: [(u64, &str); 2] = [
     ),
     (
         9,
-        "a weak motor (k_t 0.020, R_m 9.9 ohm) against arm Coulomb friction worth 2.2 V: the \
-         tuned LQR and LQG balance in limit cycles of 0.15 and 0.06 rad at the clamp (with \
-         exact angles LQR falls), the MPC falls and the pre-flight refuses it",
+        "a weak motor (k_t 0.020, R_m 9.9 ohm) against arm Coulomb friction worth 2.2 V and \
+         a 0.7 V dead zone (24 % of the 12 V bound): the tuned LQR and LQG balance in limit \
+         cycles of 0.15 and 0.06 rad (LQR's is the friction's: 0.016 rad on the rig without \
+         it); the MPC falls on the 1 rad step and the pre-flight refuses it, though it \
+         balances within the bar at rest, on a 0.5 rad step, or at 16 V (diagnose_seed9)",
     ),
 ];
 
