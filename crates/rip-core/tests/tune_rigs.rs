@@ -232,6 +232,22 @@ fn a_rig_whose_controller_falls_is_refused_by_the_preflight() {
     let p = report.finding("prediction").unwrap();
     assert_eq!(p.verdict, Verdict::Refuse, "{report}");
     assert!(p.message.contains("predicted to fall"), "{}", p.message);
+    // The refusal is the 1 rad step's at 12 V, not the rig's: 2.86 V of its 12 go to the dead
+    // zone and the arm's Coulomb friction, yet the same MPC balances it within the bar at rest.
+    let params = spec.plant.params();
+    let lost = params.vd + params.cr * params.rm / params.kt;
+    assert!((2.7..3.0).contains(&lost), "{lost}");
+    let mut at_rest = t.spec.clone();
+    at_rest.reference.arm_step = 0.0;
+    let d = at_rest.design(0.01).unwrap();
+    let plant = at_rest.plant().unwrap();
+    let mut mpc = d.controller(ControllerKind::Mpc).unwrap();
+    let run = rip_core::simulate(&plant, mpc.as_mut(), &at_rest.sim_config(0.01, 11)).unwrap();
+    let (pp, alpha, offset) = rip_core::tune::steady_state(&run, 3.0);
+    assert!(
+        !run.fell && pp <= 0.05 && alpha <= 0.02 && offset <= 0.02,
+        "{pp} {alpha} {offset}"
+    );
 }
 
 #[test]
