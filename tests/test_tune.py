@@ -3,7 +3,8 @@
 The margins are checked against an independent computation: the paper's LQG written out as a
 state-space controller in numpy (from its gains K, L, M and the paper's augmented model), the
 loop ``L = -K(z) P(z)`` evaluated densely, and python-control's ``stability_margins`` and
-``disk_margins`` on it.
+``disk_margins`` on it; and the MPC's, against its unconstrained law rebuilt from the condensed
+QP's data and closed around the plant in python-control.
 """
 
 from __future__ import annotations
