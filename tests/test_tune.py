@@ -3,7 +3,8 @@
 The margins are checked against an independent computation: the paper's LQG written out as a
 state-space controller in numpy (from its gains K, L, M and the paper's augmented model), the
 loop ``L = -K(z) P(z)`` evaluated densely, and python-control's ``stability_margins`` and
-``disk_margins`` on it.
+``disk_margins`` on it; and the MPC's, against its unconstrained law rebuilt from the condensed
+QP's data and closed around the plant in python-control.
 """
 
 from __future__ import annotations
@@ -95,6 +96,70 @@ def test_margins_agree_with_python_control() -> None:
     # python-control's classical margins (on its own frequency grid) agree with one of them.
     gm = ct.stability_margins(ct.frd(loop, omega))[0]
     assert min(abs(20 * np.log10(gm) - g) for g in gms) < 0.05
+
+
+def _mpc_loop(spec: riprs.Spec) -> tuple[ct.StateSpace, riprs.Mpc]:
+    """``L(z) = -K(z) P(z)`` of the spec's MPC as a linear controller: its unconstrained move
+    ``du = -(H^-1 f)[0]`` from the condensed QP's data (``f`` linear in the estimate and the
+    previous move, found by probing ``qp_matrices`` with unit vectors), on its Kalman filter
+    in current form, with the previous move as a controller state."""
+    mpc = spec.build_controllers(paper.TS)["MPC"]
+    A, B, C = mpc.model
+    L, M = mpc.L, mpc.M
+    n = A.shape[0]
+    sy = np.asarray(spec.mpc.output_scales, dtype=float)
+    H, f0, _, _ = mpc.qp_matrices(np.zeros(n), [0.0])
+    Hinv = np.linalg.inv(H)
+    first = lambda x, up: -(Hinv @ (mpc.qp_matrices(x, [up])[1] - f0))[0]  # noqa: E731
+    kx = np.array([first(e, 0.0) for e in np.eye(n)])[None, :]
+    ku = first(np.zeros(n), 1.0)
+    # The law against the solver on small data (no bound active): the reconstruction is the
+    # MPC's own move.
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        x, up = 1e-3 * rng.standard_normal(n), 1e-3 * rng.standard_normal()
+        u = mpc.solve(x, [up]).u[0]
+        assert u == pytest.approx(up + (kx @ x)[0] + ku * up, abs=1e-9)
+    # Controller state [x-, u_prev], input y, output u (outputs scaled by 1/sy).
+    I_MC = np.eye(n) - M @ C
+    Bs = np.diag(1.0 / sy)
+    Ac = np.block([
+        [A - L @ C + B @ kx @ I_MC, B * (1.0 + ku)],
+        [kx @ I_MC, np.array([[1.0 + ku]])],
+    ])  # fmt: skip
+    Bc = np.vstack([(L + B @ kx @ M) @ Bs, kx @ M @ Bs])
+    Cc = np.hstack([kx @ I_MC, np.array([[1.0 + ku]])])
+    Dc = kx @ M @ Bs
+    P = ct.ss(A[:4, :4], B[:4], C[:, :4] * sy[:, None], np.zeros((2, 1)), paper.TS)
+    K = ct.ss(Ac, Bc, Cc, Dc, paper.TS)
+    return -(K * P), mpc
+
+
+@pytest.mark.parametrize("recovery", [1.0, 100.0])
+@pytest.mark.parametrize("rig", ["paper", "qube_like"])
+def test_mpc_margins_are_those_of_its_unconstrained_law(rig: str, recovery: float) -> None:
+    # The MPC's margins (measured through the running controller) are those of its
+    # unconstrained MPC's equivalent linear law, by python-control's disk_margins and a
+    # dense sweep of the return difference at the plant input.
+    spec = riprs.Spec() if rig == "paper" else riprs.Spec.from_toml(QUBE_LIKE)
+    k = spec.kalman
+    spec = spec.updated({"kalman": {
+        "disturbance_gain": k.disturbance_gain / recovery,
+        "measurement_noise": [v / recovery for v in k.measurement_noise],
+    }})  # fmt: skip
+    loop, _ = _mpc_loop(spec)
+    ours = margins(spec, "MPC")
+    omega = np.logspace(-2, np.log10(np.pi / paper.TS * 0.999), 20000)
+    dm, _, dpm = ct.disk_margins(loop, omega, skew=0.0)
+    assert ours.disk_margin == pytest.approx(float(dm), rel=1e-3)
+    assert ours.disk_phase_margin_deg == pytest.approx(float(dpm), rel=1e-3)
+    # |1 + L| at its smallest bounds every simultaneous gain/phase change the loop tolerates.
+    resp = loop(np.exp(1j * omega * paper.TS))
+    s_half = np.abs(1.0 / (1.0 + resp) - 0.5).max()
+    assert ours.disk_margin == pytest.approx(1.0 / s_half, rel=1e-3)
+    gain_cross = np.nonzero(np.diff(np.sign(np.abs(resp) - 1.0)))[0]
+    pm = min(abs((np.angle(resp[i], deg=True) + 360.0) % 360.0 - 180.0) for i in gain_cross)
+    assert ours.phase_margin_deg == pytest.approx(pm, abs=0.1)
 
 
 def test_the_paper_lqg_is_fragile_at_the_plant_input_and_lqr_is_not() -> None:

@@ -141,7 +141,9 @@ class TuneResult:
     weights : dict
         The change to the file's weights: factors ``arm``, ``pendulum``, ``input`` (on Q and R,
         and on the MPC's weights by their square roots), ``measurement_noise`` (on
-        ``kalman.measurement_noise``) and the ``integral_weight`` set.
+        ``kalman.measurement_noise``), the ``integral_weight`` set and ``recovery``, the
+        loop-transfer-recovery parameter ``q`` (``kalman.disturbance_gain`` and
+        ``kalman.measurement_noise`` divided by it: ``rip_core::tune::RECOVERY``).
     kept_file_weights : bool
         Whether the file's own weights were kept (they already worked).
     works : bool
@@ -202,7 +204,8 @@ class TuneResult:
                 if self.kept_file_weights
                 else f"Q arm x{w['arm']:g}, Q pendulum x{w['pendulum']:g}, R x{w['input']:g}, "
                 f"kalman.measurement_noise x{w['measurement_noise']:g}, "
-                f"lqr.integral_weight {w['integral_weight']:g}"
+                f"lqr.integral_weight {w['integral_weight']:g}, "
+                f"loop transfer recovery q = {w['recovery']:g}"
             ),
             f"lqr.Q = {list(self.spec.lqr.Q)}, lqr.R = {self.spec.lqr.R:g}, "
             f"mpc.output_weights = {list(self.spec.mpc.output_weights)}, "
@@ -514,6 +517,7 @@ def tune(
         "input": 1.0,
         "integral_weight": 0.0,
         "measurement_noise": 1.0,
+        "recovery": 1.0,
     }
     return TuneResult(
         spec=tuned,

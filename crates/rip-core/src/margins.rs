@@ -34,6 +34,13 @@
 //!   i.e. simultaneous gain variations in `[(2 − α)/(2 + α), (2 + α)/(2 − α)]`
 //!   (`disk_gain_margin_db`) or phase variations of `±2 atan(α/2)` (`disk_phase_margin_deg`).
 //!
+//! For the MPC this is the loop of its **unconstrained** law: with a 1 mV impulse no input or
+//! output bound is active, the QP's solution is `Δu = −(H⁻¹ f)₀` with `f` linear in the
+//! estimate `x̂[k|k]` and the previous move `u[k−1]`, and the MPC acts as the linear controller
+//! `u = u[k−1] + k_x x̂[k|k] + k_u u[k−1]` on its Kalman filter, with `u[k−1]` (what it
+//! believes it applied) one of its states. `tests/test_tune.py` rebuilds that controller from
+//! the condensed QP's data and checks these margins against python-control's `disk_margins`.
+//!
 //! A loop whose impulse response grows, or has not fallen below 1e-4 of its peak after 65 536
 //! samples, is unstable; its margins are all zero.
 

@@ -5,9 +5,11 @@
 //! `Q[2], Q[3]` by `q_α` and `R` by `ρ`; the MPC's weights enter its cost squared, so its
 //! `w^y` scale by `√q_θ, √q_α` and its `w^u, w^Δu` by `√ρ`, and the cost stays the one cost
 //! of the file, reweighted alike. A candidate may lower the shared estimator's measurement
-//! noise (loop transfer recovery, [`candidates`]) and add integral action
-//! (`lqr.integral_weight`, MATLAB's `lqi`) to LQR and LQG; the MPC has its output-disturbance
-//! model already.
+//! noise ([`candidates`]) and add integral action (`lqr.integral_weight`, MATLAB's `lqi`) to
+//! LQR and LQG; the MPC has its output-disturbance model already. Each candidate then gets
+//! the loop transfer recovery (Doyle–Stein) its margins ask for: the smallest parameter
+//! `q` of [`RECOVERY`] with which the margins of LQG and the MPC, the two controllers on the
+//! shared estimator, meet the bar ([`choose_recovery`]; LQR's margins do not depend on it).
 //!
 //! A candidate **works** when every controller, on the rig's nonlinear model (its dead zone,
 //! friction and stiction; `[sensor]`; the `[reference]` step, [`SEEDS`] noise seeds) and with
@@ -24,9 +26,11 @@
 //!
 //! [`tune`] tries the file's own weights first and keeps them when they work; otherwise the
 //! candidates of [`candidates`] in order (closest to the file's first) and keeps the first
-//! that works, or, when none does, the one that misses the bar by least (and says so),
-//! preferring one that balances within the bar and the voltage bound with margins short of
-//! the bar to one that does not balance within it.
+//! that works. When none does, it tries again those whose recovery was raised, without it
+//! (a recovered estimator trusts the sensor more, which a coarse or noisy one may not
+//! bear), and keeps the one that misses the bar by least (and says so): one that balances
+//! within the bar and the voltage bound beats any that does not, and among equals the one
+//! nearer the margins wins.
 //! [`robustness`] then draws rigs around the file's (each parameter within ±10 %, or from
 //! the identification's covariance) and counts the runs each tuned controller balances.
 
@@ -65,6 +69,26 @@ pub struct Bar {
     pub disk_margin: f64,
 }
 
+impl Bar {
+    /// Whether `m` meets the margins of the bar: the classical ones both ways, or the disk's.
+    pub fn margins_ok(&self, m: &Margins) -> bool {
+        m.meets(self.gain_margin_db, self.phase_margin_deg)
+            || (m.stable && m.disk_margin >= self.disk_margin)
+    }
+
+    /// How far `m` is from the margins of the bar: 0 when [`margins_ok`](Self::margins_ok),
+    /// else the disk margin's relative shortfall (2 for an unstable loop).
+    pub fn margin_shortfall(&self, m: &Margins) -> f64 {
+        if self.margins_ok(m) {
+            0.0
+        } else if m.stable {
+            (1.0 - m.disk_margin / self.disk_margin).max(0.0)
+        } else {
+            2.0
+        }
+    }
+}
+
 impl Default for Bar {
     fn default() -> Self {
         let f = 10f64.powf(6.0 / 20.0);
@@ -93,6 +117,11 @@ pub struct Weights {
     pub integral_weight: f64,
     /// Factor on `kalman.measurement_noise` (the shared estimator's `D_n`).
     pub measurement_noise: f64,
+    /// The loop-transfer-recovery parameter `q ≥ 1` (Doyle–Stein, [`RECOVERY`]): the shared
+    /// estimator's fictitious noise on the plant input, relative to its output disturbance
+    /// and measurement noise, raised by `q`; applied as `kalman.disturbance_gain / q` and
+    /// `kalman.measurement_noise / q`.
+    pub recovery: f64,
 }
 
 impl Weights {
@@ -103,10 +132,19 @@ impl Weights {
         input: 1.0,
         integral_weight: 0.0,
         measurement_noise: 1.0,
+        recovery: 1.0,
     };
 
+    /// These weights with the recovery parameter `q` ([`recovery`](Self::recovery)).
+    pub fn with_recovery(self, q: f64) -> Self {
+        Self {
+            recovery: q,
+            ..self
+        }
+    }
+
     /// `spec` with these weights (module docs); the integral weight replaces the file's only
-    /// when it is positive here or the other factors change nothing.
+    /// when it is positive here or the other factors (the recovery aside) change something.
     pub fn apply(&self, spec: &Spec) -> Spec {
         let mut s = spec.clone();
         s.lqr.Q[0] *= self.arm;
@@ -114,7 +152,7 @@ impl Weights {
         s.lqr.Q[2] *= self.pendulum;
         s.lqr.Q[3] *= self.pendulum;
         s.lqr.R *= self.input;
-        if *self != Self::FILE {
+        if self.with_recovery(1.0) != Self::FILE {
             s.lqr.integral_weight = self.integral_weight;
         }
         s.mpc.output_weights[0] *= self.arm.sqrt();
@@ -122,11 +160,29 @@ impl Weights {
         s.mpc.input_rate_weights[0] *= self.input.sqrt();
         s.mpc.input_weights[0] *= self.input.sqrt();
         for v in s.kalman.measurement_noise.iter_mut() {
-            *v *= self.measurement_noise;
+            *v *= self.measurement_noise / self.recovery;
         }
+        s.kalman.disturbance_gain /= self.recovery;
         s
     }
 }
+
+/// The loop-transfer-recovery parameters `q` [`tune`] chooses from, smallest first.
+///
+/// The shared Kalman filter is designed with unit white noise `w_u` on the scaled plant input,
+/// the output disturbance `g w_od` and the measurement noise `D_n v`:
+/// `Q = B_u S_u S_uᵀ B_uᵀ + g² B_od B_odᵀ`, `R = D_n D_nᵀ`. Doyle and Stein's recovery at the
+/// plant input ("Robustness with observers", IEEE TAC 24(4), 1979) adds fictitious input
+/// noise, `Q(q) = q² B_u S_u S_uᵀ B_uᵀ + g² B_od B_odᵀ`: as `q → ∞` the filter attributes
+/// every unexplained output to the input, and the loop of the controller on the estimate
+/// approaches that of the same law on the true state (LQR's `K (zI − A)⁻¹ B` for LQG, the
+/// unconstrained MPC's own law for the MPC). The gains depend only on `Q / R`, so `Q(q), R`
+/// is `Q(1)` with `g / q` and `D_n / q` — which is how [`Weights::apply`] writes it, in the
+/// file's own keys. Larger `q` trusts the sensor more and passes more of its noise to the
+/// voltage, so [`tune`] takes the smallest that meets the margins. The largest is 100: with
+/// `q = 1000` generated rig 3's recovered LQG missed the steady-state bar even on an
+/// 8192-count encoder with 0.1 mrad of noise (0.16 rad arm peak-to-peak on its own sensor).
+pub const RECOVERY: [f64; 5] = [1.0, 3.0, 10.0, 30.0, 100.0];
 
 /// The candidates after the file's own weights, closest to them first: the estimator's
 /// measurement noise lowered (loop transfer recovery at the plant input: the shared Kalman
@@ -147,6 +203,7 @@ pub fn candidates(spec: &Spec) -> Vec<Weights> {
                         input,
                         integral_weight: integral * q0 * arm,
                         measurement_noise: noise,
+                        recovery: 1.0,
                     };
                     if w != Weights::FILE {
                         out.push(w);
@@ -191,8 +248,7 @@ pub struct Assessment {
 impl Assessment {
     /// Whether the margins meet the bar (classical, or the disk's).
     pub fn margins_ok(&self, bar: &Bar) -> bool {
-        self.margins.meets(bar.gain_margin_db, bar.phase_margin_deg)
-            || (self.margins.stable && self.margins.disk_margin >= bar.disk_margin)
+        bar.margins_ok(&self.margins)
     }
 
     /// Whether the steady state meets the bar and the run did not fall.
@@ -221,9 +277,16 @@ impl Assessment {
         self.balances(bar) && !self.saturated && self.margins_ok(bar)
     }
 
-    /// How far from the bar (0 when it [works](Self::works)): the relative excess of each
-    /// steady-state figure and margin, a fall or saturation counting 10 and 1.
+    /// How far from the bar (0 when it [works](Self::works)): the
+    /// [balance shortfall](Self::balance_shortfall) and the margins'
+    /// ([`Bar::margin_shortfall`]).
     pub fn shortfall(&self, bar: &Bar) -> f64 {
+        self.balance_shortfall(bar) + bar.margin_shortfall(&self.margins)
+    }
+
+    /// How far from balancing within the bar and the voltage bound: the relative excess of
+    /// each steady-state figure, a fall or saturation counting 10 and 1.
+    pub fn balance_shortfall(&self, bar: &Bar) -> f64 {
         let over = |v: f64, limit: f64| (v / limit - 1.0).max(0.0);
         let mut s = if self.fell { 10.0 } else { 0.0 };
         if !self.fell {
@@ -233,13 +296,6 @@ impl Assessment {
         }
         if self.saturated {
             s += 1.0;
-        }
-        if !self.margins_ok(bar) {
-            s += if self.margins.stable {
-                (1.0 - self.margins.disk_margin / bar.disk_margin).max(0.0)
-            } else {
-                2.0
-            };
         }
         s
     }
@@ -402,9 +458,25 @@ pub struct Tuned {
 
 /// Chooses shared weights for the rig of `spec` at sample time `ts` (module docs).
 pub fn tune(spec: &Spec, ts: f64, bar: &Bar) -> Result<Tuned, SpecError> {
-    let mut best: Option<(f64, Weights)> = None;
+    // (balance shortfall, margin shortfall, weights) of the best candidate so far.
+    let mut best: Option<(f64, f64, Weights)> = None;
     let mut tried = 0;
-    for w in std::iter::once(Weights::FILE).chain(candidates(spec)) {
+    let base: Vec<Weights> = std::iter::once(Weights::FILE)
+        .chain(candidates(spec))
+        .collect();
+    // First each candidate with the recovery its margins ask for; then, when none works,
+    // those whose recovery that was again without it (the recovery trusts the sensor more,
+    // which may cost the steady state on a coarse or noisy one).
+    let recovered: Vec<Weights> = base
+        .iter()
+        .map(|&w| choose_recovery(spec, w, ts, bar))
+        .collect();
+    let unrecovered: Vec<Weights> = recovered
+        .iter()
+        .filter(|w| w.recovery != 1.0)
+        .map(|w| w.with_recovery(1.0))
+        .collect();
+    for w in recovered.into_iter().chain(unrecovered) {
         let candidate = w.apply(spec);
         tried += 1;
         let Ok((assessments, complete)) = assess_until(&candidate, ts, bar, true) else {
@@ -420,20 +492,30 @@ pub fn tune(spec: &Spec, ts: f64, bar: &Bar) -> Result<Tuned, SpecError> {
             });
         }
         // Short of the whole bar, a candidate that balances within the bar and the voltage
-        // bound (its margins short) beats any that does not; a controller not assessed counts
-        // as a fall.
+        // bound (its margins short) beats any that does not, and among those the one nearer
+        // the margins wins; a controller not assessed counts as a fall.
         let missing = ControllerKind::ALL.len() - assessments.len();
-        let shortfall: f64 = assessments.iter().map(|a| a.shortfall(bar)).sum::<f64>()
+        let balance: f64 = assessments
+            .iter()
+            .map(|a| a.balance_shortfall(bar))
+            .sum::<f64>()
             + if complete {
                 0.0
             } else {
                 100.0 + 12.0 * missing as f64
             };
-        if best.as_ref().map_or(true, |b| shortfall < b.0) {
-            best = Some((shortfall, w));
+        let margins: f64 = assessments
+            .iter()
+            .map(|a| bar.margin_shortfall(&a.margins))
+            .sum();
+        if best
+            .as_ref()
+            .map_or(true, |b| (balance, margins) < (b.0, b.1))
+        {
+            best = Some((balance, margins, w));
         }
     }
-    let (_, weights) = best.ok_or_else(|| {
+    let (_, _, weights) = best.ok_or_else(|| {
         SpecError::new("lqr", "no candidate weights could be designed for this rig")
     })?;
     let spec = weights.apply(spec);
@@ -446,6 +528,32 @@ pub fn tune(spec: &Spec, ts: f64, bar: &Bar) -> Result<Tuned, SpecError> {
         assessments,
         tried,
     })
+}
+
+/// `w` with the smallest recovery parameter of [`RECOVERY`] with which the margins of LQG and
+/// the MPC (the controllers on the shared estimator) meet the bar; when none does, the one
+/// that misses them by least ([`Bar::margin_shortfall`], summed), the smaller on a tie. The
+/// margins are the linearised loop's, so this costs no simulation.
+pub fn choose_recovery(spec: &Spec, w: Weights, ts: f64, bar: &Bar) -> Weights {
+    let mut best: Option<(f64, f64)> = None;
+    for q in RECOVERY {
+        let Ok(design) = w.with_recovery(q).apply(spec).design(ts) else {
+            continue;
+        };
+        let mut short = 0.0;
+        for kind in [ControllerKind::Lqg, ControllerKind::Mpc] {
+            short += design
+                .margins(kind)
+                .map_or(2.0, |m| bar.margin_shortfall(&m));
+        }
+        if short == 0.0 {
+            return w.with_recovery(q);
+        }
+        if best.map_or(true, |(s, _)| short < s) {
+            best = Some((short, q));
+        }
+    }
+    w.with_recovery(best.map_or(1.0, |(_, q)| q))
 }
 
 /// The record `riprs tune` writes beside the tuned file (crate::preflight::TuneRecord):

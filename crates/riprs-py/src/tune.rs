@@ -169,12 +169,14 @@ fn tune_weights<'py>(
         input,
         integral_weight,
         measurement_noise,
+        recovery,
     } = t.weights;
     w.set_item("arm", arm)?;
     w.set_item("pendulum", pendulum)?;
     w.set_item("input", input)?;
     w.set_item("integral_weight", integral_weight)?;
     w.set_item("measurement_noise", measurement_noise)?;
+    w.set_item("recovery", recovery)?;
     let list = t
         .assessments
         .iter()
