@@ -74,7 +74,8 @@ pub const MAX_CONSECUTIVE_MISSES: std::ops::RangeInclusive<u32> = 1..=20;
 impl Default for LoopConfig {
     fn default() -> Self {
         Self {
-            period_ms: 10.0,
+            // The controllers are designed at the paper's sample time.
+            period_ms: crate::paper::TS * 1000.0,
             reply_timeout_ms: 5.0,
             watchdog_periods: 5,
             max_step_periods: 2.0,
@@ -105,9 +106,11 @@ pub struct DeviceConfig {
 
 impl Default for DeviceConfig {
     fn default() -> Self {
+        // The counts are `[sensor] encoder_counts`; unparsed, its default.
+        let [arm, pendulum] = super::sections::SensorSpec::default().encoder_counts;
         Self {
-            arm_counts_per_rev: 2048,
-            pendulum_counts_per_rev: 2048,
+            arm_counts_per_rev: arm,
+            pendulum_counts_per_rev: pendulum,
             pendulum_zero: PendulumZero::Down,
             arm_sign: 1.0,
             pendulum_sign: 1.0,
