@@ -388,3 +388,17 @@ def test_logs_recorded_with_different_settings_are_refused_naming_both(heavy_log
     pattern = r"heavy-prbs: header arm_counts_per_rev: 2048, but heavy-chirp says 1024"
     with pytest.raises(IdentifyError, match=pattern):
         riprs.identify(logs)
+
+
+def test_the_rig_file_keeps_the_tightest_limits_the_logs_were_recorded_within():
+    from types import SimpleNamespace
+
+    from riprs.identify import _header_settings
+
+    logs = [
+        SimpleNamespace(meta={"voltage_limit": "12", "arm_limit": "1.2", "period_ms": "10"}),
+        SimpleNamespace(meta={"voltage_limit": "6", "arm_limit": "1.5", "period_ms": "10"}),
+    ]
+    sections, _ = _header_settings(["a", "b"], logs)
+    assert sections["safety"] == {"voltage_limit": 6.0, "arm_limit": 1.2}
+    assert sections["loop"] == {"period_ms": 10.0}

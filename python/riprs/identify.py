@@ -496,6 +496,13 @@ HEADER_SETTINGS = {
 }
 
 
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        return float("nan")
+
+
 def _header_settings(
     names: Sequence[str], logs: Sequence[RtLog]
 ) -> Tuple[Dict[str, Dict[str, object]], Dict[str, float]]:
@@ -505,7 +512,13 @@ def _header_settings(
     found: Dict[str, Tuple[str, str]] = {}
     for name, log in zip(names, logs, strict=True):
         for key, value in log.meta.items():
-            if key in HEADER_SETTINGS or key.startswith("lab."):
+            if HEADER_SETTINGS.get(key, ("",))[0] == "safety":
+                # Limits may differ from run to run (a gentler chirp): the rig file keeps the
+                # tightest, checked below.
+                if key in found and _number(found[key][1]) <= _number(value):
+                    continue
+                found[key] = (name, value)
+            elif key in HEADER_SETTINGS or key.startswith("lab."):
                 if key in found and found[key][1] != value:
                     raise IdentifyError(
                         f"{name}: header {key}: {value}, but {found[key][0]} says "
