@@ -6,6 +6,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
+import tomllib
 
 import riprs
 from riprs.cli import main, reference
@@ -44,11 +45,19 @@ def test_both_tools_print_the_same_experiment_sections(tmp_path, capsys, rip_rt)
     assert code == 0
     rt = subprocess.run([str(rip_rt), "config", str(path)], capture_output=True, text=True)
     assert rt.returncode == 0, rt.stderr
-    # rip-rt prints the experiment sections first, then its own.
-    assert rt.stdout.startswith(ours)
-    rest = rt.stdout[len(ours) :]
+    # Both print the experiment sections first, the same text; then rip-rt prints its own
+    # sections resolved, riprs the ones the file sets, as it sets them (so that what riprs
+    # prints or writes is still the rig).
+    experiment = ours.split("\n[loop]")[0].split("\n[safety]")[0]
+    assert rt.stdout.startswith(experiment)
+    rest = rt.stdout[len(experiment) :]
     assert "[loop]" in rest and "[device]" in rest and "[safety]" in rest
-    assert "[loop]" not in ours
+    doc, rt_doc = tomllib.loads(ours), tomllib.loads(rt.stdout)
+    assert doc["loop"] == {"period_ms": 10} and doc["safety"] == {"voltage_limit": 10}
+    assert "device" not in doc
+    for section in ("loop", "safety"):
+        for key, value in doc[section].items():
+            assert rt_doc[section][key] == value, (section, key)
     # Resolved: every default is there, and the given values.
     for needle in ('preset = "qube_servo2"', "Lp = 0.13", "Rm = 8.4", "R = 0.2", "ecr_weight"):
         assert needle in ours, needle

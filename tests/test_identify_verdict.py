@@ -344,7 +344,7 @@ def test_the_rig_file_carries_the_headers_sensor_device_and_lab(heavy_logs, tmp_
     # The logs as rip-rt excite --lab writes them: device settings and lab values in the header.
     header = (
         "# arm_counts_per_rev: 1024\n# pendulum_counts_per_rev: 4096\n# pendulum_zero: down\n"
-        "# arm_sign: 1\n# pendulum_sign: -1\n"
+        "# arm_sign: 1\n# pendulum_sign: -1\n# voltage_limit: 6\n# arm_limit: 1.2\n"
         + "".join(f"# lab.{k}: {getattr(HEAVY, k)!r}\n" for k in LAB_KEYS)
     )
     logs = []
@@ -363,6 +363,8 @@ def test_the_rig_file_carries_the_headers_sensor_device_and_lab(heavy_logs, tmp_
     }
     assert doc["sensor"]["encoder_counts"] == [1024, 4096]
     assert doc["loop"]["period_ms"] == 10.0
+    # The limits the rig was excited within (a 6 V motor here), not rip-rt's defaults.
+    assert doc["safety"] == {"voltage_limit": 6.0, "arm_limit": 1.2}
     # The header's lab values were used: the rig's own mp, Lp, ... in [plant].
     for key in LAB_KEYS:
         assert doc["plant"][key] == pytest.approx(getattr(HEAVY, key), rel=1e-12)
@@ -373,6 +375,7 @@ def test_the_rig_file_carries_the_headers_sensor_device_and_lab(heavy_logs, tmp_
     )
     assert checked.returncode == 0, checked.stderr
     assert "encoder_counts = [1024, 4096]" in checked.stdout
+    assert "voltage_limit = 6" in checked.stdout and "arm_limit = 1.2" in checked.stdout
     assert list(riprs.load_config(out).sensor.encoder_counts) == [1024, 4096]
 
 
@@ -385,3 +388,17 @@ def test_logs_recorded_with_different_settings_are_refused_naming_both(heavy_log
     pattern = r"heavy-prbs: header arm_counts_per_rev: 2048, but heavy-chirp says 1024"
     with pytest.raises(IdentifyError, match=pattern):
         riprs.identify(logs)
+
+
+def test_the_rig_file_keeps_the_tightest_limits_the_logs_were_recorded_within():
+    from types import SimpleNamespace
+
+    from riprs.identify import _header_settings
+
+    logs = [
+        SimpleNamespace(meta={"voltage_limit": "12", "arm_limit": "1.2", "period_ms": "10"}),
+        SimpleNamespace(meta={"voltage_limit": "6", "arm_limit": "1.5", "period_ms": "10"}),
+    ]
+    sections, _ = _header_settings(["a", "b"], logs)
+    assert sections["safety"] == {"voltage_limit": 6.0, "arm_limit": 1.2}
+    assert sections["loop"] == {"period_ms": 10.0}

@@ -201,27 +201,166 @@ def test_no_copy_of_the_parameter_table_in_the_package():
 
 
 def test_the_voltage_bound_has_one_definition():
-    # 12 V is rip-core's paper::INPUT_LIMIT (DEFAULT_U_LIMIT in Python); no default of a
-    # voltage setting in the core, rip-rt or the package writes the number again.
+    # 12 V is rip-control's INPUT_LIMIT_MV (paper::INPUT_LIMIT in rip-core, DEFAULT_U_LIMIT in
+    # Python, the device's and the firmware board's default); 24 V is the largest limit rip-rt
+    # accepts (MAX_VOLTAGE_LIMIT, the emulated bridge's supply). No voltage setting, supply or
+    # bound in the core, the no_std crates, rip-rt, the firmware or the package writes either
+    # number again.
     import re
 
     root = Path(__file__).resolve().parents[1]
     pattern = re.compile(
-        r"(volt|u_limit|u_max|_limit)\w*\s*[:=]\s*(?:\w+\s*=\s*)?-?12(\.0)?\b", re.IGNORECASE
+        r"(volt|u_limit|u_max|_limit|supply|bound)\w*\s*[:=]\s*(?:\[?[\w:]*\(?\s*=?\s*)?"
+        r"-?(12|24)(\.0|_?000)?\b",
+        re.IGNORECASE,
     )
     sources = [*_python_sources()]
-    for crate in ("rip-core", "rip-rt", "riprs-py"):
+    for crate in ("rip-core", "rip-rt", "riprs-py", "rip-control", "rip-device", "rip-protocol"):
         sources += sorted((root / "crates" / crate / "src").rglob("*.rs"))
+    sources += sorted((root / "firmware" / "src").rglob("*.rs"))
     hits = []
     for path in sources:
         text = path.read_text()
         if path.suffix == ".rs":
             # Only the code before a file's tests.
             text = text.split("#[cfg(test)]")[0]
-        for i, line in enumerate(text.splitlines(), 1):
+        for line in text.splitlines():
             code = line.split("//")[0] if path.suffix == ".rs" else line.split("#")[0]
             if pattern.search(code):
-                hits.append(f"{path.relative_to(root)}:{i}: {line.strip()}")
-    assert hits == ["crates/rip-core/src/paper.rs:49: pub const INPUT_LIMIT: f64 = 12.0;"], (
-        "\n".join(hits)
-    )
+                hits.append(f"{path.relative_to(root)}: {line.strip()}")
+    assert hits == [
+        "crates/rip-core/src/spec/rig_sections.rs: pub const MAX_VOLTAGE_LIMIT: f64 = 24.0;",
+        "crates/rip-control/src/lib.rs: pub const INPUT_LIMIT_MV: u16 = 12_000;",
+    ], "\n".join(hits)
+
+
+def _rust_sources():
+    """The non-test Rust sources of the crates and the firmware (test modules' own files
+    left out; callers cut each file at its ``#[cfg(test)]``)."""
+    root = Path(__file__).resolve().parents[1]
+    files = [
+        *sorted((root / "crates").glob("*/src/**/*.rs")),
+        *sorted((root / "firmware" / "src").rglob("*.rs")),
+    ]
+    return root, [p for p in files if p.name != "tests.rs" and "tests" not in p.parts[-3:-1]]
+
+
+def test_one_crc32_implementation():
+    # CRC-32 is rip_protocol::crc32: the design image, the upload frames and the device check one
+    # function. A second implementation carries the reflected polynomial again.
+    root, sources = _rust_sources()
+    hits = [
+        str(p.relative_to(root))
+        for p in sources
+        if "0xedb88320" in p.read_text().lower().replace("_", "")
+    ]
+    assert hits == ["crates/rip-protocol/src/lib.rs"], hits
+
+
+def test_no_copy_of_the_parameter_table_in_the_crates():
+    # Rust lists of parameter names (any case: "lr" is Param::Lr's "Lr") are a second table that
+    # can drift: the crates take their names from rip_core::plant::Param.
+    import re
+
+    names = {n.lower() for n in PARAMETERS} | {"g"}
+    root, sources = _rust_sources()
+    copies = []
+    for path in sources:
+        text = path.read_text().split("#[cfg(test)]")[0]
+        for m in re.finditer(r"\[([^\[\]]*)\]", text):
+            found = [s for s in re.findall(r'"(\w+)"', m.group(1)) if s.lower() in names]
+            if len(found) >= 5:
+                line = text[: m.start()].count("\n") + 1
+                copies.append(f"{path.relative_to(root)}:{line}: {found}")
+    assert not copies, "\n".join(copies)
+
+
+def test_the_tuning_record_is_named_by_the_core(monkeypatch, tmp_path):
+    # rip-rt finds the record by rip_core::preflight::tune_record_path; riprs.tune writes it by
+    # the same function (a second naming rule in Python could drift from the loop's).
+    import importlib
+
+    tune = importlib.import_module("riprs.tune")  # the module, not riprs.tune the function
+    assert tune.record_path(tmp_path / "rig.toml") == tmp_path / "rig.tune.toml"
+    assert tune.record_path("x/rig") == Path("x/rig.tune.toml")
+    monkeypatch.setattr(tune, "tune_record_path", lambda p: "core-named")
+    assert tune.record_path(tmp_path / "rig.toml") == Path("core-named")
+
+
+def test_the_default_encoder_resolution_has_one_definition():
+    # 2048 counts per revolution is [sensor] encoder_counts' default (SensorSpec); [device]'s
+    # counts and the emulator's take it from there.
+    import re
+
+    pattern = re.compile(r"counts\w*\s*[:=]\s*\[?2048\b")
+    root, sources = _rust_sources()
+    hits = []
+    for path in sources:
+        text = path.read_text().split("#[cfg(test)]")[0]
+        for line in text.splitlines():
+            if pattern.search(line.split("//")[0]):
+                hits.append(f"{path.relative_to(root)}: {line.strip()}")
+    assert hits == ["crates/rip-core/src/spec/sections.rs: encoder_counts: [2048, 2048],"], hits
+
+
+RIG_FILE = """[plant]
+preset = "qube_servo2"
+
+[sensor]
+encoder_counts = [1024, 512]
+
+[safety]
+voltage_limit = 6.0
+arm_limit = 1.2
+
+[device]
+arm_sign = -1.0
+
+[loop]
+period_ms = 5.0
+reply_timeout_ms = 2.0
+"""
+
+
+def test_a_file_riprs_writes_describes_the_rig_it_read(tmp_path, capsys):
+    # rip-rt's sections survive load_config -> to_toml (what riprs config prints and riprs
+    # tune writes): a 6 V motor's limit and a reversed encoder are not lost to the defaults.
+    import tomllib
+
+    from riprs.cli import main
+
+    rig = tmp_path / "rig.toml"
+    rig.write_text(RIG_FILE)
+    spec = riprs.load_config(rig)
+    text = spec.to_toml()
+    doc = tomllib.loads(text)
+    assert doc["safety"] == {"voltage_limit": 6.0, "arm_limit": 1.2}
+    assert doc["device"] == {"arm_sign": -1.0}
+    assert doc["loop"] == {"period_ms": 5.0, "reply_timeout_ms": 2.0}
+    assert doc["sensor"]["encoder_counts"] == [1024, 512]
+    assert riprs.Spec.from_toml(text) == spec
+    written = tmp_path / "written.toml"
+    written.write_text(text)
+    assert riprs.load_config(written) == spec
+    # An update keeps them, and is checked against them.
+    assert tomllib.loads(spec.updated({"lqr": {"R": 0.2}}).to_toml())["safety"] == doc["safety"]
+    assert main(["config", str(rig)]) == 0
+    assert tomllib.loads(capsys.readouterr().out)["safety"] == doc["safety"]
+    # Without rip-rt sections nothing is added.
+    assert "safety" not in tomllib.loads(riprs.Spec().to_toml())
+
+
+def test_a_written_rig_file_reads_the_same_in_rip_rt(tmp_path, rip_rt):
+    import subprocess
+
+    rig = tmp_path / "rig.toml"
+    rig.write_text(RIG_FILE)
+    written = tmp_path / "written.toml"
+    written.write_text(riprs.load_config(rig).to_toml())
+    outs = [
+        subprocess.run([str(rip_rt), "config", str(p)], capture_output=True, text=True, timeout=60)
+        for p in (rig, written)
+    ]
+    assert all(o.returncode == 0 for o in outs), [o.stderr for o in outs]
+    assert outs[0].stdout == outs[1].stdout
+    assert "voltage_limit = 6" in outs[1].stdout

@@ -31,10 +31,11 @@ use stm32f4xx_hal::qei::Qei;
 use stm32f4xx_hal::rcc::{Config, Rcc};
 use stm32f4xx_hal::timer::{CounterUs, PwmChannel};
 
-/// Supply of the H-bridge (mV): the voltage at 100 % duty.
-pub const SUPPLY_MV: u16 = 12_000;
-/// The device's own voltage limit (mV), at most the supply.
-pub const VOLTAGE_LIMIT_MV: u16 = 12_000;
+/// Supply of the H-bridge (mV): the voltage at 100 % duty. This board is the reference rig, so
+/// it is the device's default (the motor's rated voltage).
+pub const SUPPLY_MV: u16 = rip_device::Config::DEFAULT.supply_mv;
+/// The device's own voltage limit (mV), at most the supply: the device's default.
+pub const VOLTAGE_LIMIT_MV: u16 = rip_device::Config::DEFAULT.voltage_limit_mv;
 /// The bridge brakes (shorts the windings) at 0 % duty with its enable line high.
 pub const CAN_BRAKE: bool = true;
 /// PWM frequency: above hearing, low enough for common H-bridges' switching times.

@@ -216,7 +216,9 @@ alike.
 Every key is optional. Below is the complete file with every default (the paper's settings),
 as `riprs config` prints it; `riprs config FILE` prints a file resolved the same way.
 `rip-rt` adds its own `[loop]`, `[device]`, `[safety]` and `[calibration]` sections
-([rip-rt.md](rip-rt.md)); `rip-rt config FILE` prints them after these.
+([rip-rt.md](rip-rt.md)); `rip-rt config FILE` prints them after these, resolved. A file
+riprs reads keeps the ones it sets: `riprs config FILE`, `Spec.to_toml` and the file
+`riprs tune` writes carry them after the experiment's, as the file gave them.
 
 - `controllers`: what `riprs compare` runs.
 - `[plant]`: `preset` (`paper` or `qube_servo2`) and the physical parameters

@@ -26,7 +26,7 @@ SignalName = Literal["chirp", "prbs", "steps", "free-swing", "free_swing"]
 def excitation(
     signal: SignalName,
     *,
-    dt: float = 0.01,
+    dt: float = _riprs.TS,
     t: ArrayLike | None = None,
     duration: float | None = None,
     amplitude: float | None = None,
@@ -55,7 +55,8 @@ def excitation(
         held ``step_hold`` seconds, repeated. ``free-swing``: a kick of ``+A`` for ``kick`` seconds
         and ``-A`` for ``kick`` seconds (the arm pushed, then braked), then 0 V.
     dt : float
-        Sample time (s) the settings are checked against (``f_end`` below the Nyquist
+        Sample time (s), by default ``riprs.TS`` (the loop's default ``loop.period_ms``,
+        10 ms). The settings are checked against it (``f_end`` below the Nyquist
         frequency, clocks and holds at least one sample), and the spacing of the default
         times.
     t : array_like, optional

@@ -129,8 +129,8 @@ class IdentifyResult:
         ``[plant_covariance]`` in the identification file; infinite rows for parameters the
         logs do not determine.
     settings : dict
-        The ``[loop]``, ``[device]`` and ``[sensor]`` settings the logs' headers record (the
-        rig as it was excited), written into the rig file.
+        The ``[loop]``, ``[device]``, ``[sensor]`` and ``[safety]`` settings the logs' headers
+        record (the rig as it was excited), written into the rig file.
     lab : dict
         The lab file's measurements used (name -> value), empty without one.
     """
@@ -257,7 +257,7 @@ class IdentifyResult:
             head.append("# Not identifiable from the logs: " + ", ".join(self.not_identifiable))
         body = ["[plant]", f'preset = "{self.preset}"']
         body += [f"{k} = {p[k]!r}" for k in PLANT_KEYS]
-        for section in ("sensor", "loop", "device"):
+        for section in ("sensor", "loop", "device", "safety"):
             if section in self.settings:
                 body += ["", f"[{section}]"]
                 body += [f"{k} = {_toml_value(v)}" for k, v in self.settings[section].items()]
@@ -480,8 +480,8 @@ def _start(start: Union[str, FurutaParams, PathLike]) -> Tuple[FurutaParams, str
     return spec.params, spec.plant.preset
 
 
-#: The ``rip-rt excite`` log header's sensor and device settings and the rig file's section
-#: and key each is written to: the rig file then holds what ``rip-rt run`` needs.
+#: The ``rip-rt excite`` log header's sensor, device and safety settings and the rig file's
+#: section and key each is written to: the rig file then holds what ``rip-rt run`` needs.
 HEADER_SETTINGS = {
     "period_ms": ("loop", "period_ms", float),
     "arm_counts_per_rev": ("device", "arm_counts_per_rev", int),
@@ -489,19 +489,36 @@ HEADER_SETTINGS = {
     "pendulum_zero": ("device", "pendulum_zero", str),
     "arm_sign": ("device", "arm_sign", float),
     "pendulum_sign": ("device", "pendulum_sign", float),
+    # The limits the rig was excited within (a 6 V motor's file says 6): without them the
+    # identified file would run the rig at rip-rt's defaults.
+    "voltage_limit": ("safety", "voltage_limit", float),
+    "arm_limit": ("safety", "arm_limit", float),
 }
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        return float("nan")
 
 
 def _header_settings(
     names: Sequence[str], logs: Sequence[RtLog]
 ) -> Tuple[Dict[str, Dict[str, object]], Dict[str, float]]:
-    """The rig file's ``[loop]``, ``[device]`` and ``[sensor]`` settings and the lab values
-    recorded in the logs' headers (``rip-rt excite``); the logs must agree, else an error names
-    the two logs and the key."""
+    """The rig file's ``[loop]``, ``[device]``, ``[sensor]`` and ``[safety]`` settings and the
+    lab values recorded in the logs' headers (``rip-rt excite``); the logs must agree, else an
+    error names the two logs and the key."""
     found: Dict[str, Tuple[str, str]] = {}
     for name, log in zip(names, logs, strict=True):
         for key, value in log.meta.items():
-            if key in HEADER_SETTINGS or key.startswith("lab."):
+            if HEADER_SETTINGS.get(key, ("",))[0] == "safety":
+                # Limits may differ from run to run (a gentler chirp): the rig file keeps the
+                # tightest, checked below.
+                if key in found and _number(found[key][1]) <= _number(value):
+                    continue
+                found[key] = (name, value)
+            elif key in HEADER_SETTINGS or key.startswith("lab."):
                 if key in found and found[key][1] != value:
                     raise IdentifyError(
                         f"{name}: header {key}: {value}, but {found[key][0]} says "

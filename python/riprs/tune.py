@@ -23,6 +23,7 @@ from riprs._riprs import (
     loop_margins,
     loop_response,
     preflight_check,
+    tune_record_path,
     tune_robustness,
     tune_weights,
 )
@@ -273,9 +274,21 @@ class PreflightFinding:
 
 
 def record_path(tuned: PathLike) -> Path:
-    """The tuning record beside a tuned file: ``tuned.toml`` -> ``tuned.tune.toml``."""
-    p = Path(os.fspath(tuned))
-    return p.with_name(f"{p.stem}.tune.toml")
+    """The tuning record beside a tuned file: ``tuned.toml`` -> ``tuned.tune.toml``.
+
+    The core's naming rule, the one ``rip-rt run`` reads the record by.
+
+    Parameters
+    ----------
+    tuned : path-like
+        The tuned experiment file.
+
+    Returns
+    -------
+    pathlib.Path
+        The record's path, beside ``tuned``.
+    """
+    return Path(tune_record_path(tuned))
 
 
 def _blocks(text: str) -> List[Tuple[str, str]]:

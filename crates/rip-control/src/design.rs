@@ -3,6 +3,7 @@
 //! documented in the crate docs).
 
 use crate::real::Real;
+use rip_protocol::crc32;
 
 /// Most plant inputs: the rig has one motor.
 pub const MAX_NU: usize = 1;
@@ -247,7 +248,10 @@ impl<R: Real> Default for Design<R> {
         Self {
             kind: Kind::Lqr,
             ts: R::from_f64(0.01),
-            input_bounds: [R::from_f64(-12.0), R::from_f64(12.0)],
+            input_bounds: [
+                R::from_f64(-crate::INPUT_LIMIT),
+                R::from_f64(crate::INPUT_LIMIT),
+            ],
             k: [z; NX_PLANT],
             integral_gain: z,
             rate_cutoff_hz: R::from_f64(20.0),
@@ -649,18 +653,4 @@ impl Reader<'_> {
     fn u16(&mut self) -> Result<u16, DesignError> {
         Ok(u16::from_le_bytes(self.take::<2>()?))
     }
-}
-
-/// CRC-32 (IEEE 802.3: reflected polynomial `0xEDB88320`, initial value and final XOR
-/// `0xFFFFFFFF`; `crc32(b"123456789") = 0xCBF43926`), bitwise, so no table in flash.
-pub fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = 0xFFFF_FFFFu32;
-    for &b in bytes {
-        crc ^= u32::from(b);
-        for _ in 0..8 {
-            let mask = (crc & 1).wrapping_neg();
-            crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
-        }
-    }
-    !crc
 }

@@ -124,8 +124,18 @@ mod real;
 
 pub use controller::{Controller, Measurement, Move, Phase, RateFilter, Stats, Status};
 pub use design::{
-    crc32, CompensationDesign, Design, DesignError, Kind, HEADER_LEN, LAYOUT_VERSION, MAGIC,
+    CompensationDesign, Design, DesignError, Kind, HEADER_LEN, LAYOUT_VERSION, MAGIC,
     MAX_CONTROL_HORIZON, MAX_NCON, MAX_NU, MAX_NX, MAX_NY, MAX_NZ, MAX_PREDICTION_HORIZON,
     MAX_QP_ITERATIONS, NX_PLANT,
 };
 pub use real::Real;
+/// CRC-32 (IEEE 802.3) of the design's bytes: the wire protocol's own, so an image checked by
+/// the host, the device and the upload frames is checked by one function.
+pub use rip_protocol::crc32;
+
+/// The actuator limit (mV): the motor's rated ±12 V, the paper's hard input bound
+/// `|u| ≤ 12 V`. The one definition of the number: rip-core's `paper::INPUT_LIMIT` (the default
+/// of every clamp on the voltage), the device's default limit and the firmware board's are this.
+pub const INPUT_LIMIT_MV: u16 = 12_000;
+/// [`INPUT_LIMIT_MV`] in volts.
+pub const INPUT_LIMIT: f64 = INPUT_LIMIT_MV as f64 / 1000.0;

@@ -454,10 +454,10 @@ mod tests {
             );
             let peak = res.x.iter().fold(0.0f64, |a, x| a.max(x[0].abs()));
             assert_eq!(m.peak_arm, peak);
-            // The step comes 2 s after the catch (study::STEP_AFTER_CATCH), never before.
+            // The step comes reference.step_time after the catch, never before.
             if let Some(tc) = res.catch_time {
                 for (t, r) in res.t.iter().zip(&res.r) {
-                    let stepped = *t >= tc + crate::spec::study::STEP_AFTER_CATCH - 1e-9;
+                    let stepped = *t >= tc + spec.reference.step_time - 1e-9;
                     assert_eq!(r[0], if stepped { 1.0 } else { 0.0 }, "t {t}, catch {tc}");
                 }
             }

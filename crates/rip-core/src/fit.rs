@@ -17,7 +17,7 @@
 //! The twelve physical parameters therefore cannot all be recovered. The fit keeps six of them
 //! fixed at the values of a *base* parameter set — `rm`, `kt`, `km` (these fix the scale through
 //! `b`), both masses `mr`, `mp`, and `g` — and solves for the six that remain:
-//! `lr`, `lp`, `jr`, `jp`, `dr`, `dp` ([`FREE_PARAMETERS`]). Given the fixed ones, these map one
+//! `Lr`, `Lp`, `Jr`, `Jp`, `Dr`, `Dp` ([`FREE_PARAMETERS`]). Given the fixed ones, these map one
 //! to one onto the six identifiable combinations:
 //! `lp = 2G/(mp g)`, `lr = m₁₂/(mp lp/2)`, `jp = Jα − mp lp²/4`,
 //! `jr = J₀ − mr lr²/4 − mp lr²`, `dr = c − kt km/rm`, `dp`.
@@ -40,10 +40,18 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::error::{Result, RipError};
 use crate::linalg::{c2d, check_finite, check_shape, Mat};
-use crate::plant::{FurutaParams, Plant};
+use crate::plant::{FurutaParams, Param, Plant};
 
-/// Names of the parameters the fit solves for; all others are taken from the base set.
-pub const FREE_PARAMETERS: [&str; 6] = ["lr", "lp", "jr", "jp", "dr", "dp"];
+/// The parameters the fit solves for, in the order of its unknowns; all others are taken from
+/// the base set. Their names are [`Param::name`].
+pub const FREE_PARAMETERS: [Param; 6] = [
+    Param::Lr,
+    Param::Lp,
+    Param::Jr,
+    Param::Jp,
+    Param::Dr,
+    Param::Dp,
+];
 
 /// Largest accepted [`FitOptions::max_iterations`]: the fit converges in tens of iterations
 /// when it converges at all, and each iteration costs up to 42 discretisations.
@@ -114,15 +122,11 @@ pub fn paper_weights() -> Mat {
 }
 
 fn with_free(base: &FurutaParams, logp: &DVector<f64>) -> FurutaParams {
-    FurutaParams {
-        lr: logp[0].exp(),
-        lp: logp[1].exp(),
-        jr: logp[2].exp(),
-        jp: logp[3].exp(),
-        dr: logp[4].exp(),
-        dp: logp[5].exp(),
-        ..*base
+    let mut p = *base;
+    for (param, v) in FREE_PARAMETERS.iter().zip(logp.iter()) {
+        *param.field(&mut p) = v.exp();
     }
+    p
 }
 
 /// Weighted residual vector (20 entries, row-major over `[A_d B_d]`); `None` when the
@@ -215,8 +219,13 @@ pub fn fit_params(ad: &Mat, bd: &Mat, ts: f64, options: &FitOptions) -> Result<F
 
     let b = &options.base;
     // Friction may be zero in the base set; the log parameterisation needs a positive start.
-    let start = [b.lr, b.lp, b.jr, b.jp, b.dr.max(1e-6), b.dp.max(1e-7)];
-    let mut logp = DVector::from_iterator(6, start.iter().map(|v| v.ln()));
+    // The logarithm needs a positive start: a frictionless base starts from a small damping.
+    let start = FREE_PARAMETERS.map(|p| match p {
+        Param::Dr => b.get(p).max(1e-6),
+        Param::Dp => b.get(p).max(1e-7),
+        _ => b.get(p),
+    });
+    let mut logp = DVector::from_iterator(FREE_PARAMETERS.len(), start.iter().map(|v| v.ln()));
     let (mut r, mut fit_ad, mut fit_bd) = residual(b, &logp, &target, &w, ts).ok_or_else(|| {
         RipError::invalid(
             "base",

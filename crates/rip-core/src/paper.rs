@@ -45,8 +45,9 @@ pub const CONTINUOUS_PARAMETERS: [f64; 8] = [
 
 /// The actuator limit (V): the motor's rated ±12 V, the paper's hard input bound `|u| ≤ 12 V`
 /// (section 3). The default of every clamp on the voltage: the regulators' `[u_min, u_max]`, the
-/// MPC's input bound, the simulator's saturation and `rip-rt`'s safety limit.
-pub const INPUT_LIMIT: f64 = 12.0;
+/// MPC's input bound, the simulator's saturation and `rip-rt`'s safety limit. Defined once, in
+/// the `no_std` controllers (`rip_control::INPUT_LIMIT`), which the device and the firmware share.
+pub const INPUT_LIMIT: f64 = rip_control::INPUT_LIMIT;
 
 /// Input scale factor `L_su` of the MPC (section 3).
 pub const INPUT_SCALE: f64 = 10.0;

@@ -87,11 +87,13 @@ pub struct Config {
 }
 
 impl Config {
-    /// 50 ms watchdog, 12 V limit on a 12 V supply, a bridge that brakes (the reference rig).
+    /// 50 ms watchdog, a bridge that brakes, and the motor's rated voltage
+    /// ([`rip_control::INPUT_LIMIT_MV`], 12 V) as both the limit and the supply: the reference
+    /// rig feeds its bridge at the motor's rating, so full duty is the rated voltage.
     pub const DEFAULT: Config = Config {
         command_timeout_us: 50_000,
-        voltage_limit_mv: 12_000,
-        supply_mv: 12_000,
+        voltage_limit_mv: rip_control::INPUT_LIMIT_MV,
+        supply_mv: rip_control::INPUT_LIMIT_MV,
         can_brake: true,
     };
 

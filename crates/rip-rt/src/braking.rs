@@ -8,8 +8,8 @@ use crate::envelope::{
     stop_mode, Brake, BrakeCommand, BrakeMode, BrakeReport, StopSequence, BLIND_PERIODS,
     MAX_BRAKE_S, MAX_HOLD_S,
 };
+use crate::exchange::exchange;
 use crate::loop_core::LoopCore;
-use crate::period::exchange;
 use crate::protocol::{encode, Command, Frame, Message, MAX_FRAME, STATUS_FAULT};
 use crate::serial::Fd;
 use crate::stop::{next_seq, StopReason};

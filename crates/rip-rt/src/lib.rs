@@ -40,6 +40,7 @@ pub mod config;
 pub mod controllers;
 pub mod emulator;
 pub mod envelope;
+pub mod exchange;
 pub mod excite;
 pub mod log;
 pub mod loop_core;

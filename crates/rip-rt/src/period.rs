@@ -22,78 +22,15 @@
 //! The stop path (the active stop of [`crate::envelope`], then the stop frame of
 //! [`crate::stop::StopGuard`]) is the caller's, on the same clock ([`Period::clock`]).
 
+pub use crate::exchange::{exchange, Reply};
+
 use crate::config::{Config, MAX_BLIND_MS};
 use crate::log::{LogWriter, Row};
 use crate::loop_core::{LoopCore, StepOutput, FLAG_DEADLINE_MISS, FLAG_NO_REPLY};
-use crate::protocol::{Measurement, MAX_FRAME, STATUS_LOCKSTEP};
-use crate::serial::{Fd, Readiness};
+use crate::protocol::MAX_FRAME;
+use crate::serial::Fd;
 use crate::stop::{requested_stop, Overrun, StopReason};
-use crate::timing::{self, ClockMode, Histogram, Periodic, Tick, LOCKSTEP_REPLY_WAIT_NS};
-
-/// A measurement, when its request was sent and when its bytes were read.
-#[derive(Debug, Clone, Copy)]
-pub struct Reply {
-    /// The measurement.
-    pub m: Measurement,
-    /// When its sample request was sent (ns, on the run's clock).
-    pub req_ns: u64,
-    /// When its bytes were read.
-    pub rx_ns: u64,
-}
-
-/// Sends a sample request on `io` and waits for the measurement answering it, up to
-/// `reply_timeout_ns` after the request and never past the grid's next deadline (which the
-/// next request must keep). `None` when none arrived in time; bytes that are not the answer
-/// (stale replies, garbage) are consumed by `core`'s parser.
-///
-/// In lockstep the emulator answers once it has advanced its plant by a period: the wait is
-/// bounded by [`LOCKSTEP_REPLY_WAIT_NS`] of wall time instead, and a measurement without
-/// [`STATUS_LOCKSTEP`] (a real device, or an emulator in real time) stops the run, since
-/// nothing would then keep the loop's pace.
-pub fn exchange(
-    io: &Fd,
-    core: &mut LoopCore,
-    clock: &Periodic,
-    tx: &mut [u8; MAX_FRAME],
-    rx: &mut [u8],
-    reply_timeout_ns: u64,
-) -> Result<(u16, Option<Reply>), StopReason> {
-    let lockstep = clock.mode() == ClockMode::Lockstep;
-    let (seq, n) = core.encode_request(tx);
-    let req_ns = clock.now_ns();
-    io.write_all(&tx[..n]).map_err(StopReason::DeviceLost)?;
-    // Counted from the request, so a late wake-up does not cost a measurement the device
-    // answers at once.
-    let wall_deadline = if lockstep {
-        timing::now_ns() + LOCKSTEP_REPLY_WAIT_NS
-    } else {
-        (timing::now_ns() + reply_timeout_ns).min(clock.next_deadline_ns())
-    };
-    loop {
-        let now = timing::now_ns();
-        if now >= wall_deadline {
-            return Ok((seq, None));
-        }
-        match io.wait_readable(wall_deadline - now) {
-            Ok(Readiness::Readable) => {}
-            Ok(Readiness::Timeout) => return Ok((seq, None)),
-            Ok(Readiness::Interrupted) => continue,
-            Err(e) => return Err(StopReason::DeviceLost(e)),
-        }
-        let got = io.read_available(rx).map_err(StopReason::DeviceLost)?;
-        let rx_ns = clock.now_ns();
-        if let Some(m) = core.receive(&rx[..got], seq) {
-            if lockstep && m.status & STATUS_LOCKSTEP == 0 {
-                return Err(StopReason::DeviceLost(std::io::Error::new(
-                    std::io::ErrorKind::InvalidData,
-                    "--lockstep: the device does not run in lockstep (only \
-                     `rip-rt emulate --lockstep` does); run without --lockstep",
-                )));
-            }
-            return Ok((seq, Some(Reply { m, req_ns, rx_ns })));
-        }
-    }
-}
+use crate::timing::{ClockMode, Histogram, Periodic, Tick};
 
 /// A row of the log that the law fills in: its time axis, phase name and estimate.
 #[derive(Debug, Clone, Copy)]

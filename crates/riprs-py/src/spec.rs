@@ -10,7 +10,7 @@ use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
 use rip_core::metrics::table1_rmse_of;
-use rip_core::spec::{ControllerKind, Param, Spec, SpecError};
+use rip_core::spec::{rig_sections, ControllerKind, Param, Spec, SpecError};
 
 use crate::control::{PyLqg, PyLqr};
 use crate::errors::RiprsError;
@@ -187,6 +187,19 @@ pub struct PyMonteCarloSpec {
 pub struct PySpec {
     // Always resolved (every plant parameter written out), so equal files compare equal.
     pub(crate) inner: Spec,
+    // rip-rt's sections ([loop], [device], [safety], [calibration]) as the file gave them,
+    // checked: written back by `to_toml`, so a file riprs writes describes the same rig.
+    pub(crate) rig: toml::Table,
+}
+
+impl PySpec {
+    /// A spec without rip-rt sections (the defaults).
+    pub(crate) fn of(spec: Spec) -> Self {
+        Self {
+            inner: spec.resolved(),
+            rig: toml::Table::new(),
+        }
+    }
 }
 
 impl PySpec {
@@ -201,9 +214,7 @@ impl PySpec {
 impl PySpec {
     #[new]
     fn new() -> Self {
-        Self {
-            inner: Spec::default().resolved(),
-        }
+        Self::of(Spec::default())
     }
 
     /// Parse and check TOML text.
@@ -219,8 +230,10 @@ impl PySpec {
     ///     Unknown key, wrong type or out-of-range value; the message names the key.
     #[staticmethod]
     fn from_toml(text: &str) -> PyResult<Self> {
+        let (spec, rig) = rig_sections::parse_file_as_given(text).map_err(config_err)?;
         Ok(Self {
-            inner: Spec::parse(text).map_err(config_err)?.resolved(),
+            inner: spec.resolved(),
+            rig,
         })
     }
 
@@ -230,9 +243,7 @@ impl PySpec {
         let toml::Value::Table(table) = to_toml(data.as_any(), "")? else {
             unreachable!("a dict converts to a table")
         };
-        Ok(Self {
-            inner: Spec::from_table(table).map_err(config_err)?.resolved(),
-        })
+        Ok(Self::of(Spec::from_table(table).map_err(config_err)?))
     }
 
     /// A copy with ``changes`` (nested dicts, e.g. ``{"monte_carlo": {"runs": 10}}``)
@@ -249,15 +260,21 @@ impl PySpec {
         let toml::Value::Table(changes) = to_toml(changes.as_any(), "")? else {
             unreachable!("a dict converts to a table")
         };
+        let inner = self.inner.updated(changes).map_err(config_err)?.resolved();
+        // The rig sections' relations to the experiment (limits, counts) are checked again.
+        rig_sections::parse_file(&rig_sections::file_toml(&inner, &self.rig))
+            .map_err(config_err)?;
         Ok(Self {
-            inner: self.inner.updated(changes).map_err(config_err)?.resolved(),
+            inner,
+            rig: self.rig.clone(),
         })
     }
 
     /// The resolved configuration as TOML, every default filled in (what ``riprs config``
-    /// prints).
+    /// prints), then rip-rt's sections (``[loop]``, ``[device]``, ``[safety]``,
+    /// ``[calibration]``) as the file gave them: the text describes the same rig.
     fn to_toml(&self) -> String {
-        self.inner.to_toml()
+        rig_sections::file_toml(&self.inner, &self.rig)
     }
 
     /// The keyword arguments of :func:`riprs.simulate` (and ``simulate_metrics``) for a run
@@ -529,11 +546,17 @@ impl PySpec {
 ///     that fail together in a design; the message names the file and the key.
 #[pyfunction]
 fn load_config(py: Python<'_>, path: PathBuf) -> PyResult<PySpec> {
-    let spec = py
-        .allow_threads(|| Spec::load_checked(&path, rip_core::paper::TS))
+    let (spec, rig) = py
+        .allow_threads(|| {
+            let (spec, rig) = rig_sections::load_file_as_given(&path)?;
+            spec.check(rip_core::paper::TS)
+                .map_err(|e| e.in_file(&path))?;
+            Ok::<_, rip_core::spec::SpecError>((spec, rig))
+        })
         .map_err(config_err)?;
     Ok(PySpec {
         inner: spec.resolved(),
+        rig,
     })
 }
 

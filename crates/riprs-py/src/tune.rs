@@ -185,6 +185,7 @@ fn tune_weights<'py>(
     Ok((
         PySpec {
             inner: t.spec.resolved(),
+            rig: spec.rig.clone(),
         },
         w,
         t.works,
@@ -284,11 +285,19 @@ fn preflight_check(
         .collect())
 }
 
+/// The tuning record beside a tuned file (``rip_core::preflight::tune_record_path``):
+/// ``tuned.toml`` -> ``tuned.tune.toml``, where ``rip-rt run`` looks for it.
+#[pyfunction]
+fn tune_record_path(tuned: PathBuf) -> PathBuf {
+    preflight::tune_record_path(&tuned)
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(loop_margins, m)?)?;
     m.add_function(wrap_pyfunction!(loop_response, m)?)?;
     m.add_function(wrap_pyfunction!(tune_weights, m)?)?;
     m.add_function(wrap_pyfunction!(tune_robustness, m)?)?;
     m.add_function(wrap_pyfunction!(preflight_check, m)?)?;
+    m.add_function(wrap_pyfunction!(tune_record_path, m)?)?;
     Ok(())
 }

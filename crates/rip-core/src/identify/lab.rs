@@ -20,17 +20,22 @@
 
 use std::path::Path;
 
+use crate::plant::Param;
 use crate::spec::SpecError;
 
-/// The keys of a lab file's `[lab]` table and what each is, in the file's order.
+/// The keys of a lab file's `[lab]` table and what each is, in the file's order: the measured
+/// parameters by their [`Param`] names, then the encoders' resolutions.
 pub const LAB_KEYS: [(&str, &str); 9] = [
-    ("mp", "pendulum mass (kg)"),
-    ("Lp", "pendulum length (m)"),
-    ("mr", "arm mass (kg)"),
-    ("Lr", "arm length, motor axis to pendulum joint (m)"),
-    ("Rm", "motor terminal resistance (ohm)"),
-    ("km", "motor back-EMF constant (V s/rad)"),
-    ("kt", "motor torque constant (N m/A)"),
+    (Param::Mp.name(), "pendulum mass (kg)"),
+    (Param::Lp.name(), "pendulum length (m)"),
+    (Param::Mr.name(), "arm mass (kg)"),
+    (
+        Param::Lr.name(),
+        "arm length, motor axis to pendulum joint (m)",
+    ),
+    (Param::Rm.name(), "motor terminal resistance (ohm)"),
+    (Param::Km.name(), "motor back-EMF constant (V s/rad)"),
+    (Param::Kt.name(), "motor torque constant (N m/A)"),
     ("arm_counts", "arm encoder counts per revolution"),
     ("pendulum_counts", "pendulum encoder counts per revolution"),
 ];

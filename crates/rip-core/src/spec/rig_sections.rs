@@ -74,7 +74,8 @@ pub const MAX_CONSECUTIVE_MISSES: std::ops::RangeInclusive<u32> = 1..=20;
 impl Default for LoopConfig {
     fn default() -> Self {
         Self {
-            period_ms: 10.0,
+            // The controllers are designed at the paper's sample time.
+            period_ms: crate::paper::TS * 1000.0,
             reply_timeout_ms: 5.0,
             watchdog_periods: 5,
             max_step_periods: 2.0,
@@ -105,9 +106,11 @@ pub struct DeviceConfig {
 
 impl Default for DeviceConfig {
     fn default() -> Self {
+        // The counts are `[sensor] encoder_counts`; unparsed, its default.
+        let [arm, pendulum] = super::sections::SensorSpec::default().encoder_counts;
         Self {
-            arm_counts_per_rev: 2048,
-            pendulum_counts_per_rev: 2048,
+            arm_counts_per_rev: arm,
+            pendulum_counts_per_rev: pendulum,
             pendulum_zero: PendulumZero::Down,
             arm_sign: 1.0,
             pendulum_sign: 1.0,
@@ -599,12 +602,57 @@ pub fn load_file(path: &Path) -> Result<(Spec, RigSections), SpecError> {
     parse_file(&super::read_text(path)?).map_err(|e| e.in_file(path))
 }
 
+/// Parses and checks a whole file as [`parse_file`] does, returning rip-rt's sections as the
+/// file gave them: what a file written back ([`file_toml`]) carries so that it describes the
+/// same rig (a `[safety] voltage_limit` of a 6 V motor, a reversed encoder's `arm_sign`).
+pub fn parse_file_as_given(text: &str) -> Result<(Spec, toml::Table), SpecError> {
+    let (spec, _) = parse_file(text)?;
+    let (_, given) = Spec::parse_with_runtime(text)?;
+    Ok((spec, given))
+}
+
+/// [`parse_file_as_given`] of the file at `path`; errors name the file.
+pub fn load_file_as_given(path: &Path) -> Result<(Spec, toml::Table), SpecError> {
+    parse_file_as_given(&super::read_text(path)?).map_err(|e| e.in_file(path))
+}
+
+/// The text of a whole file: the resolved experiment ([`Spec::to_toml`]), then rip-rt's
+/// sections as given (`rig`, from [`parse_file_as_given`]). [`parse_file`] reads it back to
+/// the same spec and the same rig sections.
+pub fn file_toml(spec: &Spec, rig: &toml::Table) -> String {
+    let mut text = spec.to_toml();
+    if !rig.is_empty() {
+        text.push('\n');
+        text.push_str(&toml::to_string(rig).expect("a parsed table has a TOML form"));
+    }
+    text
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn key_of(text: &str) -> String {
         parse_file(text).unwrap_err().key
+    }
+
+    #[test]
+    fn a_written_file_keeps_the_rig_sections_it_was_read_with() {
+        let text = "[plant]\npreset = \"qube_servo2\"\n[sensor]\nencoder_counts = [1024, 512]\n\
+                    [safety]\nvoltage_limit = 6.0\narm_limit = 1.2\n[device]\narm_sign = -1.0\n\
+                    [loop]\nperiod_ms = 5.0\nreply_timeout_ms = 2.0\n[calibration]\nrest_window_s = 0.5\n";
+        let (spec, given) = parse_file_as_given(text).unwrap();
+        let written = file_toml(&spec, &given);
+        let ((back, rig), (read, read_rig)) =
+            (parse_file(&written).unwrap(), parse_file(text).unwrap());
+        assert_eq!((back.resolved(), &rig), (read.resolved(), &read_rig));
+        assert_eq!(rig.safety.voltage_limit, 6.0);
+        assert_eq!(rig.device.arm_sign, -1.0);
+        assert_eq!(rig.device.arm_counts_per_rev, 1024);
+        assert_eq!(rig.loop_.period_ms, 5.0);
+        // Without rig sections the text is the spec's own.
+        let (plain, none) = parse_file_as_given("[reference]\nstep_time = 0.5\n").unwrap();
+        assert_eq!(file_toml(&plain, &none), plain.to_toml());
     }
 
     #[test]

@@ -552,3 +552,29 @@ fn an_update_is_a_deep_merge_checked_as_a_file() {
         assert_eq!(e.key, key, "{text}: {e}");
     }
 }
+
+#[test]
+fn the_study_steps_the_arm_reference_step_time_after_the_catch() {
+    // `reference.step_time` is the time from the catch to the step on the rig (rip-rt's loop);
+    // the simulated swing-up must use the same setting, not a constant of its own.
+    use crate::sim::simulate;
+    for step_time in [0.37, 1.6] {
+        let spec = Spec::parse(&format!("[reference]\nstep_time = {step_time}\n")).unwrap();
+        let design = spec.design(paper::TS).unwrap();
+        let config = crate::SimConfig {
+            duration: 6.0,
+            ..study::hanging_config(&spec, paper::TS, 0)
+        };
+        let mut sup = study::supervised(&spec, &design, ControllerKind::Lqr).unwrap();
+        let res = simulate(&spec.plant().unwrap(), sup.as_mut(), &config).unwrap();
+        let tc = res.catch_time.expect("the paper rig is caught within 6 s");
+        let first = res.t.iter().zip(&res.r).find(|(_, r)| r[0] != 0.0).unwrap();
+        assert_eq!(first.1[0], spec.reference.arm_step);
+        // The first sample at or after catch + step_time (the sample grid is Ts).
+        assert!(
+            *first.0 >= tc + step_time - 1e-9 && *first.0 < tc + step_time + paper::TS,
+            "step at {}, catch {tc}, step_time {step_time}",
+            first.0
+        );
+    }
+}

@@ -3,7 +3,7 @@ use crate::paper;
 use crate::plant::{FurutaParams, State};
 use crate::regulators::Lqr;
 use crate::sim::{simulate, Reference, SimConfig, SimResult};
-use crate::spec::study::{hanging_config, supervised, STEP_AFTER_CATCH};
+use crate::spec::study::{hanging_config, supervised};
 use crate::spec::{ControllerKind, Spec};
 use std::f64::consts::PI;
 
@@ -77,9 +77,9 @@ fn every_balance_controller_catches_from_hanging_and_tracks_the_step() {
                     max_arm(&res)
                 );
                 assert!(res.u.iter().all(|u| u.abs() <= u_max));
-                // The step comes STEP_AFTER_CATCH after the catch; before it the arm reference
-                // is 0 (held where the arm was caught by the supervisor).
-                let k_up = k + (STEP_AFTER_CATCH / paper::TS).round() as usize;
+                // The step comes reference.step_time after the catch; before it the arm
+                // reference is 0 (held where the arm was caught by the supervisor).
+                let k_up = k + (spec.reference.step_time / paper::TS).round() as usize;
                 assert!(res.r[..k_up].iter().all(|r| r[0] == 0.0), "{name}/{seed}");
                 assert!(res.r[k_up..].iter().all(|r| r[0] == 1.0), "{name}/{seed}");
                 // After the step the arm tracks as well as when started upright (the paper's

@@ -24,9 +24,14 @@ pub struct EmulatorConfig {
     pub hold_until_enabled: bool,
     /// The device watchdog: zero the motor when no command arrived for this long (s).
     pub command_timeout_s: f64,
-    /// The device's own voltage limit (V); commands beyond it are clamped.
+    /// The device's own voltage limit (V); commands beyond it are clamped. Not the controller's
+    /// input bound (`safety.voltage_limit`, default `paper::INPUT_LIMIT`): by default the
+    /// emulated device allows the largest limit rip-rt accepts
+    /// ([`MAX_VOLTAGE_LIMIT`](crate::config::MAX_VOLTAGE_LIMIT)), so the clamp a run exercises is
+    /// the loop's own.
     pub voltage_limit: f64,
-    /// H-bridge supply (V): the voltage at 100 % PWM duty.
+    /// H-bridge supply (V): the voltage at 100 % PWM duty. A physical property of the emulated
+    /// bridge, by default `MAX_VOLTAGE_LIMIT` too (a bridge able to drive every rig's motor).
     pub supply: f64,
     /// Standard deviation (rad) of the Gaussian noise on the arm and the pendulum angle
     /// (`[sensor] noise_std`). As in the simulation's `SensorModel`, the noise is added to the
@@ -87,18 +92,19 @@ pub struct Wiring {
 
 impl Default for EmulatorConfig {
     fn default() -> Self {
+        let [arm, pendulum] = rip_core::spec::SensorSpec::default().encoder_counts;
         Self {
             model: Model::Paper,
             sim_rate_hz: 1000.0,
-            arm_counts_per_rev: 2048,
-            pendulum_counts_per_rev: 2048,
+            arm_counts_per_rev: arm,
+            pendulum_counts_per_rev: pendulum,
             encoder_offsets: [0.0, 0.0],
             initial_arm: 0.0,
             initial_pendulum: 0.05,
             hold_until_enabled: true,
             command_timeout_s: 0.05,
-            voltage_limit: 24.0,
-            supply: 24.0,
+            voltage_limit: crate::config::MAX_VOLTAGE_LIMIT,
+            supply: crate::config::MAX_VOLTAGE_LIMIT,
             noise_std: [0.0; 2],
             drop_rate: 0.0,
             corrupt_rate: 0.0,
