@@ -324,19 +324,7 @@ pub fn design_checksum(design: &Design) -> String {
         .iter()
         .flat_map(|v| v.to_bits().to_le_bytes())
         .collect();
-    fnv1a64(&[spec.as_bytes(), &bits])
-}
-
-/// 64-bit FNV-1a over `parts` in order, written `fnv1a64:` and 16 hex digits: the checksum of
-/// the tuning record's entries ([`design_checksum`],
-/// [`feasibility_inputs`](crate::swingup::feasibility_inputs)).
-pub fn fnv1a64(parts: &[&[u8]]) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for &b in parts.iter().flat_map(|p| p.iter()) {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    format!("fnv1a64:{h:016x}")
+    crate::checksum::fnv1a64(&[spec.as_bytes(), &bits])
 }
 
 /// What `riprs tune` predicted for one controller, as stored in its record.

@@ -110,7 +110,8 @@ impl Config {
         self.rig().validate_swing_up(&self.spec)?;
         let s = &self.spec.swing_up;
         let plant = self.spec.plant()?;
-        let (f, source) = rip_core::swingup::stored_or_computed(&plant, s, rig_file);
+        let record = rig_file.map(rip_core::preflight::tune_record_path);
+        let (f, source) = rip_core::swingup::stored_or_computed(&plant, s, record.as_deref());
         if f.verdict == rip_core::swingup::Verdict::Impossible {
             let key = if f.voltage_needed.is_some() || f.arm_travel_needed.is_none() {
                 "swing_up.max_voltage"

@@ -1,14 +1,14 @@
 //! The feasibility verdict stored in the tuning record: `riprs tune` computes it when the rig
 //! file is made and writes it as the record's `[swing_up]` table
-//! ([`crate::preflight::tune_record_path`]); `rip-rt run --swing-up` reads it while its
-//! checksum matches the inputs and computes it again otherwise.
+//! (beside the rig file, `crate::preflight::tune_record_path`); `rip-rt run --swing-up` reads
+//! it while its checksum matches the inputs and computes it again otherwise.
 
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::checksum::fnv1a64;
 use crate::plant::Plant;
-use crate::preflight::{fnv1a64, tune_record_path};
 
 use super::feasibility::{feasibility, Feasibility, Verdict};
 use super::SwingUpSettings;
@@ -144,18 +144,19 @@ impl std::fmt::Display for VerdictSource {
     }
 }
 
-/// The verdict on `plant` with `settings`: the one stored in the tuning record beside
-/// `rig_file` when its checksum is [`feasibility_inputs`]'s, otherwise computed now.
+/// The verdict on `plant` with `settings`: the one stored in the tuning record at `record`
+/// (beside the rig file, `crate::preflight::tune_record_path`) when its checksum is
+/// [`feasibility_inputs`]'s, otherwise computed now.
 pub fn stored_or_computed(
     plant: &Plant,
     settings: &SwingUpSettings,
-    rig_file: Option<&Path>,
+    record: Option<&Path>,
 ) -> (Feasibility, VerdictSource) {
     let computed = |why: String| (feasibility(plant, settings), VerdictSource::Computed(why));
-    let Some(rig) = rig_file else {
+    let Some(path) = record else {
         return computed("no rig file".into());
     };
-    let path = tune_record_path(rig);
+    let path = path.to_path_buf();
     let Ok(text) = std::fs::read_to_string(&path) else {
         return computed(format!("no tuning record {}", path.display()));
     };
