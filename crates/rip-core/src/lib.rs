@@ -36,6 +36,7 @@
 //! Every fallible routine returns [`RipError`], whose variants name the offending argument.
 
 pub mod batch;
+pub mod checksum;
 pub mod compensation;
 pub mod controller;
 pub mod dare;

@@ -318,19 +318,13 @@ pub fn tune_record_path(rig: &Path) -> PathBuf {
 /// (its canonical TOML, presets resolved), the sample time and the planned input bounds.
 /// 64-bit FNV-1a, written `fnv1a64:` and 16 hex digits; it detects edits, not tampering.
 pub fn design_checksum(design: &Design) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |bytes: &[u8]| {
-        for &b in bytes {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0000_0100_0000_01b3);
-        }
-    };
-    eat(design.spec().resolved().to_toml().as_bytes());
+    let spec = design.spec().resolved().to_toml();
     let (lo, hi) = design.bounds();
-    for v in [design.ts(), lo, hi] {
-        eat(&v.to_bits().to_le_bytes());
-    }
-    format!("fnv1a64:{h:016x}")
+    let bits: Vec<u8> = [design.ts(), lo, hi]
+        .iter()
+        .flat_map(|v| v.to_bits().to_le_bytes())
+        .collect();
+    crate::checksum::fnv1a64(&[spec.as_bytes(), &bits])
 }
 
 /// What `riprs tune` predicted for one controller, as stored in its record.

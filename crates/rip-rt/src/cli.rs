@@ -401,8 +401,11 @@ fn prepare(
         None => Config::default(),
     };
     let controller = if args.swing_up {
-        cfg.validate_swing_up()
-            .and_then(|()| rip_rt::envelope::check_swing_up(&cfg))
+        cfg.validate_swing_up(args.config.as_deref())
+            .and_then(|(f, source)| {
+                rip_rt::say!("rip-rt: swing-up feasibility: {f} (verdict {source})");
+                rip_rt::envelope::check_swing_up(&cfg)
+            })
             .map_err(|e| match &args.config {
                 Some(path) => e.in_file(path),
                 None => e,
@@ -437,7 +440,7 @@ fn prepare(
                 ("period_ms", cfg.loop_.period_ms.to_string()),
                 ("voltage_limit", cfg.safety.voltage_limit.to_string()),
             ];
-            Some(LogWriter::create(path, &header, n_estimates)?)
+            Some(LogWriter::create(path, &header, n_estimates)?.waiting(args.lockstep))
         }
         None => None,
     };

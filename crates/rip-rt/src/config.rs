@@ -91,23 +91,36 @@ impl Config {
 
     /// The swing-up's settings against the safety limits, as [`RigSections::validate`] checks
     /// them for a file that sets `[swing_up]`: what `rip-rt run --swing-up` requires whatever
-    /// the file sets, before its braking envelope (`envelope::check_swing_up`).
-    pub fn validate_swing_up(&self) -> Result<(), ConfigError> {
+    /// the file sets, before its braking envelope (`envelope::check_swing_up`). Then whether
+    /// the rig can be swung up at all (rip-core's energy balance of the last swing): the
+    /// verdict `riprs tune` stored in the tuning record beside `rig_file` while its checksum
+    /// matches, otherwise computed now. Returns the verdict and where it came from; a rig the
+    /// voltage bound and the arm travel cannot swing up is refused before the motor moves,
+    /// naming what it would need.
+    pub fn validate_swing_up(
+        &self,
+        rig_file: Option<&std::path::Path>,
+    ) -> Result<
+        (
+            rip_core::swingup::Feasibility,
+            rip_core::swingup::VerdictSource,
+        ),
+        ConfigError,
+    > {
         self.rig().validate_swing_up(&self.spec)?;
-        // Before the motor moves: a rig the voltage bound and the arm travel cannot swing up
-        // (rip-core's energy balance of the last swing) is refused, naming what it would need.
         let s = &self.spec.swing_up;
         let plant = self.spec.plant()?;
-        let f = rip_core::swingup::feasibility(&plant, s);
+        let record = rig_file.map(rip_core::preflight::tune_record_path);
+        let (f, source) = rip_core::swingup::stored_or_computed(&plant, s, record.as_deref());
         if f.verdict == rip_core::swingup::Verdict::Impossible {
             let key = if f.voltage_needed.is_some() || f.arm_travel_needed.is_none() {
                 "swing_up.max_voltage"
             } else {
                 "swing_up.arm_limit"
             };
-            return Err(SpecError::new(key, f.to_string()));
+            return Err(SpecError::new(key, format!("{f} (verdict {source})")));
         }
-        Ok(())
+        Ok((f, source))
     }
 
     /// The control period in nanoseconds.
@@ -137,13 +150,13 @@ mod tests {
     #[test]
     fn a_rig_that_cannot_be_swung_up_is_refused_naming_the_voltage_it_needs() {
         let cfg = Config::from_toml("[swing_up]\nmax_voltage = 0.05\n").unwrap();
-        let e = cfg.validate_swing_up().unwrap_err().to_string();
+        let e = cfg.validate_swing_up(None).unwrap_err().to_string();
         assert!(e.contains("swing_up.max_voltage"), "{e}");
         assert!(
             e.contains("no swing-up is possible") && e.contains(" V "),
             "{e}"
         );
-        Config::default().validate_swing_up().unwrap();
+        Config::default().validate_swing_up(None).unwrap();
     }
 
     #[test]

@@ -114,6 +114,8 @@ pub struct LogWriter {
     tx: Option<SyncSender<Row>>,
     thread: Option<JoinHandle<BufWriter<File>>>,
     shared: Arc<Shared>,
+    /// Wait for room in the queue instead of faulting ([`LogWriter::waiting`]).
+    wait: bool,
 }
 
 impl std::fmt::Debug for LogWriter {
@@ -248,6 +250,7 @@ impl LogWriter {
             tx: Some(tx),
             thread: Some(thread),
             shared,
+            wait: false,
         })
     }
 
@@ -274,6 +277,14 @@ impl LogWriter {
         Ok(())
     }
 
+    /// The writer with [`push`](Self::push) waiting for room in the queue when `wait`, as a
+    /// lockstep run needs: it has no deadline, and it outpaces the writer on a loaded machine
+    /// (a full queue there is the loop running ahead, not the storage stalling).
+    pub fn waiting(mut self, wait: bool) -> Self {
+        self.wait = wait;
+        self
+    }
+
     /// Queues one row; an error is a log fault (the writer failed or fell behind). Allocation
     /// and system-call free.
     pub fn push(&mut self, row: Row) -> Result<(), LogError> {
@@ -281,7 +292,12 @@ impl LogWriter {
         let Some(tx) = &self.tx else {
             return Err(LogError::WriterGone);
         };
-        match tx.try_send(row) {
+        let sent = if self.wait {
+            tx.send(row).map_err(|e| TrySendError::Disconnected(e.0))
+        } else {
+            tx.try_send(row)
+        };
+        match sent {
             Ok(()) => Ok(()),
             Err(TrySendError::Full(_)) => Err(LogError::Behind(QUEUE_ROWS)),
             Err(TrySendError::Disconnected(_)) => {

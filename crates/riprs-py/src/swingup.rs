@@ -158,8 +158,8 @@ impl Controller for Balance {
 ///     ``arm_centering`` (rad/s), ``barrier_rate`` (1/s), ``rate_cutoff`` (Hz),
 ///     ``catch_angle`` (rad), ``catch_lookahead`` (s), ``catch_mode_fraction``,
 ///     ``catch_rate`` (rad/s),
-///     ``catch_arm_rate`` (rad/s), ``catch_arm_angle`` (rad), ``reference_return_rate``
-///     (rad/s), ``balance_angle`` (rad),
+///     ``catch_arm_rate`` (rad/s), ``catch_arm_angle`` (rad), ``catch_prediction`` (s),
+///     ``catch_margin`` (rad), ``reference_return_rate`` (rad/s), ``balance_angle`` (rad),
 ///     ``estimator_window`` (rad), ``handover_time`` (s), ``max_time`` (s), ``on_fall`` (``"retry"`` or ``"stop"``).
 ///
 /// Raises

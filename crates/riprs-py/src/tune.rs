@@ -135,7 +135,9 @@ fn loop_response<'py>(
 
 /// Chooses shared weights for the spec's rig (``rip_core::tune::tune``). Returns
 /// ``(tuned spec, weights, works, assessments, tried, record)``, the record the TOML text of
-/// ``rip_core::preflight::TuneRecord`` that the pre-flight reads beside the tuned file.
+/// ``rip_core::preflight::TuneRecord`` that the pre-flight reads beside the tuned file,
+/// followed by the swing-up feasibility verdict's ``[swing_up]`` table
+/// (``rip_core::swingup::StoredFeasibility``) that ``rip-rt run --swing-up`` reads.
 #[pyfunction]
 #[pyo3(signature = (spec, Ts = rip_core::paper::TS))]
 #[allow(non_snake_case)]
@@ -159,7 +161,12 @@ fn tune_weights<'py>(
         .allow_threads(|| {
             let t = tune::tune(&s, Ts, &bar)?;
             let record = tune::record(&t, Ts, &bar)?;
-            Ok::<_, rip_core::spec::SpecError>((t, record))
+            // The swing-up verdict beside the predictions, so that `rip-rt run --swing-up`
+            // reads it instead of computing it (rip_core::swingup::stored).
+            let verdict =
+                rip_core::swingup::StoredFeasibility::compute(&t.spec.plant()?, &t.spec.swing_up);
+            let text = format!("{}{}", record.to_toml(), verdict.to_section());
+            Ok::<_, rip_core::spec::SpecError>((t, text))
         })
         .map_err(config_err)?;
     let w = PyDict::new(py);
@@ -191,7 +198,7 @@ fn tune_weights<'py>(
         t.works,
         list,
         t.tried,
-        record.to_toml(),
+        record,
     ))
 }
 

@@ -118,6 +118,24 @@
 //!   there) until the external reference changes from the value it had at the catch; from that change on the external
 //!   reference is passed through (so a later 0 → 1 rad step is tracked as given, from the
 //!   arm's place rather than from `θ_c`).
+//! - **Predicted catch** (opt-in, [`SwingUpSettings::catch_prediction`] `> 0`): the fixed arm
+//!   windows (`catch_arm_rate`, `catch_arm_angle`) are replaced by a prediction. From the
+//!   swing-up's estimate `x`, the nominal model without dead zone and Coulomb friction is
+//!   simulated (RK4) for `catch_prediction` seconds under a reference LQR holding the arm
+//!   where it is,
+//!
+//!   ```text
+//!   u_k = sat_U(−K (x_k − [θ_c, 0, 0, 0]ᵀ)),   K = dlqr(A_d, b_d, diag(25, 0, 50, 0), 0.1)
+//!   ```
+//!
+//!   (`A_d, b_d` the upright linearisation sampled at `T_s`; the `[lqr]` section's default
+//!   weights), and the state is caught when every predicted sample keeps
+//!   `|α_k| ≤ balance_angle − m` and both `|θ_k|` and the arm's stopping point braked at the
+//!   bound within `arm_limit − m` (`m` = [`SwingUpSettings::catch_margin`]). It is the part
+//!   of the LQR's region of attraction that respects the balance region, found by simulation
+//!   instead of a level set, so an arm that is off centre or still turning is caught when the
+//!   balance controller can stop it in time, and not otherwise. The prediction runs only on
+//!   samples that meet the pendulum's conditions (a few per arrival) and allocates nothing.
 //! - **Balance**: the balance controller runs on `[θ, wrap(α)]`. For
 //!   [`SwingUpSettings::handover_time`] after the catch its estimator is restarted every
 //!   sample, after it has computed its move, from the swing-up's estimate and that move
@@ -135,21 +153,25 @@
 //!
 //! Every step is allocation-free when the balance controller's is.
 
+mod catch;
 pub mod feasibility;
 mod law;
 
 mod settings;
+pub mod stored;
 
 pub use crate::swing_report::{SwingUpReport, STILL_ARM};
 pub use crate::trig::wrap_angle;
 pub use feasibility::{feasibility, Feasibility, Verdict};
 pub use settings::{OnFall, SwingUpSettings, MAX_SWING_UP_TIME};
+pub use stored::{feasibility_inputs, stored_or_computed, StoredFeasibility, VerdictSource};
 
 use crate::controller::{Controller, Phase, StepStatus, StopCause};
 use crate::envelope::StoppingModel;
 use crate::error::{Result, RipError};
 use crate::plant::Plant;
 
+use catch::CatchPredictor;
 use law::{EnergyLaw, RateEstimator, UnstableMode};
 
 /// The swing-up supervisor around the balance controller `C` (module docs).
@@ -159,6 +181,8 @@ pub struct SwingUp<C> {
     settings: SwingUpSettings,
     law: EnergyLaw,
     mode: UnstableMode,
+    /// The predicted catch, when `catch_prediction > 0`.
+    predictor: Option<CatchPredictor>,
     /// How far the arm still travels when braked at the voltage bound: the balance region
     /// ends where that would take it beyond `arm_limit`.
     stopping: StoppingModel,
@@ -207,6 +231,7 @@ impl<C: Controller> SwingUp<C> {
         let mut out = Self {
             law: EnergyLaw::new(plant, &settings, ts),
             mode,
+            predictor: CatchPredictor::new(plant, &settings, ts),
             stopping: StoppingModel::new(plant.params(), settings.max_voltage, 1.0, ts),
             rates: RateEstimator::new(ts, settings.rate_cutoff),
             balance,
@@ -271,12 +296,15 @@ impl<C: Controller> SwingUp<C> {
         let x = self.rates.state();
         let s = &self.settings;
         let arm_stop = x[0] + x[1] * x[1].abs() / (2.0 * self.law.brake());
-        x[2].abs() <= s.catch_angle
+        let pendulum = x[2].abs() <= s.catch_angle
             && self.mode.load(x) <= s.catch_mode_fraction
             && (x[2] + x[3] * s.catch_lookahead).abs() <= s.catch_angle
-            && x[3].abs() <= s.catch_rate
-            && x[1].abs() <= s.catch_arm_rate
-            && arm_stop.abs() <= s.catch_arm_angle
+            && x[3].abs() <= s.catch_rate;
+        pendulum
+            && match &self.predictor {
+                Some(p) => p.recoverable(x, x[0]),
+                None => x[1].abs() <= s.catch_arm_rate && arm_stop.abs() <= s.catch_arm_angle,
+            }
     }
 
     fn in_balance_region(&self) -> bool {

@@ -107,6 +107,17 @@ pub struct SwingUpSettings {
     /// balance controller takes over with room to stop the arm inside `arm_limit`; default
     /// 0.7 rad (the balance controllers' catch transients move the arm by up to about 0.8 rad).
     pub catch_arm_angle: f64,
+    /// Predicted catch: horizon (s) over which the catch is predicted on the nominal model
+    /// under a reference LQR (the `[lqr]` section's default weights) holding the arm where it
+    /// is; a state inside the other catch conditions is caught when that prediction keeps the
+    /// pendulum within `balance_angle − catch_margin` and the arm and its stopping point within
+    /// `arm_limit − catch_margin` ([module docs](super), "Predicted catch"). It replaces the
+    /// fixed arm windows `catch_arm_rate` and `catch_arm_angle`, which then go unused.
+    /// Default 0: off (the arm windows decide).
+    pub catch_prediction: f64,
+    /// Room (rad) the predicted catch keeps inside `arm_limit` and `balance_angle` for the
+    /// difference between the nominal model and the rig; default 0.2 rad, less than both.
+    pub catch_margin: f64,
     /// Rate (rad/s) at which the arm reference moves from the arm's angle at the catch back to
     /// the external reference while that stays unchanged; default 0 (held at the catch angle).
     /// 0.5 rad/s raises the Monte Carlo success of the LQR and LQG on `qube_servo2` from
@@ -166,6 +177,8 @@ impl Default for SwingUpSettings {
             catch_rate: 7.0,
             catch_arm_rate: 3.0,
             catch_arm_angle: 0.7,
+            catch_prediction: 0.0,
+            catch_margin: 0.2,
             reference_return_rate: 0.0,
             balance_angle: 0.6,
             estimator_window: 0.3,
@@ -240,6 +253,14 @@ impl SwingUpSettings {
             false,
         )?;
         in_range(
+            "catch_prediction",
+            self.catch_prediction,
+            0.0,
+            10.0,
+            false,
+            false,
+        )?;
+        in_range(
             "reference_return_rate",
             self.reference_return_rate,
             0.0,
@@ -262,6 +283,15 @@ impl SwingUpSettings {
             self.estimator_window,
             0.0,
             PI,
+            false,
+            true,
+        )?;
+        // Checked after the two it is measured against, so that their own errors come first.
+        in_range(
+            "catch_margin",
+            self.catch_margin,
+            0.0,
+            self.arm_limit.min(self.balance_angle),
             false,
             true,
         )?;

@@ -1,0 +1,160 @@
+//! The predicted catch: whether a balance controller taking over at the current state keeps
+//! the pendulum up and the arm inside its limit, decided by simulating the nominal model
+//! under a reference LQR (module docs, "Predicted catch").
+
+use crate::envelope::StoppingModel;
+use crate::linalg::{c2d, Mat};
+use crate::lqr::dlqr;
+use crate::plant::{FurutaParams, Plant, State};
+
+use super::settings::SwingUpSettings;
+
+/// The reference LQR's state weights `diag(Q)` for `[θ, θ̇, α, α̇]`: the paper's, the `[lqr]`
+/// section's default.
+const REFERENCE_Q: [f64; 4] = [25.0, 0.0, 50.0, 0.0];
+/// The reference LQR's input weight, the `[lqr]` section's default.
+const REFERENCE_R: f64 = 0.1;
+/// RK4 substeps per sample of the prediction.
+const SUBSTEPS: usize = 2;
+
+/// The nominal closed loop the catch is predicted on (module docs, "Predicted catch").
+#[derive(Debug, Clone)]
+pub(crate) struct CatchPredictor {
+    plant: Plant,
+    k: [f64; 4],
+    ts: f64,
+    steps: usize,
+    u_max: f64,
+    arm_room: f64,
+    pendulum_room: f64,
+    stopping: StoppingModel,
+}
+
+impl CatchPredictor {
+    /// `None` when the prediction is off (`catch_prediction = 0`) or the reference LQR
+    /// cannot be designed on `plant`.
+    pub(crate) fn new(plant: &Plant, s: &SwingUpSettings, ts: f64) -> Option<Self> {
+        if s.catch_prediction <= 0.0 {
+            return None;
+        }
+        let smooth = Plant::new(FurutaParams {
+            vd: 0.0,
+            cr: 0.0,
+            cp: 0.0,
+            ..*plant.params()
+        })
+        .ok()?;
+        let (a, b) = smooth.linearize_upright();
+        let (ad, bd) = c2d(&a, &b, ts).ok()?;
+        let q = Mat::from_diagonal(&nalgebra::DVector::from_row_slice(&REFERENCE_Q));
+        let r = Mat::from_element(1, 1, REFERENCE_R);
+        let design = dlqr(&ad, &bd, &q, &r, None).ok()?;
+        let k = [
+            design.k[(0, 0)],
+            design.k[(0, 1)],
+            design.k[(0, 2)],
+            design.k[(0, 3)],
+        ];
+        Some(Self {
+            stopping: StoppingModel::new(smooth.params(), s.max_voltage, 1.0, ts),
+            plant: smooth,
+            k,
+            ts,
+            steps: (s.catch_prediction / ts).ceil() as usize,
+            u_max: s.max_voltage,
+            arm_room: s.arm_limit - s.catch_margin,
+            pendulum_room: s.balance_angle - s.catch_margin,
+        })
+    }
+
+    /// Whether the reference LQR, holding the arm at `theta_ref` from `x` (α wrapped), keeps
+    /// `|α|` within `balance_angle − catch_margin` and the arm and its stopping point within
+    /// `arm_limit − catch_margin` over the horizon.
+    pub(crate) fn recoverable(&self, x: &State, theta_ref: f64) -> bool {
+        let mut x = *x;
+        for _ in 0..self.steps {
+            let e = [x[0] - theta_ref, x[1], x[2], x[3]];
+            let v: f64 = -(0..4).map(|i| self.k[i] * e[i]).sum::<f64>();
+            let u = v.clamp(-self.u_max, self.u_max);
+            let stop = self.stopping.stopping_point(x[0], x[1], u);
+            if !(x[2].abs() <= self.pendulum_room
+                && x[0].abs() <= self.arm_room
+                && stop.abs() <= self.arm_room)
+            {
+                return false;
+            }
+            self.plant.advance(&mut x, u, 0.0, self.ts, SUBSTEPS);
+        }
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::paper::TS;
+
+    fn predictor(plant: &Plant, margin: f64) -> CatchPredictor {
+        let s = SwingUpSettings {
+            catch_prediction: 1.0,
+            catch_margin: margin,
+            ..SwingUpSettings::default()
+        };
+        CatchPredictor::new(plant, &s, TS).unwrap()
+    }
+
+    #[test]
+    fn off_by_default() {
+        let s = SwingUpSettings::default();
+        assert!(CatchPredictor::new(&Plant::paper(), &s, TS).is_none());
+    }
+
+    #[test]
+    fn the_reference_gain_stabilises_the_discrete_upright_model() {
+        for plant in [Plant::paper(), Plant::qube_servo2()] {
+            let p = predictor(&plant, 0.2);
+            let (a, b) = plant.linearize_upright();
+            let (ad, bd) = c2d(&a, &b, TS).unwrap();
+            let k = Mat::from_row_slice(1, 4, &p.k);
+            let closed = &ad - &bd * &k;
+            let radius = crate::linalg::eigenvalues(&closed)
+                .iter()
+                .map(|e| e.norm())
+                .fold(0.0f64, f64::max);
+            assert!(radius < 1.0, "spectral radius {radius}");
+        }
+    }
+
+    #[test]
+    fn obvious_catches_and_losses() {
+        for plant in [Plant::paper(), Plant::qube_servo2()] {
+            let p = predictor(&plant, 0.2);
+            // Upright at rest, anywhere in the middle of the travel: kept.
+            assert!(p.recoverable(&State::new(0.0, 0.0, 0.0, 0.0), 0.0));
+            assert!(p.recoverable(&State::new(0.5, 0.0, 0.05, 0.0), 0.5));
+            // The arm near its limit still turning towards it: its stopping point is beyond.
+            assert!(!p.recoverable(&State::new(1.2, 4.0, 0.0, 0.0), 1.2));
+            // The pendulum at the catch angle falling away fast: lost.
+            assert!(!p.recoverable(&State::new(0.0, 0.0, 0.3, 8.0), 0.0));
+        }
+    }
+
+    #[test]
+    fn a_larger_margin_accepts_fewer_states() {
+        let plant = Plant::qube_servo2();
+        let (tight, loose) = (predictor(&plant, 0.35), predictor(&plant, 0.1));
+        let (mut n_tight, mut n_loose) = (0, 0);
+        for i in 0..15 {
+            for j in 0..15 {
+                let theta = -1.2 + 0.17 * f64::from(i);
+                let rate = -5.0 + 0.7 * f64::from(j);
+                let x = State::new(theta, rate, 0.2, -2.0);
+                let (a, b) = (tight.recoverable(&x, theta), loose.recoverable(&x, theta));
+                assert!(!a || b, "kept by the larger margin only at {x:?}");
+                n_tight += usize::from(a);
+                n_loose += usize::from(b);
+            }
+        }
+        assert!(n_tight < n_loose, "{n_tight} vs {n_loose}");
+    }
+}
