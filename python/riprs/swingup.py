@@ -21,7 +21,8 @@ balance does.
 
 A local optimiser that finds nothing is not a proof: :func:`find_swing_up` reports
 ``found=False`` ("not found"), which is a different statement from rip-core's
-"impossible" (:func:`riprs.swing_up_feasibility`).
+"impossible": the energy bound's verdict, which ``riprs tune`` stores in the tuning record's
+``[swing_up]`` table and ``rip-rt run --swing-up`` reads.
 """
 
 from __future__ import annotations
