@@ -147,7 +147,8 @@ impl ArmEnvelope {
                 stop_at = sim.stopping_point(State::new(theta, rate, alpha, alpha_rate), applied);
             }
         }
-        if !(stop_at.abs() <= self.bound) {
+        // A NaN stopping point (no finite state to simulate) stops too.
+        if stop_at.is_nan() || stop_at.abs() > self.bound {
             return Err(StopReason::ArmEnvelope {
                 angle: theta,
                 rate,

@@ -361,7 +361,11 @@ fn a_fall_cycle_that_uses_up_the_swing_up_time_leaves_the_arm_inside_its_limit()
     // (docs/rip-rt.md, "Stopping the arm"), so it does not act first.
     assert_eq!(out.code, Some(13), "{}", out.stderr);
     assert!(out.stderr.contains("fell"), "{}", out.stderr);
-    assert!(!out.stderr.contains("arm braking envelope"), "{}", out.stderr);
+    assert!(
+        !out.stderr.contains("arm braking envelope"),
+        "{}",
+        out.stderr
+    );
     assert!(out.stderr.contains("stop: braked"), "{}", out.stderr);
     out.assert_safe("fall cycle until swing_up.max_time", ARM_LIMIT);
 }
