@@ -82,10 +82,11 @@
 //! ```
 //!
 //! (`c_s` the friction's largest torque, `J_min` the arm's least effective inertia), which
-//! enters the arm's `σ²` as `δ_f²`. Without it a balance that holds the arm in stick-slip,
-//! its voltage hovering just beyond a dead zone (generated rig 5: 0.53 V dead zone, 4.7 mN m
-//! of friction, 1.8 mrad of noise), fed the sign statistic a bias of about 2 per second:
-//! 25 after 15 s of balance, a false stop.
+//! enters the arm's `σ²` as `δ_f²`. A balance that holds the arm in stick-slip, its voltage
+//! hovering just beyond a dead zone (generated rig 5: 0.53 V dead zone, 4.7 mN m of
+//! friction, 1.8 mrad of noise), took the sign statistic to 25.06 after 15 s without it (a
+//! false stop), 23.9 with it; the rest is a closed-loop correlation between the observer's
+//! carried noise and the controller's reaction to it, which is open (docs/rip-rt.md).
 //!
 //! # An encoder that stopped counting
 //!
