@@ -265,6 +265,145 @@ impl HoldLaw {
     }
 }
 
+/// Share of the braking law's voltage that [`SimulatedStop`] counts on: the rest is kept for a
+/// motor weaker than `[plant]` says and a larger dead zone (tens of percent before
+/// identification). The pendulum's reaction on the arm is simulated, not reserved for.
+pub const SIMULATED_BRAKE_FRACTION: f64 = 0.7;
+
+/// Seconds of braking after which [`SimulatedStop`] takes an arm still moving outwards as
+/// one it cannot stop: the stop's own braking time (`rip-rt`'s `MAX_BRAKE_S`).
+pub const SIMULATED_STOP_S: f64 = 3.0;
+
+/// Seconds the simulated arm must stay at rest or move back before [`SimulatedStop`] takes
+/// its farthest point as reached: longer than the half swing of a hanging pendulum
+/// (`π √(J_α / G)`, 0.13–0.4 s across the rigs of shared/DESIGN.md), whose reaction can push
+/// a braked arm out again.
+pub const SIMULATED_REST_S: f64 = 0.5;
+/// Arm speed (rad/s) below which [`SimulatedStop`] counts the arm at rest.
+pub const SIMULATED_REST_RATE: f64 = 0.05;
+
+/// The stop simulated from the rig's whole state: the braking law run on the model of
+/// `[plant]`, the pendulum's reaction on the arm included, from the measured arm and pendulum
+/// angles and rates.
+///
+/// The analytic distance (3) cannot know the pendulum: it reserves a share of the braking
+/// torque for its reaction (`STOP_BRAKE_FRACTION`), which is too much for an upright
+/// pendulum just caught (its reaction is small; a controlled catch moves the arm fast) and
+/// too little for a heavy pendulum falling on a light arm. The simulation takes the reaction
+/// from the equations of motion of [`crate::plant`] instead:
+///
+/// ```text
+/// u = applied (full along the motion, SIMULATED_BRAKE_FRACTION of it against)   τ periods
+/// u = SIMULATED_BRAKE_FRACTION · BrakingLaw(θ̇_sampled)                          after
+/// ```
+///
+/// on the model without its Coulomb friction (which only helps the stop, and would need
+/// small integration steps), until the arm has stayed at rest or moved back for
+/// [`SIMULATED_REST_S`], at most [`SIMULATED_STOP_S`]; the stopping point is the farthest the
+/// arm went along its motion, and an arm that moved outwards all along the last
+/// [`SIMULATED_REST_S`] of that time has none (±∞).
+#[derive(Debug, Clone)]
+pub struct SimulatedStop {
+    plant: Plant,
+    law: BrakingLaw,
+    ts: f64,
+    substeps: usize,
+    latency_periods: usize,
+    voltage: f64,
+}
+
+impl SimulatedStop {
+    /// The simulated stop of plant `p` braked at `voltage` (V), sampled every `ts` (s), the
+    /// applied voltage acting for `latency_periods` periods before the braking law.
+    pub fn new(
+        p: &FurutaParams,
+        voltage: f64,
+        ts: f64,
+        latency_periods: usize,
+    ) -> crate::error::Result<Self> {
+        let smooth = FurutaParams {
+            cr: 0.0,
+            cp: 0.0,
+            ..*p
+        };
+        let plant = Plant::new(smooth)?;
+        let substeps = (ts / plant.max_rk4_substep()).ceil().clamp(1.0, 1000.0) as usize;
+        Ok(Self {
+            plant,
+            law: BrakingLaw::new(p, voltage, ts),
+            ts,
+            substeps,
+            latency_periods,
+            voltage,
+        })
+    }
+
+    /// The farthest arm angle (rad) along its motion from state `x` (the pendulum's angle 0
+    /// upright) with `applied` (V) across the motor until the stop's first command (class
+    /// docs); `x[0]` for an arm at rest, ±∞ for one the stop cannot bring to rest.
+    pub fn stopping_point(&self, x: State, applied: f64) -> f64 {
+        let dir = x[1].signum();
+        if x[1] == 0.0 || !x.iter().all(|v| v.is_finite()) {
+            return x[0];
+        }
+        let along = applied.clamp(-self.voltage, self.voltage);
+        let held = if along * dir > 0.0 {
+            along
+        } else {
+            SIMULATED_BRAKE_FRACTION * along
+        };
+        let mut x = x;
+        let mut far = x[0];
+        let outwards = |x: &State| x[1] * dir > 0.0;
+        for _ in 0..self.latency_periods {
+            self.plant
+                .advance(&mut x, held, 0.0, self.ts, self.substeps);
+            far = if dir > 0.0 {
+                far.max(x[0])
+            } else {
+                far.min(x[0])
+            };
+        }
+        let mut last = x[0];
+        let mut rate = x[1];
+        let periods = (SIMULATED_STOP_S / self.ts).ceil() as usize;
+        let rest = (SIMULATED_REST_S / self.ts).ceil() as u32;
+        let (mut still, mut escaping) = (0, 0);
+        for _ in 0..periods {
+            let u = SIMULATED_BRAKE_FRACTION * self.law.voltage(rate);
+            self.plant.advance(&mut x, u, 0.0, self.ts, self.substeps);
+            rate = (x[0] - last) / self.ts;
+            last = x[0];
+            far = if dir > 0.0 {
+                far.max(x[0])
+            } else {
+                far.min(x[0])
+            };
+            if !far.is_finite() {
+                break;
+            }
+            // At rest, or on its way back, for long enough that the pendulum's reaction has
+            // had its swing to push the arm out again.
+            if outwards(&x) && x[1].abs() > SIMULATED_REST_RATE {
+                (still, escaping) = (0, escaping + 1);
+            } else {
+                (still, escaping) = (still + 1, 0);
+            }
+            if still >= rest {
+                return far;
+            }
+        }
+        // Still swinging with its pendulum after the braking time, the arm has its farthest
+        // point behind it; one that has moved outwards all along its last SIMULATED_REST_S
+        // is not being stopped.
+        if far.is_finite() && escaping < rest {
+            far
+        } else {
+            dir * f64::INFINITY
+        }
+    }
+}
+
 /// Where a simulated run first left the envelope: the stop that the loop would make there.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Breach {
@@ -408,5 +547,73 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The simulated stop from the whole state bounds the farthest point of the nonlinear
+    /// plant (Coulomb friction and all) braked by the full law, from states of the swing-up
+    /// and of a catch; and on a controlled catch it stops the arm well before the analytic
+    /// distance, which reserves half the torque for the pendulum.
+    #[test]
+    fn the_simulated_stop_bounds_the_plant_braked_from_its_whole_state() {
+        let ts = 0.01;
+        for p in [FurutaParams::qube_servo2(), FurutaParams::paper()] {
+            let rough = FurutaParams {
+                cr: 0.004,
+                cp: 2e-5,
+                vd: 0.3,
+                ..p
+            };
+            let plant = Plant::new(rough).unwrap();
+            let sim = SimulatedStop::new(&rough, 12.0, ts, 2).unwrap();
+            let law = BrakingLaw::new(&rough, 12.0, ts);
+            for (w, alpha, alpha_dot, applied) in [
+                (15.7, 0.05, 1.0, -6.0),
+                (15.7, 0.05, 1.0, 12.0),
+                (8.0, std::f64::consts::PI, 0.0, 12.0),
+                (8.0, 1.0, -6.0, 3.0),
+                (-5.0, 2.5, 8.0, -12.0),
+                (3.0, -0.4, 5.0, 0.0),
+                (17.18, 0.05, 1.0, 12.0),
+            ] {
+                let predicted = sim.stopping_point(State::new(0.0, w, alpha, alpha_dot), applied);
+                let mut x = State::new(0.0, w, alpha, alpha_dot);
+                let (mut far, mut last, mut rate) = (0.0f64, 0.0, w);
+                for k in 0..400 {
+                    let u = if k < 2 { applied } else { law.voltage(rate) };
+                    plant.advance(&mut x, u, 0.0, ts, 50);
+                    rate = (x[0] - last) / ts;
+                    last = x[0];
+                    far = if w > 0.0 {
+                        far.max(x[0])
+                    } else {
+                        far.min(x[0])
+                    };
+                }
+                assert!(x[1].abs() < 0.5, "not at rest: {x:?}");
+                assert!(
+                    far.abs() <= predicted.abs(),
+                    "{w} {alpha}: {far} > {predicted}"
+                );
+            }
+        }
+        // The catch of the QUBE: upright, the arm at 15.7 rad/s with the controller braking.
+        let p = FurutaParams::qube_servo2();
+        let analytic = StoppingModel::new(&p, 12.0, STOP_BRAKE_FRACTION, 2.0 * ts);
+        let sim = SimulatedStop::new(&p, 12.0, ts, 2).unwrap();
+        let x = State::new(-0.18, 15.7, 0.05, 1.0);
+        // The analytic distance stops this arm (exit 5 in 3 of 60 emulated swing-ups); the
+        // simulated one, full voltage along the motion for the latency and all, does not.
+        assert!(analytic.stopping_point(-0.18, 15.7, 12.0) > 2.95);
+        let simulated = sim.stopping_point(x, 12.0);
+        assert!(simulated < 2.5, "{simulated}");
+        assert!(sim.stopping_point(x, -6.0) < simulated);
+        // The fastest catch seen (17.2 rad/s): the pendulum falls as the arm brakes and swings
+        // on for seconds, and the arm with it, inside.
+        let fastest = sim.stopping_point(State::new(-0.182, 17.18, 0.05, 1.0), 12.0);
+        assert!(fastest < 2.95, "{fastest}");
+        assert_eq!(
+            sim.stopping_point(State::new(0.3, 0.0, 0.0, 0.0), 12.0),
+            0.3
+        );
     }
 }

@@ -9,9 +9,13 @@
 //! `safety.voltage_limit` with half the braking deceleration counted on
 //! ([`STOP_BRAKE_FRACTION`]), two periods of latency at full drive, and the largest inertia
 //! of the arm, all on the configuration's `[plant]` (a preset until the rig is identified).
-//! The run stops ([`StopReason::ArmEnvelope`], exit 5) in the period the stopping point
-//! leaves `safety.arm_limit − ENVELOPE_MARGIN`, so that the stop that follows ends inside
-//! the limit. The position rule (`|θ| > safety.arm_limit`, [`StopReason::AngleLimit`]) stays
+//! Where that point is past `safety.arm_limit − ENVELOPE_MARGIN`, the stop is simulated from
+//! the whole measured state ([`SimulatedStop`]: the pendulum's reaction on the arm from the
+//! model, not a share of the torque reserved for it), and the run stops
+//! ([`StopReason::ArmEnvelope`], exit 5) in the period the simulated stopping point is past
+//! it too, so that the stop that follows ends inside the limit. A controlled catch, whose
+//! arm moves fast with the pendulum near upright, is not stopped by the analytic distance's
+//! reserve. The position rule (`|θ| > safety.arm_limit`, [`StopReason::AngleLimit`]) stays
 //! as a last resort.
 //!
 //! # The active stop ([`crate::braking::bring_to_rest`])
@@ -28,7 +32,8 @@
 //! not depend on it.
 
 use rip_core::envelope::{
-    envelope_speed, excitation_breach, BrakingLaw, HoldLaw, StoppingModel, STOP_BRAKE_FRACTION,
+    envelope_speed, excitation_breach, BrakingLaw, HoldLaw, SimulatedStop, StoppingModel,
+    STOP_BRAKE_FRACTION,
 };
 use rip_core::excitation::{ExcitationSettings, Signal};
 use rip_core::plant::{Plant, State};
@@ -74,9 +79,11 @@ pub fn envelope_limit(cfg: &Config) -> f64 {
 #[derive(Debug, Clone)]
 pub struct ArmEnvelope {
     model: StoppingModel,
+    simulated: Option<SimulatedStop>,
     bound: f64,
-    // The last arm angle and the device's clock (µs, wrapping) when it was sampled.
-    last: Option<(f64, u32)>,
+    // The last arm and pendulum angles and the device's clock (µs, wrapping) when they were
+    // sampled.
+    last: Option<(f64, f64, u32)>,
 }
 
 impl ArmEnvelope {
@@ -84,6 +91,13 @@ impl ArmEnvelope {
     pub fn new(cfg: &Config) -> Self {
         Self {
             model: stopping_model(cfg),
+            simulated: SimulatedStop::new(
+                &cfg.spec.plant.params(),
+                cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT),
+                cfg.period_s(),
+                LATENCY_PERIODS as usize,
+            )
+            .ok(),
             bound: envelope_limit(cfg),
             last: None,
         }
@@ -99,24 +113,42 @@ impl ArmEnvelope {
         self.last = None;
     }
 
-    /// Takes the arm angle `theta` sampled at the device's clock `device_us` with `applied`
-    /// (V) across the motor (the device's report, which acts until the stop's first command);
-    /// the stop reason when the arm's stopping point is past the envelope's bound.
-    pub fn check(&mut self, theta: f64, device_us: u32, applied: f64) -> Result<(), StopReason> {
-        let rate = match self.last.replace((theta, device_us)) {
-            Some((before, at)) => {
+    /// Takes the arm angle `theta` and the pendulum angle `alpha` (rad, 0 upright) sampled at
+    /// the device's clock `device_us` with `applied` (V) across the motor (the device's
+    /// report, which acts until the stop's first command); the stop reason when the arm's
+    /// stopping point is past the envelope's bound (module docs: the analytic distance first,
+    /// and where it is past the bound, the stop simulated from the whole state).
+    pub fn check(
+        &mut self,
+        theta: f64,
+        alpha: f64,
+        device_us: u32,
+        applied: f64,
+    ) -> Result<(), StopReason> {
+        let (rate, alpha_rate) = match self.last.replace((theta, alpha, device_us)) {
+            Some((before, alpha_before, at)) => {
                 let dt = device_us.wrapping_sub(at);
                 // Two samples in the same microsecond, or a clock that jumped back: no rate.
                 if dt > 0 && dt < u32::MAX / 2 {
-                    (theta - before) / (dt as f64 * 1e-6)
+                    let dt = dt as f64 * 1e-6;
+                    (
+                        (theta - before) / dt,
+                        rip_core::trig::wrap_angle(alpha - alpha_before) / dt,
+                    )
                 } else {
-                    0.0
+                    (0.0, 0.0)
                 }
             }
-            None => 0.0,
+            None => (0.0, 0.0),
         };
-        let stop_at = self.model.stopping_point(theta, rate, applied);
+        let mut stop_at = self.model.stopping_point(theta, rate, applied);
         if stop_at.abs() > self.bound {
+            if let Some(sim) = &self.simulated {
+                stop_at = sim.stopping_point(State::new(theta, rate, alpha, alpha_rate), applied);
+            }
+        }
+        // A NaN stopping point (no finite state to simulate) stops too.
+        if stop_at.is_nan() || stop_at.abs() > self.bound {
             return Err(StopReason::ArmEnvelope {
                 angle: theta,
                 rate,
@@ -900,17 +932,36 @@ mod tests {
         let cfg = Config::from_toml("").unwrap();
         let mut env = ArmEnvelope::new(&cfg);
         let model = *env.model();
-        // At 2 rad from the 3 rad limit, the fastest speed it may still move outwards.
+        let hanging = std::f64::consts::PI;
+        // At 2 rad from the 3 rad limit, the fastest speed it may still move outwards: by the
+        // analytic distance, and by the stop simulated from the whole state (the pendulum
+        // hanging still), which decides.
         let room = envelope_limit(&cfg) - 2.0;
         let v = model.max_speed(room, 12.0);
-        assert!(v > 1.0, "{v}");
-        env.check(2.0 - 0.9 * v * 0.01, 0, 12.0).unwrap();
-        env.check(2.0, 10_000, 12.0).unwrap();
+        let sim = SimulatedStop::new(&cfg.spec.plant.params(), 12.0, 0.01, 2).unwrap();
+        let stops_inside = |w: f64| {
+            sim.stopping_point(State::new(2.0, w, hanging, 0.0), 12.0) <= envelope_limit(&cfg)
+        };
+        let (mut lo, mut hi) = (v, 10.0 * v);
+        assert!(stops_inside(lo) && !stops_inside(hi));
+        while hi - lo > 1e-3 * v {
+            let mid = 0.5 * (lo + hi);
+            if stops_inside(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let w = lo;
+        // The analytic distance reserves half the torque for a pendulum that does not push.
+        assert!(0.9 * w > v, "{w} vs {v}");
+        env.check(2.0 - 0.9 * w * 0.01, hanging, 0, 12.0).unwrap();
+        env.check(2.0, hanging, 10_000, 12.0).unwrap();
         env.reset();
-        env.check(2.0 - 1.1 * v * 0.01, u32::MAX - 4_999, 12.0)
+        env.check(2.0 - 1.1 * w * 0.01, hanging, u32::MAX - 4_999, 12.0)
             .unwrap();
         // Across the wrap of the device's clock.
-        let stop = env.check(2.0, 5_000, 12.0).unwrap_err();
+        let stop = env.check(2.0, hanging, 5_000, 12.0).unwrap_err();
         assert!(
             matches!(stop, StopReason::ArmEnvelope { stop_at, .. } if stop_at > 2.95),
             "{stop}"
@@ -918,12 +969,12 @@ mod tests {
         assert_eq!(stop.exit_code(), crate::stop::exit_code::ANGLE_LIMIT);
         // Moving inwards is never stopped.
         env.reset();
-        env.check(2.5, 0, -12.0).unwrap();
-        env.check(2.4, 10_000, -12.0).unwrap();
+        env.check(2.5, hanging, 0, -12.0).unwrap();
+        env.check(2.4, hanging, 10_000, -12.0).unwrap();
         // At that speed, an applied voltage already braking leaves room.
         env.reset();
-        env.check(2.0 - 1.1 * v * 0.01, 0, -12.0).unwrap();
-        env.check(2.0, 10_000, -12.0).unwrap();
+        env.check(2.0 - 1.1 * w * 0.01, hanging, 0, -12.0).unwrap();
+        env.check(2.0, hanging, 10_000, -12.0).unwrap();
     }
 
     #[test]

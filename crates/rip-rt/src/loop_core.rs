@@ -411,7 +411,7 @@ impl LoopCore {
                 .map_err(StopReason::Witness)?;
         }
         self.envelope
-            .check(theta, m.device_time_us, m.applied_mv as f64 * 1e-3)?;
+            .check(theta, alpha, m.device_time_us, m.applied_mv as f64 * 1e-3)?;
         let reference = self.reference_at(t);
         self.y = [theta, alpha];
         self.r = [reference, 0.0];
@@ -514,7 +514,7 @@ impl LoopCore {
             });
         }
         self.envelope
-            .check(theta, m.device_time_us, m.applied_mv as f64 * 1e-3)?;
+            .check(theta, alpha, m.device_time_us, m.applied_mv as f64 * 1e-3)?;
         if !voltage.is_finite() {
             return Err(StopReason::ControllerFault { voltage, t });
         }
