@@ -138,6 +138,9 @@ use rip_core::swingup::wrap_angle;
 
 use crate::config::Config;
 
+mod fault;
+pub use fault::WitnessFault;
+
 /// Position gain ℓ_p of the observer's correction (module docs).
 pub const GAIN_POSITION: f64 = 0.5;
 /// Rate gain ℓ_v of the observer's correction (module docs).
@@ -174,76 +177,6 @@ pub const FROZEN_PERIODS: u32 = 2;
 /// Threshold of the sign statistic (a log-likelihood ratio, module docs): the run stops as
 /// a reversed motor or arm encoder when it exceeds this.
 pub const SIGN_THRESHOLD: f64 = 25.0;
-
-/// Why the witness stopped the run: the likely fault.
-#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
-pub enum WitnessFault {
-    /// The arm encoder's reading stayed constant while the voltage must have turned the arm.
-    #[error(
-        "the arm encoder has read a constant {theta:+.3} rad for {still_s:.2} s while the \
-         applied voltage must have turned the arm by {predicted:+.3} rad: the arm encoder \
-         stopped counting (check its cable and connector)"
-    )]
-    ArmFrozen {
-        /// The constant reading (rad).
-        theta: f64,
-        /// The arm motion the model predicted meanwhile (rad).
-        predicted: f64,
-        /// How long the reading has been constant (s).
-        still_s: f64,
-    },
-    /// The arm moved against the motion the voltage must produce.
-    #[error(
-        "the arm moved {measured:+.3} rad over the last {window_s:.2} s where the applied \
-         voltage must have turned it {predicted:+.3} rad (statistic {stat:.0} > {limit}): the \
-         motor leads are swapped, the arm encoder counts backwards, or device.arm_sign is wrong \
-         (rip-rt excite's sign check tells which)"
-    )]
-    ArmWrongWay {
-        /// The measured arm motion since the disagreement began (rad).
-        measured: f64,
-        /// The arm motion the model predicted meanwhile (rad).
-        predicted: f64,
-        /// How long ago the disagreement began (s).
-        window_s: f64,
-        /// The statistic at the trip.
-        stat: f64,
-        /// Its threshold.
-        limit: f64,
-    },
-    /// The arm moved the predicted way, but not as far as the model says.
-    #[error(
-        "the arm's motion disagrees with what the applied voltage must produce: it moved \
-         {measured:+.3} rad over the last {window_s:.2} s where [plant] predicts \
-         {predicted:+.3} rad (statistic {stat:.0} > {limit}): swapped motor leads, a reversed \
-         arm encoder or device.arm_sign (rip-rt excite's sign check tells which), a wrong \
-         sensor.encoder_counts[0], a slipping arm, or a rig unlike [plant] (riprs identify)"
-    )]
-    ArmDisagrees {
-        /// The measured arm motion since the disagreement began (rad).
-        measured: f64,
-        /// The arm motion the model predicted meanwhile (rad).
-        predicted: f64,
-        /// How long ago the disagreement began (s).
-        window_s: f64,
-        /// The statistic at the trip.
-        stat: f64,
-        /// Its threshold.
-        limit: f64,
-    },
-    /// The pendulum's motion disagrees with the model.
-    #[error(
-        "the pendulum's motion disagrees with what the arm's motion must produce (statistic \
-         {stat:.0} > {limit}): check the pendulum encoder (cable, device.pendulum_sign, \
-         sensor.encoder_counts[1]) and the motor leads"
-    )]
-    PendulumDisagrees {
-        /// The statistic at the trip.
-        stat: f64,
-        /// Its threshold.
-        limit: f64,
-    },
-}
 
 /// The thresholds and gains (module docs); [`WitnessLimits::default`] is the measured choice.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -496,21 +429,8 @@ impl Witness {
         self.predict(&mut late, volts, dt, latest);
         self.predict(&mut x, volts, dt, delay);
         if unknown {
-            // The arrival the measurements show: the point between the command at the sample
-            // and at the next one that fits both angles best (in units of their noise), so that
-            // the observer leaves the period with the rates the late command gave the rig.
-            let d = [
-                (late[0] - early[0]) / self.sigma[0],
-                wrap_angle(late[2] - early[2]) / self.sigma[1],
-            ];
-            let m = [
-                (theta - early[0]) / self.sigma[0],
-                wrap_angle(alpha - early[2]) / self.sigma[1],
-            ];
-            let norm = d[0] * d[0] + d[1] * d[1];
-            if norm > 0.0 {
-                let f = ((m[0] * d[0] + m[1] * d[1]) / norm).clamp(0.0, 1.0);
-                x = early + (late - early) * f;
+            if let Some(fitted) = self.fit_arrival(&early, &late, theta, alpha) {
+                x = fitted;
             }
         }
         // The same period at 0 V: what the voltage adds to the arm's motion, by the model.
@@ -571,47 +491,13 @@ impl Witness {
             self.unknown_left.saturating_sub(1)
         };
         let on_time = dt >= 0.5 * self.ts && dt <= 1.5 * self.ts && !held;
-        let k = self.limits.drift;
         let friction = self.friction_uncertainty(prior[1], dt);
-        // The observer's error carried from a period of unknown timing into this prediction;
-        // then what of it the correction leaves, and a new one's spread.
-        let carried: [f64; 2] =
-            std::array::from_fn(|j| self.carried[j][0] + self.carried[j][1] * dt);
-        for j in 0..2 {
-            self.carried[j] = [
-                (1.0 - GAIN_POSITION) * carried[j],
-                (1.0 - GAIN_RATE) * self.carried[j][1],
-            ];
-            if unknown {
-                // The fit above chose the arrival within the interval: at most half of it
-                // either side of the truth is left.
-                let spread = [
-                    0.5 * (late[2 * j] - early[2 * j]).abs(),
-                    0.5 * (late[2 * j + 1] - early[2 * j + 1]).abs(),
-                ];
-                self.carried[j][0] = self.carried[j][0].max(spread[0]);
-                self.carried[j][1] = self.carried[j][1].max(spread[1]);
-            }
-        }
+        let carried = self.carry_error(dt, unknown.then_some((&early, &late)));
         // The arm's statistics leave it out: they are what stops a wiring fault within half a
         // radian on a loaded machine, and the holds above already cover them (measured,
         // docs/rip-rt.md); the pendulum's, which a chattering catch with a late command in
         // it drove past its threshold, take it in.
-        let model = [friction, carried[1]];
-        for j in 0..2 {
-            let timing = TIMING_S * rate[j];
-            let var = self.sigma[j] * self.sigma[j]
-                + timing * timing
-                + switch[j] * switch[j]
-                + model[j] * model[j];
-            let z = e[j] / var.sqrt();
-            let g = &mut self.cusum[j];
-            if on_time {
-                g[0] = (g[0] + z - k).max(0.0);
-                g[1] = (g[1] - z - k).max(0.0);
-            }
-            self.peak[j] = self.peak[j].max(g[0].max(g[1]));
-        }
+        self.accumulate(e, rate, switch, [friction, carried[1]], on_time);
         if on_time {
             // The log-likelihood ratio of "the voltage acts reversed" (the arm measured at
             // the 0 V motion less the voltage's part) against "as modelled".
@@ -643,6 +529,80 @@ impl Witness {
             self.disagreeing += 1;
         }
         self.judge(theta)
+    }
+
+    /// The arrival the measurements show, for a period of unknown timing: the point between
+    /// the command at the sample (`early`) and at the next one (`late`) that fits both angles
+    /// best in units of their noise, so that the observer leaves the period with the rates
+    /// the late command gave the rig. `None` when the two predictions coincide.
+    fn fit_arrival(&self, early: &State, late: &State, theta: f64, alpha: f64) -> Option<State> {
+        let d = [
+            (late[0] - early[0]) / self.sigma[0],
+            wrap_angle(late[2] - early[2]) / self.sigma[1],
+        ];
+        let m = [
+            (theta - early[0]) / self.sigma[0],
+            wrap_angle(alpha - early[2]) / self.sigma[1],
+        ];
+        let norm = d[0] * d[0] + d[1] * d[1];
+        (norm > 0.0).then(|| {
+            let f = ((m[0] * d[0] + m[1] * d[1]) / norm).clamp(0.0, 1.0);
+            *early + (*late - *early) * f
+        })
+    }
+
+    /// The observer's error carried from a period of unknown timing into this prediction
+    /// (returned, per joint), advanced by what the correction leaves of it; `fitted`, the
+    /// bounds of a new unknown period's arrival, adds its spread.
+    fn carry_error(&mut self, dt: f64, fitted: Option<(&State, &State)>) -> [f64; 2] {
+        let carried: [f64; 2] =
+            std::array::from_fn(|j| self.carried[j][0] + self.carried[j][1] * dt);
+        for j in 0..2 {
+            self.carried[j] = [
+                (1.0 - GAIN_POSITION) * carried[j],
+                (1.0 - GAIN_RATE) * self.carried[j][1],
+            ];
+            if let Some((early, late)) = fitted {
+                // The fit chose the arrival within the interval: at most half of it either
+                // side of the truth is left.
+                let spread = [
+                    0.5 * (late[2 * j] - early[2 * j]).abs(),
+                    0.5 * (late[2 * j + 1] - early[2 * j + 1]).abs(),
+                ];
+                self.carried[j][0] = self.carried[j][0].max(spread[0]);
+                self.carried[j][1] = self.carried[j][1].max(spread[1]);
+            }
+        }
+        carried
+    }
+
+    /// One period's CUSUM update of the arm's and the pendulum's statistics from the
+    /// innovations `e`, normalised by the spread of the noise, the sampling instant
+    /// (`rate`), the command's arrival (`switch`) and the model (`model`); held while the
+    /// period is not `on_time`.
+    fn accumulate(
+        &mut self,
+        e: [f64; 2],
+        rate: [f64; 2],
+        switch: [f64; 2],
+        model: [f64; 2],
+        on_time: bool,
+    ) {
+        let k = self.limits.drift;
+        for j in 0..2 {
+            let timing = TIMING_S * rate[j];
+            let var = self.sigma[j] * self.sigma[j]
+                + timing * timing
+                + switch[j] * switch[j]
+                + model[j] * model[j];
+            let z = e[j] / var.sqrt();
+            let g = &mut self.cusum[j];
+            if on_time {
+                g[0] = (g[0] + z - k).max(0.0);
+                g[1] = (g[1] - z - k).max(0.0);
+            }
+            self.peak[j] = self.peak[j].max(g[0].max(g[1]));
+        }
     }
 
     /// The verdict on the statistics after the measurement `theta` (rad): the first limit
