@@ -34,17 +34,24 @@ fn send(dev: &mut Device<ControlLaw<f64, 4096>>, message: Message) -> Option<Fra
     dev.handle(Event::Frame(Frame { seq: 1, message }), &Inputs::default())
 }
 
-#[test]
-fn pil_steps_match_the_controller_on_independently_converted_angles() {
+/// A device in onboard mode with no design yet, and the LQR's upload image for it.
+fn device_and_lqr_image() -> (Device<ControlLaw<f64, 4096>>, Vec<u8>) {
     let mut img = vec![0u8; 4096];
     let n = write_image(&sensor(), &lqr(), &mut img).unwrap();
     img.truncate(n);
-    let mut dev = Device::with_onboard(
+    let dev = Device::with_onboard(
         Config::DEFAULT,
         &Inputs::default(),
         [0, 0],
         ControlLaw::<f64, 4096>::new(),
     );
+    (dev, img)
+}
+
+#[test]
+fn pil_steps_match_the_controller_on_independently_converted_angles() {
+    let (mut dev, img) = device_and_lqr_image();
+    let n = img.len();
     // Before any design: refused.
     let Some(Frame {
         message: Message::PilMove(m),
@@ -131,15 +138,8 @@ fn counting() -> u32 {
 
 #[test]
 fn pil_phase_flags_time_one_part_each_and_leave_the_move_unchanged() {
-    let mut img = vec![0u8; 4096];
-    let n = write_image(&sensor(), &lqr(), &mut img).unwrap();
-    img.truncate(n);
-    let mut dev = Device::with_onboard(
-        Config::DEFAULT,
-        &Inputs::default(),
-        [0, 0],
-        ControlLaw::<f64, 4096>::new(),
-    );
+    let (mut dev, img) = device_and_lqr_image();
+    let n = img.len();
     dev.set_cycle_counter(counting, 0);
     send(
         &mut dev,
