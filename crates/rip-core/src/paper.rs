@@ -187,11 +187,17 @@ pub fn noise_model() -> NoiseModel {
     }
 }
 
-/// LQR weights of eq. (13): `Q = diag(25, 0, 50, 0)`, `R = 0.1`.
+/// The diagonal of the LQR state weight of eq. (13), `Q = diag(25, 0, 50, 0)` for
+/// `[θ, θ̇, α, α̇]`: the `[lqr]` section's default.
+pub const LQR_Q: [f64; 4] = [25.0, 0.0, 50.0, 0.0];
+/// The LQR input weight of eq. (13), `R = 0.1`: the `[lqr]` section's default.
+pub const LQR_R: f64 = 0.1;
+
+/// LQR weights of eq. (13): `Q = diag(`[`LQR_Q`]`)`, `R = `[`LQR_R`].
 pub fn lqr_weights() -> (Mat, Mat) {
     (
-        Mat::from_diagonal(&nalgebra::DVector::from_row_slice(&[25.0, 0.0, 50.0, 0.0])),
-        Mat::from_element(1, 1, 0.1),
+        Mat::from_diagonal(&nalgebra::DVector::from_row_slice(&LQR_Q)),
+        Mat::from_element(1, 1, LQR_R),
     )
 }
 

@@ -29,8 +29,8 @@ pub struct LqrSpec {
 impl Default for LqrSpec {
     fn default() -> Self {
         Self {
-            Q: [25.0, 0.0, 50.0, 0.0],
-            R: 0.1,
+            Q: crate::paper::LQR_Q,
+            R: crate::paper::LQR_R,
             rate_cutoff: DEFAULT_RATE_CUTOFF_HZ,
             integral_weight: 0.0,
         }

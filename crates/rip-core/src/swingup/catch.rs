@@ -3,17 +3,12 @@
 //! under a reference LQR (module docs, "Predicted catch").
 
 use crate::envelope::StoppingModel;
-use crate::linalg::{c2d, Mat};
+use crate::linalg::c2d;
 use crate::lqr::dlqr;
 use crate::plant::{FurutaParams, Plant, State};
 
 use super::settings::SwingUpSettings;
 
-/// The reference LQR's state weights `diag(Q)` for `[θ, θ̇, α, α̇]`: the paper's, the `[lqr]`
-/// section's default.
-const REFERENCE_Q: [f64; 4] = [25.0, 0.0, 50.0, 0.0];
-/// The reference LQR's input weight, the `[lqr]` section's default.
-const REFERENCE_R: f64 = 0.1;
 /// RK4 substeps per sample of the prediction.
 const SUBSTEPS: usize = 2;
 
@@ -46,8 +41,8 @@ impl CatchPredictor {
         .ok()?;
         let (a, b) = smooth.linearize_upright();
         let (ad, bd) = c2d(&a, &b, ts).ok()?;
-        let q = Mat::from_diagonal(&nalgebra::DVector::from_row_slice(&REFERENCE_Q));
-        let r = Mat::from_element(1, 1, REFERENCE_R);
+        // The reference LQR is the paper's, eq. (13): the `[lqr]` section's default.
+        let (q, r) = crate::paper::lqr_weights();
         let design = dlqr(&ad, &bd, &q, &r, None).ok()?;
         let k = [
             design.k[(0, 0)],
@@ -92,6 +87,7 @@ impl CatchPredictor {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::linalg::Mat;
     use crate::paper::TS;
 
     fn predictor(plant: &Plant, margin: f64) -> CatchPredictor {
