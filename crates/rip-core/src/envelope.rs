@@ -327,7 +327,7 @@ impl SimulatedStop {
             ..*p
         };
         let plant = Plant::new(smooth)?;
-        let substeps = (ts / plant.max_rk4_substep()).ceil().clamp(1.0, 1000.0) as usize;
+        let substeps = stable_substeps(&plant, ts);
         Ok(Self {
             plant,
             law: BrakingLaw::new(p, voltage, ts),
@@ -431,7 +431,7 @@ pub fn first_breach(
     bound: f64,
     mut law: impl FnMut(f64, f64, f64) -> f64,
 ) -> Option<Breach> {
-    let substeps = (ts / plant.max_rk4_substep()).ceil().clamp(1.0, 1000.0) as usize;
+    let substeps = stable_substeps(plant, ts);
     let steps = (duration / ts).ceil() as usize;
     let mut x = x0;
     let mut last = x[0];
@@ -481,6 +481,12 @@ pub fn excitation_breach(
             x.command(e, theta, rate, arm_limit)
         },
     ))
+}
+
+/// RK4 substeps per sample `ts` (s) within `plant`'s stability limit
+/// ([`Plant::max_rk4_substep`]), between 1 and 1000.
+fn stable_substeps(plant: &Plant, ts: f64) -> usize {
+    (ts / plant.max_rk4_substep()).ceil().clamp(1.0, 1000.0) as usize
 }
 
 #[cfg(test)]
