@@ -623,15 +623,15 @@ fn syscall_of(pid: u32) -> Option<i64> {
 /// A loop suspended between a sample request and its command (here while it waits for the
 /// reply) must not, on resuming, send an enabling command resting on the measurement of before
 /// the suspension, held or freshly computed: the stall stops it first.
+/// One run of [`a_loop_suspended_while_waiting_for_a_reply_sends_nothing_stale`]: the run's
+/// result, its emulator, and the system call the loop was suspended in.
 #[cfg(all(target_os = "linux", target_arch = "x86_64"))]
-#[test]
-fn a_loop_suspended_while_waiting_for_a_reply_sends_nothing_stale() {
-    let _serial = one_at_a_time();
-    let cfg = scratch("stall-reply.toml");
+fn suspend_while_waiting_for_a_reply(name: &str) -> (RunResult, Emulator, Option<i64>) {
+    let cfg = scratch(&format!("{name}.toml"));
     // Most of each period spent waiting for a reply, and many replies dropped (held commands).
     std::fs::write(&cfg, "[loop]\nreply_timeout_ms = 9.5\n").unwrap();
     let emu = Emulator::start(
-        "stall-reply",
+        name,
         &["--noise", "0.3", "--drop-rate", "0.25", "--seed", "8"],
     );
     let child = spawn_run(
@@ -650,7 +650,34 @@ fn a_loop_suspended_while_waiting_for_a_reply_sends_nothing_stale() {
     let stopped_in = syscall_of(pid);
     std::thread::sleep(Duration::from_millis(400));
     unsafe { libc::kill(pid as i32, libc::SIGCONT) };
-    let r = wait_with_timeout(child, Duration::from_secs(15));
+    (
+        wait_with_timeout(child, Duration::from_secs(15)),
+        emu,
+        stopped_in,
+    )
+}
+
+/// A loop suspended between a sample request and its command (here while it waits for the
+/// reply) must not, on resuming, send an enabling command resting on the measurement of before
+/// the suspension, held or freshly computed: the stall stops it first. A run the witness
+/// stopped before the suspension (exit 15; about 1 in 6 real-time runs with a quarter of the
+/// replies dropped, a false stop open under issue 21) did not reach the subject and is run
+/// again, at most twice.
+#[cfg(all(target_os = "linux", target_arch = "x86_64"))]
+#[test]
+fn a_loop_suspended_while_waiting_for_a_reply_sends_nothing_stale() {
+    let _serial = one_at_a_time();
+    let (mut r, mut emu, mut stopped_in) = suspend_while_waiting_for_a_reply("stall-reply");
+    for attempt in 1..3 {
+        if r.status.code() != Some(15) {
+            break;
+        }
+        println!(
+            "witness stop before the suspension, attempt {attempt} again: {}",
+            r.stderr
+        );
+        (r, emu, stopped_in) = suspend_while_waiting_for_a_reply(&format!("stall-reply-{attempt}"));
+    }
     assert_eq!(r.status.code(), Some(10), "{}", r.stderr);
     assert!(r.stderr.contains("stalled"), "{}", r.stderr);
     // The record's times: every command after the 400 ms gap is the stop.
