@@ -42,6 +42,7 @@ use crate::metrics::table1_rmse;
 use crate::plant::{FurutaParams, Plant};
 use crate::preflight::{design_checksum, StoredPrediction, TuneRecord};
 use crate::sim::simulate;
+use crate::spec::rig_sections::COUNTS_PER_REV;
 use crate::spec::{ControllerKind, Spec, SpecError};
 
 /// Noise seeds of each candidate's simulations.
@@ -393,17 +394,16 @@ pub fn steady_state(run: &crate::sim::SimResult, window: f64) -> (f64, f64, f64)
     (hi - lo, alpha, (sum / n.max(1) as f64).abs())
 }
 
-/// The rig of `spec` read by exact sensors: no quantisation, no noise, no offsets.
+/// The rig of `spec` read by exact sensors: the finest resolution the schema accepts
+/// (2²⁴ counts, a step of 0.37 µrad, far below any rig's noise), no noise, no offsets; a
+/// spec that stays inside [`COUNTS_PER_REV`] so that every run of it can be validated.
 fn exact_sensor(spec: &Spec) -> Spec {
     let mut s = spec.clone();
-    s.sensor.encoder_counts = [EXACT_COUNTS; 2];
+    s.sensor.encoder_counts = [*COUNTS_PER_REV.end(); 2];
     s.sensor.noise_std = [0.0; 2];
     s.sensor.encoder_offsets = [0.0; 2];
     s
 }
-
-/// Counts a revolution of the "exact" encoder (a step of 6 nrad).
-const EXACT_COUNTS: u32 = 1 << 30;
 
 /// Fills [`Assessment::exact_sensor`] of every controller of `assessments` that balances
 /// outside the steady-state bar: the same design (same weights, same estimator) run on the
@@ -688,4 +688,21 @@ pub fn robustness(
         out.push((kind, ok as f64 / runs.max(1) as f64));
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The diagnosis run must be a spec every command would accept, or its verdict would
+    /// describe a rig no one can run.
+    #[test]
+    fn the_exact_sensor_rig_is_a_valid_spec() {
+        let spec = Spec::default();
+        let exact = exact_sensor(&spec);
+        exact.validate().expect("exact-sensor spec validates");
+        exact
+            .design(crate::paper::TS)
+            .expect("exact-sensor spec designs");
+    }
 }
