@@ -1,10 +1,13 @@
 #!/usr/bin/env bash
-# Processor-in-the-loop checks of the USART image in QEMU (firmware/README.md, "Onboard mode"):
-# agreement of the image's moves with the host's, instruction counts per step, and balance in
-# lockstep with the host's simulated plant. Ends with one line per controller:
+# Processor-in-the-loop checks of the qemu build of the USART image in QEMU (firmware/README.md,
+# "Onboard mode"): agreement of the image's moves with the host's, instruction counts per step,
+# and balance in lockstep with the host's simulated plant; then the SysTick-driven onboard loop
+# at 1 kHz and 100 Hz, its period on QEMU's clock. Ends with one line per controller and timer:
 #   pil: <controller> steps=N max_du=X max_instr=Y balanced=yes|no
+#   pil: timer-<rate> periods=N mean_us=X min_us=Y max_us=Z max_step_instr=W overruns=0
 #
-#   firmware/pil.sh [IMAGE] [STEPS]     (default: the USART build, 10000 steps per controller)
+#   firmware/build.sh --no-default-features --features qemu
+#   firmware/pil.sh [IMAGE] [STEPS]     (default: that build, 10000 steps per controller)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 image=${1:-firmware/target/thumbv7em-none-eabihf/release/rip-firmware}

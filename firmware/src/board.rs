@@ -21,7 +21,7 @@
 //! | USB (CN5 micro-USB)          | PA11 / PA12| OTG FS, CDC-ACM             |
 //! | USART (feature `usart`)      | PB6 / PB7  | USART1 TX/RX, 115200 8N1    |
 //! | microsecond clock            | —          | TIM5, 32-bit free-running   |
-//! | onboard controller step      | —          | TIM2 update interrupt       |
+//! | onboard controller step      | —          | SysTick exception           |
 
 use rip_device::{Direction, Pwm};
 use stm32f4xx_hal::gpio::{Input, Output, Pin, PushPull};
@@ -44,9 +44,17 @@ pub const PWM_HZ: u32 = 20_000;
 /// panicked firmware lets it expire, and the reset disables the motor.
 pub const IWDG_MS: u32 = 100;
 
-/// Core clock (Hz) of the build: the budget of a controller step in cycles is its period
-/// times this ([`clocks`]).
-pub const SYSCLK_HZ: u32 = if cfg!(feature = "usart") { 16_000_000 } else { 168_000_000 };
+/// SysTick's clock (Hz), the core clock of the build ([`clocks`]): the onboard step's period
+/// and budget in ticks are its period times this. QEMU's `netduinoplus2` clocks SysTick at its
+/// fixed 168 MHz system clock whatever the RCC is set to, so the `qemu` build counts that.
+pub const SYSTICK_HZ: u32 = if cfg!(feature = "qemu") || !cfg!(feature = "usart") {
+    168_000_000
+} else {
+    16_000_000
+};
+/// The bridge has a fault line. QEMU models no GPIO (every pin reads low, the fault level), so
+/// the `qemu` build reads none; a board build always does.
+pub const HAS_FAULT_LINE: bool = !cfg!(feature = "qemu");
 
 /// Clocks: the Discovery's 8 MHz crystal, 168 MHz core, 48 MHz for USB. The USART build for
 /// QEMU runs on the internal 16 MHz oscillator, because QEMU does not model the RCC's ready flags
@@ -76,7 +84,7 @@ impl Bridge {
 
     /// Whether the driver reports a fault (the line is active low).
     pub fn fault(&self) -> bool {
-        self.fault.is_low()
+        HAS_FAULT_LINE && self.fault.is_low()
     }
 
     /// Drives the bridge. Off first, on last: the enable line is only raised once the
@@ -134,8 +142,6 @@ pub struct Board {
     pub pendulum: Qei<pac::TIM8>,
     /// Free-running microsecond clock.
     pub clock: CounterUs<pac::TIM5>,
-    /// The onboard controller's step timer (its update interrupt steps the controller).
-    pub step_timer: CounterUs<pac::TIM2>,
     /// The H-bridge.
     pub bridge: Bridge,
     /// Status LEDs.
@@ -187,6 +193,17 @@ pub fn take(dp: pac::Peripherals) -> (Board, LinkParts) {
     clock
         .start(u32::MAX.micros())
         .unwrap_or_else(|_| panic!("TIM5"));
+    // QEMU's timers count a 1 GHz clock divided by the prescaler, whatever the RCC is set
+    // to; the prescaler for a 1 µs tick at that clock makes the device's time QEMU's virtual
+    // time (and so the watchdogs' timeouts true ones).
+    #[cfg(feature = "qemu")]
+    {
+        // SAFETY: TIM5 is owned by `clock` above; a prescaler write and an update event
+        // (which loads it and restarts the count at 0) before anything reads the clock.
+        let tim5 = unsafe { &*pac::TIM5::ptr() };
+        tim5.psc().write(|w| w.psc().set(999));
+        tim5.egr().write(|w| w.ug().set_bit());
+    }
 
     #[cfg(not(feature = "usart"))]
     let link = stm32f4xx_hal::otg_fs::USB::new(
@@ -202,13 +219,10 @@ pub fn take(dp: pac::Peripherals) -> (Board, LinkParts) {
             .unwrap_or_else(|_| panic!("USART1"))
     };
 
-    let step_timer = dp.TIM2.counter_us(rcc);
-
     let board = Board {
         arm,
         pendulum,
         clock,
-        step_timer,
         bridge: Bridge {
             pwm,
             direction,

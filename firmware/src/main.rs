@@ -7,13 +7,18 @@
 //! the PC, so the end-to-end tests against the emulator test this logic.
 //!
 //! Onboard mode (protocol v2): the host uploads a design into the device's buffer and starts
-//! it; then the TIM2 update interrupt, at the design's rate (1 kHz down to 100 Hz; any other
+//! it; then the SysTick exception, at the design's rate (1 kHz down to 100 Hz; any other
 //! period is refused by stopping at once), steps rip-control's controller in `f32` (the
-//! Cortex-M4F's FPU; `f64` is emulated in software) on the device's own encoder counts,
-//! measures the step with the DWT cycle counter, and stops the motor on an overrun (a step
-//! longer than its period). The telemetry it streams is queued for the main loop to send.
-//! Processor-in-the-loop steps (`PilStep`) are timed with the DWT counter on the board and
-//! with SysTick in the USART build for QEMU, whose DWT counter reads 0.
+//! Cortex-M4F's FPU; `f64` is emulated in software) on the device's own encoder counts. The
+//! step is timed by SysTick itself: its countdown at the step's end is the time since the
+//! period began, and a wrap during the step (an overrun, a step longer than its period) stops
+//! the motor. SysTick rather than a general-purpose timer, because QEMU models it on its
+//! virtual clock, period after period, so the timer-driven loop runs there (`firmware/pil.sh`
+//! checks its period); QEMU's TIM2 model does not repeat its update interrupt. The telemetry
+//! the step streams is queued for the main loop to send.
+//! Processor-in-the-loop steps (`PilStep`), outside onboard mode, are timed with the DWT
+//! counter on the board and, in the USART builds for QEMU, whose DWT counter reads 0, with
+//! SysTick free-running over its 24 bits.
 //!
 //! Safety: the driver's enable line is low from reset until the PC sends an enabling command
 //! or starts onboard mode; the command watchdog of `rip-device` stops driving when commands
@@ -33,13 +38,12 @@ use core::cell::RefCell;
 use cortex_m::interrupt::{free, Mutex};
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::{DWT, SYST};
-use cortex_m_rt::entry;
+use cortex_m_rt::{entry, exception};
 use rip_device::law::ControlLaw;
 use rip_device::{Config, Device, Inputs, Onboard};
 use rip_protocol::{encode, Event, Frame, Message, Parser, COMMAND_BRAKE, MAX_FRAME};
-use stm32f4xx_hal::pac::{self, interrupt};
+use stm32f4xx_hal::pac;
 use stm32f4xx_hal::prelude::*;
-use stm32f4xx_hal::timer::{Event as TimerEvent, Flag};
 
 /// Bytes of the design buffer: the paper's MPC (P = 50, m = 3) takes 10 506.
 pub const DESIGN_BUFFER: usize = 12 * 1024;
@@ -61,6 +65,10 @@ static DEVICE: Mutex<RefCell<Device<Law>>> =
     Mutex::new(RefCell::new(Device::at_power_up(CFG, Law::new())));
 static BOARD: Mutex<RefCell<Option<board::Board>>> = Mutex::new(RefCell::new(None));
 static OUTBOX: Mutex<RefCell<Outbox>> = Mutex::new(RefCell::new(Outbox::new()));
+static SYSTICK: Mutex<RefCell<Option<SYST>>> = Mutex::new(RefCell::new(None));
+
+/// SysTick ticks per microsecond of the build's clock.
+const TICKS_PER_US: u32 = board::SYSTICK_HZ / 1_000_000;
 
 /// Encoded frames waiting for the main loop to send them (replies and telemetry); a frame
 /// that does not fit is dropped (the host counts telemetry steps).
@@ -118,9 +126,30 @@ fn read(b: &board::Board) -> Inputs {
 }
 
 /// SysTick as a 32-bit up-counter in units of 1/256 cycle (`rip-device`'s cycle counter with
-/// shift 8): QEMU models it, on its virtual clock, where the DWT counter reads 0.
+/// shift 8): QEMU models it, on its virtual clock, where the DWT counter reads 0. Valid while
+/// SysTick runs free ([`systick_free`]), i.e. outside onboard mode, where PIL steps run.
 fn systick_counter() -> u32 {
     (0x00FF_FFFF - SYST::get_current()) << 8
+}
+
+/// SysTick counting down over its full 24 bits without its exception.
+fn systick_free(s: &mut SYST) {
+    s.disable_interrupt();
+    s.disable_counter();
+    s.set_reload(0x00FF_FFFF);
+    s.clear_current();
+    s.enable_counter();
+}
+
+/// SysTick's exception every `period_us` (at most 99 ms at 168 MHz: the reload is 24 bits).
+fn systick_periodic(s: &mut SYST, period_us: u32) {
+    s.disable_counter();
+    s.set_reload(period_us * TICKS_PER_US - 1);
+    s.clear_current();
+    // A wrap flag left from free running would read as an overrun of the first step.
+    let _ = s.has_wrapped();
+    s.enable_interrupt();
+    s.enable_counter();
 }
 
 fn dwt_counter() -> u32 {
@@ -138,9 +167,7 @@ fn main() -> ! {
     cp.DCB.enable_trace();
     cp.DWT.enable_cycle_counter();
     cp.SYST.set_clock_source(SystClkSource::Core);
-    cp.SYST.set_reload(0x00FF_FFFF);
-    cp.SYST.clear_current();
-    cp.SYST.enable_counter();
+    systick_free(&mut cp.SYST);
 
     let (mut board, link) = board::take(dp);
     board.iwdg.start(board::IWDG_MS.millis());
@@ -155,9 +182,8 @@ fn main() -> ! {
             dev.set_cycle_counter(dwt_counter, 0);
         }
         BOARD.borrow(cs).replace(Some(board));
+        SYSTICK.borrow(cs).replace(Some(cp.SYST));
     });
-    // SAFETY: the handler only touches the statics above, inside critical sections.
-    unsafe { cortex_m::peripheral::NVIC::unmask(pac::Interrupt::TIM2) };
 
     let mut parser = Parser::new();
     let mut link = link::Link::new(link);
@@ -182,22 +208,22 @@ fn main() -> ! {
                     outbox.push_bytes(reply)
                 });
             }
-            // The step timer runs exactly while onboard mode does, at the design's period.
+            // SysTick steps exactly while onboard mode runs, at the design's period.
             let want = if dev.onboard_running() {
                 dev.onboard().period_us()
             } else {
                 0
             };
             if want != timer_period_us {
-                board.step_timer.unlisten(TimerEvent::Update);
-                let _ = board.step_timer.cancel();
                 timer_period_us = 0;
-                if want != 0 && PERIOD_RANGE_US.contains(&want) {
-                    if board.step_timer.start(want.micros()).is_ok() {
-                        board.step_timer.listen(TimerEvent::Update);
+                if let Some(syst) = SYSTICK.borrow(cs).borrow_mut().as_mut() {
+                    systick_free(syst);
+                    if want != 0 && PERIOD_RANGE_US.contains(&want) {
+                        systick_periodic(syst, want);
                         timer_period_us = want;
                     }
-                } else if want != 0 {
+                }
+                if want != 0 && timer_period_us == 0 {
                     // A rate this firmware does not run: stop as the host would.
                     let stop = Frame {
                         seq: 0,
@@ -226,22 +252,33 @@ fn main() -> ! {
 }
 
 /// One onboard controller step: the device's own encoder counts, the move on the bridge at
-/// once, the step's cycles against its period's budget (an overrun stops onboard mode).
-#[interrupt]
-fn TIM2() {
+/// once, and the step's time against its period. SysTick's countdown at the end is the time
+/// since the period began (the interrupt's latency included, since the move is due within the
+/// period); a wrap since the entry means the step ran into the next period, an overrun, which
+/// stops onboard mode.
+#[exception]
+fn SysTick() {
     free(|cs| {
+        let mut st = SYSTICK.borrow(cs).borrow_mut();
         let mut b = BOARD.borrow(cs).borrow_mut();
-        let Some(board) = b.as_mut() else {
+        let (Some(syst), Some(board)) = (st.as_mut(), b.as_mut()) else {
             return;
         };
-        board.step_timer.clear_flags(Flag::Update);
+        // Reading the flag clears it: only a wrap during this step sets it again.
+        let _ = syst.has_wrapped();
         let mut dev = DEVICE.borrow(cs).borrow_mut();
         let inputs = read(board);
-        let start = DWT::cycle_count();
         let frame = dev.onboard_step(&inputs);
-        let cycles = DWT::cycle_count().wrapping_sub(start);
-        let budget = dev.onboard().period_us().saturating_mul(board::SYSCLK_HZ / 1_000_000);
-        dev.record_step_cycles(cycles, budget);
+        board.bridge.apply(dev.pwm(board.bridge.max_duty()));
+        let period = SYST::get_reload() + 1;
+        let into_period = period - 1 - SYST::get_current();
+        let ticks = if syst.has_wrapped() {
+            period + into_period
+        } else {
+            into_period
+        };
+        dev.record_step_cycles(ticks, period);
+        // An overrun's stop is applied now, not at the next pass of the main loop.
         board.bridge.apply(dev.pwm(board.bridge.max_duty()));
         if let Some(f) = frame {
             OUTBOX.borrow(cs).borrow_mut().push(&f);

@@ -23,6 +23,13 @@ pub const MAX_NCON: usize =
     2 * MAX_CONTROL_HORIZON * MAX_NU + 2 * MAX_PREDICTION_HORIZON * MAX_NY + 1;
 /// Most dual active-set iterations a design may ask for.
 pub const MAX_QP_ITERATIONS: u32 = 1000;
+/// Instructions a step may take per µs of its period on the device: the STM32F407's 168 MHz
+/// at 2 cycles per instruction (flash wait states behind the ART accelerator, multi-cycle FPU
+/// divisions), within half the period, the rest left to the link and the checks around it.
+pub const STEP_BUDGET_INSTRUCTIONS_PER_US: u64 = 168 / 2 / 2;
+/// A regulator's worst step (instructions): above the 1 518 (LQR) and 2 167 (LQG) measured
+/// in QEMU (firmware/README.md).
+const REGULATOR_STEP_INSTRUCTIONS: u64 = 3_000;
 /// Number of plant states `[θ, θ̇, α, α̇]` the regulators feed back.
 pub const NX_PLANT: usize = 4;
 
@@ -99,6 +106,15 @@ pub enum DesignError {
     BadSize(&'static str),
     /// A number is not finite (or not positive where it must be).
     BadValue(&'static str),
+    /// The worst step ([`Design::worst_step_instructions`]) does not fit the period's budget
+    /// ([`Design::step_budget_instructions`]) even at one QP iteration, or the design's
+    /// `max_iterations` does not.
+    OverBudget {
+        /// The worst step's instructions at the design's iteration bound.
+        instructions: u64,
+        /// The budget of its period.
+        budget: u64,
+    },
 }
 
 impl core::fmt::Display for DesignError {
@@ -113,6 +129,14 @@ impl core::fmt::Display for DesignError {
             Self::UnknownKind(k) => write!(f, "unknown controller kind {k}"),
             Self::BadSize(name) => write!(f, "{name}: size out of range"),
             Self::BadValue(name) => write!(f, "{name}: invalid value"),
+            Self::OverBudget {
+                instructions,
+                budget,
+            } => write!(
+                f,
+                "max_iterations: the worst step, {instructions} instructions, exceeds the \
+                 period's budget of {budget}"
+            ),
         }
     }
 }
@@ -387,6 +411,85 @@ impl<R: Real> Design<R> {
         finite("b0", &self.b0[..self.ncon])?;
         finite("bx", &self.bx[..self.ncon * n])?;
         finite("bu", &self.bu[..self.ncon])?;
+        Ok(())
+    }
+
+    /// The worst step's instructions on the Cortex-M4F in `f32`, at `iterations` QP
+    /// iterations: for the MPC, the model fitted to QEMU's counts of the paper's design
+    /// (firmware/README.md; n = 5, ncon = 107, nz = 4: 17 800 + 5 300 (I − 1) measured)
+    ///
+    /// ```text
+    /// N(I) = 2 400 + 8 ncon (n + 1) + 12.5 ncon nz (I + 1)
+    /// ```
+    ///
+    /// the fixed part (counts to angles, the Kalman correction, the plan), the QP data `f`, `b`
+    /// (one multiply-add per row and state), and the solve: the data `d` of every row and one
+    /// pass over the rows per iteration. For the paper's design it gives 18 236 at I = 1 and
+    /// 28 936 at I = 3, above the 28 339 measured. Regulators: a constant above their measured
+    /// worst.
+    pub fn worst_step_instructions_at(&self, iterations: u32) -> u64 {
+        if self.kind != Kind::Mpc {
+            return REGULATOR_STEP_INSTRUCTIONS;
+        }
+        let (n, ncon, nz) = (self.nx as u64, self.ncon as u64, self.nz() as u64);
+        2_400 + 8 * ncon * (n + 1) + 25 * ncon * nz * (u64::from(iterations) + 1) / 2
+    }
+
+    /// [`worst_step_instructions_at`](Self::worst_step_instructions_at) the design's
+    /// `max_iterations`.
+    pub fn worst_step_instructions(&self) -> u64 {
+        self.worst_step_instructions_at(self.max_iterations)
+    }
+
+    /// The instructions a step may take in the design's period `Ts`:
+    /// `Ts · `[`STEP_BUDGET_INSTRUCTIONS_PER_US`].
+    pub fn step_budget_instructions(&self) -> u64 {
+        let us = libm::round(self.ts.to_f64() * 1e6);
+        if us.is_finite() && us > 0.0 {
+            us as u64 * STEP_BUDGET_INSTRUCTIONS_PER_US
+        } else {
+            0
+        }
+    }
+
+    /// The largest QP iteration bound whose worst step fits the period's budget (at most
+    /// [`MAX_QP_ITERATIONS`]); 0 when not even one iteration does. A regulator needs none:
+    /// [`MAX_QP_ITERATIONS`] if it fits, else 0.
+    pub fn fitting_iterations(&self) -> u32 {
+        let budget = self.step_budget_instructions();
+        if self.worst_step_instructions_at(1) > budget {
+            return 0;
+        }
+        if self.kind != Kind::Mpc {
+            return MAX_QP_ITERATIONS;
+        }
+        // N(I) increases with I: the last I whose N(I) fits.
+        let (mut lo, mut hi) = (1u32, MAX_QP_ITERATIONS);
+        while lo < hi {
+            let mid = lo + (hi - lo).div_ceil(2);
+            if self.worst_step_instructions_at(mid) <= budget {
+                lo = mid;
+            } else {
+                hi = mid - 1;
+            }
+        }
+        lo
+    }
+
+    /// Whether the worst step at the design's iteration bound fits its period's budget: what
+    /// the host requires of a design before it sends it to the device.
+    ///
+    /// # Errors
+    /// [`DesignError::OverBudget`] with the two counts.
+    pub fn check_step_budget(&self) -> Result<(), DesignError> {
+        let instructions = self.worst_step_instructions();
+        let budget = self.step_budget_instructions();
+        if instructions > budget {
+            return Err(DesignError::OverBudget {
+                instructions,
+                budget,
+            });
+        }
         Ok(())
     }
 

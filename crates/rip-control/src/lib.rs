@@ -65,7 +65,10 @@
 //! `u(k) = sat(u⁻ + Δu(k))`. When the solver hits the design's iteration bound (or fails
 //! numerically), the fallback law applies: the unconstrained minimiser `−H⁻¹ f` with its
 //! blocked inputs clamped to the bounds; it is reported in [`Move::status`] and counted in
-//! [`Stats`]. A discarded measurement applies the previous plan's next move.
+//! [`Stats`]. A discarded measurement applies the previous plan's next move. The iteration
+//! bound is what makes the step's time bounded: [`Design::worst_step_instructions_at`] models
+//! the worst step on the Cortex-M4F, and [`Design::fitting_iterations`] gives the largest bound
+//! that fits half the period (the host uploads no larger one).
 //!
 //! # Compensation
 //!
@@ -126,7 +129,7 @@ pub use controller::{Controller, Measurement, Move, Phase, RateFilter, Stats, St
 pub use design::{
     CompensationDesign, Design, DesignError, Kind, HEADER_LEN, LAYOUT_VERSION, MAGIC,
     MAX_CONTROL_HORIZON, MAX_NCON, MAX_NU, MAX_NX, MAX_NY, MAX_NZ, MAX_PREDICTION_HORIZON,
-    MAX_QP_ITERATIONS, NX_PLANT,
+    MAX_QP_ITERATIONS, NX_PLANT, STEP_BUDGET_INSTRUCTIONS_PER_US,
 };
 pub use real::Real;
 /// CRC-32 (IEEE 802.3) of the design's bytes: the wire protocol's own, so an image checked by

@@ -17,9 +17,21 @@
 //! and the arm within 0.05 rad of the 1 rad reference step over the last second, and the
 //! pendulum's RMS angle within 5 % of the same closed loop with the host's `f64` controller.
 //!
-//! Usage: `cargo run --release -p rip-rt --example pil -- IMAGE [STEPS [CONTROLLER]]`; the last
-//! lines are `pil: <controller> steps=N max_du=X max_instr=Y balanced=yes|no`. Exit 1 if any
-//! check fails.
+//! **Timer**: then, for a 1 kHz and a 100 Hz design, onboard mode itself runs: the design is
+//! uploaded and started, and the SysTick exception steps it on the image's own (meaningless,
+//! in QEMU) encoder readings, with limits wide enough that they never stop it; the host only
+//! keeps the link alive and collects the telemetry, one record per step. Each record carries
+//! the device's microsecond clock (TIM5, which the `qemu` build prescales to QEMU's virtual
+//! time: a timer model independent of SysTick's), so the interval between consecutive steps
+//! is the interrupt's period as QEMU's clock saw it. Passing: every step reported in order,
+//! every interval within [`PERIOD_TOLERANCE`] of the period, their mean within 1 µs of it,
+//! no overrun, and each step's own time (SysTick's countdown) inside the period. The line is
+//! `pil: timer-<rate> periods=N mean_us=X min_us=Y max_us=Z max_step_instr=W overruns=0`.
+//!
+//! Usage: `cargo run --release -p rip-rt --example pil -- IMAGE [STEPS [CONTROLLER]]`, IMAGE
+//! the `qemu` build; the last lines are
+//! `pil: <controller> steps=N max_du=X max_instr=Y balanced=yes|no` and the timer lines. Exit 1
+//! if any check fails.
 //!
 //! With `PIL_PHASES=1` each step's count covers one part of the step instead (`PIL_PHASE_*`,
 //! in turn; `PIL_PHASES=qp`, or another part's name, that part on every step), and a `pil: <controller> phases:` line gives the worst count of each part over
@@ -32,7 +44,10 @@ use std::time::Duration;
 
 use rip_device::law::ControlLaw;
 use rip_device::Onboard;
-use rip_protocol::{Message, PilStep, PIL_PHASES, PIL_PHASE_QP, PIL_PHASE_SHIFT, PIL_RESET};
+use rip_protocol::{
+    Message, OnboardStart, PilStep, ACK_OK, ONBOARD_RUNNING, PIL_PHASES, PIL_PHASE_QP,
+    PIL_PHASE_SHIFT, PIL_RESET,
+};
 use rip_rt::config::Config;
 use rip_rt::controllers::ControllerKind;
 use rip_rt::emulator::EmulatorConfig;
@@ -44,6 +59,12 @@ use rip_rt::serial::SerialPort;
 const INSTR_PER_TICK: f64 = 1000.0 / 168.0;
 /// Cycles per instruction assumed for the time on the chip (module docs).
 const CPI_MARGIN: f64 = 2.0;
+/// Largest departure of one step interval from the period, as a fraction of it: the step's
+/// interrupt waits while the main loop holds a critical section (parsing a frame, queueing a
+/// reply), a few thousand instructions, a few µs in QEMU's clock.
+const PERIOD_TOLERANCE: f64 = 0.05;
+/// Steps of each timer check.
+const TIMER_PERIODS: usize = 1000;
 
 struct Qemu(Child);
 
@@ -273,10 +294,93 @@ fn main() {
             if balanced && same { "yes" } else { "no" }
         ));
     }
+    for (name, period_ms, periods) in [
+        ("timer-1khz", 1.0, TIMER_PERIODS),
+        ("timer-100hz", 10.0, TIMER_PERIODS / 5),
+    ] {
+        if only.as_deref().is_some_and(|o| o != name) {
+            continue;
+        }
+        match timer_check(&mut link, period_ms, periods) {
+            Ok(line) => lines.push(format!("pil: {name} {line}")),
+            Err(e) => {
+                println!("pil: {name} failed: {e}");
+                ok = false;
+            }
+        }
+    }
     for l in &lines {
         println!("{l}");
     }
     // `exit` runs no destructors: QEMU is stopped first, or it would outlive the check.
     drop(qemu);
     std::process::exit(if ok { 0 } else { 1 });
+}
+
+/// Onboard mode at `period_ms` for `periods` steps, timed by QEMU's clock (module docs,
+/// "Timer"): the line's fields, or what failed.
+fn timer_check(link: &mut Link<'_>, period_ms: f64, periods: usize) -> Result<String, String> {
+    let mut cfg = Config::default();
+    cfg.loop_.period_ms = period_ms;
+    let design = onboard::design(ControllerKind::Lqr, &cfg)?;
+    link.upload(&onboard::image(&design, &cfg)?)?;
+    link.telemetry.clear();
+    // Limits no reading can leave, and the longest host timeout: only the timer is tested.
+    let start = OnboardStart {
+        decimation: 1,
+        host_timeout_ms: u16::MAX,
+        arm_center: 0,
+        arm_limit: u32::MAX,
+        pendulum_center: 0,
+        pendulum_limit: u32::MAX,
+    };
+    let (code, state) = link.request(Message::OnboardStart(start))?;
+    if code != ACK_OK {
+        return Err(format!("start refused (ack code {code}, state {state})"));
+    }
+    // QEMU runs its virtual clock slower than real time; a sample request every 10 ms keeps
+    // the device's host-silence watchdog fed.
+    let deadline = std::time::Instant::now() + Duration::from_secs(120);
+    while link.telemetry.len() < periods + 1 && std::time::Instant::now() < deadline {
+        link.send(Message::SampleRequest)
+            .map_err(|e| e.to_string())?;
+        link.wait(Duration::from_millis(10), |_| false)
+            .map_err(|e| e.to_string())?;
+    }
+    link.stop();
+    let t: Vec<_> = link.telemetry.iter().take(periods + 1).copied().collect();
+    if t.len() < periods + 1 {
+        return Err(format!("{} telemetry records of {}", t.len(), periods + 1));
+    }
+    let period_us = period_ms * 1e3;
+    let (mut min, mut max, mut max_ticks) = (f64::INFINITY, 0.0f64, 0u32);
+    for (i, w) in t.windows(2).enumerate() {
+        let [a, b] = [w[0], w[1]];
+        if b.step != a.step.wrapping_add(1) || b.onboard != ONBOARD_RUNNING || b.overruns != 0 {
+            return Err(format!("record {i}: {a:?} then {b:?}"));
+        }
+        let dt = f64::from(b.device_time_us.wrapping_sub(a.device_time_us));
+        if (dt - period_us).abs() > PERIOD_TOLERANCE * period_us {
+            return Err(format!("step {}: {dt} µs after the previous one", b.step));
+        }
+        min = min.min(dt);
+        max = max.max(dt);
+        // `step_cycles` is the previous step's; the first record has none.
+        if i > 0 {
+            max_ticks = max_ticks.max(b.step_cycles);
+        }
+    }
+    let span = t[periods].device_time_us.wrapping_sub(t[0].device_time_us);
+    let mean = f64::from(span) / periods as f64;
+    if (mean - period_us).abs() > 1.0 {
+        return Err(format!("mean interval {mean} µs, period {period_us} µs"));
+    }
+    let budget = period_us * 168.0;
+    if max_ticks == 0 || f64::from(max_ticks) >= budget {
+        return Err(format!("step time {max_ticks} ticks, budget {budget}"));
+    }
+    Ok(format!(
+        "periods={periods} mean_us={mean:.3} min_us={min} max_us={max} max_step_instr={} overruns=0",
+        (f64::from(max_ticks) * INSTR_PER_TICK).round()
+    ))
 }

@@ -57,10 +57,16 @@ pub fn design(kind: ControllerKind, cfg: &Config) -> Result<OnboardDesign, Strin
             .control_design()
             .map_err(|e| err(&e))?,
     };
-    Ok(match d.compensation() {
+    let mut out = match d.compensation() {
         Some(law) => rip_core::onboard::with_compensation(out, law),
         None => out,
-    })
+    };
+    // The device refuses a design whose worst step cannot fit its period: the QP's iteration
+    // bound is the configured one or the largest that fits, whichever is smaller (at the bound
+    // the step applies the fallback law, rip-control's crate docs).
+    out.max_iterations = out.max_iterations.min(out.fitting_iterations().max(1));
+    out.check_step_budget().map_err(|e| err(&e))?;
+    Ok(out)
 }
 
 /// The onboard image of `design` with the conversion of `cfg`'s `[device]` and the

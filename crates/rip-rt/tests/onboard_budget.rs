@@ -1,0 +1,74 @@
+//! The onboard MPC's iteration bound as part of the design: the host caps the uploaded
+//! design's `max_iterations` to what fits half the period on the STM32F407 and refuses one
+//! that does not fit. The reference is the firmware's QEMU measurement of the paper's MPC
+//! (firmware/README.md): a worst step of 17 800 + 5 300 (I − 1) instructions, 28 339 measured
+//! at its 3 iterations, against 168 MHz / CPI 2 / half the period.
+
+use rip_device::law::ControlLaw;
+use rip_device::Onboard;
+use rip_rt::config::Config;
+use rip_rt::controllers::ControllerKind;
+use rip_rt::onboard;
+
+/// The largest I whose measured worst step fits half of `period_us` at 168 MHz and CPI 2.
+fn measured_cap(period_us: u64) -> u32 {
+    let budget = period_us * 168 / 2 / 2;
+    (1..=1000u32)
+        .take_while(|&i| 17_800 + 5_300 * u64::from(i - 1) <= budget)
+        .last()
+        .unwrap_or(0)
+}
+
+fn cfg_at(period_ms: f64) -> Config {
+    let mut cfg = Config::default();
+    cfg.loop_.period_ms = period_ms;
+    cfg
+}
+
+fn loads(image: &[u8]) -> bool {
+    let mut law = Box::new(ControlLaw::<f64, { onboard::MAX_IMAGE }>::new());
+    law.buffer()[..image.len()].copy_from_slice(image);
+    law.load(image.len()).is_ok()
+}
+
+#[test]
+fn the_uploaded_mpc_carries_the_iteration_cap_that_fits_its_period() {
+    for (period_ms, period_us) in [(1.0, 1_000), (10.0, 10_000)] {
+        let cfg = cfg_at(period_ms);
+        let d = onboard::design(ControllerKind::Mpc, &cfg).unwrap();
+        assert_eq!(d.max_iterations, measured_cap(period_us), "{period_ms} ms");
+        assert!(loads(&onboard::image(&d, &cfg).unwrap()), "{period_ms} ms");
+    }
+    // The measurement's own figures: I ≤ 5 at 1 kHz, I ≤ 76 at 100 Hz.
+    assert_eq!((measured_cap(1_000), measured_cap(10_000)), (5, 76));
+}
+
+#[test]
+fn the_step_model_bounds_the_worst_step_measured_in_qemu() {
+    let d = onboard::design(ControllerKind::Mpc, &cfg_at(10.0)).unwrap();
+    assert_eq!((d.nx, d.ncon, d.nz()), (5, 107, 4), "the measured design");
+    assert!(d.worst_step_instructions_at(3) >= 28_339);
+    for i in 1..=10 {
+        let model = d.worst_step_instructions_at(i);
+        let measured = 17_800 + 5_300 * u64::from(i - 1);
+        // Above the measurement, by at most 10 %.
+        assert!(
+            model >= measured && model * 10 <= measured * 11,
+            "I = {i}: {model}"
+        );
+    }
+}
+
+#[test]
+fn a_design_whose_iteration_bound_cannot_fit_its_period_is_refused() {
+    let cfg = cfg_at(1.0);
+    let mut d = onboard::design(ControllerKind::Mpc, &cfg).unwrap();
+    d.max_iterations = measured_cap(1_000) + 1;
+    let err = d.check_step_budget().unwrap_err().to_string();
+    assert!(err.contains("max_iterations"), "{err}");
+    // The configured default, 200, as it would have been sent uncapped.
+    d.max_iterations = 200;
+    assert!(d.check_step_budget().is_err());
+    d.max_iterations = measured_cap(1_000);
+    assert!(d.check_step_budget().is_ok());
+}
