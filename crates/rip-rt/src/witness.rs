@@ -131,10 +131,10 @@
 //! take it: they are the ones that must stop a wiring fault within half a radian on a loaded
 //! machine, and the holds cover them (measured).
 //!
-//! A restart (the first reading, a gap of more than 0.5 s on the device's clock, a new phase
-//! of the run) takes the rates from the first two readings rather than assuming rest, and
-//! holds the statistics for that period and the [`HELD_AFTER_UNKNOWN`] after it, so that a
-//! gap is never evidence of a fault ([`Witness::observe`]).
+//! A restart after a gap of more than 0.5 s on the device's clock takes the rates from the
+//! first two readings rather than assuming rest, and holds the statistics for that period and
+//! the [`HELD_AFTER_UNKNOWN`] after it, so that a gap is never evidence of a fault
+//! ([`Witness::observe`]); the start of a run or a phase still starts at rest.
 //!
 //! Everything is allocation-free per step: the plant's RK4 on stack vectors and a few scalars.
 
@@ -326,9 +326,8 @@ impl Witness {
         })
     }
 
-    /// Forgets the state: the next [`observe`](Self::observe) starts the observer afresh where
-    /// it measures, and the one after it takes the rates from the two readings (the largest
-    /// statistics so far are kept).
+    /// Forgets the state: the next [`observe`](Self::observe) starts the observer afresh at
+    /// rest where it measures (the largest statistics so far are kept).
     pub fn reset(&mut self) {
         self.x = None;
         self.acquiring = false;
@@ -414,6 +413,11 @@ impl Witness {
         dt: f64,
         delay: f64,
     ) -> Result<(), WitnessFault> {
+        // A rig seen again after a gap is moving as it was; at the start of a run or a phase
+        // it is at rest (or held) where it measures, and its rates are taken as 0 as before:
+        // two readings of a rig at rest give nothing better, and a wrong-scale fault from
+        // power-up was then named a reversal (measured, witness_sim).
+        let gap = dt > 0.5;
         if !(dt > 0.0 && dt <= 0.5) {
             self.reset();
         }
@@ -422,7 +426,7 @@ impl Witness {
             self.x = Some(x);
             self.free = x;
             self.last_theta = theta;
-            self.acquiring = true;
+            self.acquiring = gap;
             return Ok(());
         };
         if std::mem::take(&mut self.acquiring) {
