@@ -5,8 +5,7 @@
 
 use crate::config::Config;
 use crate::envelope::{
-    stop_mode, Brake, BrakeCommand, BrakeMode, BrakeReport, StopSequence, BLIND_PERIODS,
-    MAX_BRAKE_S, MAX_HOLD_S,
+    stop_mode, Brake, BrakeCommand, BrakeMode, BrakeReport, StopSequence, MAX_BRAKE_S, MAX_HOLD_S,
 };
 use crate::exchange::exchange;
 use crate::loop_core::LoopCore;
@@ -79,17 +78,21 @@ pub fn bring_to_rest(
             Err(_) => return report,
         };
         let Some(reply) = reply else {
+            // Without a fresh measurement the law has no rate: short the windings for this
+            // period only. Giving the law up for good left the pendulum free to walk the arm
+            // on past the limit once the device answered again.
             blind += 1;
-            if blind >= BLIND_PERIODS {
+            if stop.mode() == BrakeMode::Modelled {
+                // The model's arm ran open loop on the law's voltages; the short it did not
+                // see leaves it apart from the arm for good.
                 stop.short();
             }
-            // Without a fresh measurement the law has no rate: short the windings.
             if !send(io, Command::BRAKE) {
                 return report;
             }
             continue;
         };
-        blind = 0;
+        let resumed = std::mem::take(&mut blind) > 0;
         if reply.m.status & STATUS_FAULT != 0 {
             // A faulted driver opens the windings itself; nothing to drive.
             send(io, Command::BRAKE);
@@ -98,6 +101,15 @@ pub fn bring_to_rest(
         }
         let (theta, alpha) = core.angles(&reply.m);
         let now_us = reply.m.device_time_us;
+        if resumed {
+            // A rate across the gap is the mean over the blind periods, not the arm's rate
+            // now: short once more, and resume the law on the next period's difference.
+            last = Some((theta, alpha, now_us));
+            if !send(io, Command::BRAKE) {
+                return report;
+            }
+            continue;
+        }
         let (rate, alpha_rate) = match last.replace((theta, alpha, now_us)) {
             Some((before, alpha_before, at))
                 if (1..u32::MAX / 2).contains(&now_us.wrapping_sub(at)) =>

@@ -334,9 +334,16 @@ struct EmulateArgs {
     /// counts backwards from it).
     #[arg(long, allow_negative_numbers = true, value_name = "S", value_parser = nonnegative)]
     fault_at: Option<f64>,
+    /// Answer nothing for --silent-for seconds starting this many seconds after the first
+    /// enabling command (every measurement in the window lost; commands still arrive).
+    #[arg(long, allow_negative_numbers = true, value_name = "S", value_parser = nonnegative, requires = "silent_for")]
+    silent_at: Option<f64>,
+    /// How long the silence of --silent-at lasts (s).
+    #[arg(long, allow_negative_numbers = true, value_name = "S", value_parser = nonnegative, requires = "silent_at")]
+    silent_for: Option<f64>,
     /// Lockstep with `rip-rt run/excite --lockstep`: advance the plant by one host period
     /// (`[loop] period_ms` of --config, else 10 ms) per sample request instead of in real
-    /// time; after 0.5 s without a host frame the plant runs on in real time.
+    /// time; after 1.5 s without a host frame the plant runs on in real time.
     #[arg(long)]
     lockstep: bool,
 }
@@ -659,6 +666,7 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
             encoder_frozen: [args.freeze_arm_encoder, args.freeze_pendulum_encoder],
         },
         fault_at_s: args.fault_at,
+        silence: args.silent_at.zip(args.silent_for),
         lockstep_period_s: args.lockstep.then_some(period_s),
         ..EmulatorConfig::default()
     }

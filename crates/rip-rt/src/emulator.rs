@@ -334,10 +334,24 @@ impl Device {
         Some(encode(&frame, out))
     }
 
+    /// Whether the device is inside its configured silence (`EmulatorConfig::silence`).
+    fn silent(&self) -> bool {
+        match (self.cfg.silence, self.enabled_at_ns) {
+            (Some((at, len)), Some(t0)) => {
+                let t = self.time_ns.saturating_sub(t0) as f64 * 1e-9;
+                t >= at && t < at + len
+            }
+            _ => false,
+        }
+    }
+
     /// Applies the configured faults to an outgoing frame and writes what remains into `wire`
     /// (which is cleared first).
     pub fn inject_faults(&mut self, frame: &[u8], wire: &mut Vec<u8>) {
         wire.clear();
+        if self.silent() {
+            return;
+        }
         if self.cfg.drop_rate > 0.0 && self.rng.gen_bool(self.cfg.drop_rate) {
             return;
         }

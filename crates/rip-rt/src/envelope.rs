@@ -27,7 +27,10 @@
 //! device cannot be trusted (a failed sign check, a driver fault, a fault of the wiring), a
 //! voltage could drive the arm the wrong way: the stop sends the brake command instead
 //! (`COMMAND_BRAKE`: the windings shorted, which brakes whatever the wiring's sign) for as
-//! long. Without measurements (the device silent) it sends the brake command too. A device
+//! long. A period without a measurement (a lost reply, a silent device) gets the brake command
+//! too, and the law resumes once measurements return (the period after the gap shorted as well,
+//! its rate a mean over the gap); a short kept after a gap left the pendulum free to walk the
+//! arm past the limit. A device
 //! that cannot brake (protocol.md rule 9) leaves the windings open on it; the active law does
 //! not depend on it.
 
@@ -55,9 +58,6 @@ pub const REST_S: f64 = 0.2;
 pub const REST_TRAVEL: f64 = 0.01;
 /// The longest an active stop brakes (s) before the stop frame goes out regardless.
 pub const MAX_BRAKE_S: f64 = 3.0;
-/// Periods without a measurement after which the active stop gives up the law and brakes by
-/// shorting the windings.
-pub const BLIND_PERIODS: u32 = 3;
 
 /// The stopping model of a configuration: its `[plant]`, `safety.voltage_limit`, two loop
 /// periods of latency (module docs).

@@ -131,6 +131,11 @@
 //! take it: they are the ones that must stop a wiring fault within half a radian on a loaded
 //! machine, and the holds cover them (measured).
 //!
+//! A restart after a gap of more than 0.5 s on the device's clock takes the rates from the
+//! first two readings rather than assuming rest, and holds the statistics for that period and
+//! the [`HELD_AFTER_UNKNOWN`] after it, so that a gap is never evidence of a fault
+//! ([`Witness::observe`]); the start of a run or a phase still starts at rest.
+//!
 //! Everything is allocation-free per step: the plant's RK4 on stack vectors and a few scalars.
 
 use rip_core::plant::{Plant, State};
@@ -216,6 +221,9 @@ pub struct Witness {
     friction_swing: f64,
     rate_uncertainty: f64,
     x: Option<State>,
+    // Whether the observer was started on the last reading alone, its rates not yet known
+    // (the next reading gives them: [`Witness::acquire_rates`]).
+    acquiring: bool,
     cusum: [[f64; 2]; 2],
     // Predicted and measured arm increments, and periods, since the arm statistic left 0.
     predicted: f64,
@@ -290,6 +298,7 @@ impl Witness {
             friction_swing: 2.0 * breakaway / j_min,
             rate_uncertainty: GAIN_RATE * (q[0] + 2.0 * s[0]) / ts,
             x: None,
+            acquiring: false,
             cusum: [[0.0; 2]; 2],
             predicted: 0.0,
             measured: 0.0,
@@ -321,6 +330,7 @@ impl Witness {
     /// rest where it measures (the largest statistics so far are kept).
     pub fn reset(&mut self) {
         self.x = None;
+        self.acquiring = false;
         self.cusum = [[0.0; 2]; 2];
         self.predicted = 0.0;
         self.measured = 0.0;
@@ -403,6 +413,11 @@ impl Witness {
         dt: f64,
         delay: f64,
     ) -> Result<(), WitnessFault> {
+        // A rig seen again after a gap is moving as it was; at the start of a run or a phase
+        // it is at rest (or held) where it measures, and its rates are taken as 0 as before:
+        // two readings of a rig at rest give nothing better, and a wrong-scale fault from
+        // power-up was then named a reversal (measured, witness_sim).
+        let gap = dt > 0.5;
         if !(dt > 0.0 && dt <= 0.5) {
             self.reset();
         }
@@ -411,8 +426,13 @@ impl Witness {
             self.x = Some(x);
             self.free = x;
             self.last_theta = theta;
+            self.acquiring = gap;
             return Ok(());
         };
+        if std::mem::take(&mut self.acquiring) {
+            self.acquire_rates(x, theta, alpha, volts, dt, delay);
+            return Ok(());
+        }
         let start = x[0];
         // The same period with the command arriving at the sample and TIMING_S after the
         // expected delay: how much the prediction hangs on when the voltage changed. A period
@@ -529,6 +549,40 @@ impl Witness {
             self.disagreeing += 1;
         }
         self.judge(theta)
+    }
+
+    /// The observer's rates after a restart, from the first two readings (`start`, then
+    /// `theta`, `alpha` `dt` later under `volts`): the mean rates over the interval plus half
+    /// the model's change of rate over it (the rates at its end, for a constant acceleration).
+    /// A restart at rest where it measured took a moving rig's rates as 0, and the first
+    /// periods' innovations (the rig's whole motion) as evidence: 49 σ on the arm after a
+    /// 0.6 s gap mid-swing. The statistics are held for [`HELD_AFTER_UNKNOWN`] periods more,
+    /// while the correction settles on what the two readings left of the noise.
+    fn acquire_rates(
+        &mut self,
+        start: State,
+        theta: f64,
+        alpha: f64,
+        volts: (f64, f64),
+        dt: f64,
+        delay: f64,
+    ) {
+        let mean = [(theta - start[0]) / dt, wrap_angle(alpha - start[2]) / dt];
+        let mut ahead = State::new(start[0], mean[0], start[2], mean[1]);
+        self.predict(&mut ahead, volts, dt, delay);
+        let x = State::new(
+            theta,
+            mean[0] + 0.5 * (ahead[1] - mean[0]),
+            alpha,
+            mean[1] + 0.5 * (ahead[3] - mean[1]),
+        );
+        self.x = Some(x);
+        self.free = x;
+        self.last_theta = theta;
+        self.unchanged = 0;
+        self.predicted_unchanged = 0.0;
+        self.history = 0;
+        self.unknown_left = HELD_AFTER_UNKNOWN;
     }
 
     /// The arrival the measurements show, for a period of unknown timing: the point between
@@ -764,97 +818,4 @@ impl Witness {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use std::f64::consts::PI;
-
-    /// Drives the hanging paper rig open loop with `u(t)` and feeds the witness what an
-    /// encoder pair wired by `wiring` reads (2048 counts); returns the first fault and when.
-    fn drive(
-        u: impl Fn(f64) -> f64,
-        wiring: impl Fn(f64, f64) -> f64,
-        seconds: f64,
-    ) -> Option<(f64, WitnessFault)> {
-        let cfg = Config::default();
-        let plant = cfg.spec.plant().unwrap();
-        let mut w = Witness::new(&cfg, WitnessLimits::default()).unwrap();
-        let ts = cfg.period_s();
-        let q = std::f64::consts::TAU / 2048.0;
-        let mut x = State::new(0.0, 0.0, PI, 0.0);
-        let mut prev = 0.0;
-        for k in 0..(seconds / ts) as usize {
-            let t = k as f64 * ts;
-            let theta = (wiring(x[0], t) / q).round() * q;
-            let alpha = wrap_angle((x[2] / q).round() * q);
-            let dt = if k == 0 { 0.0 } else { ts };
-            if let Err(f) = w.observe(theta, alpha, (prev, prev), dt, 0.0) {
-                return Some((t, f));
-            }
-            prev = u(t);
-            plant.advance(&mut x, prev, 0.0, ts, 10);
-        }
-        None
-    }
-
-    #[test]
-    fn a_rig_that_moves_as_commanded_never_trips() {
-        // A ±3 V square wave of 0.4 s: the arm turns back and forth, the pendulum swings.
-        let square = |t: f64| if (t / 0.2) as i64 % 2 == 0 { 3.0 } else { -3.0 };
-        assert_eq!(drive(square, |theta, _| theta, 5.0), None);
-        assert_eq!(drive(|_| 0.0, |theta, _| theta, 2.0), None);
-    }
-
-    #[test]
-    fn a_frozen_arm_encoder_is_named() {
-        let (t, f) = drive(|_| 3.0, |_, _| 0.0, 2.0).expect("not stopped");
-        assert!(matches!(f, WitnessFault::ArmFrozen { .. }), "{f}");
-        assert!(t < 0.3, "{t}");
-        assert!(f.to_string().contains("stopped counting"), "{f}");
-    }
-
-    #[test]
-    fn motion_against_the_voltage_is_named() {
-        // The encoder counts backwards from 0.5 s on, while the arm turns under 3 V.
-        let reversed = |theta: f64, t: f64| if t < 0.5 { theta } else { -theta };
-        let (t, f) = drive(|_| 3.0, reversed, 2.0).expect("not stopped");
-        assert!((0.5..0.6).contains(&t), "{t}");
-        assert!(
-            matches!(
-                f,
-                WitnessFault::ArmWrongWay { .. } | WitnessFault::ArmDisagrees { .. }
-            ),
-            "{f}"
-        );
-        assert!(f.to_string().contains("motor leads"), "{f}");
-    }
-
-    #[test]
-    fn a_reversed_motor_trips_the_sign_statistic_within_a_few_periods_and_a_scale_does_not() {
-        // The encoder counts backwards from 0.5 s on while ±6 V square waves turn the arm:
-        // the voltage's share of the motion reads reversed from the first period.
-        let square = |t: f64| if (t / 0.1) as i64 % 2 == 0 { 6.0 } else { -6.0 };
-        let reversed = |theta: f64, t: f64| if t < 0.5 { theta } else { -theta };
-        let (t, f) = drive(square, reversed, 2.0).expect("not stopped");
-        assert!((0.5..0.55).contains(&t), "{t}");
-        assert!(
-            matches!(f, WitnessFault::ArmWrongWay { stat, limit, .. } if stat > limit && limit == SIGN_THRESHOLD),
-            "{f}"
-        );
-        // A quarter of the motion (8192 counts configured on a 2048-count encoder): the
-        // voltage still moves the arm its way, so it is not named a reversal.
-        if let Some((_, f)) = drive(square, |theta, _| theta / 4.0, 2.0) {
-            assert!(!matches!(f, WitnessFault::ArmWrongWay { .. }), "{f}");
-        }
-    }
-
-    #[test]
-    fn a_gap_in_the_device_clock_restarts_the_observer() {
-        let cfg = Config::default();
-        let mut w = Witness::new(&cfg, WitnessLimits::default()).unwrap();
-        w.observe(0.0, PI, (0.0, 0.0), 0.0, 0.0).unwrap();
-        // A second later the arm is elsewhere: no prediction spans the gap.
-        w.observe(1.0, PI, (0.0, 0.0), 1.0, 0.0).unwrap();
-        w.observe(1.0, PI, (0.0, 0.0), 0.01, 0.0).unwrap();
-        assert_eq!(w.statistic(), [0.0, 0.0]);
-    }
-}
+mod tests;

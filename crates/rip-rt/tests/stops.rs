@@ -294,6 +294,34 @@ fn a_watchdog_stop_after_the_catch_brakes_the_arm_inside_its_limit() {
 }
 
 #[test]
+fn a_stop_that_loses_its_replies_for_a_while_brakes_the_arm_inside_its_limit() {
+    let _serial = one_at_a_time();
+    // The QUBE-Servo 2 balancing after its catch; 9 s after the sign check's pulse the device
+    // answers nothing for 0.5 s (commands still arrive): the watchdog stops the run after 5
+    // periods, and the stop runs blind for 45 more, the pendulum falling meanwhile. In
+    // lockstep, so that the gap falls at the same state every run. A stop that kept the
+    // windings shorted after the gap let the pendulum walk the arm to 3.29 rad; one that
+    // returns to the braking law when the replies do ends inside.
+    let name = "stop-silent";
+    let cfg = swing_config(name, 4.0, "[plant]\npreset = \"qube_servo2\"\n");
+    let emu = hanging_rig(
+        name,
+        &cfg,
+        &["--silent-at", "9", "--silent-for", "0.5"],
+        true,
+    );
+    let child = spawn_run(
+        &emu.device,
+        "lqr",
+        &with_lockstep(&["--swing-up", "--force", "--config", cfg.to_str().unwrap()]),
+    );
+    let out = settle(emu, child);
+    assert_eq!(out.code, Some(4), "{}", out.stderr);
+    assert!(out.stderr.contains("stop: braked"), "{}", out.stderr);
+    out.assert_safe("replies lost during a watchdog stop", ARM_LIMIT);
+}
+
+#[test]
 fn a_fall_right_after_the_catch_brakes_the_arm_inside_its_limit() {
     let _serial = one_at_a_time();
     // A 2.5 rad arm step half a second after the catch: the arm runs out fast and the

@@ -70,13 +70,24 @@ pub struct EmulatorConfig {
     /// the host's `loop.period_ms`) before each sample request is answered, instead of in
     /// real time; measurements carry [`STATUS_LOCKSTEP`]. `None`: real time.
     pub lockstep_period_s: Option<f64>,
+    /// The device answers nothing for `.1` seconds starting `.0` seconds after the first
+    /// enabling command (`--silent-at`, `--silent-for`): a USB hub's or a serial adapter's
+    /// hiccup, every measurement in the window lost while commands still arrive. Unlike
+    /// `drop_rate` it starts mid-run, so that a stop can be made to run blind.
+    pub silence: Option<(f64, f64)>,
 }
 
 /// In lockstep, a host silent for this long (wall time) no longer paces the plant: it runs on
 /// in real time, so that what happens after a run (the arm coasting, the device watchdog)
 /// plays out as on the rig, until the next sample request. Before the host's first frame the
 /// plant waits, so that a lockstep run is reproducible.
-pub const LOCKSTEP_IDLE_NS: u64 = 500_000_000;
+///
+/// Longer than the host's wait for a lockstep reply
+/// ([`LOCKSTEP_REPLY_WAIT_NS`](crate::timing::LOCKSTEP_REPLY_WAIT_NS)), by half a second: a
+/// reply the emulator dropped leaves the host waiting that long, and at 0.5 s (shorter than
+/// the wait) the plant ran 0.3–0.5 s unpaced inside what the host counted as one period, a
+/// gap no rig on a 100 Hz loop shows.
+pub const LOCKSTEP_IDLE_NS: u64 = crate::timing::LOCKSTEP_REPLY_WAIT_NS + 500_000_000;
 
 /// How the emulated rig is wired: the motor's leads and each encoder's direction, and
 /// encoders that do not count (a loose cable). The default is a correctly wired rig.
@@ -118,6 +129,7 @@ impl Default for EmulatorConfig {
             fault_at_s: None,
             can_brake: true,
             lockstep_period_s: None,
+            silence: None,
         }
     }
 }
@@ -269,6 +281,16 @@ impl EmulatorConfig {
                     "needs a wiring fault to start (--reverse-motor, --reverse-arm-encoder, \
                      --freeze-arm-encoder, ...)",
                 ));
+            }
+        }
+        if let Some((at, len)) = self.silence {
+            for (name, v) in [("--silent-at", at), ("--silent-for", len)] {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(EmulatorConfigError::new(
+                        name,
+                        format!("must be a non-negative number of seconds, got {v}"),
+                    ));
+                }
             }
         }
         if self.arm_counts_per_rev == 0 || self.pendulum_counts_per_rev == 0 {

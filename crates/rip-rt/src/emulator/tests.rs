@@ -155,3 +155,36 @@ fn the_encoders_read_the_sensor_section_as_the_simulation_measures_it() {
         assert!((ss / sigma - 1.0).abs() < 0.05, "{j}: {ss} {sigma}");
     }
 }
+
+#[test]
+fn a_silence_loses_every_reply_in_its_window_only() {
+    let mut dev = Device::new(EmulatorConfig {
+        silence: Some((0.02, 0.01)),
+        ..EmulatorConfig::default()
+    });
+    let mut out = [0u8; MAX_FRAME];
+    let mut wire = Vec::new();
+    let frame = [1u8, 2, 3];
+    // Before the first enabling command the window has not started.
+    dev.advance(30_000_000);
+    dev.inject_faults(&frame, &mut wire);
+    assert_eq!(wire, frame);
+    let enable = Event::Frame(Frame {
+        seq: 0,
+        message: Message::Command(Command {
+            voltage_mv: 0,
+            flags: COMMAND_ENABLE,
+        }),
+    });
+    dev.handle(enable, &mut out);
+    // Sent at each millisecond after the enable: through before 20 ms, lost in [20, 30) ms,
+    // through again from 30 ms.
+    let mut sent = Vec::new();
+    for _ in 0..40 {
+        dev.inject_faults(&frame, &mut wire);
+        sent.push(!wire.is_empty());
+        dev.advance(1_000_000);
+    }
+    let lost: Vec<usize> = (0..40).filter(|&ms| !sent[ms]).collect();
+    assert_eq!(lost, (20..30).collect::<Vec<_>>());
+}
