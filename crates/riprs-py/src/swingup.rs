@@ -155,7 +155,8 @@ impl Controller for Balance {
 ///     Any of the settings (keyword only; omitted ones take their defaults, listed in
 ///     :attr:`settings`): ``max_voltage`` (V), ``arm_limit`` (rad), ``brake_fraction``,
 ///     ``pump_fraction``, ``pump_width`` (rad/s), ``energy_gain``, ``energy_margin``,
-///     ``arm_centering`` (rad/s), ``barrier_rate`` (1/s), ``rate_cutoff`` (Hz),
+///     ``arm_centering`` (rad/s), ``rise_damping`` (1/s), ``barrier_rate`` (1/s),
+///     ``rate_cutoff`` (Hz),
 ///     ``catch_angle`` (rad), ``catch_lookahead`` (s), ``catch_mode_fraction``,
 ///     ``catch_rate`` (rad/s),
 ///     ``catch_arm_rate`` (rad/s), ``catch_arm_angle`` (rad), ``catch_prediction`` (s),

@@ -102,6 +102,7 @@ pub(crate) struct EnergyLaw {
     gain: f64,
     width: f64,
     wc: f64,
+    rise_damping: f64,
     lambda: f64,
     arm_limit: f64,
     u_max: f64,
@@ -139,6 +140,7 @@ impl EnergyLaw {
             gain: s.energy_gain,
             width: s.pump_width,
             wc: s.arm_centering,
+            rise_damping: s.rise_damping,
             lambda: s.barrier_rate,
             arm_limit: s.arm_limit - margin,
             u_max: s.max_voltage,
@@ -148,6 +150,22 @@ impl EnergyLaw {
     /// The pendulum's own energy relative to upright rest, `E = ½ J_α α̇² + G (cos α − 1)`.
     pub(crate) fn energy(&self, x: &State) -> f64 {
         0.5 * self.ja * x[3] * x[3] + self.grav * (x[2].cos() - 1.0)
+    }
+
+    /// The pendulum's energy once an impulse on the arm has stopped it (module docs, eq. (5)):
+    /// `E' = ½ J_α α̇'² + G (cos α − 1)`, `α̇' = α̇ − r θ̇`, `r = Δα̈/Δθ̈` the pendulum's
+    /// response per unit of the arm's to a torque on the arm alone.
+    pub(crate) fn stopped_energy(&self, x: &State) -> f64 {
+        // The ratio r = −M₁₂/M₂₂ taken from two evaluations of the equations of motion, as
+        // `voltage` inverts them: a change of voltage is a torque on the arm alone.
+        let d0 = self.plant.derivative(x, 0.0, 0.0);
+        let d1 = self.plant.derivative(x, 1.0, 0.0);
+        let ratio = (d1[3] - d0[3]) / (d1[1] - d0[1]);
+        if !ratio.is_finite() {
+            return self.energy(x);
+        }
+        let rate = x[3] - ratio * x[1];
+        0.5 * self.ja * rate * rate + self.grav * (x[2].cos() - 1.0)
     }
 
     /// The target energy at pendulum angle `alpha` (wrapped): `δ G` plus what viscous friction
@@ -169,7 +187,14 @@ impl EnergyLaw {
     /// The arm acceleration the law asks for at `x` (module docs, steps 1–3).
     pub(crate) fn acceleration(&self, x: &State) -> f64 {
         let (theta, theta_dot, alpha, alpha_dot) = (x[0], x[1], x[2], x[3]);
-        let eps = (self.target(alpha) - self.energy(x)) / self.grav;
+        // With the last-rise brake the arm is stopped before the catch, and what the pendulum
+        // then has is its energy once the arm is at rest (module docs, "Last rise").
+        let energy = if self.rise_damping > 0.0 {
+            self.stopped_energy(x)
+        } else {
+            self.energy(x)
+        };
+        let eps = (self.target(alpha) - energy) / self.grav;
         let v = alpha_dot * alpha.cos();
         // At exact rest (a quantised, noise-free reading of a still pendulum) v is 0 and a
         // smoothed sign would never start the swing: push one way until it moves.
@@ -179,7 +204,15 @@ impl EnergyLaw {
             (v / self.width).clamp(-1.0, 1.0)
         };
         let pump = self.pump * (self.gain * eps).clamp(-1.0, 1.0) * sign;
-        let centre = -self.wc * self.wc * theta - 2.0 * self.wc * theta_dot;
+        let last_rise = alpha.cos() > 0.0
+            && alpha * alpha_dot < 0.0
+            && (self.gain * eps).abs() < 1.0
+            && self.rise_damping > 0.0;
+        let centre = if last_rise {
+            -self.rise_damping * theta_dot
+        } else {
+            -self.wc * self.wc * theta - 2.0 * self.wc * theta_dot
+        };
         let wanted = pump + centre;
         let b = self.brake;
         let v_up = envelope_speed(b, self.arm_limit - theta);

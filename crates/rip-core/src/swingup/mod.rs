@@ -94,6 +94,25 @@
 //! kept for back-EMF at the envelope's top speed `√(4 a_b θ_L)`, the pendulum's reaction on the
 //! arm and ±10 % model error. The simulation tests check `|θ| ≤ θ_L` over perturbed plants.
 //!
+//! # Last rise (opt-in)
+//!
+//! The pumping leaves the arm turning when the pendulum arrives, so the catch starts with the
+//! arm's rate to stop as well as the pendulum's. With [`SwingUpSettings::rise_damping`]
+//! `k_r > 0` the arm is stopped on the way up instead. A torque on the arm alone changes the
+//! rates in the ratio `Δα̇/Δθ̇ = −M₁₂/M₂₂ = r` (the mass matrix `M` of the equations of motion;
+//! `r = Δα̈/Δθ̈` between two voltages), so stopping the arm leaves the pendulum with
+//!
+//! ```text
+//! E' = ½ J_α (α̇ − r θ̇)² + G (cos α − 1)                                               (5)
+//! ```
+//!
+//! and `α̇ − r θ̇ = p_α / M₂₂` (the pendulum's generalised momentum) does not depend on `θ̈` at
+//! all: braking changes `E'` only through the arm's rate, which it takes to 0. The law then
+//! regulates `E'` instead of `E` in (1), and on the last rise (the pendulum in the upper half,
+//! `cos α > 0`, moving towards upright, `α α̇ < 0`, with `|k_E ε| < 1`) replaces the centring
+//! spring by `a_c = −k_r θ̇`: the arm comes to rest while the pendulum arrives with the energy
+//! of (1a). The barrier (3) bounds it as before.
+//!
 //! # Supervisor and catch
 //!
 //! [`SwingUp`] wraps a balance controller `C` and moves through [`Phase`]s:

@@ -470,3 +470,37 @@ fn after_a_fall_the_arm_stays_inside_its_limit_on_perturbed_plants() {
     }
     assert!(falls >= 3, "{falls} falls: the test needs some");
 }
+
+#[test]
+fn the_stopped_energy_is_what_an_arm_stopped_by_a_torque_pulse_leaves() {
+    // Reference: the equations of motion integrated through a short, large torque pulse on
+    // the arm alone, until the arm is at rest; gravity and friction act for microseconds.
+    let mut largest_change = 0.0f64;
+    for preset in ["paper", "qube_servo2"] {
+        let plant = spec(preset).plant().unwrap();
+        let law = law::EnergyLaw::new(&plant, &SwingUpSettings::default(), paper::TS);
+        let grav = law.gravity();
+        for (theta_dot, alpha, alpha_dot) in [(4.0, 0.8, -3.0), (-3.0, -1.2, 5.0), (2.0, 2.5, 1.0)]
+        {
+            let x0 = State::new(0.1, theta_dot, alpha, alpha_dot);
+            let torque = -theta_dot.signum() * 20.0;
+            let mut x = x0;
+            let h = 1e-7;
+            let mut steps = 0;
+            while x[1] * theta_dot > 0.0 {
+                plant.rk4_step(&mut x, 0.0, torque, h);
+                steps += 1;
+                assert!(steps < 1_000_000);
+            }
+            let stopped = law.stopped_energy(&x0);
+            let reference = law.energy(&x);
+            assert!(
+                (stopped - reference).abs() < 1e-3 * grav,
+                "{preset} {x0:?}: E' {stopped}, after the pulse {reference}"
+            );
+            largest_change = largest_change.max((law.energy(&x0) - reference).abs() / grav);
+        }
+    }
+    // The arm's rate matters: without the correction the energy is far off.
+    assert!(largest_change > 0.05, "{largest_change}");
+}
