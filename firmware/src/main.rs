@@ -277,11 +277,12 @@ fn SysTick() {
         } else {
             into_period
         };
-        dev.record_step_cycles(ticks, period);
+        let overrun = dev.record_step_cycles(ticks, period, inputs.now_us);
         // An overrun's stop is applied now, not at the next pass of the main loop.
         board.bridge.apply(dev.pwm(board.bridge.max_duty()));
-        if let Some(f) = frame {
-            OUTBOX.borrow(cs).borrow_mut().push(&f);
+        let mut outbox = OUTBOX.borrow(cs).borrow_mut();
+        for f in [frame, overrun].into_iter().flatten() {
+            outbox.push(&f);
         }
     });
 }

@@ -15,7 +15,7 @@ use rip_device::law::{write_image, ControlLaw, Sensor};
 use rip_device::{Config, Device, Inputs};
 use rip_protocol::{
     crc32, Command, Event, Frame, Message, OnboardStart, PilStep, UploadBegin, UploadChunk,
-    UploadCommit, CHUNK_MAX,
+    UploadCommit, CHUNK_MAX, ONBOARD_OVERRUN,
 };
 
 fn image() -> ([u8; 512], usize) {
@@ -118,7 +118,13 @@ fuzz_target!(|data: &[u8]| {
             }),
             8 => {
                 // No inputs reach the device here: judge it on the fault line it last read.
-                dev.record_step_cycles(u32_of(2), u32_of(4));
+                // An overrun, and only an overrun, ends the run with a final record.
+                let was_running = dev.onboard_running();
+                let last = dev.record_step_cycles(u32_of(2), u32_of(4), 0);
+                assert_eq!(last.is_some(), was_running && u32_of(2) > u32_of(4));
+                if last.is_some() {
+                    assert_eq!(dev.onboard_state(), ONBOARD_OVERRUN);
+                }
                 check(&dev, host_enabled, seen_fault, cfg);
                 continue;
             }

@@ -349,18 +349,20 @@ impl<C: Onboard> Device<C> {
 
     /// Records how long the last controller step took, `cycles` processor cycles, against
     /// its `budget` (the period's cycles): a step over budget is an overrun, which stops
-    /// onboard mode (module docs). Returns whether it overran.
-    pub fn record_step_cycles(&mut self, cycles: u32, budget: u32) -> bool {
-        let Some(run) = self.run.as_mut() else {
-            return false;
-        };
+    /// onboard mode (module docs). On an overrun it returns the run's final telemetry record,
+    /// stamped `now_us` and numbered as the step that overran, so that the host learns why the
+    /// run ended as it does for every other stop; otherwise `None`.
+    pub fn record_step_cycles(&mut self, cycles: u32, budget: u32, now_us: u32) -> Option<Frame> {
+        let run = self.run.as_mut()?;
         run.last_cycles = cycles;
         if cycles <= budget {
-            return false;
+            return None;
         }
         run.overruns = run.overruns.saturating_add(1);
+        let run = *run;
         self.stop_onboard(ONBOARD_OVERRUN, true);
-        true
+        let positions = self.positions();
+        Some(self.telemetry(&run, run.step.wrapping_sub(1), positions, now_us))
     }
 
     /// The `ONBOARD_*` state: running, idle, or why the last run stopped.

@@ -457,11 +457,19 @@ fn a_non_finite_move_stops() {
 fn an_overrun_is_a_fault() {
     let mut dev = running(1000);
     dev.onboard_step(&inputs(0, 0, 2048));
-    assert!(!dev.record_step_cycles(167_999, 168_000));
+    assert!(dev.record_step_cycles(167_999, 168_000, 0).is_none());
     assert!(dev.onboard_running());
     dev.onboard_step(&inputs(1000, 0, 2048));
-    assert!(dev.record_step_cycles(168_001, 168_000));
+    // An overrun ends with a final telemetry record, as every other stop does: the host
+    // reads why the run ended, how long the step took, and what the bridge does.
+    let t = telemetry(dev.record_step_cycles(168_001, 168_000, 1000));
     assert_eq!(dev.onboard_state(), ONBOARD_OVERRUN);
+    assert_eq!(
+        (t.onboard, t.step, t.step_cycles, t.overruns),
+        (ONBOARD_OVERRUN, 1, 168_001, 1)
+    );
+    assert_eq!(t.device_time_us, 1000);
+    assert_eq!(t.applied_mv, 0);
     assert!(!dev.enabled());
     assert_eq!(dev.pwm(1000), Pwm::BRAKE);
 }
