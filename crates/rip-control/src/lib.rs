@@ -16,10 +16,12 @@
 //! `f32`). Measured on the host over a 15 s nonlinear loop of each preset (rip-core's
 //! `tests/onboard.rs`), `f32` keeps the LQR within 60 µV of `f64`, but the estimators drift:
 //! the paper's LQG ends 12 V apart and the MPCs 17 V and 8 V (the slow Kalman error modes
-//! integrate the round-off). So the device runs `f64`, whose moves are the host's bit for bit;
-//! `f32` remains available for the LQR. The bytes always carry `f64`; a `Design<f32>` rounds
-//! them once when it reads them. Transcendentals (`exp`, `sqrt`, `pow`) come from `libm` on
-//! both sides.
+//! integrate the round-off). The firmware runs `f32` on its FPU (`ControlLaw<f32, _>` in
+//! `firmware/src/main.rs`), and that drift is why its moves are checked against this crate's
+//! own `f32` controller on the host, fed the same counts (the processor-in-the-loop check of
+//! `firmware/README.md`), not against the host's `f64` run. The bytes always carry `f64`; a
+//! `Design<f32>` rounds them once when it reads them. Transcendentals (`exp`, `sqrt`, `pow`)
+//! come from `libm` on both sides.
 //!
 //! # Capacities
 //!
