@@ -94,6 +94,46 @@ def test_mpc_paper_is_the_specs_mpc():
     assert riprs.Mpc(m.A, m.B, m.C, 0.01).prediction_horizon == 10
 
 
+def test_the_mpc_section_is_the_core_settings(tmp_path):
+    # Spec.mpc is MpcSettings' serde form: the stub's attributes are exactly its keys, and a
+    # file's [mpc] values come back as written (bounds as [min, max] lists).
+    spec = riprs.Spec()
+    assert sorted(_properties(_stub(), "MpcSpec")) == [k for k in dir(spec.mpc) if k[0] != "_"]
+    f = tmp_path / "mpc.toml"
+    f.write_text(
+        "[mpc]\nprediction_horizon = 35\nsolver = 'clarabel'\n"
+        "output_bounds = [[-1.0, 1.0], [-0.4, 0.4]]\n"
+    )
+    mpc = riprs.load_config(f).mpc
+    assert (mpc.prediction_horizon, mpc.solver) == (35, "clarabel")
+    assert mpc.output_bounds == [[-1.0, 1.0], [-0.4, 0.4]]
+    assert mpc.control_horizon == spec.mpc.control_horizon
+    try:
+        getattr(mpc, "horizon")  # noqa: B009 (the attribute is looked up by name on purpose)
+    except AttributeError as e:
+        assert "prediction_horizon" in str(e)
+    else:
+        raise AssertionError("an unknown attribute was served")
+
+
+def test_a_lab_start_restarts_measured_links_as_uniform_rods():
+    # The uniform rod, J = m L^2 / 12, computed here from the definition.
+    import importlib
+
+    identify = importlib.import_module("riprs.identify")
+    q = riprs.FurutaParams.qube_servo2()
+    p = identify._apply_lab(q, {"mp": 0.06, "Lr": 0.1, "km": 0.05})
+    assert abs(p.Jp - 0.06 * q.Lp**2 / 12) < 1e-15
+    assert abs(p.Jr - q.mr * 0.1**2 / 12) < 1e-15
+    assert (p.km, p.kt, p.Rm) == (0.05, 0.05, q.Rm)
+    try:
+        identify._apply_lab(q, {"mass": 0.1})
+    except identify.IdentifyError as e:
+        assert "lab.mass" in str(e)
+    else:
+        raise AssertionError("an unknown lab key was accepted")
+
+
 def _paper_lqr_gain():
     import numpy as np
     import scipy.linalg

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import re
 import sys
 from typing import Sequence
 
@@ -110,10 +109,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
             "map_axes": "--map",
             "scheduler": "--scheduler",
         }
-        message = re.sub(
-            r"^(chunk_size|workers|map_axes|scheduler)\b", lambda m: flag[m[1]], str(exc)
-        )
-        raise campaign.CampaignError(message) from None
+        raise (exc.renamed(flag[exc.key]) if exc.key in flag else exc) from None
     except KeyboardInterrupt:
         print(
             f"riprs: interrupted; finished chunks are in {args.out}/runs, the same command resumes",

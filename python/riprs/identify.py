@@ -32,6 +32,7 @@ from riprs._riprs import (
     FurutaParams,
     Plant,
     identify_logs,
+    lab_start,
     load_config,
     read_lab_file,
 )
@@ -449,21 +450,11 @@ def read_lab(path: PathLike) -> Dict[str, float]:
 
 
 def _apply_lab(start: FurutaParams, lab: Dict[str, float]) -> FurutaParams:
-    """The start set with the lab's measurements in place; centroidal inertias of measured
-    links restart as those of uniform rods, ``km = kt`` (SI units) when only one is given."""
-    d = start.to_dict()
-    for key, value in lab.items():
-        if key in d:  # the lab's [plant] keys (its encoder counts are not parameters)
-            d[key] = float(value)
-    if "km" in lab and "kt" not in lab:
-        d["kt"] = d["km"]
-    if "kt" in lab and "km" not in lab:
-        d["km"] = d["kt"]
-    if "mp" in lab or "Lp" in lab:
-        d["Jp"] = d["mp"] * d["Lp"] ** 2 / 12.0
-    if "mr" in lab or "Lr" in lab:
-        d["Jr"] = d["mr"] * d["Lr"] ** 2 / 12.0
-    return FurutaParams(**d)
+    """The start set with the lab's measurements in place (``rip_core``'s rule)."""
+    try:
+        return lab_start(start, [(k, float(v)) for k, v in lab.items()])
+    except ConfigError as exc:
+        raise IdentifyError(str(exc)) from None
 
 
 def _start(start: Union[str, FurutaParams, PathLike]) -> Tuple[FurutaParams, str]:

@@ -2,8 +2,8 @@
 //! spec designs them), N runs from hanging at rest, each on a plant whose every physical
 //! parameter (all but `g`) is drawn uniformly within ±10 % of the preset's, with its own noise
 //! seed, 2048-count encoders and 1 mrad noise; the swing-up is designed on the nominal preset.
-//! The runs are [`rip_core::spec::study`]'s experiment (the arm steps 0 → 1 rad 2 s after
-//! the catch); success and time to upright are [`rip_core::sim::swing_up_succeeded`] and the
+//! The runs are [`rip_core::spec::study`]'s experiment (the arm steps 0 → 1 rad
+//! `reference.step_time`, by default 1 s, after the catch); success and time to upright are [`rip_core::sim::swing_up_succeeded`] and the
 //! catch time, and [`rip_core::spec::study::arrivals`] counts the arrivals near upright
 //! and the passes over the top of each run from its true state.
 //!

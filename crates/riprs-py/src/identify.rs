@@ -162,7 +162,21 @@ fn read_lab_file<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bou
     Ok(d)
 }
 
+/// The identification's start set: ``start`` with the lab's measured values in place
+/// (``rip_core::identify::lab::Lab::start``: a measured link restarts as a uniform rod,
+/// ``km = kt`` when only one is given). ``lab`` maps :data:`LAB_KEYS` names to values,
+/// checked like a lab file's; raises ``ConfigError`` naming ``lab.KEY``.
+#[pyfunction]
+fn lab_start(start: PyFurutaParams, lab: Vec<(String, f64)>) -> PyResult<PyFurutaParams> {
+    let lab = Lab::from_values(lab.iter().map(|(k, v)| (k.as_str(), *v)))
+        .map_err(|e| crate::spec::ConfigError::new_err(e.to_string()))?;
+    Ok(PyFurutaParams {
+        inner: lab.start(&start.inner),
+    })
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(lab_start, m)?)?;
     m.add_function(wrap_pyfunction!(identify_logs, m)?)?;
     m.add_function(wrap_pyfunction!(read_lab_file, m)?)?;
     m.add("LAB_KEYS", rip_core::identify::lab::LAB_KEYS.to_vec())?;

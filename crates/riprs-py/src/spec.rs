@@ -29,6 +29,28 @@ fn config_err(e: SpecError) -> PyErr {
     ConfigError::new_err(e.to_string())
 }
 
+/// A TOML value as the Python object of the same shape (arrays as lists, tables as dicts).
+pub(crate) fn from_toml(py: Python<'_>, value: &toml::Value) -> PyResult<PyObject> {
+    Ok(match value {
+        toml::Value::Float(v) => v.into_pyobject(py)?.into_any().unbind(),
+        toml::Value::Integer(v) => v.into_pyobject(py)?.into_any().unbind(),
+        toml::Value::String(v) => v.into_pyobject(py)?.into_any().unbind(),
+        toml::Value::Boolean(v) => PyBool::new(py, *v).to_owned().into_any().unbind(),
+        toml::Value::Datetime(v) => v.to_string().into_pyobject(py)?.into_any().unbind(),
+        toml::Value::Array(items) => {
+            let items: PyResult<Vec<PyObject>> = items.iter().map(|v| from_toml(py, v)).collect();
+            PyList::new(py, items?)?.into_any().unbind()
+        }
+        toml::Value::Table(table) => {
+            let d = PyDict::new(py);
+            for (k, v) in table {
+                d.set_item(k, from_toml(py, v)?)?;
+            }
+            d.into_any().unbind()
+        }
+    })
+}
+
 /// Converts nested Python dicts, lists and scalars into a TOML value; `key` is the key path
 /// of `obj`, named by the error of a value no TOML value holds.
 pub(crate) fn to_toml(obj: &Bound<'_, PyAny>, key: &str) -> PyResult<toml::Value> {
@@ -150,22 +172,29 @@ pub struct PyCompensationSpec {
     velocity_scale: f64,
 }
 
-/// `[mpc]` (read-only).
-#[pyclass(name = "MpcSpec", module = "riprs._riprs", frozen, get_all)]
+/// `[mpc]` (read-only): the core's ``MpcSettings`` in its serde form, one attribute per key of
+/// the section (the settings type is the section's schema, so the names and values are its).
+#[pyclass(name = "MpcSpec", module = "riprs._riprs", frozen)]
 pub struct PyMpcSpec {
-    prediction_horizon: usize,
-    control_horizon: usize,
-    output_weights: Vec<f64>,
-    input_rate_weights: Vec<f64>,
-    input_weights: Vec<f64>,
-    input_target: Vec<f64>,
-    input_bounds: Vec<(f64, f64)>,
-    output_bounds: Vec<(f64, f64)>,
-    ecr_weight: f64,
-    input_scales: Vec<f64>,
-    output_scales: Vec<f64>,
-    solver: String,
-    max_iterations: usize,
+    table: toml::Table,
+}
+
+#[pymethods]
+impl PyMpcSpec {
+    fn __getattr__(&self, py: Python<'_>, name: &str) -> PyResult<PyObject> {
+        match self.table.get(name) {
+            Some(value) => from_toml(py, value),
+            None => Err(pyo3::exceptions::PyAttributeError::new_err(format!(
+                "MpcSpec has no attribute {name:?}; the [mpc] keys are {}",
+                self.table.keys().cloned().collect::<Vec<_>>().join(", ")
+            ))),
+        }
+    }
+
+    /// The section's keys.
+    fn __dir__(&self) -> Vec<String> {
+        self.table.keys().cloned().collect()
+    }
 }
 
 /// `[monte_carlo]` (read-only).
@@ -486,22 +515,10 @@ impl PySpec {
     /// ``[mpc]``.
     #[getter]
     fn mpc(&self) -> PyMpcSpec {
-        let m = &self.inner.mpc;
-        PyMpcSpec {
-            prediction_horizon: m.prediction_horizon,
-            control_horizon: m.control_horizon,
-            output_weights: m.output_weights.clone(),
-            input_rate_weights: m.input_rate_weights.clone(),
-            input_weights: m.input_weights.clone(),
-            input_target: m.input_target.clone(),
-            input_bounds: m.input_bounds.clone(),
-            output_bounds: m.output_bounds.clone(),
-            ecr_weight: m.ecr_weight,
-            input_scales: m.input_scales.clone(),
-            output_scales: m.output_scales.clone(),
-            solver: m.solver.name().into(),
-            max_iterations: m.max_iterations,
-        }
+        let Ok(toml::Value::Table(table)) = toml::Value::try_from(&self.inner.mpc) else {
+            unreachable!("the MPC settings serialise to a table")
+        };
+        PyMpcSpec { table }
     }
 
     /// ``[monte_carlo]``.

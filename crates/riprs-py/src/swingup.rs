@@ -214,19 +214,12 @@ pub(crate) fn settings_dict<'py>(
     py: Python<'py>,
     s: &SwingUpSettings,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let Ok(toml::Value::Table(table)) = toml::Value::try_from(s) else {
+    let Ok(table @ toml::Value::Table(_)) = toml::Value::try_from(s) else {
         unreachable!("the swing-up settings serialise to a table")
     };
-    let d = PyDict::new(py);
-    for (key, value) in table {
-        match value {
-            toml::Value::Float(v) => d.set_item(key, v)?,
-            toml::Value::Integer(v) => d.set_item(key, v)?,
-            toml::Value::String(v) => d.set_item(key, v)?,
-            other => unreachable!("a swing-up setting is a number or a name, got {other}"),
-        }
-    }
-    Ok(d)
+    Ok(crate::spec::from_toml(py, &table)?
+        .into_bound(py)
+        .downcast_into::<PyDict>()?)
 }
 
 fn phase_name(p: Phase) -> &'static str {

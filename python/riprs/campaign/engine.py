@@ -140,7 +140,8 @@ def _scheduler_address(scheduler: str) -> tuple[str, int]:
     if m is None or not 1 <= int(m.group(3)) <= 65535:
         raise CampaignError(
             f"scheduler must be an address like tcp://HOST:PORT (port 1..65535), "
-            f"got {scheduler!r}"
+            f"got {scheduler!r}",
+            key="scheduler",
         )
     return m.group(2).strip("[]"), int(m.group(3))
 
@@ -410,10 +411,14 @@ def run(
     if map_axes is not None:
         names = [a.name for a in campaign.axes]
         if len(map_axes) != 2 or len(set(map_axes)) != 2:
-            raise CampaignError(f"map_axes must name two different axes, got {list(map_axes)}")
+            raise CampaignError(
+                f"map_axes must name two different axes, got {list(map_axes)}", key="map_axes"
+            )
         for name in map_axes:
             if name not in names:
-                raise CampaignError(f"map_axes: {name!r} is not an axis ({', '.join(names)})")
+                raise CampaignError(
+                    f"map_axes: {name!r} is not an axis ({', '.join(names)})", key="map_axes"
+                )
         pair = (map_axes[0], map_axes[1])
     engine = (
         f"dask {scheduler}"

@@ -84,7 +84,19 @@ COLUMNS = ("run", "controller", "point", "seed_index", "noise_seed")
 
 class CampaignError(RiprsError):
     """A campaign spec, results directory or cluster problem; the message names the key or
-    path."""
+    path. ``key`` is the key or argument the message begins with, as data, when it names one
+    (so a command line can name its option instead)."""
+
+    def __init__(self, message: str, *, key: str | None = None) -> None:
+        super().__init__(message)
+        self.key = key
+
+    def renamed(self, name: str) -> CampaignError:
+        """The same error naming ``name`` in place of its key."""
+        text = str(self)
+        if self.key is None or not text.startswith(self.key):
+            return self
+        return CampaignError(name + text[len(self.key) :], key=name)
 
 
 # -- the base experiment spec -------------------------------------------------------------------
@@ -661,7 +673,7 @@ def _is_int(v: Any) -> bool:
 
 def _int(v: Any, key: str, minimum: int) -> int:
     if not _is_int(v) or v < minimum:
-        raise CampaignError(f"{key} must be an integer >= {minimum}, got {v!r}")
+        raise CampaignError(f"{key} must be an integer >= {minimum}, got {v!r}", key=key)
     return int(v)
 
 

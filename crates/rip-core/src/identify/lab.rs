@@ -20,7 +20,7 @@
 
 use std::path::Path;
 
-use crate::plant::Param;
+use crate::plant::{FurutaParams, Param};
 use crate::spec::SpecError;
 
 /// The keys of a lab file's `[lab]` table and what each is, in the file's order: the measured
@@ -56,52 +56,110 @@ impl Lab {
         let doc: toml::Table = text
             .parse()
             .map_err(|e: toml::de::Error| SpecError::new("", format!("not a TOML file: {e}")))?;
-        let keys = LAB_KEYS.map(|(k, _)| k).join(", ");
         let table = match doc.get("lab") {
             Some(toml::Value::Table(t)) if doc.len() == 1 => t,
             _ => {
                 return Err(SpecError::new(
                     "",
-                    format!("a lab file holds one [lab] table (keys: {keys})"),
+                    format!("a lab file holds one [lab] table (keys: {})", Self::keys()),
                 ))
             }
         };
-        for key in table.keys() {
-            if !LAB_KEYS.iter().any(|(k, _)| k == key) {
-                return Err(SpecError::new(
-                    format!("lab.{key}"),
-                    format!("unknown key; the keys are {keys}"),
-                ));
+        let mut values = Vec::new();
+        for (key, value) in table {
+            let key = Self::key(key)?;
+            let number = match value {
+                toml::Value::Integer(n) => *n as f64,
+                toml::Value::Float(x) if !Self::is_count(key) => *x,
+                _ => f64::NAN,
+            };
+            values.push((key, Self::checked(key, number, &value.to_string())?));
+        }
+        values.sort_by_key(|(k, _)| LAB_KEYS.iter().position(|(l, _)| l == k));
+        Ok(Self { values })
+    }
+
+    /// Measurements given as values (a log header's, or Python's `riprs.identify(lab=...)`),
+    /// checked like a file's: the error names `lab.KEY`.
+    pub fn from_values<'a>(
+        given: impl IntoIterator<Item = (&'a str, f64)>,
+    ) -> Result<Self, SpecError> {
+        let mut values = Vec::new();
+        for (key, value) in given {
+            let key = Self::key(key)?;
+            values.push((key, Self::checked(key, value, &value.to_string())?));
+        }
+        values.sort_by_key(|(k, _)| LAB_KEYS.iter().position(|(l, _)| l == k));
+        Ok(Self { values })
+    }
+
+    /// The identification's start set: `start` with the measured parameters in place. A
+    /// measured link's centroidal inertia restarts as that of a uniform rod
+    /// ([`FurutaParams::rod_inertia`]), since its old inertia belongs to another mass and
+    /// length; `km = kt` (SI units, the same motor constant) when only one is given.
+    pub fn start(&self, start: &FurutaParams) -> FurutaParams {
+        let mut p = *start;
+        for (key, value) in &self.values {
+            if let Some(param) = Param::from_name(key) {
+                p.set(param, *value);
             }
         }
-        let mut values = Vec::new();
-        for (key, _) in LAB_KEYS {
-            let Some(v) = table.get(key) else { continue };
-            let value = if key.ends_with("_counts") {
-                match v {
-                    toml::Value::Integer(n) if *n >= MIN_COUNTS => *n as f64,
-                    _ => {
-                        return Err(SpecError::new(
-                            format!("lab.{key}"),
-                            format!("must be an integer >= {MIN_COUNTS}, got {v}"),
-                        ))
-                    }
-                }
-            } else {
-                match v {
-                    toml::Value::Float(x) if x.is_finite() && *x > 0.0 => *x,
-                    toml::Value::Integer(n) if *n > 0 => *n as f64,
-                    _ => {
-                        return Err(SpecError::new(
-                            format!("lab.{key}"),
-                            format!("must be a positive number, got {v}"),
-                        ))
-                    }
-                }
-            };
-            values.push((key, value));
+        let given = |param: Param| self.get(param.name()).is_some();
+        match (given(Param::Km), given(Param::Kt)) {
+            (true, false) => p.kt = p.km,
+            (false, true) => p.km = p.kt,
+            _ => {}
         }
-        Ok(Self { values })
+        if given(Param::Mp) || given(Param::Lp) {
+            p.jp = FurutaParams::rod_inertia(p.mp, p.lp);
+        }
+        if given(Param::Mr) || given(Param::Lr) {
+            p.jr = FurutaParams::rod_inertia(p.mr, p.lr);
+        }
+        p
+    }
+
+    fn keys() -> String {
+        LAB_KEYS.map(|(k, _)| k).join(", ")
+    }
+
+    fn is_count(key: &str) -> bool {
+        key.ends_with("_counts")
+    }
+
+    /// `key` as one of [`LAB_KEYS`], or the error naming it.
+    fn key(key: &str) -> Result<&'static str, SpecError> {
+        LAB_KEYS
+            .iter()
+            .map(|(k, _)| *k)
+            .find(|k| *k == key)
+            .ok_or_else(|| {
+                SpecError::new(
+                    format!("lab.{key}"),
+                    format!("unknown key; the keys are {}", Self::keys()),
+                )
+            })
+    }
+
+    /// The one range rule of a measurement: counts an integer of at least [`MIN_COUNTS`],
+    /// the rest positive and finite (`shown` is the value as given, for the error).
+    fn checked(key: &'static str, value: f64, shown: &str) -> Result<f64, SpecError> {
+        if Self::is_count(key) {
+            if value.fract() == 0.0 && value >= MIN_COUNTS as f64 {
+                return Ok(value);
+            }
+            return Err(SpecError::new(
+                format!("lab.{key}"),
+                format!("must be an integer >= {MIN_COUNTS}, got {shown}"),
+            ));
+        }
+        if value.is_finite() && value > 0.0 {
+            return Ok(value);
+        }
+        Err(SpecError::new(
+            format!("lab.{key}"),
+            format!("must be a positive number, got {shown}"),
+        ))
     }
 
     /// Reads and parses the lab file at `path`; errors name the file.
@@ -144,9 +202,33 @@ mod tests {
         ] {
             assert_eq!(Lab::parse(text).unwrap_err().key, key, "{text}");
         }
+        let given = Lab::from_values([("Lp", 0.25), ("mp", 0.06), ("arm_counts", 2048.0)]);
+        assert_eq!(given.unwrap(), lab);
+        for (key, value) in [("mass", 0.1), ("Rm", f64::NAN), ("arm_counts", 20.5)] {
+            let err = Lab::from_values([(key, value)]).unwrap_err();
+            assert_eq!(err.key, format!("lab.{key}"));
+        }
         assert!(Lab::parse("mp = 0.1\n")
             .unwrap_err()
             .reason
             .contains("one [lab] table"));
+    }
+
+    #[test]
+    fn a_measured_link_restarts_as_a_uniform_rod() {
+        let q = FurutaParams::qube_servo2();
+        let p = Lab::parse("[lab]\nmp = 0.06\nkm = 0.05\n")
+            .unwrap()
+            .start(&q);
+        // Jp = m L²/12 with the new mass and the start's length: 0.06 · 0.129² / 12.
+        assert!((p.jp - 0.06 * 0.129 * 0.129 / 12.0).abs() < 1e-15);
+        assert_eq!((p.mp, p.lp, p.km, p.kt), (0.06, q.lp, 0.05, 0.05));
+        assert_eq!((p.jr, p.mr, p.rm), (q.jr, q.mr, q.rm));
+        let both = Lab::parse("[lab]\nkm = 0.05\nkt = 0.04\nLr = 0.1\n")
+            .unwrap()
+            .start(&q);
+        assert_eq!((both.km, both.kt), (0.05, 0.04));
+        assert!((both.jr - q.mr * 0.01 / 12.0).abs() < 1e-15);
+        assert_eq!(Lab::default().start(&q), q);
     }
 }

@@ -49,7 +49,7 @@ pub(super) fn with(mut p: FurutaParams, v: &[f64; NP]) -> FurutaParams {
         let product = p.mp * p.lp;
         p.lp = 3.0 * ja / product;
         p.mp = product / p.lp;
-        p.jp = p.mp * p.lp * p.lp / 12.0;
+        p.jp = FurutaParams::rod_inertia(p.mp, p.lp);
     }
     let rest = j0 - p.mp * lr * lr;
     let jr = rest - p.mr * lr * lr / 4.0;
@@ -57,7 +57,7 @@ pub(super) fn with(mut p: FurutaParams, v: &[f64; NP]) -> FurutaParams {
         p.jr = jr;
     } else if rest > 0.0 {
         p.mr = 3.0 * rest / (lr * lr);
-        p.jr = p.mr * lr * lr / 12.0;
+        p.jr = FurutaParams::rod_inertia(p.mr, lr);
     } else {
         p.jr = -1.0;
     }

@@ -181,6 +181,14 @@ pub struct FurutaParams {
 }
 
 impl FurutaParams {
+    /// Centroidal inertia of a uniform rod of mass `m` and length `l`, `m l²/12`: the one rule
+    /// by which a link whose inertia was not measured is taken from its mass and length (the
+    /// presets, the lab file's start set, an identification whose split leaves no positive
+    /// inertia).
+    pub fn rod_inertia(m: f64, l: f64) -> f64 {
+        m * l * l / 12.0
+    }
+
     /// Quanser QUBE-Servo 2 with the rotary-pendulum module.
     ///
     /// Source: Quanser, *QUBE-Servo 2 User Manual* and the parameter script of its
@@ -209,10 +217,10 @@ impl FurutaParams {
             km: 0.042,
             mr,
             lr,
-            jr: mr * lr * lr / 12.0,
+            jr: Self::rod_inertia(mr, lr),
             mp,
             lp,
-            jp: mp * lp * lp / 12.0,
+            jp: Self::rod_inertia(mp, lp),
             dr: 0.001,
             dp: 0.00005,
             g: 9.81,

@@ -77,9 +77,9 @@ pub struct Design {
     compensation: Option<Compensation>,
 }
 
-/// The weight an LQR design failure is blamed on: `R` when it is named, or when it is so
-/// small against `Q` (below 1e-12 of its largest entry) that the Riccati equation is
-/// ill-conditioned; `Q` otherwise.
+/// The weight an LQR design failure is blamed on: `R` when the error's argument is `dlqr`'s
+/// `R` (the argument name is the error's data), or when it is so small against `Q` (below
+/// 1e-12 of its largest entry) that the Riccati equation is ill-conditioned; `Q` otherwise.
 fn lqr_key(e: &RipError, spec: &super::LqrSpec) -> &'static str {
     let q_max = spec.Q.iter().copied().fold(0.0, f64::max);
     if spec.R < 1e-12 * q_max {
@@ -93,10 +93,9 @@ fn lqr_key(e: &RipError, spec: &super::LqrSpec) -> &'static str {
         | RipError::NotPositiveSemidefinite { name, .. } => name.as_str(),
         _ => "",
     };
-    if name.starts_with('R') {
-        "lqr.R"
-    } else {
-        "lqr.Q"
+    match name {
+        "R" => "lqr.R",
+        _ => "lqr.Q",
     }
 }
 

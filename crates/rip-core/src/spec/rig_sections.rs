@@ -277,7 +277,7 @@ impl CalibrationConfig {
                     "must be in [{}, {}] s, got {}",
                     REST_WINDOW_S.start(),
                     REST_WINDOW_S.end(),
-                    self.rest_window_s
+                    Shown(self.rest_window_s)
                 ),
             );
         }
@@ -287,7 +287,8 @@ impl CalibrationConfig {
                 "calibration.rest_timeout_s",
                 format!(
                     "must be in [calibration.rest_window_s ({}), {MAX_REST_TIMEOUT_S}] s, got {}",
-                    self.rest_window_s, self.rest_timeout_s
+                    self.rest_window_s,
+                    Shown(self.rest_timeout_s)
                 ),
             );
         }
@@ -298,7 +299,8 @@ impl CalibrationConfig {
                 "calibration.settle_timeout_s",
                 format!(
                     "must be in [calibration.rest_window_s ({}), {MAX_REST_TIMEOUT_S}] s, got {}",
-                    self.rest_window_s, self.settle_timeout_s
+                    self.rest_window_s,
+                    Shown(self.settle_timeout_s)
                 ),
             );
         }
@@ -350,11 +352,29 @@ impl CalibrationConfig {
     }
 }
 
+/// A value as an error shows it: `{}` of an `f64` writes 1e300 as 301 digits, so values
+/// outside `[1e-4, 1e15)` in magnitude are written in exponent form.
+struct Shown(f64);
+
+impl std::fmt::Display for Shown {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let a = self.0.abs();
+        if a.is_finite() && a != 0.0 && !(1e-4..1e15).contains(&a) {
+            write!(f, "{:e}", self.0)
+        } else {
+            write!(f, "{}", self.0)
+        }
+    }
+}
+
 fn positive(key: &str, v: f64) -> Result<(), SpecError> {
     if v.is_finite() && v > 0.0 {
         Ok(())
     } else {
-        Err(err(key, format!("must be a positive number, got {v}")))
+        Err(err(
+            key,
+            format!("must be a positive number, got {}", Shown(v)),
+        ))
     }
 }
 
@@ -370,9 +390,10 @@ fn in_range(
         Err(err(
             key,
             format!(
-                "must be in [{}, {}] {unit}, got {v}",
+                "must be in [{}, {}] {unit}, got {}",
                 range.start(),
-                range.end()
+                range.end(),
+                Shown(v)
             ),
         ))
     }
@@ -382,7 +403,10 @@ fn in_open_closed(key: &str, v: f64, max: f64, unit: &str) -> Result<(), SpecErr
     if v > 0.0 && v <= max {
         Ok(())
     } else {
-        Err(err(key, format!("must be in (0, {max}] {unit}, got {v}")))
+        Err(err(
+            key,
+            format!("must be in (0, {max}] {unit}, got {}", Shown(v)),
+        ))
     }
 }
 
@@ -390,7 +414,7 @@ fn sign(key: &str, v: f64) -> Result<(), SpecError> {
     if v == 1.0 || v == -1.0 {
         Ok(())
     } else {
-        Err(err(key, format!("must be 1 or -1, got {v}")))
+        Err(err(key, format!("must be 1 or -1, got {}", Shown(v))))
     }
 }
 
@@ -634,6 +658,16 @@ mod tests {
 
     fn key_of(text: &str) -> String {
         parse_file(text).unwrap_err().key
+    }
+
+    #[test]
+    fn a_huge_value_is_shown_in_exponent_form() {
+        let e = parse_file("[safety]\nwait_upright_s = 1e300\n").unwrap_err();
+        assert!(e.reason.ends_with("got 1e300"), "{e}");
+        let e = parse_file("[calibration]\nsettle_timeout_s = 1e300\n").unwrap_err();
+        assert!(e.reason.ends_with("got 1e300"), "{e}");
+        assert_eq!(Shown(0.2).to_string(), "0.2");
+        assert_eq!(Shown(-1e-7).to_string(), "-1e-7");
     }
 
     #[test]
