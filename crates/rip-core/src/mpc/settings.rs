@@ -209,6 +209,19 @@ impl MpcSettings {
                 format!("must be positive, got {}", self.ecr_weight),
             ));
         }
+        // The condensed Hessian holds 2·ecr_weight (MATLAB's ECR term ρ_ε ε², differentiated
+        // twice): a weight whose double overflows is this key's fault, not the QP's.
+        if !(2.0 * self.ecr_weight).is_finite() {
+            return Err(KeyError::new(
+                "ecr_weight",
+                format!(
+                    "must be at most {:e}, half the largest double (the QP's Hessian holds \
+                     twice it), got {:e}",
+                    f64::MAX / 2.0,
+                    self.ecr_weight
+                ),
+            ));
+        }
         if self.max_iterations == 0 || self.max_iterations > MAX_QP_ITERATIONS {
             return Err(KeyError::new(
                 "max_iterations",

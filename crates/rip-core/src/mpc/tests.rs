@@ -257,6 +257,13 @@ fn bad_settings_name_the_argument() {
         ),
         (
             MpcSettings {
+                ecr_weight: 1e308,
+                ..Default::default()
+            },
+            "ecr_weight",
+        ),
+        (
+            MpcSettings {
                 output_weights: vec![1.0],
                 ..Default::default()
             },
@@ -296,7 +303,17 @@ fn bad_settings_name_the_argument() {
     ];
     for (settings, name) in cases {
         let err = Mpc::new(&a, &b, &c, 0.1, settings).unwrap_err();
-        assert!(err.to_string().contains(name), "{err} should name {name}");
+        // The key is data: a message that merely mentions the key among others is not enough.
+        match &err {
+            RipError::InvalidParameter { name: key, .. } => {
+                assert_eq!(
+                    key.split('[').next(),
+                    Some(name),
+                    "{err} should be blamed on {name}"
+                )
+            }
+            other => assert!(other.to_string().contains(name), "{err} should name {name}"),
+        }
     }
 }
 
