@@ -235,3 +235,17 @@ def test_a_key_that_moved_names_its_new_key(tmp_path: Path) -> None:
         assert str(info.value) == (
             f"{f}: device.{key}: moved to sensor.encoder_counts[{n}]: set it there"
         )
+
+
+def test_an_update_is_checked_against_the_files_rig_sections(tmp_path: Path) -> None:
+    # The file's own [safety] arm_limit bounds the arm step of every later update: the
+    # relation is checked on the updated spec, as a file holding both would be.
+    f = tmp_path / "rig.toml"
+    f.write_text("[safety]\narm_limit = 1.2\n")
+    spec = load_config(f)
+    assert spec.updated({"reference": {"arm_step": 1.1}}) != spec
+    with pytest.raises(riprs.ConfigError) as info:
+        spec.updated({"reference": {"arm_step": 1.25}})
+    assert str(info.value).startswith("reference.arm_step:"), str(info.value)
+    assert "1.2" in str(info.value)
+    assert spec == load_config(f)

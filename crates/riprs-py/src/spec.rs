@@ -291,8 +291,7 @@ impl PySpec {
         };
         let inner = self.inner.updated(changes).map_err(config_err)?.resolved();
         // The rig sections' relations to the experiment (limits, counts) are checked again.
-        rig_sections::parse_file(&rig_sections::file_toml(&inner, &self.rig))
-            .map_err(config_err)?;
+        rig_sections::resolve(&inner, &self.rig).map_err(config_err)?;
         Ok(Self {
             inner,
             rig: self.rig.clone(),

@@ -601,23 +601,38 @@ fn name_every_section(e: SpecError) -> SpecError {
     SpecError { reason, ..e }
 }
 
-/// Parses and checks a whole file: the experiment's sections ([`Spec::parse_with_runtime`])
-/// and rip-rt's ([`RigSections::validate`]).
-pub fn parse_file(text: &str) -> Result<(Spec, RigSections), SpecError> {
-    // A TOML syntax error is reported as by the experiment's reader.
-    let table = parse_table(text)?;
-    let (spec, runtime) = Spec::parse_with_runtime(text).map_err(name_every_section)?;
-    let mut rig = RigSections::from_runtime(runtime)?;
+/// rip-rt's sections of a file, `runtime` as the file gave them ([`Spec::parse_with_runtime`]),
+/// completed from `spec` (the encoder resolution is `sensor.encoder_counts`; the rest rates
+/// not given follow from it) and checked in full, their relations to `spec` included
+/// ([`RigSections::validate`]): the one check of a file's rig, whether it was read from text
+/// or changed in memory (`riprs.Spec.updated`).
+pub fn resolve(spec: &Spec, runtime: &toml::Table) -> Result<RigSections, SpecError> {
+    let mut rig = RigSections::from_runtime(runtime.clone())?;
     [
         rig.device.arm_counts_per_rev,
         rig.device.pendulum_counts_per_rev,
     ] = spec.sensor.encoder_counts;
-    let given = |key: &str| table.get("calibration").and_then(|c| c.get(key)).is_some();
+    let given = |key: &str| {
+        runtime
+            .get("calibration")
+            .and_then(|c| c.get(key))
+            .is_some()
+    };
     rig.calibration.resolve_default_rates(
         spec.sensor.encoder_counts,
         [given("rest_arm_rate"), given("rest_pendulum_rate")],
     );
-    rig.validate(&spec)?;
+    rig.validate(spec)?;
+    Ok(rig)
+}
+
+/// Parses and checks a whole file: the experiment's sections ([`Spec::parse_with_runtime`])
+/// and rip-rt's ([`resolve`]).
+pub fn parse_file(text: &str) -> Result<(Spec, RigSections), SpecError> {
+    // A TOML syntax error is reported as by the experiment's reader.
+    parse_table(text)?;
+    let (spec, runtime) = Spec::parse_with_runtime(text).map_err(name_every_section)?;
+    let rig = resolve(&spec, &runtime)?;
     Ok((spec, rig))
 }
 
