@@ -7,6 +7,7 @@ mod common;
 use std::time::Duration;
 
 use common::*;
+use rip_rt::emulator::LOCKSTEP_IDLE_NS;
 
 fn onboard_run(device: &std::path::Path, extra: &[&str]) -> RunResult {
     // LQR: the tests of the device's stops hold for any controller.
@@ -131,8 +132,8 @@ fn the_device_enforces_the_angle_limits_itself() {
 fn a_host_that_dies_leaves_the_device_to_stop_the_motor() {
     let _one = one_at_a_time();
     // In lockstep until the host dies, so that a loaded machine cannot starve the host into a
-    // silence before then; the emulator then runs on in real time (after 0.5 s without a host
-    // frame) and the device's own host timeout must stop the motor.
+    // silence before then; the emulator then runs on in real time (after LOCKSTEP_IDLE_NS
+    // without a host frame) and the device's own host timeout must stop the motor.
     let emu = Emulator::lockstep("onboard-silent", &[]);
     let child = spawn_run(
         &emu.device,
@@ -146,7 +147,9 @@ fn a_host_that_dies_leaves_the_device_to_stop_the_motor() {
     let r = wait_with_timeout(child, Duration::from_secs(5));
     assert_eq!(r.status.code(), None);
     let killed_at = emu.truth_so_far().last().map_or(0.0, |t| t.t);
-    std::thread::sleep(Duration::from_millis(1500));
+    // The plant stays paced for LOCKSTEP_IDLE_NS after the host's last frame, then must run a
+    // second of real time: long beyond the device's 50 ms host timeout.
+    std::thread::sleep(Duration::from_nanos(LOCKSTEP_IDLE_NS) + Duration::from_secs(1));
     let truth = emu.truth_so_far();
     let driven: Vec<&Truth> = truth.iter().filter(|t| t.driver == "drive").collect();
     assert!(!driven.is_empty(), "the onboard run never drove the motor");
