@@ -58,7 +58,8 @@ pub fn bring_to_rest(
     let mut stop = StopSequence::new(cfg, brake);
     let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
     let mut last: Option<(f64, f64, u32)> = None;
-    let mut blind = 0u32;
+    // Whether the last period went without a reply (its successor is shorted too).
+    let mut blind = false;
     let mut tx = [0u8; MAX_FRAME];
     let mut rx = [0u8; 512];
     // A fresh grid: the run may have stopped in the middle of a period, or after a stall.
@@ -81,7 +82,7 @@ pub fn bring_to_rest(
             // Without a fresh measurement the law has no rate: short the windings for this
             // period only. Giving the law up for good left the pendulum free to walk the arm
             // on past the limit once the device answered again.
-            blind += 1;
+            blind = true;
             if stop.mode() == BrakeMode::Modelled {
                 // The model's arm ran open loop on the law's voltages; the short it did not
                 // see leaves it apart from the arm for good.
@@ -92,7 +93,7 @@ pub fn bring_to_rest(
             }
             continue;
         };
-        let resumed = std::mem::take(&mut blind) > 0;
+        let resumed = std::mem::take(&mut blind);
         if reply.m.status & STATUS_FAULT != 0 {
             // A faulted driver opens the windings itself; nothing to drive.
             send(io, Command::BRAKE);

@@ -61,9 +61,11 @@ pub fn design(kind: ControllerKind, cfg: &Config) -> Result<OnboardDesign, Strin
         Some(law) => rip_core::onboard::with_compensation(out, law),
         None => out,
     };
-    // The device refuses a design whose worst step cannot fit its period: the QP's iteration
-    // bound is the configured one or the largest that fits, whichever is smaller (at the bound
-    // the step applies the fallback law, rip-control's crate docs).
+    // A step that overruns its period stops the onboard run, and the device does not check
+    // the budget at upload itself, so the host does: the QP's iteration bound is the
+    // configured one or the largest that fits, whichever is smaller (at the bound the step
+    // applies the fallback law, rip-control's crate docs), and a design that does not fit even
+    // one iteration is refused here.
     out.max_iterations = out.max_iterations.min(out.fitting_iterations().max(1));
     out.check_step_budget().map_err(|e| err(&e))?;
     Ok(out)
