@@ -135,11 +135,9 @@ fn a_host_that_dies_leaves_the_device_to_stop_the_motor() {
     // silence before then; the emulator then runs on in real time (after LOCKSTEP_IDLE_NS
     // without a host frame) and the device's own host timeout must stop the motor.
     let emu = Emulator::lockstep("onboard-silent", &[]);
-    let child = spawn_run(
-        &emu.device,
-        "lqr",
-        &["--onboard", "--lockstep", "--duration", "120"],
-    );
+    // No --duration: a lockstep run outpaces the wall clock, and 120 s of it has ended with
+    // exit 0 before the kill; without one it runs until the kill.
+    let child = spawn_run(&emu.device, "lqr", &["--onboard", "--lockstep"]);
     std::thread::sleep(Duration::from_millis(500));
     let pid = child.id() as i32;
     // SIGKILL: no stop frame can be sent.
