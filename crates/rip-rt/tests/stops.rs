@@ -156,14 +156,91 @@ fn wait_for_enable(emu: &Emulator, child: &mut std::process::Child) {
     }
 }
 
-/// Ctrl-C `delay_s` after the swing started.
+/// The simulated time (s) of the swing's first command: the first row of the true state driven
+/// beyond the sign check's pulse. The first enabling command is the pulse, and the swing
+/// starts only after the rig has come to rest from it (seconds later), so a stop timed from
+/// the first enabling command would land while the arm still rests.
+fn swing_start(rows: &[Truth]) -> Option<f64> {
+    let pulse = rip_rt::sign_check::PULSE_VOLTAGE;
+    rows.iter()
+        .find(|r| r.driver == "drive" && r.voltage.abs() > pulse + 0.5)
+        .map(|r| r.t)
+}
+
+/// Waits until the swing has started ([`swing_start`]) and returns its simulated time; a run
+/// that ended before it fails the test with its message.
+fn wait_for_swing(emu: &Emulator, child: &mut std::process::Child) -> f64 {
+    let start = std::time::Instant::now();
+    loop {
+        if let Some(t) = swing_start(&emu.truth_so_far()) {
+            return t;
+        }
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("the run ended ({status}) before the swing started");
+        }
+        assert!(start.elapsed().as_secs() < 30, "the swing never started");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+/// Waits until the swing has brought the pendulum upright (within 0.2 rad, driven), for the
+/// stops that are to find the run balancing after the catch.
+fn wait_for_catch(emu: &Emulator, child: &mut std::process::Child) {
+    let start = std::time::Instant::now();
+    loop {
+        let rows = emu.truth_so_far();
+        let upright =
+            |r: &&Truth| r.driver == "drive" && rip_core::swingup::wrap_angle(r.alpha).abs() < 0.2;
+        if swing_start(&rows).is_some_and(|t| rows.iter().filter(|r| r.t > t).any(|r| upright(&r)))
+        {
+            return;
+        }
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("the run ended ({status}) before the catch");
+        }
+        assert!(start.elapsed().as_secs() < 40, "never caught");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// Ctrl-C `delay_s` of wall time after the swing started (real time).
 fn sigint_during_swing(controller: &str, delay_s: f64) -> Outcome {
     let name = format!("stop-sigint-{controller}-{delay_s}");
     let (emu, mut child) = start_swing(&name, controller, "");
-    wait_for_enable(&emu, &mut child);
+    wait_for_swing(&emu, &mut child);
     std::thread::sleep(Duration::from_secs_f64(delay_s));
     unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
     settle(emu, child)
+}
+
+/// Ctrl-C once the simulated plant is `delay_s` past the swing's start, in lockstep: the plant
+/// waits for the run, so the signal lands within a few periods of that point of the swing
+/// whatever the machine's load. Returns the outcome and the simulated time the signal found.
+fn sigint_at_swing_time(model: &str, controller: &str, delay_s: f64) -> (Outcome, f64) {
+    let name = format!("stop-scan-{model}-{controller}-{delay_s}");
+    let cfg = swing_config(&name, 4.0, &format!("[plant]\npreset = \"{model}\"\n"));
+    let emu = hanging_rig(&name, &cfg, &[], true);
+    let mut child = spawn_run(
+        &emu.device,
+        controller,
+        &with_lockstep(&["--swing-up", "--force", "--config", cfg.to_str().unwrap()]),
+    );
+    let at = wait_for_swing(&emu, &mut child) + delay_s;
+    let start = std::time::Instant::now();
+    let signalled_at = loop {
+        let rows = emu.truth_so_far();
+        let now = rows.last().map_or(0.0, |r| r.t);
+        if now >= at {
+            break now;
+        }
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("{name}: the run ended ({status}) before the signal");
+        }
+        assert!(start.elapsed().as_secs() < 60, "{name}: the plant stalled");
+        std::thread::sleep(Duration::from_millis(1));
+    };
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    (settle(emu, child), signalled_at - (at - delay_s))
 }
 
 #[test]
@@ -188,12 +265,49 @@ fn ctrl_c_during_the_swing_and_after_the_catch_leaves_the_arm_inside_its_limit()
     }
 }
 
+/// A scan of Ctrl-C timings through the swing (the arm's fastest motion) and past the catch,
+/// with each controller on both presets, in lockstep. A lockstep plant runs many times faster
+/// than real time, so a signal lands some periods after the time asked for; each case
+/// prints the time the signal found, and the scan must have landed inside the swing.
+#[test]
+fn a_scan_of_ctrl_c_timings_through_the_swing_leaves_the_arm_inside_its_limit() {
+    let _serial = one_at_a_time();
+    let mut worst = (0.0, String::new());
+    for model in ["paper", "qube_servo2"] {
+        let mut in_the_swing = 0;
+        for (k, controller) in ["lqr", "lqg", "mpc"].into_iter().enumerate() {
+            // Staggered by controller: together 0.2 s apart from 0.1 to 2.9 s past the start
+            // (the catch comes about 2 s after it).
+            for i in 0..5 {
+                let delay = 0.1 + 0.2 * k as f64 + 0.6 * i as f64;
+                let (out, at) = sigint_at_swing_time(model, controller, delay);
+                let case = format!("{model} {controller}: SIGINT {at:.2} s into the swing");
+                assert_eq!(out.code, Some(130), "{case}: {}", out.stderr);
+                out.assert_safe(&case, ARM_LIMIT);
+                in_the_swing += usize::from(at < 2.0);
+                if out.max_theta > worst.0 {
+                    worst = (out.max_theta, case);
+                }
+            }
+        }
+        // 10 of the 15 asked for land before 2 s.
+        assert!(
+            in_the_swing >= 5,
+            "{model}: only {in_the_swing} signals in the swing"
+        );
+    }
+    println!(
+        "largest true |theta| of the scan: {:.3} rad ({})",
+        worst.0, worst.1
+    );
+}
+
 #[test]
 fn a_loop_stall_after_the_catch_stops_the_arm_inside_its_limit() {
     let _serial = one_at_a_time();
     let (emu, mut child) = start_swing("stop-stall", "lqr", "");
-    wait_for_enable(&emu, &mut child);
-    std::thread::sleep(Duration::from_secs(6));
+    wait_for_catch(&emu, &mut child);
+    std::thread::sleep(Duration::from_secs(1));
     // Suspended: the device's watchdog stops the motor (braking it); resumed, the loop finds
     // its deadlines missed and stops as stalled.
     unsafe { libc::kill(child.id() as i32, libc::SIGSTOP) };
@@ -279,8 +393,8 @@ fn every_excitation_beyond_its_envelope_is_refused_and_its_largest_amplitude_sta
 fn a_watchdog_stop_after_the_catch_brakes_the_arm_inside_its_limit() {
     let _serial = one_at_a_time();
     let (emu, mut child) = start_swing("stop-watchdog", "lqr", "");
-    wait_for_enable(&emu, &mut child);
-    std::thread::sleep(Duration::from_secs(6));
+    wait_for_catch(&emu, &mut child);
+    std::thread::sleep(Duration::from_secs(1));
     // The device goes silent for 150 ms (its process suspended): no measurement for
     // loop.watchdog_periods periods; it answers again while the loop brakes.
     let pid = emu.child.id() as i32;
