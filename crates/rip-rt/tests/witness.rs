@@ -1,7 +1,8 @@
 //! End to end through the emulator, judged on its true state: a wiring fault before a swing-up
 //! is refused by the sign check (exit 14), one that begins mid-run (during the swing, after
-//! the catch) is stopped by the witness (exit 15) before the arm has moved 0.5 rad from where
-//! it was when the fault began; normal runs never trip it.
+//! the catch) is stopped by the witness (exit 15): the run refuses to go on before the arm has
+//! moved 0.5 rad from where it was when the fault began, and the braking from the arm's speed
+//! then keeps it inside `safety.arm_limit`; normal runs never trip it.
 //!
 //! `cargo test --release -p rip-rt --test witness -- --ignored --nocapture` runs the whole
 //! matrix (every fault, timing and controller) and prints each case's true arm excursion.
@@ -10,11 +11,17 @@ mod common;
 
 use common::*;
 
-/// Seconds from the first enabling command (the sign check's pulse) on the nominal emulator:
-/// the pulse and the rest after it take about 5.2 s, the catch comes at about 7.3 s.
-const MID_SWING_S: f64 = 6.0;
+/// Seconds from the first enabling command (the sign check's pulse) on the nominal emulator
+/// in lockstep: the pulse and the rest after it take 5.98 s, the pendulum is upright at
+/// 8.12 s. Each case checks on its own true state that its fault began in the phase named.
+const MID_SWING_S: f64 = 7.0;
 const AFTER_CATCH_S: f64 = 9.0;
+const UPRIGHT_S: f64 = 8.12;
+/// Onsets through the whole swing, for the matrix of [`every_fault_timing_and_controller`].
+const SWING_SCAN_S: [f64; 6] = [6.2, 6.5, 6.8, 7.2, 7.5, 7.8];
 const MAX_MOVE: f64 = 0.5;
+/// `safety.arm_limit` of the default configuration (rad).
+const ARM_LIMIT: f64 = 3.0;
 
 /// The first enabling command's device time (s), from the emulator's record.
 fn first_enabling(emu: &Emulator) -> Option<f64> {
@@ -29,15 +36,43 @@ fn first_enabling(emu: &Emulator) -> Option<f64> {
 struct Excursion {
     /// True arm angle at the fault's onset (rad).
     at: f64,
-    /// Largest distance from it while the motor was driven (until the stop).
+    /// Largest distance from it until the run refused to go on (its stop's first command).
+    until_decision: f64,
+    /// ... and while the motor was driven (until the stop's braking law let go).
     until_stop: f64,
+    /// The largest true |θ| of the whole record (rad).
+    largest: f64,
     /// ... and until the end of the record (the arm coasting to rest).
     total: f64,
     /// The motor was still driven when the fault began (else the run stopped before it).
     driven_at_onset: bool,
+    /// Where the fault began: in the swing (after its first command beyond the sign check's
+    /// pulse, before the pendulum first came within 0.2 rad of upright), or after the catch.
+    phase: &'static str,
 }
 
-fn excursion(truth: &[Truth], onset: f64) -> Excursion {
+/// The phase of the run at simulated time `t` ([`Excursion::phase`]).
+fn phase_at(truth: &[Truth], t: f64) -> &'static str {
+    let pulse = rip_rt::sign_check::PULSE_VOLTAGE;
+    let Some(swing) = truth
+        .iter()
+        .find(|r| r.driver == "drive" && r.voltage.abs() > pulse + 0.5)
+        .map(|r| r.t)
+    else {
+        return "before the swing";
+    };
+    let upright = truth
+        .iter()
+        .find(|r| r.t > swing && rip_core::swingup::wrap_angle(r.alpha).abs() < 0.2)
+        .map_or(f64::INFINITY, |r| r.t);
+    match t {
+        t if t < swing => "before the swing",
+        t if t < upright => "swing",
+        _ => "after the catch",
+    }
+}
+
+fn excursion(truth: &[Truth], onset: f64, decision: f64) -> Excursion {
     // Strictly after: a row stamped with the command's own time was sampled by the step
     // before the command arrived (rows come from plant steps, commands between them), so it
     // shows the bridge as it was, not as the command left it.
@@ -48,8 +83,12 @@ fn excursion(truth: &[Truth], onset: f64) -> Excursion {
         .position(|r| r.driver != "drive")
         .unwrap_or(after.len());
     let dist = |rows: &[&Truth]| rows.iter().fold(0.0f64, |m, r| m.max((r.theta - at).abs()));
+    let decided = after.iter().take_while(|r| r.t <= decision).count();
     Excursion {
+        until_decision: dist(&after[..decided]),
+        largest: truth.iter().fold(0.0f64, |m, r| m.max(r.theta.abs())),
         driven_at_onset: after.first().is_some_and(|r| r.driver == "drive"),
+        phase: phase_at(truth, onset),
         at,
         until_stop: dist(&after[..stop]),
         total: dist(&after),
@@ -96,18 +135,32 @@ fn case(controller: &str, fault: &str, fault_at: Option<f64>) -> (i32, String, E
         panic!("{name}: the motor was never enabled: {}", r.stderr);
     };
     let onset = enabled + fault_at.unwrap_or(0.0);
+    // The log's clock starts at the first enabling command, and in lockstep each row's
+    // command reaches the plant at that time on the emulator's: the stop's first command
+    // arrives a period after the last row.
+    let last_row = Log::read(&log).col("t").last().copied().unwrap_or(0.0);
+    let decision = enabled + last_row + 0.01;
     let truth = emu.finish();
     assert_eq!(emu.commands().last(), Some(&(0, 0)), "{name}: {}", r.stderr);
     let code = r.status.code().unwrap_or(-1);
-    (code, r.stderr, excursion(&truth, onset))
+    (code, r.stderr, excursion(&truth, onset, decision))
 }
 
 fn check(controller: &str, fault: &str, fault_at: Option<f64>, expected: &str) {
     let (code, stderr, e) = case(controller, fault, fault_at);
     println!(
-        "{controller} {fault} at {fault_at:?}: exit {code}, arm {:+.3} rad at onset, moved {:.3} \
-         rad until the stop, {:.3} rad in all",
-        e.at, e.until_stop, e.total
+        "{controller} {fault} at {fault_at:?} ({}): exit {code}, arm {:+.3} rad at onset, moved \
+         {:.3} rad until the stop, {:.3} rad braking, {:.3} rad in all, largest |θ| {:.3} rad",
+        e.phase, e.at, e.until_decision, e.until_stop, e.total, e.largest
+    );
+    let phase = match fault_at {
+        None => "before the swing",
+        Some(t) if t < UPRIGHT_S => "swing",
+        Some(_) => "after the catch",
+    };
+    assert_eq!(
+        e.phase, phase,
+        "{controller} {fault} {fault_at:?}: {stderr}"
     );
     assert!(
         e.driven_at_onset,
@@ -116,9 +169,15 @@ fn check(controller: &str, fault: &str, fault_at: Option<f64>, expected: &str) {
     let want = if fault_at.is_none() { 14 } else { 15 };
     assert_eq!(code, want, "{controller} {fault} {fault_at:?}: {stderr}");
     assert!(stderr.contains(expected), "{controller} {fault}: {stderr}");
+    // Refused within half a radian of the fault's onset; what braking from the arm's speed
+    // then takes is physics, held to the limit.
     assert!(
-        e.until_stop < MAX_MOVE,
+        e.until_decision < MAX_MOVE,
         "{controller} {fault} {fault_at:?}: the arm moved {e:?}"
+    );
+    assert!(
+        e.largest < ARM_LIMIT,
+        "{controller} {fault} {fault_at:?}: past safety.arm_limit: {e:?}"
     );
 }
 
@@ -184,7 +243,7 @@ fn every_fault_timing_and_controller() {
     let _serial = one_at_a_time();
     for controller in ["lqr", "lqg", "mpc"] {
         for (fault, expected) in FAULTS {
-            for at in [MID_SWING_S, AFTER_CATCH_S] {
+            for at in SWING_SCAN_S.into_iter().chain([MID_SWING_S, AFTER_CATCH_S]) {
                 check(controller, fault, Some(at), expected);
             }
         }
