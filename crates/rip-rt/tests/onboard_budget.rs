@@ -1,6 +1,6 @@
 //! The onboard MPC's iteration bound as part of the design: the host caps the uploaded
 //! design's `max_iterations` to what fits half the period on the STM32F407 and refuses one
-//! that does not fit. The reference is the firmware's QEMU measurement of the paper's MPC
+//! that does not fit, and so does the device's law when it loads the image. The reference is the firmware's QEMU measurement of the paper's MPC
 //! (firmware/README.md): a worst step of 17 800 + 5 300 (I − 1) instructions, 28 339 measured
 //! at its 3 iterations, against 168 MHz / CPI 2 / half the period.
 
@@ -66,11 +66,15 @@ fn a_design_whose_iteration_bound_cannot_fit_its_period_is_refused() {
     d.max_iterations = measured_cap(1_000) + 1;
     let err = d.check_step_budget().unwrap_err().to_string();
     assert!(err.contains("max_iterations"), "{err}");
+    // The device's own check: its law refuses the image at the commit.
+    assert!(!loads(&onboard::image(&d, &cfg).unwrap()));
     // The configured default, 200, as it would have been sent uncapped.
     d.max_iterations = 200;
     assert!(d.check_step_budget().is_err());
+    assert!(!loads(&onboard::image(&d, &cfg).unwrap()));
     d.max_iterations = measured_cap(1_000);
     assert!(d.check_step_budget().is_ok());
+    assert!(loads(&onboard::image(&d, &cfg).unwrap()));
 }
 
 /// The 1 kHz MPC of the processor-in-the-loop check: the estimator and the move at 1 ms, the
