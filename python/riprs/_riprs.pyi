@@ -339,6 +339,7 @@ class Mpc:
         *,
         prediction_horizon: int = ...,
         control_horizon: int = ...,
+        prediction_step: int = 1,
         output_weights: ArrayLike | None = None,
         input_rate_weights: ArrayLike | None = None,
         input_weights: ArrayLike | None = None,

@@ -243,7 +243,11 @@ riprs reads keeps the ones it sets: `riprs config FILE`, `Spec.to_toml` and the 
 - `[mpc]`: section 3's MPC; the section is the MPC's own settings (`MpcSettings`, the keywords
   of Python's `riprs.Mpc`), each missing key taking the paper profile (`riprs.Mpc.paper()`,
   which is this section's default exactly, solver included; `riprs.Mpc(...)`'s own keyword
-  defaults are MATLAB's, e.g. `prediction_horizon = 10`). `input_bounds` (V) also clamps LQR
+  defaults are MATLAB's, e.g. `prediction_horizon = 10`). `prediction_step` (periods, default
+  1, no MATLAB equivalent) puts the prediction, its cost and its soft bounds on a grid of that
+  many loop periods, each move held for one grid step: the horizon is `prediction_horizon ·
+  prediction_step` periods, so a 1 kHz loop keeps the paper's 0.5 s and its QP's size with
+  `prediction_step = 10` ([firmware.md](firmware.md)). `input_bounds` (V) also clamps LQR
   and LQG; `output_bounds` per output, `[-inf, inf]` for none, `[y, y]` a soft equality;
   `input_target` is the input `input_weights` pull towards. `solver` is `active_set` (the
   default everywhere) or `clarabel`: both solve the same strictly convex QP to the same

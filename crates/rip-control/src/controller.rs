@@ -227,7 +227,8 @@ pub struct Controller<R: Real = f64> {
     plan: [R; MAX_NZ],
     f: [R; MAX_NZ],
     b: [R; MAX_NCON],
-    qp: Option<FixedQp<R>>,
+    /// The MPC's solver; of no QP (`n = 0`) for the regulators.
+    qp: FixedQp<R>,
     last_written: R,
     last_planned: R,
     stats: Stats,
@@ -238,50 +239,93 @@ impl<R: Real> Controller<R> {
     ///
     /// # Errors
     /// The design's first invalid field, or `BadValue("h")` for a Hessian that is not
-    /// positive definite.
+    /// numerically positive definite.
     pub fn new(design: &Design<R>) -> Result<Self, DesignError> {
+        let mut c = Self::unloaded();
+        c.design.clone_from(design);
+        c.start()?;
+        Ok(c)
+    }
+
+    /// A controller of no design ([`Design::zeroed`]), `const` for a firmware's static, to be
+    /// [`load`](Self::load)ed in place. Do not step it.
+    pub const fn unloaded() -> Self {
+        let z = R::ZERO;
+        Self {
+            design: Design::zeroed(),
+            plan_bounds: [z; 2],
+            filter: RateFilter {
+                a: z,
+                ts: z,
+                angles: [z; 2],
+                rates: [z; 2],
+                started: false,
+                held: 0,
+            },
+            x_hat: [z; NX_PLANT],
+            integral: z,
+            est: Estimator {
+                prior: [z; MAX_NX],
+                posterior: [z; MAX_NX],
+                innovation: [z; MAX_NY],
+            },
+            u_prev: z,
+            plan: [z; MAX_NZ],
+            f: [z; MAX_NZ],
+            b: [z; MAX_NCON],
+            qp: FixedQp::empty(),
+            last_written: z,
+            last_planned: z,
+            stats: Stats {
+                steps: 0,
+                invalid_measurements: 0,
+                iteration_limits: 0,
+                solver_failures: 0,
+                max_iterations: 0,
+            },
+        }
+    }
+
+    /// [`Design::read_from`] into this controller's own design, then [`new`](Self::new)'s
+    /// checks and initial state, all in place: a device keeps its one controller in a static,
+    /// and a design or a controller built as a temporary would take tens of kilobytes of its
+    /// stack.
+    ///
+    /// # Errors
+    /// As [`Design::from_bytes`] and [`new`](Self::new); the controller is then unspecified
+    /// but valid to load again: do not step it.
+    pub fn load(&mut self, bytes: &[u8]) -> Result<(), DesignError> {
+        self.design.read_from(bytes)?;
+        self.start()
+    }
+
+    /// Checks the design it holds and sets up the rate filter, the QP's factors and the
+    /// initial state.
+    fn start(&mut self) -> Result<(), DesignError> {
+        let design = &self.design;
         design.validate()?;
         let c = design.compensation;
         let margin = c.dead_zone + c.friction_voltage;
         let [lo, hi] = design.input_bounds;
-        let plan_bounds = [lo + margin, hi - margin];
-        if plan_bounds[0].partial_cmp(&plan_bounds[1]) != Some(core::cmp::Ordering::Less) {
+        self.plan_bounds = [lo + margin, hi - margin];
+        if self.plan_bounds[0].partial_cmp(&self.plan_bounds[1]) != Some(core::cmp::Ordering::Less)
+        {
             return Err(DesignError::BadValue("compensation"));
         }
-        let qp = if design.kind == Kind::Mpc {
-            Some(
-                FixedQp::new(
-                    &design.h,
-                    &design.ac,
-                    design.nz(),
-                    design.ncon,
-                    design.max_iterations,
-                )
-                .ok_or(DesignError::BadValue("h"))?,
-            )
+        self.filter = RateFilter::new(design.ts, design.rate_cutoff_hz);
+        let (nz, ncon) = if design.kind == Kind::Mpc {
+            (design.nz(), design.ncon)
         } else {
-            None
+            (0, 0)
         };
-        Ok(Self {
-            design: design.clone(),
-            plan_bounds,
-            filter: RateFilter::new(design.ts, design.rate_cutoff_hz),
-            x_hat: [R::ZERO; NX_PLANT],
-            integral: R::ZERO,
-            est: Estimator {
-                prior: [R::ZERO; MAX_NX],
-                posterior: [R::ZERO; MAX_NX],
-                innovation: [R::ZERO; MAX_NY],
-            },
-            u_prev: R::ZERO,
-            plan: [R::ZERO; MAX_NZ],
-            f: [R::ZERO; MAX_NZ],
-            b: [R::ZERO; MAX_NCON],
-            qp,
-            last_written: R::ZERO,
-            last_planned: R::ZERO,
-            stats: Stats::default(),
-        })
+        if !self
+            .qp
+            .refactor(&design.h, &design.ac, nz, ncon, design.max_iterations)
+        {
+            return Err(DesignError::BadValue("h"));
+        }
+        self.reset();
+        Ok(())
     }
 
     /// The design it runs.
@@ -329,7 +373,7 @@ impl<R: Real> Controller<R> {
     /// The MPC's last QP solution `z = [Δu(k) … Δu(k+m−1), ε]` (the fallback law's
     /// unconstrained minimiser after a failed solve; empty for the regulators).
     pub fn qp_solution(&self) -> &[R] {
-        self.qp.as_ref().map_or(&[], |q| q.solution())
+        self.qp.solution()
     }
 
     /// The integrator state `x_i` of the integral action.
@@ -347,9 +391,7 @@ impl<R: Real> Controller<R> {
         self.est.innovation = [R::ZERO; MAX_NY];
         self.u_prev = R::ZERO;
         self.plan = [R::ZERO; MAX_NZ];
-        if let Some(qp) = &mut self.qp {
-            qp.reset();
-        }
+        self.qp.reset();
         self.last_written = R::ZERO;
         self.last_planned = R::ZERO;
         self.stats = Stats::default();
@@ -728,8 +770,7 @@ impl<R: Real> Controller<R> {
         let [lo, hi] = self.plan_bounds;
         let u_prev = self.u_prev;
         let (status, iterations) = if measured && r_ok {
-            let qp = self.qp.as_mut().expect("an MPC design has a QP");
-            let (outcome, it) = qp.solve(&self.f[..nz], &self.b[..ncon]);
+            let (outcome, it) = self.qp.solve(&self.f[..nz], &self.b[..ncon]);
             let status = match outcome {
                 QpOutcome::Solved => Status::Nominal,
                 QpOutcome::IterationLimit => Status::IterationLimit,
@@ -743,7 +784,7 @@ impl<R: Real> Controller<R> {
         self.shift_plan();
         match status {
             Status::Nominal => {
-                let z = self.qp.as_ref().map(|q| q.solution()).unwrap_or(&[]);
+                let z = self.qp.solution();
                 let mut u = u_prev;
                 for j in 0..m {
                     u += z[j];
@@ -754,9 +795,7 @@ impl<R: Real> Controller<R> {
                 // The fallback law: the unconstrained minimiser −H⁻¹f, its blocked inputs
                 // clamped to the bounds (the moves recomputed from the clamped sums).
                 let mut z = [R::ZERO; MAX_NZ];
-                if let Some(q) = &self.qp {
-                    q.unconstrained(&mut z);
-                }
+                self.qp.unconstrained(&mut z);
                 let mut u = u_prev;
                 let mut all = true;
                 for j in 0..m {

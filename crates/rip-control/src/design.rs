@@ -268,17 +268,24 @@ pub struct Design<R: Real = f64> {
 
 impl<R: Real> Default for Design<R> {
     fn default() -> Self {
+        let mut d = Self::zeroed();
+        d.clear(Kind::Lqr);
+        d
+    }
+}
+
+impl<R: Real> Design<R> {
+    /// Every number and size zero (not a valid design), `const` for a firmware's static that
+    /// [`read_from`](Self::read_from) fills in place.
+    pub const fn zeroed() -> Self {
         let z = R::ZERO;
         Self {
             kind: Kind::Lqr,
-            ts: R::from_f64(0.01),
-            input_bounds: [
-                R::from_f64(-crate::INPUT_LIMIT),
-                R::from_f64(crate::INPUT_LIMIT),
-            ],
+            ts: z,
+            input_bounds: [z; 2],
             k: [z; NX_PLANT],
             integral_gain: z,
-            rate_cutoff_hz: R::from_f64(20.0),
+            rate_cutoff_hz: z,
             nx: 0,
             ny: 0,
             a: [z; MAX_NX * MAX_NX],
@@ -286,7 +293,7 @@ impl<R: Real> Default for Design<R> {
             c: [z; MAX_NY * MAX_NX],
             l: [z; MAX_NX * MAX_NY],
             m: [z; MAX_NX * MAX_NY],
-            output_scales: [R::ONE; MAX_NY],
+            output_scales: [z; MAX_NY],
             horizon: 0,
             control_horizon: 0,
             ncon: 0,
@@ -301,8 +308,56 @@ impl<R: Real> Default for Design<R> {
             b0: [z; MAX_NCON],
             bx: [z; MAX_NCON * MAX_NX],
             bu: [z; MAX_NCON],
-            max_iterations: 200,
-            compensation: CompensationDesign::default(),
+            max_iterations: 0,
+            compensation: CompensationDesign {
+                dead_zone: z,
+                friction_voltage: z,
+                voltage_scale: z,
+                velocity_scale: z,
+            },
+        }
+    }
+
+    /// The defaults ([`Default`]) with `kind`, written in place: a design is tens of
+    /// kilobytes, more than a firmware's stack should hold as a temporary.
+    fn clear(&mut self, kind: Kind) {
+        let z = R::ZERO;
+        self.kind = kind;
+        self.ts = R::from_f64(0.01);
+        self.input_bounds = [
+            R::from_f64(-crate::INPUT_LIMIT),
+            R::from_f64(crate::INPUT_LIMIT),
+        ];
+        self.k = [z; NX_PLANT];
+        self.integral_gain = z;
+        self.rate_cutoff_hz = R::from_f64(20.0);
+        self.nx = 0;
+        self.ny = 0;
+        self.output_scales = [R::ONE; MAX_NY];
+        self.horizon = 0;
+        self.control_horizon = 0;
+        self.ncon = 0;
+        self.n_input_rows = 0;
+        self.n_soft_rows = 0;
+        self.max_iterations = 200;
+        self.compensation = CompensationDesign::default();
+        for a in [
+            &mut self.a[..],
+            &mut self.b,
+            &mut self.c,
+            &mut self.l,
+            &mut self.m,
+            &mut self.h,
+            &mut self.f0,
+            &mut self.fx,
+            &mut self.fu,
+            &mut self.fr,
+            &mut self.ac,
+            &mut self.b0,
+            &mut self.bx,
+            &mut self.bu,
+        ] {
+            a.fill(z);
         }
     }
 }
@@ -477,7 +532,7 @@ impl<R: Real> Design<R> {
     }
 
     /// Whether the worst step at the design's iteration bound fits its period's budget: what
-    /// the host requires of a design before it sends it to the device.
+    /// the host requires of a design before it sends it, and the device before it runs it.
     ///
     /// # Errors
     /// [`DesignError::OverBudget`] with the two counts.
@@ -570,10 +625,7 @@ impl<R: Real> Design<R> {
             return Err(DesignError::BadChecksum);
         }
         let kind = Kind::from_code(bytes[6]).ok_or(DesignError::UnknownKind(bytes[6]))?;
-        *self = Self {
-            kind,
-            ..Self::default()
-        };
+        self.clear(kind);
         let mut r = Reader {
             buf: &bytes[HEADER_LEN..total - 4],
             pos: 0,

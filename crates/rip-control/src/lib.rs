@@ -5,8 +5,10 @@
 //! host (rip-core), `rip-rt` and the firmware.
 //!
 //! The design (DARE, Kalman design, condensing) is made on the host by rip-core, which fills a
-//! [`Design`]; the host uploads its bytes ([`Design::to_bytes`]); the device reads them
-//! ([`Design::from_bytes`]) and runs [`Controller::step`] every period.
+//! [`Design`]; the host uploads its bytes ([`Design::to_bytes`]); the device reads them into
+//! its one controller in place ([`Controller::load`]: a design is tens of kilobytes, which a
+//! firmware's stack cannot also hold as a temporary) and runs [`Controller::step`] every
+//! period.
 //!
 //! # Number format
 //!
@@ -70,7 +72,8 @@
 //! [`Stats`]. A discarded measurement applies the previous plan's next move. The iteration
 //! bound is what makes the step's time bounded: [`Design::worst_step_instructions_at`] models
 //! the worst step on the Cortex-M4F, and [`Design::fitting_iterations`] gives the largest bound
-//! that fits half the period (the host uploads no larger one).
+//! that fits half the period (the host uploads no larger one, and the device refuses a design
+//! that [`Design::check_step_budget`] rejects).
 //!
 //! # Compensation
 //!

@@ -129,15 +129,22 @@ impl<R: Real> FixedQp<R> {
         if n > MAX_NZ || ncon > MAX_NCON {
             return None;
         }
-        Self::new_in(
-            h,
-            a,
-            n,
-            ncon,
-            max_iter,
-            [R::ZERO; FIXED_STORAGE],
-            [0; MAX_NZ],
-        )
+        let mut qp = Self::empty();
+        qp.refactor(h, a, n, ncon, max_iter).then_some(qp)
+    }
+
+    /// A solver of no QP (`n = 0`: empty solutions), `const` for a firmware's static, to be
+    /// [`refactor`](DualActiveSet::refactor)ed in place.
+    pub const fn empty() -> Self {
+        Self {
+            n: 0,
+            ncon: 0,
+            max_iter: 0,
+            nw: 0,
+            buf: [R::ZERO; FIXED_STORAGE],
+            working: [0; MAX_NZ],
+            _real: core::marker::PhantomData,
+        }
     }
 }
 
@@ -159,22 +166,43 @@ impl<R: Real, B: AsRef<[R]> + AsMut<[R]>, W: AsRef<[usize]> + AsMut<[usize]>>
         n: usize,
         ncon: usize,
         max_iter: u32,
-        mut buf: B,
+        buf: B,
         working: W,
     ) -> Option<Self> {
-        if buf.as_ref().len() < Self::storage_len(n, ncon)
-            || working.as_ref().len() < n
+        let mut qp = Self {
+            n: 0,
+            ncon: 0,
+            max_iter,
+            nw: 0,
+            buf,
+            working,
+            _real: core::marker::PhantomData,
+        };
+        qp.refactor(h, a, n, ncon, max_iter).then_some(qp)
+    }
+
+    /// [`new_in`](Self::new_in) in the solver's own storage, for a device that keeps its one
+    /// solver in a static: the factors of a QP of `n` variables and `ncon` rows replace the
+    /// previous QP's, and the warm start is forgotten. `false` (the solver then holds no QP,
+    /// `n = 0`) when `H` is not numerically positive definite or the storage is short.
+    pub fn refactor(&mut self, h: &[R], a: &[R], n: usize, ncon: usize, max_iter: u32) -> bool {
+        self.n = 0;
+        self.ncon = 0;
+        self.nw = 0;
+        self.max_iter = max_iter;
+        if self.buf.as_ref().len() < Self::storage_len(n, ncon)
+            || self.working.as_ref().len() < n
             || h.len() < n * n
             || a.len() < ncon * n
         {
-            return None;
+            return false;
         }
-        let p = split(buf.as_mut(), n, ncon);
+        let p = split(self.buf.as_mut(), n, ncon);
         // Lower Cholesky factor L of H (so R = Lᵀ), in `chol`.
         let l = p.chol;
         l.copy_from_slice(&h[..n * n]);
         if !cholesky(l, n, R::from_f64(1e-13)) {
-            return None;
+            return false;
         }
         // R⁻¹ = (Lᵀ)⁻¹ = (L⁻¹)ᵀ: row j of R⁻¹ is column j of L⁻¹ (forward substitution on eⱼ).
         for j in 0..n {
@@ -202,15 +230,9 @@ impl<R: Real, B: AsRef<[R]> + AsMut<[R]>, W: AsRef<[usize]> + AsMut<[usize]>>
             p.norm2[i] = nrm;
         }
         p.z.fill(R::ZERO);
-        Some(Self {
-            n,
-            ncon,
-            max_iter,
-            nw: 0,
-            buf,
-            working,
-            _real: core::marker::PhantomData,
-        })
+        self.n = n;
+        self.ncon = ncon;
+        true
     }
 
     fn z_offset(&self) -> usize {

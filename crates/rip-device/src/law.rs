@@ -140,10 +140,10 @@ pub fn write_image<R: Real>(sensor: &Sensor, design: &Design<R>, out: &mut [u8])
 pub struct ControlLaw<R: Real, const N: usize> {
     buf: [u8; N],
     sensor: Sensor,
-    // The design read from the image, kept here rather than on the stack while the
-    // controller is built from it (a firmware's stack is small).
-    scratch: Option<Design<R>>,
-    controller: Option<Controller<R>>,
+    // Loaded in place (`Controller::load`): a design or a controller built as a temporary
+    // would take tens of kilobytes of a firmware's stack, which overflows into the statics.
+    controller: Controller<R>,
+    loaded: bool,
     step: u32,
     last: Option<rip_control::Move<R>>,
 }
@@ -167,8 +167,8 @@ impl<R: Real, const N: usize> ControlLaw<R, N> {
                 arm_step: 0.0,
                 step_time: 0.0,
             },
-            scratch: None,
-            controller: None,
+            controller: Controller::unloaded(),
+            loaded: false,
             step: 0,
             last: None,
         }
@@ -176,7 +176,7 @@ impl<R: Real, const N: usize> ControlLaw<R, N> {
 
     /// The loaded controller, if any.
     pub fn controller(&self) -> Option<&Controller<R>> {
-        self.controller.as_ref()
+        self.loaded.then_some(&self.controller)
     }
 
     /// The loaded image's counts → angles conversion and reference.
@@ -192,10 +192,7 @@ impl<R: Real, const N: usize> ControlLaw<R, N> {
     /// The controller's measurement at step `k` from the positions (module docs).
     pub fn measurement(&self, k: u32, positions: [i32; 2]) -> Measurement<R> {
         let [theta, alpha] = self.sensor.angles(positions);
-        let ts = self
-            .controller
-            .as_ref()
-            .map_or(0.0, |c| c.design().ts.to_f64());
+        let ts = self.controller().map_or(0.0, |c| c.design().ts.to_f64());
         let r = if k as f64 * ts >= self.sensor.step_time {
             self.sensor.arm_step
         } else {
@@ -214,35 +211,37 @@ impl<R: Real, const N: usize> Onboard for ControlLaw<R, N> {
     }
 
     fn load(&mut self, len: usize) -> Result<(), DesignRefused> {
-        self.controller = None;
+        self.loaded = false;
         let bytes = self.buf.get(..len).ok_or(DesignRefused)?;
         let sensor = Sensor::read(bytes).ok_or(DesignRefused)?;
         if len <= IMAGE_HEADER_LEN {
             return Err(DesignRefused);
         }
-        let design = self.scratch.get_or_insert_with(Design::default);
-        design
-            .read_from(&self.buf[IMAGE_HEADER_LEN..len])
+        self.controller
+            .load(&self.buf[IMAGE_HEADER_LEN..len])
             .map_err(|_| DesignRefused)?;
+        let design = self.controller.design();
         let ts = design.ts.to_f64();
         if !(1e-4..=1.0).contains(&ts) {
             return Err(DesignRefused);
         }
-        self.controller = Some(Controller::new(design).map_err(|_| DesignRefused)?);
+        // A step that overruns its period stops the run: a design whose worst step does not
+        // fit (an MPC's iteration bound too high for its rate) is refused before it starts.
+        design.check_step_budget().map_err(|_| DesignRefused)?;
         self.sensor = sensor;
+        self.loaded = true;
         Ok(())
     }
 
     fn period_us(&self) -> u32 {
-        self.controller
-            .as_ref()
+        self.controller()
             .map_or(0, |c| libm::round(c.design().ts.to_f64() * 1e6) as u32)
     }
 
     fn reset(&mut self, _positions: [i32; 2]) {
         self.step = 0;
-        if let Some(c) = self.controller.as_mut() {
-            c.reset();
+        if self.loaded {
+            self.controller.reset();
         }
     }
 
@@ -260,7 +259,7 @@ impl<R: Real, const N: usize> ControlLaw<R, N> {
         let m = self.measurement(self.step, positions);
         self.step = self.step.wrapping_add(1);
         probe(PIL_PHASE_CONVERT);
-        match self.controller.as_mut() {
+        match self.loaded.then_some(&mut self.controller) {
             Some(c) => {
                 let mv = c.step_probed(m, |p| {
                     probe(match p {

@@ -28,6 +28,12 @@
 //! no overrun, and each step's own time (SysTick's countdown) inside the period. The line is
 //! `pil: timer-<rate> periods=N mean_us=X min_us=Y max_us=Z max_step_instr=W overruns=0`.
 //!
+//! **Budget**: the device refuses, at the commit, a design whose modelled worst step does not
+//! fit half its period (rip-control's `Design::check_step_budget`, called by the image's
+//! load on the chip): the 1 kHz MPC is accepted with the iteration bound the host caps it to
+//! and refused with one more, and with the file's 200, after which onboard mode does not
+//! start. The line is `pil: budget accepted=max_iterations:5 refused=max_iterations:6,200`.
+//!
 //! Usage: `cargo run --release -p rip-rt --example pil -- IMAGE [STEPS [CONTROLLER]]`, IMAGE
 //! the `qemu` build; the last lines are
 //! `pil: <controller> steps=N max_du=X max_instr=Y balanced=yes|no` and the timer lines. Exit 1
@@ -97,6 +103,18 @@ fn boot(image: &str) -> (Qemu, String) {
         .unwrap_or_else(|| panic!("qemu offered no pty: {line:?}"))
         .to_string();
     (Qemu(child), pty)
+}
+
+/// The default configuration at `period_ms`. A faster loop than the paper's 10 ms keeps the
+/// MPC's horizon in seconds and its QP's size: the prediction steps stay 10 ms
+/// (`mpc.prediction_step`), `P = 50` of them, 0.5 s, while the estimator and the move run at
+/// the loop's period.
+fn config(period_ms: f64) -> Config {
+    let mut cfg = Config::default();
+    cfg.loop_.period_ms = period_ms;
+    let paper_ms = 1e3 * rip_core::paper::TS;
+    cfg.spec.mpc.prediction_step = (paper_ms / period_ms).round().max(1.0) as usize;
+    cfg
 }
 
 /// Counts of the plant state with the default `[device]` (2048 counts per revolution, the
@@ -172,12 +190,12 @@ fn main() {
         ("mpc", ControllerKind::Mpc, 10.0),
         ("lqr-1khz", ControllerKind::Lqr, 1.0),
         ("lqg-1khz", ControllerKind::Lqg, 1.0),
+        ("mpc-1khz", ControllerKind::Mpc, 1.0),
     ] {
         if only.as_deref().is_some_and(|o| o != name) {
             continue;
         }
-        let mut cfg = Config::default();
-        cfg.loop_.period_ms = period_ms;
+        let cfg = config(period_ms);
         let ts = cfg.period_s();
         let design = onboard::design(kind, &cfg).expect("design");
         let img = onboard::image(&design, &cfg).expect("image");
@@ -294,6 +312,15 @@ fn main() {
             if balanced && same { "yes" } else { "no" }
         ));
     }
+    if !only.as_deref().is_some_and(|o| o != "budget") {
+        match budget_check(&mut link) {
+            Ok(line) => lines.push(format!("pil: budget {line}")),
+            Err(e) => {
+                println!("pil: budget failed: {e}");
+                ok = false;
+            }
+        }
+    }
     for (name, period_ms, periods) in [
         ("timer-1khz", 1.0, TIMER_PERIODS),
         ("timer-100hz", 10.0, TIMER_PERIODS / 5),
@@ -315,6 +342,47 @@ fn main() {
     // `exit` runs no destructors: QEMU is stopped first, or it would outlive the check.
     drop(qemu);
     std::process::exit(if ok { 0 } else { 1 });
+}
+
+/// The device's own step budget (module docs, "Budget"): the 1 kHz MPC with the iteration
+/// bound the host caps to what fits (accepted), then the same design with one iteration
+/// more and with the file's uncapped 200 (both refused at the commit, and then no design is
+/// loaded: onboard mode does not start).
+fn budget_check(link: &mut Link<'_>) -> Result<String, String> {
+    let cfg = config(1.0);
+    let mut design = onboard::design(ControllerKind::Mpc, &cfg)?;
+    let cap = design.max_iterations;
+    link.upload(&onboard::image(&design, &cfg)?)
+        .map_err(|e| format!("the capped design (max_iterations {cap}) was refused: {e}"))?;
+    for over in [cap + 1, cfg.spec.mpc.max_iterations as u32] {
+        design.max_iterations = over;
+        let img = onboard::image(&design, &cfg)?;
+        match link.upload(&img) {
+            Ok(()) => return Err(format!("max_iterations {over} was accepted")),
+            Err(e) if e.contains("refused the design") => {}
+            Err(e) => return Err(format!("max_iterations {over}: {e}")),
+        }
+        let start = OnboardStart {
+            decimation: 1,
+            host_timeout_ms: 50,
+            arm_center: 0,
+            arm_limit: u32::MAX,
+            pendulum_center: 0,
+            pendulum_limit: u32::MAX,
+        };
+        let (code, _) = link.request(Message::OnboardStart(start))?;
+        if code == ACK_OK {
+            link.stop();
+            return Err(format!(
+                "onboard mode started after max_iterations {over} was refused"
+            ));
+        }
+    }
+    Ok(format!(
+        "accepted=max_iterations:{cap} refused=max_iterations:{},{}",
+        cap + 1,
+        cfg.spec.mpc.max_iterations
+    ))
 }
 
 /// Onboard mode at `period_ms` for `periods` steps, timed by QEMU's clock (module docs,

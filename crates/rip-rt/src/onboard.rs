@@ -61,11 +61,12 @@ pub fn design(kind: ControllerKind, cfg: &Config) -> Result<OnboardDesign, Strin
         Some(law) => rip_core::onboard::with_compensation(out, law),
         None => out,
     };
-    // A step that overruns its period stops the onboard run, and the device does not check
-    // the budget at upload itself, so the host does: the QP's iteration bound is the
+    // A step that overruns its period stops the onboard run, and the device refuses at the
+    // commit a design whose worst step does not fit (rip-control's `check_step_budget`, in the
+    // image's load), so the host sends one that fits: the QP's iteration bound is the
     // configured one or the largest that fits, whichever is smaller (at the bound the step
     // applies the fallback law, rip-control's crate docs), and a design that does not fit even
-    // one iteration is refused here.
+    // one iteration is refused here, with the reason the device's refusal cannot give.
     out.max_iterations = out.max_iterations.min(out.fitting_iterations().max(1));
     out.check_step_budget().map_err(|e| err(&e))?;
     Ok(out)

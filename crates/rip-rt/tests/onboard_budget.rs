@@ -1,6 +1,6 @@
 //! The onboard MPC's iteration bound as part of the design: the host caps the uploaded
 //! design's `max_iterations` to what fits half the period on the STM32F407 and refuses one
-//! that does not fit. The reference is the firmware's QEMU measurement of the paper's MPC
+//! that does not fit, and so does the device's law when it loads the image. The reference is the firmware's QEMU measurement of the paper's MPC
 //! (firmware/README.md): a worst step of 17 800 + 5 300 (I − 1) instructions, 28 339 measured
 //! at its 3 iterations, against 168 MHz / CPI 2 / half the period.
 
@@ -66,9 +66,51 @@ fn a_design_whose_iteration_bound_cannot_fit_its_period_is_refused() {
     d.max_iterations = measured_cap(1_000) + 1;
     let err = d.check_step_budget().unwrap_err().to_string();
     assert!(err.contains("max_iterations"), "{err}");
+    // The device's own check: its law refuses the image at the commit.
+    assert!(!loads(&onboard::image(&d, &cfg).unwrap()));
     // The configured default, 200, as it would have been sent uncapped.
     d.max_iterations = 200;
     assert!(d.check_step_budget().is_err());
+    assert!(!loads(&onboard::image(&d, &cfg).unwrap()));
     d.max_iterations = measured_cap(1_000);
     assert!(d.check_step_budget().is_ok());
+    assert!(loads(&onboard::image(&d, &cfg).unwrap()));
+}
+
+/// The 1 kHz MPC of the processor-in-the-loop check: the estimator and the move at 1 ms, the
+/// prediction on the paper's 10 ms grid (`mpc.prediction_step = 10`, P = 50: 0.5 s).
+#[test]
+fn the_1khz_mpc_on_a_10ms_grid_is_the_papers_qp_and_fits_half_its_period() {
+    let mut fast = cfg_at(1.0);
+    fast.spec.mpc.prediction_step = 10;
+    let d = onboard::design(ControllerKind::Mpc, &fast).unwrap();
+    let paper = onboard::design(ControllerKind::Mpc, &cfg_at(10.0)).unwrap();
+    assert_eq!(d.ts, 1e-3);
+    // Ten 1 ms zero-order-hold steps are one 10 ms step of the same continuous plant, so the
+    // condensed QP is the one of the 100 Hz design, discretised on its own.
+    let (nz, ncon, n) = (d.nz(), d.ncon, d.nx);
+    assert_eq!((d.horizon, n, ncon, nz), (50, 5, 107, 4));
+    let close = |name: &str, a: &[f64], b: &[f64]| {
+        let scale = b.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+        let err = a
+            .iter()
+            .zip(b)
+            .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+        assert!(err <= 1e-9 * scale, "{name}: {err} of {scale}");
+    };
+    close("h", &d.h[..nz * nz], &paper.h[..nz * nz]);
+    close("fx", &d.fx[..nz * n], &paper.fx[..nz * n]);
+    close("fu", &d.fu[..nz], &paper.fu[..nz]);
+    close("fr", &d.fr[..nz * 2], &paper.fr[..nz * 2]);
+    close("ac", &d.ac[..ncon * nz], &paper.ac[..ncon * nz]);
+    close("b0", &d.b0[..ncon], &paper.b0[..ncon]);
+    close("bx", &d.bx[..ncon * n], &paper.bx[..ncon * n]);
+    close("bu", &d.bu[..ncon], &paper.bu[..ncon]);
+    // The estimator is not the 100 Hz one: its model is the 1 ms step.
+    assert!((d.a[1] - paper.a[1]).abs() > 1e-3);
+    // The same QP, so the same cap as the P = 50 design at 1 ms: 5 iterations, whose modelled
+    // worst step fits 42 000 instructions.
+    assert_eq!(d.max_iterations, measured_cap(1_000));
+    assert!(d.worst_step_instructions() <= 42_000);
+    assert!(loads(&onboard::image(&d, &fast).unwrap()));
 }

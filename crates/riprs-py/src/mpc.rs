@@ -303,6 +303,10 @@ impl PyMpcSolution {
 ///     than 10 million entries per matrix, raise :class:`riprs.InvalidParameterError`.
 /// control_horizon : int
 ///     :math:`m \le P` (default 2).
+/// prediction_step : int
+///     Sample periods per prediction step (default 1): the prediction, its cost and its soft
+///     bounds on a grid of ``prediction_step * Ts``, each move held for one grid step, so the
+///     horizon spans ``P * prediction_step`` periods (at most 10 000).
 /// output_weights, input_rate_weights, input_weights : array_like or None
 ///     :math:`w^y` (ny,), :math:`w^{\Delta u}` (nu,), :math:`w^u` (nu,); MATLAB defaults 1,
 ///     0.1, 0.
@@ -356,7 +360,8 @@ impl PyMpc {
     #[new]
     #[pyo3(signature = (
         A, B, C, Ts, *, prediction_horizon=Count::of(rip_core::mpc::DEFAULT_PREDICTION_HORIZON as i64),
-        control_horizon=Count::of(rip_core::mpc::DEFAULT_CONTROL_HORIZON as i64), output_weights=None,
+        control_horizon=Count::of(rip_core::mpc::DEFAULT_CONTROL_HORIZON as i64),
+        prediction_step=Count::of(1), output_weights=None,
         input_rate_weights=None, input_weights=None, input_target=None, input_bounds=None,
         output_bounds=None, ecr_weight=Real(rip_core::mpc::DEFAULT_ECR_WEIGHT), input_scales=None,
         output_scales=None, output_disturbance=None, measurement_noise=None, solver="active_set",
@@ -371,6 +376,7 @@ impl PyMpc {
         Ts: Real,
         prediction_horizon: Count,
         control_horizon: Count,
+        prediction_step: Count,
         output_weights: Option<&Bound<'_, PyAny>>,
         input_rate_weights: Option<&Bound<'_, PyAny>>,
         input_weights: Option<&Bound<'_, PyAny>>,
@@ -392,6 +398,7 @@ impl PyMpc {
         let settings = MpcSettings {
             prediction_horizon: prediction_horizon.get("prediction_horizon")?,
             control_horizon: control_horizon.get("control_horizon")?,
+            prediction_step: prediction_step.get("prediction_step")?,
             output_weights: vec_arg(output_weights, "output_weights")?,
             input_weights: vec_arg(input_weights, "input_weights")?,
             input_rate_weights: vec_arg(input_rate_weights, "input_rate_weights")?,

@@ -14,6 +14,14 @@
 //! S_i = Σ_{j<i} Aʲ B                                                    (i = 1..P)
 //! ```
 //!
+//! # Prediction grid
+//!
+//! With `prediction_step = s > 1` the index `i` above counts steps of `s` sample periods:
+//! `A` and `B` stand for the grid's `A_s = Aˢ` and `B_s = Σ_{j<s} Aʲ B` (the input held over
+//! the `s` periods of a grid step), so `y(k+i|k)` is the output `i·s` periods ahead,
+//! `Δu(k+l)` the change at the start of grid step `l`, and the cost and the rows below are
+//! taken on that grid. Only the first move is applied, for one period, before the next solve.
+//!
 //! # Cost `½ zᵀ H z + fᵀ z + const` over `z = [Δ; ε]`
 //!
 //! ```text
@@ -82,6 +90,8 @@ pub(crate) struct CondenseInput<'a> {
     pub c: &'a Mat,
     pub p: usize,
     pub m: usize,
+    /// Sample periods per prediction step (module docs, "Prediction grid").
+    pub step: usize,
     pub output_weights: &'a [f64],
     pub input_weights: &'a [f64],
     pub input_rate_weights: &'a [f64],
@@ -293,14 +303,15 @@ fn prediction(d: &CondenseInput<'_>) -> Prediction {
         nd,
         ..
     } = Dims::of(d);
-    // S_i = Σ_{j<i} Aʲ B and Aⁱ, i = 0..P.
+    let (a_grid, b_grid) = grid_model(d.a, d.b, d.step);
+    // S_i = Σ_{j<i} Aʲ B and Aⁱ, i = 0..P, on the grid.
     let mut apow = Mat::identity(nx, nx);
     let mut s = vec![Mat::zeros(nx, nu)];
     let mut phi = Mat::zeros(p * ny, nx);
     let mut gamma = Mat::zeros(p * ny, nu);
     for i in 1..=p {
-        let next_s = &s[i - 1] + &apow * d.b;
-        apow = &apow * d.a;
+        let next_s = &s[i - 1] + &apow * &b_grid;
+        apow = &apow * &a_grid;
         phi.view_mut(((i - 1) * ny, 0), (ny, nx))
             .copy_from(&(d.c * &apow));
         gamma
@@ -322,6 +333,17 @@ fn prediction(d: &CondenseInput<'_>) -> Prediction {
         }
     }
     Prediction { phi, gamma, g, t }
+}
+
+/// `(Aˢ, Σ_{j<s} Aʲ B)`: one prediction step of `s` periods with the input held.
+fn grid_model(a: &Mat, b: &Mat, step: usize) -> (Mat, Mat) {
+    let mut a_s = Mat::identity(a.nrows(), a.ncols());
+    let mut b_s = Mat::zeros(b.nrows(), b.ncols());
+    for _ in 0..step {
+        b_s += &a_s * b;
+        a_s = &a_s * a;
+    }
+    (a_s, b_s)
 }
 
 /// `H` and the maps from `x`, `u⁻`, the reference and the input target to `f` (module docs,

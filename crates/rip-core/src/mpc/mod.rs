@@ -46,6 +46,11 @@
 //! in [`Mpc::new`], and each step only fills two vectors and solves the QP with the selected
 //! [`QpSolver`]. The applied input is `u(k) = u(k−1) + Δu(k)`.
 //!
+//! With [`MpcSettings::prediction_step`] `= s > 1` the sums above run over a grid of `s`
+//! periods (the `condense` module docs, "Prediction grid"): `y(k+i|k)` is the output `i·s`
+//! periods ahead and each planned move is held for `s` periods, so a fast loop keeps a long
+//! horizon in seconds without more QP rows; the estimator and the move stay at `Ts`.
+//!
 //! # Failures and the fallback
 //!
 //! Every solve reports a [`QpStatus`]. If it is not usable (maximum iterations, numerical
@@ -218,6 +223,7 @@ impl Mpc {
             c: &model.c,
             p: settings.prediction_horizon,
             m: settings.control_horizon,
+            step: settings.prediction_step,
             output_weights: &wy,
             input_weights: &wu,
             input_rate_weights: &wdu,
@@ -340,8 +346,9 @@ impl Mpc {
         Ok((self.qp.h.clone(), f, self.qp.a.clone(), b))
     }
 
-    /// Predicted outputs `y(k+i|k)`, `i = 1..P` (P × ny, engineering units), for the
-    /// augmented state `x`, previous input `u_prev` and moves `du` (m·nu). Allocates.
+    /// Predicted outputs `y(k+i|k)`, `i = 1..P` (P × ny, engineering units; `i` counts
+    /// prediction steps of [`MpcSettings::prediction_step`] periods), for the augmented
+    /// state `x`, previous input `u_prev` and moves `du` (m·nu). Allocates.
     pub fn predict_outputs(&self, x: &[f64], u_prev: &[f64], du: &[f64]) -> Result<Mat> {
         check_len("x", x, self.qp.nx)?;
         check_len("u_prev", u_prev, self.qp.nu)?;

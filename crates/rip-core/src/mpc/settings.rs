@@ -68,6 +68,13 @@ pub struct MpcSettings {
     /// Control horizon `m ≤ P` (moves `Δu(k..k+m−1)`, then blocked) \[`ControlHorizon`\];
     /// MATLAB's default 2.
     pub control_horizon: usize,
+    /// Sample periods per prediction step (no MATLAB equivalent; default 1): the prediction,
+    /// its cost and its soft bounds are on a grid of `prediction_step · Ts`, each planned move
+    /// held for one grid step, so the horizon spans `P · prediction_step` periods. A 1 kHz
+    /// loop keeps the paper's 0.5 s horizon and its QP's size with `P = 50` and
+    /// `prediction_step = 10` (the module docs, "Prediction grid"). `P · prediction_step` is
+    /// at most [`MAX_PREDICTION_HORIZON`].
+    pub prediction_step: usize,
     /// `w^y ≥ 0` per output \[`Weights.OutputVariables`\]; default 1.
     pub output_weights: Vec<f64>,
     /// `w^u ≥ 0` per input \[`Weights.ManipulatedVariables`\]; default 0.
@@ -115,6 +122,7 @@ impl Default for MpcSettings {
         Self {
             prediction_horizon: DEFAULT_PREDICTION_HORIZON,
             control_horizon: DEFAULT_CONTROL_HORIZON,
+            prediction_step: 1,
             output_weights: Vec::new(),
             input_weights: Vec::new(),
             input_rate_weights: Vec::new(),
@@ -143,6 +151,7 @@ impl MpcSettings {
         Self {
             prediction_horizon: p::PREDICTION_HORIZON,
             control_horizon: p::CONTROL_HORIZON,
+            prediction_step: 1,
             output_weights: p::OUTPUT_WEIGHTS.to_vec(),
             input_weights: vec![0.0],
             input_rate_weights: vec![p::INPUT_RATE_WEIGHT],
@@ -182,6 +191,16 @@ impl MpcSettings {
             return Err(KeyError::new(
                 "control_horizon",
                 format!("must be in 1..=prediction_horizon ({p}), got {m}"),
+            ));
+        }
+        let step = self.prediction_step;
+        if step == 0 || step.saturating_mul(p) > MAX_PREDICTION_HORIZON {
+            return Err(KeyError::new(
+                "prediction_step",
+                format!(
+                    "must be at least 1 with prediction_horizon · prediction_step at most \
+                     {MAX_PREDICTION_HORIZON} periods, got {step} with prediction_horizon {p}"
+                ),
             ));
         }
         for (key, v) in [
@@ -341,6 +360,8 @@ impl MpcSettingsBuilder {
         prediction_horizon: usize,
         /// See [`MpcSettings::control_horizon`].
         control_horizon: usize,
+        /// See [`MpcSettings::prediction_step`].
+        prediction_step: usize,
         /// See [`MpcSettings::output_weights`].
         output_weights: Vec<f64>,
         /// See [`MpcSettings::input_weights`].

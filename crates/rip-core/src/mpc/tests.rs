@@ -222,6 +222,21 @@ fn bad_settings_name_the_argument() {
         ),
         (
             MpcSettings {
+                prediction_step: 0,
+                ..Default::default()
+            },
+            "prediction_step",
+        ),
+        (
+            // P = 10 grid steps of 1001 periods: a horizon beyond MAX_PREDICTION_HORIZON.
+            MpcSettings {
+                prediction_step: MAX_PREDICTION_HORIZON / 10 + 1,
+                ..Default::default()
+            },
+            "prediction_step",
+        ),
+        (
+            MpcSettings {
                 output_weights: vec![1.0, -1.0],
                 ..Default::default()
             },
@@ -471,5 +486,86 @@ fn an_overflowing_measurement_is_discarded_and_the_controller_recovers() {
         // The same holds for a direct solve from an absurd state: no solver call, a fallback.
         let sol = mpc.solve(&[1e307, 0.0, -1e307, 0.0, 0.0], &[0.0], &[0.0, 0.0]);
         assert_eq!(sol.unwrap().status, QpStatus::InvalidInput);
+    }
+}
+
+/// The condensed problem on a grid of `s` periods against the model run one period at a
+/// time: the predicted outputs every `s` periods with each move held for `s` periods, and the
+/// QP's cost differences against the cost summed along that simulated trajectory.
+#[test]
+fn prediction_grid_matches_the_model_run_period_by_period() {
+    let mut rng = StdRng::seed_from_u64(11);
+    let s = 3;
+    let settings = MpcSettings {
+        prediction_step: s,
+        ..small_settings(QpSolver::ActiveSet)
+    };
+    let (p, m) = (settings.prediction_horizon, settings.control_horizon);
+    let (wy, wu, wdu, su, sy) = ([2.0, 1.0], 0.05, 0.3, 2.0, [1.0, 0.5]);
+    let rho = settings.ecr_weight;
+    for _ in 0..10 {
+        let (a, b, c) = random_plant(&mut rng, 3, 1, 2);
+        let mpc = Mpc::new(&a, &b, &c, 0.1, settings.clone()).unwrap();
+        let model = mpc.model();
+        let nx = model.a.nrows();
+        let x0 = DVector::from_fn(nx, |_, _| rng.sample::<f64, _>(StandardNormal));
+        let u_prev = [rng.gen_range(-1.0..1.0)];
+        let r = [rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)];
+        let (h, f, _, _) = mpc.qp_matrices(x0.as_slice(), &u_prev, &r).unwrap();
+        // Outputs (engineering units) every s periods and the inputs of each grid step.
+        let simulate = |du: &[f64]| {
+            let (mut x, mut u) = (x0.clone(), u_prev[0]);
+            let (mut ys, mut us) = (Vec::new(), Vec::new());
+            for k in 0..p * s {
+                if k % s == 0 {
+                    if k / s < m {
+                        u += du[k / s];
+                    }
+                    us.push(u);
+                }
+                x = &model.a * &x + &model.b * u;
+                if (k + 1) % s == 0 {
+                    let y = &model.c * &x;
+                    ys.push([y[0] * sy[0], y[1] * sy[1]]);
+                }
+            }
+            (ys, us)
+        };
+        let cost = |du: &[f64], eps: f64| {
+            let (ys, us) = simulate(du);
+            let mut j = rho * eps * eps;
+            for y in &ys {
+                for o in 0..2 {
+                    j += (wy[o] * (r[o] - y[o]) / sy[o]).powi(2);
+                }
+            }
+            j += du.iter().map(|d| (wdu * d / su).powi(2)).sum::<f64>();
+            j + us.iter().map(|u| (wu * u / su).powi(2)).sum::<f64>()
+        };
+        let qp_cost = |du: &[f64], eps: f64| {
+            let mut z = DVector::from_column_slice(du).push(0.0);
+            z[m] = eps;
+            0.5 * z.dot(&(&h * &z)) + f.dot(&z)
+        };
+        let du: Vec<f64> = (0..m).map(|_| rng.gen_range(-1.0..1.0)).collect();
+        let (ys, _) = simulate(&du);
+        let pred = mpc.predict_outputs(x0.as_slice(), &u_prev, &du).unwrap();
+        for (i, y) in ys.iter().enumerate() {
+            for o in 0..2 {
+                let tol = 1e-9 * (1.0 + y[o].abs());
+                assert!(
+                    (pred[(i, o)] - y[o]).abs() < tol,
+                    "step {i}: {pred} vs {ys:?}"
+                );
+            }
+        }
+        let zero = vec![0.0; m];
+        let (eps, eps0) = (rng.gen_range(0.0..0.5), 0.0);
+        let want = cost(&du, eps) - cost(&zero, eps0);
+        let got = qp_cost(&du, eps) - qp_cost(&zero, eps0);
+        assert!(
+            (got - want).abs() < 1e-8 * (1.0 + want.abs()),
+            "cost difference {got} vs {want}"
+        );
     }
 }
