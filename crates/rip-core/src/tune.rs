@@ -458,64 +458,52 @@ pub struct Tuned {
 
 /// Chooses shared weights for the rig of `spec` at sample time `ts` (module docs).
 pub fn tune(spec: &Spec, ts: f64, bar: &Bar) -> Result<Tuned, SpecError> {
-    // (balance shortfall, margin shortfall, weights) of the best candidate so far.
-    let mut best: Option<(f64, f64, Weights)> = None;
     let mut tried = 0;
-    let base: Vec<Weights> = std::iter::once(Weights::FILE)
-        .chain(candidates(spec))
-        .collect();
-    // First each candidate with the recovery its margins ask for; then, when none works,
-    // those whose recovery that was again without it (the recovery trusts the sensor more,
-    // which may cost the steady state on a coarse or noisy one).
-    let recovered: Vec<Weights> = base
-        .iter()
-        .map(|&w| choose_recovery(spec, w, ts, bar))
-        .collect();
-    let unrecovered: Vec<Weights> = recovered
-        .iter()
-        .filter(|w| w.recovery != 1.0)
-        .map(|w| w.with_recovery(1.0))
-        .collect();
-    for w in recovered.into_iter().chain(unrecovered) {
-        let candidate = w.apply(spec);
-        tried += 1;
-        let Ok((assessments, complete)) = assess_until(&candidate, ts, bar, true) else {
-            continue;
-        };
-        if complete && assessments.iter().all(|a| a.works(bar)) {
-            return Ok(Tuned {
-                spec: candidate,
-                weights: w,
-                works: true,
-                assessments,
-                tried,
-            });
+    // First each candidate with the recovery its margins ask for, in order. One whose
+    // recovered LQG or MPC misses the margins cannot work, so it is simulated only when no
+    // candidate works and the one that misses by least is wanted.
+    let mut recovered = Vec::new();
+    for w in std::iter::once(Weights::FILE).chain(candidates(spec)) {
+        let (w, margins_met) = recover(spec, w, ts, bar);
+        let mut score = None;
+        if margins_met {
+            tried += 1;
+            match judge(spec, w, ts, bar) {
+                Judgement::Works(tuned) => return Ok(Tuned { tried, ..*tuned }),
+                Judgement::Misses(s) => score = Some(Some(s)),
+                Judgement::NoDesign => score = Some(None),
+            }
         }
-        // Short of the whole bar, a candidate that balances within the bar and the voltage
-        // bound (its margins short) beats any that does not, and among those the one nearer
-        // the margins wins; a controller not assessed counts as a fall.
-        let missing = ControllerKind::ALL.len() - assessments.len();
-        let balance: f64 = assessments
-            .iter()
-            .map(|a| a.balance_shortfall(bar))
-            .sum::<f64>()
-            + if complete {
-                0.0
-            } else {
-                100.0 + 12.0 * missing as f64
-            };
-        let margins: f64 = assessments
-            .iter()
-            .map(|a| bar.margin_shortfall(&a.margins))
-            .sum();
-        if best
-            .as_ref()
-            .map_or(true, |b| (balance, margins) < (b.0, b.1))
-        {
-            best = Some((balance, margins, w));
+        recovered.push((w, score));
+    }
+    // None works: then those whose recovery was raised are tried again without it (the
+    // recovery trusts the sensor more, which may cost the steady state on a coarse or noisy
+    // one), and the one that misses by least is kept, the first in this order on a tie.
+    let unrecovered: Vec<(Weights, Option<Shortfall>)> = recovered
+        .iter()
+        .filter(|(w, _)| w.recovery != 1.0)
+        .map(|(w, _)| (w.with_recovery(1.0), None))
+        .collect();
+    let mut best: Option<((f64, f64), Weights)> = None;
+    for (w, score) in recovered.into_iter().chain(unrecovered) {
+        let score = match score {
+            Some(s) => s,
+            None => {
+                tried += 1;
+                match judge(spec, w, ts, bar) {
+                    Judgement::Works(tuned) => return Ok(Tuned { tried, ..*tuned }),
+                    Judgement::Misses(s) => Some(s),
+                    Judgement::NoDesign => None,
+                }
+            }
+        };
+        if let Some(s) = score {
+            if best.as_ref().map_or(true, |b| s < b.0) {
+                best = Some((s, w));
+            }
         }
     }
-    let (_, _, weights) = best.ok_or_else(|| {
+    let (_, weights) = best.ok_or_else(|| {
         SpecError::new("lqr", "no candidate weights could be designed for this rig")
     })?;
     let spec = weights.apply(spec);
@@ -530,11 +518,65 @@ pub fn tune(spec: &Spec, ts: f64, bar: &Bar) -> Result<Tuned, SpecError> {
     })
 }
 
+/// A candidate's `(balance, margins)` shortfall ([`judge`]); `None` when it could not be
+/// designed.
+type Shortfall = Option<(f64, f64)>;
+
+/// What [`judge`] found of one candidate.
+enum Judgement {
+    /// Every controller works with it.
+    Works(Box<Tuned>),
+    /// It misses the bar by `(balance, margins)`, compared in that order.
+    Misses((f64, f64)),
+    /// It could not be designed or simulated.
+    NoDesign,
+}
+
+/// Assesses the candidate `w` (module docs). Short of the whole bar, a candidate that
+/// balances within the bar and the voltage bound (its margins short) beats any that does
+/// not, and among those the one nearer the margins wins; a controller not assessed counts as
+/// a fall.
+fn judge(spec: &Spec, w: Weights, ts: f64, bar: &Bar) -> Judgement {
+    let candidate = w.apply(spec);
+    let Ok((assessments, complete)) = assess_until(&candidate, ts, bar, true) else {
+        return Judgement::NoDesign;
+    };
+    if complete && assessments.iter().all(|a| a.works(bar)) {
+        return Judgement::Works(Box::new(Tuned {
+            spec: candidate,
+            weights: w,
+            works: true,
+            assessments,
+            tried: 0,
+        }));
+    }
+    let missing = ControllerKind::ALL.len() - assessments.len();
+    let balance: f64 = assessments
+        .iter()
+        .map(|a| a.balance_shortfall(bar))
+        .sum::<f64>()
+        + if complete {
+            0.0
+        } else {
+            100.0 + 12.0 * missing as f64
+        };
+    let margins: f64 = assessments
+        .iter()
+        .map(|a| bar.margin_shortfall(&a.margins))
+        .sum();
+    Judgement::Misses((balance, margins))
+}
+
 /// `w` with the smallest recovery parameter of [`RECOVERY`] with which the margins of LQG and
 /// the MPC (the controllers on the shared estimator) meet the bar; when none does, the one
 /// that misses them by least ([`Bar::margin_shortfall`], summed), the smaller on a tie. The
 /// margins are the linearised loop's, so this costs no simulation.
 pub fn choose_recovery(spec: &Spec, w: Weights, ts: f64, bar: &Bar) -> Weights {
+    recover(spec, w, ts, bar).0
+}
+
+/// [`choose_recovery`], and whether the margins of LQG and the MPC meet the bar with it.
+fn recover(spec: &Spec, w: Weights, ts: f64, bar: &Bar) -> (Weights, bool) {
     let mut best: Option<(f64, f64)> = None;
     for q in RECOVERY {
         let Ok(design) = w.with_recovery(q).apply(spec).design(ts) else {
@@ -547,13 +589,13 @@ pub fn choose_recovery(spec: &Spec, w: Weights, ts: f64, bar: &Bar) -> Weights {
                 .map_or(2.0, |m| bar.margin_shortfall(&m));
         }
         if short == 0.0 {
-            return w.with_recovery(q);
+            return (w.with_recovery(q), true);
         }
         if best.map_or(true, |(s, _)| short < s) {
             best = Some((short, q));
         }
     }
-    w.with_recovery(best.map_or(1.0, |(_, q)| q))
+    (w.with_recovery(best.map_or(1.0, |(_, q)| q)), false)
 }
 
 /// The record `riprs tune` writes beside the tuned file (crate::preflight::TuneRecord):
