@@ -1,38 +1,17 @@
 //! Tuning on the issue's rigs and on rigs drawn across the envelope.
 
 use rip_core::preflight::{self, Verdict};
-use rip_core::rig::Rig;
+use rip_core::rig::{NamedRig, Rig};
 use rip_core::spec::{ControllerKind, Spec};
 use rip_core::tune::{assess, tune, Bar};
 
-const SENSOR: &str = "[sensor]\nencoder_counts = [2048, 2048]\nnoise_std = [0.0005, 0.0005]\n";
-
-fn qube_like(extra: &str, mp: f64, lp: f64) -> String {
-    format!(
-        "[plant]\npreset = \"qube_servo2\"\nmr = 0.12\nLr = 0.105\nJr = {}\nmp = {mp}\nLp = {lp}\n\
-         Jp = {}\nRm = 6.5\nkt = 0.055\nkm = 0.055\n{extra}{SENSOR}",
-        0.12 * 0.105 * 0.105 / 12.0,
-        mp * lp * lp / 12.0
-    )
-}
-
-/// The issue's table of rigs, by name.
+/// The issue's table of rigs but the paper preset (which keeps its Tab. 1), by label.
 pub fn issue_rigs() -> Vec<(&'static str, String)> {
-    vec![
-        ("qube-like", qube_like("", 0.038, 0.19)),
-        (
-            "qube-like dead zone",
-            qube_like("Vd = 0.4\nCr = 0.003\n", 0.038, 0.19),
-        ),
-        (
-            "qube-servo-3",
-            format!(
-                "[plant]\npreset = \"qube_servo2\"\nRm = 7.5\nkt = 0.0422\nkm = 0.0422\n\
-                 Jr = 1.38e-4\nDr = 3.975e-4\nCp = 6.1e-6\nVd = 0.65\n{SENSOR}"
-            ),
-        ),
-        ("heavy", qube_like("Vd = 0.6\nCr = 0.006\n", 0.06, 0.25)),
-    ]
+    NamedRig::ALL
+        .into_iter()
+        .filter(|r| *r != NamedRig::Paper)
+        .map(|r| (r.label(), r.to_toml()))
+        .collect()
 }
 
 /// The generated rigs, fixed before any was run: `Rig::random(1..=16)`.
