@@ -26,9 +26,10 @@
 //!
 //! [`tune`] tries the file's own weights first and keeps them when they work; otherwise the
 //! candidates of [`candidates`] in order (closest to the file's first) and keeps the first
-//! that works. When none does, it tries again those whose recovery was raised, without it
-//! (a recovered estimator trusts the sensor more, which a coarse or noisy one may not
-//! bear), and keeps the one that misses the bar by least (and says so): one that balances
+//! that works (a candidate whose recovered LQG or MPC misses the margins cannot work, so it is
+//! simulated only once none does). When none does, it tries again those whose recovery was
+//! raised, without it (a recovered estimator trusts the sensor more, which a coarse or noisy
+//! one may not bear), and keeps the one that misses the bar by least (and says so): one that balances
 //! within the bar and the voltage bound beats any that does not, and among equals the one
 //! nearer the margins wins.
 //! [`robustness`] then draws rigs around the file's (each parameter within ±10 %, or from
@@ -474,7 +475,8 @@ pub fn tune(spec: &Spec, ts: f64, bar: &Bar) -> Result<Tuned, SpecError> {
     // First each candidate with the recovery its margins ask for, in order. One whose
     // recovered LQG or MPC misses the margins cannot work, so it is simulated only when no
     // candidate works and the one that misses by least is wanted.
-    let mut recovered = Vec::new();
+    // Each with its shortfall once judged (`None` until then).
+    let mut recovered: Vec<(Weights, Option<Shortfall>)> = Vec::new();
     for w in std::iter::once(Weights::FILE).chain(candidates(spec)) {
         let (w, margins_met) = recover(spec, w, ts, bar);
         let mut score = None;
