@@ -81,8 +81,9 @@ def measure(name: str, file: Spec) -> List[str]:
         cs = tuned.spec.updated(changes).build_controllers(TS)
         row.append(" / ".join(cell(steady(truth, cs[c])) for c in CONTROLLERS))
     w = tuned.weights
+    pendulum = f"α×{w['pendulum']:g} " if w["pendulum"] != 1.0 else ""
     row.append(
-        f"θ×{w['arm']:g} R×{w['input']:g} q {w['recovery']:g} "
+        f"θ×{w['arm']:g} {pendulum}R×{w['input']:g} q {w['recovery']:g} "
         f"ki {w['integral_weight']:g} {'kept' if tuned.kept_file_weights else ''}".strip()
     )
     return [name, *row]
