@@ -7,7 +7,8 @@ N m, which neither the compensation nor the tuning is told), 2048-count encoders
 noise, the paper's 0 -> 1 rad arm step at 1 s, 10 s; over the last 3 s the arm's
 peak-to-peak, the largest ``|alpha|`` and the arm's offset from the reference, the worst of
 two noise seeds. "falls" is a fall in either seed. The rigs are the issue's five and
-``riprs.random_rig(seed)`` for the seeds given, each with the sensor above.
+``riprs.random_rig(seed)`` for the seeds given, each with the sensor above (the issue's rigs'
+own, ``riprs.named_rig``).
 
 Usage: python benches/tune_table.py [--seeds 1-10] [--no-issue-rigs]
 """
@@ -23,30 +24,18 @@ import riprs
 from riprs.config import Spec
 from riprs.tune import tune
 
-TS, COUNTS, NOISE, SEEDS = 0.01, [2048, 2048], [5e-4, 5e-4], (0, 1)
-SENSOR = {"encoder_counts": COUNTS, "noise_std": NOISE}
+TS, SEEDS = 0.01, (0, 1)
+#: The issue's table's sensor, the named rigs' own, which the generated rigs are read by too.
+SENSOR = riprs.named_rig("paper").to_config()["sensor"]
+COUNTS, NOISE = SENSOR["encoder_counts"], SENSOR["noise_std"]
 CONTROLLERS = ("LQR", "LQG", "MPC")
 
 
-def _qube_like(**changes: float) -> dict:
-    p = dict(preset="qube_servo2", mr=0.12, Lr=0.105, mp=0.038, Lp=0.19, Rm=6.5, kt=0.055, km=0.055)
-    p.update(changes)
-    p["Jr"] = p["mr"] * p["Lr"] ** 2 / 12
-    p["Jp"] = p["mp"] * p["Lp"] ** 2 / 12
-    return p
-
-
-def issue_rigs() -> Dict[str, dict]:
-    """The ``[plant]`` of each of the issue's rigs."""
+def issue_rigs() -> Dict[str, Spec]:
+    """Each of the issue's rigs (``riprs.named_rig``), by its row label."""
     return {
-        "paper preset": {"preset": "paper"},
-        "QUBE-like": _qube_like(),
-        "QUBE-like, Vd 0.4, Cr 0.003": _qube_like(Vd=0.4, Cr=0.003),
-        "QUBE-Servo 3, 0.65 V band": dict(
-            preset="qube_servo2", Rm=7.5, kt=0.0422, km=0.0422, Jr=1.38e-4, Dr=3.975e-4,
-            Cp=6.1e-6, Vd=0.65,
-        ),
-        "heavy pendulum": _qube_like(mp=0.06, Lp=0.25, Vd=0.6, Cr=0.006),
+        rig.label: Spec.from_toml(rig.to_toml())
+        for rig in map(riprs.named_rig, riprs.named_rigs())
     }
 
 
@@ -92,8 +81,9 @@ def measure(name: str, file: Spec) -> List[str]:
         cs = tuned.spec.updated(changes).build_controllers(TS)
         row.append(" / ".join(cell(steady(truth, cs[c])) for c in CONTROLLERS))
     w = tuned.weights
+    pendulum = f"α×{w['pendulum']:g} " if w["pendulum"] != 1.0 else ""
     row.append(
-        f"θ×{w['arm']:g} R×{w['input']:g} q {w['recovery']:g} "
+        f"θ×{w['arm']:g} {pendulum}R×{w['input']:g} q {w['recovery']:g} "
         f"ki {w['integral_weight']:g} {'kept' if tuned.kept_file_weights else ''}".strip()
     )
     return [name, *row]
@@ -109,8 +99,8 @@ def main() -> None:
         lo, _, hi = part.partition("-")
         seeds.extend(range(int(lo), int(hi or lo) + 1))
     rigs = {
-        name: with_sensor(Spec.from_dict({"plant": plant}))
-        for name, plant in ({} if args.no_issue_rigs else issue_rigs()).items()
+        name: with_sensor(spec)
+        for name, spec in ({} if args.no_issue_rigs else issue_rigs()).items()
     }
     for s in seeds:
         rigs[f"generated {s}"] = with_sensor(Spec.from_toml(riprs.random_rig(s).to_toml()))

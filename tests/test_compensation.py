@@ -9,28 +9,16 @@ import pytest
 
 import riprs
 from riprs.config import Spec
+from riprs.tune import tune
 
 TS = 0.01
-SENSOR = {"encoder_counts": [2048, 2048], "noise_std": [5e-4, 5e-4]}
+#: The sensor of the issue's table, which every named rig is read by.
+SENSOR = riprs.named_rig("qube_like").to_config()["sensor"]
 
-
-def _qube_like(**changes: float) -> dict:
-    p = dict(preset="qube_servo2", mr=0.12, Lr=0.105, mp=0.038, Lp=0.19, Rm=6.5, kt=0.055, km=0.055)
-    p.update(changes)
-    p["Jr"] = p["mr"] * p["Lr"] ** 2 / 12
-    p["Jp"] = p["mp"] * p["Lp"] ** 2 / 12
-    return p
-
-
-#: The rigs of the issue's table that have a dead zone and arm friction.
+#: The rigs of the issue's table that have a dead zone and arm friction (``riprs.named_rig``).
 RIGS = {
-    "qube_like_vd_cr": _qube_like(Vd=0.4, Cr=0.003),
-    # qube_servo2 preset with QUBE-Servo 3 values and its documented 0.65 V dead band.
-    "qube_servo3": dict(
-        preset="qube_servo2", Rm=7.5, kt=0.0422, km=0.0422, Jr=1.38e-4, Dr=3.975e-4, Cp=6.1e-6,
-        Vd=0.65,
-    ),
-    "heavy": _qube_like(mp=0.06, Lp=0.25, Vd=0.6, Cr=0.006),
+    name: riprs.named_rig(name).to_config()["plant"]
+    for name in ("qube_like_dead_zone", "qube_servo3", "heavy")
 }
 
 
@@ -44,7 +32,7 @@ def _spec(plant: dict, compensation: dict | None = None) -> Spec:
 def _run(spec: Spec, controller, seed: int = 0) -> riprs.SimResult:
     return riprs.simulate(
         spec.build_plant(), controller, 10.0, reference=1.0, reference_time=1.0,
-        encoder_counts=[2048, 2048], noise_std=[5e-4, 5e-4], seed=seed,
+        encoder_counts=SENSOR["encoder_counts"], noise_std=SENSOR["noise_std"], seed=seed,
     )
 
 
@@ -80,7 +68,7 @@ def _law(v, rate, vd, vf, vs=0.05, ws=0.05, lim=12.0):
 
 @pytest.mark.parametrize("name", ["LQR", "LQG", "MPC"])
 def test_the_written_voltage_is_the_law_applied_to_the_planned_one(name):
-    plant = RIGS["qube_like_vd_cr"]
+    plant = RIGS["qube_like_dead_zone"]
     spec = _spec(plant)
     c = spec.build_controllers(TS)[name]
     comp = c.compensation
@@ -105,7 +93,7 @@ def test_the_written_voltage_is_the_law_applied_to_the_planned_one(name):
 
 def test_uncompensated_the_rigs_limit_cycle_or_fall():
     # The "before" column of the table: LQG on the QUBE-like rig with Vd 0.4 V, Cr 0.003 N m.
-    spec = _spec(RIGS["qube_like_vd_cr"], {"enabled": False})
+    spec = _spec(RIGS["qube_like_dead_zone"], {"enabled": False})
     c = spec.build_controllers(TS)["LQG"]
     assert c.compensation is None
     pp, alpha, _ = _steady(_run(spec, c))
@@ -122,33 +110,66 @@ def test_compensated_every_controller_balances_the_rig(rig):
         assert pp <= 0.05 and alpha <= 0.02 and abs(offset) <= 0.02, (rig, name, pp, alpha, offset)
 
 
-# Compensation 30 % off the plant's dead zone and friction (so nothing cancels exactly): stated
-# bounds on steady-state arm peak-to-peak (rad). Over-compensation keeps every controller at
-# the 0.05 rad bar but the LQG on the heavy rig; under-compensation leaves a residual dead zone
-# of 0.3 Vd on which the shared Kalman filter's slow estimate (unit measurement noise on the
-# scaled outputs) lets LQG and MPC cycle, smaller than uncompensated and without a fall.
-OFF_BOUNDS = {
-    1.3: {"LQR": 0.05, "LQG": 0.15, "MPC": 0.05},
-    0.7: {"LQR": 0.06, "LQG": 0.6, "MPC": 0.4},
-}
+# Compensation 30 % off the plant's dead zone and friction (so nothing cancels exactly), the
+# file's weights and riprs tune's: the largest steady-state arm peak-to-peak (rad) measured over
+# noise seeds 0-9, then the bound held, about 15 % above it. Falls: the seeds that fell (the
+# peak-to-peak is over the others). Where a figure is above the 0.05 rad bar the
+# controller does not meet it with that compensation; docs/tuning.md says which.
+#   (rig, weights, factor): {controller: (measured, bound, falls)}
+OFF = {
+    ("qube_like_dead_zone", "file", 0.7): {
+        "LQR": (0.027, 0.035, 0), "LQG": (0.242, 0.28, 0), "MPC": (0.095, 0.11, 0)},
+    ("qube_like_dead_zone", "file", 1.3): {
+        "LQR": (0.029, 0.035, 0), "LQG": (0.062, 0.075, 0), "MPC": (0.025, 0.03, 0)},
+    ("qube_like_dead_zone", "tuned", 0.7): {
+        "LQR": (0.057, 0.07, 0), "LQG": (0.112, 0.13, 0), "MPC": (0.033, 0.04, 0)},
+    ("qube_like_dead_zone", "tuned", 1.3): {
+        "LQR": (0.034, 0.04, 0), "LQG": (0.036, 0.045, 0), "MPC": (0.021, 0.025, 0)},
+    ("qube_servo3", "file", 0.7): {
+        "LQR": (0.020, 0.025, 0), "LQG": (0.200, 0.23, 0), "MPC": (0.048, 0.06, 0)},
+    ("qube_servo3", "file", 1.3): {
+        "LQR": (0.019, 0.025, 0), "LQG": (0.025, 0.03, 0), "MPC": (0.020, 0.025, 0)},
+    ("qube_servo3", "tuned", 0.7): {
+        "LQR": (0.030, 0.035, 0), "LQG": (0.056, 0.065, 0), "MPC": (0.024, 0.03, 0)},
+    ("qube_servo3", "tuned", 1.3): {
+        "LQR": (0.021, 0.025, 0), "LQG": (0.033, 0.04, 0), "MPC": (0.022, 0.03, 0)},
+    ("heavy", "file", 0.7): {
+        "LQR": (0.053, 0.065, 0), "LQG": (0.563, 0.65, 1), "MPC": (0.358, 0.415, 0)},
+    ("heavy", "file", 1.3): {
+        "LQR": (0.055, 0.065, 0), "LQG": (0.128, 0.15, 0), "MPC": (0.047, 0.055, 0)},
+    ("heavy", "tuned", 0.7): {
+        "LQR": (0.120, 0.14, 0), "LQG": (0.153, 0.18, 0), "MPC": (0.042, 0.05, 0)},
+    ("heavy", "tuned", 1.3): {
+        "LQR": (0.063, 0.075, 0), "LQG": (0.058, 0.07, 0), "MPC": (0.032, 0.04, 0)},
+}  # fmt: skip
 
 
-@pytest.mark.parametrize("factor", sorted(OFF_BOUNDS))
-@pytest.mark.parametrize("rig", list(RIGS))
-def test_compensation_30_percent_off_still_balances(rig, factor):
+@pytest.mark.parametrize("case", list(OFF), ids=lambda c: "-".join(map(str, c)))
+def test_compensation_30_percent_off_holds_its_measured_steady_state(case):
+    rig, weights, factor = case
     p = RIGS[rig]
-    comp = {"dead_zone": factor * p["Vd"], "arm_friction": factor * p.get("Cr", 0.0)}
-    spec = _spec(p, comp)
+    spec = _spec(p)
+    if weights == "tuned":
+        spec = tune(spec, runs=0, progress=False).spec
+    comp = {"dead_zone": factor * p["Vd"], "arm_friction": factor * p["Cr"]}
+    spec = spec.updated({"compensation": comp})
     for name, c in spec.build_controllers(TS).items():
-        r = _run(spec, c)
-        pp, _, offset = _steady(r)
-        assert not r.fell, (rig, factor, name)
-        assert pp <= OFF_BOUNDS[factor][name], (rig, factor, name, pp)
-        assert abs(offset) <= 0.02, (rig, factor, name, offset)
+        _, bound, falls = OFF[case][name]
+        fell = 0
+        for seed in range(10):
+            r = _run(spec, c, seed)
+            if r.fell:
+                fell += 1
+                continue
+            pp, _, offset = _steady(r)
+            assert pp <= bound, (case, name, seed, pp)
+            assert abs(offset) <= 0.02, (case, name, seed, offset)
+        # A known fall is asserted too, so that a fix shows here.
+        assert fell == falls, (case, name, fell)
 
 
 def test_the_swing_up_is_compensated_around_the_supervisor():
-    spec = _spec(RIGS["qube_like_vd_cr"])
+    spec = _spec(RIGS["qube_like_dead_zone"])
     lqr = spec.build_controllers(TS)["LQR"]
     s = riprs.SwingUp(balance=lqr, plant=spec.build_plant(), **spec.swing_up)
     assert s.compensation == lqr.compensation
@@ -184,8 +205,8 @@ def test_swing_up_and_catch_succeed_compensated_and_uncompensated():
                 out[name] += bool(r.swing_up_succeeded)
         return out
 
-    on = successes(_spec(RIGS["qube_like_vd_cr"]))
-    off = successes(_spec(RIGS["qube_like_vd_cr"], {"enabled": False}))
+    on = successes(_spec(RIGS["qube_like_dead_zone"]))
+    off = successes(_spec(RIGS["qube_like_dead_zone"], {"enabled": False}))
     assert all(n >= 9 for n in on.values()), on
     assert all(n >= 8 for n in off.values()), off
 

@@ -20,24 +20,10 @@ from riprs import paper
 from riprs.cli import main
 from riprs.tune import loop_response, margins, tune
 
-QUBE_DEAD_ZONE = """# A QUBE-like rig with a dead zone and arm friction (the issue's third row).
-[plant]
-preset = "qube_servo2"
-mr = 0.12
-Lr = 0.105
-Jr = 0.00011025
-mp = 0.038
-Lp = 0.19
-Jp = 0.00011431666666666667
-Rm = 6.5
-kt = 0.055
-km = 0.055
-Vd = 0.4
-Cr = 0.003
-[sensor]
-encoder_counts = [2048, 2048]
-noise_std = [0.0005, 0.0005]
-"""
+QUBE_DEAD_ZONE = (
+    "# A QUBE-like rig with a dead zone and arm friction (the issue's third row).\n"
+    + riprs.named_rig("qube_like_dead_zone").to_toml()
+)
 
 
 def _paper_lqg_loop() -> ct.StateSpace:
@@ -258,9 +244,7 @@ def test_the_preflight_reads_the_tuning_record_while_it_is_current(tmp_path) -> 
     assert "stale" in found.message and "balances the rig's model in 3" in found.message, found
 
 
-QUBE_LIKE = QUBE_DEAD_ZONE.replace("Vd = 0.4\nCr = 0.003\n", "").replace(
-    "with a dead zone and arm friction (the issue's third row)", "(the issue's second row)"
-)
+QUBE_LIKE = riprs.named_rig("qube_like").to_toml()
 
 
 def _lqg_catches(spec: riprs.Spec, seeds: range) -> int:
@@ -299,9 +283,7 @@ def test_tuned_rigs_balance_end_to_end_on_the_emulator(tmp_path, rip_rt) -> None
     LQR reached 0.052 rad against 0.040 here)."""
     import signal
 
-    heavy = QUBE_DEAD_ZONE.replace("mp = 0.038", "mp = 0.06").replace("Lp = 0.19", "Lp = 0.25")
-    heavy = heavy.replace("Vd = 0.4", "Vd = 0.6").replace("Cr = 0.003", "Cr = 0.006")
-    heavy = heavy.replace("Jp = 0.00011431666666666667", f"Jp = {0.06 * 0.25**2 / 12!r}")
+    heavy = riprs.named_rig("heavy").to_toml()
     rigs = {"qube_like": QUBE_LIKE, "dead_zone": QUBE_DEAD_ZONE, "heavy": heavy}
     duration = 7.0
 

@@ -27,7 +27,7 @@ from riprs.identify import IdentifyError, IdentifyResult, IdentifyWarning, ident
 from riprs.log import LogError, RtLog, load_log
 from riprs.mpc import Mpc, MpcSolution
 from riprs.plant import FurutaParams, Plant
-from riprs.rig import Rig, random_rig
+from riprs.rig import NamedRig, Rig, named_rig, named_rigs, random_rig
 from riprs.sim import BatchMetrics, SimResult, simulate, simulate_batch, simulate_metrics
 from riprs.statespace import StateSpace
 from riprs.tune import TuneResult, tune
@@ -48,6 +48,7 @@ __all__ = [
     "Lqr",
     "Mpc",
     "MpcSolution",
+    "NamedRig",
     "NoStabilizingSolutionError",
     "NonFiniteError",
     "NotDetectableError",
@@ -76,6 +77,8 @@ __all__ = [
     "kalman",
     "load_config",
     "load_log",
+    "named_rig",
+    "named_rigs",
     "paper",
     "random_rig",
     "simulate",

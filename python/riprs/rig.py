@@ -1,4 +1,5 @@
-"""Seeded random rigs across the envelope riprs must handle.
+"""Seeded random rigs across the envelope riprs must handle, and the named rigs of the
+controllers issue's table.
 
 :func:`random_rig` draws a full parameter set (masses, lengths, inertias, motor, viscous and
 Coulomb friction, dead zone) and its sensors (encoder counts, angle noise) from a seed, in the
@@ -13,10 +14,18 @@ Examples
 True
 >>> 512 <= rig.encoder_counts[0] <= 8192
 True
+
+:func:`named_rig` gives the issue's rigs by name (``rip_core::rig::NamedRig``), each read by
+the table's sensor, for the tests, benches and docs' tables to share:
+
+>>> riprs.named_rig("heavy").params.mp
+0.06
+>>> riprs.named_rig("paper").to_config()["plant"]
+{'preset': 'paper'}
 """
 
 from __future__ import annotations
 
-from riprs._riprs import Rig, random_rig
+from riprs._riprs import NamedRig, Rig, named_rig, named_rigs, random_rig
 
-__all__ = ["Rig", "random_rig"]
+__all__ = ["NamedRig", "Rig", "named_rig", "named_rigs", "random_rig"]

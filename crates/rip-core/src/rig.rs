@@ -28,6 +28,13 @@
 //! Viscous friction spans an order of magnitude, hence the log-uniform draw; every other
 //! range is drawn uniformly. The same seed gives the same rig for a given riprs version (the
 //! generator is `rand`'s `StdRng`, fixed by the lockfile).
+//!
+//! # Named rigs
+//!
+//! [`NamedRig`] holds the rigs of the controllers issue's table (the paper preset, the
+//! QUBE-like rig with and without a dead zone, the QUBE-Servo 3 values, the heavy pendulum),
+//! each read by that table's sensor ([`TABLE_SENSOR_COUNTS`], [`TABLE_SENSOR_NOISE`]): the one
+//! definition the tests, the benches and the docs' tables use.
 
 use std::f64::consts::TAU;
 
@@ -37,6 +44,139 @@ use serde::Serialize;
 
 use crate::plant::FurutaParams;
 use crate::spec::{PlantSpec, Preset, SensorSpec};
+
+/// Encoder counts per revolution (arm, pendulum) of the sensor the named rigs are read by.
+pub const TABLE_SENSOR_COUNTS: [u32; 2] = [2048, 2048];
+/// Angle noise (rad, arm and pendulum) of the sensor the named rigs are read by.
+pub const TABLE_SENSOR_NOISE: [f64; 2] = [5e-4, 5e-4];
+
+/// A rig of the controllers issue's table, by name (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NamedRig {
+    /// The paper preset as it is (designed on the paper's recovered linear model).
+    Paper,
+    /// The QUBE-Servo 2 preset with a longer, heavier arm and pendulum and a stronger motor:
+    /// `mr` 0.12 kg, `Lr` 0.105 m, `mp` 0.038 kg, `Lp` 0.19 m, `Rm` 6.5 Ω, `kt = km` 0.055,
+    /// uniform-rod inertias; no friction beyond the preset's viscous, no dead zone.
+    QubeLike,
+    /// [`QubeLike`](Self::QubeLike) with a 0.4 V dead zone and 0.003 N m of arm Coulomb
+    /// friction.
+    QubeLikeDeadZone,
+    /// The QUBE-Servo 2 preset with QUBE-Servo 3 values (`Rm` 7.5 Ω, `kt = km` 0.0422,
+    /// `Jr` 1.38e-4 kg m², `Dr` 3.975e-4 N m s, `Cp` 6.1e-6 N m) and its documented 0.65 V
+    /// dead band.
+    QubeServo3,
+    /// [`QubeLike`](Self::QubeLike) with a 0.06 kg, 0.25 m pendulum, a 0.6 V dead zone and
+    /// 0.006 N m of arm Coulomb friction.
+    Heavy,
+}
+
+impl NamedRig {
+    /// Every named rig, in the table's order.
+    pub const ALL: [NamedRig; 5] = [
+        Self::Paper,
+        Self::QubeLike,
+        Self::QubeLikeDeadZone,
+        Self::QubeServo3,
+        Self::Heavy,
+    ];
+
+    /// The name [`from_name`](Self::from_name) takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Paper => "paper",
+            Self::QubeLike => "qube_like",
+            Self::QubeLikeDeadZone => "qube_like_dead_zone",
+            Self::QubeServo3 => "qube_servo3",
+            Self::Heavy => "heavy",
+        }
+    }
+
+    /// The rig of `name`, if it is one.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|r| r.name() == name)
+    }
+
+    /// The row label of the docs' tables.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Paper => "paper preset",
+            Self::QubeLike => "QUBE-like",
+            Self::QubeLikeDeadZone => "QUBE-like, Vd 0.4, Cr 0.003",
+            Self::QubeServo3 => "QUBE-Servo 3, 0.65 V band",
+            Self::Heavy => "heavy pendulum",
+        }
+    }
+
+    /// The physical parameters.
+    pub fn params(self) -> FurutaParams {
+        let qube_like = |mp: f64, lp: f64, vd: f64, cr: f64| {
+            let (mr, lr) = (0.12, 0.105);
+            FurutaParams {
+                mr,
+                lr,
+                jr: FurutaParams::rod_inertia(mr, lr),
+                mp,
+                lp,
+                jp: FurutaParams::rod_inertia(mp, lp),
+                rm: 6.5,
+                kt: 0.055,
+                km: 0.055,
+                vd,
+                cr,
+                ..FurutaParams::qube_servo2()
+            }
+        };
+        match self {
+            Self::Paper => FurutaParams::paper(),
+            Self::QubeLike => qube_like(0.038, 0.19, 0.0, 0.0),
+            Self::QubeLikeDeadZone => qube_like(0.038, 0.19, 0.4, 0.003),
+            Self::QubeServo3 => FurutaParams {
+                rm: 7.5,
+                kt: 0.0422,
+                km: 0.0422,
+                jr: 1.38e-4,
+                dr: 3.975e-4,
+                cp: 6.1e-6,
+                vd: 0.65,
+                ..FurutaParams::qube_servo2()
+            },
+            Self::Heavy => qube_like(0.06, 0.25, 0.6, 0.006),
+        }
+    }
+
+    /// The `[plant]` section: the paper preset alone for [`Paper`](Self::Paper) (so that its
+    /// controllers are the paper's), otherwise the QUBE-Servo 2 preset with every parameter
+    /// given.
+    pub fn plant_spec(self) -> PlantSpec {
+        match self {
+            Self::Paper => PlantSpec::default(),
+            _ => PlantSpec::with_params(Preset::QubeServo2, &self.params()),
+        }
+    }
+
+    /// The `[sensor]` section: the table's sensor, zero offsets.
+    pub fn sensor_spec(self) -> SensorSpec {
+        SensorSpec {
+            encoder_counts: TABLE_SENSOR_COUNTS,
+            noise_std: TABLE_SENSOR_NOISE,
+            ..SensorSpec::default()
+        }
+    }
+
+    /// `[plant]` and `[sensor]` as a TOML file (the other sections take their defaults).
+    pub fn to_toml(self) -> String {
+        let file = RigFile {
+            plant: self.plant_spec(),
+            sensor: self.sensor_spec(),
+        };
+        format!(
+            "# {} (rip_core::rig::NamedRig::{self:?})\n{}",
+            self.label(),
+            toml::to_string(&file).expect("every spec value has a TOML form")
+        )
+    }
+}
 
 /// A closed range `[lo, hi]` of the envelope.
 pub type Range = (f64, f64);
@@ -229,6 +369,29 @@ mod tests {
         let mid = (DR.0 * DR.1).sqrt();
         let below = rigs.iter().filter(|r| r.params.dr < mid).count();
         assert!((900..1100).contains(&below), "{below}");
+    }
+
+    #[test]
+    fn a_named_rig_reads_back_as_its_parameters_and_the_paper_stays_the_preset() {
+        for rig in NamedRig::ALL {
+            assert_eq!(NamedRig::from_name(rig.name()), Some(rig));
+            let spec = Spec::parse(&rig.to_toml()).unwrap();
+            assert_eq!(spec.plant.params(), rig.params(), "{rig:?}");
+            assert_eq!(spec.sensor.encoder_counts, [2048, 2048]);
+            assert_eq!(spec.sensor.noise_std, [5e-4, 5e-4]);
+        }
+        let paper = Spec::parse(&NamedRig::Paper.to_toml()).unwrap();
+        assert_eq!(paper.plant, Spec::default().plant);
+        // The figures, written out here rather than read back from the code.
+        let heavy = NamedRig::Heavy.params();
+        assert_eq!(
+            (heavy.mp, heavy.lp, heavy.vd, heavy.cr),
+            (0.06, 0.25, 0.6, 0.006)
+        );
+        assert!((heavy.jp - 0.06 * 0.25 * 0.25 / 12.0).abs() < 1e-18);
+        let q3 = NamedRig::QubeServo3.params();
+        assert_eq!((q3.rm, q3.kt, q3.km, q3.vd), (7.5, 0.0422, 0.0422, 0.65));
+        assert_eq!(q3.mp, FurutaParams::qube_servo2().mp);
     }
 
     #[test]

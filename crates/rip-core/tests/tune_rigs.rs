@@ -1,38 +1,17 @@
 //! Tuning on the issue's rigs and on rigs drawn across the envelope.
 
 use rip_core::preflight::{self, Verdict};
-use rip_core::rig::Rig;
+use rip_core::rig::{NamedRig, Rig};
 use rip_core::spec::{ControllerKind, Spec};
 use rip_core::tune::{assess, tune, Bar};
 
-const SENSOR: &str = "[sensor]\nencoder_counts = [2048, 2048]\nnoise_std = [0.0005, 0.0005]\n";
-
-fn qube_like(extra: &str, mp: f64, lp: f64) -> String {
-    format!(
-        "[plant]\npreset = \"qube_servo2\"\nmr = 0.12\nLr = 0.105\nJr = {}\nmp = {mp}\nLp = {lp}\n\
-         Jp = {}\nRm = 6.5\nkt = 0.055\nkm = 0.055\n{extra}{SENSOR}",
-        0.12 * 0.105 * 0.105 / 12.0,
-        mp * lp * lp / 12.0
-    )
-}
-
-/// The issue's table of rigs, by name.
+/// The issue's table of rigs but the paper preset (which keeps its Tab. 1), by label.
 pub fn issue_rigs() -> Vec<(&'static str, String)> {
-    vec![
-        ("qube-like", qube_like("", 0.038, 0.19)),
-        (
-            "qube-like dead zone",
-            qube_like("Vd = 0.4\nCr = 0.003\n", 0.038, 0.19),
-        ),
-        (
-            "qube-servo-3",
-            format!(
-                "[plant]\npreset = \"qube_servo2\"\nRm = 7.5\nkt = 0.0422\nkm = 0.0422\n\
-                 Jr = 1.38e-4\nDr = 3.975e-4\nCp = 6.1e-6\nVd = 0.65\n{SENSOR}"
-            ),
-        ),
-        ("heavy", qube_like("Vd = 0.6\nCr = 0.006\n", 0.06, 0.25)),
-    ]
+    NamedRig::ALL
+        .into_iter()
+        .filter(|r| *r != NamedRig::Paper)
+        .map(|r| (r.label(), r.to_toml()))
+        .collect()
 }
 
 /// The generated rigs, fixed before any was run: `Rig::random(1..=16)`.
@@ -41,23 +20,14 @@ const SEEDS: std::ops::RangeInclusive<u64> = 1..=16;
 /// Generated rigs on which some tuned controller still misses the bar for a reason that is
 /// neither its sensor nor a fall the pre-flight refuses (each named with what it misses).
 /// The test asserts that they still miss, so that a fix shows here.
-const KNOWN_MISSES: [(u64, &str); 2] = [
-    (
-        1,
-        "the recovered LQG (q 3, margins met) holds 0.07 rad arm peak-to-peak on its \
-         876-count pendulum encoder; with exact angles its peak-to-peak is 0.0001 rad but the \
-         arm stops 0.03 rad off the reference, held by its Coulomb friction once no noise \
-         dithers it, so the miss is not the sensor's alone",
-    ),
-    (
-        9,
-        "a weak motor (k_t 0.020, R_m 9.9 ohm) against arm Coulomb friction worth 2.2 V and \
+const KNOWN_MISSES: [(u64, &str); 1] = [(
+    9,
+    "a weak motor (k_t 0.020, R_m 9.9 ohm) against arm Coulomb friction worth 2.2 V and \
          a 0.7 V dead zone (24 % of the 12 V bound): the tuned LQR and LQG balance in limit \
-         cycles of 0.15 and 0.06 rad (LQR's is the friction's: 0.016 rad on the rig without \
+         cycles of 0.13 and 0.06 rad (LQR's is the friction's: 0.016 rad on the rig without \
          it); the MPC falls on the 1 rad step and the pre-flight refuses it, though it \
          balances within the bar at rest, on a 0.5 rad step, or at 16 V (diagnose_seed9)",
-    ),
-];
+)];
 
 /// Whether an LQR with any of a range of weights balances the rig's model from its start:
 /// the independent evidence that it can be balanced at its voltage bound.
