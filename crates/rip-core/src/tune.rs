@@ -222,11 +222,11 @@ pub fn candidates(spec: &Spec) -> Vec<Weights> {
 
 /// The factors `q_α` on the pendulum weights [`candidates`] tries, the file's first.
 ///
-/// On generated rigs 3, 4, 5, 7, 8, 14, 15 and 16 no candidate of the file's pendulum weight
-/// gave LQR, LQG and the MPC all 6 dB / 30°, while a margins-only grid over `q_θ` (1, 4, 16),
-/// `q_α` (0.25, 1, 4), `ρ` (1–100) and the recovery found such weights, mostly with
-/// `q_α = 0.25`. They come after every candidate of the file's pendulum weight, so a rig those
-/// already balance keeps the weights it had.
+/// With the file's measurement noise, a margins-only grid over `q_θ` (1, 4, 16), `q_α` (0.25,
+/// 1, 4), `ρ` (1–100) and the recovery found weights with which LQR, LQG and the MPC all met
+/// 6 dB / 30° on generated rigs 3, 4, 5, 7, 8, 14, 15 and 16, mostly with `q_α = 0.25`. They
+/// come after every candidate of the file's pendulum weight, so a rig those already balance
+/// keeps the weights it had.
 pub const PENDULUM: [f64; 2] = [1.0, 0.25];
 
 /// How one controller does on the rig (module docs), the worst over [`SEEDS`].
