@@ -1,5 +1,5 @@
 """Seeded random rigs across the envelope riprs must handle, and the named rigs of the
-controllers issue's table.
+tables of docs/tuning.md.
 
 :func:`random_rig` draws a full parameter set (masses, lengths, inertias, motor, viscous and
 Coulomb friction, dead zone) and its sensors (encoder counts, angle noise) from a seed, in the
@@ -15,8 +15,8 @@ True
 >>> 512 <= rig.encoder_counts[0] <= 8192
 True
 
-:func:`named_rig` gives the issue's rigs by name (``rip_core::rig::NamedRig``), each read by
-the table's sensor, for the tests, benches and docs' tables to share:
+:func:`named_rig` gives those rigs by name (``rip_core::rig::NamedRig``), each read by the
+tables' sensor, for the tests, benches and docs' tables to share:
 
 >>> riprs.named_rig("heavy").params.mp
 0.06

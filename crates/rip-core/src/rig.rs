@@ -31,7 +31,7 @@
 //!
 //! # Named rigs
 //!
-//! [`NamedRig`] holds the rigs of the controllers issue's table (the paper preset, the
+//! [`NamedRig`] holds the rigs of the tables of docs/tuning.md (the paper preset, the
 //! QUBE-like rig with and without a dead zone, the QUBE-Servo 3 values, the heavy pendulum),
 //! each read by that table's sensor ([`TABLE_SENSOR_COUNTS`], [`TABLE_SENSOR_NOISE`]): the one
 //! definition the tests, the benches and the docs' tables use.
@@ -50,7 +50,7 @@ pub const TABLE_SENSOR_COUNTS: [u32; 2] = [2048, 2048];
 /// Angle noise (rad, arm and pendulum) of the sensor the named rigs are read by.
 pub const TABLE_SENSOR_NOISE: [f64; 2] = [5e-4, 5e-4];
 
-/// A rig of the controllers issue's table, by name (module docs).
+/// A rig of the tables of docs/tuning.md, by name (module docs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum NamedRig {
     /// The paper preset as it is (designed on the paper's recovered linear model).
@@ -382,7 +382,7 @@ mod tests {
         }
         let paper = Spec::parse(&NamedRig::Paper.to_toml()).unwrap();
         assert_eq!(paper.plant, Spec::default().plant);
-        // The figures, written out here rather than read back from the code.
+        // The published figures, written out here rather than read back from the code.
         let heavy = NamedRig::Heavy.params();
         assert_eq!(
             (heavy.mp, heavy.lp, heavy.vd, heavy.cr),

@@ -132,7 +132,7 @@ fn config<'py>(
     Ok(d)
 }
 
-/// A rig of the controllers issue's table (see :func:`named_rig`).
+/// A rig of the tables of docs/tuning.md (see :func:`named_rig`).
 ///
 /// Attributes
 /// ----------
@@ -189,7 +189,7 @@ impl PyNamedRig {
     }
 }
 
-/// A rig of the controllers issue's table, by name: the one definition tests, benches and
+/// A rig of the tables of docs/tuning.md, by name: the one definition tests, benches and
 /// docs use (``rip_core::rig::NamedRig``), read by the table's sensor (2048-count encoders,
 /// 0.5 mrad of noise).
 ///
