@@ -339,7 +339,7 @@ class Mpc:
         *,
         prediction_horizon: int = ...,
         control_horizon: int = ...,
-        prediction_step: int = 1,
+        prediction_step: int = ...,
         output_weights: ArrayLike | None = None,
         input_rate_weights: ArrayLike | None = None,
         input_weights: ArrayLike | None = None,
@@ -458,6 +458,8 @@ class MpcSpec:
     def prediction_horizon(self) -> int: ...
     @property
     def control_horizon(self) -> int: ...
+    @property
+    def prediction_step(self) -> int: ...
     @property
     def output_weights(self) -> list[float]: ...
     @property
