@@ -28,10 +28,11 @@
 //! # Capacities
 //!
 //! Fixed arrays, sized for the paper's MPC (P = 50, m = 3, 5 augmented states, one soft
-//! output bound: 107 rows) and for a 1 kHz design that keeps the paper's 0.5 s horizon by
-//! predicting on a 5 ms grid (P = 100): [`MAX_NX`] = 8, [`MAX_NY`] = 2, [`MAX_NU`] = 1,
-//! [`MAX_CONTROL_HORIZON`] = 4, [`MAX_PREDICTION_HORIZON`] = 100, so at most [`MAX_NZ`] = 5 QP
-//! variables and [`MAX_NCON`] = 409 rows. A [`Controller`] holds its own copy of the design.
+//! output bound: 107 rows; at 1 kHz the same QP with the prediction on a 10 ms grid, rip-core's
+//! `prediction_step`) and for a 1 kHz design on a 5 ms grid (P = 100, also 0.5 s):
+//! [`MAX_NX`] = 8, [`MAX_NY`] = 2, [`MAX_NU`] = 1, [`MAX_CONTROL_HORIZON`] = 4,
+//! [`MAX_PREDICTION_HORIZON`] = 100, so at most [`MAX_NZ`] = 5 QP variables and [`MAX_NCON`] =
+//! 409 rows. A [`Controller`] holds its own copy of the design.
 //!
 //! # LQR
 //!
