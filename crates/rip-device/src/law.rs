@@ -252,6 +252,15 @@ impl<R: Real, const N: usize> Onboard for ControlLaw<R, N> {
     fn step_probed(&mut self, positions: [i32; 2], probe: &mut dyn FnMut(u8)) -> f64 {
         self.step_with(positions, probe)
     }
+
+    /// The controller's iteration-bound and solver-failure steps ([`Stats`](rip_control::Stats)),
+    /// both of which apply its fallback law.
+    fn fallbacks(&self) -> u32 {
+        self.controller().map_or(0, |c| {
+            let s = c.stats();
+            s.iteration_limits.saturating_add(s.solver_failures)
+        })
+    }
 }
 
 impl<R: Real, const N: usize> ControlLaw<R, N> {

@@ -30,6 +30,11 @@ pub trait Onboard {
         let _ = probe;
         self.step(positions)
     }
+    /// Steps since the last [`reset`](Self::reset) that applied the controller's fallback law
+    /// (telemetry's `fallbacks`). The default: a law without one, 0.
+    fn fallbacks(&self) -> u32 {
+        0
+    }
 }
 
 /// The device without an onboard controller (the v1 device): every upload is refused as too
@@ -343,6 +348,7 @@ impl<C: Onboard> Device<C> {
             onboard: self.onboard_state,
             step_cycles: run.last_cycles,
             overruns: run.overruns,
+            fallbacks: u16::try_from(self.onboard.fallbacks()).unwrap_or(u16::MAX),
         };
         self.next_frame(Message::Telemetry(t))
     }

@@ -24,6 +24,7 @@ struct Law {
     steps: Vec<[i32; 2]>,
     reset_at: Option<[i32; 2]>,
     nan: bool,
+    fallbacks: u32,
 }
 
 impl Law {
@@ -35,6 +36,7 @@ impl Law {
             steps: Vec::new(),
             reset_at: None,
             nan: false,
+            fallbacks: 0,
         }
     }
 }
@@ -65,6 +67,9 @@ impl Onboard for Law {
             return f64::NAN;
         }
         (self.k[0] * p[0] as f32 + self.k[1] * (p[1] - 2048) as f32) as f64
+    }
+    fn fallbacks(&self) -> u32 {
+        self.fallbacks
     }
 }
 
@@ -347,6 +352,25 @@ fn each_step_applies_the_law_on_the_devices_own_counts_with_decimated_telemetry(
         t.status & (STATUS_ONBOARD | STATUS_ENABLED),
         STATUS_ONBOARD | STATUS_ENABLED
     );
+}
+
+#[test]
+fn telemetry_carries_the_laws_fallback_count_saturated_to_its_field() {
+    let mut dev = running(1000);
+    let report = |dev: &mut Device<Law>, k: u32| -> Option<Telemetry> {
+        dev.onboard_tick(&inputs(k * 1000, 0, 2048))
+            .map(|f| telemetry(Some(f)))
+    };
+    let first = report(&mut dev, 0).expect("step 0 is reported");
+    assert_eq!(first.fallbacks, 0);
+    dev.onboard_mut().fallbacks = 3;
+    let reported: Vec<_> = (1..=4).filter_map(|k| report(&mut dev, k)).collect();
+    assert_eq!(reported.len(), 1);
+    assert_eq!((reported[0].step, reported[0].fallbacks), (4, 3));
+    // A count beyond the u16 field reads as its largest value, never as a wrapped small one.
+    dev.onboard_mut().fallbacks = 70_000;
+    let reported: Vec<_> = (5..=8).filter_map(|k| report(&mut dev, k)).collect();
+    assert_eq!(reported[0].fallbacks, u16::MAX);
 }
 
 #[test]

@@ -133,7 +133,7 @@ pub const PIL_PHASES: usize = 5;
 /// Payload length of an ack.
 pub const ACK_LEN: usize = 8;
 /// Payload length of a telemetry record.
-pub const TELEMETRY_LEN: usize = 26;
+pub const TELEMETRY_LEN: usize = 28;
 
 /// Device status bit: the motor driver is enabled and applying the commanded voltage.
 pub const STATUS_ENABLED: u8 = 1 << 0;
@@ -418,6 +418,7 @@ pub fn encode(frame: &Frame, out: &mut [u8; MAX_FRAME]) -> usize {
             p[19] = t.onboard;
             p[20..24].copy_from_slice(&t.step_cycles.to_le_bytes());
             p[24..26].copy_from_slice(&t.overruns.to_le_bytes());
+            p[26..28].copy_from_slice(&t.fallbacks.to_le_bytes());
             (TYPE_TELEMETRY, TELEMETRY_LEN)
         }
     };
@@ -501,6 +502,7 @@ fn decode_payload(version: u8, kind: u8, p: &[u8]) -> Option<Message> {
             onboard: p[19],
             step_cycles: u32_at(20),
             overruns: u16_at(24),
+            fallbacks: u16_at(26),
         })),
         _ => None,
     }

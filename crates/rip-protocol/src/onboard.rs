@@ -195,4 +195,7 @@ pub struct Telemetry {
     pub step_cycles: u32,
     /// Steps that overran their period since the start.
     pub overruns: u16,
+    /// Steps since the start that applied the controller's fallback law (an MPC whose QP hit
+    /// its iteration bound or failed; saturates).
+    pub fallbacks: u16,
 }

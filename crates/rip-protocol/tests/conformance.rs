@@ -89,6 +89,7 @@ fn frame_of(v: &Value) -> Frame {
             onboard: int(v, "onboard") as u8,
             step_cycles: int(v, "step_cycles") as u32,
             overruns: int(v, "overruns") as u16,
+            fallbacks: int(v, "fallbacks") as u16,
         }),
         "pil_step" => Message::PilStep(PilStep {
             arm_counts: int(v, "arm_counts") as i32,

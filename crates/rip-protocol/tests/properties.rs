@@ -106,11 +106,12 @@ fn v2_message() -> impl Strategy<Value = Message> {
                 any::<u8>(),
                 any::<u8>(),
                 any::<u32>(),
+                any::<u16>(),
                 any::<u16>()
             )
         )
             .prop_map(
-                |((step, t, arm, pend), (mv, status, onboard, cycles, overruns))| {
+                |((step, t, arm, pend), (mv, status, onboard, cycles, overruns, fallbacks))| {
                     Message::Telemetry(Telemetry {
                         step,
                         device_time_us: t,
@@ -121,6 +122,7 @@ fn v2_message() -> impl Strategy<Value = Message> {
                         onboard,
                         step_cycles: cycles,
                         overruns,
+                        fallbacks,
                     })
                 }
             ),

@@ -23,7 +23,7 @@ use crate::config::Config;
 use crate::controllers::{self, ControllerKind};
 use crate::log::{LogWriter, Row};
 use crate::serial::{Fd, Readiness};
-use crate::step::StepOutput;
+use crate::step::{StepOutput, FLAG_FALLBACK};
 
 /// Largest onboard image the host builds (the emulator's buffer holds it).
 pub const MAX_IMAGE: usize = crate::emulator::ONBOARD_BUFFER;
@@ -412,7 +412,7 @@ pub fn run(
             let Some(log) = log.as_deref_mut() else {
                 return Ok(());
             };
-            log_rows(log, cfg, image, &link.telemetry[logged..])?;
+            log_rows(log, cfg, image, &link.telemetry, logged)?;
             logged = link.telemetry.len();
             Ok(())
         },
@@ -421,7 +421,7 @@ pub fn run(
     report.stop_sent = link.stop();
     let _ = link.wait(Duration::from_millis(50), |_| false);
     if let Some(log) = log {
-        if let Err(e) = log_rows(log, cfg, image, &link.telemetry[logged..]) {
+        if let Err(e) = log_rows(log, cfg, image, &link.telemetry, logged) {
             if matches!(end, OnboardEnd::Duration) {
                 end = OnboardEnd::Log(e);
             }
@@ -432,19 +432,24 @@ pub fn run(
     report
 }
 
-/// Log rows of telemetry records, in the usual columns: the angles converted as the device
-/// converts them, the applied voltage, the status bits, and the step's time at 168 MHz as the
-/// compute time.
+/// Log rows of the telemetry records from `first` on, in the usual columns: the angles
+/// converted as the device converts them, the applied voltage, the status bits, and the step's
+/// time at 168 MHz as the compute time. A record whose fallback count rose since the record
+/// before it carries `FLAG_FALLBACK`: one or more of the steps between them (the decimation)
+/// applied the controller's fallback law.
 fn log_rows(
     log: &mut LogWriter,
     cfg: &Config,
     image: &[u8],
     records: &[Telemetry],
+    first: usize,
 ) -> Result<(), String> {
     let Some(sensor) = Sensor::read(image) else {
         return Ok(());
     };
-    for t in records {
+    for (i, t) in records.iter().enumerate().skip(first) {
+        let previous_fallbacks = i.checked_sub(1).map_or(0, |p| records[p].fallbacks);
+        let fell_back = t.fallbacks > previous_fallbacks;
         let [theta, alpha] = sensor.angles([t.arm_counts, t.pendulum_counts]);
         let time = t.step as f64 * cfg.period_s();
         let row = Row {
@@ -459,7 +464,7 @@ fn log_rows(
                     0.0
                 },
                 voltage: t.applied_mv as f64 / 1000.0,
-                flags: t.status as u32,
+                flags: t.status as u32 | if fell_back { FLAG_FALLBACK } else { 0 },
                 len: 0,
                 phase: rip_core::Phase::Balance,
             },
@@ -565,7 +570,7 @@ fn supervise(
 }
 
 /// Telemetry every this many steps: at most 100 records a second, which a 115 200-baud link
-/// carries with room to spare (35 bytes each, about 330 a second fit).
+/// carries with room to spare (a record is a 37-byte frame: about 310 a second fit).
 pub fn telemetry_decimation(cfg: &Config) -> u16 {
     (0.01 / cfg.period_s()).round().clamp(1.0, u16::MAX as f64) as u16
 }
@@ -656,10 +661,13 @@ pub fn command(a: &OnboardArgs<'_>) -> i32 {
     );
     drop(guard);
     let mut end = report.end;
+    // The device counts from the start, so the last record holds the run's total.
+    let fallbacks = report.telemetry.last().map_or(0, |t| t.fallbacks);
     if let Some(log) = log.as_mut() {
         let footer = [
             ("stop", end.to_string()),
             ("telemetry", report.telemetry.len().to_string()),
+            ("fallbacks", fallbacks.to_string()),
         ];
         if let Err(e) = log.finish(&footer) {
             if matches!(end, OnboardEnd::Duration) {
@@ -689,7 +697,8 @@ pub fn command(a: &OnboardArgs<'_>) -> i32 {
         }
     );
     crate::say!(
-        "rip-rt: onboard: image={} bytes steps={steps} telemetry={} max_step_cycles={max_cycles}",
+        "rip-rt: onboard: image={} bytes steps={steps} telemetry={} max_step_cycles={max_cycles} \
+         fallbacks={fallbacks}",
         report.image_len,
         report.telemetry.len()
     );

@@ -53,6 +53,12 @@ fn lqr_lqg_and_mpc_balance_onboard_through_the_reference_step_as_on_the_host() {
         );
         assert_eq!(r.status.code(), Some(0), "{controller}: {}", r.stderr);
         assert!(r.stderr.contains("steps=800"), "{controller}: {}", r.stderr);
+        // The device's QP finished within its iteration cap on every step.
+        assert!(
+            r.stderr.contains("fallbacks=0"),
+            "{controller}: {}",
+            r.stderr
+        );
         let truth = emu.finish();
         let worst_alpha = truth
             .iter()
@@ -85,6 +91,12 @@ fn lqr_lqg_and_mpc_balance_onboard_through_the_reference_step_as_on_the_host() {
         let log = Log::read(&log);
         assert_eq!(log.meta("onboard"), Some("true"));
         assert_eq!(log.rows.len(), 800);
+        let fallback_rows = log
+            .col("status")
+            .iter()
+            .filter(|&&s| (s as u32) & (1 << 9) != 0)
+            .count();
+        assert_eq!(fallback_rows, 0, "{controller}: rows flagged FALLBACK");
         let t = log.col("t");
         let th = log.col("theta");
         let k = t

@@ -114,3 +114,50 @@ fn the_1khz_mpc_on_a_10ms_grid_is_the_papers_qp_and_fits_half_its_period() {
     assert!(d.worst_step_instructions() <= 42_000);
     assert!(loads(&onboard::image(&d, &fast).unwrap()));
 }
+
+/// Telemetry's fallback count is the law's: an MPC held to one QP iteration cannot finish the
+/// active-set solve of a state that saturates the input, and applies its fallback law on each
+/// such step; with the cap that fits its period the same run falls back on none. The count
+/// starts again at the onboard start (the law's reset).
+#[test]
+fn the_law_counts_the_steps_that_applied_the_mpcs_fallback() {
+    let cfg = cfg_at(10.0);
+    let mut d = onboard::design(ControllerKind::Mpc, &cfg).unwrap();
+    let capped = d.max_iterations;
+    let run = |max_iterations: u32, d: &mut rip_control::Design| {
+        d.max_iterations = max_iterations;
+        let image = onboard::image(d, &cfg).unwrap();
+        let mut law = Box::new(ControlLaw::<f64, { onboard::MAX_IMAGE }>::new());
+        law.buffer()[..image.len()].copy_from_slice(&image);
+        law.load(image.len()).unwrap();
+        let sensor = *law.sensor();
+        // The pendulum's upright count, from the sensor's own conversion.
+        let upright = (sensor.pendulum_offset / sensor.pendulum_rad_per_count).round() as i32;
+        assert!(sensor.angles([0, upright])[1].abs() < sensor.pendulum_rad_per_count);
+        law.reset([0, upright]);
+        // 0.3 rad off upright and back: the move saturates for several steps.
+        let tilt = (0.3 / sensor.pendulum_rad_per_count).round() as i32;
+        let mut saturated = 0;
+        for k in 0..60 {
+            let offset = if k < 20 { tilt } else { 0 };
+            let u = law.step([0, upright + offset]);
+            saturated += usize::from(u.abs() >= d.input_bounds[1] - 1e-6);
+        }
+        let stats = law.controller().unwrap().stats();
+        let counted = law.fallbacks();
+        assert_eq!(
+            counted,
+            stats.iteration_limits + stats.solver_failures,
+            "the law reports its controller's count"
+        );
+        law.reset([0, upright]);
+        assert_eq!(law.fallbacks(), 0, "reset at the onboard start");
+        (counted, saturated)
+    };
+    let (one, saturated) = run(1, &mut d);
+    eprintln!("one iteration: {one} fallbacks in 60 steps, {saturated} of them saturated");
+    assert!(saturated > 0, "the tilt never saturated the input");
+    assert!(one > 0, "one iteration sufficed on every step");
+    let (at_cap, _) = run(capped, &mut d);
+    assert_eq!(at_cap, 0, "{capped} iterations fell back");
+}
