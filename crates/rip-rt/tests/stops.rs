@@ -156,17 +156,6 @@ fn wait_for_enable(emu: &Emulator, child: &mut std::process::Child) {
     }
 }
 
-/// The simulated time (s) of the swing's first command: the first row of the true state driven
-/// beyond the sign check's pulse. The first enabling command is the pulse, and the swing
-/// starts only after the rig has come to rest from it (seconds later), so a stop timed from
-/// the first enabling command would land while the arm still rests.
-fn swing_start(rows: &[Truth]) -> Option<f64> {
-    let pulse = rip_rt::sign_check::PULSE_VOLTAGE;
-    rows.iter()
-        .find(|r| r.driver == "drive" && r.voltage.abs() > pulse + 0.5)
-        .map(|r| r.t)
-}
-
 /// Waits until the swing has started ([`swing_start`]) and returns its simulated time; a run
 /// that ended before it fails the test with its message.
 fn wait_for_swing(emu: &Emulator, child: &mut std::process::Child) -> f64 {
@@ -188,11 +177,7 @@ fn wait_for_swing(emu: &Emulator, child: &mut std::process::Child) -> f64 {
 fn wait_for_catch(emu: &Emulator, child: &mut std::process::Child) {
     let start = std::time::Instant::now();
     loop {
-        let rows = emu.truth_so_far();
-        let upright =
-            |r: &&Truth| r.driver == "drive" && rip_core::swingup::wrap_angle(r.alpha).abs() < 0.2;
-        if swing_start(&rows).is_some_and(|t| rows.iter().filter(|r| r.t > t).any(|r| upright(&r)))
-        {
+        if first_upright(&emu.truth_so_far()).is_some() {
             return;
         }
         if let Some(status) = child.try_wait().unwrap() {

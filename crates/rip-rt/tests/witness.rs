@@ -53,18 +53,10 @@ struct Excursion {
 
 /// The phase of the run at simulated time `t` ([`Excursion::phase`]).
 fn phase_at(truth: &[Truth], t: f64) -> &'static str {
-    let pulse = rip_rt::sign_check::PULSE_VOLTAGE;
-    let Some(swing) = truth
-        .iter()
-        .find(|r| r.driver == "drive" && r.voltage.abs() > pulse + 0.5)
-        .map(|r| r.t)
-    else {
+    let Some(swing) = swing_start(truth) else {
         return "before the swing";
     };
-    let upright = truth
-        .iter()
-        .find(|r| r.t > swing && rip_core::swingup::wrap_angle(r.alpha).abs() < 0.2)
-        .map_or(f64::INFINITY, |r| r.t);
+    let upright = first_upright(truth).unwrap_or(f64::INFINITY);
     match t {
         t if t < swing => "before the swing",
         t if t < upright => "swing",

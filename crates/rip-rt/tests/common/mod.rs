@@ -363,6 +363,29 @@ pub struct Truth {
     pub driver: String,
 }
 
+/// The simulated time (s) of the swing's first command, on the emulator's true state: the
+/// first driven row above the sign check's pulse by 0.5 V, which the pulse itself never
+/// reaches. The first enabling command is the pulse, and the swing starts only after the rig
+/// has come to rest from it (seconds later), so a fault or a stop timed from the first
+/// enabling command would land while the arm still rests.
+pub fn swing_start(rows: &[Truth]) -> Option<f64> {
+    let pulse = rip_rt::sign_check::PULSE_VOLTAGE;
+    rows.iter()
+        .find(|r| r.driver == "drive" && r.voltage.abs() > pulse + 0.5)
+        .map(|r| r.t)
+}
+
+/// The swing's first arrival near upright, the catch: the first driven row after
+/// [`swing_start`] with the pendulum within 0.2 rad of upright.
+pub fn first_upright(rows: &[Truth]) -> Option<f64> {
+    let swing = swing_start(rows)?;
+    rows.iter()
+        .find(|r| {
+            r.t > swing && r.driver == "drive" && rip_core::swingup::wrap_angle(r.alpha).abs() < 0.2
+        })
+        .map(|r| r.t)
+}
+
 /// The complete rows of a true-state record (a row being written is skipped).
 pub fn parse_truth(text: &str) -> Vec<Truth> {
     let mut lines = text.lines();
