@@ -34,6 +34,14 @@
 //! and refused with one more, and with the file's 200, after which onboard mode does not
 //! start. The line is `pil: budget accepted=max_iterations:5 refused=max_iterations:6,200`.
 //!
+//! **Overrun**: last, the same image boots in a second QEMU whose core takes 64 ns of virtual
+//! time per instruction (`-icount shift=6`, ten times slower than the chip at CPI 2), and runs
+//! the 1 kHz MPC onboard. The budget accepts it (it counts instructions, not this core's
+//! time), and its step takes longer than the 1 ms period: SysTick wraps during the step, and
+//! the first step must end onboard mode as an overrun, the final record showing the driver
+//! disabled at 0 V. The line is `pil: overrun step=0 step_us=X step_instr=Y state=overrun
+//! overruns=1 applied_mv=0 enabled=no`.
+//!
 //! Usage: `cargo run --release -p rip-rt --example pil -- IMAGE [STEPS [CONTROLLER]]`, IMAGE
 //! the `qemu` build; the last lines are
 //! `pil: <controller> steps=N max_du=X max_instr=Y balanced=yes|no` and the timer lines. Exit 1
@@ -51,8 +59,8 @@ use std::time::Duration;
 use rip_device::law::ControlLaw;
 use rip_device::Onboard;
 use rip_protocol::{
-    Message, OnboardStart, PilStep, ACK_OK, ONBOARD_RUNNING, PIL_PHASES, PIL_PHASE_QP,
-    PIL_PHASE_SHIFT, PIL_RESET,
+    Message, OnboardStart, PilStep, ACK_OK, ONBOARD_OVERRUN, ONBOARD_RUNNING, PIL_PHASES,
+    PIL_PHASE_QP, PIL_PHASE_SHIFT, PIL_RESET, STATUS_ENABLED,
 };
 use rip_rt::config::Config;
 use rip_rt::controllers::ControllerKind;
@@ -81,13 +89,11 @@ impl Drop for Qemu {
     }
 }
 
-fn boot(image: &str) -> (Qemu, String) {
+/// QEMU on `image` with `-icount icount`; its USART's pty.
+fn boot(image: &str, icount: &str) -> (Qemu, String) {
     let mut child = Command::new("qemu-system-arm")
         .args(["-M", "netduinoplus2", "-nographic", "-monitor", "none"])
-        .args([
-            "-icount",
-            &std::env::var("PIL_ICOUNT").unwrap_or("shift=0".into()),
-        ])
+        .args(["-icount", icount])
         .args(["-serial", "pty", "-kernel", image])
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
@@ -169,18 +175,11 @@ fn main() {
         Ok(part) => PARTS.iter().position(|p| *p == part).map_or(0, |i| i + 1),
         Err(_) => 0,
     };
-    let (qemu, pty) = boot(&image);
+    let icount = std::env::var("PIL_ICOUNT").unwrap_or("shift=0".into());
+    let (qemu, pty) = boot(&image, &icount);
     let port = SerialPort::open(std::path::Path::new(&pty), 115_200).expect("pty");
     let mut link = Link::new(port.io());
-    // Wait for the firmware to boot and answer.
-    let mut up = false;
-    for _ in 0..100 {
-        if let Ok(Some(_)) = link.sample(Duration::from_millis(300)) {
-            up = true;
-            break;
-        }
-    }
-    assert!(up, "the firmware did not answer");
+    assert!(answers(&mut link), "the firmware did not answer");
 
     let mut ok = true;
     let mut lines = Vec::new();
@@ -336,11 +335,20 @@ fn main() {
             }
         }
     }
+    // QEMU is stopped first: the overrun check boots its own.
+    drop(qemu);
+    if !only.as_deref().is_some_and(|o| o != "overrun") {
+        match overrun_check(&image) {
+            Ok(line) => lines.push(format!("pil: overrun {line}")),
+            Err(e) => {
+                println!("pil: overrun failed: {e}");
+                ok = false;
+            }
+        }
+    }
     for l in &lines {
         println!("{l}");
     }
-    // `exit` runs no destructors: QEMU is stopped first, or it would outlive the check.
-    drop(qemu);
     std::process::exit(if ok { 0 } else { 1 });
 }
 
@@ -450,5 +458,84 @@ fn timer_check(link: &mut Link<'_>, period_ms: f64, periods: usize) -> Result<St
     Ok(format!(
         "periods={periods} mean_us={mean:.3} min_us={min} max_us={max} max_step_instr={} overruns=0",
         (f64::from(max_ticks) * INSTR_PER_TICK).round()
+    ))
+}
+
+/// Whether the firmware on `link` answers a sample request, waiting for its boot.
+fn answers(link: &mut Link<'_>) -> bool {
+    (0..100).any(|_| matches!(link.sample(Duration::from_millis(300)), Ok(Some(_))))
+}
+
+/// QEMU's instruction time for the overrun check (module docs, "Overrun"): 64 ns of virtual
+/// time per instruction, a core ten times slower than the chip at CPI 2.
+const OVERRUN_ICOUNT: &str = "shift=6";
+/// Nanoseconds of virtual time per instruction under [`OVERRUN_ICOUNT`].
+const OVERRUN_NS_PER_INSTR: f64 = 64.0;
+
+/// An overrun on QEMU's clock (module docs, "Overrun"): the same image under
+/// [`OVERRUN_ICOUNT`], where the 1 kHz MPC the device's budget accepts (its cost is counted
+/// in instructions, not in this core's time) takes longer than its period. Its first step must
+/// end onboard mode as an overrun, and the final record must show the motor disabled at 0 V.
+fn overrun_check(image: &str) -> Result<String, String> {
+    let (qemu, pty) = boot(image, OVERRUN_ICOUNT);
+    let port = SerialPort::open(std::path::Path::new(&pty), 115_200).map_err(|e| e.to_string())?;
+    let mut link = Link::new(port.io());
+    if !answers(&mut link) {
+        return Err("the firmware did not answer".into());
+    }
+    let cfg = config(1.0);
+    let design = onboard::design(ControllerKind::Mpc, &cfg)?;
+    link.upload(&onboard::image(&design, &cfg)?)?;
+    link.telemetry.clear();
+    let start = OnboardStart {
+        decimation: 1,
+        host_timeout_ms: u16::MAX,
+        arm_center: 0,
+        arm_limit: u32::MAX,
+        pendulum_center: 0,
+        pendulum_limit: u32::MAX,
+    };
+    let (code, state) = link.request(Message::OnboardStart(start))?;
+    if code != ACK_OK {
+        return Err(format!("start refused (ack code {code}, state {state})"));
+    }
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    let ended = |t: &[rip_protocol::Telemetry]| t.iter().any(|r| r.onboard != ONBOARD_RUNNING);
+    while !ended(&link.telemetry) && std::time::Instant::now() < deadline {
+        link.send(Message::SampleRequest)
+            .map_err(|e| e.to_string())?;
+        link.wait(Duration::from_millis(10), |_| false)
+            .map_err(|e| e.to_string())?;
+    }
+    let stopped_by_host = !ended(&link.telemetry);
+    link.stop();
+    drop(qemu);
+    if stopped_by_host {
+        return Err(format!(
+            "no overrun within 60 s: {} records, the last {:?}",
+            link.telemetry.len(),
+            link.telemetry.last()
+        ));
+    }
+    let last = *link
+        .telemetry
+        .iter()
+        .find(|r| r.onboard != ONBOARD_RUNNING)
+        .unwrap();
+    let period_ticks = 168_000u32;
+    let disabled = last.status & STATUS_ENABLED == 0 && last.applied_mv == 0;
+    if last.onboard != ONBOARD_OVERRUN
+        || last.overruns != 1
+        || last.step_cycles <= period_ticks
+        || !disabled
+    {
+        return Err(format!("the run ended with {last:?}"));
+    }
+    let instr = f64::from(last.step_cycles) / 0.168 / OVERRUN_NS_PER_INSTR;
+    Ok(format!(
+        "step={} step_us={:.0} step_instr={instr:.0} state=overrun overruns={} applied_mv=0 enabled=no",
+        last.step,
+        f64::from(last.step_cycles) / 168.0,
+        last.overruns
     ))
 }
