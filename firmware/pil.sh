@@ -7,6 +7,7 @@
 #   pil: <controller> steps=N max_du=X max_instr=Y balanced=yes|no
 #   pil: timer-<rate> periods=N mean_us=X min_us=Y max_us=Z max_step_instr=W overruns=0
 #   pil: budget accepted=... refused=...
+#   pil: cli-<controller> exit=0 rows=N max_step_cycles=C
 #   pil: overrun step=0 step_us=X step_instr=Y state=overrun overruns=1 applied_mv=0 enabled=no
 #
 #   firmware/build.sh --no-default-features --features qemu
@@ -15,5 +16,5 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 image=${1:-firmware/target/thumbv7em-none-eabihf/release/rip-firmware}
 steps=${2:-10000}
-cargo build --release --quiet -p rip-rt --example pil
+cargo build --release --quiet -p rip-rt --bins --example pil
 exec target/release/examples/pil "$image" "$steps"

@@ -55,6 +55,11 @@ pub const SYSTICK_HZ: u32 = if cfg!(feature = "qemu") || !cfg!(feature = "usart"
 /// The bridge has a fault line. QEMU models no GPIO (every pin reads low, the fault level), so
 /// the `qemu` build reads none; a board build always does.
 pub const HAS_FAULT_LINE: bool = !cfg!(feature = "qemu");
+/// The encoders are read. QEMU models no encoder mode: its TIM3 counts the timer clock, an arm
+/// that would read as turning a million counts a second, whatever the timer's enable bit says.
+/// The `qemu` build reads both counters as 0, a rig at rest, so that a run from the command
+/// line can start against the image; a board build always reads them.
+pub const HAS_ENCODERS: bool = !cfg!(feature = "qemu");
 
 /// Clocks: the Discovery's 8 MHz crystal, 168 MHz core, 48 MHz for USB. The USART build for
 /// QEMU runs on the internal 16 MHz oscillator, because QEMU does not model the RCC's ready flags
@@ -151,9 +156,13 @@ pub struct Board {
 }
 
 impl Board {
-    /// The 16-bit encoder counters (arm, pendulum).
+    /// The 16-bit encoder counters (arm, pendulum); 0 in the `qemu` build ([`HAS_ENCODERS`]).
     pub fn encoders(&self) -> [u16; 2] {
-        [self.arm.count(), self.pendulum.count()]
+        if HAS_ENCODERS {
+            [self.arm.count(), self.pendulum.count()]
+        } else {
+            [0, 0]
+        }
     }
 
     /// The microsecond clock.

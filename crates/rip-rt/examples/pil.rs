@@ -34,13 +34,21 @@
 //! and refused with one more, and with the file's 200, after which onboard mode does not
 //! start. The line is `pil: budget accepted=max_iterations:5 refused=max_iterations:6,200`.
 //!
-//! **Overrun**: last, the same image boots in a second QEMU whose core takes 64 ns of virtual
+//! **Overrun**: then the same image boots in a second QEMU whose core takes 64 ns of virtual
 //! time per instruction (`-icount shift=6`, ten times slower than the chip at CPI 2), and runs
 //! the 1 kHz MPC onboard. The budget accepts it (it counts instructions, not this core's
 //! time), and its step takes longer than the 1 ms period: SysTick wraps during the step, and
 //! the first step must end onboard mode as an overrun, the final record showing the driver
 //! disabled at 0 V. The line is `pil: overrun step=0 step_us=X step_instr=Y state=overrun
 //! overruns=1 applied_mv=0 enabled=no`.
+//!
+//! **Command line**: last, `rip-rt run --onboard` itself (the `rip-rt` binary beside this
+//! example) runs LQR, LQG and MPC against a freshly booted image for a few seconds: it must
+//! upload, verify and start the design, log the telemetry, stop on its duration with exit 0,
+//! and leave the device, asked afterwards, disabled at 0 V. The `qemu` build reads its
+//! encoders as 0 and the run's configuration sets `device.pendulum_zero = "up"`, so the image
+//! sees an upright pendulum at rest. The lines are `pil: cli-<controller> exit=0 rows=N
+//! max_step_cycles=C`.
 //!
 //! Usage: `cargo run --release -p rip-rt --example pil -- IMAGE [STEPS [CONTROLLER]]`, IMAGE
 //! the `qemu` build; the last lines are
@@ -346,6 +354,19 @@ fn main() {
             }
         }
     }
+    for controller in ["lqr", "lqg", "mpc"] {
+        let name = format!("cli-{controller}");
+        if only.as_deref().is_some_and(|o| o != name) {
+            continue;
+        }
+        match cli_check(&image, controller) {
+            Ok(line) => lines.push(format!("pil: {name} {line}")),
+            Err(e) => {
+                println!("pil: {name} failed: {e}");
+                ok = false;
+            }
+        }
+    }
     for l in &lines {
         println!("{l}");
     }
@@ -538,4 +559,93 @@ fn overrun_check(image: &str) -> Result<String, String> {
         f64::from(last.step_cycles) / 168.0,
         last.overruns
     ))
+}
+
+/// Seconds of each [`cli_check`] run.
+const CLI_SECONDS: f64 = 4.0;
+
+/// `rip-rt run --onboard` itself against a freshly booted image (module docs, "Command
+/// line"): the `qemu` build reads its encoders as 0, which `device.pendulum_zero = "up"` makes
+/// the upright pendulum at rest, so the run uploads, verifies and starts the design,
+/// supervises the telemetry for [`CLI_SECONDS`] of wall time and stops the motor: exit 0, a
+/// logged row per telemetry record, and the device, asked after the run, disabled at 0 V. QEMU's clock runs about ten times slower than wall time here (the firmware's
+/// main loop never sleeps, and `-icount shift=0` makes its time its instruction count), so the
+/// device steps far fewer than the host's periods.
+fn cli_check(image: &str, controller: &str) -> Result<String, String> {
+    let rip_rt = std::env::current_exe()
+        .map_err(|e| e.to_string())?
+        .parent()
+        .and_then(|examples| examples.parent())
+        .map(|release| release.join("rip-rt"))
+        .ok_or("no target directory")?;
+    let dir = std::env::temp_dir().join(format!("riprs-pil-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let config = dir.join("qemu.toml");
+    std::fs::write(&config, "[device]\npendulum_zero = \"up\"\n").map_err(|e| e.to_string())?;
+    let log = dir.join(format!("{controller}.csv"));
+    let (qemu, pty) = boot(image, "shift=0");
+    // The firmware answers before the run opens the port: the run's own start-up waits less.
+    {
+        let port =
+            SerialPort::open(std::path::Path::new(&pty), 115_200).map_err(|e| e.to_string())?;
+        if !answers(&mut Link::new(port.io())) {
+            return Err("the firmware did not answer".into());
+        }
+    }
+    let out = Command::new(&rip_rt)
+        .args([
+            "run",
+            "--port",
+            &pty,
+            "--onboard",
+            "--controller",
+            controller,
+        ])
+        .args(["--duration", &CLI_SECONDS.to_string()])
+        .arg("--config")
+        .arg(&config)
+        .arg("--log")
+        .arg(&log)
+        .stdin(Stdio::null())
+        .output()
+        .map_err(|e| format!("{}: {e}", rip_rt.display()))?;
+    // The device's own state after the run, not the run's last record: QEMU's slow clock may
+    // not have reached the step that reports the stop before the run exited.
+    let after = {
+        let port =
+            SerialPort::open(std::path::Path::new(&pty), 115_200).map_err(|e| e.to_string())?;
+        Link::new(port.io())
+            .sample(Duration::from_secs(2))
+            .map_err(|e| e.to_string())?
+            .ok_or("no measurement after the run")?
+    };
+    drop(qemu);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let text = std::fs::read_to_string(&log).map_err(|e| format!("{}: {e}", log.display()))?;
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let _header = lines.next();
+    let rows: Vec<&str> = lines.filter(|l| l.ends_with(",onboard")).collect();
+    let field = |name: &str| {
+        stderr
+            .split_whitespace()
+            .find_map(|w| w.strip_prefix(name))
+            .and_then(|v| v.parse::<usize>().ok())
+    };
+    let code = out.status.code();
+    let disabled = after.status & STATUS_ENABLED == 0 && after.applied_mv == 0;
+    if code != Some(0)
+        || rows.len() < 5
+        || field("telemetry=") != Some(rows.len())
+        || !disabled
+        || !stderr.contains("stop frames sent (0 V, disabled)")
+    {
+        return Err(format!(
+            "exit {code:?}, {} onboard rows, then {after:?}: {stderr}",
+            rows.len()
+        ));
+    }
+    let cycles = field("max_step_cycles=").unwrap_or(0);
+    let rows = rows.len();
+    Ok(format!("exit=0 rows={rows} max_step_cycles={cycles}"))
 }
