@@ -67,8 +67,8 @@ use std::time::Duration;
 use rip_device::law::ControlLaw;
 use rip_device::Onboard;
 use rip_protocol::{
-    Message, OnboardStart, PilStep, ACK_OK, ONBOARD_OVERRUN, ONBOARD_RUNNING, PIL_PHASES,
-    PIL_PHASE_QP, PIL_PHASE_SHIFT, PIL_RESET, STATUS_ENABLED,
+    Message, OnboardStart, PilStep, Telemetry, ACK_OK, ONBOARD_OVERRUN, ONBOARD_RUNNING,
+    PIL_PHASES, PIL_PHASE_QP, PIL_PHASE_SHIFT, PIL_RESET, STATUS_ENABLED,
 };
 use rip_rt::config::Config;
 use rip_rt::controllers::ControllerKind;
@@ -392,12 +392,8 @@ fn budget_check(link: &mut Link<'_>) -> Result<String, String> {
             Err(e) => return Err(format!("max_iterations {over}: {e}")),
         }
         let start = OnboardStart {
-            decimation: 1,
             host_timeout_ms: 50,
-            arm_center: 0,
-            arm_limit: u32::MAX,
-            pendulum_center: 0,
-            pendulum_limit: u32::MAX,
+            ..WIDE_OPEN
         };
         let (code, _) = link.request(Message::OnboardStart(start))?;
         if code == ACK_OK {
@@ -414,36 +410,52 @@ fn budget_check(link: &mut Link<'_>) -> Result<String, String> {
     ))
 }
 
+/// Onboard start settings no reading can leave, with the longest host timeout: for the checks
+/// of the timer and the step, since QEMU models no encoders.
+const WIDE_OPEN: OnboardStart = OnboardStart {
+    decimation: 1,
+    host_timeout_ms: u16::MAX,
+    arm_center: 0,
+    arm_limit: u32::MAX,
+    pendulum_center: 0,
+    pendulum_limit: u32::MAX,
+};
+
+/// Uploads `image` and starts it with [`WIDE_OPEN`], then collects telemetry until `done`
+/// holds of it or `timeout` (wall time) passes. QEMU runs its virtual clock slower than real
+/// time; a sample request every 10 ms keeps the device's host-silence watchdog fed.
+fn run_wide_open(
+    link: &mut Link<'_>,
+    image: &[u8],
+    timeout: Duration,
+    done: impl Fn(&[Telemetry]) -> bool,
+) -> Result<(), String> {
+    link.upload(image)?;
+    link.telemetry.clear();
+    let (code, state) = link.request(Message::OnboardStart(WIDE_OPEN))?;
+    if code != ACK_OK {
+        return Err(format!("start refused (ack code {code}, state {state})"));
+    }
+    let deadline = std::time::Instant::now() + timeout;
+    while !done(&link.telemetry) && std::time::Instant::now() < deadline {
+        link.send(Message::SampleRequest)
+            .map_err(|e| e.to_string())?;
+        link.wait(Duration::from_millis(10), |_| false)
+            .map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
 /// Onboard mode at `period_ms` for `periods` steps, timed by QEMU's clock (module docs,
 /// "Timer"): the line's fields, or what failed.
 fn timer_check(link: &mut Link<'_>, period_ms: f64, periods: usize) -> Result<String, String> {
     let mut cfg = Config::default();
     cfg.loop_.period_ms = period_ms;
     let design = onboard::design(ControllerKind::Lqr, &cfg)?;
-    link.upload(&onboard::image(&design, &cfg)?)?;
-    link.telemetry.clear();
-    // Limits no reading can leave, and the longest host timeout: only the timer is tested.
-    let start = OnboardStart {
-        decimation: 1,
-        host_timeout_ms: u16::MAX,
-        arm_center: 0,
-        arm_limit: u32::MAX,
-        pendulum_center: 0,
-        pendulum_limit: u32::MAX,
-    };
-    let (code, state) = link.request(Message::OnboardStart(start))?;
-    if code != ACK_OK {
-        return Err(format!("start refused (ack code {code}, state {state})"));
-    }
-    // QEMU runs its virtual clock slower than real time; a sample request every 10 ms keeps
-    // the device's host-silence watchdog fed.
-    let deadline = std::time::Instant::now() + Duration::from_secs(120);
-    while link.telemetry.len() < periods + 1 && std::time::Instant::now() < deadline {
-        link.send(Message::SampleRequest)
-            .map_err(|e| e.to_string())?;
-        link.wait(Duration::from_millis(10), |_| false)
-            .map_err(|e| e.to_string())?;
-    }
+    let image = onboard::image(&design, &cfg)?;
+    run_wide_open(link, &image, Duration::from_secs(120), |t| {
+        t.len() > periods
+    })?;
     link.stop();
     let t: Vec<_> = link.telemetry.iter().take(periods + 1).copied().collect();
     if t.len() < periods + 1 {
@@ -506,28 +518,13 @@ fn overrun_check(image: &str) -> Result<String, String> {
     }
     let cfg = config(1.0);
     let design = onboard::design(ControllerKind::Mpc, &cfg)?;
-    link.upload(&onboard::image(&design, &cfg)?)?;
-    link.telemetry.clear();
-    let start = OnboardStart {
-        decimation: 1,
-        host_timeout_ms: u16::MAX,
-        arm_center: 0,
-        arm_limit: u32::MAX,
-        pendulum_center: 0,
-        pendulum_limit: u32::MAX,
-    };
-    let (code, state) = link.request(Message::OnboardStart(start))?;
-    if code != ACK_OK {
-        return Err(format!("start refused (ack code {code}, state {state})"));
-    }
-    let deadline = std::time::Instant::now() + Duration::from_secs(60);
-    let ended = |t: &[rip_protocol::Telemetry]| t.iter().any(|r| r.onboard != ONBOARD_RUNNING);
-    while !ended(&link.telemetry) && std::time::Instant::now() < deadline {
-        link.send(Message::SampleRequest)
-            .map_err(|e| e.to_string())?;
-        link.wait(Duration::from_millis(10), |_| false)
-            .map_err(|e| e.to_string())?;
-    }
+    let ended = |t: &[Telemetry]| t.iter().any(|r| r.onboard != ONBOARD_RUNNING);
+    run_wide_open(
+        &mut link,
+        &onboard::image(&design, &cfg)?,
+        Duration::from_secs(60),
+        ended,
+    )?;
     let stopped_by_host = !ended(&link.telemetry);
     link.stop();
     drop(qemu);
