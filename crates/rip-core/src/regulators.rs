@@ -36,7 +36,8 @@
 //!
 //! Both step with [`rip_control::Controller`], the `no_std` code `rip-rt` and the firmware run
 //! too: these types check their arguments, build the [`rip_control::Design`]
-//! ([`Lqr::control_design`], [`Lqg::control_design`]) and convert at the boundary.
+//! ([`Lqr::control_design`], [`Lqg::control_design`]) and hand every step to an
+//! [`OnboardController`], which converts at the boundary (the run-time MPC uses the same).
 
 use nalgebra::SMatrix;
 
@@ -44,7 +45,7 @@ use crate::controller::{Controller, StepStatus};
 use crate::error::{Result, RipError};
 use crate::linalg::{check_finite, check_shape, Mat};
 use crate::lqr::dlqr;
-use crate::onboard::{put, refused, ControlDesign, ControlKind, ControlStep};
+use crate::onboard::{put, ControlDesign, ControlKind, OnboardController};
 use crate::paper;
 
 /// Default cut-off (Hz) of [`Lqr`]'s rate filter.
@@ -86,35 +87,6 @@ fn gain_row(k: &Mat) -> Result<SMatrix<f64, 1, NX>> {
     Ok(SMatrix::<f64, 1, NX>::from_fn(|_, j| k[(0, j)]))
 }
 
-/// The rip-control controller of `design` (already checked field by field here).
-fn runner(design: &ControlDesign) -> Result<Box<ControlStep<f64>>> {
-    ControlStep::new(design).map(Box::new).map_err(refused)
-}
-
-/// The step of either regulator through rip-control: the move into `u[0]` and the status.
-#[inline]
-fn step_with(inner: &mut ControlStep<f64>, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
-    let mv = inner.step(rip_control::Measurement {
-        angles: [y[0], y[1]],
-        reference: [r[0], r[1]],
-    });
-    u[0] = mv.voltage;
-    if mv.status.is_nominal() {
-        StepStatus::Nominal
-    } else {
-        StepStatus::Fallback
-    }
-}
-
-/// `x` as the four plant states, NaN when it is short (a seed that is then a held period).
-fn plant_state(x: &[f64]) -> [f64; NX] {
-    let mut s = [f64::NAN; NX];
-    if x.len() >= NX {
-        s.copy_from_slice(&x[..NX]);
-    }
-    s
-}
-
 /// LQR on measured angles with rates from a filtered difference (the paper's section 4: "the
 /// states are measured and computed", no estimator).
 ///
@@ -144,7 +116,7 @@ fn plant_state(x: &[f64]) -> [f64; NX] {
 /// [`StepStatus::Fallback`].
 #[derive(Debug, Clone)]
 pub struct Lqr {
-    inner: Box<ControlStep<f64>>,
+    inner: OnboardController,
 }
 
 impl Lqr {
@@ -167,7 +139,9 @@ impl Lqr {
             ..ControlDesign::default()
         };
         d.k.copy_from_slice(k.as_slice());
-        Ok(Self { inner: runner(&d)? })
+        Ok(Self {
+            inner: OnboardController::new(&d)?,
+        })
     }
 
     /// Designs `K = dlqr(A_d, B_d, Q, R)` and builds the regulator.
@@ -186,9 +160,7 @@ impl Lqr {
     }
 
     fn rebuilt(mut self, edit: impl FnOnce(&mut ControlDesign)) -> Result<Self> {
-        let mut d = self.inner.design().clone();
-        edit(&mut d);
-        self.inner = runner(&d)?;
+        self.inner = self.inner.rebuilt(edit)?;
         Ok(self)
     }
 
@@ -239,7 +211,7 @@ impl Lqr {
 
     /// The integrator state `x_i` (zero without integral action).
     pub fn integrator(&self) -> f64 {
-        self.inner.integrator()
+        self.inner.control().integrator()
     }
 }
 
@@ -253,23 +225,23 @@ impl Controller for Lqr {
     }
 
     fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
-        step_with(&mut self.inner, y, r, u)
+        self.inner.step(y, r, u)
     }
 
     /// The estimate update of [`step`](Controller::step) (an unusable sample counts as held);
     /// the input plays no part in it.
     fn observe(&mut self, y: &[f64], u: &[f64]) {
-        self.inner.observe([y[0], y[1]], u[0]);
+        self.inner.observe(y, u);
     }
 
     /// `x̂ = x`, the next rate difference taken from this sample's angles.
     fn seed(&mut self, x: &[f64], u: &[f64]) {
-        self.inner.seed(plant_state(x), u[0]);
+        self.inner.seed(x, u);
     }
 
     /// Counts the period, so that the next rate difference spans it (type docs).
     fn hold(&mut self, u: &[f64]) {
-        self.inner.hold(u[0]);
+        self.inner.hold(u);
     }
 
     fn reset(&mut self) {
@@ -281,7 +253,7 @@ impl Controller for Lqr {
     }
 
     fn state_estimate(&self) -> Option<&[f64]> {
-        Some(self.inner.estimate())
+        self.inner.state_estimate()
     }
 }
 
@@ -308,7 +280,7 @@ impl Controller for Lqr {
 /// `x̂[k|k−1]` and reported as [`StepStatus::Fallback`].
 #[derive(Debug, Clone)]
 pub struct Lqg {
-    inner: Box<ControlStep<f64>>,
+    inner: OnboardController,
     l: Mat,
     m: Mat,
 }
@@ -360,16 +332,14 @@ impl Lqg {
         put("L", &mut d.l, l, cap, rip_control::MAX_NY)?;
         put("M", &mut d.m, m, cap, rip_control::MAX_NY)?;
         Ok(Self {
-            inner: runner(&d)?,
+            inner: OnboardController::new(&d)?,
             l: l.clone(),
             m: m.clone(),
         })
     }
 
     fn rebuilt(mut self, edit: impl FnOnce(&mut ControlDesign)) -> Result<Self> {
-        let mut d = self.inner.design().clone();
-        edit(&mut d);
-        self.inner = runner(&d)?;
+        self.inner = self.inner.rebuilt(edit)?;
         Ok(self)
     }
 
@@ -408,7 +378,7 @@ impl Lqg {
 
     /// The integrator state `x_i` (zero without integral action).
     pub fn integrator(&self) -> f64 {
-        self.inner.integrator()
+        self.inner.control().integrator()
     }
 
     /// Predictor gain `L` (n×2).
@@ -448,24 +418,24 @@ impl Controller for Lqg {
     }
 
     fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
-        step_with(&mut self.inner, y, r, u)
+        self.inner.step(y, r, u)
     }
 
     /// The correction of [`step`](Controller::step) with `y`, then the prediction with the
     /// applied `u` (a non-finite `u` keeps the last applied input, as in
     /// [`hold`](Controller::hold)).
     fn observe(&mut self, y: &[f64], u: &[f64]) {
-        self.inner.observe([y[0], y[1]], u[0]);
+        self.inner.observe(y, u);
     }
 
     /// `x̂[k|k] = [x; 0]`, then `x̂[k+1|k] = A x̂[k|k] + B_u u`.
     fn seed(&mut self, x: &[f64], u: &[f64]) {
-        self.inner.seed(plant_state(x), u[0]);
+        self.inner.seed(x, u);
     }
 
     /// Advances the estimator over the period with `u` and no innovation (type docs).
     fn hold(&mut self, u: &[f64]) {
-        self.inner.hold(u[0]);
+        self.inner.hold(u);
     }
 
     fn reset(&mut self) {
@@ -477,7 +447,7 @@ impl Controller for Lqg {
     }
 
     fn state_estimate(&self) -> Option<&[f64]> {
-        Some(self.inner.estimate())
+        self.inner.state_estimate()
     }
 }
 

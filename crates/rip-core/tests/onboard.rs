@@ -10,8 +10,8 @@ use rand::{rngs::StdRng, Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use rip_control::{Controller as Step, Measurement, Status};
 type CDesign = rip_control::Design<f64>;
-use rip_core::mpc::QpSolver;
-use rip_core::spec::Spec;
+use rip_core::mpc::{QpSolver, QpStatus};
+use rip_core::spec::{ControllerKind, Spec};
 
 fn specs() -> Vec<(&'static str, Spec)> {
     vec![
@@ -337,4 +337,218 @@ fn single_precision_meets_one_millivolt_for_the_lqr_but_not_for_the_mpc() {
             rip_control::Kind::Lqg => {}
         }
     }
+}
+
+/// What the controllers are asked to do at a sample of [`mpcs_on_one_run`].
+#[derive(Clone, Copy, PartialEq)]
+enum Act {
+    Step,
+    Hold,
+    /// Someone else's input (a supervisor's), then a restart from the true state.
+    Observe,
+    Seed,
+}
+
+/// The schedule of sample `k`: mostly steps, a missed sample every 97, and every 400 samples
+/// a 10-sample stretch of an outside input ended by a seed, as a swing-up hands over.
+fn act(k: usize) -> Act {
+    match k % 400 {
+        200..=209 => Act::Observe,
+        210 => Act::Seed,
+        _ if k % 97 == 50 => Act::Hold,
+        _ => Act::Step,
+    }
+}
+
+/// Worst move differences (V) and counts of [`mpcs_on_one_run`].
+#[derive(Default)]
+struct Agreement {
+    /// Over the moves Clarabel solved to full accuracy.
+    vs_clarabel: f64,
+    vs_general_active_set: f64,
+    moves: usize,
+    saturated: usize,
+    /// Moves Clarabel solved to full accuracy, and the saturated ones among them.
+    solved: usize,
+    solved_saturated: usize,
+}
+
+/// The assembly's run-time MPC (rip-control's controller, the device's code) in a closed loop
+/// on the nonlinear plant through arm steps, sensor noise and torque kicks (up to `kicks`
+/// N·m), with held, observed and seeded samples and the spec's compensation between the move
+/// and the plant, against rip-core's general `Mpc` (its own estimator step and move
+/// assembly) on the same samples:
+///
+/// - with Clarabel, an independent interior-point solver: its estimator takes every sample
+///   with the input the loop applied, and each move is its own solve from its own estimate
+///   (compared where Clarabel reports full accuracy).
+///   Fed its own moves instead, a solver's 1e-9 would grow along the controller's own
+///   dynamics (`A − L C − B K` is not stable for a balancing controller); run in a loop of
+///   its own, the plant's Coulomb friction (stick or slip) would part the two loops;
+/// - with the active set, as a `Controller` taking its own moves: the same QP solver, so any
+///   difference is in the estimator, the hold, observe and seed, or the move.
+fn mpcs_on_one_run(spec: &Spec, kicks: f64, seed: u64, steps: usize, out: &mut Agreement) {
+    use rip_core::onboard::OnboardController;
+    use rip_core::{Controller, StepStatus};
+    let design = spec.design(0.01).unwrap();
+    let mut general = design.mpc().unwrap();
+    assert!(
+        OnboardController::for_mpc(&general).is_some(),
+        "the default MPC runs on rip-control"
+    );
+    let mut cl_spec = spec.clone();
+    cl_spec.mpc.solver = QpSolver::Clarabel;
+    // Its default bound stops a few of these solves short of full accuracy.
+    cl_spec.mpc.max_iterations = 2000;
+    let mut clarabel = cl_spec.design(0.01).unwrap().mpc().unwrap();
+    assert!(OnboardController::for_mpc(&clarabel).is_none());
+    let mut run_time = design.balance(ControllerKind::Mpc).unwrap();
+    let law = design.compensation().copied();
+    let limit = design.bounds().1;
+    let plant = spec.plant().unwrap();
+    let mut rng = StdRng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, 1e-3).unwrap();
+    let mut x = rip_core::plant::State::new(0.0, 0.0, 0.05, 0.0);
+    let (mut u, mut v) = ([0.0], [0.0]);
+    let mut kick = 0.0;
+    for k in 0..steps {
+        let r = [if (k / 300) % 2 == 0 { 0.0 } else { 1.0 }, 0.0];
+        let y = [x[0] + noise.sample(&mut rng), x[2] + noise.sample(&mut rng)];
+        match act(k) {
+            Act::Step => {
+                let u_prev = u;
+                assert_eq!(run_time.step(&y, &r, &mut u), StepStatus::Nominal, "k={k}");
+                assert_eq!(general.step(&y, &r, &mut v), StepStatus::Nominal, "k={k}");
+                clarabel.observe(&y, &u);
+                let estimate = clarabel.estimator().posterior().as_slice().to_vec();
+                let sol = clarabel.solve(&estimate, &u_prev, &r).unwrap();
+                let saturated = u[0].abs() >= limit - 1e-9;
+                out.vs_general_active_set = out.vs_general_active_set.max((u[0] - v[0]).abs());
+                out.moves += 1;
+                out.saturated += usize::from(saturated);
+                // Its reduced-accuracy solutions are no reference at this tolerance.
+                if sol.status == QpStatus::Solved {
+                    out.vs_clarabel = out.vs_clarabel.max((u[0] - sol.u[0]).abs());
+                    out.solved += 1;
+                    out.solved_saturated += usize::from(saturated);
+                } else {
+                    assert_eq!(sol.status, QpStatus::AlmostSolved, "k={k}");
+                }
+            }
+            Act::Hold => {
+                run_time.hold(&u);
+                general.hold(&u);
+                clarabel.hold(&u);
+            }
+            Act::Observe => {
+                u[0] = (0.3 * k as f64).sin();
+                run_time.observe(&y, &u);
+                general.observe(&y, &u);
+                clarabel.observe(&y, &u);
+            }
+            Act::Seed => {
+                u[0] = 0.0;
+                let s = [x[0], x[1], x[2], x[3]];
+                run_time.seed(&s, &u);
+                general.seed(&s, &u);
+                clarabel.seed(&s, &u);
+            }
+        }
+        // The voltage the plant receives, as the assembly's compensation writes it.
+        let written = match law {
+            Some(law) => law.apply(u[0], run_time.state_estimate().unwrap()[1]),
+            None => u[0],
+        };
+        if k % 150 == 0 {
+            kick = rng.gen_range(-kicks..kicks);
+        } else if k % 150 == 10 {
+            kick = 0.0;
+        }
+        for _ in 0..10 {
+            plant.rk4_step(&mut x, written, kick, 0.001);
+        }
+        assert!(x[2].abs() < 1.0, "seed {seed} k={k}: fell");
+    }
+}
+
+#[test]
+fn the_run_time_mpc_moves_as_the_general_mpc_with_clarabel() {
+    let dead_zone = Spec::parse("[plant]\npreset = 'qube_servo2'\nCr = 0.003\nVd = 0.4\n").unwrap();
+    assert!(dead_zone.design(0.01).unwrap().compensation().is_some());
+    // The kicks each pendulum survives while they saturate the input, and how many of its
+    // moves Clarabel solves to full accuracy at least (on the QUBE's problems it mostly
+    // stops at reduced accuracy, within 2e-4 V).
+    let cases = [
+        ("paper", Spec::default(), 0.04, 2000),
+        ("qube_servo2 dead zone", dead_zone, 0.01, 100),
+    ];
+    for (name, spec, kicks, min_solved) in cases {
+        let mut a = Agreement::default();
+        for seed in 0..2 {
+            mpcs_on_one_run(&spec, kicks, seed, 1200, &mut a);
+        }
+        eprintln!(
+            "{name}: {} moves ({} saturated), {} solved by Clarabel ({} saturated); worst \
+             |Δu| vs Clarabel {:e} V, vs the general active set {:e} V",
+            a.moves,
+            a.saturated,
+            a.solved,
+            a.solved_saturated,
+            a.vs_clarabel,
+            a.vs_general_active_set
+        );
+        assert!(a.moves >= 2000, "{name}: {}", a.moves);
+        assert!(
+            a.solved >= min_solved && a.solved_saturated > 0,
+            "{name}: {} solved, {} saturated",
+            a.solved,
+            a.solved_saturated
+        );
+        // Clarabel's interior-point accuracy (3.5e-7 V at worst here).
+        assert!(a.vs_clarabel < 1e-6, "{name}: {:e} V", a.vs_clarabel);
+        // The same QP solver: the estimators and moves agree to round-off.
+        assert!(
+            a.vs_general_active_set < 1e-9,
+            "{name}: {:e} V",
+            a.vs_general_active_set
+        );
+    }
+}
+
+/// The one place the run-time MPC is chosen: rip-control's controller for the default
+/// active set (seen by its fallback law at the iteration bound, which the general `Mpc` does
+/// not share), the general `Mpc` for Clarabel.
+#[test]
+fn the_assembly_runs_the_mpc_on_rip_control_unless_clarabel_is_chosen() {
+    use rip_core::onboard::OnboardController;
+    use rip_core::{Controller, StepStatus};
+    let mut spec = Spec::default();
+    spec.mpc.max_iterations = 1;
+    let design = spec.design(0.01).unwrap();
+    let general = design.mpc().unwrap();
+    let mut run_time = design.balance(ControllerKind::Mpc).unwrap();
+    let mut u = [0.0];
+    let mut limited = 0;
+    for k in 0..50 {
+        // A large tilt: the soft bound and the voltage bound are active, so one iteration
+        // cannot finish.
+        let y = [0.0, if k < 5 { 0.45 } else { 0.0 }];
+        let u_prev = u[0];
+        if run_time.step(&y, &[0.0, 0.0], &mut u) == StepStatus::Nominal {
+            continue;
+        }
+        limited += 1;
+        // rip-control's fallback: the unconstrained minimiser −H⁻¹f, clamped. The general
+        // `Mpc` would apply the previous plan's next move instead.
+        let x = run_time.state_estimate().unwrap();
+        let (h, f, _, _) = general.qp_matrices(x, &[u_prev], &[0.0, 0.0]).unwrap();
+        let z = -h.cholesky().unwrap().solve(&f);
+        let want = (u_prev + z[0]).clamp(-12.0, 12.0);
+        assert!((u[0] - want).abs() < 1e-9, "k={k}: {} vs {want}", u[0]);
+    }
+    assert!(limited > 0);
+    assert!(OnboardController::for_mpc(&general).is_some());
+    spec.mpc.solver = QpSolver::Clarabel;
+    let clarabel = spec.design(0.01).unwrap().mpc().unwrap();
+    assert!(OnboardController::for_mpc(&clarabel).is_none());
 }

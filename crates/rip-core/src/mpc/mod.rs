@@ -72,6 +72,15 @@
 //! plan advances one sample as in a fallback step, and the held input becomes the previous move
 //! `u(k−1)` of the next step.
 //!
+//! # The run-time MPC
+//!
+//! This is the general MPC (several inputs and outputs, long horizons, Clarabel or the active
+//! set) and the design object: [`Mpc::control_design`] is what rip-control runs. The
+//! experiment file's MPC, as `rip-rt` and the simulations run it, steps with rip-control's
+//! controller of that design whenever it computes the same move
+//! ([`OnboardController::for_mpc`](crate::onboard::OnboardController::for_mpc), which also
+//! says how its fallback differs); this type runs otherwise.
+//!
 //! # Size limits
 //!
 //! The condensed matrices are dense, so their size is bounded before anything is built:

@@ -12,7 +12,9 @@
 //!                plant + [kalman] disturbance, MPC scales, eqs. (1)–(11)
 //! LQR            K, lqr.rate_cutoff, clamp to mpc.input_bounds
 //! LQG            K on the estimator (no MPC is built for it)
-//! MPC            [mpc] settings on the same estimator
+//! MPC            [mpc] settings on the same estimator; it runs as rip-control's controller
+//!                of its design (the device's code) when that computes the same move
+//!                (onboard::OnboardController::for_mpc), as the general Mpc otherwise
 //! compensation   when [compensation] finds a dead zone or arm friction to compensate, each
 //!                controller plans within the input bounds shrunk by V_d + V_f and its
 //!                voltage passes through the compensation (crate::compensation)
@@ -30,6 +32,7 @@ use crate::error::RipError;
 use crate::linalg::{c2d, Mat};
 use crate::lqr::dlqr;
 use crate::mpc::{EstimatorDesign, Mpc, MpcSettings, OutputDisturbance};
+use crate::onboard::OnboardController;
 use crate::paper;
 use crate::plant::Plant;
 use crate::regulators::{Lqg, Lqr};
@@ -412,6 +415,20 @@ impl Design {
         })
     }
 
+    /// The MPC as `rip-rt`, the simulations and `riprs compare` run it, planning within
+    /// [`bounds`](Self::bounds): [`mpc`](Self::mpc)'s design stepped by rip-control, the code
+    /// the device runs, whenever that computes the same move
+    /// ([`OnboardController::for_mpc`]: the active-set solver, a design within rip-control's
+    /// capacities); otherwise the general [`Mpc`] itself (Clarabel, a design too large for
+    /// the device).
+    pub fn run_time_mpc(&self) -> Result<Box<dyn Controller>, SpecError> {
+        let mpc = self.mpc()?;
+        Ok(match OnboardController::for_mpc(&mpc) {
+            Some(onboard) => Box::new(onboard),
+            None => Box::new(mpc),
+        })
+    }
+
     /// The controller `kind` as it runs: [`balance`](Self::balance) with the compensation
     /// around it ([`compensate`](Self::compensate)).
     pub fn controller(&self, kind: ControllerKind) -> Result<Box<dyn Controller>, SpecError> {
@@ -424,7 +441,7 @@ impl Design {
         Ok(match kind {
             ControllerKind::Lqr => Box::new(self.lqr()?),
             ControllerKind::Lqg => Box::new(self.lqg()?),
-            ControllerKind::Mpc => Box::new(self.mpc()?),
+            ControllerKind::Mpc => self.run_time_mpc()?,
         })
     }
 
