@@ -10,7 +10,7 @@
 //! [`OnboardController`] runs such a design on the host behind rip-core's [`Controller`]
 //! interface: [`Lqr`](crate::regulators::Lqr) and [`Lqg`](crate::regulators::Lqg) step with
 //! it, and so does the run-time MPC the assembly hands to `rip-rt` and the simulations
-//! ([`OnboardController::for_mpc`] decides when), so the move the PC computes is the move the
+//! ([`Mpc::run_time_controller`](crate::mpc::Mpc::run_time_controller) decides when), so the move the PC computes is the move the
 //! chip computes from the same design.
 
 pub use rip_control::{
@@ -21,7 +21,6 @@ use crate::compensation::Compensation;
 use crate::controller::{Controller, StepStatus};
 use crate::error::{Result, RipError};
 use crate::linalg::Mat;
-use crate::mpc::{Mpc, QpSolver};
 
 /// Copies `m` row-major into `dst`, naming `name` when it exceeds the capacity `cap_rows ×
 /// cap_cols`.
@@ -106,29 +105,6 @@ impl OnboardController {
             inner: ControlStep::new(design).map(Box::new).map_err(refused)?,
             last: rip_control::Move::default(),
         })
-    }
-
-    /// The run-time controller of `mpc` when the device's code computes the same move:
-    /// the QP solver is [`QpSolver::ActiveSet`] (the default; it is rip-control's dual active
-    /// set with its warm start), the iteration bound is within
-    /// [`rip_control::MAX_QP_ITERATIONS`], and the design fits rip-control's capacities (one
-    /// input, at most two outputs and [`rip_control::MAX_NX`] states, `P ≤ 100`, `m ≤ 4`:
-    /// [`Mpc::control_design`]). `None` otherwise (Clarabel, MIMO, long horizons), where
-    /// [`Mpc`] itself is the run-time controller.
-    ///
-    /// This is the one place that choice is made. Both solve the same QP from the same
-    /// estimate; they differ only after a failed solve (iteration limit, numerical trouble):
-    /// rip-control applies the unconstrained minimiser clamped to the bounds, [`Mpc`] the
-    /// previous plan's next move.
-    pub fn for_mpc(mpc: &Mpc) -> Option<Self> {
-        let settings = mpc.settings();
-        let bounded = u32::try_from(settings.max_iterations)
-            .is_ok_and(|n| n <= rip_control::MAX_QP_ITERATIONS);
-        if settings.solver != QpSolver::ActiveSet || !bounded {
-            return None;
-        }
-        let design = mpc.control_design().ok()?;
-        Self::new(&design).ok()
     }
 
     /// rip-control's controller it steps with (estimate, plan, QP solution, integrator).

@@ -388,12 +388,11 @@ struct Agreement {
 /// - with the active set, as a `Controller` taking its own moves: the same QP solver, so any
 ///   difference is in the estimator, the hold, observe and seed, or the move.
 fn mpcs_on_one_run(spec: &Spec, kicks: f64, seed: u64, steps: usize, out: &mut Agreement) {
-    use rip_core::onboard::OnboardController;
     use rip_core::{Controller, StepStatus};
     let design = spec.design(0.01).unwrap();
     let mut general = design.mpc().unwrap();
     assert!(
-        OnboardController::for_mpc(&general).is_some(),
+        general.run_time_controller().is_some(),
         "the default MPC runs on rip-control"
     );
     let mut cl_spec = spec.clone();
@@ -401,7 +400,7 @@ fn mpcs_on_one_run(spec: &Spec, kicks: f64, seed: u64, steps: usize, out: &mut A
     // Its default bound stops a few of these solves short of full accuracy.
     cl_spec.mpc.max_iterations = 2000;
     let mut clarabel = cl_spec.design(0.01).unwrap().mpc().unwrap();
-    assert!(OnboardController::for_mpc(&clarabel).is_none());
+    assert!(clarabel.run_time_controller().is_none());
     let mut run_time = design.balance(ControllerKind::Mpc).unwrap();
     let law = design.compensation().copied();
     let limit = design.bounds().1;
@@ -520,7 +519,6 @@ fn the_run_time_mpc_moves_as_the_general_mpc_with_clarabel() {
 /// not share), the general `Mpc` for Clarabel.
 #[test]
 fn the_assembly_runs_the_mpc_on_rip_control_unless_clarabel_is_chosen() {
-    use rip_core::onboard::OnboardController;
     use rip_core::{Controller, StepStatus};
     let mut spec = Spec::default();
     spec.mpc.max_iterations = 1;
@@ -547,8 +545,8 @@ fn the_assembly_runs_the_mpc_on_rip_control_unless_clarabel_is_chosen() {
         assert!((u[0] - want).abs() < 1e-9, "k={k}: {} vs {want}", u[0]);
     }
     assert!(limited > 0);
-    assert!(OnboardController::for_mpc(&general).is_some());
+    assert!(general.run_time_controller().is_some());
     spec.mpc.solver = QpSolver::Clarabel;
     let clarabel = spec.design(0.01).unwrap().mpc().unwrap();
-    assert!(OnboardController::for_mpc(&clarabel).is_none());
+    assert!(clarabel.run_time_controller().is_none());
 }

@@ -78,8 +78,7 @@
 //! set) and the design object: [`Mpc::control_design`] is what rip-control runs. The
 //! experiment file's MPC, as `rip-rt` and the simulations run it, steps with rip-control's
 //! controller of that design whenever it computes the same move
-//! ([`OnboardController::for_mpc`](crate::onboard::OnboardController::for_mpc), which also
-//! says how its fallback differs); this type runs otherwise.
+//! ([`Mpc::run_time_controller`], which also says how its fallback differs); this type runs otherwise.
 //!
 //! # Size limits
 //!
@@ -105,6 +104,7 @@ use crate::controller::{Controller, StepStatus};
 use crate::error::{Result, RipError};
 use crate::kalman::{CurrentEstimator, KalmanDesign};
 use crate::linalg::Mat;
+use crate::onboard::OnboardController;
 
 use backend::Backend;
 pub use backend::{QpSolver, QpStatus};
@@ -629,6 +629,29 @@ impl Mpc {
         self.u_prev.fill(0.0);
         self.plan.fill(0.0);
         self.backend.reset();
+    }
+
+    /// The run-time controller of this MPC ([`OnboardController`]) when the device's code computes the same move:
+    /// the QP solver is [`QpSolver::ActiveSet`] (the default; it is rip-control's dual active
+    /// set with its warm start), the iteration bound is within
+    /// [`rip_control::MAX_QP_ITERATIONS`], and the design fits rip-control's capacities (one
+    /// input, at most two outputs and [`rip_control::MAX_NX`] states, `P ≤ 100`, `m ≤ 4`:
+    /// [`control_design`](Self::control_design)). `None` otherwise (Clarabel, MIMO, long horizons), where
+    /// this [`Mpc`] itself is the run-time controller.
+    ///
+    /// This is the one place that choice is made. Both solve the same QP from the same
+    /// estimate; they differ only after a failed solve (iteration limit, numerical trouble):
+    /// rip-control applies the unconstrained minimiser clamped to the bounds, [`Mpc`] the
+    /// previous plan's next move.
+    pub fn run_time_controller(&self) -> Option<OnboardController> {
+        let settings = self.settings();
+        let bounded = u32::try_from(settings.max_iterations)
+            .is_ok_and(|n| n <= rip_control::MAX_QP_ITERATIONS);
+        if settings.solver != QpSolver::ActiveSet || !bounded {
+            return None;
+        }
+        let design = self.control_design().ok()?;
+        OnboardController::new(&design).ok()
     }
 
     /// The design rip-control runs for this controller ([`crate::onboard`]): the estimator,

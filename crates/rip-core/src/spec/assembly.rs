@@ -14,7 +14,7 @@
 //! LQG            K on the estimator (no MPC is built for it)
 //! MPC            [mpc] settings on the same estimator; it runs as rip-control's controller
 //!                of its design (the device's code) when that computes the same move
-//!                (onboard::OnboardController::for_mpc), as the general Mpc otherwise
+//!                (mpc::Mpc::run_time_controller), as the general Mpc otherwise
 //! compensation   when [compensation] finds a dead zone or arm friction to compensate, each
 //!                controller plans within the input bounds shrunk by V_d + V_f and its
 //!                voltage passes through the compensation (crate::compensation)
@@ -32,7 +32,6 @@ use crate::error::RipError;
 use crate::linalg::{c2d, Mat};
 use crate::lqr::dlqr;
 use crate::mpc::{EstimatorDesign, Mpc, MpcSettings, OutputDisturbance};
-use crate::onboard::OnboardController;
 use crate::paper;
 use crate::plant::Plant;
 use crate::regulators::{Lqg, Lqr};
@@ -418,12 +417,12 @@ impl Design {
     /// The MPC as `rip-rt`, the simulations and `riprs compare` run it, planning within
     /// [`bounds`](Self::bounds): [`mpc`](Self::mpc)'s design stepped by rip-control, the code
     /// the device runs, whenever that computes the same move
-    /// ([`OnboardController::for_mpc`]: the active-set solver, a design within rip-control's
+    /// ([`Mpc::run_time_controller`]: the active-set solver, a design within rip-control's
     /// capacities); otherwise the general [`Mpc`] itself (Clarabel, a design too large for
     /// the device).
     pub fn run_time_mpc(&self) -> Result<Box<dyn Controller>, SpecError> {
         let mpc = self.mpc()?;
-        Ok(match OnboardController::for_mpc(&mpc) {
+        Ok(match mpc.run_time_controller() {
             Some(onboard) => Box::new(onboard),
             None => Box::new(mpc),
         })
