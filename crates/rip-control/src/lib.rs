@@ -130,6 +130,7 @@ mod controller;
 mod design;
 pub mod qp;
 mod real;
+pub mod swing;
 
 pub use controller::{Controller, Measurement, Move, Phase, RateFilter, Stats, Status};
 pub use design::{
