@@ -1,8 +1,9 @@
 //! The run-time controllers of the rotary inverted pendulum, `no_std` and without `alloc`:
 //! LQR with its rate filter, LQG (the steady-state Kalman filter in current form), the
 //! constrained MPC step on the condensed QP (a dual active-set solver with warm start and a
-//! bounded iteration count), and the dead-zone and friction compensation. One source for the
-//! host (rip-core), `rip-rt` and the firmware.
+//! bounded iteration count), the dead-zone and friction compensation, and the swing-up
+//! supervisor around any of them ([`swing`]: the energy law, its arm-limit envelope, the catch
+//! and the handover). One source for the host (rip-core), `rip-rt` and the firmware.
 //!
 //! The design (DARE, Kalman design, condensing) is made on the host by rip-core, which fills a
 //! [`Design`]; the host uploads its bytes ([`Design::to_bytes`]); the device reads them into
@@ -130,6 +131,7 @@ mod controller;
 mod design;
 pub mod qp;
 mod real;
+pub mod swing;
 
 pub use controller::{Controller, Measurement, Move, Phase, RateFilter, Stats, Status};
 pub use design::{

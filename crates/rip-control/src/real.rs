@@ -41,6 +41,17 @@ pub trait Real:
     fn powu(self, n: u32) -> Self;
     /// Absolute value.
     fn abs(self) -> Self;
+    /// Sine (`libm`).
+    fn sin(self) -> Self;
+    /// Cosine (`libm`).
+    fn cos(self) -> Self;
+    /// The nearest integer, halves away from zero (`libm`'s `round`, exact).
+    fn round(self) -> Self;
+    /// `ln(1 + self)`, accurate near 0 (`libm`'s `log1p`).
+    fn ln_1p(self) -> Self;
+    /// `1` for `+0` and positive values, `−1` for `−0` and negative ones, NaN for NaN: the
+    /// semantics of `f64::signum`.
+    fn signum(self) -> Self;
     /// The larger of the two; `self` when `other` is NaN.
     #[inline]
     fn max(self, other: Self) -> Self {
@@ -105,6 +116,30 @@ impl Real for f64 {
     fn abs(self) -> Self {
         libm::fabs(self)
     }
+    #[inline]
+    fn sin(self) -> Self {
+        libm::sin(self)
+    }
+    #[inline]
+    fn cos(self) -> Self {
+        libm::cos(self)
+    }
+    #[inline]
+    fn round(self) -> Self {
+        libm::round(self)
+    }
+    #[inline]
+    fn ln_1p(self) -> Self {
+        libm::log1p(self)
+    }
+    #[inline]
+    fn signum(self) -> Self {
+        if self.is_nan() {
+            self
+        } else {
+            libm::copysign(1.0, self)
+        }
+    }
 }
 
 impl Real for f32 {
@@ -142,5 +177,29 @@ impl Real for f32 {
     #[inline]
     fn abs(self) -> Self {
         libm::fabsf(self)
+    }
+    #[inline]
+    fn sin(self) -> Self {
+        libm::sinf(self)
+    }
+    #[inline]
+    fn cos(self) -> Self {
+        libm::cosf(self)
+    }
+    #[inline]
+    fn round(self) -> Self {
+        libm::roundf(self)
+    }
+    #[inline]
+    fn ln_1p(self) -> Self {
+        libm::log1pf(self)
+    }
+    #[inline]
+    fn signum(self) -> Self {
+        if self.is_nan() {
+            self
+        } else {
+            libm::copysignf(1.0, self)
+        }
     }
 }

@@ -53,7 +53,7 @@ pub const STOP_BRAKE_FRACTION: f64 = 0.5;
 /// (rad): `√(2 a_b room⁺)`.
 #[inline]
 pub fn envelope_speed(a_b: f64, room: f64) -> f64 {
-    (2.0 * a_b * room.max(0.0)).sqrt()
+    rip_control::swing::envelope_speed(a_b, room)
 }
 
 /// The arm's stopping model (module docs, (1)–(3)) for one plant, voltage bound and latency.
@@ -91,26 +91,28 @@ impl StoppingModel {
         }
     }
 
+    /// The same model in the `no_std` form the swing-up supervisor and the device evaluate:
+    /// the one implementation of (2) and (3).
+    pub fn control(&self) -> rip_control::swing::StoppingModel {
+        rip_control::swing::StoppingModel {
+            a0: self.a0,
+            k: self.k,
+            drive_per_volt: self.drive_per_volt,
+            latency: self.latency,
+            voltage: self.voltage,
+        }
+    }
+
     /// The braking distance `d(ω)` of (2) from speed `omega` (rad/s, its magnitude is used),
     /// without the latency.
     pub fn braking_distance(&self, omega: f64) -> f64 {
-        let w = omega.abs();
-        let x = self.k * w / self.a0;
-        if x < 1e-6 {
-            // The series of (2): ω²/(2a₀) (1 − (2/3) x + …).
-            w * w / (2.0 * self.a0) * (1.0 - 2.0 * x / 3.0)
-        } else {
-            w / self.k - self.a0 / (self.k * self.k) * x.ln_1p()
-        }
+        self.control().braking_distance(omega)
     }
 
     /// The stopping distance `D(ω, u_a)` of (3) (rad), latency included, with `along` (V)
     /// the voltage applied along the motion during the latency (clamped to `[0, U]`).
     pub fn stopping_distance_with(&self, omega: f64, along: f64) -> f64 {
-        let w = omega.abs();
-        let tau = self.latency;
-        let a = self.drive_per_volt * along.clamp(0.0, self.voltage);
-        w * tau + 0.5 * a * tau * tau + self.braking_distance(w + a * tau)
+        self.control().stopping_distance_with(omega, along)
     }
 
     /// The stopping distance `D(ω, U)` (rad): the full voltage along the motion during the
@@ -122,8 +124,7 @@ impl StoppingModel {
     /// Where the arm at `theta` moving at `rate` stops with `applied` (V) acting during the
     /// latency: `θ + sgn(θ̇) D(|θ̇|, sgn(θ̇) u_a)`.
     pub fn stopping_point(&self, theta: f64, rate: f64, applied: f64) -> f64 {
-        let along = if rate >= 0.0 { applied } else { -applied };
-        theta + rate.signum() * self.stopping_distance_with(rate, along)
+        self.control().stopping_point(theta, rate, applied)
     }
 
     /// The largest speed (rad/s) from which the arm stops within `room` (rad) by (3) with

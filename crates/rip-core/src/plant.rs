@@ -279,6 +279,21 @@ impl Plant {
         &self.params
     }
 
+    /// The smooth part of these equations of motion (no dead zone, no Coulomb friction or
+    /// stiction) in the `no_std` form the swing-up law inverts and the predicted catch
+    /// integrates ([`rip_control::swing::ArmModel`]): this plant's own lumped coefficients.
+    pub fn arm_model(&self) -> rip_control::swing::ArmModel {
+        rip_control::swing::ArmModel {
+            j0: self.j0,
+            ja: self.ja,
+            m12: self.m12,
+            grav: self.grav,
+            b: self.b,
+            c_arm: self.c_arm,
+            dp: self.dp,
+        }
+    }
+
     /// Motor torque `τ = kt (z(u) − km θ̇) / rm` (N·m) at state `x` and voltage `u`, `z` the
     /// dead zone.
     #[inline]

@@ -124,16 +124,10 @@ pub fn sin_cos_lanes<const L: usize>(x: &[f64; L]) -> ([f64; L], [f64; L]) {
 }
 
 /// `a` wrapped to (−π, π]: the one angle wrap of the plant, the simulation, the swing-up and
-/// `rip-rt`.
+/// `rip-rt`, the `no_std` code's ([`rip_control::swing::wrap_angle`]) that the firmware runs.
 #[inline]
 pub fn wrap_angle(a: f64) -> f64 {
-    use std::f64::consts::{PI, TAU};
-    let w = a - TAU * (a / TAU).round();
-    if w <= -PI {
-        w + TAU
-    } else {
-        w
-    }
+    rip_control::swing::wrap_angle(a)
 }
 
 #[cfg(test)]

@@ -1,108 +1,90 @@
-//! The predicted catch: whether a balance controller taking over at the current state keeps
-//! the pendulum up and the arm inside its limit, decided by simulating the nominal model
-//! under a reference LQR (module docs, "Predicted catch").
+//! The predicted catch's design: the reference LQR and the rooms the `no_std` supervisor's
+//! prediction checks ([`rip_control::swing::CatchPrediction`], the law's docs, "Predicted
+//! catch").
+
+use rip_control::swing::CatchPrediction;
 
 use crate::envelope::StoppingModel;
 use crate::linalg::c2d;
 use crate::lqr::dlqr;
-use crate::plant::{FurutaParams, Plant, State};
+use crate::plant::{FurutaParams, Plant};
 
 use super::settings::SwingUpSettings;
 
 /// RK4 substeps per sample of the prediction.
-const SUBSTEPS: usize = 2;
+const SUBSTEPS: u32 = 2;
 
-/// The nominal closed loop the catch is predicted on (module docs, "Predicted catch").
-#[derive(Debug, Clone)]
-pub(crate) struct CatchPredictor {
-    plant: Plant,
-    k: [f64; 4],
-    ts: f64,
-    steps: usize,
-    u_max: f64,
-    arm_room: f64,
-    pendulum_room: f64,
-    stopping: StoppingModel,
-}
-
-impl CatchPredictor {
-    /// `None` when the prediction is off (`catch_prediction = 0`) or the reference LQR
-    /// cannot be designed on `plant`.
-    pub(crate) fn new(plant: &Plant, s: &SwingUpSettings, ts: f64) -> Option<Self> {
-        if s.catch_prediction <= 0.0 {
-            return None;
-        }
-        let smooth = Plant::new(FurutaParams {
-            vd: 0.0,
-            cr: 0.0,
-            cp: 0.0,
-            ..*plant.params()
-        })
-        .ok()?;
-        let (a, b) = smooth.linearize_upright();
-        let (ad, bd) = c2d(&a, &b, ts).ok()?;
-        // The reference LQR is the paper's, eq. (13): the `[lqr]` section's default.
-        let (q, r) = crate::paper::lqr_weights();
-        let design = dlqr(&ad, &bd, &q, &r, None).ok()?;
-        let k = [
-            design.k[(0, 0)],
-            design.k[(0, 1)],
-            design.k[(0, 2)],
-            design.k[(0, 3)],
-        ];
-        Some(Self {
-            stopping: StoppingModel::new(smooth.params(), s.max_voltage, 1.0, ts),
-            plant: smooth,
-            k,
-            ts,
-            steps: (s.catch_prediction / ts).ceil() as usize,
-            u_max: s.max_voltage,
-            arm_room: s.arm_limit - s.catch_margin,
-            pendulum_room: s.balance_angle - s.catch_margin,
-        })
+/// The prediction for `plant` (the nominal model) and `s`; `None` when it is off
+/// (`catch_prediction = 0`) or the reference LQR cannot be designed on `plant`.
+pub(crate) fn prediction(plant: &Plant, s: &SwingUpSettings, ts: f64) -> Option<CatchPrediction> {
+    if s.catch_prediction <= 0.0 {
+        return None;
     }
-
-    /// Whether the reference LQR, holding the arm at `theta_ref` from `x` (α wrapped), keeps
-    /// `|α|` within `balance_angle − catch_margin` and the arm and its stopping point within
-    /// `arm_limit − catch_margin` over the horizon.
-    pub(crate) fn recoverable(&self, x: &State, theta_ref: f64) -> bool {
-        let mut x = *x;
-        for _ in 0..self.steps {
-            let e = [x[0] - theta_ref, x[1], x[2], x[3]];
-            let v: f64 = -(0..4).map(|i| self.k[i] * e[i]).sum::<f64>();
-            let u = v.clamp(-self.u_max, self.u_max);
-            let stop = self.stopping.stopping_point(x[0], x[1], u);
-            if !(x[2].abs() <= self.pendulum_room
-                && x[0].abs() <= self.arm_room
-                && stop.abs() <= self.arm_room)
-            {
-                return false;
-            }
-            self.plant.advance(&mut x, u, 0.0, self.ts, SUBSTEPS);
-        }
-        true
-    }
+    let smooth = Plant::new(FurutaParams {
+        vd: 0.0,
+        cr: 0.0,
+        cp: 0.0,
+        ..*plant.params()
+    })
+    .ok()?;
+    let (a, b) = smooth.linearize_upright();
+    let (ad, bd) = c2d(&a, &b, ts).ok()?;
+    // The reference LQR is the paper's, eq. (13): the `[lqr]` section's default.
+    let (q, r) = crate::paper::lqr_weights();
+    let design = dlqr(&ad, &bd, &q, &r, None).ok()?;
+    let steps = u32::try_from((s.catch_prediction / ts).ceil() as u64).ok()?;
+    Some(CatchPrediction {
+        k: std::array::from_fn(|i| design.k[(0, i)]),
+        steps,
+        substeps: SUBSTEPS,
+        arm_room: s.arm_limit - s.catch_margin,
+        pendulum_room: s.balance_angle - s.catch_margin,
+        stopping: StoppingModel::new(smooth.params(), s.max_voltage, 1.0, ts).control(),
+    })
 }
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::linalg::Mat;
     use crate::paper::TS;
+    use crate::plant::State;
+    use rip_control::swing::ArmModel;
 
-    fn predictor(plant: &Plant, margin: f64) -> CatchPredictor {
+    /// The prediction with the model and bound the supervisor runs it with.
+    struct Predictor {
+        k: [f64; 4],
+        prediction: CatchPrediction,
+        model: ArmModel,
+        u_max: f64,
+    }
+
+    impl Predictor {
+        fn recoverable(&self, x: &State, theta_ref: f64) -> bool {
+            let x = [x[0], x[1], x[2], x[3]];
+            self.prediction
+                .recoverable(&self.model, TS, self.u_max, &x, theta_ref)
+        }
+    }
+
+    fn predictor(plant: &Plant, margin: f64) -> Predictor {
         let s = SwingUpSettings {
             catch_prediction: 1.0,
             catch_margin: margin,
             ..SwingUpSettings::default()
         };
-        CatchPredictor::new(plant, &s, TS).unwrap()
+        let prediction = super::prediction(plant, &s, TS).unwrap();
+        Predictor {
+            k: prediction.k,
+            prediction,
+            model: plant.arm_model(),
+            u_max: s.max_voltage,
+        }
     }
 
     #[test]
     fn off_by_default() {
         let s = SwingUpSettings::default();
-        assert!(CatchPredictor::new(&Plant::paper(), &s, TS).is_none());
+        assert!(super::prediction(&Plant::paper(), &s, TS).is_none());
     }
 
     #[test]

@@ -186,7 +186,7 @@ fn pumping_raises_the_energy_below_its_target_and_lowers_it_above() {
     // E_t(α) = δ G + 4 d_p √(G/J_α) (1 − cos(α/2)), eq. (1a).
     let plant = Plant::paper();
     let s = SwingUpSettings::default();
-    let law = law::EnergyLaw::new(&plant, &s, paper::TS);
+    let law = design::params(&plant, &s, paper::TS).unwrap();
     let p = plant.params();
     let m12 = p.mp * p.lr * p.lp / 2.0;
     let grav = p.mp * p.g * p.lp / 2.0;
@@ -197,7 +197,7 @@ fn pumping_raises_the_energy_below_its_target_and_lowers_it_above() {
         let target =
             s.energy_margin * grav + 4.0 * p.dp * (grav / ja).sqrt() * (1.0 - (0.5 * alpha).cos());
         for alpha_dot in [-6.0, -2.5, 2.5, 6.0] {
-            let x = State::new(0.0, 0.0, alpha, alpha_dot);
+            let x = [0.0, 0.0, alpha, alpha_dot];
             let v = alpha_dot * alpha.cos();
             if v.abs() < s.pump_width {
                 continue;
@@ -478,8 +478,9 @@ fn the_stopped_energy_is_what_an_arm_stopped_by_a_torque_pulse_leaves() {
     let mut largest_change = 0.0f64;
     for preset in ["paper", "qube_servo2"] {
         let plant = spec(preset).plant().unwrap();
-        let law = law::EnergyLaw::new(&plant, &SwingUpSettings::default(), paper::TS);
-        let grav = law.gravity();
+        let law = design::params(&plant, &SwingUpSettings::default(), paper::TS).unwrap();
+        let grav = law.model.grav;
+        let arr = |x: &State| [x[0], x[1], x[2], x[3]];
         for (theta_dot, alpha, alpha_dot) in [(4.0, 0.8, -3.0), (-3.0, -1.2, 5.0), (2.0, 2.5, 1.0)]
         {
             let x0 = State::new(0.1, theta_dot, alpha, alpha_dot);
@@ -492,15 +493,43 @@ fn the_stopped_energy_is_what_an_arm_stopped_by_a_torque_pulse_leaves() {
                 steps += 1;
                 assert!(steps < 1_000_000);
             }
-            let stopped = law.stopped_energy(&x0);
-            let reference = law.energy(&x);
+            let stopped = law.stopped_energy(&arr(&x0));
+            let reference = law.energy(&arr(&x));
             assert!(
                 (stopped - reference).abs() < 1e-3 * grav,
                 "{preset} {x0:?}: E' {stopped}, after the pulse {reference}"
             );
-            largest_change = largest_change.max((law.energy(&x0) - reference).abs() / grav);
+            largest_change = largest_change.max((law.energy(&arr(&x0)) - reference).abs() / grav);
         }
     }
     // The arm's rate matters: without the correction the energy is far off.
     assert!(largest_change > 0.05, "{largest_change}");
+}
+
+#[test]
+fn the_no_std_arm_model_is_the_plants_smooth_part() {
+    // The law inverts rip-control's equations of motion; they must be the plant's without its
+    // dead zone and Coulomb friction, which the simulation integrates.
+    for preset in ["paper", "qube_servo2"] {
+        let plant = spec(preset).plant().unwrap();
+        let model = plant.arm_model();
+        for i in 0..50 {
+            let t = f64::from(i);
+            let x = [
+                (0.3 * t).sin(),
+                4.0 * (0.7 * t).cos(),
+                3.0 * (0.45 * t).sin(),
+                9.0 * (0.2 * t).cos(),
+            ];
+            let u = 12.0 * (1.3 * t).sin();
+            let want = plant.derivative(&State::new(x[0], x[1], x[2], x[3]), u, 0.0);
+            let got = model.derivative(&x, u);
+            for k in 0..4 {
+                assert!(
+                    (got[k] - want[k]).abs() <= 1e-12 * (1.0 + want[k].abs()),
+                    "{preset} {x:?} {u}: {got:?} vs {want:?}"
+                );
+            }
+        }
+    }
 }
