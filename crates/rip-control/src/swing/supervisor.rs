@@ -1,0 +1,333 @@
+//! The supervisor: the swing, the catch and the handover to the balance controller (module docs, "Supervisor and catch").
+
+use super::*;
+
+/// The swing-up's own estimate: angles and filtered-difference rates `[θ, θ̇, α, α̇]`, α
+/// wrapped; the LQR's rate filter (crate docs, "LQR") with the pendulum's difference wrapped.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct SwingRates<R: Real> {
+    ts: R,
+    a: R,
+    x: [R; 4],
+    started: bool,
+    held: u32,
+}
+
+impl<R: Real> SwingRates<R> {
+    fn new(ts: R, cutoff_hz: R) -> Self {
+        let two_pi: R = c(2.0 * core::f64::consts::PI);
+        Self {
+            ts,
+            a: (-(two_pi * cutoff_hz * ts)).exp(),
+            x: [R::ZERO; 4],
+            started: false,
+            held: 0,
+        }
+    }
+
+    /// Takes the angles `[θ, α]`; `false` (estimate kept, the period counted as held) when
+    /// they are not finite.
+    fn update(&mut self, y: [R; 2]) -> bool {
+        if !(y[0].is_finite() && y[1].is_finite()) {
+            self.hold();
+            return false;
+        }
+        let alpha = wrap_angle(y[1]);
+        if self.started {
+            let periods = self.held.saturating_add(1);
+            let dt = c::<R>(f64::from(periods)) * self.ts;
+            let a = self.a.powu(periods);
+            let d_theta = (y[0] - self.x[0]) / dt;
+            let d_alpha = wrap_angle(alpha - self.x[2]) / dt;
+            self.x[1] = a * self.x[1] + (R::ONE - a) * d_theta;
+            self.x[3] = a * self.x[3] + (R::ONE - a) * d_alpha;
+        } else {
+            self.started = true;
+        }
+        self.held = 0;
+        self.x[0] = y[0];
+        self.x[2] = alpha;
+        true
+    }
+
+    fn hold(&mut self) {
+        if self.started {
+            self.held = self.held.saturating_add(1);
+        }
+    }
+
+    fn reset(&mut self) {
+        self.x = [R::ZERO; 4];
+        self.started = false;
+        self.held = 0;
+    }
+}
+
+/// The balance controller the supervisor hands over to: what [`SwingSupervisor`] needs of
+/// it. rip-control's [`Controller`] implements it; rip-core adapts its own controllers.
+pub trait Balance<R: Real> {
+    /// What a balance step reports, passed through in [`SwingStatus::Balance`].
+    type Status;
+    /// One balance sample on the angles `[θ, α]` (α wrapped) and the reference `[θ_ref,
+    /// α_ref]`: the voltage written and the step's status.
+    fn step(&mut self, angles: [R; 2], reference: [R; 2]) -> (R, Self::Status);
+    /// A sample whose voltage `u` the swing-up chose: the estimator runs on `angles`.
+    fn observe(&mut self, angles: [R; 2], u: R);
+    /// Restarts the estimator at the plant state `x` with `u` the voltage just written.
+    fn seed(&mut self, x: [R; 4], u: R);
+    /// A period without a measurement, the plant receiving `u`.
+    fn hold(&mut self, u: R);
+    /// Back to the initial state.
+    fn reset(&mut self);
+}
+
+impl<R: Real> Balance<R> for Controller<R> {
+    type Status = Status;
+
+    fn step(&mut self, angles: [R; 2], reference: [R; 2]) -> (R, Status) {
+        let mut m = Measurement {
+            angles: [R::ZERO; MAX_NY],
+            reference: [R::ZERO; MAX_NY],
+        };
+        m.angles[..2].copy_from_slice(&angles);
+        m.reference[..2].copy_from_slice(&reference);
+        let mv = Controller::step(self, m);
+        (mv.voltage, mv.status)
+    }
+
+    fn observe(&mut self, angles: [R; 2], u: R) {
+        let mut y = [R::ZERO; MAX_NY];
+        y[..2].copy_from_slice(&angles);
+        Controller::observe(self, y, u);
+    }
+
+    fn seed(&mut self, x: [R; 4], u: R) {
+        let mut s = [R::ZERO; NX_PLANT];
+        s[..4].copy_from_slice(&x);
+        Controller::seed(self, s, u);
+    }
+
+    fn hold(&mut self, u: R) {
+        Controller::hold(self, u);
+    }
+
+    fn reset(&mut self) {
+        Controller::reset(self);
+    }
+}
+
+/// Why the supervisor gave up ([`SwingPhase::Stopped`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SwingStop {
+    /// No catch within [`SwingParams::max_time`].
+    Timeout,
+    /// A fall with [`OnFall::Stop`].
+    LeftBalanceRegion,
+}
+
+/// Where the supervisor is (module docs, "Supervisor and catch").
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SwingPhase {
+    /// Pumping energy by the law (1)–(4).
+    SwingUp,
+    /// The balance controller in charge.
+    Balance,
+    /// 0 V from now on.
+    Stopped(SwingStop),
+}
+
+/// What one supervisor step did, besides its voltage.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SwingStatus<S> {
+    /// The law's voltage (or 0 V stopped), from a usable measurement.
+    Nominal,
+    /// A swing-up sample with an unusable measurement: the estimate is kept and the balance
+    /// controller told the period was held.
+    Held,
+    /// The balance controller's step and its status.
+    Balance(S),
+}
+
+/// The swing-up supervisor (module docs): the law, the catch, the handover and the balance
+/// region's fall test, driving a [`Balance`] controller passed in at every call.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SwingSupervisor<R: Real = f64> {
+    params: SwingParams<R>,
+    rates: SwingRates<R>,
+    phase: SwingPhase,
+    /// Samples spent in the current swing-up.
+    swing_samples: u32,
+    /// Samples since the catch (0 while swinging up).
+    balance_samples: u32,
+    /// The arm reference held since the catch, and the external one at the catch.
+    hold_reference: Option<(R, R)>,
+    /// The last voltage the swing-up applied.
+    u_swing: R,
+    /// The last voltage the balance controller applied: it acts during the stop's latency.
+    u_balance: R,
+}
+
+impl<R: Real> SwingSupervisor<R> {
+    /// The supervisor with `params`, swinging up from its first sample.
+    pub fn new(params: SwingParams<R>) -> Self {
+        Self {
+            rates: SwingRates::new(params.ts, params.rate_cutoff_hz),
+            params,
+            phase: SwingPhase::SwingUp,
+            swing_samples: 0,
+            balance_samples: 0,
+            hold_reference: None,
+            u_swing: R::ZERO,
+            u_balance: R::ZERO,
+        }
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &SwingParams<R> {
+        &self.params
+    }
+
+    /// The phase.
+    pub fn phase(&self) -> SwingPhase {
+        self.phase
+    }
+
+    /// The swing-up's own estimate `[θ, θ̇, α, α̇]` (α wrapped).
+    pub fn estimate(&self) -> [R; 4] {
+        self.rates.x
+    }
+
+    /// Whether the estimate has had a usable measurement since the start or the last reset
+    /// (the law writes 0 V until it has).
+    pub fn started(&self) -> bool {
+        self.rates.started
+    }
+
+    /// One period: the measured angles `y = [θ, α]` (non-finite: unusable) and the external
+    /// reference `r = [θ_ref, α_ref]`; the voltage to write and what the step did.
+    pub fn step<B: Balance<R>>(
+        &mut self,
+        balance: &mut B,
+        y: [R; 2],
+        r: [R; 2],
+    ) -> (R, SwingStatus<B::Status>) {
+        let usable = self.rates.update(y);
+        match self.phase {
+            SwingPhase::Stopped(_) => (R::ZERO, SwingStatus::Nominal),
+            SwingPhase::SwingUp => {
+                if usable && self.params.in_catch_region(&self.rates.x) {
+                    self.phase = SwingPhase::Balance;
+                    self.balance_samples = 0;
+                    self.u_balance = self.u_swing;
+                    self.hold_reference = Some((self.rates.x[0], r[0]));
+                    self.balance_step(balance, y, r)
+                } else {
+                    self.swing(balance, y, usable)
+                }
+            }
+            SwingPhase::Balance => {
+                if !usable || self.params.in_balance_region(&self.rates.x, self.u_balance) {
+                    return self.balance_step(balance, y, r);
+                }
+                match self.params.on_fall {
+                    OnFall::Stop => self.stop(SwingStop::LeftBalanceRegion),
+                    OnFall::Retry => {
+                        self.phase = SwingPhase::SwingUp;
+                        self.swing_samples = 0;
+                        self.hold_reference = None;
+                        self.swing(balance, y, usable)
+                    }
+                }
+            }
+        }
+    }
+
+    /// A period without a measurement, the plant receiving `u`.
+    pub fn hold<B: Balance<R>>(&mut self, balance: &mut B, u: R) {
+        self.rates.hold();
+        if self.phase == SwingPhase::SwingUp {
+            self.swing_samples = self.swing_samples.saturating_add(1);
+        }
+        balance.hold(u);
+    }
+
+    /// Back to swinging up from scratch; `balance` reset too.
+    pub fn reset<B: Balance<R>>(&mut self, balance: &mut B) {
+        balance.reset();
+        self.rates.reset();
+        self.phase = SwingPhase::SwingUp;
+        self.swing_samples = 0;
+        self.balance_samples = 0;
+        self.hold_reference = None;
+        self.u_swing = R::ZERO;
+        self.u_balance = R::ZERO;
+    }
+
+    fn stop<S>(&mut self, cause: SwingStop) -> (R, SwingStatus<S>) {
+        self.phase = SwingPhase::Stopped(cause);
+        (R::ZERO, SwingStatus::Nominal)
+    }
+
+    /// One swing-up sample: the law's voltage, the balance estimator kept in step, the clock.
+    fn swing<B: Balance<R>>(
+        &mut self,
+        balance: &mut B,
+        y: [R; 2],
+        usable: bool,
+    ) -> (R, SwingStatus<B::Status>) {
+        let p = &self.params;
+        self.swing_samples = self.swing_samples.saturating_add(1);
+        if c::<R>(f64::from(self.swing_samples)) * p.ts > p.max_time {
+            return self.stop(SwingStop::Timeout);
+        }
+        let x = self.rates.x;
+        let u = if self.rates.started {
+            p.voltage(&x, p.acceleration(&x))
+        } else {
+            R::ZERO
+        };
+        self.u_swing = u;
+        if !usable {
+            balance.hold(u);
+            return (u, SwingStatus::Held);
+        }
+        if x[2].abs() <= p.estimator_window {
+            balance.observe([y[0], wrap_angle(y[1])], u);
+        } else {
+            balance.seed(x, u);
+        }
+        (u, SwingStatus::Nominal)
+    }
+
+    fn balance_step<B: Balance<R>>(
+        &mut self,
+        balance: &mut B,
+        y: [R; 2],
+        r: [R; 2],
+    ) -> (R, SwingStatus<B::Status>) {
+        let ts = self.params.ts;
+        let theta_ref = match self.hold_reference {
+            Some((held, at_catch)) if r[0] == at_catch => {
+                // Back to the external reference at a bounded rate (module docs, "catch").
+                let step = self.params.reference_return_rate * ts;
+                let next = held + (at_catch - held).clamp(-step, step);
+                self.hold_reference = Some((next, at_catch));
+                next
+            }
+            Some(_) => {
+                self.hold_reference = None;
+                r[0]
+            }
+            None => r[0],
+        };
+        let (u, status) = balance.step([y[0], wrap_angle(y[1])], [theta_ref, r[1]]);
+        self.u_balance = u;
+        // The handover (module docs, "Balance"): the swing-up's estimate carries the balance
+        // controller's estimator through the catch transient.
+        self.balance_samples = self.balance_samples.saturating_add(1);
+        if c::<R>(f64::from(self.balance_samples)) * ts <= self.params.handover_time {
+            balance.seed(self.rates.x, u);
+        }
+        (u, SwingStatus::Balance(status))
+    }
+}
