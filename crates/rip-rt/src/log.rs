@@ -22,6 +22,44 @@ pub const MAX_ESTIMATES: usize = 32;
 
 /// Rows the loop may be ahead of the writer (5 s at 100 Hz) before that is a log fault.
 pub const QUEUE_ROWS: usize = 512;
+/// How long a [`waiting`](LogWriter::waiting) push waits for room before the writer counts as
+/// fallen behind: a lockstep run outpaces any writer, but storage that accepts nothing for
+/// this long has stalled, and a stop signal must not wait on it forever.
+pub const WAIT_FOR_ROOM: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// Why a row did not go into the queue.
+enum Unsent {
+    Full,
+    Disconnected,
+}
+
+/// `row` into the queue at once.
+fn send_now(tx: &SyncSender<Row>, row: Row) -> Result<(), Unsent> {
+    tx.try_send(row).map_err(|e| match e {
+        TrySendError::Full(_) => Unsent::Full,
+        TrySendError::Disconnected(_) => Unsent::Disconnected,
+    })
+}
+
+/// `row` into the queue, waiting up to [`WAIT_FOR_ROOM`] for room, or less once a stop is
+/// requested (the loop then reports the full queue and stops).
+fn send_waiting(tx: &SyncSender<Row>, mut row: Row) -> Result<(), Unsent> {
+    let deadline = std::time::Instant::now() + WAIT_FOR_ROOM;
+    loop {
+        match tx.try_send(row) {
+            Ok(()) => return Ok(()),
+            Err(TrySendError::Disconnected(_)) => return Err(Unsent::Disconnected),
+            Err(TrySendError::Full(back)) => {
+                if std::time::Instant::now() >= deadline || crate::stop::requested_stop().is_some()
+                {
+                    return Err(Unsent::Full);
+                }
+                row = back;
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+        }
+    }
+}
 
 /// How long [`LogWriter::finish`] waits for the writer to drain the queue. The loop has
 /// stopped the motor by then; what is left is to exit, and a write blocked on stalled storage
@@ -286,27 +324,25 @@ impl LogWriter {
     }
 
     /// Queues one row; an error is a log fault (the writer failed or fell behind). Allocation
-    /// and system-call free.
+    /// free, and system-call free unless [`waiting`](Self::waiting) finds the queue full.
     pub fn push(&mut self, row: Row) -> Result<(), LogError> {
         self.check()?;
         let Some(tx) = &self.tx else {
             return Err(LogError::WriterGone);
         };
         let sent = if self.wait {
-            tx.send(row).map_err(|e| TrySendError::Disconnected(e.0))
+            send_waiting(tx, row)
         } else {
-            tx.try_send(row)
+            send_now(tx, row)
         };
         match sent {
             Ok(()) => Ok(()),
-            Err(TrySendError::Full(_)) => Err(LogError::Behind(QUEUE_ROWS)),
-            Err(TrySendError::Disconnected(_)) => {
-                Err(if self.shared.failed.load(Ordering::Acquire) {
-                    self.write_error()
-                } else {
-                    LogError::WriterGone
-                })
-            }
+            Err(Unsent::Full) => Err(LogError::Behind(QUEUE_ROWS)),
+            Err(Unsent::Disconnected) => Err(if self.shared.failed.load(Ordering::Acquire) {
+                self.write_error()
+            } else {
+                LogError::WriterGone
+            }),
         }
     }
 
@@ -389,6 +425,53 @@ mod tests {
         assert_eq!(lines.len(), 2 + 100 + 1);
         assert_eq!(lines[102], "# stop: finished");
         std::fs::remove_file(&path).unwrap();
+    }
+
+    /// A FIFO at `name` with a reader that opens it and never reads: storage that hangs
+    /// once the pipe's buffer is full.
+    fn hung_storage(name: &str) -> (PathBuf, File) {
+        let path = std::env::temp_dir().join(format!("rip-rt-{name}-{}.fifo", std::process::id()));
+        let _ = std::fs::remove_file(&path);
+        let c = std::ffi::CString::new(path.to_str().unwrap()).unwrap();
+        // SAFETY: a valid, NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        use std::os::unix::fs::OpenOptionsExt;
+        // Non-blocking: a FIFO's reader would otherwise wait for its writer to open it.
+        let reader = std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(&path)
+            .unwrap();
+        (path, reader)
+    }
+
+    /// A lockstep run waits for its writer rather than faulting on a full queue, since it
+    /// outpaces any writer; storage that takes nothing still ends it, after
+    /// [`WAIT_FOR_ROOM`], as a writer fallen behind, so a stop never waits on it forever.
+    #[test]
+    fn a_waiting_writer_waits_for_room_but_not_for_hung_storage() {
+        let (path, _reader) = hung_storage("hung");
+        let mut log = LogWriter::create(&path, &[("a", "b".into())], 2)
+            .unwrap()
+            .waiting(true);
+        let start = std::time::Instant::now();
+        let mut pushed = 0usize;
+        let err = loop {
+            match log.push(row(pushed as f64)) {
+                Ok(()) => pushed += 1,
+                Err(e) => break e,
+            }
+            assert!(
+                start.elapsed() < WAIT_FOR_ROOM * 3,
+                "the push never gave up"
+            );
+        };
+        assert!(matches!(err, LogError::Behind(QUEUE_ROWS)), "{err}");
+        // The pipe's buffer and the queue filled first; then one push waited its full time.
+        assert!(pushed > QUEUE_ROWS, "{pushed} rows");
+        assert!(start.elapsed() >= WAIT_FOR_ROOM, "{:?}", start.elapsed());
+        drop(log);
+        let _ = std::fs::remove_file(&path);
     }
 
     #[test]

@@ -633,7 +633,7 @@ pub fn command(a: &OnboardArgs<'_>) -> i32 {
                 ("voltage_limit", cfg.safety.voltage_limit.to_string()),
             ];
             match LogWriter::create(path, &header, 0) {
-                Ok(l) => Some(l),
+                Ok(l) => Some(l.waiting(a.lockstep)),
                 Err(e) => return fail(exit_code::LOG_ERROR, &e),
             }
         }

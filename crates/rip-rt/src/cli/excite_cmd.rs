@@ -243,7 +243,7 @@ fn prepare(
     let port = SerialPort::open(&args.port, args.baud).map_err(SetupError::Port)?;
     let head = header(args, &cfg, &excitation, &lab);
     let head: Vec<(&str, String)> = head.iter().map(|(k, v)| (k.as_str(), v.clone())).collect();
-    let log = LogWriter::create(&args.log, &head, 0)?;
+    let log = LogWriter::create(&args.log, &head, 0)?.waiting(args.lockstep);
     Ok((cfg, excitation, core, port, log))
 }
 
