@@ -24,7 +24,7 @@ pub const MAX_ESTIMATES: usize = 32;
 pub const QUEUE_ROWS: usize = 512;
 /// How long a [`waiting`](LogWriter::waiting) push waits for room before the writer counts as
 /// fallen behind: a lockstep run outpaces any writer, but storage that accepts nothing for
-/// this long has stalled, and a stop signal must not wait on it forever.
+/// this long has stalled, and a stop must not wait on it forever.
 pub const WAIT_FOR_ROOM: std::time::Duration = std::time::Duration::from_secs(5);
 
 /// Why a row did not go into the queue.
@@ -41,8 +41,8 @@ fn send_now(tx: &SyncSender<Row>, row: Row) -> Result<(), Unsent> {
     })
 }
 
-/// `row` into the queue, waiting up to [`WAIT_FOR_ROOM`] for room, or less once a stop is
-/// requested (the loop then reports the full queue and stops).
+/// `row` into the queue, waiting up to [`WAIT_FOR_ROOM`] for room (a stop requested meanwhile
+/// is seen by the loop when the push returns, at most that long after).
 fn send_waiting(tx: &SyncSender<Row>, mut row: Row) -> Result<(), Unsent> {
     let deadline = std::time::Instant::now() + WAIT_FOR_ROOM;
     loop {
@@ -50,8 +50,7 @@ fn send_waiting(tx: &SyncSender<Row>, mut row: Row) -> Result<(), Unsent> {
             Ok(()) => return Ok(()),
             Err(TrySendError::Disconnected(_)) => return Err(Unsent::Disconnected),
             Err(TrySendError::Full(back)) => {
-                if std::time::Instant::now() >= deadline || crate::stop::requested_stop().is_some()
-                {
+                if std::time::Instant::now() >= deadline {
                     return Err(Unsent::Full);
                 }
                 row = back;

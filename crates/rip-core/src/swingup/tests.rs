@@ -306,20 +306,6 @@ fn bad_balance_controllers_and_settings_are_named() {
 }
 
 #[test]
-fn wrap_angle_lands_in_the_half_open_interval() {
-    for (a, w) in [
-        (0.0, 0.0),
-        (PI, PI),
-        (-PI, PI),
-        (3.0 * PI, PI),
-        (2.0 * PI + 0.1, 0.1),
-        (-2.0 * PI - 0.1, -0.1),
-    ] {
-        assert!((wrap_angle(a) - w).abs() < 1e-12, "{a}: {}", wrap_angle(a));
-    }
-}
-
-#[test]
 fn the_swing_up_section_of_the_spec() {
     let spec = crate::Spec::parse("[swing_up]\nmax_time = 9.0\non_fall = \"stop\"\n").unwrap();
     assert_eq!(spec.swing_up.max_time, 9.0);
