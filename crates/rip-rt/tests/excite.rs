@@ -74,13 +74,25 @@ fn check_log(path: &Path, signal: &str, arm_limit: f64) -> Log {
     log
 }
 
+/// In lockstep: what is tested is each signal's shape, its log and its stop, not timing,
+/// which a real-time emulator on a loaded machine can break (5 replies missed at the start
+/// of one run in CI stopped it on the watchdog before the rest check).
 #[test]
 fn each_signal_runs_logs_its_columns_and_ends_at_zero_volts() {
     let _serial = one_at_a_time();
+    let pi = PI.to_string();
     for signal in ["chirp", "prbs", "steps", "free-swing"] {
-        let emu = hanging(&format!("excite-{signal}"), &["--noise", "0.3"]);
+        let emu = Emulator::lockstep(
+            &format!("excite-{signal}"),
+            &["--initial-pendulum", pi.as_str(), "--noise", "0.3"],
+        );
         let path = scratch(&format!("excite-{signal}.csv"));
-        let r = excite(&emu.device, signal, &path, &["--duration", "2.5"]);
+        let r = excite(
+            &emu.device,
+            signal,
+            &path,
+            &["--duration", "2.5", "--lockstep"],
+        );
         assert_eq!(r.status.code(), Some(0), "{signal}: {}", r.stderr);
         let log = check_log(&path, signal, 3.0);
         assert_eq!(log.meta("stop"), Some("finished"), "{signal}");
