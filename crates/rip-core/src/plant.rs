@@ -483,6 +483,30 @@ impl Plant {
         Ok(())
     }
 
+    /// Angular momentum about the arm's (vertical) axis (kg m²/s), `H = ∂T/∂θ̇ =
+    /// (J₀ + J_α sin²α) θ̇ − m₁₂ cos α α̇` (the first row of the module docs' mass matrix
+    /// times the rates). Gravity and the pendulum's reaction act in planes through that axis,
+    /// so only the arm's torques change it: `Ḣ = τ_m − d_r θ̇ − c_r sgn θ̇ + τ_d`. An arm
+    /// whose rate is braked to 0 under a swinging pendulum keeps whatever `H` the pendulum
+    /// holds, and walks at `H / (J₀ + J_α sin²α)` on average once nothing holds it.
+    pub fn arm_momentum(&self, x: &State) -> f64 {
+        let (s, c) = crate::trig::sin_cos(x[2]);
+        (self.j0 + self.ja * s * s) * x[1] - self.m12 * c * x[3]
+    }
+
+    /// The arm's inertia about its axis with the pendulum at `alpha` (kg m²), `J₀ + J_α
+    /// sin²α`: [`arm_momentum`](Self::arm_momentum) per unit arm rate.
+    pub fn arm_inertia(&self, alpha: f64) -> f64 {
+        let s = crate::trig::sin_cos(alpha).0;
+        self.j0 + self.ja * s * s
+    }
+
+    /// The pendulum's energy from hanging to upright, `2 m_p g L_p/2` (J): the span of the
+    /// potential of [`energy`](Self::energy).
+    pub fn swing_energy(&self) -> f64 {
+        2.0 * self.grav
+    }
+
     /// Total mechanical energy `T + V` (J), with `V = G cos α` (module docs). Conserved when
     /// `km = dr = dp = cr = cp = 0` and `u = τ_d = 0`.
     pub fn energy(&self, x: &State) -> f64 {

@@ -174,7 +174,7 @@ pub const ARM_THRESHOLD: f64 = 40.0;
 pub const PENDULUM_THRESHOLD: f64 = 30.0;
 /// Arm motion (rad) that the free-running arm model may predict while the arm reading stays
 /// constant before the run stops as a frozen arm encoder (at least [`FROZEN_COUNTS`] counts).
-pub const FROZEN_RAD: f64 = 0.1;
+pub const FROZEN_RAD: f64 = 0.05;
 /// The least arm motion, in encoder counts, of the frozen-encoder rule.
 pub const FROZEN_COUNTS: f64 = 8.0;
 /// Periods the arm reading must stay constant before a trip is named a frozen encoder.

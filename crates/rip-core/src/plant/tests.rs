@@ -122,6 +122,64 @@ fn energy_is_conserved_without_friction() {
     assert!((plant.energy(&x) - e0).abs() < 1e-8 * e0.abs());
 }
 
+/// Only the arm's torques change its angular momentum: without them it is conserved through
+/// a pendulum swinging over the top, and with the motor driving, `Ḣ` is the motor torque
+/// less the arm's damping (integrated by the trapezoid rule along the trajectory).
+#[test]
+fn arm_momentum_changes_by_the_arms_torques_alone() {
+    let free = Plant::new(FurutaParams {
+        km: 0.0,
+        dr: 0.0,
+        dp: 0.0,
+        cr: 0.0,
+        cp: 0.0,
+        ..FurutaParams::qube_servo2()
+    })
+    .unwrap();
+    let mut x = State::new(0.0, 3.0, 0.5, -14.0);
+    let h0 = free.arm_momentum(&x);
+    let mut swing: f64 = 0.0;
+    for _ in 0..2000 {
+        free.advance(&mut x, 0.0, 0.0, 1e-3, 1);
+        swing = swing.max((x[1] - 3.0).abs());
+    }
+    assert!(
+        swing > 1.0,
+        "the arm's rate alone must not be conserved: {swing}"
+    );
+    let drift = (free.arm_momentum(&x) - h0).abs();
+    // RK4's truncation over 2 s at 1 ms with the pendulum over the top: ~4·10⁻⁹ relative;
+    // a wrong coupling term changes H by the order of the arm's swing in rate.
+    assert!(drift < 1e-7 * h0.abs(), "{drift} of {h0}");
+
+    let p = FurutaParams {
+        dp: 0.0,
+        cr: 0.0,
+        cp: 0.0,
+        ..FurutaParams::qube_servo2()
+    };
+    let driven = Plant::new(p).unwrap();
+    let torque = |x: &State| driven.motor_torque(x, 5.0) - p.dr * x[1];
+    let mut x = State::new(0.0, 1.0, 2.5, 3.0);
+    let h0 = driven.arm_momentum(&x);
+    let mut integral = 0.0;
+    let h = 1e-4;
+    for _ in 0..5000 {
+        let before = torque(&x);
+        driven.advance(&mut x, 5.0, 0.0, h, 1);
+        integral += 0.5 * h * (before + torque(&x));
+    }
+    let change = driven.arm_momentum(&x) - h0;
+    assert!(
+        (change - integral).abs() < 1e-6 * integral.abs(),
+        "{change} against {integral}"
+    );
+    assert!(
+        (driven.arm_inertia(x[2]) * x[1] - driven.arm_momentum(&x)).abs() > 1e-6,
+        "the pendulum's rate must count"
+    );
+}
+
 fn rough_params() -> FurutaParams {
     FurutaParams {
         cr: 3e-3,
