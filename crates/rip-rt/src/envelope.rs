@@ -843,7 +843,7 @@ pub const MOMENTUM_ENERGY_GAIN: f64 = 1.0;
 /// under a pendulum still swinging from its fall held the arm near still for 8 s and left
 /// `H` to the pendulum, and the arm walked on to 10.2 rad with the windings open (generated
 /// rig 79, a healthy rig, at the end of an MPC balance). `ω_H = θ̇` when the pendulum rests.
-fn momentum_rate(plant: &Plant, rate: f64, alpha: f64, alpha_rate: f64) -> f64 {
+pub fn momentum_rate(plant: &Plant, rate: f64, alpha: f64, alpha_rate: f64) -> f64 {
     let x = State::new(0.0, rate, alpha, alpha_rate);
     plant.arm_momentum(&x) / plant.arm_inertia(alpha)
 }
