@@ -385,6 +385,26 @@ fn normal_runs_never_trip_the_witness() {
     }
 }
 
+/// Runs `each` on the normal runs of rig `r`: LQR/LQG/MPC, balancing (5 s) and swing-up
+/// (15 s), noise seeds 0 and 1.
+fn each_normal_run(r: &Rigged, mut each: impl FnMut(Case, Outcome)) {
+    for kind in KINDS {
+        for swing_up in [false, true] {
+            for seed in 0..2 {
+                let case = Case {
+                    kind,
+                    swing_up,
+                    fault: Fault::None,
+                    fault_at: None,
+                    seed,
+                    late: ON_TIME,
+                };
+                each(case, simulate(r, case, if swing_up { 15.0 } else { 5.0 }));
+            }
+        }
+    }
+}
+
 /// Generated rigs of [`normal_stops_keep_the_arm_inside_the_limit`].
 const STOPPED_RIGS: usize = 40;
 
@@ -400,26 +420,16 @@ fn normal_stops_keep_the_arm_inside_the_limit() {
     let mut failures = Vec::new();
     let mut worst: (f64, String) = (0.0, String::new());
     for (name, r) in rigs(STOPPED_RIGS) {
-        for kind in KINDS {
-            for swing_up in [false, true] {
-                for seed in 0..2 {
-                    let case = Case {
-                        kind,
-                        swing_up,
-                        fault: Fault::None,
-                        fault_at: None,
-                        seed,
-                        late: ON_TIME,
-                    };
-                    let o = simulate(&r, case, if swing_up { 15.0 } else { 5.0 });
-                    let id = format!("{name} {kind} swing_up={swing_up} seed {seed}");
-                    if o.max_abs_arm > worst.0 {
-                        worst = (o.max_abs_arm, id.clone());
-                    }
-                    inside_the_limit(&r.cfg, &o, &id, &mut failures);
-                }
+        each_normal_run(&r, |case, o| {
+            let id = format!(
+                "{name} {} swing_up={} seed {}",
+                case.kind, case.swing_up, case.seed
+            );
+            if o.max_abs_arm > worst.0 {
+                worst = (o.max_abs_arm, id.clone());
             }
-        }
+            inside_the_limit(&r.cfg, &o, &id, &mut failures);
+        });
     }
     println!("largest true |arm|: {:.2} rad ({})", worst.0, worst.1);
     assert!(failures.is_empty(), "{}", failures.join("\n"));
@@ -651,31 +661,18 @@ fn measure() {
     let mut runs = 0;
     let mut trips = 0;
     for (name, r) in &rigs {
-        for kind in KINDS {
-            for swing_up in [false, true] {
-                for seed in 0..2 {
-                    let case = Case {
-                        kind,
-                        swing_up,
-                        fault: Fault::None,
-                        fault_at: None,
-                        seed,
-                        late: ON_TIME,
-                    };
-                    let o = simulate(r, case, if swing_up { 15.0 } else { 5.0 });
-                    runs += 1;
-                    trips += usize::from(o.trip.is_some());
-                    for (w, p) in worst.iter_mut().zip(o.peak) {
-                        *w = w.max(p);
-                    }
-                    worst_sign = worst_sign.max(o.sign_peak);
-                    println!(
-                        "normal {name:12} {kind} swing_up={swing_up:5} peak arm {:7.1} pendulum {:7.1} frozen {:5.2} sign {:6.2} ended {} caught {} stop {:.2} s max|arm| {:.2}",
-                        o.peak[0], o.peak[1], o.peak[2], o.sign_peak, o.ended, o.caught, o.stop_s, o.max_abs_arm
-                    );
-                }
+        each_normal_run(r, |case, o| {
+            runs += 1;
+            trips += usize::from(o.trip.is_some());
+            for (w, p) in worst.iter_mut().zip(o.peak) {
+                *w = w.max(p);
             }
-        }
+            worst_sign = worst_sign.max(o.sign_peak);
+            println!(
+                "normal {name:12} {} swing_up={:5} peak arm {:7.1} pendulum {:7.1} frozen {:5.2} sign {:6.2} ended {} caught {} stop {:.2} s max|arm| {:.2}",
+                case.kind, case.swing_up, o.peak[0], o.peak[1], o.peak[2], o.sign_peak, o.ended, o.caught, o.stop_s, o.max_abs_arm
+            );
+        });
     }
     println!(
         "normal runs {runs}, witness trips {trips}, worst arm {:.1} pendulum {:.1} frozen {:.2} sign {:.2}",
