@@ -1,0 +1,298 @@
+//! The stop's sequence, period by period: the braking law, the hold law, the short (module
+//! docs of [`crate::envelope`]).
+
+use super::*;
+
+/// The longest the hold law runs (s) before the windings are shorted regardless.
+pub const MAX_HOLD_S: f64 = 5.0;
+/// Swing of the pendulum (rad, its range over [`REST_S`]) below which the hold law has
+/// taken out what it needs to.
+pub const PENDULUM_REST_RAD: f64 = 0.05;
+/// Distance (rad) from its hold point past which the hold law is given up for the short (a
+/// sign learnt wrong, a reading that is not the arm's).
+pub const HOLD_GIVE_UP_RAD: f64 = 0.5;
+
+/// Periods in a row in which the hold law drives with at least a quarter of the voltage bound
+/// while the arm's reading does not change, after which the law is given up for the short:
+/// the reading is not the arm's (an arm encoder that stopped counting unseen), and the
+/// pendulum's terms would drive the arm blind.
+pub const HOLD_BLIND_PERIODS: u32 = 5;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Stage {
+    Braking,
+    Holding {
+        at: f64,
+        periods: u32,
+        last: f64,
+        unmoved: u32,
+    },
+    /// `blind`: the arm's reading was found not to be the arm's (it did not change while the
+    /// hold law drove), so the short lasts until the pendulum rests instead.
+    Shorted {
+        blind: bool,
+    },
+}
+
+/// A stop, period by period, after the run ended: the braking law of the stop's mode
+/// ([`Brake`]; with the wiring trusted, on the arm's angular momentum, [`momentum_rate`])
+/// until the arm rests or that momentum is braked out; then, where the wiring's sign is known, the hold law
+/// (`rip_core::envelope::HoldLaw`: the arm held where it stopped, the pendulum's energy taken
+/// out through it; the arm's terms alone when only the arm's sign was learnt) until arm and
+/// pendulum rest, at most [`MAX_HOLD_S`]; then the windings shorted until the arm rests once
+/// more. One definition for `rip-rt`'s stops ([`crate::braking::bring_to_rest`]) and for
+/// the simulations that test them. Allocation-free per period.
+#[derive(Debug, Clone)]
+pub struct StopSequence {
+    brake: Brake,
+    hold: Option<HoldLaw>,
+    arm_rest: RestTest,
+    pendulum_rest: RestTest,
+    stage: Stage,
+    period_s: f64,
+    voltage: f64,
+    // The plant of `[plant]`, for the arm's angular momentum; the periods in a row the
+    // saturated law on it has seen its speed rise (`None` once it gave way), that speed,
+    // and the rig's energy (measured) when the law began.
+    plant: Option<Plant>,
+    momentum_rising: Option<u32>,
+    momentum_speed: f64,
+    momentum_energy: Option<f64>,
+    // Periods in a row the law on it has had `ω_H` within its dead band.
+    momentum_still: u32,
+    // The last command's voltage (0 for the short).
+    last_volts: f64,
+}
+
+impl StopSequence {
+    /// The stop of `cfg` with `brake`.
+    pub fn new(cfg: &Config, brake: Brake) -> Self {
+        let period_s = cfg.period_s();
+        let voltage = cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT);
+        Self {
+            plant: cfg.spec.plant().ok(),
+            momentum_rising: Some(0),
+            momentum_speed: f64::INFINITY,
+            momentum_energy: None,
+            momentum_still: 0,
+            brake,
+            hold: HoldLaw::new(&cfg.spec.plant.params(), voltage, period_s).ok(),
+            arm_rest: RestTest::new(period_s),
+            pendulum_rest: RestTest::new(period_s),
+            stage: Stage::Braking,
+            period_s,
+            voltage,
+            last_volts: 0.0,
+        }
+    }
+
+    /// How it brakes now.
+    pub fn mode(&self) -> BrakeMode {
+        self.brake.mode()
+    }
+
+    /// Whether the hold law is running.
+    pub fn holding(&self) -> bool {
+        matches!(self.stage, Stage::Holding { .. })
+    }
+
+    /// Without a fresh measurement: the short from now on.
+    pub fn short(&mut self) {
+        self.brake.short();
+        if self.holding() {
+            self.stage = Stage::Shorted { blind: false };
+            self.arm_rest = RestTest::new(self.period_s);
+        }
+    }
+
+    /// The command for this period from the measured arm angle `theta` (rad) and rate `rate`
+    /// (rad/s), pendulum angle `alpha` (rad, 0 upright) and rate `alpha_rate` (rad/s);
+    /// `None` once the stop is done (the arm at rest with the windings shorted, or with the
+    /// short its only brake).
+    pub fn step(
+        &mut self,
+        theta: f64,
+        rate: f64,
+        alpha: f64,
+        alpha_rate: f64,
+    ) -> Option<BrakeCommand> {
+        // The model's arm while the stop runs on it: the reading is not the arm's.
+        let arm_rests = self
+            .arm_rest
+            .observe(self.brake.model_arm().unwrap_or(theta));
+        let hold_ready = self.hold.is_some() && self.hold_sign().is_some();
+        match self.stage {
+            // The arm at rest, or its momentum braked out (the law at 0 V for REST_S): under a
+            // pendulum still swinging the arm swings with it and never rests, and the hold
+            // law is what takes the pendulum's energy out.
+            Stage::Braking
+                if arm_rests || f64::from(self.momentum_still) * self.period_s >= REST_S =>
+            {
+                if self.brake.mode() == BrakeMode::Short {
+                    return None;
+                }
+                if hold_ready {
+                    self.stage = Stage::Holding {
+                        at: theta,
+                        periods: 0,
+                        last: theta,
+                        unmoved: 0,
+                    };
+                    self.pendulum_rest = RestTest::new(self.period_s);
+                } else {
+                    self.brake.short();
+                    self.stage = Stage::Shorted { blind: false };
+                }
+                self.arm_rest = RestTest::new(self.period_s);
+            }
+            Stage::Holding {
+                at,
+                periods,
+                last,
+                unmoved,
+            } => {
+                let driven = self.last_volts.abs() >= 0.25 * self.voltage;
+                let unmoved = if driven && theta == last {
+                    unmoved + 1
+                } else {
+                    0
+                };
+                let phi = rip_core::swingup::wrap_angle(alpha - std::f64::consts::PI);
+                let pendulum_rests = self.pendulum_rest.observe_within(phi, PENDULUM_REST_RAD);
+                let done = (arm_rests && pendulum_rests)
+                    || f64::from(periods + 1) * self.period_s >= MAX_HOLD_S
+                    || (theta - at).abs() > HOLD_GIVE_UP_RAD
+                    || unmoved >= HOLD_BLIND_PERIODS
+                    || !theta.is_finite();
+                if done {
+                    self.brake.short();
+                    self.stage = Stage::Shorted {
+                        blind: unmoved >= HOLD_BLIND_PERIODS,
+                    };
+                    self.arm_rest = RestTest::new(self.period_s);
+                    self.pendulum_rest = RestTest::new(self.period_s);
+                } else {
+                    self.stage = Stage::Holding {
+                        at,
+                        periods: periods + 1,
+                        last: theta,
+                        unmoved,
+                    };
+                }
+            }
+            Stage::Shorted { blind: false } if arm_rests => return None,
+            // The arm's reading is not the arm's, and the pendulum's swing still drives the
+            // arm through the coupling: a swinging pendulum left with the windings open walked
+            // an arm that read at rest to 5.1 rad (generated rig 33, MPC, arm encoder stopped).
+            Stage::Shorted { blind: true } => {
+                let phi = rip_core::swingup::wrap_angle(alpha - std::f64::consts::PI);
+                if self.pendulum_rest.observe_within(phi, PENDULUM_REST_RAD) {
+                    return None;
+                }
+            }
+            _ => {}
+        }
+        let command = match (self.stage, self.hold, self.hold_sign()) {
+            (Stage::Braking, ..) => {
+                let rate = self.braked_rate(rate, alpha, alpha_rate);
+                self.brake.command(Some(rate))
+            }
+            (Stage::Holding { at, .. }, Some(law), Some((sign, full))) => {
+                // The pendulum's terms are the linearisation's about hanging: in the upper
+                // half (a pendulum still falling from upright) they would drive the arm hard
+                // on a state they do not describe.
+                let lower = alpha.cos() < 0.0;
+                let v = if full && lower {
+                    law.voltage(theta - at, rate, alpha, alpha_rate)
+                } else {
+                    law.arm_voltage(theta - at, rate)
+                };
+                BrakeCommand::Volts(sign * v)
+            }
+            _ => BrakeCommand::Short,
+        };
+        self.last_volts = match command {
+            BrakeCommand::Volts(v) => v,
+            BrakeCommand::Short => 0.0,
+        };
+        Some(command)
+    }
+
+    /// The rate the braking law takes: [`momentum_rate`] while the wiring is trusted and the
+    /// law on it makes progress, else the measured arm rate. A law on `ω_H` mixes the two
+    /// readings, and a wrong `arm_counts_per_rev` (the arm's rate read at a quarter) turns it
+    /// into one that drives the arm on: once its saturated speed has risen for
+    /// [`WRONG_SIGN_PERIODS`] periods in a row it gives way to the arm rate for the rest of
+    /// the stop (without that guard, 14 more generated rigs' LQR balances with the wrong
+    /// scale ended past the limit). A brake takes energy out; a law on `ω_H` whose rig gained
+    /// [`MOMENTUM_ENERGY_GAIN`] of the pendulum's swing energy (`2 m_p g L_p/2`) since it
+    /// began is pumping the pendulum (that wrong scale spun one to 115 rad/s, generated rig
+    /// 71) and gives way too.
+    fn braked_rate(&mut self, rate: f64, alpha: f64, alpha_rate: f64) -> f64 {
+        let Some(plant) = self
+            .plant
+            .as_ref()
+            .filter(|_| self.brake.mode() == BrakeMode::Active)
+        else {
+            return rate;
+        };
+        let Some(rising) = self.momentum_rising.as_mut() else {
+            return rate;
+        };
+        let omega = momentum_rate(plant, rate, alpha, alpha_rate);
+        let speed = omega.abs();
+        *rising = if self.brake.saturates(speed) && speed > self.momentum_speed {
+            *rising + 1
+        } else {
+            0
+        };
+        self.momentum_speed = speed;
+        let energy = plant.energy(&State::new(0.0, rate, alpha, alpha_rate));
+        let start = *self.momentum_energy.get_or_insert(energy);
+        if *rising >= WRONG_SIGN_PERIODS
+            || energy > start + MOMENTUM_ENERGY_GAIN * plant.swing_energy()
+        {
+            self.momentum_rising = None;
+            self.momentum_still = 0;
+            return rate;
+        }
+        self.momentum_still = if self.brake.below_dead_band(speed) {
+            self.momentum_still + 1
+        } else {
+            0
+        };
+        omega
+    }
+
+    /// The hold law's sign and whether it may use the pendulum's terms, by the brake's mode:
+    /// the model's sign with both angles when the wiring is trusted; the sign the arm showed,
+    /// arm terms alone, once the braking law proved it on the arm's response; none otherwise
+    /// (an unproven sign could drive the arm off its hold point).
+    fn hold_sign(&self) -> Option<(f64, bool)> {
+        if !self.brake.sign_known() {
+            return None;
+        }
+        match self.brake.mode() {
+            BrakeMode::Active => Some((1.0, true)),
+            BrakeMode::Checked => Some((1.0, false)),
+            BrakeMode::Reversed => Some((-1.0, false)),
+            _ => None,
+        }
+    }
+}
+
+/// Share of the pendulum's swing energy ([`Plant::swing_energy`]) that the rig may gain under
+/// the braking law on [`momentum_rate`] before that law gives way to the arm's rate.
+pub const MOMENTUM_ENERGY_GAIN: f64 = 1.0;
+
+/// The arm rate that the braking law takes when the wiring is trusted: the arm's angular
+/// momentum about its axis in units of its inertia, `ω_H = H / (J₀ + J_α sin²α)`
+/// ([`Plant::arm_momentum`]), from the measured rates. Only the motor's torque changes `H`,
+/// so a law on `ω_H` leaves nothing to walk the arm once the windings open; a law on `θ̇`
+/// under a pendulum still swinging from its fall held the arm near still for 8 s and left
+/// `H` to the pendulum, and the arm walked on to 10.2 rad with the windings open (generated
+/// rig 79, a healthy rig, at the end of an MPC balance). `ω_H = θ̇` when the pendulum rests.
+pub fn momentum_rate(plant: &Plant, rate: f64, alpha: f64, alpha_rate: f64) -> f64 {
+    let x = State::new(0.0, rate, alpha, alpha_rate);
+    plant.arm_momentum(&x) / plant.arm_inertia(alpha)
+}
