@@ -51,6 +51,7 @@ CHANGES: dict[str, tuple[str, str]] = {
     "monte_carlo.parameters": ('["mr"]', ""),
     "monte_carlo.runs": ("3", ""),
     "swing_up.on_fall": ('"stop"', ""),
+    "swing_up.method": ('"trajectory"', ""),
     "swing_up.max_voltage": ("10.0", ""),
 }
 

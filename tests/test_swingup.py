@@ -224,3 +224,46 @@ def test_a_reference_after_catch_without_a_catch_stays_zero() -> None:
         riprs.simulate(
             riprs.paper.plant(), riprs.Lqr.paper(), 1.0, reference=1.0, step_after_catch=-1.0
         )
+
+
+def test_a_planned_swing_up_replays_under_scipy_and_catches_on_its_first_arrival() -> None:
+    from scipy.integrate import solve_ivp
+
+    from riprs.compare import build_controllers
+
+    spec = _spec("qube_servo2")
+    plant = spec.build_plant()
+    lqr = build_controllers(spec)["LQR"]
+    sup = riprs.SwingUp(lqr, plant, method="trajectory")
+    assert sup.settings["method"] == "trajectory"
+    x, u, gain = sup.plan
+    n = len(u)
+    assert x.shape == (n, 4) and gain.shape == (n, 4) and n > 20
+    assert np.max(np.abs(u)) < 12.0
+    assert np.max(np.abs(x[:, 0])) < sup.settings["arm_limit"]
+    # The planned voltages, held over each period, integrated by scipy on the plant's
+    # equations: the angles follow the plan up to where it holds upright at rest.
+    end = int(np.argmax((x[:, 2] == x[-1, 2]) & (u == 0.0)))
+    state = np.array(HANGING)
+    for k in range(end):
+        assert np.allclose(state[[0, 2]], x[k, [0, 2]], atol=5e-3), (k, state, x[k])
+        sol = solve_ivp(
+            lambda _t, s, v=u[k]: plant.derivative(s, v),
+            (0.0, sup.Ts),
+            state,
+            method="DOP853",
+            rtol=1e-10,
+            atol=1e-12,
+        )
+        state = sol.y[:, -1]
+    assert abs(state[2] - x[-1, 2]) < 0.05 and abs(state[1]) < 0.5 and abs(state[3]) < 0.5
+    # Closed loop from hanging: caught within the plan's length, never over the top.
+    run = riprs.simulate(plant, sup, 5.0, x0=HANGING, encoder_counts=2048, noise_std=1e-3)
+    assert run.catch_time is not None and run.catch_time <= n * sup.Ts
+    assert np.max(np.abs(run.x[:, 2])) < 2 * math.pi + 0.3
+    assert not run.fell and np.max(np.abs(run.x[:, 0])) <= sup.settings["arm_limit"]
+    # The energy method has no plan.
+    x, u, gain = riprs.SwingUp(lqr, plant).plan
+    assert x.shape == (0, 4) and u.shape == (0,) and gain.shape == (0, 4)
+    with pytest.raises(riprs.InvalidParameterError, match=r"swing_up\.method"):
+        riprs.SwingUp(lqr, plant, method="rocket")

@@ -274,6 +274,15 @@ class SwingUp:
     @property
     def stop_cause(self) -> str | None: ...
     @property
+    def plan(self) -> tuple[_F, _F, _F]:
+        """The planned swing-up (``method="trajectory"``): ``(x, u, K)``, one row per period.
+
+        ``x`` (N, 4) is the state as the swing-up's rate estimate reads it along the plan,
+        ``u`` (N,) the planned voltage, ``K`` (N, 4) the time-varying LQR gain; the swing-up
+        writes ``u[k] - K[k] @ (x - x[k])``. ``N`` is 0 with ``method="energy"`` or when no
+        plan was found.
+        """
+    @property
     def settings(self) -> dict[str, float | str]: ...
     @property
     def Ts(self) -> float: ...

@@ -61,11 +61,12 @@ fn main() {
         "controller  success  no catch  fell  first arrival  max over-tops  upright median    p95   max|θ|  after fall"
     );
     for kind in ControllerKind::ALL {
-        let one = |i: u64| -> Run {
+        // One supervisor per thread, designed once (a planned swing-up takes seconds to
+        // design): `simulate` resets it before each run.
+        let one = |sup: &mut Box<dyn rip_core::Controller>, i: u64| -> Run {
             let (plant, seed) = study.run(i).expect("a perturbed plant");
-            let mut sup = supervised(&spec, &design, kind).expect("the supervisor");
             let config = hanging_config(&spec, ts, seed);
-            let res = simulate(&plant, &mut sup, &config).expect("the run");
+            let res = simulate(&plant, sup, &config).expect("the run");
             Run {
                 ok: res.swing_up_succeeded(),
                 caught: res.catch_time.is_some(),
@@ -76,8 +77,12 @@ fn main() {
         };
         let half = n / 2;
         let runs: Vec<Run> = std::thread::scope(|s| {
-            let a = s.spawn(|| (0..half).map(one).collect::<Vec<_>>());
-            let mut b: Vec<Run> = (half..n).map(one).collect();
+            let runs = |range: std::ops::Range<u64>| {
+                let mut sup = supervised(&spec, &design, kind).expect("the supervisor");
+                range.map(|i| one(&mut sup, i)).collect::<Vec<_>>()
+            };
+            let a = s.spawn(move || runs(0..half));
+            let mut b = runs(half..n);
             let mut out = a.join().expect("the runs");
             out.append(&mut b);
             out

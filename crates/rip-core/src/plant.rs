@@ -279,6 +279,11 @@ impl Plant {
         &self.params
     }
 
+    /// The smooth part of this model ([`FurutaParams::smooth`], and no stiction).
+    pub fn smooth(&self) -> Result<Plant> {
+        Plant::new(self.params.smooth())
+    }
+
     /// The smooth part of these equations of motion (no dead zone, no Coulomb friction or
     /// stiction) in the `no_std` form the swing-up law inverts and the predicted catch
     /// integrates ([`rip_control::swing::ArmModel`]): this plant's own lumped coefficients.

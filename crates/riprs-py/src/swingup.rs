@@ -1,8 +1,8 @@
 //! Binding for `rip_core::swingup`: `riprs.SwingUp`, the swing-up supervisor around any of the
 //! balance controllers.
 
-use numpy::ndarray::Array1;
-use numpy::{IntoPyArray, PyArray1};
+use numpy::ndarray::{Array1, Array2};
+use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -161,7 +161,10 @@ impl Controller for Balance {
 ///     ``catch_rate`` (rad/s),
 ///     ``catch_arm_rate`` (rad/s), ``catch_arm_angle`` (rad), ``catch_prediction`` (s),
 ///     ``catch_margin`` (rad), ``reference_return_rate`` (rad/s), ``balance_angle`` (rad),
-///     ``estimator_window`` (rad), ``handover_time`` (s), ``max_time`` (s), ``on_fall`` (``"retry"`` or ``"stop"``).
+///     ``estimator_window`` (rad), ``handover_time`` (s), ``max_time`` (s), ``on_fall`` (``"retry"`` or ``"stop"``),
+///     ``method`` (``"energy"``, the default, or ``"trajectory"``: a swing-up planned on the
+///     nominal model by iterative LQR and tracked by time-varying LQR, see :attr:`plan`; its
+///     design takes up to a few seconds).
 ///
 /// Raises
 /// ------
@@ -243,6 +246,7 @@ impl PySwingUp {
     #[new]
     #[pyo3(signature = (balance, plant=None, **settings))]
     fn new(
+        py: Python<'_>,
         balance: &Bound<'_, PyAny>,
         plant: Option<&Bound<'_, PyAny>>,
         settings: Option<&Bound<'_, PyDict>>,
@@ -273,7 +277,8 @@ impl PySwingUp {
             s.max_voltage = c.planned_limit(s.max_voltage);
         }
         let balance_kind = balance.name();
-        let inner = SwingUp::new(balance, &plant, s).py()?;
+        // A planned swing-up is designed here (up to seconds): without the GIL.
+        let inner = py.allow_threads(|| SwingUp::new(balance, &plant, s)).py()?;
         Ok(Self {
             inner: Shared::new(inner),
             balance_kind,
@@ -352,6 +357,43 @@ impl PySwingUp {
     fn x_hat<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
         let estimate = self.inner.lock(py).state_estimate().map(<[f64]>::to_vec);
         estimate.map(|s| Array1::from_vec(s).into_pyarray(py))
+    }
+
+    /// The planned swing-up (``method="trajectory"``): one row per period from hanging, the
+    /// plan's end held upright for its tail.
+    ///
+    /// Returns
+    /// -------
+    /// x : ndarray, shape (N, 4)
+    ///     ``[theta, theta_dot, alpha, alpha_dot]`` as the swing-up's rate estimate reads them
+    ///     along the plan (alpha unwrapped from pi).
+    /// u : ndarray, shape (N,)
+    ///     The planned voltage (V), before the compensation.
+    /// K : ndarray, shape (N, 4)
+    ///     The time-varying LQR gain: the swing-up writes ``u[k] - K[k] @ (x - x[k])``.
+    ///
+    /// ``N`` is 0 with ``method="energy"`` or when no plan was found.
+    #[getter]
+    #[allow(clippy::type_complexity)]
+    fn plan<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray2<f64>>,
+    )> {
+        let guard = self.inner.lock(py);
+        let plan = guard.plan();
+        let n = plan.len();
+        let rows = |f: &dyn Fn(&rip_core::swingup::PlanPoint) -> [f64; 4]| {
+            Array2::from_shape_vec((n, 4), plan.iter().flat_map(f).collect())
+        };
+        let x = rows(&|p| p.x).map_err(|e| PyTypeError::new_err(e.to_string()))?;
+        let k = rows(&|p| p.k).map_err(|e| PyTypeError::new_err(e.to_string()))?;
+        let u = Array1::from_vec(plan.iter().map(|p| p.u).collect());
+        drop(guard);
+        Ok((x.into_pyarray(py), u.into_pyarray(py), k.into_pyarray(py)))
     }
 
     fn __repr__(&self, py: Python<'_>) -> String {

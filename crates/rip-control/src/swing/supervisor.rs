@@ -63,6 +63,57 @@ impl<R: Real> SwingRates<R> {
     }
 }
 
+/// Largest distance (rad) of the pendulum from hanging at which a swing-up starts its plan.
+pub const PLAN_START_ANGLE: f64 = 0.15;
+
+/// Largest `|θ̇|` and `|α̇|` (rad/s) with which a swing-up starts its plan.
+pub const PLAN_START_RATE: f64 = 0.5;
+
+/// Largest distance (rad) of the arm or the pendulum from the plan (and of the arm's
+/// stopping point from the plan's, once it is past the envelope's limit) before the plan is
+/// left for the energy law.
+pub const PLAN_ABORT_ANGLE: f64 = 0.6;
+
+/// One period of a planned swing-up (module docs, "Planned swing-up"): the planned state, the
+/// planned voltage and the tracking gain.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PlanPoint<R: Real = f64> {
+    /// The planned state `x_k = [θ, θ̇, α, α̇]` (α unwrapped from π).
+    pub x: [R; 4],
+    /// The planned voltage `u_k` (V) on the smooth model.
+    pub u: R,
+    /// The time-varying LQR gain `K_k`.
+    pub k: [R; 4],
+}
+
+impl<R: Real> PlanPoint<R> {
+    /// The error `x − x_k`, the pendulum's wrapped.
+    #[inline]
+    pub fn error(&self, x: &[R; 4]) -> [R; 4] {
+        [
+            x[0] - self.x[0],
+            x[1] - self.x[1],
+            wrap_angle(x[2] - self.x[2]),
+            x[3] - self.x[3],
+        ]
+    }
+
+    /// The tracking voltage `sat_U(u_k − K_k (x − x_k))` (module docs).
+    #[inline]
+    pub fn voltage(&self, x: &[R; 4], max_voltage: R) -> R {
+        let e = self.error(x);
+        let mut u = self.u;
+        for i in 0..4 {
+            u -= self.k[i] * e[i];
+        }
+        if u.is_finite() {
+            u.clamp(-max_voltage, max_voltage)
+        } else {
+            R::ZERO
+        }
+    }
+}
+
 /// The balance controller the supervisor hands over to: what [`SwingSupervisor`] needs of
 /// it. rip-control's [`Controller`] implements it; rip-core adapts its own controllers.
 pub trait Balance<R: Real> {
@@ -165,6 +216,12 @@ pub struct SwingSupervisor<R: Real = f64> {
     u_swing: R,
     /// The last voltage the balance controller applied: it acts during the stop's latency.
     u_balance: R,
+    /// The plan's next sample while the swing-up follows one (module docs, "Planned
+    /// swing-up"); `None` pumping.
+    plan_step: Option<u32>,
+    /// Whether the plan has just been left with the arm outside the envelope (module docs,
+    /// "Planned swing-up"): braked with the whole bound until it is inside or turns back.
+    left_plan: bool,
 }
 
 impl<R: Real> SwingSupervisor<R> {
@@ -179,6 +236,8 @@ impl<R: Real> SwingSupervisor<R> {
             hold_reference: None,
             u_swing: R::ZERO,
             u_balance: R::ZERO,
+            plan_step: None,
+            left_plan: false,
         }
     }
 
@@ -203,6 +262,11 @@ impl<R: Real> SwingSupervisor<R> {
         self.rates.started
     }
 
+    /// Whether the swing-up is following its plan.
+    pub fn planning(&self) -> bool {
+        self.plan_step.is_some()
+    }
+
     /// One period: the measured angles `y = [θ, α]` (non-finite: unusable) and the external
     /// reference `r = [θ_ref, α_ref]`; the voltage to write and what the step did.
     pub fn step<B: Balance<R>>(
@@ -211,18 +275,36 @@ impl<R: Real> SwingSupervisor<R> {
         y: [R; 2],
         r: [R; 2],
     ) -> (R, SwingStatus<B::Status>) {
+        self.step_planned(balance, &[], y, r)
+    }
+
+    /// [`step`](Self::step) with a plan (module docs, "Planned swing-up"), the same slice at
+    /// every call; an empty plan pumps.
+    pub fn step_planned<B: Balance<R>>(
+        &mut self,
+        balance: &mut B,
+        plan: &[PlanPoint<R>],
+        y: [R; 2],
+        r: [R; 2],
+    ) -> (R, SwingStatus<B::Status>) {
         let usable = self.rates.update(y);
         match self.phase {
             SwingPhase::Stopped(_) => (R::ZERO, SwingStatus::Nominal),
             SwingPhase::SwingUp => {
-                if usable && self.params.in_catch_region(&self.rates.x) {
+                let near_end = self.plan_step.map_or(true, |k| {
+                    plan.get(k as usize).map_or(true, |point| {
+                        wrap_angle(point.x[2]).abs() <= self.params.catch_angle
+                    })
+                });
+                if usable && near_end && self.params.in_catch_region(&self.rates.x) {
                     self.phase = SwingPhase::Balance;
+                    self.plan_step = None;
                     self.balance_samples = 0;
                     self.u_balance = self.u_swing;
                     self.hold_reference = Some((self.rates.x[0], r[0]));
                     self.balance_step(balance, y, r)
                 } else {
-                    self.swing(balance, y, usable)
+                    self.swing(balance, plan, y, usable)
                 }
             }
             SwingPhase::Balance => {
@@ -235,7 +317,8 @@ impl<R: Real> SwingSupervisor<R> {
                         self.phase = SwingPhase::SwingUp;
                         self.swing_samples = 0;
                         self.hold_reference = None;
-                        self.swing(balance, y, usable)
+                        self.plan_step = None;
+                        self.swing(balance, &[], y, usable)
                     }
                 }
             }
@@ -261,10 +344,13 @@ impl<R: Real> SwingSupervisor<R> {
         self.hold_reference = None;
         self.u_swing = R::ZERO;
         self.u_balance = R::ZERO;
+        self.plan_step = None;
+        self.left_plan = false;
     }
 
     fn stop<S>(&mut self, cause: SwingStop) -> (R, SwingStatus<S>) {
         self.phase = SwingPhase::Stopped(cause);
+        self.plan_step = None;
         (R::ZERO, SwingStatus::Nominal)
     }
 
@@ -272,19 +358,51 @@ impl<R: Real> SwingSupervisor<R> {
     fn swing<B: Balance<R>>(
         &mut self,
         balance: &mut B,
+        plan: &[PlanPoint<R>],
         y: [R; 2],
         usable: bool,
     ) -> (R, SwingStatus<B::Status>) {
-        let p = &self.params;
         self.swing_samples = self.swing_samples.saturating_add(1);
-        if c::<R>(f64::from(self.swing_samples)) * p.ts > p.max_time {
+        if c::<R>(f64::from(self.swing_samples)) * self.params.ts > self.params.max_time {
             return self.stop(SwingStop::Timeout);
         }
         let x = self.rates.x;
-        let u = if self.rates.started {
-            p.voltage(&x, p.acceleration(&x))
-        } else {
-            R::ZERO
+        if self.swing_samples == 1 && self.rates.started && !plan.is_empty() {
+            let start: R = c(PLAN_START_RATE);
+            let at_rest = wrap_angle(x[2] - c(core::f64::consts::PI)).abs() <= c(PLAN_START_ANGLE)
+                && x[1].abs() <= start
+                && x[3].abs() <= start;
+            self.plan_step = at_rest.then_some(0);
+        }
+        let p = &self.params;
+        let planned = self.plan_step.and_then(|k| {
+            let point = plan.get(k as usize)?;
+            let e = point.error(&x);
+            let abort: R = c(PLAN_ABORT_ANGLE);
+            let two_brake = c::<R>(2.0) * p.brake;
+            let arm_stop = x[0] + x[1] * x[1].abs() / two_brake;
+            let plan_stop = point.x[0] + point.x[1] * point.x[1].abs() / two_brake;
+            let safe = arm_stop.abs() <= p.envelope_limit || (arm_stop - plan_stop).abs() <= abort;
+            (e[0].abs() <= abort && e[2].abs() <= abort && safe)
+                .then(|| point.voltage(&x, p.max_voltage))
+        });
+        self.left_plan |= planned.is_none() && self.plan_step.is_some();
+        self.plan_step = match (planned, self.plan_step) {
+            (Some(_), Some(k)) => Some(k + 1),
+            _ => None,
+        };
+        // After the plan, the envelope holds only from inside it: an arm whose stopping point
+        // at `a_b` is past the limit and still moving out is braked with the whole bound.
+        if self.left_plan {
+            let outward = x[0] * x[1] > R::ZERO;
+            let stop = x[0] + x[1] * x[1].abs() / (c::<R>(2.0) * p.brake);
+            self.left_plan = outward && stop.abs() > p.envelope_limit;
+        }
+        let u = match planned {
+            Some(u) => u,
+            None if self.left_plan => -p.max_voltage * x[1].signum(),
+            None if self.rates.started => p.voltage(&x, p.acceleration(&x)),
+            None => R::ZERO,
         };
         self.u_swing = u;
         if !usable {

@@ -526,3 +526,137 @@ fn the_stopping_point_is_the_braked_arm_of_the_model() {
         );
     }
 }
+
+/// A plan that holds the arm still at hanging with a constant planned voltage and a gain on
+/// the arm angle only: what the supervisor outputs tells which law it follows.
+fn still_plan(n: usize) -> Vec<PlanPoint<f64>> {
+    (0..n)
+        .map(|_| PlanPoint {
+            x: [0.0, 0.0, core::f64::consts::PI, 0.0],
+            u: 2.0,
+            k: [10.0, 0.0, 0.0, 0.0],
+        })
+        .collect()
+}
+
+#[test]
+fn a_plan_is_followed_from_hanging_rest_and_left_when_the_arm_strays() {
+    let p = params(false);
+    let plan = still_plan(50);
+    let mut sup = SwingSupervisor::new(p);
+    let mut probe = Probe::default();
+    // On the plan: u_k − K (x − x_k) with the wrapped pendulum error (−π is π).
+    let (u, _) = sup.step_planned(&mut probe, &plan, [0.05, -core::f64::consts::PI], [0.0; 2]);
+    assert!(sup.planning());
+    assert!((u - (2.0 - 10.0 * 0.05)).abs() < 1e-12, "{u}");
+    let (u, _) = sup.step_planned(&mut probe, &plan, [0.05, core::f64::consts::PI], [0.0; 2]);
+    assert!(sup.planning());
+    assert!((u - 1.5).abs() < 1e-9, "{u}");
+    // The arm beyond PLAN_ABORT_ANGLE from the plan: the energy law from then on, and the
+    // plan is not taken up again when the arm comes back.
+    let off = PLAN_ABORT_ANGLE + 0.05;
+    let (u, _) = sup.step_planned(&mut probe, &plan, [off, core::f64::consts::PI], [0.0; 2]);
+    assert!(!sup.planning());
+    assert!((u - (2.0 - 10.0 * off)).abs() > 1e-3, "{u}");
+    sup.step_planned(&mut probe, &plan, [0.0, core::f64::consts::PI], [0.0; 2]);
+    assert!(!sup.planning());
+    assert!(probe.steps.is_empty(), "no catch far from upright");
+
+    // Not at rest when the swing-up starts: no plan.
+    let mut sup = SwingSupervisor::new(p);
+    sup.step_planned(
+        &mut probe,
+        &plan,
+        [0.0, core::f64::consts::PI - 0.5],
+        [0.0; 2],
+    );
+    assert!(!sup.planning());
+
+    // The plan's end: the energy law (or the catch) takes over.
+    let mut sup = SwingSupervisor::new(p);
+    let short = still_plan(3);
+    for _ in 0..3 {
+        sup.step_planned(&mut probe, &short, [0.0, core::f64::consts::PI], [0.0; 2]);
+        assert!(sup.planning());
+    }
+    sup.step_planned(&mut probe, &short, [0.0, core::f64::consts::PI], [0.0; 2]);
+    assert!(!sup.planning());
+}
+
+#[test]
+fn a_planned_swing_is_caught_only_once_the_plan_nears_upright() {
+    let p = params(true);
+    let hanging = [0.0, 0.0, core::f64::consts::PI, 0.0];
+    let near = |alpha: f64| PlanPoint {
+        x: [0.0, 0.0, alpha, 0.0],
+        u: 0.0,
+        k: [0.0; 4],
+    };
+    // Hanging, then 20 points just outside the catch angle, then 5 inside it; the pendulum
+    // is measured at rest just inside the catch angle throughout.
+    let mut plan = std::vec![PlanPoint {
+        x: hanging,
+        u: 0.0,
+        k: [0.0; 4]
+    }];
+    plan.extend((0..20).map(|_| near(p.catch_angle + 0.1)));
+    plan.extend((0..5).map(|_| near(0.5 * p.catch_angle)));
+    let measured = [0.0, 0.5 * p.catch_angle];
+    let mut sup = SwingSupervisor::new(p);
+    let mut probe = Probe::default();
+    sup.step_planned(&mut probe, &plan, [0.0, core::f64::consts::PI], [0.0; 2]);
+    // The plan's pendulum is 0.1 rad from the measured one: followed, not caught, although
+    // the rates settle into the catch region within the 20 samples.
+    for _ in 0..20 {
+        sup.step_planned(&mut probe, &plan, measured, [0.0; 2]);
+        assert!(sup.planning());
+        assert_eq!(sup.phase(), SwingPhase::SwingUp);
+    }
+    assert!(p.in_catch_region(&[0.0, 0.0, measured[1], 0.0]));
+    sup.step_planned(&mut probe, &plan, measured, [0.0; 2]);
+    assert_eq!(sup.phase(), SwingPhase::Balance);
+    assert!(!sup.planning());
+}
+
+#[test]
+fn a_plan_left_with_the_arm_outside_the_envelope_brakes_it_with_the_whole_bound() {
+    let p = params(false);
+    let a = (-(core::f64::consts::TAU * p.rate_cutoff_hz * p.ts)).exp();
+    let pi = core::f64::consts::PI;
+    // The plan: hanging, then the arm at 1.2 rad with the rate the estimate reads after a
+    // jump there, so that the supervisor is exactly on it.
+    let rate = (1.0 - a) * 1.2 / p.ts;
+    let plan = [
+        PlanPoint {
+            x: [0.0, 0.0, pi, 0.0],
+            u: 0.0,
+            k: [0.0; 4],
+        },
+        PlanPoint {
+            x: [1.2, rate, pi, 0.0],
+            u: 3.0,
+            k: [0.0; 4],
+        },
+        PlanPoint {
+            x: [1.2, a * rate, pi, 0.0],
+            u: 3.0,
+            k: [0.0; 4],
+        },
+    ];
+    let mut sup = SwingSupervisor::new(p);
+    let mut probe = Probe::default();
+    sup.step_planned(&mut probe, &plan, [0.0, pi], [0.0; 2]);
+    let (u, _) = sup.step_planned(&mut probe, &plan, [1.2, pi], [0.0; 2]);
+    assert!(sup.planning() && (u - 3.0).abs() < 1e-9, "{u}");
+    // The pendulum 1 rad off the plan: left, with the arm moving out and its stopping point
+    // far past the envelope's limit: the whole bound against the motion.
+    let (u, _) = sup.step_planned(&mut probe, &plan, [1.2, pi - 1.0], [0.0; 2]);
+    assert!(!sup.planning());
+    assert_eq!(u, -U);
+    // Once the arm turns back, the energy law (within the bound, not the brake's sign).
+    for _ in 0..30 {
+        sup.step_planned(&mut probe, &plan, [1.0, pi - 1.0], [0.0; 2]);
+    }
+    let (u, _) = sup.step_planned(&mut probe, &plan, [1.0, pi - 1.0], [0.0; 2]);
+    assert!(u.abs() <= U && u != -U, "{u}");
+}

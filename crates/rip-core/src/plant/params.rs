@@ -181,6 +181,17 @@ pub struct FurutaParams {
 }
 
 impl FurutaParams {
+    /// The same rig without its dead zone and Coulomb friction (`V_d = C_r = C_p = 0`): the
+    /// smooth model the swing-up plans on while the compensation clears the rest.
+    pub fn smooth(&self) -> FurutaParams {
+        FurutaParams {
+            vd: 0.0,
+            cr: 0.0,
+            cp: 0.0,
+            ..*self
+        }
+    }
+
     /// Centroidal inertia of a uniform rod of mass `m` and length `l`, `m l²/12`: the one rule
     /// by which a link whose inertia was not measured is taken from its mass and length (the
     /// presets, the lab file's start set, an identification whose split leaves no positive

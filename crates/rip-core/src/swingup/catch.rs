@@ -7,7 +7,7 @@ use rip_control::swing::CatchPrediction;
 use crate::envelope::StoppingModel;
 use crate::linalg::c2d;
 use crate::lqr::dlqr;
-use crate::plant::{FurutaParams, Plant};
+use crate::plant::Plant;
 
 use super::settings::SwingUpSettings;
 
@@ -20,13 +20,7 @@ pub(crate) fn prediction(plant: &Plant, s: &SwingUpSettings, ts: f64) -> Option<
     if s.catch_prediction <= 0.0 {
         return None;
     }
-    let smooth = Plant::new(FurutaParams {
-        vd: 0.0,
-        cr: 0.0,
-        cp: 0.0,
-        ..*plant.params()
-    })
-    .ok()?;
+    let smooth = plant.smooth().ok()?;
     let (a, b) = smooth.linearize_upright();
     let (ad, bd) = c2d(&a, &b, ts).ok()?;
     // The reference LQR is the paper's, eq. (13): the `[lqr]` section's default.

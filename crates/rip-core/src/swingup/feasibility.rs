@@ -140,13 +140,7 @@ fn balance(p: &FurutaParams, u_max: f64, arm_limit: f64) -> (f64, f64, f64, f64)
     let w = (grav / ja).sqrt();
     // The smooth model, with the dead zone and the arm's Coulomb friction taken off the
     // voltage instead.
-    let smooth = Plant::new(FurutaParams {
-        vd: 0.0,
-        cr: 0.0,
-        cp: 0.0,
-        ..*p
-    });
-    let Ok(smooth) = smooth else {
+    let Ok(smooth) = Plant::new(p.smooth()) else {
         return (0.0, f64::INFINITY, grav, w);
     };
     // What is left for accelerating once the dead zone and the arm's Coulomb friction

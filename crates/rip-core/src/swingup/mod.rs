@@ -19,6 +19,7 @@
 mod catch;
 mod design;
 pub mod feasibility;
+pub mod plan;
 
 mod settings;
 pub mod stored;
@@ -26,8 +27,8 @@ pub mod stored;
 pub use crate::swing_report::{SwingUpReport, STILL_ARM};
 pub use crate::trig::wrap_angle;
 pub use feasibility::{feasibility, Feasibility, Verdict};
-pub use rip_control::swing::SwingParams;
-pub use settings::{OnFall, SwingUpSettings, MAX_SWING_UP_TIME};
+pub use rip_control::swing::{PlanPoint, SwingParams};
+pub use settings::{OnFall, SwingUpMethod, SwingUpSettings, MAX_SWING_UP_TIME};
 pub use stored::{feasibility_inputs, stored_or_computed, StoredFeasibility, VerdictSource};
 
 use rip_control::swing::{Balance, SwingPhase, SwingStatus, SwingStop, SwingSupervisor};
@@ -43,6 +44,8 @@ pub struct SwingUp<C> {
     balance: C,
     settings: SwingUpSettings,
     supervisor: SwingSupervisor,
+    /// The planned swing-up ([`plan`]); empty with the energy method or when none was found.
+    plan: Vec<PlanPoint>,
     /// What the current swing-up has done so far.
     report: SwingUpReport,
 }
@@ -101,14 +104,27 @@ impl<C: Controller> SwingUp<C> {
                 "the nominal model has no real unstable mode about upright to catch",
             )
         })?;
+        let plan = match settings.method {
+            SwingUpMethod::Energy => Vec::new(),
+            SwingUpMethod::Trajectory => {
+                plan::plan(plant, &settings, &params, ts).unwrap_or_default()
+            }
+        };
         let mut out = Self {
             balance,
             settings,
+            plan,
             supervisor: SwingSupervisor::new(params),
             report: SwingUpReport::start(0.0, 0.0, 0.0),
         };
         out.reset();
         Ok(out)
+    }
+
+    /// The planned swing-up, one point per period from hanging ([`plan`]); empty with the
+    /// energy method or when no plan was found.
+    pub fn plan(&self) -> &[PlanPoint] {
+        &self.plan
     }
 
     /// The settings.
@@ -170,9 +186,12 @@ impl<C: Controller> Controller for SwingUp<C> {
 
     fn step(&mut self, y: &[f64], r: &[f64], u: &mut [f64]) -> StepStatus {
         let before = self.supervisor.phase();
-        let (v, status) =
-            self.supervisor
-                .step(&mut Host(&mut self.balance), [y[0], y[1]], [r[0], r[1]]);
+        let (v, status) = self.supervisor.step_planned(
+            &mut Host(&mut self.balance),
+            &self.plan,
+            [y[0], y[1]],
+            [r[0], r[1]],
+        );
         u[0] = v;
         let after = self.supervisor.phase();
         // A fall with a retry starts a new swing-up, and a new report with it; every swing-up

@@ -42,6 +42,29 @@ impl OnFall {
     }
 }
 
+/// How the swing-up brings the pendulum up (`swing_up.method`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SwingUpMethod {
+    /// Pump energy (Åström & Furuta) until the pendulum arrives in the catch region.
+    #[default]
+    Energy,
+    /// Follow a trajectory planned on the nominal model from hanging to upright at rest,
+    /// tracked by time-varying LQR ([module docs](super::plan)); the energy law where no plan is
+    /// found, after a fall, or when the rig strays from the plan.
+    Trajectory,
+}
+
+impl SwingUpMethod {
+    /// The name in the file: `"energy"` or `"trajectory"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Energy => "energy",
+            Self::Trajectory => "trajectory",
+        }
+    }
+}
+
 /// Settings of the energy swing-up and of its supervisor (the `[swing_up]` section).
 ///
 /// Accelerations are given as fractions of the *stall acceleration*
@@ -52,6 +75,8 @@ impl OnFall {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SwingUpSettings {
+    /// How the pendulum is brought up; default [`SwingUpMethod::Energy`].
+    pub method: SwingUpMethod,
     /// Largest voltage the swing-up applies, `U` (V); default the paper's bound,
     /// [`INPUT_LIMIT`](crate::paper::INPUT_LIMIT) (12 V).
     pub max_voltage: f64,
@@ -169,6 +194,7 @@ pub struct SwingUpSettings {
 impl Default for SwingUpSettings {
     fn default() -> Self {
         Self {
+            method: SwingUpMethod::Energy,
             max_voltage: crate::paper::INPUT_LIMIT,
             arm_limit: 1.5,
             brake_fraction: 0.5,
@@ -358,5 +384,22 @@ mod tests {
         assert_eq!(toml::from_str::<SwingUpSettings>(&text).unwrap(), s);
         let err = toml::from_str::<SwingUpSettings>("max_tme = 3.0\n").unwrap_err();
         assert!(err.to_string().contains("max_tme"), "{err}");
+        let s: SwingUpSettings = toml::from_str("method = \"trajectory\"\n").unwrap();
+        assert_eq!(s.method, SwingUpMethod::Trajectory);
+        assert_eq!(SwingUpSettings::default().method, SwingUpMethod::Energy);
+        let text = toml::to_string(&s).unwrap();
+        assert!(text.contains("method = \"trajectory\""), "{text}");
+    }
+
+    #[test]
+    fn an_unknown_method_is_an_error_naming_the_key() {
+        let err = crate::spec::Spec::parse("[swing_up]\nmethod = \"rocket\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("swing_up.method"), "{err}");
+        assert!(
+            err.contains("energy") && err.contains("trajectory"),
+            "{err}"
+        );
     }
 }
