@@ -185,26 +185,28 @@
 //!
 //! Given a plan (rip-core's `swingup::plan`: a trajectory from hanging to upright at rest on
 //! the nominal model, one [`PlanPoint`] per period, with the time-varying LQR gain that tracks
-//! it), a swing-up that starts from hanging at rest (within [`PLAN_START_ANGLE`] of hanging,
-//! both rates below [`PLAN_START_RATE`]) follows it instead of pumping: at its `k`-th sample
+//! it), a swing-up that starts from hanging (its first sample within [`PLAN_START_ANGLE`] of
+//! hanging, and its rates within [`PLAN_START_RATE`] of the plan's over the first
+//! [`PLAN_SETTLE_SAMPLES`]: the estimate has no rate at its first sample) follows it instead of
+//! pumping: at its `k`-th period
 //!
 //! ```text
 //! u = sat_U(u_k − K_k (x − x_k)),   the pendulum's error wrapped,
 //! ```
 //!
-//! and the catch is tested only once the plan's pendulum is within `catch_angle` of upright
-//! (the plan carries it there; a catch tested earlier would take an arrival the plan is not
-//! yet braking for). The plan is left for the energy law when the estimate strays from it
-//! (pendulum or arm more than [`PLAN_ABORT_ANGLE`] off), or when the arm's stopping point
-//! braked at `a_b` leaves the envelope's limit and lies more than [`PLAN_ABORT_ANGLE`] from
-//! the plan's own stopping point (the plan brakes the arm itself, often at more than `a_b`:
-//! its own stopping point may lie past the limit while the plan stays inside it), whose
-//! barrier (3) then brakes it. The barrier holds only from states inside the envelope, and a
-//! plan left while the arm's stopping point at `a_b` is past the limit leaves it outside: the
-//! arm is then braked with the whole bound, `u = −U sgn θ̇`, until that stopping point is back
-//! inside or the arm turns back, and the energy law takes over from there. At the plan's end
-//! the energy law or the catch takes over. A swing-up after a fall, or from anywhere else,
-//! pumps.
+//! `u_k` alone on a period without a usable measurement, and `k` counts every period, held
+//! ones included. The catch is tested only once the plan's pendulum is within `catch_angle` of
+//! upright (the plan carries it there; a catch tested earlier would take an arrival the plan
+//! is not yet braking for). The plan is left for the energy law when the estimate strays from
+//! it (pendulum or arm more than [`PLAN_ABORT_ANGLE`] off), when the arm passes the envelope's
+//! limit `θ_L`, or when the arm's stopping point braked at `a_b` is past `θ_L` and more than
+//! [`PLAN_ARM_EXCESS`] further out than the plan's own (the plan brakes the arm harder than
+//! `a_b`: its own stopping point by `a_b` may lie past the limit while the plan stays inside
+//! it). The envelope's barrier (3) holds only from states inside the envelope, and a plan left
+//! while the arm's stopping point at `a_b` is past the limit leaves it outside: the arm is then
+//! braked with the whole bound, `u = −U sgn θ̇`, until that stopping point is back inside or
+//! the arm turns back, and the energy law takes over from there. At the plan's end the energy
+//! law or the catch takes over. A swing-up after a fall, or from anywhere else, pumps.
 //!
 //! Every step is allocation-free (the crate has no allocator); its time is bounded by the
 //! predicted catch's horizon, [`CatchPrediction::steps`] RK4 samples.

@@ -66,8 +66,18 @@ impl<R: Real> SwingRates<R> {
 /// Largest distance (rad) of the pendulum from hanging at which a swing-up starts its plan.
 pub const PLAN_START_ANGLE: f64 = 0.15;
 
-/// Largest `|θ̇|` and `|α̇|` (rad/s) with which a swing-up starts its plan.
-pub const PLAN_START_RATE: f64 = 0.5;
+/// Largest `|θ̇|` and `|α̇|` (rad/s) from the plan's over its first [`PLAN_SETTLE_SAMPLES`]
+/// samples: a swing-up that starts its plan from a moving pendulum leaves it. (A count of an
+/// 800-count encoder reads as 0.56 rad/s in the estimate's first difference.)
+pub const PLAN_START_RATE: f64 = 2.0;
+
+/// Samples of the plan over which the rates are checked against [`PLAN_START_RATE`] (the
+/// estimate has no rate at its first sample, two differences by the third).
+pub const PLAN_SETTLE_SAMPLES: u32 = 3;
+
+/// Largest distance (rad) by which the arm's stopping point at `a_b` may lie further out than
+/// the plan's, once it is past the envelope's limit, before the plan is left.
+pub const PLAN_ARM_EXCESS: f64 = 0.2;
 
 /// Largest distance (rad) of the arm or the pendulum from the plan (and of the arm's
 /// stopping point from the plan's, once it is past the envelope's limit) before the plan is
@@ -299,6 +309,7 @@ impl<R: Real> SwingSupervisor<R> {
                 if usable && near_end && self.params.in_catch_region(&self.rates.x) {
                     self.phase = SwingPhase::Balance;
                     self.plan_step = None;
+                    self.left_plan = false;
                     self.balance_samples = 0;
                     self.u_balance = self.u_swing;
                     self.hold_reference = Some((self.rates.x[0], r[0]));
@@ -318,6 +329,7 @@ impl<R: Real> SwingSupervisor<R> {
                         self.swing_samples = 0;
                         self.hold_reference = None;
                         self.plan_step = None;
+                        self.left_plan = false;
                         self.swing(balance, &[], y, usable)
                     }
                 }
@@ -330,6 +342,8 @@ impl<R: Real> SwingSupervisor<R> {
         self.rates.hold();
         if self.phase == SwingPhase::SwingUp {
             self.swing_samples = self.swing_samples.saturating_add(1);
+            // The plan's clock runs with the plant's.
+            self.plan_step = self.plan_step.map(|k| k.saturating_add(1));
         }
         balance.hold(u);
     }
@@ -351,6 +365,7 @@ impl<R: Real> SwingSupervisor<R> {
     fn stop<S>(&mut self, cause: SwingStop) -> (R, SwingStatus<S>) {
         self.phase = SwingPhase::Stopped(cause);
         self.plan_step = None;
+        self.left_plan = false;
         (R::ZERO, SwingStatus::Nominal)
     }
 
@@ -368,22 +383,29 @@ impl<R: Real> SwingSupervisor<R> {
         }
         let x = self.rates.x;
         if self.swing_samples == 1 && self.rates.started && !plan.is_empty() {
-            let start: R = c(PLAN_START_RATE);
-            let at_rest = wrap_angle(x[2] - c(core::f64::consts::PI)).abs() <= c(PLAN_START_ANGLE)
-                && x[1].abs() <= start
-                && x[3].abs() <= start;
-            self.plan_step = at_rest.then_some(0);
+            // The estimate has no rate yet at its first sample: the rest is checked on the
+            // angle here and on the rates over the plan's first samples (below).
+            let hanging = wrap_angle(x[2] - c(core::f64::consts::PI)).abs() <= c(PLAN_START_ANGLE);
+            self.plan_step = hanging.then_some(0);
         }
         let p = &self.params;
         let planned = self.plan_step.and_then(|k| {
             let point = plan.get(k as usize)?;
+            if !usable {
+                // A stale estimate against this period's point would read as a jump: the
+                // planned voltage alone.
+                return Some(point.u.clamp(-p.max_voltage, p.max_voltage));
+            }
             let e = point.error(&x);
             let abort: R = c(PLAN_ABORT_ANGLE);
+            let start: R = c(PLAN_START_RATE);
+            let settled = k >= PLAN_SETTLE_SAMPLES || (e[1].abs() <= start && e[3].abs() <= start);
             let two_brake = c::<R>(2.0) * p.brake;
             let arm_stop = x[0] + x[1] * x[1].abs() / two_brake;
             let plan_stop = point.x[0] + point.x[1] * point.x[1].abs() / two_brake;
-            let safe = arm_stop.abs() <= p.envelope_limit || (arm_stop - plan_stop).abs() <= abort;
-            (e[0].abs() <= abort && e[2].abs() <= abort && safe)
+            let arm_inside = x[0].abs() <= p.envelope_limit
+                && (arm_stop.abs() <= p.envelope_limit || (arm_stop - plan_stop).abs() <= abort);
+            (settled && e[0].abs() <= abort && e[2].abs() <= abort && arm_inside)
                 .then(|| point.voltage(&x, p.max_voltage))
         });
         self.left_plan |= planned.is_none() && self.plan_step.is_some();

@@ -552,8 +552,8 @@ fn a_plan_is_followed_from_hanging_rest_and_left_when_the_arm_strays() {
     let (u, _) = sup.step_planned(&mut probe, &plan, [0.05, core::f64::consts::PI], [0.0; 2]);
     assert!(sup.planning());
     assert!((u - 1.5).abs() < 1e-9, "{u}");
-    // The arm beyond PLAN_ABORT_ANGLE from the plan: the energy law from then on, and the
-    // plan is not taken up again when the arm comes back.
+    // The arm beyond PLAN_ABORT_ANGLE from the plan: the plan is left, and not taken up
+    // again when the arm comes back.
     let off = PLAN_ABORT_ANGLE + 0.05;
     let (u, _) = sup.step_planned(&mut probe, &plan, [off, core::f64::consts::PI], [0.0; 2]);
     assert!(!sup.planning());
@@ -592,19 +592,25 @@ fn a_planned_swing_is_caught_only_once_the_plan_nears_upright() {
         u: 0.0,
         k: [0.0; 4],
     };
-    // Hanging, then 20 points just outside the catch angle, then 5 inside it; the pendulum
-    // is measured at rest just inside the catch angle throughout.
-    let mut plan = std::vec![PlanPoint {
-        x: hanging,
-        u: 0.0,
-        k: [0.0; 4]
-    }];
+    // Hanging for the settling samples, then 20 points just outside the catch angle, then 5
+    // inside it; the pendulum is measured hanging, then at rest just inside the catch angle.
+    let settle = PLAN_SETTLE_SAMPLES as usize;
+    let mut plan = std::vec![
+        PlanPoint {
+            x: hanging,
+            u: 0.0,
+            k: [0.0; 4]
+        };
+        settle
+    ];
     plan.extend((0..20).map(|_| near(p.catch_angle + 0.1)));
     plan.extend((0..5).map(|_| near(0.5 * p.catch_angle)));
     let measured = [0.0, 0.5 * p.catch_angle];
     let mut sup = SwingSupervisor::new(p);
     let mut probe = Probe::default();
-    sup.step_planned(&mut probe, &plan, [0.0, core::f64::consts::PI], [0.0; 2]);
+    for _ in 0..settle {
+        sup.step_planned(&mut probe, &plan, [0.0, core::f64::consts::PI], [0.0; 2]);
+    }
     // The plan's pendulum is 0.1 rad from the measured one: followed, not caught, although
     // the rates settle into the catch region within the 20 samples.
     for _ in 0..20 {
@@ -659,4 +665,57 @@ fn a_plan_left_with_the_arm_outside_the_envelope_brakes_it_with_the_whole_bound(
     }
     let (u, _) = sup.step_planned(&mut probe, &plan, [1.0, pi - 1.0], [0.0; 2]);
     assert!(u.abs() <= U && u != -U, "{u}");
+}
+
+#[test]
+fn a_plan_started_on_a_moving_pendulum_is_left_within_its_settling_samples() {
+    let p = params(false);
+    let plan = still_plan(50);
+    let pi = core::f64::consts::PI;
+    // Through hanging at 5 rad/s: the first sample cannot tell (no rate yet), the second can.
+    let mut sup = SwingSupervisor::new(p);
+    let mut probe = Probe::default();
+    sup.step_planned(&mut probe, &plan, [0.0, pi - 0.01], [0.0; 2]);
+    assert!(sup.planning());
+    sup.step_planned(&mut probe, &plan, [0.0, pi - 0.06], [0.0; 2]);
+    assert!(!sup.planning());
+    // At rest it is kept past the settling samples.
+    let mut sup = SwingSupervisor::new(p);
+    for _ in 0..2 * PLAN_SETTLE_SAMPLES {
+        sup.step_planned(&mut probe, &plan, [0.0, pi], [0.0; 2]);
+        assert!(sup.planning());
+    }
+}
+
+#[test]
+fn a_held_period_advances_the_plan_and_an_unusable_one_applies_its_voltage_alone() {
+    let p = params(false);
+    let pi = core::f64::consts::PI;
+    // Point k asks for k volts, with a gain on the arm.
+    let plan: Vec<PlanPoint<f64>> = (0..10)
+        .map(|k| PlanPoint {
+            x: [0.0, 0.0, pi, 0.0],
+            u: k as f64,
+            k: [10.0, 0.0, 0.0, 0.0],
+        })
+        .collect();
+    let mut sup = SwingSupervisor::new(p);
+    let mut probe = Probe::default();
+    let (u, _) = sup.step_planned(&mut probe, &plan, [0.0, pi], [0.0; 2]);
+    assert_eq!(u, 0.0);
+    sup.hold(&mut probe, u);
+    sup.hold(&mut probe, u);
+    let (u, _) = sup.step_planned(&mut probe, &plan, [0.0, pi], [0.0; 2]);
+    assert!((u - 3.0).abs() < 1e-12, "{u}");
+    // Without a measurement: point 4's voltage, not corrected by the stale arm estimate.
+    let (u, status) = sup.step_planned(&mut probe, &plan, [f64::NAN, pi], [0.0; 2]);
+    assert_eq!(status, SwingStatus::Held);
+    assert!((u - 4.0).abs() < 1e-12, "{u}");
+    assert!(sup.planning());
+    let (u, _) = sup.step_planned(&mut probe, &plan, [0.01, pi], [0.0; 2]);
+    assert!((u - (5.0 - 10.0 * 0.01)).abs() < 1e-9, "{u}");
+    // A reset starts from the plan's beginning again.
+    sup.reset(&mut probe);
+    let (u, _) = sup.step_planned(&mut probe, &plan, [0.0, pi], [0.0; 2]);
+    assert!(sup.planning() && u == 0.0);
 }

@@ -20,12 +20,16 @@
 //! the size of the compensation itself (dead zone `V_d` and Coulomb friction voltage), whose
 //! errors it has to absorb: on generated rigs with friction a plan at `κ U` caught on the first
 //! arrival in 6 of 9 runs where this one catches in 9 (`examples/swingup_rigs.rs`, rigs 1, 3
-//! and 14); `θ_s` is the arm limit less
+//! and 14); `θ_s = max(θ_L − θ_r, θ_L/2)` with `θ_L` = `swing_up.arm_limit` and `θ_r`
 //! [`ARM_ROOM`]; `Q_f = diag(100, 10, 1000, 10)`, `ρ = 0.05`, `w_θ = 1000`. iLQR (Li & Todorov
-//! 2004; Tassa, Erez & Todorov 2012 for the regularisation) expands `f` to first and the cost
-//! to second order about the current trajectory (Gauss–Newton in the input cost), solves the
-//! resulting time-varying LQ problem backwards and line-searches the new inputs forwards with
-//! the feedback of the expansion. The first guess is the energy law's own swing-up on the
+//! 2004) expands `f` to first and the cost to second order about the current trajectory
+//! (Gauss–Newton in the input cost), solves the resulting time-varying LQ problem backwards
+//! (a Levenberg–Marquardt term `μ` added to `Q_vv`, raised tenfold when a pass fails, lowered
+//! threefold when one succeeds) and line-searches the new inputs forwards with the feedback of
+//! the expansion (halving the step up to ten times; converged when an accepted step gains less
+//! than `10⁻⁹ (1 + J)`). Its work is bounded whatever the rig and period: each horizon gets at
+//! most `min(2000, 10⁶/N)` iterations, and no plan is longer than 10 s or
+//! `swing_up.max_time` less the tail. The first guess is the energy law's own swing-up on the
 //! nominal model: its first arrival within the catch angle sets the horizon `N`, and the
 //! horizons of [`HORIZON_FACTORS`] are tried in turn (the plan's smaller voltage often needs a
 //! longer one).
@@ -46,8 +50,9 @@
 //! ```
 //!
 //! so the tracking law `u = u_k − K_k (x − x_k)` (the pendulum's error wrapped) ends in the
-//! balance LQR's own gain. The plan is extended by [`UPRIGHT_TAIL`] at rest upright (`u = 0`,
-//! the gain the upright LQR's), so that a pendulum a little behind the plan is carried into
+//! paper's upright LQR gain (the balance LQR's with the default `[lqr]` weights). The plan is
+//! extended by [`UPRIGHT_TAIL`] at rest at its own final angles (`u = 0`, the gain the upright
+//! LQR's), so that a pendulum a little behind the plan is carried into
 //! the catch region rather than left to the energy law. The stored `x_k` are not the planned
 //! states themselves but what the supervisor's rate estimate (filtered backward differences
 //! at `swing_up.rate_cutoff`) reads along them, so that the error carries no lag of the
@@ -76,16 +81,22 @@ pub const UPRIGHT_TAIL: f64 = 0.3;
 /// Room (rad) the plan keeps inside `swing_up.arm_limit`.
 pub const ARM_ROOM: f64 = 0.2;
 
-/// Largest `(|α|, |α̇|, |θ̇|)` (rad, rad/s, rad/s) of a found plan's final state.
-pub const UPRIGHT_TOLERANCE: [f64; 3] = [0.05, 0.5, 0.5];
+/// Largest distance of a found plan's final state from upright at rest, `(|θ|, |θ̇|, |α −
+/// 2πm|, |α̇|)` (rad, rad/s, rad, rad/s).
+pub const UPRIGHT_TOLERANCE: [f64; 4] = [0.1, 0.5, 0.05, 0.5];
 
-/// iLQR iterations per horizon.
+/// iLQR iterations per horizon, at most.
 const MAX_ITERATIONS: usize = 2000;
+
+/// Iterations times horizon length per horizon, at most: bounds the design's work (each
+/// iteration costs about 20 RK4 periods per point) whatever the rig and period.
+const ITERATION_BUDGET: usize = 1_000_000;
 
 /// Horizons tried, as multiples of the energy law's time to its first arrival.
 pub const HORIZON_FACTORS: [f64; 4] = [1.0, 0.8, 1.3, 1.7];
 
-/// Longest plan (s).
+/// Longest first guess and plan (s), before the upright tail; a plan is also no longer than
+/// `swing_up.max_time` less the tail.
 const MAX_PLAN_TIME: f64 = 10.0;
 
 type M4 = SMatrix<f64, 4, 4>;
@@ -179,14 +190,20 @@ fn rollout(model: &Model, cost: &Cost, x0: &V4, vs: &[f64]) -> Option<Vec<V4>> {
 }
 
 /// iLQR from the inputs `vs` (module docs); the converged inputs and their rollout.
-fn ilqr(model: &Model, cost: &Cost, x0: &V4, mut vs: Vec<f64>) -> Option<(Vec<V4>, Vec<f64>)> {
+fn ilqr(
+    model: &Model,
+    cost: &Cost,
+    x0: &V4,
+    mut vs: Vec<f64>,
+    iterations: usize,
+) -> Option<(Vec<V4>, Vec<f64>)> {
     let n = vs.len();
     let mut xs = rollout(model, cost, x0, &vs)?;
     let mut j = total(cost, &xs, &vs);
     let mut mu = 1e-6;
     let mut ff = vec![0.0; n];
     let mut fb = vec![V4::zeros(); n];
-    for _ in 0..MAX_ITERATIONS {
+    for _ in 0..iterations {
         // Backward pass.
         let mut vx = V4::from_fn(|i, _| 2.0 * cost.terminal[i] * (xs[n][i] - cost.goal[i]));
         let mut vxx = M4::from_diagonal(&(2.0 * cost.terminal));
@@ -258,6 +275,9 @@ fn ilqr(model: &Model, cost: &Cost, x0: &V4, mut vs: Vec<f64>) -> Option<(Vec<V4
                     vs = new_vs;
                     j = new_j;
                     accepted = true;
+                    // A tiny gain of an accepted step, full or halved, ends the search: the
+                    // expansion no longer leads anywhere better (stopping only on full steps
+                    // found worse plans on 3 of 10 generated rigs).
                     if gain < 1e-9 * (1.0 + j) {
                         return Some((xs, vs));
                     }
@@ -325,29 +345,33 @@ pub(crate) fn plan(
     };
     let x0 = V4::new(0.0, 0.0, std::f64::consts::PI, 0.0);
     let to_v = |u: f64| (u / u_max).clamp(-0.95, 0.95).atanh();
+    let longest = ((s.max_time - UPRIGHT_TAIL).min(MAX_PLAN_TIME) / ts) as usize;
     for factor in HORIZON_FACTORS {
         let n = ((guess.len() as f64 * factor).round() as usize).max(10);
+        if n > longest {
+            continue;
+        }
         let vs: Vec<f64> = (0..n)
             .map(|k| guess.get(k).copied().map_or(0.0, to_v))
             .collect();
-        let Some((xs, vs)) = ilqr(&model, &cost, &x0, vs) else {
+        let iterations = (ITERATION_BUDGET / n).min(MAX_ITERATIONS);
+        let Some((xs, vs)) = ilqr(&model, &cost, &x0, vs, iterations) else {
             continue;
         };
         let end = xs[n];
         let arm = xs.iter().fold(0.0f64, |m, x| m.max(x[0].abs()));
-        let found = (end[2] - cost.goal[2]).abs() <= UPRIGHT_TOLERANCE[0]
-            && end[3].abs() <= UPRIGHT_TOLERANCE[1]
-            && end[1].abs() <= UPRIGHT_TOLERANCE[2]
-            && arm <= arm_soft + 0.02;
+        let off = end - cost.goal;
+        let found = (0..4).all(|i| off[i].abs() <= UPRIGHT_TOLERANCE[i]) && arm <= arm_soft + 0.02;
         if found {
+            // The tail holds the plan's own final angles at rest, so that the rate estimate
+            // along it has no jump.
             let mut us: Vec<f64> = vs.iter().map(|v| u_max * v.tanh()).collect();
             let mut xs = xs;
-            xs.pop();
+            let rest = V4::new(end[0], 0.0, end[2], 0.0);
             for _ in 0..((UPRIGHT_TAIL / model.ts).round() as usize) {
-                xs.push(cost.goal);
                 us.push(0.0);
+                xs.push(rest);
             }
-            xs.push(cost.goal);
             return tracking(&model, &xs, &us, law.rate_cutoff_hz);
         }
     }
@@ -467,24 +491,33 @@ mod tests {
                 assert!((x[0] - p.x[0]).abs() < 1e-3 && (x[2] - p.x[2]).abs() < 1e-3);
                 plant.advance(&mut x, p.u, 0.0, TS, substeps);
             }
-            let goal = points[n].x[2];
-            assert!(
-                (goal / std::f64::consts::TAU).fract().abs() < 1e-12,
-                "{goal}"
-            );
-            assert!(
-                (x[2] - goal).abs() < UPRIGHT_TOLERANCE[0],
-                "{preset}: {x:?}"
-            );
-            assert!(x[1].abs() < UPRIGHT_TOLERANCE[2] && x[3].abs() < UPRIGHT_TOLERANCE[1]);
-            // The tail holds upright at rest with the upright LQR's gain.
+            let end = points[n].x;
+            assert!((x[0] - end[0]).abs() < 1e-3 && (x[2] - end[2]).abs() < 1e-3);
+            let turns = (x[2] / std::f64::consts::TAU).round();
+            assert!(turns == 1.0, "{preset}: {x:?}");
+            let off = [x[0], x[1], x[2] - turns * std::f64::consts::TAU, x[3]];
+            for i in 0..4 {
+                assert!(off[i].abs() < UPRIGHT_TOLERANCE[i], "{preset}: {x:?}");
+            }
+            // The tail rests at the plan's final angles, and its gain is the upright LQR's
+            // (the DARE's, independent of the recursion along the plan).
+            for p in &points[n..] {
+                assert_eq!((p.x[0], p.x[2], p.u), (end[0], end[2], 0.0));
+            }
             let last = points[points.len() - 1];
-            assert_eq!((last.x[0], last.x[2], last.u), (0.0, goal, 0.0));
             assert!(
-                last.x[1].abs() < 1e-12 && last.x[3].abs() < 1e-12,
+                last.x[1].abs() < 0.01 && last.x[3].abs() < 0.01,
                 "{:?}",
                 last.x
             );
+            let (a, b) = plant.smooth().unwrap().linearize_upright();
+            let (ad, bd) = c2d(&a, &b, TS).unwrap();
+            let (q, r) = crate::paper::lqr_weights();
+            let k = dlqr(&ad, &bd, &q, &r, None).unwrap().k;
+            for i in 0..4 {
+                let rel = (last.k[i] - k[(0, i)]).abs() / k[(0, i)].abs().max(1.0);
+                assert!(rel < 1e-3, "{preset}: {:?} vs {k}", last.k);
+            }
         }
     }
 
