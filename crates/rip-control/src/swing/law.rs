@@ -182,9 +182,15 @@ impl<R: Real> SwingParams<R> {
         }
     }
 
+    /// Where the arm at `theta` moving at `rate` stops braked at `a_b`: `θ + θ̇|θ̇|/(2 a_b)`.
+    #[inline]
+    pub fn braked_stop(&self, theta: R, rate: R) -> R {
+        theta + rate * rate.abs() / (c::<R>(2.0) * self.brake)
+    }
+
     /// Whether the estimate `x` is in the catch region (module docs, "catch").
     pub fn in_catch_region(&self, x: &[R; 4]) -> bool {
-        let arm_stop = x[0] + x[1] * x[1].abs() / (c::<R>(2.0) * self.brake);
+        let arm_stop = self.braked_stop(x[0], x[1]);
         let pendulum = x[2].abs() <= self.catch_angle
             && self.mode.load(x) <= self.catch_mode_fraction
             && (x[2] + x[3] * self.catch_lookahead).abs() <= self.catch_angle

@@ -200,7 +200,7 @@
 //! is not yet braking for). The plan is left for the energy law when the estimate strays from
 //! it (pendulum or arm more than [`PLAN_ABORT_ANGLE`] off), when the arm passes the envelope's
 //! limit `θ_L`, or when the arm's stopping point braked at `a_b` is past `θ_L` and more than
-//! [`PLAN_ARM_EXCESS`] further out than the plan's own (the plan brakes the arm harder than
+//! [`PLAN_ABORT_ANGLE`] from the plan's own (the plan brakes the arm harder than
 //! `a_b`: its own stopping point by `a_b` may lie past the limit while the plan stays inside
 //! it). The envelope's barrier (3) holds only from states inside the envelope, and a plan left
 //! while the arm's stopping point at `a_b` is past the limit leaves it outside: the arm is then

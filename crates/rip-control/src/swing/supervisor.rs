@@ -75,10 +75,6 @@ pub const PLAN_START_RATE: f64 = 2.0;
 /// estimate has no rate at its first sample, two differences by the third).
 pub const PLAN_SETTLE_SAMPLES: u32 = 3;
 
-/// Largest distance (rad) by which the arm's stopping point at `a_b` may lie further out than
-/// the plan's, once it is past the envelope's limit, before the plan is left.
-pub const PLAN_ARM_EXCESS: f64 = 0.2;
-
 /// Largest distance (rad) of the arm or the pendulum from the plan (and of the arm's
 /// stopping point from the plan's, once it is past the envelope's limit) before the plan is
 /// left for the energy law.
@@ -400,9 +396,8 @@ impl<R: Real> SwingSupervisor<R> {
             let abort: R = c(PLAN_ABORT_ANGLE);
             let start: R = c(PLAN_START_RATE);
             let settled = k >= PLAN_SETTLE_SAMPLES || (e[1].abs() <= start && e[3].abs() <= start);
-            let two_brake = c::<R>(2.0) * p.brake;
-            let arm_stop = x[0] + x[1] * x[1].abs() / two_brake;
-            let plan_stop = point.x[0] + point.x[1] * point.x[1].abs() / two_brake;
+            let arm_stop = p.braked_stop(x[0], x[1]);
+            let plan_stop = p.braked_stop(point.x[0], point.x[1]);
             let arm_inside = x[0].abs() <= p.envelope_limit
                 && (arm_stop.abs() <= p.envelope_limit || (arm_stop - plan_stop).abs() <= abort);
             (settled && e[0].abs() <= abort && e[2].abs() <= abort && arm_inside)
@@ -417,8 +412,7 @@ impl<R: Real> SwingSupervisor<R> {
         // at `a_b` is past the limit and still moving out is braked with the whole bound.
         if self.left_plan {
             let outward = x[0] * x[1] > R::ZERO;
-            let stop = x[0] + x[1] * x[1].abs() / (c::<R>(2.0) * p.brake);
-            self.left_plan = outward && stop.abs() > p.envelope_limit;
+            self.left_plan = outward && p.braked_stop(x[0], x[1]).abs() > p.envelope_limit;
         }
         let u = match planned {
             Some(u) => u,

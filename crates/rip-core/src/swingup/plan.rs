@@ -73,8 +73,8 @@ use super::settings::SwingUpSettings;
 /// the plan may use; the rest is the tracking law's.
 pub const PLAN_VOLTAGE_SHARE: f64 = 0.8;
 
-/// Time (s) the plan holds upright after its end (its points at rest upright, the tracking
-/// gain then the upright LQR's), so that a pendulum a little behind the plan is still
+/// Time (s) the plan holds upright after its end (its points at rest at the plan's final
+/// angles, the tracking gain then the upright LQR's), so that a pendulum a little behind the plan is still
 /// tracked to upright until the catch region takes it.
 pub const UPRIGHT_TAIL: f64 = 0.3;
 
@@ -175,18 +175,29 @@ fn total(cost: &Cost, xs: &[V4], vs: &[f64]) -> f64 {
     stages + cost.terminal(&xs[xs.len() - 1])
 }
 
-fn rollout(model: &Model, cost: &Cost, x0: &V4, vs: &[f64]) -> Option<Vec<V4>> {
-    let mut xs = Vec::with_capacity(vs.len() + 1);
+/// The `n` periods from `x0` under the inputs `input(k, x_k)`: the states and the inputs, or
+/// `None` when the state leaves the finite numbers.
+fn rollout(
+    model: &Model,
+    cost: &Cost,
+    x0: &V4,
+    n: usize,
+    mut input: impl FnMut(usize, &V4) -> f64,
+) -> Option<(Vec<V4>, Vec<f64>)> {
+    let mut xs = Vec::with_capacity(n + 1);
+    let mut vs = Vec::with_capacity(n);
     let mut x = *x0;
     xs.push(x);
-    for &v in vs {
+    for k in 0..n {
+        let v = input(k, &x);
+        vs.push(v);
         x = model.step(&x, cost.u_max * v.tanh());
         if !x.iter().all(|c| c.is_finite()) {
             return None;
         }
         xs.push(x);
     }
-    Some(xs)
+    Some((xs, vs))
 }
 
 /// iLQR from the inputs `vs` (module docs); the converged inputs and their rollout.
@@ -198,7 +209,7 @@ fn ilqr(
     iterations: usize,
 ) -> Option<(Vec<V4>, Vec<f64>)> {
     let n = vs.len();
-    let mut xs = rollout(model, cost, x0, &vs)?;
+    let (mut xs, _) = rollout(model, cost, x0, n, |k, _| vs[k])?;
     let mut j = total(cost, &xs, &vs);
     let mut mu = 1e-6;
     let mut ff = vec![0.0; n];
@@ -252,22 +263,10 @@ fn ilqr(
         let mut accepted = false;
         let mut step = 1.0;
         for _ in 0..10 {
-            let mut x = *x0;
-            let mut new_xs = Vec::with_capacity(n + 1);
-            let mut new_vs = Vec::with_capacity(n);
-            new_xs.push(x);
-            let mut finite = true;
-            for k in 0..n {
-                let v = (vs[k] + step * ff[k] + fb[k].dot(&(x - xs[k]))).clamp(-6.0, 6.0);
-                new_vs.push(v);
-                x = model.step(&x, cost.u_max * v.tanh());
-                if !x.iter().all(|c| c.is_finite()) {
-                    finite = false;
-                    break;
-                }
-                new_xs.push(x);
-            }
-            if finite {
+            let policy = |k: usize, x: &V4| {
+                (vs[k] + step * ff[k] + fb[k].dot(&(x - xs[k]))).clamp(-6.0, 6.0)
+            };
+            if let Some((new_xs, new_vs)) = rollout(model, cost, x0, n, policy) {
                 let new_j = total(cost, &new_xs, &new_vs);
                 if new_j < j {
                     let gain = j - new_j;
