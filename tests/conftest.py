@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+import scale
 from hypothesis import HealthCheck, settings
 
 from riprs._binaries import rip_rt_path
@@ -20,6 +21,15 @@ settings.register_profile(
     derandomize=True,
 )
 settings.load_profile("riprs")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    # A typo in RIPRS_TEST_SCALE must not run the small sweeps in a run that asked for the
+    # full ones: refused before any test runs.
+    try:
+        scale.scale()
+    except ValueError as e:
+        raise pytest.UsageError(str(e)) from None
 
 
 @pytest.fixture(scope="session")

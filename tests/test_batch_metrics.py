@@ -135,6 +135,7 @@ def _peak_rss_kib(runs: int) -> int:
     return int(out[1])
 
 
+@pytest.mark.slow
 def test_monte_carlo_memory_grows_with_the_metrics_only() -> None:
     # Keeping each 10 s LQR record (about 0.18 MB) added some 550 MB between these two studies;
     # the metrics of 3 000 runs are well under 1 MB.

@@ -85,6 +85,7 @@ def test_scipys_pascal_test(n: int) -> None:
     np.testing.assert_allclose(Ad, expected, atol=1e-13 * np.abs(expected).max(), rtol=0)
 
 
+@pytest.mark.slow
 def test_two_hundred_random_stable_systems() -> None:
     rng = np.random.default_rng(27)
     det_refused = 0

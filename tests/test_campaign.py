@@ -273,6 +273,7 @@ points = 50
     np.testing.assert_array_equal(_column(partial, "rmse_arm")[:20], fresh["rmse_arm"])
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_long_chunks_on_pool_threads_promptly(tmp_path):
     # Hour-long runs: every chunk is still inside its native batch when SIGINT arrives, on a
     # pool thread that never sees the signal itself. Uninterrupted, this takes minutes.
@@ -722,6 +723,7 @@ def _not_a_scheduler(answer: bytes | None):
         server.close()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "answer",
     [

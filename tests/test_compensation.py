@@ -144,6 +144,7 @@ OFF = {
 }  # fmt: skip
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", list(OFF), ids=lambda c: "-".join(map(str, c)))
 def test_compensation_30_percent_off_holds_its_measured_steady_state(case):
     rig, weights, factor = case

@@ -226,6 +226,7 @@ def test_rip_rt_run_and_emulate_accept_the_written_file(identified, tmp_path, ri
     assert emulated.returncode == 0, emulated.stderr
 
 
+@pytest.mark.slow
 def test_hidden_rig_chain_excite_identify_run(tmp_path, rip_rt):
     """`rip-rt emulate --config hidden.toml` is the rig; `rip-rt excite` logs a chirp, a PRBS
     run and a free swing; `riprs identify` writes rig.toml; `rip-rt run --config rig.toml`

@@ -69,6 +69,7 @@ def excite(rip_rt: Path, truth: Path, config: Path, lab: Path, name: str, args: 
     return done
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [2, 5])
 def test_a_generated_rig_through_rip_rt_excite_is_identified_or_refused(
     tmp_path, rip_rt, seed, capsys

@@ -132,7 +132,8 @@ def test_malformed_logs_name_the_problem(tmp_path: pathlib.Path, text: str, matc
 def test_reads_a_log_written_by_rip_rt(tmp_path: pathlib.Path, rip_rt: pathlib.Path) -> None:
     exe = rip_rt
     emu = subprocess.Popen(
-        [str(exe), "emulate", "--noise", "0.3"],
+        # In lockstep: the log's contents are the subject, not timing.
+        [str(exe), "emulate", "--noise", "0.3", "--lockstep"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -143,7 +144,7 @@ def test_reads_a_log_written_by_rip_rt(tmp_path: pathlib.Path, rip_rt: pathlib.P
         log_path = tmp_path / "lqg.csv"
         run = subprocess.run(
             [str(exe), "run", "--port", device, "--controller", "lqg",
-             "--duration", "1.5", "--log", str(log_path), "--quiet"],
+             "--duration", "1.5", "--log", str(log_path), "--quiet", "--lockstep"],
             capture_output=True,
             text=True,
             timeout=30,
@@ -155,9 +156,8 @@ def test_reads_a_log_written_by_rip_rt(tmp_path: pathlib.Path, rip_rt: pathlib.P
     log = riprs.load_log(log_path)
     assert log.meta["controller"] == "lqg"
     assert log.stop_reason == "finished"
-    # A row per period that ran: periods skipped on a loaded machine have none, so the rows
-    # are counted from above and the log must span the run.
-    assert len(log.t) <= 151
+    # A row per period, 0 to 1.49 s: in lockstep none is skipped.
+    assert len(log.t) == 150
     assert log.t[-1] >= 1.45
     assert np.all(np.diff(log.t) > 0)
     assert log.xhat.shape[1] == 5  # the LQG's augmented estimate
@@ -173,7 +173,7 @@ def test_reads_the_phases_of_a_swing_up_written_by_rip_rt(
     config = tmp_path / "rig.toml"
     config.write_text("[calibration]\nrest_window_s = 0.5\n")
     emu = subprocess.Popen(
-        [str(exe), "emulate", "--start", "down", "--noise", "0.3"],
+        [str(exe), "emulate", "--start", "down", "--noise", "0.3", "--lockstep"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -184,7 +184,8 @@ def test_reads_the_phases_of_a_swing_up_written_by_rip_rt(
         log_path = tmp_path / "swing.csv"
         run = subprocess.run(
             [str(exe), "run", "--port", device, "--controller", "lqr", "--swing-up",
-             "--config", str(config), "--duration", "1", "--log", str(log_path), "--quiet"],
+             "--config", str(config), "--duration", "1", "--log", str(log_path), "--quiet",
+             "--lockstep"],
             capture_output=True,
             text=True,
             timeout=40,

@@ -190,14 +190,15 @@ def test_the_checklists_encoder_offset_reading(tmp_path: Path, rip_rt: Path) -> 
     rig = tmp_path / "offset.toml"
     rig.write_text("[sensor]\nencoder_offsets = [0.0, 0.02]\n")
     emulator = subprocess.Popen(
-        [str(rip_rt), "emulate", "--config", str(rig), "--start", "down"],
+        [str(rip_rt), "emulate", "--config", str(rig), "--start", "down", "--lockstep"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
         assert emulator.stdout is not None
         device = emulator.stdout.readline().strip().removeprefix("device: ")
         done = subprocess.run(
-            [str(rip_rt), "run", "--port", device, "--controller", "lqr", "--duration", "1"],
+            [str(rip_rt), "run", "--port", device, "--controller", "lqr", "--duration", "1",
+             "--lockstep"],
             capture_output=True, text=True, timeout=60,
         )  # fmt: skip
     finally:

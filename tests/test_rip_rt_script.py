@@ -143,7 +143,8 @@ def test_a_signal_stops_the_motor_with_the_binarys_exit_code(
 ) -> None:
     record = tmp_path / "record.csv"
     emulator = subprocess.Popen(
-        [str(binary), "emulate", "--noise", "0.3", "--record", str(record)],
+        # In lockstep: the signal's path through the script is the subject, not timing.
+        [str(binary), "emulate", "--noise", "0.3", "--record", str(record), "--lockstep"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -154,21 +155,22 @@ def test_a_signal_stops_the_motor_with_the_binarys_exit_code(
         # As from a shell: Python's own SIGINT handler would be installed in the script's
         # interpreter (a job started with SIGINT ignored is another case, the binary's too).
         run = subprocess.Popen(
-            [str(SCRIPT), "run", "--port", device, "--controller", "lqr"],
+            [str(SCRIPT), "run", "--port", device, "--controller", "lqr", "--lockstep"],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
             env={**os.environ, "PYTHONFAULTHANDLER": ""},
         )
+        # Half a second of balancing (50 enabled commands) before the signal.
         balanced = False
         deadline = time.monotonic() + 20
         while time.monotonic() < deadline and run.poll() is None:
-            time.sleep(0.1)
-            if record.exists() and any(f == 1 and mv != 0 for mv, f in _record(record)):
+            time.sleep(0.02)
+            enabled = [mv for mv, f in _record(record) if f == 1] if record.exists() else []
+            if len(enabled) >= 50 and any(mv != 0 for mv in enabled):
                 balanced = True
                 break
         assert balanced, "never balanced"
-        time.sleep(0.5)
         run.send_signal(sig)
         _, err = run.communicate(timeout=20)
         commands = _settled_record(record)

@@ -275,6 +275,7 @@ def test_the_tuned_lqg_holds_the_pendulum_after_the_swing_ups_catch() -> None:
     assert after == len(seeds), after
 
 
+@pytest.mark.slow
 def test_tuned_rigs_balance_end_to_end_on_the_emulator(tmp_path, rip_rt) -> None:
     """``rip-rt run --config TUNED.toml`` with each tuned controller on the emulator of that
     rig: three of the issue's rigs, the steady state judged on the emulator's true state (its

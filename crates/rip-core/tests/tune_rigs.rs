@@ -17,6 +17,12 @@ pub fn issue_rigs() -> Vec<(&'static str, String)> {
 /// The generated rigs, fixed before any was run: `Rig::random(1..=16)`.
 const SEEDS: std::ops::RangeInclusive<u64> = 1..=16;
 
+/// The generated rigs at this run's scale (`RIPRS_TEST_SCALE`): all of [`SEEDS`] at the full
+/// one; at the small one seed 9 (the known miss, [`KNOWN_MISSES`]) and seed 14.
+fn seeds() -> Vec<u64> {
+    rip_test_scale::cases(SEEDS, |s| [9, 14].contains(s))
+}
+
 /// Generated rigs on which some tuned controller still misses the bar for a reason that is
 /// neither its sensor nor a fall the pre-flight refuses (each named with what it misses).
 /// The test asserts that they still miss, so that a fix shows here.
@@ -140,7 +146,7 @@ fn tuned_controllers_meet_the_bar_on_the_issue_rigs_and_generated_rigs() {
         .into_iter()
         .map(|(n, t)| (n.to_string(), t, None))
         .collect();
-    for seed in SEEDS {
+    for seed in seeds() {
         rigs.push((
             format!("generated rig {seed}"),
             Rig::random(seed).to_toml(),

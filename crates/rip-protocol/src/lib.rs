@@ -160,6 +160,14 @@ pub const STATUS_LOCKSTEP: u8 = 1 << 5;
 /// as 0) in v1.
 pub const STATUS_ONBOARD: u8 = 1 << 6;
 
+/// Device status bit: this measurement carries no reading, only the news that the period's
+/// reply was lost on the way (an injected fault of an emulator in lockstep: dropped, damaged
+/// or inside a silence). A lockstep host counts the period as without a measurement at once,
+/// as a real-time host does when its reply timeout passes, instead of waiting on a wall-clock
+/// timeout for a reply that will not come. Set only together with [`STATUS_LOCKSTEP`]; a real
+/// device never sets it (bit 7 was reserved, sent as 0, before).
+pub const STATUS_NO_SAMPLE: u8 = 1 << 7;
+
 /// Command flag bit: enable the motor driver. Without it the device applies 0 V.
 pub const COMMAND_ENABLE: u8 = 1 << 0;
 /// Command flag bit, with [`COMMAND_ENABLE`] clear: brake (short the motor's windings, so that

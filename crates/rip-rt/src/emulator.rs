@@ -25,7 +25,10 @@ use rand_distr::{Distribution, StandardNormal};
 use rip_device::{Direction, Inputs};
 
 use crate::plant::{Model, PlantSim, Windings};
-use crate::protocol::{encode, Event, Frame, Message, Parser, MAX_FRAME, STATUS_LOCKSTEP, SYNC0};
+use crate::protocol::{
+    encode, Event, Frame, Measurement, Message, Parser, MAX_FRAME, STATUS_LOCKSTEP,
+    STATUS_NO_SAMPLE, SYNC0,
+};
 use crate::serial::{Fd, Pty, Readiness};
 use crate::timing::now_ns;
 
@@ -34,7 +37,23 @@ use crate::timing::now_ns;
 pub const PWM_MAX_DUTY: u16 = 8400;
 
 mod config;
-pub use config::{EmulatorConfig, EmulatorConfigError, Wiring, LOCKSTEP_IDLE_NS};
+pub use config::{EmulatorConfig, EmulatorConfigError, Wiring};
+
+/// After its host hung up, a lockstep emulator runs its plant on, unpaced, until it has
+/// rested ([`RUN_ON_REST_RATE`], the motor not driven) for this long (s of simulated time):
+/// what happens after a run (the arm coasting, the device's watchdog, the pendulum settling)
+/// plays out as on the rig, in a fraction of the wall time, and a test reads it from the
+/// true-state record at once.
+pub const RUN_ON_REST_S: f64 = 1.0;
+
+/// The rates `|θ̇|`, `|α̇|` (rad/s) below which the plant counts as resting for
+/// [`RUN_ON_REST_S`].
+pub const RUN_ON_REST_RATE: [f64; 2] = [1e-3, 1e-2];
+
+/// The longest a lockstep emulator runs on after its host hung up (s of simulated time), for a
+/// plant that never rests (a lightly damped pendulum, a motor the device still drives); then
+/// it waits, its plant paced again, for the next host.
+pub const RUN_ON_MAX_S: f64 = 60.0;
 
 /// The emulated device: the firmware's logic (`rip-device`) on a simulated pendulum.
 #[derive(Debug)]
@@ -346,14 +365,15 @@ impl Device {
     }
 
     /// Applies the configured faults to an outgoing frame and writes what remains into `wire`
-    /// (which is cleared first).
-    pub fn inject_faults(&mut self, frame: &[u8], wire: &mut Vec<u8>) {
+    /// (which is cleared first); `false` when the frame cannot reach the host intact
+    /// (dropped, silenced, or a byte flipped).
+    pub fn inject_faults(&mut self, frame: &[u8], wire: &mut Vec<u8>) -> bool {
         wire.clear();
         if self.silent() {
-            return;
+            return false;
         }
         if self.cfg.drop_rate > 0.0 && self.rng.gen_bool(self.cfg.drop_rate) {
-            return;
+            return false;
         }
         if self.cfg.corrupt_rate > 0.0 && self.rng.gen_bool(self.cfg.corrupt_rate) {
             if self.rng.gen_bool(0.5) {
@@ -368,15 +388,42 @@ impl Device {
                     wire.push(b);
                 }
                 wire.extend_from_slice(frame);
-            } else {
-                wire.extend_from_slice(frame);
-                let i = self.rng.gen_range(0..wire.len());
-                let flip: u8 = self.rng.gen_range(1..=255);
-                wire[i] ^= flip;
+                return true;
             }
-            return;
+            wire.extend_from_slice(frame);
+            let i = self.rng.gen_range(0..wire.len());
+            let flip: u8 = self.rng.gen_range(1..=255);
+            wire[i] ^= flip;
+            return false;
         }
         wire.extend_from_slice(frame);
+        true
+    }
+
+    /// The lockstep marker that stands in for a lost reply to the sample request `ack_seq`
+    /// ([`STATUS_NO_SAMPLE`]), encoded into `out`: its length. A lockstep host then counts the
+    /// period as without a measurement at once; a real-time host would have waited out its
+    /// reply timeout for the same verdict, which costs the lockstep run no wall time.
+    pub fn lost_reply_marker(&self, ack_seq: u16, out: &mut [u8; MAX_FRAME]) -> usize {
+        let frame = Frame {
+            seq: ack_seq,
+            message: Message::Measurement(Measurement {
+                ack_seq,
+                status: STATUS_LOCKSTEP | STATUS_NO_SAMPLE,
+                device_time_us: (self.time_ns / 1000) as u32,
+                ..Measurement::default()
+            }),
+        };
+        encode(&frame, out)
+    }
+
+    /// Whether the plant is at rest with the motor not driven: what a lockstep emulator runs
+    /// on to after its host hung up.
+    fn resting(&self) -> bool {
+        let [_, theta_dot, _, alpha_dot] = self.state();
+        theta_dot.abs() < RUN_ON_REST_RATE[0]
+            && alpha_dot.abs() < RUN_ON_REST_RATE[1]
+            && !matches!(self.windings(), Windings::Driven(_))
     }
 }
 
@@ -475,10 +522,10 @@ fn serve(
     cfg: EmulatorConfig,
     device: &mut Device,
     truth: &mut Option<TrueState>,
-    pty: Pty,
+    mut pty: Pty,
     stop: &AtomicBool,
 ) -> io::Result<EmulatorExit> {
-    let mut record = match &cfg.record {
+    let record = match &cfg.record {
         Some(path) => {
             let mut w = BufWriter::new(File::create(path).map_err(|e| {
                 io::Error::new(e.kind(), format!("--record {}: {e}", path.display()))
@@ -490,120 +537,246 @@ fn serve(
         None => None,
     };
     let dt_ns = (1e9 / cfg.sim_rate_hz).round() as u64;
-    let mut clock = SimClock {
-        dt_ns,
-        duration: cfg.duration_s,
-        vanish_after: cfg.vanish_after_s,
-        first_command_at: None,
+    let mut server = Server {
+        device,
+        truth,
+        clock: SimClock {
+            dt_ns,
+            duration: cfg.duration_s,
+            vanish_after: cfg.vanish_after_s,
+            first_command_at: None,
+        },
+        // Simulation steps per host period in lockstep.
+        lockstep_steps: cfg
+            .lockstep_period_s
+            .map(|p| ((p * 1e9 / dt_ns as f64).round() as u64).max(1)),
+        parser: Parser::new(),
+        record,
+        out: [0u8; MAX_FRAME],
+        wire: Vec::with_capacity(2 * MAX_FRAME + 16),
     };
-    // Simulation steps per host period in lockstep.
-    let lockstep_steps = cfg
-        .lockstep_period_s
-        .map(|p| ((p * 1e9 / dt_ns as f64).round() as u64).max(1));
-    let mut parser = Parser::new();
     let mut rx = [0u8; 256];
-    let mut out = [0u8; MAX_FRAME];
-    let mut wire = Vec::with_capacity(MAX_FRAME + 16);
     let mut next_tick = now_ns() + dt_ns;
-    // Wall time of the host's latest frame (lockstep: the host paces the plant until it has
-    // been silent for LOCKSTEP_IDLE_NS).
-    let mut host_ns = 0u64;
-    let io: &Fd = pty.io();
+    let mut host = Host::Awaited;
     loop {
         if stop.load(Ordering::Relaxed) {
             return Ok(EmulatorExit::Stopped);
         }
         let now = now_ns();
-        // Before the host's first frame the plant waits for it too: a lockstep run is the same
-        // sequence of plant steps and noise draws however long the host took to start.
-        let paced = lockstep_steps.is_some() && (host_ns == 0 || now < host_ns + LOCKSTEP_IDLE_NS);
-        if paced {
-            next_tick = now + dt_ns;
-        } else if now >= next_tick {
-            if let Some(exit) = clock.step(device, truth)? {
-                return Ok(exit);
+        let wait_ns = match (server.lockstep_steps, host) {
+            // Real time: the plant steps on its own grid of deadlines.
+            (None, _) => {
+                if now >= next_tick {
+                    if let Some(exit) = server.step()? {
+                        return Ok(exit);
+                    }
+                    server.send_outgoing(pty.io())?;
+                    next_tick += dt_ns;
+                    if now > next_tick + 100 * dt_ns {
+                        // Far behind (the machine stalled): resume from now rather than
+                        // fast-forward.
+                        next_tick = now + dt_ns;
+                    }
+                    continue;
+                }
+                next_tick - now
             }
-            send_outgoing(device, io, &mut out, &mut wire)?;
-            next_tick += dt_ns;
-            if now > next_tick + 100 * dt_ns {
-                // Far behind (the machine stalled): resume from now rather than fast-forward.
-                next_tick = now + dt_ns;
+            (Some(_), Host::RunningOn { since_ns, rest_ns }) => {
+                let (exit, next) = server.run_on(since_ns, rest_ns)?;
+                if let Some(exit) = exit {
+                    return Ok(exit);
+                }
+                host = next;
+                0
             }
+            // Lockstep, waiting for the host's frames (the plant waits too) or, once it has
+            // gone and the plant has settled, for the next host.
+            (Some(_), _) => HOST_POLL_NS,
+        };
+        let read = match pty.io().wait_readable(wait_ns) {
+            Ok(Readiness::Readable) => pty.io().read_available(&mut rx),
+            Ok(Readiness::Timeout | Readiness::Interrupted) => continue,
+            Err(e) => Err(e),
+        };
+        let n = match read {
+            Ok(n) => n,
+            Err(e) if e.kind() == io::ErrorKind::BrokenPipe && pty.slave_released() => {
+                host = host.hung_up(server.device.time_ns);
+                if host == Host::Gone {
+                    // The hang-up stays readable while no client holds the slave: wait
+                    // between looks instead of spinning on it.
+                    std::thread::sleep(std::time::Duration::from_nanos(HOST_POLL_NS));
+                }
+                continue;
+            }
+            Err(e) => return Err(e),
+        };
+        if n == 0 {
             continue;
         }
-        let wait_ns = if paced {
-            (host_ns + LOCKSTEP_IDLE_NS)
-                .saturating_sub(now)
-                .max(1_000_000)
-        } else {
-            next_tick - now
-        };
-        match io.wait_readable(wait_ns)? {
-            Readiness::Readable => {}
-            Readiness::Timeout | Readiness::Interrupted => continue,
-        }
-        let n = io.read_available(&mut rx)?;
-        host_ns = now_ns();
-        let mut error = None;
-        for &byte in &rx[..n] {
-            parser.push(byte);
-            // Rejected candidates go to the firmware too: it reports them with RX_ERROR in the
-            // next measurement and disables the motor on a frame of another version.
-            while let Some(event) = parser.poll_event() {
-                if let Event::Frame(frame) = event {
-                    if let (Some(steps), Message::SampleRequest) = (lockstep_steps, frame.message) {
-                        // One host period of the plant under the command in force, then the
-                        // answer: the measurement a sampled loop sees at its next deadline.
-                        for _ in 0..steps {
-                            if let Some(exit) = clock.step(device, truth)? {
-                                return Ok(exit);
-                            }
-                        }
-                        if let Err(e) = send_outgoing(device, io, &mut out, &mut wire) {
-                            error.get_or_insert(e);
-                        }
-                    }
-                    let t = device.time_s();
-                    if clock.first_command_at.is_none()
-                        && matches!(frame.message, Message::Command(_))
-                    {
-                        clock.first_command_at = Some(t);
-                    }
-                    if let Err(e) = write_record(&mut record, t, &frame) {
-                        error.get_or_insert(e);
-                    }
-                }
-                if let Reply::Bytes(len) = device.handle(event, &mut out) {
-                    device.inject_faults(&out[..len], &mut wire);
-                    if !wire.is_empty() {
-                        if let Err(e) = io.write_all(&wire) {
-                            error.get_or_insert(e);
-                        }
-                    }
-                }
+        if server.lockstep_steps.is_some() {
+            // The host holds the slave now: from here on its close is a hang-up the master
+            // sees, which releases the plant to run on.
+            pty.release_slave();
+            if host != Host::Connected {
+                server.parser = Parser::new();
             }
+            host = Host::Connected;
         }
-        if let Some(e) = error {
-            return Err(e);
+        if let Some(exit) = server.answer(pty.io(), &rx[..n])? {
+            return Ok(exit);
         }
     }
 }
 
-/// Writes the frames the firmware sent on its own, through the configured faults.
-fn send_outgoing(
-    device: &mut Device,
-    io: &Fd,
-    out: &mut [u8; MAX_FRAME],
-    wire: &mut Vec<u8>,
-) -> io::Result<()> {
-    while let Some(len) = device.take_outgoing(out) {
-        device.inject_faults(&out[..len], wire);
-        if !wire.is_empty() {
-            io.write_all(wire)?;
+/// What [`serve`] keeps between the host's frames.
+struct Server<'a> {
+    device: &'a mut Device,
+    truth: &'a mut Option<TrueState>,
+    clock: SimClock,
+    lockstep_steps: Option<u64>,
+    parser: Parser,
+    record: Option<BufWriter<File>>,
+    out: [u8; MAX_FRAME],
+    wire: Vec<u8>,
+}
+
+impl Server<'_> {
+    /// One simulation step; `Some` when the emulator must end.
+    fn step(&mut self) -> io::Result<Option<EmulatorExit>> {
+        self.clock.step(self.device, self.truth)
+    }
+
+    /// Writes the frames the firmware sent on its own, through the configured faults.
+    fn send_outgoing(&mut self, io: &Fd) -> io::Result<()> {
+        while let Some(len) = self.device.take_outgoing(&mut self.out) {
+            self.device.inject_faults(&self.out[..len], &mut self.wire);
+            if !self.wire.is_empty() {
+                io.write_all(&self.wire)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// A batch of the plant run on, unpaced, after the host hung up at simulated time
+    /// `since_ns`, the plant having rested for `rest_ns`: the host's state after it (still
+    /// running on, or gone once the plant rested for [`RUN_ON_REST_S`] or ran on for
+    /// [`RUN_ON_MAX_S`]), or the emulator's end.
+    fn run_on(&mut self, since_ns: u64, rest_ns: u64) -> io::Result<(Option<EmulatorExit>, Host)> {
+        let mut rest_ns = rest_ns;
+        for _ in 0..RUN_ON_BATCH {
+            if let Some(exit) = self.step()? {
+                return Ok((Some(exit), Host::Gone));
+            }
+            rest_ns = if self.device.resting() {
+                rest_ns + self.clock.dt_ns
+            } else {
+                0
+            };
+            let ran_s = (self.device.time_ns - since_ns) as f64 * 1e-9;
+            if rest_ns as f64 * 1e-9 >= RUN_ON_REST_S || ran_s >= RUN_ON_MAX_S {
+                return Ok((None, Host::Gone));
+            }
+        }
+        // Frames the firmware sent on its own have no reader: dropped, as the host's close
+        // drops them on a rig.
+        while self.device.take_outgoing(&mut self.out).is_some() {}
+        Ok((None, Host::RunningOn { since_ns, rest_ns }))
+    }
+
+    /// Hands the host's `bytes` to the firmware and answers them: in lockstep a sample request
+    /// first advances the plant by one host period, and a reply the faults lose is followed
+    /// by its [`STATUS_NO_SAMPLE`] marker. `Some` when the emulator must end.
+    fn answer(&mut self, io: &Fd, bytes: &[u8]) -> io::Result<Option<EmulatorExit>> {
+        let mut error = None;
+        for &byte in bytes {
+            self.parser.push(byte);
+            // Rejected candidates go to the firmware too: it reports them with RX_ERROR in the
+            // next measurement and disables the motor on a frame of another version.
+            while let Some(event) = self.parser.poll_event() {
+                let mut lockstep_request = None;
+                if let Event::Frame(frame) = event {
+                    if let (Some(steps), Message::SampleRequest) =
+                        (self.lockstep_steps, frame.message)
+                    {
+                        // One host period of the plant under the command in force, then the
+                        // answer: the measurement a sampled loop sees at its next deadline.
+                        for _ in 0..steps {
+                            if let Some(exit) = self.step()? {
+                                return Ok(Some(exit));
+                            }
+                        }
+                        if let Err(e) = self.send_outgoing(io) {
+                            error.get_or_insert(e);
+                        }
+                        lockstep_request = Some(frame.seq);
+                    }
+                    let t = self.device.time_s();
+                    if self.clock.first_command_at.is_none()
+                        && matches!(frame.message, Message::Command(_))
+                    {
+                        self.clock.first_command_at = Some(t);
+                    }
+                    if let Err(e) = write_record(&mut self.record, t, &frame) {
+                        error.get_or_insert(e);
+                    }
+                }
+                if let Reply::Bytes(len) = self.device.handle(event, &mut self.out) {
+                    let intact = self.device.inject_faults(&self.out[..len], &mut self.wire);
+                    if let (false, Some(seq)) = (intact, lockstep_request) {
+                        // The lost reply's marker follows whatever of it went out.
+                        let m = self.device.lost_reply_marker(seq, &mut self.out);
+                        self.wire.extend_from_slice(&self.out[..m]);
+                    }
+                    if !self.wire.is_empty() {
+                        if let Err(e) = io.write_all(&self.wire) {
+                            error.get_or_insert(e);
+                        }
+                    }
+                }
+            }
+        }
+        match error {
+            Some(e) => Err(e),
+            None => Ok(None),
         }
     }
-    Ok(())
 }
+
+/// Where a lockstep emulator's host is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Host {
+    /// No frame yet: the plant waits for the host's first frame, so that a lockstep run is
+    /// the same sequence of plant steps and noise draws however long the host took to start.
+    Awaited,
+    /// A host holds the port: it paces the plant, one period per sample request.
+    Connected,
+    /// The host hung up at simulated time `since_ns`; the plant runs on, unpaced, and has
+    /// rested for `rest_ns`.
+    RunningOn { since_ns: u64, rest_ns: u64 },
+    /// The host hung up and the plant has run on to rest: it waits for the next host.
+    Gone,
+}
+
+impl Host {
+    /// The state after the port reported a hang-up at simulated time `now_ns`.
+    fn hung_up(self, now_ns: u64) -> Self {
+        match self {
+            Self::Connected => Self::RunningOn {
+                since_ns: now_ns,
+                rest_ns: 0,
+            },
+            // Before any host (the slave still held, so never), while running on, or gone.
+            other => other,
+        }
+    }
+}
+
+/// Plant steps between looks at the port while a lockstep emulator runs on.
+const RUN_ON_BATCH: usize = 200;
+
+/// How often (ns) a lockstep emulator without a host looks for one.
+const HOST_POLL_NS: u64 = 5_000_000;
 
 /// The simulation's own clock: one step of the plant and the ends it can bring (the
 /// emulator's `--duration`, the vanish fault).

@@ -3,7 +3,7 @@
 //! exchange with the device on the run's clock.
 
 use crate::loop_core::LoopCore;
-use crate::protocol::{Measurement, MAX_FRAME, STATUS_LOCKSTEP};
+use crate::protocol::{Measurement, MAX_FRAME, STATUS_LOCKSTEP, STATUS_NO_SAMPLE};
 use crate::serial::{Fd, Readiness};
 use crate::stop::StopReason;
 use crate::timing::{self, ClockMode, Periodic, LOCKSTEP_REPLY_WAIT_NS};
@@ -24,10 +24,12 @@ pub struct Reply {
 /// next request must keep). `None` when none arrived in time; bytes that are not the answer
 /// (stale replies, garbage) are consumed by `core`'s parser.
 ///
-/// In lockstep the emulator answers once it has advanced its plant by a period: the wait is
-/// bounded by [`LOCKSTEP_REPLY_WAIT_NS`] of wall time instead, and a measurement without
-/// [`STATUS_LOCKSTEP`] (a real device, or an emulator in real time) stops the run, since
-/// nothing would then keep the loop's pace.
+/// In lockstep the emulator answers once it has advanced its plant by a period, and a reply
+/// its faults lose is answered by a [`STATUS_NO_SAMPLE`] marker, which ends the wait at once
+/// as a period without a measurement; the wait is bounded by [`LOCKSTEP_REPLY_WAIT_NS`] of
+/// wall time only against an emulator that hangs. A measurement without [`STATUS_LOCKSTEP`]
+/// (a real device, or an emulator in real time) stops the run, since nothing would then keep
+/// the loop's pace.
 pub fn exchange(
     io: &Fd,
     core: &mut LoopCore,
@@ -67,6 +69,9 @@ pub fn exchange(
                     "--lockstep: the device does not run in lockstep (only \
                      `rip-rt emulate --lockstep` does); run without --lockstep",
                 )));
+            }
+            if m.status & STATUS_NO_SAMPLE != 0 {
+                return Ok((seq, None));
             }
             return Ok((seq, Some(Reply { m, req_ns, rx_ns })));
         }

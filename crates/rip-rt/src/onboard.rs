@@ -16,7 +16,7 @@ use rip_device::law::{write_image, Sensor};
 use rip_protocol::{
     crc32, encode, Command, Frame, Measurement, Message, OnboardStart, Parser, Telemetry,
     UploadBegin, UploadChunk, UploadCommit, ACK_OK, ACK_OUT_OF_ORDER, CHUNK_MAX, COMMAND_BRAKE,
-    MAX_FRAME, ONBOARD_RUNNING, STATUS_LOCKSTEP,
+    MAX_FRAME, ONBOARD_RUNNING, STATUS_LOCKSTEP, STATUS_NO_SAMPLE,
 };
 
 use crate::config::Config;
@@ -301,7 +301,8 @@ impl<'a> Link<'a> {
                 timeout,
                 |m| matches!(m, Message::Measurement(x) if x.ack_seq == seq),
             )? {
-                Some(Message::Measurement(m)) => Some(m),
+                // A lockstep emulator's marker of a lost reply: a period without one.
+                Some(Message::Measurement(m)) if m.status & STATUS_NO_SAMPLE == 0 => Some(m),
                 _ => None,
             },
         )

@@ -286,8 +286,9 @@ impl SerialPort {
 pub struct Pty {
     master: Fd,
     // Held open so the master never sees a hang-up while no client is connected; and so the
-    // raw mode set here persists between clients.
-    _slave: OwnedFd,
+    // raw mode set here persists between clients. `None` once released
+    // ([`Pty::release_slave`]).
+    slave: Option<OwnedFd>,
     path: PathBuf,
 }
 
@@ -319,7 +320,7 @@ impl Pty {
             set_nonblocking(m)?;
             Ok(Self {
                 master: Fd::new(master),
-                _slave: slave,
+                slave: Some(slave),
                 path,
             })
         }
@@ -333,5 +334,18 @@ impl Pty {
     /// The slave device path (what `rip-rt run --port` opens).
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Lets go of the emulator's own hold on the slave side, once a client has it open: from
+    /// then on the master sees a hang-up ([`Fd::wait_readable`] and [`Fd::read_available`]
+    /// fail with `BrokenPipe`) whenever no client holds the slave, so that the emulator
+    /// learns that its host has gone from the host's close, not by guessing from silence.
+    pub fn release_slave(&mut self) {
+        self.slave = None;
+    }
+
+    /// Whether [`release_slave`](Self::release_slave) was called.
+    pub fn slave_released(&self) -> bool {
+        self.slave.is_none()
     }
 }

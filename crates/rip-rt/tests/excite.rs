@@ -14,14 +14,16 @@ use rip_core::excitation::{ArmCentering, ExcitationSettings, Signal, STEP_LEVELS
 
 const COLUMNS: &str = "t,seq,theta,alpha,theta_ref,u,compute_us,jitter_us,status,phase";
 
-/// The emulator with the pendulum hanging at rest.
+/// The emulator with the pendulum hanging at rest, in lockstep: these tests are about the
+/// excitation's signals, logs and stops, not timing; pair it with [`spawn_excite`].
 fn hanging(name: &str, extra: &[&str]) -> Emulator {
     let pi = PI.to_string();
     let mut args = vec!["--initial-pendulum", pi.as_str()];
     args.extend_from_slice(extra);
-    Emulator::start(name, &args)
+    Emulator::lockstep(name, &args)
 }
 
+/// `rip-rt excite` in lockstep.
 fn spawn_excite(device: &Path, signal: &str, log: &Path, extra: &[&str]) -> Child {
     Command::new(BIN)
         .arg("excite")
@@ -30,6 +32,7 @@ fn spawn_excite(device: &Path, signal: &str, log: &Path, extra: &[&str]) -> Chil
         .args(["--signal", signal, "--quiet", "--log"])
         .arg(log)
         .args(extra)
+        .args((!extra.contains(&LOCKSTEP)).then_some(LOCKSTEP))
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -217,8 +220,10 @@ fn sigint_mid_excitation_leaves_zero_volts() {
     let emu = hanging("excite-sigint", &[]);
     let path = scratch("excite-sigint.csv");
     let child = spawn_excite(&emu.device, "prbs", &path, &["--duration", "30"]);
-    // Rest check (1 s), sign check (0.6 s), then well into the PRBS.
-    std::thread::sleep(Duration::from_millis(3500));
+    // Rest check (1 s), sign check (0.6 s), then well into the PRBS: 2 s of it driven.
+    emu.wait_for("the PRBS under way", Duration::from_secs(60), |rows| {
+        rows.iter().filter(|r| r.driver == "drive").count() > 200
+    });
     unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
     let r = wait_with_timeout(child, Duration::from_secs(20));
     assert_eq!(r.status.code(), Some(130), "{}", r.stderr);

@@ -7,7 +7,6 @@ mod common;
 use std::time::Duration;
 
 use common::*;
-use rip_rt::emulator::LOCKSTEP_IDLE_NS;
 
 fn onboard_run(device: &std::path::Path, extra: &[&str]) -> RunResult {
     // LQR: the tests of the device's stops hold for any controller.
@@ -60,9 +59,11 @@ fn lqr_lqg_and_mpc_balance_onboard_through_the_reference_step_as_on_the_host() {
             r.stderr
         );
         let truth = emu.finish();
+        // Over the run's 8 s: after it the emulator runs its plant on to rest, the pendulum
+        // falling once the device has stopped.
         let worst_alpha = truth
             .iter()
-            .filter(|t| t.t > 0.5)
+            .filter(|t| t.t > 0.5 && t.t < 8.0)
             .fold(0.0f64, |m, t| m.max(t.alpha.abs()));
         assert!(
             worst_alpha < 0.2,
@@ -143,31 +144,54 @@ fn the_device_enforces_the_angle_limits_itself() {
 #[test]
 fn a_host_that_dies_leaves_the_device_to_stop_the_motor() {
     let _one = one_at_a_time();
-    // In lockstep until the host dies, so that a loaded machine cannot starve the host into a
-    // silence before then; the emulator then runs on in real time (after LOCKSTEP_IDLE_NS
-    // without a host frame) and the device's own host timeout must stop the motor.
+    // In lockstep, so that a loaded machine cannot starve the host into a silence before it
+    // dies; the host's death is a hang-up, after which the emulator runs its plant on to rest
+    // and the device's own host timeout must stop the motor.
     let emu = Emulator::lockstep("onboard-silent", &[]);
     // No --duration: a lockstep run outpaces the wall clock, and 120 s of it has ended with
     // exit 0 before the kill; without one it runs until the kill.
-    let child = spawn_run(&emu.device, "lqr", &["--onboard", "--lockstep"]);
-    std::thread::sleep(Duration::from_millis(500));
+    let mut child = spawn_run(&emu.device, "lqr", &["--onboard", "--lockstep"]);
+    emu.wait_for(
+        "the onboard run driving the motor",
+        Duration::from_secs(30),
+        |rows| rows.iter().filter(|r| r.driver == "drive").count() > 20,
+    );
     let pid = child.id() as i32;
+    // Suspended first, so that the paced plant stands still where the host left it: the
+    // simulated time of the kill is then read off the record, not guessed.
+    unsafe { libc::kill(pid, libc::SIGSTOP) };
+    let mut last = f64::NAN;
+    let frozen = emu.wait_for(
+        "the paced plant standing still",
+        Duration::from_secs(10),
+        |rows| {
+            let t = rows.last().map_or(f64::NAN, |r| r.t);
+            let still = t == last;
+            last = t;
+            // Two looks 50 ms apart that agree.
+            std::thread::sleep(Duration::from_millis(50));
+            still
+        },
+    );
+    let killed_at = frozen.last().unwrap().t;
     // SIGKILL: no stop frame can be sent.
     unsafe { libc::kill(pid, libc::SIGKILL) };
-    let r = wait_with_timeout(child, Duration::from_secs(5));
-    assert_eq!(r.status.code(), None);
-    let killed_at = emu.truth_so_far().last().map_or(0.0, |t| t.t);
-    // The plant stays paced for LOCKSTEP_IDLE_NS after the host's last frame, then must run a
-    // second of real time: long beyond the device's 50 ms host timeout.
-    std::thread::sleep(Duration::from_nanos(LOCKSTEP_IDLE_NS) + Duration::from_secs(1));
-    let truth = emu.truth_so_far();
+    let _ = child.wait();
+    let truth = emu.wait_for(
+        "the plant run on after the hang-up",
+        Duration::from_secs(30),
+        |rows| {
+            rows.last()
+                .is_some_and(|r| r.t > killed_at + 0.5 && r.driver != "drive")
+        },
+    );
     let driven: Vec<&Truth> = truth.iter().filter(|t| t.driver == "drive").collect();
     assert!(!driven.is_empty(), "the onboard run never drove the motor");
     let last_drive = driven.last().unwrap().t;
     // Stopped within the 50 ms host timeout plus a period and the record's 10 ms grid.
     assert!(
         last_drive < killed_at + 0.1,
-        "driven until {last_drive} s, host killed near {killed_at} s"
+        "driven until {last_drive} s, host killed at {killed_at} s"
     );
     assert_eq!(truth.last().unwrap().driver, "brake");
 }
@@ -179,12 +203,22 @@ fn a_signal_ends_the_onboard_run_with_the_motor_stopped() {
     // run outpaces the wall clock (120 s of it ended before the signal), so it runs until one.
     let mut emu = Emulator::lockstep("onboard-signal", &[]);
     let child = spawn_run(&emu.device, "lqr", &["--onboard", "--lockstep"]);
-    std::thread::sleep(Duration::from_millis(500));
+    emu.wait_for(
+        "the onboard run driving the motor",
+        Duration::from_secs(30),
+        |rows| rows.iter().any(|r| r.driver == "drive"),
+    );
     unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
     let r = wait_with_timeout(child, Duration::from_secs(5));
     assert_eq!(r.status.code(), Some(130), "{}", r.stderr);
     assert!(r.stderr.contains("stop frames sent"), "{}", r.stderr);
-    std::thread::sleep(Duration::from_millis(100));
+    // The emulator runs its plant on once the run has hung up: the record then ends with
+    // the motor as the run's stop frames left it.
+    emu.wait_for(
+        "the plant run on after the run",
+        Duration::from_secs(30),
+        |rows| rows.last().is_some_and(|r| r.driver != "drive"),
+    );
     let truth = emu.finish();
     assert!(truth.iter().any(|t| t.driver == "drive"));
     assert_ne!(truth.last().unwrap().driver, "drive");

@@ -122,7 +122,8 @@ fn case(controller: &str, fault: &str, fault_at: Option<f64>) -> (i32, String, E
         log.to_str().unwrap(),
     ];
     let r = run_lockstep(&emu.device, controller, &args[..]);
-    std::thread::sleep(std::time::Duration::from_millis(1500));
+    // The run has hung up: the emulator runs its plant on to rest, the arm coasting.
+    emu.wait_for_rest(0.05, 1.0, std::time::Duration::from_secs(30));
     let Some(enabled) = first_enabling(&emu) else {
         panic!("{name}: the motor was never enabled: {}", r.stderr);
     };

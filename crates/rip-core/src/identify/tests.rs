@@ -315,7 +315,8 @@ fn advised_kick(problem: &str) -> Option<f64> {
 const MIN_TRUSTED_FROM_LAB: usize = 9;
 
 /// The rigs of [`rigs_across_the_envelope_meet_the_bar_or_are_refused`]: eight of the shared
-/// generator and both presets (2048-count encoders, 0.5 mrad of noise).
+/// generator and both presets (2048-count encoders, 0.5 mrad of noise); at the small scale
+/// (`RIPRS_TEST_SCALE`, [`envelope_rigs_at_scale`]) three of them.
 fn envelope_rigs() -> Vec<crate::rig::Rig> {
     let mut rigs: Vec<_> = (1..=8u64).map(crate::rig::Rig::random).collect();
     // RIPRS_ENVELOPE_SEEDS=4,6 runs only those (to look into one rig).
@@ -341,6 +342,13 @@ fn envelope_rigs() -> Vec<crate::rig::Rig> {
     rigs
 }
 
+/// [`envelope_rigs`] at this run's scale: all ten at the full one; at the small one seed 4 (a
+/// lightly damped pendulum, the one the verdict sends back for a wider free swing), seed 1
+/// and the QUBE-Servo 2 preset (102).
+fn envelope_rigs_at_scale() -> Vec<crate::rig::Rig> {
+    rip_test_scale::cases(envelope_rigs(), |r| [1, 4, 102].contains(&r.seed))
+}
+
 /// Rigs of the shared generator across the envelope and both presets: every trusted result,
 /// from the lab file's values or from the default start, meets the bar (every
 /// non-structural-zero entry of the continuous [A B] within 2 %, the pendulum-damping entries
@@ -351,7 +359,9 @@ fn rigs_across_the_envelope_meet_the_bar_or_are_refused() {
     let cancel = AtomicBool::new(false);
     let mut trusted_from_lab = Vec::new();
     let mut trusted_after_remedy = Vec::new();
-    for rig in envelope_rigs() {
+    let rigs = envelope_rigs_at_scale();
+    for rig in &rigs {
+        let rig = rig.clone();
         let seed = rig.seed;
         let logs = rig_logs(&rig, seed);
         let names = vec!["chirp".into(), "prbs".into(), "free-swing".into()];
@@ -467,8 +477,10 @@ fn rigs_across_the_envelope_meet_the_bar_or_are_refused() {
     eprintln!("trusted from the lab file after the verdict's remedy: {trusted_after_remedy:?}");
     eprintln!("trusted from the lab file: {trusted_from_lab:?}");
     let filtered = std::env::var("RIPRS_ENVELOPE_SEEDS").is_ok();
+    // As many misses at most as the full sweep allows.
+    let allowed_misses = envelope_rigs().len() - MIN_TRUSTED_FROM_LAB;
     assert!(
-        filtered || trusted_from_lab.len() + trusted_after_remedy.len() >= MIN_TRUSTED_FROM_LAB,
+        filtered || trusted_from_lab.len() + trusted_after_remedy.len() + allowed_misses >= rigs.len(),
         "trusted from the lab file: {trusted_from_lab:?}, after the remedy {trusted_after_remedy:?}"
     );
 }
@@ -477,14 +489,14 @@ fn rigs_across_the_envelope_meet_the_bar_or_are_refused() {
 /// (and the encoders' quantisation) each time, fixed seeds; the 95 % intervals of the
 /// parameters reported identifiable hold the truth in at least 90 % of all (parameter, run)
 /// pairs, and no parameter of the upright linearisation is ever reported not identifiable.
-/// `RIPRS_COVERAGE_RUNS` sets the number of runs (12 by default, for CI; the docs give the
-/// figure of 50).
+/// `RIPRS_COVERAGE_RUNS` sets the number of runs (by default 12 at the small scale,
+/// `RIPRS_TEST_SCALE`, and 50 at the full one, the docs' figure).
 #[test]
 fn the_95_percent_intervals_cover_the_truth() {
     let runs: u64 = std::env::var("RIPRS_COVERAGE_RUNS")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(12);
+        .unwrap_or_else(|| rip_test_scale::size(12, 50));
     let truth_params = hidden();
     let truth = Plant::new(truth_params).unwrap();
     let cancel = AtomicBool::new(false);

@@ -77,18 +77,6 @@ pub struct EmulatorConfig {
     pub silence: Option<(f64, f64)>,
 }
 
-/// In lockstep, a host silent for this long (wall time) no longer paces the plant: it runs on
-/// in real time, so that what happens after a run (the arm coasting, the device watchdog)
-/// plays out as on the rig, until the next sample request. Before the host's first frame the
-/// plant waits, so that a lockstep run is reproducible.
-///
-/// Longer than the host's wait for a lockstep reply
-/// ([`LOCKSTEP_REPLY_WAIT_NS`](crate::timing::LOCKSTEP_REPLY_WAIT_NS)), by half a second: a
-/// reply the emulator dropped leaves the host waiting that long, and at 0.5 s (shorter than
-/// the wait) the plant ran 0.3–0.5 s unpaced inside what the host counted as one period, a
-/// gap no rig on a 100 Hz loop shows.
-pub const LOCKSTEP_IDLE_NS: u64 = crate::timing::LOCKSTEP_REPLY_WAIT_NS + 500_000_000;
-
 /// How the emulated rig is wired: the motor's leads and each encoder's direction, and
 /// encoders that do not count (a loose cable). The default is a correctly wired rig.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

@@ -45,6 +45,8 @@ pub struct Emulator {
     pub record: PathBuf,
     /// The emulator's `--true-state` record: the simulated plant, not its encoders.
     pub truth: PathBuf,
+    /// In lockstep ([`Emulator::lockstep`]).
+    pub lockstep: bool,
 }
 
 /// The flag that puts `rip-rt emulate`, `rip-rt run` and `rip-rt excite` in lockstep.
@@ -93,6 +95,7 @@ impl Emulator {
             device,
             record,
             truth,
+            lockstep: extra.contains(&LOCKSTEP),
         }
     }
 
@@ -109,10 +112,102 @@ impl Emulator {
         parse_truth(&std::fs::read_to_string(&self.truth).unwrap())
     }
 
+    /// Polls the true-state record until `done` holds for the rows so far (every 5 ms) and
+    /// returns them; fails the test after `timeout` of wall time, naming `what`. A test
+    /// waits for a state this way, never for a fixed time.
+    pub fn wait_for(
+        &self,
+        what: &str,
+        timeout: Duration,
+        mut done: impl FnMut(&[Truth]) -> bool,
+    ) -> Vec<Truth> {
+        let start = Instant::now();
+        loop {
+            let rows = self.truth_so_far();
+            if done(&rows) {
+                return rows;
+            }
+            assert!(
+                start.elapsed() < timeout,
+                "{what}: not seen within {timeout:?}; last row {:?}",
+                rows.last()
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// The true-state rows once the record has stopped growing (two reads 2 ms apart agree),
+    /// for a plant that stands still because its lockstep host is suspended.
+    pub fn truth_when_still(&self) -> Vec<Truth> {
+        let mut text = std::fs::read_to_string(&self.truth).unwrap_or_default();
+        loop {
+            std::thread::sleep(Duration::from_millis(2));
+            let again = std::fs::read_to_string(&self.truth).unwrap_or_default();
+            if again == text {
+                return parse_truth(&text);
+            }
+            text = again;
+        }
+    }
+
+    /// Lets the lockstep run `child` go on in short bursts until `done` holds for the true
+    /// state, and leaves it suspended (SIGSTOP) there: the plant, paced by the run, then
+    /// stands still at that state, so a signal sent now lands close to it however fast
+    /// lockstep runs. `near` says when the state is close to `done`: from then on each burst
+    /// is as short as two signals in a row. Send SIGCONT after the signal. Fails the test if
+    /// the run ends first or after `timeout` of wall time, naming `what`.
+    pub fn suspend_run_when(
+        &self,
+        child: &mut Child,
+        what: &str,
+        timeout: Duration,
+        near: impl Fn(&[Truth]) -> bool,
+        mut done: impl FnMut(&[Truth]) -> bool,
+    ) -> Vec<Truth> {
+        let pid = child.id() as i32;
+        let start = Instant::now();
+        loop {
+            unsafe { libc::kill(pid, libc::SIGSTOP) };
+            let rows = self.truth_when_still();
+            if done(&rows) {
+                return rows;
+            }
+            if let Some(status) = child.try_wait().unwrap() {
+                panic!("{what}: the run ended ({status}) first");
+            }
+            assert!(
+                start.elapsed() < timeout,
+                "{what}: not seen within {timeout:?}; last row {:?}",
+                rows.last()
+            );
+            let close = near(&rows);
+            unsafe { libc::kill(pid, libc::SIGCONT) };
+            if !close {
+                std::thread::sleep(Duration::from_micros(200));
+            }
+        }
+    }
+
     /// Waits until the simulated arm has come to rest (|θ̇| below `rate` for `hold` seconds
     /// of simulated time) or `timeout` of wall time passed; returns the rows so far.
+    ///
+    /// In lockstep, once the run has ended: until the record stops growing. The emulator then
+    /// runs its plant on to rest as soon as the run hangs up and stands still after it
+    /// (`rip_rt::emulator::RUN_ON_REST_S`), or, if no run ever connected, holds the plant
+    /// where it was.
     pub fn wait_for_rest(&self, rate: f64, hold: f64, timeout: Duration) -> Vec<Truth> {
         let start = Instant::now();
+        if self.lockstep {
+            let mut text = std::fs::read_to_string(&self.truth).unwrap_or_default();
+            loop {
+                std::thread::sleep(Duration::from_millis(100));
+                let again = std::fs::read_to_string(&self.truth).unwrap_or_default();
+                if again == text || start.elapsed() > timeout {
+                    return parse_truth(&again);
+                }
+                text = again;
+            }
+        }
         loop {
             let rows = self.truth_so_far();
             if let Some(last) = rows.last() {
