@@ -3,8 +3,14 @@
 Every function accepts array-likes, returns float64 numpy arrays, and raises a subclass of
 :class:`riprs.RiprsError` (a :class:`ValueError`) naming the offending argument or value. A call
 that is malformed as a call (too few arguments, an unknown keyword, a system object of the wrong
-kind, a complex array) raises :class:`TypeError`, as python-control's ``ControlArgument`` (a
-``TypeError``) does for those; see "Coming from MATLAB and python-control" in the docs.
+kind, a complex array, ``None`` for a required matrix) raises :class:`TypeError`, as
+python-control's ``ControlArgument`` (a ``TypeError``) does for those; see "Coming from MATLAB
+and python-control" in the docs.
+
+``None`` means what python-control gives it: the default of an optional matrix (zero for a
+cross term, the identity for ``E``) and, in :func:`dare`, the identity for ``R``. Where
+python-control gives ``None`` no meaning (every other required matrix) it is a
+:class:`TypeError` naming the argument.
 """
 
 from __future__ import annotations
@@ -65,7 +71,7 @@ def dare(
     A: ArrayLike,
     B: ArrayLike,
     Q: ArrayLike,
-    R: ArrayLike,
+    R: ArrayLike | None,
     S: ArrayLike | None = None,
     E: ArrayLike | None = None,
     stabilizing: bool = True,
@@ -90,14 +96,15 @@ def dare(
     B : array_like, shape (n, m)
     Q : array_like, shape (n, n)
         Symmetric state weight; it may be indefinite.
-    R : array_like, shape (m, m)
+    R : array_like, shape (m, m), or None
         Symmetric positive semidefinite input weight. A singular ``R`` is allowed wherever
         :math:`R + B^T X B` is invertible, definite or not (SLICOT's DAREX examples 1.2 and
-        1.4).
+        1.4). ``None`` is the identity, as in python-control (the argument is still
+        required).
     S : array_like, shape (n, m), optional
-        Cross weight; zero by default.
+        Cross weight; ``None`` (the default) is zero.
     E : array_like, shape (n, n), optional
-        Descriptor matrix; identity by default.
+        Descriptor matrix; ``None`` (the default) is the identity.
     stabilizing : bool, optional
         python-control's switch to the anti-stabilizing solution. Only ``True`` (the default)
         is supported; ``False`` raises :class:`InvalidParameterError`.
@@ -124,7 +131,8 @@ def dare(
     InvalidParameterError
         ``stabilizing=False`` or an unknown ``method``.
     TypeError
-        A complex argument (riprs solves real equations only) or an unknown keyword.
+        A complex argument (riprs solves real equations only), ``None`` for ``A``, ``B`` or
+        ``Q`` (naming it), or an unknown keyword.
     """
     _reject_unknown_keywords("dare", kwargs, "S, E, stabilizing, method")
     _check_riccati_method("dare", method)
@@ -158,19 +166,22 @@ def dlqr(
         Plant, shapes (n, n) and (n, m).
     Q, R : array_like
         Weights, shapes (n, n) and (m, m); ``[[Q, N], [N^T, R]]`` must be positive
-        semidefinite. With ``integral_action`` of ``p`` rows, ``Q`` is (n + p, n + p).
+        semidefinite. With ``integral_action`` of ``p`` rows, ``Q`` is (n + p, n + p). Both
+        are required: python-control's ``dlqr`` gives ``None`` no meaning here.
     N : array_like, shape (n, m), optional
-        Cross weight ((n + p, m) with ``integral_action``).
+        Cross weight ((n + p, m) with ``integral_action``); ``None`` (the default), given
+        positionally or by keyword, is zero, python-control's omitted ``N``.
     method : {None, 'scipy', 'slycot'}, optional
         Accepted for python-control compatibility; every value selects riprs's solver.
     integral_action : array_like, shape (p, n), optional
-        python-control's integral action: the design is made for the plant augmented with the
-        integrators :math:`z[k+1] = z[k] + C_i x[k]` of ``C_i = integral_action``,
+        python-control's integral action (``None``, the default, for none): the design is made
+        for the plant augmented with the integrators :math:`z[k+1] = z[k] + C_i x[k]` of
+        ``C_i = integral_action``,
 
         .. math::
 
-            A_a = egin{bmatrix} A & 0 \ C_i & I \end{bmatrix}, \quad
-            B_a = egin{bmatrix} B \ 0 \end{bmatrix},
+            A_a = \begin{bmatrix} A & 0 \\ C_i & I \end{bmatrix}, \quad
+            B_a = \begin{bmatrix} B \\ 0 \end{bmatrix},
 
         and ``K = [K_x, K_z]`` (shape (m, n + p)) feeds back both.
 
@@ -188,7 +199,8 @@ def dlqr(
     ------
     TypeError
         Too few or too many arguments, an unknown keyword, a system that is not in state-space
-        form, or a non-numeric ``integral_action``.
+        form, ``None`` for ``A``, ``B``, ``Q`` or ``R`` (naming it), or a non-numeric
+        ``integral_action``.
     ShapeError, NonFiniteError, NotSymmetricError, NotPositiveSemidefiniteError
         Malformed arguments (``integral_action`` without n columns is a ``ShapeError``).
     InvalidParameterError
@@ -238,9 +250,11 @@ def dlqe(
     A, G, C : array_like
         Plant, noise input and output matrices, shapes (n, n), (n, w) and (p, n).
     QN, RN : array_like
-        Process and measurement noise covariances, shapes (w, w) and (p, p).
+        Process and measurement noise covariances, shapes (w, w) and (p, p). Like ``A``,
+        ``G`` and ``C``, required: python-control's ``dlqe`` gives ``None`` no meaning here.
     NN : array_like, shape (w, p), optional
-        Noise cross-covariance (python-control 0.10 refuses one; riprs uses it).
+        Noise cross-covariance (python-control 0.10 refuses one; riprs uses it); ``None`` (the
+        default), given positionally or by keyword, is zero, python-control's omitted ``NN``.
     method : {None, 'scipy', 'slycot'}, optional
         Accepted for python-control compatibility; every value selects riprs's solver.
 
@@ -256,8 +270,8 @@ def dlqe(
     Raises
     ------
     TypeError
-        Too few or too many arguments, an unknown keyword, or a system that is not in
-        state-space form.
+        Too few or too many arguments, an unknown keyword, a system that is not in
+        state-space form, or ``None`` for ``A``, ``G``, ``C``, ``QN`` or ``RN`` (naming it).
     ShapeError, NonFiniteError, NotSymmetricError, NotPositiveSemidefiniteError
         Malformed arguments.
     InvalidParameterError
@@ -328,13 +342,26 @@ def kalman(
     Qn : array_like, shape (w, w)
     Rn : array_like, shape (p, p)
     Nn : array_like, shape (w, p), optional
+        ``None`` (the default) is zero, as an omitted ``Nn`` in MATLAB.
     H : array_like, shape (p, w), optional
+        ``None`` (the default) is zero, as an omitted ``H`` in MATLAB.
 
     Returns
     -------
     KalmanDesign
         With attributes ``L`` (predictor gain), ``M`` (innovation gain), ``P`` (prior
         covariance), ``Z`` (posterior covariance) and ``E`` (poles of ``A - L C``).
+
+    Raises
+    ------
+    TypeError
+        ``None`` for ``A``, ``G``, ``C``, ``Qn`` or ``Rn`` (naming it), or a complex argument.
+    ShapeError, NonFiniteError, NotSymmetricError
+        Malformed arguments.
+    NotPositiveDefiniteError, NotPositiveSemidefiniteError
+        Noise covariances that are not covariances (``Rn`` must be definite).
+    NotDetectableError, NoStabilizingSolutionError
+        As :func:`dlqe`.
     """
     return _riprs.kalman(
         A,
@@ -352,7 +379,7 @@ def c2d(
 ) -> tuple[FloatArray, FloatArray]:
     r"""Zero-order-hold discretisation (MATLAB ``c2d(sys, Ts, 'zoh')``).
 
-    Returns :math:`A_d = e^{A T_s}` and :math:`B_d = \int_0^{T_s} e^{A	au}\,d	au\, B`, read
+    Returns :math:`A_d = e^{A T_s}` and :math:`B_d = \int_0^{T_s} e^{A\tau}\,d\tau\, B`, read
     off one exponential of :math:`[[A, B], [0, 0]] T_s` (Al-Mohy & Higham 2009), and refuses a
     result whose a-posteriori error estimate exceeds ``1e-6`` (see the design page).
 
@@ -373,6 +400,8 @@ def c2d(
 
     Raises
     ------
+    TypeError
+        ``None`` for ``A``, ``B`` or ``Ts`` (naming it), or a complex argument.
     ShapeError, NonFiniteError
         Malformed arguments.
     InvalidParameterError

@@ -6,6 +6,10 @@
 //!   ragged nested list is a `ShapeError`; anything else that is not numbers is a `TypeError`;
 //!   NaN or Inf is a `NonFiniteError`. For matrices a scalar is 1×1 and a 1-D input one row, as
 //!   in python-control.
+//! - `None`: where an argument is optional its binding gives `None` its meaning, a default such
+//!   as zero or the identity (python-control's, where python-control has one; `matrix_opt`
+//!   passes `None` through for this). Anywhere else `None` is a `TypeError` naming the
+//!   argument: numpy would read it as a NaN scalar, and the caller be told of a NaN never given.
 //! - Real numbers ([`Real`]): a Python `int` too large for a float is `±inf`, which the core's
 //!   own range checks then reject by name, instead of an `OverflowError` from the conversion.
 //! - Counts ([`Count`]): negative or huge integers are an `InvalidParameterError` naming the
@@ -36,6 +40,11 @@ pub fn eig_to_py<'py>(
 
 /// The shape and the row-major values of an array-like of real numbers (module docs).
 pub(crate) fn real_array(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<usize>, Vec<f64>)> {
+    if obj.is_none() {
+        return Err(PyTypeError::new_err(format!(
+            "{name} must be an array of real numbers, got None"
+        )));
+    }
     let complex = obj
         .getattr("dtype")
         .and_then(|dtype| dtype.getattr("kind"))

@@ -2,6 +2,7 @@
 
 use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
+use rip_core::Mat;
 
 use crate::convert::{eig_to_py, mat_to_py, matrix_arg, matrix_opt, Real};
 use crate::errors::IntoPyResult;
@@ -16,20 +17,20 @@ fn dare<'py>(
     a: &Bound<'py, PyAny>,
     b: &Bound<'py, PyAny>,
     q: &Bound<'py, PyAny>,
-    r: &Bound<'py, PyAny>,
+    r: Option<&Bound<'py, PyAny>>,
     s: Option<&Bound<'py, PyAny>>,
     e: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<(Py2<'py>, PyEig<'py>, Py2<'py>)> {
     let (s, e) = (matrix_opt(s, "S")?, matrix_opt(e, "E")?);
-    let sol = rip_core::dare(
-        &matrix_arg(a, "A", None, None)?,
-        &matrix_arg(b, "B", None, None)?,
-        &matrix_arg(q, "Q", None, None)?,
-        &matrix_arg(r, "R", None, None)?,
-        s.as_ref(),
-        e.as_ref(),
-    )
-    .py()?;
+    let (a, b, q) = (
+        matrix_arg(a, "A", None, None)?,
+        matrix_arg(b, "B", None, None)?,
+        matrix_arg(q, "Q", None, None)?,
+    );
+    // python-control's dare: R = None is the identity of B's input dimension (R stays a
+    // required argument, as there).
+    let r = matrix_opt(r, "R")?.unwrap_or_else(|| Mat::identity(b.ncols(), b.ncols()));
+    let sol = rip_core::dare(&a, &b, &q, &r, s.as_ref(), e.as_ref()).py()?;
     Ok((
         mat_to_py(py, &sol.x),
         eig_to_py(py, &sol.closed_loop_eigenvalues),
@@ -161,17 +162,19 @@ fn kalman<'py>(
 }
 
 #[pyfunction]
+// `Ts` as riprs.c2d spells it, so that a refused sample time (e.g. None) is named as the
+// caller wrote it.
+#[allow(non_snake_case)]
 fn c2d<'py>(
     py: Python<'py>,
     a: &Bound<'py, PyAny>,
     b: &Bound<'py, PyAny>,
-    ts: Real,
+    Ts: Real,
 ) -> PyResult<(Py2<'py>, Py2<'py>)> {
-    let ts = ts.0;
     let (ad, bd) = rip_core::c2d(
         &matrix_arg(a, "A", None, None)?,
         &matrix_arg(b, "B", None, None)?,
-        ts,
+        Ts.0,
     )
     .py()?;
     Ok((mat_to_py(py, &ad), mat_to_py(py, &bd)))

@@ -325,8 +325,10 @@ impl PyMpcSolution {
 ///     :math:`D_n` (ny, nv) on the scaled outputs; ``None`` for the identity.
 /// solver : {"active_set", "clarabel"}
 ///     QP backend: the dense active-set method with warm start (default, allocation-free, the
-///     solver of the experiment file and ``rip-rt``) or Clarabel (interior point, the
-///     reference); both reach the same minimiser.
+///     solver of the experiment file and ``rip-rt``) or Clarabel (interior point). Both solve
+///     the same QP, to different accuracies (measured against the exact QP solution on the
+///     design page): the active set to rounding, Clarabel to its stopping tolerances, about
+///     1e-6 V in the first move and farther later in the plan on some problems.
 /// max_iterations : int
 ///     Iteration limit of the QP solver, at most 10 000.
 ///
