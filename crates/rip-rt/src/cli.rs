@@ -230,8 +230,9 @@ struct RunArgs {
     /// the emulator advances its plant one period per exchange (refused by any other device).
     #[arg(long)]
     lockstep: bool,
-    /// Run the controller on the device (protocol v2): upload the design, verify its
-    /// checksum, start onboard mode, then supervise and log the device's telemetry.
+    /// Run the controller on the device (protocol v2): after the same pre-flight check as
+    /// without it (exit 16, --force), upload the design, verify its checksum, start onboard
+    /// mode, then supervise and log the device's telemetry.
     #[arg(long, conflicts_with = "swing_up")]
     onboard: bool,
     /// Run even when the pre-flight check refuses (an untrusted identification, a rig no
@@ -397,31 +398,51 @@ fn stop_level(stopped: &StopReason, code: i32) -> &'static str {
     }
 }
 
-/// Everything that can fail before the motor is enabled, in an order that leaves nothing
-/// behind on failure: configuration, controller design, signal dispositions, the port (a
-/// mistyped `--port` leaves an existing log untouched), the log with its header flushed.
-fn prepare(
-    args: &RunArgs,
-) -> Result<(Config, LoopCore, SerialPort, Option<LogWriter>), SetupError> {
+/// What `rip-rt run` drives the motor with.
+enum Law {
+    /// The controller, stepped by the host's loop (boxed: it is a thousand bytes or more, the
+    /// image's handle a few).
+    Host(Box<LoopCore>),
+    /// The design as an onboard image, for the device to step (`--onboard`).
+    Onboard(Vec<u8>),
+}
+
+/// Everything that can fail before the motor is enabled, for the host loop and `--onboard`
+/// alike, in an order that leaves nothing behind on failure: configuration, controller design,
+/// the pre-flight check, signal dispositions, the port (a mistyped `--port` leaves an existing
+/// log untouched), the log with its header flushed. Both modes come through here, so that no
+/// path to an enabled motor skips the pre-flight or its `--force`.
+fn prepare(args: &RunArgs) -> Result<(Config, Law, SerialPort, Option<LogWriter>), SetupError> {
     let cfg = match &args.config {
         Some(path) => Config::load(path)?,
         None => Config::default(),
     };
-    let controller = if args.swing_up {
-        cfg.validate_swing_up(args.config.as_deref())
-            .and_then(|(f, source)| {
-                rip_rt::say!("rip-rt: swing-up feasibility: {f} (verdict {source})");
-                rip_rt::envelope::check_swing_up(&cfg)
-            })
-            .map_err(|e| match &args.config {
-                Some(path) => e.in_file(path),
-                None => e,
-            })?;
-        controllers::build_swing_up(args.controller, &cfg)
+    let law = if args.onboard {
+        // The device's design is the host loop's (the one assembly; only an MPC's iteration
+        // cap may be lowered to fit the device's period), so the pre-flight's verdict on the
+        // controller is a verdict on what the device will run.
+        let image = rip_rt::onboard::design(args.controller, &cfg)
+            .and_then(|d| rip_rt::onboard::image(&d, &cfg))
+            .map_err(SetupError::Design)?;
+        Law::Onboard(image)
     } else {
-        controllers::build(args.controller, &cfg)
-    }
-    .map_err(SetupError::Design)?;
+        let controller = if args.swing_up {
+            cfg.validate_swing_up(args.config.as_deref())
+                .and_then(|(f, source)| {
+                    rip_rt::say!("rip-rt: swing-up feasibility: {f} (verdict {source})");
+                    rip_rt::envelope::check_swing_up(&cfg)
+                })
+                .map_err(|e| match &args.config {
+                    Some(path) => e.in_file(path),
+                    None => e,
+                })?;
+            controllers::build_swing_up(args.controller, &cfg)
+        } else {
+            controllers::build(args.controller, &cfg)
+        }
+        .map_err(SetupError::Design)?;
+        Law::Host(Box::new(LoopCore::new(controller, &cfg)?))
+    };
     let report = controllers::preflight(args.controller, &cfg, args.config.as_deref())
         .map_err(SetupError::Design)?;
     if report.refused() {
@@ -432,26 +453,33 @@ fn prepare(
             rip_rt::say!("rip-rt: warning: --force: {f}");
         }
     }
-    let core = LoopCore::new(controller, &cfg)?;
-    let n_estimates = core.state_estimate().map_or(0, |x| x.len());
     stop::install_signal_handlers()?;
     let port = SerialPort::open(&args.port, args.baud).map_err(SetupError::Port)?;
     let log = match &args.log {
         Some(path) => {
+            let mode = match &law {
+                Law::Host(_) => ("swing_up", args.swing_up.to_string()),
+                Law::Onboard(_) => ("onboard", "true".to_string()),
+            };
             let header = [
                 ("rip-rt", env!("CARGO_PKG_VERSION").to_string()),
                 ("protocol", rip_rt::protocol::VERSION.to_string()),
                 ("controller", args.controller.to_string()),
-                ("swing_up", args.swing_up.to_string()),
+                mode,
                 ("port", args.port.display().to_string()),
                 ("period_ms", cfg.loop_.period_ms.to_string()),
                 ("voltage_limit", cfg.safety.voltage_limit.to_string()),
             ];
+            // The onboard telemetry carries no state estimate.
+            let n_estimates = match &law {
+                Law::Host(core) => core.state_estimate().map_or(0, |x| x.len()),
+                Law::Onboard(_) => 0,
+            };
             Some(LogWriter::create(path, &header, n_estimates)?.waiting(args.lockstep))
         }
         None => None,
     };
-    Ok((cfg, core, port, log))
+    Ok((cfg, law, port, log))
 }
 
 /// `--rt-priority` and `--cpu`, best effort: a refusal is a warning.
@@ -475,22 +503,23 @@ pub(crate) fn apply_realtime(rt_priority: Option<i32>, cpu: Option<usize>) {
 }
 
 fn cmd_run(args: RunArgs) -> ExitCode {
-    if args.onboard {
-        let code = rip_rt::onboard::command(&rip_rt::onboard::OnboardArgs {
-            port: &args.port,
-            baud: args.baud,
-            controller: args.controller,
-            config: args.config.as_deref(),
-            duration: args.duration,
-            log: args.log.as_deref(),
-            quiet: args.quiet,
-            lockstep: args.lockstep,
-        });
-        return ExitCode::from(code as u8);
-    }
-    let (cfg, mut core, port, mut log) = match prepare(&args) {
+    let (cfg, law, port, mut log) = match prepare(&args) {
         Ok(ready) => ready,
         Err(e) => return fail(e.exit_code(), e),
+    };
+    let mut core = match law {
+        Law::Host(core) => *core,
+        Law::Onboard(image) => {
+            let a = rip_rt::onboard::OnboardArgs {
+                port: &args.port,
+                controller: args.controller,
+                duration: args.duration,
+                quiet: args.quiet,
+                lockstep: args.lockstep,
+            };
+            let code = rip_rt::onboard::command(&a, &cfg, &image, &port, log);
+            return ExitCode::from(code as u8);
+        }
     };
 
     // From here on every exit path must stop the motor; a panic does it through this hook

@@ -1,6 +1,7 @@
 //! `rip-rt run --onboard`: the controller runs on the device (protocol v2, `rip-device`'s
 //! onboard mode). The host makes the design from the experiment file with the same assembly
-//! as `rip-run` ([`crate::controllers`]), uploads it as an onboard image
+//! as the host loop ([`crate::controllers`]) and puts it through the same pre-flight check
+//! (`rip_rt::cli` prepares both modes), uploads it as an onboard image
 //! ([`rip_device::law`]: the counts → angles conversion and the reference step, then
 //! rip-control's design bytes) in acknowledged chunks, commits it with its CRC-32 and checks
 //! the CRC the device computed, starts onboard mode with the device's own limits in counts, and
@@ -579,67 +580,34 @@ pub fn telemetry_decimation(cfg: &Config) -> u16 {
 /// `rip-rt run --onboard`'s settings (from the command line).
 #[derive(Debug, Clone)]
 pub struct OnboardArgs<'a> {
-    /// The device.
+    /// The device, for the messages.
     pub port: &'a std::path::Path,
-    /// Its baud rate.
-    pub baud: u32,
     /// The controller.
     pub controller: ControllerKind,
-    /// The experiment file.
-    pub config: Option<&'a std::path::Path>,
     /// Stop after this many seconds.
     pub duration: Option<f64>,
-    /// The CSV log.
-    pub log: Option<&'a std::path::Path>,
     /// Only the summary.
     pub quiet: bool,
     /// Against `rip-rt emulate --lockstep`.
     pub lockstep: bool,
 }
 
-/// Runs `rip-rt run --onboard`; returns the exit code.
-pub fn command(a: &OnboardArgs<'_>) -> i32 {
+/// Runs `rip-rt run --onboard` from the point where the motor may be enabled: uploads `img`
+/// to the device on `port`, starts and supervises it ([`run`]), completes `log` and prints the
+/// summary; returns the exit code.
+///
+/// Everything before that point is the caller's, shared with the host loop so that it cannot
+/// differ between the two: the configuration `cfg`, the design `img` holds, the
+/// pre-flight check with its `--force`, the signal dispositions, `port` opened and `log`
+/// created with its header (`rip_rt::cli`).
+pub fn command(
+    a: &OnboardArgs<'_>,
+    cfg: &Config,
+    img: &[u8],
+    port: &crate::serial::SerialPort,
+    mut log: Option<LogWriter>,
+) -> i32 {
     use crate::stop::exit_code;
-    let fail = |code: i32, msg: &dyn std::fmt::Display| {
-        crate::say!("rip-rt: error: {msg}");
-        code
-    };
-    let cfg = match a.config {
-        Some(path) => match Config::load(path) {
-            Ok(c) => c,
-            Err(e) => return fail(exit_code::SETUP, &e),
-        },
-        None => Config::default(),
-    };
-    let img = match design(a.controller, &cfg).and_then(|d| image(&d, &cfg)) {
-        Ok(i) => i,
-        Err(e) => return fail(exit_code::SETUP, &e),
-    };
-    if let Err(e) = crate::stop::install_signal_handlers() {
-        return fail(e.exit_code(), &e);
-    }
-    let port = match crate::serial::SerialPort::open(a.port, a.baud) {
-        Ok(p) => p,
-        Err(e) => return fail(exit_code::SETUP, &format!("{}: {e}", a.port.display())),
-    };
-    let mut log = match a.log {
-        Some(path) => {
-            let header = [
-                ("rip-rt", env!("CARGO_PKG_VERSION").to_string()),
-                ("protocol", rip_protocol::VERSION.to_string()),
-                ("controller", a.controller.to_string()),
-                ("onboard", "true".to_string()),
-                ("port", a.port.display().to_string()),
-                ("period_ms", cfg.loop_.period_ms.to_string()),
-                ("voltage_limit", cfg.safety.voltage_limit.to_string()),
-            ];
-            match LogWriter::create(path, &header, 0) {
-                Ok(l) => Some(l.waiting(a.lockstep)),
-                Err(e) => return fail(exit_code::LOG_ERROR, &e),
-            }
-        }
-        None => None,
-    };
     crate::stop::install_panic_hook();
     if !a.quiet {
         crate::say!(
@@ -653,11 +621,11 @@ pub fn command(a: &OnboardArgs<'_>) -> i32 {
     let guard = crate::stop::StopGuard::new(port.io().raw());
     let report = run(
         port.io(),
-        &cfg,
-        &img,
+        cfg,
+        img,
         a.duration,
         a.lockstep,
-        telemetry_decimation(&cfg),
+        telemetry_decimation(cfg),
         log.as_mut(),
     );
     drop(guard);
