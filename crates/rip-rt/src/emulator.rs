@@ -39,8 +39,9 @@ pub const PWM_MAX_DUTY: u16 = 8400;
 mod config;
 pub use config::{EmulatorConfig, EmulatorConfigError, Wiring};
 
-/// After its host hung up, a lockstep emulator runs its plant on, unpaced, until it has
-/// rested ([`RUN_ON_REST_RATE`], the motor not driven) for this long (s of simulated time):
+/// After its host hung up, the emulator (in lockstep or real time) runs its plant on, unpaced,
+/// until it has rested ([`RUN_ON_REST_RATE`], the motor not driven) for this long (s of
+/// simulated time):
 /// what happens after a run (the arm coasting, the device's watchdog, the pendulum settling)
 /// plays out as on the rig, in a fraction of the wall time, and a test reads it from the
 /// true-state record at once.
@@ -50,9 +51,9 @@ pub const RUN_ON_REST_S: f64 = 1.0;
 /// [`RUN_ON_REST_S`].
 pub const RUN_ON_REST_RATE: [f64; 2] = [1e-3, 1e-2];
 
-/// The longest a lockstep emulator runs on after its host hung up (s of simulated time), for a
-/// plant that never rests (a lightly damped pendulum, a motor the device still drives); then
-/// it waits, its plant paced again, for the next host.
+/// The longest the emulator runs on after its host hung up (s of simulated time), for a plant
+/// that never rests (a lightly damped pendulum, a motor the device still drives); then it
+/// paces its plant again (in real time, or by the next host's requests in lockstep).
 pub const RUN_ON_MAX_S: f64 = 60.0;
 
 /// The emulated device: the firmware's logic (`rip-device`) on a simulated pendulum.
@@ -564,6 +565,15 @@ fn serve(
         }
         let now = now_ns();
         let wait_ns = match (server.lockstep_steps, host) {
+            // After the host hung up, in either mode: the plant runs on, unpaced, to rest.
+            (_, Host::RunningOn { since_ns, rest_ns }) => {
+                let (exit, next) = server.run_on(since_ns, rest_ns)?;
+                if let Some(exit) = exit {
+                    return Ok(exit);
+                }
+                host = next;
+                0
+            }
             // Real time: the plant steps on its own grid of deadlines.
             (None, _) => {
                 if now >= next_tick {
@@ -581,14 +591,6 @@ fn serve(
                 }
                 next_tick - now
             }
-            (Some(_), Host::RunningOn { since_ns, rest_ns }) => {
-                let (exit, next) = server.run_on(since_ns, rest_ns)?;
-                if let Some(exit) = exit {
-                    return Ok(exit);
-                }
-                host = next;
-                0
-            }
             // Lockstep, waiting for the host's frames (the plant waits too) or, once it has
             // gone and the plant has settled, for the next host.
             (Some(_), _) => HOST_POLL_NS,
@@ -604,8 +606,13 @@ fn serve(
                 host = host.hung_up(server.device.time_ns);
                 if host == Host::Gone {
                     // The hang-up stays readable while no client holds the slave: wait
-                    // between looks instead of spinning on it.
-                    std::thread::sleep(std::time::Duration::from_nanos(HOST_POLL_NS));
+                    // between looks instead of spinning on it (in real time, until the
+                    // plant's next step at most).
+                    let pause = match server.lockstep_steps {
+                        Some(_) => HOST_POLL_NS,
+                        None => next_tick.saturating_sub(now_ns()).min(HOST_POLL_NS),
+                    };
+                    std::thread::sleep(std::time::Duration::from_nanos(pause));
                 }
                 continue;
             }
@@ -614,15 +621,13 @@ fn serve(
         if n == 0 {
             continue;
         }
-        if server.lockstep_steps.is_some() {
-            // The host holds the slave now: from here on its close is a hang-up the master
-            // sees, which releases the plant to run on.
-            pty.release_slave();
-            if host != Host::Connected {
-                server.parser = Parser::new();
-            }
-            host = Host::Connected;
+        // The host holds the slave now: from here on its close is a hang-up the master sees,
+        // which releases the plant to run on.
+        pty.release_slave();
+        if host != Host::Connected {
+            server.parser = Parser::new();
         }
+        host = Host::Connected;
         if let Some(exit) = server.answer(pty.io(), &rx[..n])? {
             return Ok(exit);
         }
@@ -743,13 +748,14 @@ impl Server<'_> {
     }
 }
 
-/// Where a lockstep emulator's host is.
+/// Where the emulator's host is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Host {
-    /// No frame yet: the plant waits for the host's first frame, so that a lockstep run is
-    /// the same sequence of plant steps and noise draws however long the host took to start.
+    /// No frame yet. In lockstep the plant waits for the host's first frame, so that a
+    /// lockstep run is the same sequence of plant steps and noise draws however long the host
+    /// took to start.
     Awaited,
-    /// A host holds the port: it paces the plant, one period per sample request.
+    /// A host holds the port (in lockstep it paces the plant, one period per sample request).
     Connected,
     /// The host hung up at simulated time `since_ns`; the plant runs on, unpaced, and has
     /// rested for `rest_ns`.
