@@ -685,19 +685,30 @@ fn suspend_while_waiting_for_a_reply(name: &str) -> (RunResult, Emulator, Option
         rows.iter().filter(|r| r.driver == "drive").count() > 100
     });
     let pid = child.id();
-    // Suspend it inside ppoll (the reply wait; the period's sleep is clock_nanosleep).
+    // Suspend it inside ppoll (the reply wait; the period's sleep is clock_nanosleep). The
+    // SIGSTOP lands wherever the loop is once it is delivered, which on a loaded machine is
+    // often past the ppoll seen: a suspension that landed elsewhere is lifted at once (a
+    // hiccup of a millisecond or two, which the loop rides out) and tried again, so that the
+    // subject is reached within the one run however loaded the machine is.
     let waited = Instant::now();
-    while syscall_of(pid) != Some(libc::SYS_ppoll) {
-        assert!(waited.elapsed() < Duration::from_secs(5), "never in ppoll");
-    }
-    unsafe { libc::kill(pid as i32, libc::SIGSTOP) };
-    // Where it stopped, read once the stop has taken effect (the signal is delivered
-    // asynchronously).
-    let stopping = Instant::now();
-    while !is_stopped(pid) && stopping.elapsed() < Duration::from_secs(1) {
-        std::thread::yield_now();
-    }
-    let stopped_in = syscall_of(pid);
+    let stopped_in = loop {
+        while syscall_of(pid) != Some(libc::SYS_ppoll) {
+            assert!(waited.elapsed() < Duration::from_secs(5), "never in ppoll");
+        }
+        unsafe { libc::kill(pid as i32, libc::SIGSTOP) };
+        // Where it stopped, read once the stop has taken effect (the signal is delivered
+        // asynchronously).
+        let stopping = Instant::now();
+        while !is_stopped(pid) && stopping.elapsed() < Duration::from_secs(1) {
+            std::thread::yield_now();
+        }
+        let stopped_in = syscall_of(pid);
+        if stopped_in == Some(libc::SYS_ppoll) || waited.elapsed() > Duration::from_secs(5) {
+            break stopped_in;
+        }
+        unsafe { libc::kill(pid as i32, libc::SIGCONT) };
+        std::thread::sleep(Duration::from_millis(30));
+    };
     std::thread::sleep(Duration::from_millis(400));
     unsafe { libc::kill(pid as i32, libc::SIGCONT) };
     (
@@ -712,7 +723,9 @@ fn suspend_while_waiting_for_a_reply(name: &str) -> (RunResult, Emulator, Option
 /// the suspension, held or freshly computed: the stall stops it first. A run the witness
 /// stopped before the suspension (exit 15; about 1 in 6 real-time runs with a quarter of the
 /// replies dropped, a false stop open under issue 21) did not reach the subject and is run
-/// again, at most twice.
+/// again, at most twice. Load cannot keep it from the subject: a suspension that lands outside
+/// the reply wait is lifted at once and tried again within the run
+/// ([`suspend_while_waiting_for_a_reply`]).
 #[cfg(all(target_os = "linux", target_arch = "x86_64"))]
 #[test]
 fn a_loop_suspended_while_waiting_for_a_reply_sends_nothing_stale() {
