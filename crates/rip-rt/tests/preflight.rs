@@ -106,14 +106,10 @@ fn a_rig_that_balances_passes() {
     );
 }
 
-#[test]
-fn the_preflight_reads_the_tuning_record_while_it_is_current() {
+/// Writes beside `rig` (whose text is `text`) a tuning record of its design at rip-rt's
+/// default 10 ms period and ±12 V, so that the record is current, which says LQR falls.
+fn write_lqr_falls_record(rig: &Path, text: &str) {
     use rip_core::preflight::{design_checksum, tune_record_path, StoredPrediction, TuneRecord};
-    let dir = tempdir("record");
-    let text = "[plant]\npreset = \"qube_servo2\"\n";
-    let rig = write(&dir, "tuned.toml", text);
-    // A record of this design (at rip-rt's default 10 ms period and ±12 V) that says LQR
-    // falls: the rig balances, so only a pre-flight that reads the record refuses it.
     let design = rip_core::spec::Spec::parse(text)
         .unwrap()
         .design(0.01)
@@ -131,7 +127,17 @@ fn the_preflight_reads_the_tuning_record_while_it_is_current() {
         runs: "noise seeds [11, 12], 10 s each".into(),
         prediction: [("LQR".to_string(), falls)].into_iter().collect(),
     };
-    std::fs::write(tune_record_path(&rig), record.to_toml()).unwrap();
+    std::fs::write(tune_record_path(rig), record.to_toml()).unwrap();
+}
+
+#[test]
+fn the_preflight_reads_the_tuning_record_while_it_is_current() {
+    let dir = tempdir("record");
+    let text = "[plant]\npreset = \"qube_servo2\"\n";
+    let rig = write(&dir, "tuned.toml", text);
+    // A record of this design (at rip-rt's default 10 ms period and ±12 V) that says LQR
+    // falls: the rig balances, so only a pre-flight that reads the record refuses it.
+    write_lqr_falls_record(&rig, text);
     let (code, err) = run(&rig, false);
     assert_eq!(code, 16, "{err}");
     assert!(
@@ -168,7 +174,6 @@ impl Mode {
 /// design that says LQR falls; else an identification beside it that is not trusted. A
 /// refusal is then the pre-flight's doing, and a forced run balances.
 fn refused_rig(dir: &Path, falls: bool) -> (std::path::PathBuf, &'static str) {
-    use rip_core::preflight::{design_checksum, tune_record_path, StoredPrediction, TuneRecord};
     let text = "[plant]\npreset = \"qube_servo2\"\n";
     if !falls {
         let rig = write(dir, "lab.toml", text);
@@ -180,25 +185,7 @@ fn refused_rig(dir: &Path, falls: bool) -> (std::path::PathBuf, &'static str) {
         return (rig, "condition number 1e9");
     }
     let rig = write(dir, "tuned.toml", text);
-    // rip-rt's design at its default 10 ms period and ±12 V, so the record is current.
-    let design = rip_core::spec::Spec::parse(text)
-        .unwrap()
-        .design(0.01)
-        .unwrap();
-    let falls = StoredPrediction {
-        fell: true,
-        arm_max: 3.0,
-        arm_peak_to_peak: f64::NAN,
-        pendulum: f64::NAN,
-        disk_margin: 0.7,
-        works: false,
-    };
-    let record = TuneRecord {
-        inputs: design_checksum(&design),
-        runs: "noise seeds [11, 12], 10 s each".into(),
-        prediction: [("LQR".to_string(), falls)].into_iter().collect(),
-    };
-    std::fs::write(tune_record_path(&rig), record.to_toml()).unwrap();
+    write_lqr_falls_record(&rig, text);
     (rig, "stored by riprs tune")
 }
 

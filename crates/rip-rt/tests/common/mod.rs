@@ -136,18 +136,14 @@ impl Emulator {
         }
     }
 
-    /// The true-state rows once the record has stopped growing (two reads 2 ms apart agree),
-    /// for a plant that stands still because its lockstep host is suspended.
+    /// The true-state rows once the record has stopped growing (two reads 2 ms apart agree,
+    /// within 10 s), for a plant that stands still because its lockstep host is suspended.
     pub fn truth_when_still(&self) -> Vec<Truth> {
-        let mut text = std::fs::read_to_string(&self.truth).unwrap_or_default();
-        loop {
-            std::thread::sleep(Duration::from_millis(2));
-            let again = std::fs::read_to_string(&self.truth).unwrap_or_default();
-            if again == text {
-                return parse_truth(&text);
-            }
-            text = again;
-        }
+        parse_truth(&settled_text(
+            &self.truth,
+            Duration::from_millis(2),
+            Duration::from_secs(10),
+        ))
     }
 
     /// Lets the lockstep run `child` go on in short bursts until `done` holds for the true
@@ -198,15 +194,8 @@ impl Emulator {
     pub fn wait_for_rest(&self, rate: f64, hold: f64, timeout: Duration) -> Vec<Truth> {
         let start = Instant::now();
         if self.lockstep {
-            let mut text = std::fs::read_to_string(&self.truth).unwrap_or_default();
-            loop {
-                std::thread::sleep(Duration::from_millis(100));
-                let again = std::fs::read_to_string(&self.truth).unwrap_or_default();
-                if again == text || start.elapsed() > timeout {
-                    return parse_truth(&again);
-                }
-                text = again;
-            }
+            let text = settled_text(&self.truth, Duration::from_millis(100), timeout);
+            return parse_truth(&text);
         }
         loop {
             let rows = self.truth_so_far();
@@ -238,16 +227,27 @@ impl Emulator {
     /// before exiting may still be in the emulator's input, so this waits until the record
     /// stops growing.
     pub fn commands(&self) -> Vec<(i32, u8)> {
-        let mut text = std::fs::read_to_string(&self.record).unwrap();
-        for _ in 0..40 {
-            std::thread::sleep(Duration::from_millis(50));
-            let again = std::fs::read_to_string(&self.record).unwrap();
-            if again == text {
-                break;
-            }
-            text = again;
+        assert!(self.record.exists(), "no record {:?}", self.record);
+        parse_record(&settled_text(
+            &self.record,
+            Duration::from_millis(50),
+            Duration::from_secs(2),
+        ))
+    }
+}
+
+/// The text of `path` once it has stopped growing (two reads `interval` apart agree), or the
+/// last read after `timeout`: a record the emulator writes row by row, read when it is done.
+fn settled_text(path: &Path, interval: Duration, timeout: Duration) -> String {
+    let start = Instant::now();
+    let mut text = std::fs::read_to_string(path).unwrap_or_default();
+    loop {
+        std::thread::sleep(interval);
+        let again = std::fs::read_to_string(path).unwrap_or_default();
+        if again == text || start.elapsed() > timeout {
+            return again;
         }
-        parse_record(&text)
+        text = again;
     }
 }
 
