@@ -127,12 +127,18 @@ def test_cli_overlays_a_swing_up_log_on_a_swing_up_simulation(
                  "--quiet", "--out", str(tmp_path / "out")])  # fmt: skip
     printed = capsys.readouterr().out
     assert code == 0
-    # The same table as an explicit --start down (the time to upright is its column).
+    # The same simulations as an explicit --start down (the time to upright is its column),
+    # and the logged run's own row after them.
     code = main(["compare", "--config", str(cfg), "--start", "down", "--no-plots", "--quiet",
                  "--out", str(tmp_path / "down")])  # fmt: skip
     explicit = capsys.readouterr().out
     assert code == 0
-    assert printed.split("\nwrote")[0] == explicit.split("\nwrote")[0]
+
+    def rows(text: str) -> list[list[str]]:
+        return [ln.split() for ln in text.split("\nwrote")[0].splitlines()]
+
+    assert [r for r in rows(printed) if "(logged)" not in r] == rows(explicit)
+    assert any(r[:2] == ["rip-rt", "swing"] and r[-1] == "(logged)" for r in rows(printed))
     assert "upright" in printed
     code = main(["compare", "--config", str(cfg), "--log", str(swing_log), "--start", "up",
                  "--no-plots", "--quiet", "--out", str(tmp_path / "bad")])  # fmt: skip
@@ -216,3 +222,130 @@ def test_the_checklists_encoder_offset_reading(tmp_path: Path, rip_rt: Path) -> 
     checklist = (ROOT / "firmware" / "README.md").read_text()
     assert "-3.120 or 3.120, a 0.02 rad offset" in checklist.replace("−", "-")
     assert "--swing-up" in checklist and "calibration.max_pendulum_offset" in checklist
+
+
+def _rig_swing_log(path: Path) -> tuple[Path, float, float]:
+    """A swing-up's log as ``rip-rt run --swing-up`` writes it: the sign check's rows from
+    t = 0, no rows while the rig comes to rest (6.7 s), then the swing from t = 7.3 s and the
+    balance after its catch. Returns the path, the swing's start and the catch's time."""
+    rows = []
+    k = 0
+
+    def row(t: float, theta: float, alpha: float, ref: float, u: float, phase: str) -> None:
+        nonlocal k
+        rows.append(f"{t:.4f},{k},{theta:.6f},{alpha:.6f},{ref:.3f},{u:.4f},5.0,80.0,1,{phase}\n")
+        k += 1
+
+    for i in range(30):
+        row(0.01 * i, 0.01 * np.sin(i), np.pi, 0.0, 2.0 if i < 15 else -2.0, "sign_check")
+    t_swing, t_catch = 7.3, 9.1
+    t = t_swing
+    while t < t_catch - 1e-9:
+        row(t, 0.4 * np.sin(3 * (t - t_swing)), np.pi - (t - t_swing), 0.0, 5.0, "swing_up")
+        t += 0.01
+    while t < t_catch + 4.0:
+        ref = 1.0 if t >= t_catch + 1.0 else 0.0
+        row(t, ref + 0.02 * np.sin(7 * t), 0.01 * np.cos(5 * t), ref, 0.3 * np.sin(t), "balance")
+        t += 0.01
+    path.write_text("# controller: lqr\n" + HEADER + "".join(rows) + "# stop: finished\n")
+    return path, t_swing, t_catch
+
+
+def test_a_logged_swing_up_starts_where_its_simulation_does(tmp_path: Path) -> None:
+    path, t_swing, t_catch = _rig_swing_log(tmp_path / "run.csv")
+    log = riprs.load_log(path)
+    tr = Trajectory.from_log(log)
+    # The swing's first row is t = 0, as a simulation started hanging; the sign check and the
+    # wait for rest are not drawn.
+    assert tr.t[0] == 0.0
+    assert np.all(np.diff(tr.t) > 0) and np.all(np.diff(tr.t) < 0.011)
+    swing_rows = log.phase == "swing_up"
+    first = int(np.flatnonzero(swing_rows)[0])
+    np.testing.assert_allclose(tr.t, log.t[first:] - t_swing, atol=1e-9)
+    np.testing.assert_allclose(tr.arm, log.theta[first:])
+    assert tr.catch_time == pytest.approx(t_catch - t_swing, abs=1e-6)
+    # A run started upright is taken as it is.
+    up = Trajectory.from_log(riprs.load_log(_log(tmp_path / "up.csv", ["balance"] * 3, [0.1] * 3)))
+    assert up.t[0] == 0.0 and up.catch_time is None
+
+
+def test_gaps_are_drawn_as_gaps() -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from riprs.plots import plot_trajectories, with_gaps
+
+    t = np.concatenate([np.arange(0, 0.3, 0.01), 7.3 + np.arange(0, 1, 0.01)])
+    y = np.concatenate([np.zeros(30), np.full(100, 10.0)])
+    t2, y2 = with_gaps(t, y)
+    # One break, inside the gap, and every sample kept.
+    nan = np.flatnonzero(np.isnan(y2))
+    assert nan.size == 1 and 0.29 < t2[nan[0]] < 7.3
+    np.testing.assert_array_equal(np.delete(t2, nan), t)
+    np.testing.assert_array_equal(np.delete(y2, nan), y)
+    # Evenly spaced samples are left as they are.
+    even, same = with_gaps(t[:30], y[:30])
+    np.testing.assert_array_equal(even, t[:30])
+    np.testing.assert_array_equal(same, y[:30])
+    tr = Trajectory(t=t, arm=y, pendulum=y, voltage=y, reference=0 * y)
+    ax = plot_trajectories({"rip-rt run": tr}, "voltage")
+    drawn = np.asarray(ax.get_lines()[0].get_ydata(), dtype=float)
+    assert np.isnan(drawn).sum() == 1
+
+
+def test_the_overlay_marks_both_catches_and_scores_the_logged_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from riprs.plots import plot_trajectories
+
+    path, t_swing, t_catch = _rig_swing_log(tmp_path / "run.csv")
+    cfg = tmp_path / "rig.toml"
+    cfg.write_text(
+        SHORT.replace("step_time = 0.5", "step_time = 1.0") + '[plant]\npreset = "qube_servo2"\n'
+    )
+    code = main(["compare", "--config", str(cfg), "--log", str(path), "--no-plots", "--quiet",
+                 "--out", str(tmp_path / "out")])  # fmt: skip
+    printed = capsys.readouterr().out
+    assert code == 0, printed
+    # The step time is the spec's, and the paper's experimental column is not printed for a
+    # rig it does not describe.
+    assert "the step 1 s after the catch" in printed
+    assert "paper's experimental values are of its own rig" in printed
+    assert "   paper" not in printed
+    # The logged run's own indices, over the same window as the simulation's (from its catch,
+    # reference.duration long), against numpy's.
+    line = next(ln for ln in printed.splitlines() if ln.startswith("rip-rt run"))
+    log = riprs.load_log(path)
+    window = (log.t >= t_catch - 1e-9) & (log.t < t_catch + 3.0 - 1e-9)
+    expected = [
+        np.sqrt(np.mean((log.theta[window] - log.theta_ref[window]) ** 2)),
+        np.sqrt(np.mean(wrap_angle(log.alpha[window]) ** 2)),
+        np.sqrt(np.mean(log.u[window] ** 2)),
+    ]
+    figures = [float(v) for v in line.split()[2:5]]
+    np.testing.assert_allclose(figures, expected, atol=6e-5)
+    assert float(line.split()[5]) == pytest.approx(t_catch - t_swing, abs=0.006)
+    assert "(logged)" in line
+    # Both catches are marked on the figures.
+    result = compare(cfg, start="down", plots=False, progress=False)
+    traj = Trajectory.from_log(log)
+    ax = plot_trajectories({**result.trajectories, "rip-rt run": traj}, "arm")
+    marks = [t.get_text() for t in ax.texts]
+    assert any(m.startswith("LQR catch") for m in marks), marks
+    assert f"rip-rt run catch {t_catch - t_swing:.2f} s" in marks, marks
+
+
+def test_the_paper_rig_keeps_the_papers_column(capsys: pytest.CaptureFixture[str]) -> None:
+    from riprs.compare import describes_paper_rig, format_table
+
+    paper_rig = riprs.Spec()
+    assert describes_paper_rig(paper_rig)
+    other = paper_rig.updated({"plant": {"preset": "qube_servo2"}})
+    assert not describes_paper_rig(other)
+    assert not describes_paper_rig(paper_rig.updated({"plant": {"Dr": 1e-3}}))
+    summary = {"LQR": (0.1, 0.01, 0.5)}
+    assert "paper" in format_table(summary, config=paper_rig).splitlines()[2]
+    assert "0.1000" in format_table(summary, config=other)

@@ -319,8 +319,9 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("up", "down"),
         default=None,
         help="up: balanced near upright (the paper's experiment, default); down: hanging at "
-        "rest, swung up and caught first, the step 2 s after the catch. With --log, default: "
-        "as the logged run started (its phase column)",
+        "rest, swung up and caught first, the step reference.step_time after the catch. With "
+        "--log, default: as the logged run started (its phase column); a logged swing-up is "
+        "drawn from the start of its swing",
     )
     comp.add_argument("--log", action="append", metavar="FILE.csv", help="rip-rt log to overlay")
     comp.add_argument("--no-plots", action="store_true", help="skip the figures")

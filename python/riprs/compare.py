@@ -62,6 +62,7 @@ __all__ = [
     "Trajectory",
     "build_controllers",
     "compare",
+    "describes_paper_rig",
     "format_table",
     "rmse",
     "start_of_logs",
@@ -111,13 +112,34 @@ class Trajectory:
 
     @classmethod
     def from_log(cls, log: Any) -> Trajectory:
-        """From a :class:`riprs.RtLog` (``riprs.load_log``)."""
+        """From a :class:`riprs.RtLog` (``riprs.load_log``), on a simulation's time axis.
+
+        A swing-up's log (``swing_up`` rows in its ``phase`` column) counts its time from its
+        first ``swing_up`` row, as a simulation started hanging counts from the start of its
+        swing: the sign check and the wait for rest before it are left out, and its catch
+        (the first ``balance`` row after the swing) is marked like the simulation's. A log of
+        a run started upright is taken as it is.
+        """
+        t = np.asarray(log.t, dtype=float)
+        swinging = np.flatnonzero(np.asarray(log.phase) == "swing_up")
+        if swinging.size == 0:
+            return cls(
+                t=t,
+                arm=log.theta,
+                pendulum=wrap_angle(log.alpha),
+                voltage=log.u,
+                reference=log.theta_ref,
+            )
+        first = int(swinging[0])
+        catch = log.catch_index
+        t0 = t[first]
         return cls(
-            t=log.t,
-            arm=log.theta,
-            pendulum=wrap_angle(log.alpha),
-            voltage=log.u,
-            reference=log.theta_ref,
+            t=t[first:] - t0,
+            arm=np.asarray(log.theta)[first:],
+            pendulum=wrap_angle(np.asarray(log.alpha)[first:]),
+            voltage=np.asarray(log.u)[first:],
+            reference=np.asarray(log.theta_ref)[first:],
+            catch_time=None if catch is None or catch < first else float(t[catch] - t0),
         )
 
 
@@ -259,11 +281,22 @@ class CompareResult:
     monte_carlo: MonteCarloResult | None = None
     files: list[Path] = field(default_factory=list)
     start: str = "up"
+    #: The logged runs drawn over the simulations (``overlays``), by label.
+    overlays: dict[str, Trajectory] = field(default_factory=dict)
+    #: Each logged run's own Tab. 1 indices, over the same window as a simulation's.
+    logged: dict[str, tuple[float, float, float]] = field(default_factory=dict)
 
     def table(self) -> str:
-        """The Tab. 1 layout, simulation next to the paper's experiment (and the time to
-        upright for a run started hanging)."""
-        return format_table(self.summary, self.runs)
+        """The Tab. 1 layout: each simulation and each logged run, the paper's experiment
+        beside them where the configuration is the paper's rig (and the time to upright for
+        a run started hanging)."""
+        return format_table(
+            self.summary,
+            self.runs,
+            config=self.config,
+            logged=self.logged,
+            overlays=self.overlays,
+        )
 
 
 def build_controllers(config: Spec | None = None) -> dict[str, Any]:
@@ -407,7 +440,19 @@ def compare(
         mc = None
         if cfg.monte_carlo.runs > 0:
             mc = _monte_carlo(cfg, controllers, seed, progress, start)
-        result = CompareResult(cfg, seed, runs, trajectories, summary, mc, start=start)
+        overlays = dict(overlays or {})
+        logged = {name: rmse(_paper_window(tr, cfg)) for name, tr in overlays.items()}
+        result = CompareResult(
+            cfg,
+            seed,
+            runs,
+            trajectories,
+            summary,
+            mc,
+            start=start,
+            overlays=overlays,
+            logged=logged,
+        )
         if staging is not None:
             written = write_outputs(result, staging.path, plots=plots)
             if plots and overlays:
@@ -545,32 +590,98 @@ def _progress_bar(total: int, desc: str, enabled: bool) -> Any:
     return _bars.bar(enabled, total=total, desc=desc, unit="run", leave=False)
 
 
+def describes_paper_rig(config: Spec) -> bool:
+    """Whether ``config``'s plant is the paper's rig (the ``paper`` preset's parameters), the
+    one its Tab. 1 experiment was run on."""
+    return bool(config.params == Spec().params)
+
+
 def format_table(
     summary: Mapping[str, tuple[float, float, float]],
     runs: Mapping[str, SimResult] | None = None,
+    *,
+    config: Spec | None = None,
+    logged: Mapping[str, tuple[float, float, float]] | None = None,
+    overlays: Mapping[str, Trajectory] | None = None,
 ) -> str:
-    """Tab. 1 layout: per controller, riprs's RMSE next to the paper's experimental value."""
+    """Tab. 1 layout: per controller, riprs's RMSE, then each logged run's own.
+
+    The paper's experimental values stand beside them only where ``config`` is the paper's
+    rig (:func:`describes_paper_rig`; no ``config`` counts as the paper's): on another rig
+    they describe a different plant.
+
+    Parameters
+    ----------
+    summary : mapping of str to (float, float, float)
+        Per simulated controller, ``(arm, pendulum, voltage)`` RMSE.
+    runs : mapping of str to SimResult, optional
+        The simulations (their fall, phase and time to upright).
+    config : Spec, optional
+        The configuration: its plant, and its ``reference.step_time`` for the header.
+    logged : mapping of str to (float, float, float), optional
+        Per logged run, its own RMSE over the same window.
+    overlays : mapping of str to Trajectory, optional
+        The logged runs (their catch, for the time to upright).
+    """
+    logged = dict(logged or {})
+    overlays = dict(overlays or {})
+    paper_rig = config is None or describes_paper_rig(config)
     groups = ("arm angle [rad]", "pendulum angle [rad]", "voltage [V]")
-    lines = [
-        "Tab. 1: RMSE in simulation (riprs) and in the paper's experiment (paper)",
-        f"{'':<11}" + "".join(f"{g:>22}" for g in groups),
-        f"{'controller':<11}" + f"{'riprs':>12}{'paper':>10}" * 3,
-    ]
+    names = list(summary) + list(logged)
+    width = max([11, *(len(n) + 2 for n in names)])
+    if paper_rig:
+        title = "Tab. 1: RMSE in simulation (riprs) and in the paper's experiment (paper)"
+        lines = [
+            title,
+            f"{'':<{width}}" + "".join(f"{g:>22}" for g in groups),
+            f"{'run':<{width}}" + f"{'riprs':>12}{'paper':>10}" * 3,
+        ]
+    else:
+        title = (
+            "Tab. 1 indices: RMSE in simulation (riprs); the paper's experimental values are "
+            'of its own rig (plant.preset = "paper"), not this one'
+        )
+        lines = [
+            title,
+            f"{'run':<{width}}" + "".join(f"{g:>22}" for g in groups),
+        ]
     down = runs is not None and any(r.phase is not None and r.phase[0] == 0 for r in runs.values())
+    down = down or any(tr.catch_time is not None for tr in overlays.values())
+    # The time to upright's column: its unit under it beside the paper's two header lines,
+    # beside it on the one line otherwise.
+    up_width = 10 if paper_rig else 13
     if down:
-        lines[0] += "; started hanging, the step 2 s after the catch"
-        lines[1] += f"{'upright':>10}"
-        lines[2] += f"{'[s]':>10}"
+        step = config.reference.step_time if config is not None else Spec().reference.step_time
+        lines[0] += f"; started hanging, the step {step:g} s after the catch"
+        if paper_rig:
+            lines[1] += f"{'upright':>{up_width}}"
+            lines[2] += f"{'[s]':>{up_width}}"
+        else:
+            lines[1] += f"{'upright [s]':>{up_width}}"
+
+    def cells(values: tuple[float, float, float], ref: tuple[float, ...] | None) -> str:
+        if ref is None:
+            return "".join(f"{v:>22.4f}" for v in values)
+        return "".join(f"{v:>12.4f}{p:>10.3f}" for v, p in zip(values, ref, strict=True))
+
+    def upright(t_up: float | None) -> str:
+        return f"{t_up:>{up_width}.2f}" if t_up is not None else f"{'never':>{up_width}}"
+
     for name, values in summary.items():
-        ref = paper.TABLE1.get(name, (float("nan"),) * 3)
+        ref = paper.TABLE1.get(name, (float("nan"),) * 3) if paper_rig else None
         note = "  (fell)" if runs is not None and name in runs and runs[name].fell else ""
-        cells = "".join(f"{v:>12.4f}{p:>10.3f}" for v, p in zip(values, ref, strict=True))
+        row = cells(values, ref)
         if down and runs is not None and name in runs:
-            t_up = runs[name].time_to_upright
-            cells += f"{t_up:>10.2f}" if t_up is not None else f"{'never':>10}"
+            row += upright(runs[name].time_to_upright)
             if not runs[name].swing_up_succeeded and not runs[name].fell:
                 note += "  (not caught)"
-        lines.append(f"{name:<11}{cells}{note}")
+        lines.append(f"{name:<{width}}{row}{note}")
+    for name, values in logged.items():
+        row = cells(values, (float("nan"),) * 3 if paper_rig else None)
+        if down:
+            tr = overlays.get(name)
+            row += upright(tr.catch_time if tr is not None else None)
+        lines.append(f"{name:<{width}}{row}  (logged)")
     return "\n".join(lines)
 
 

@@ -9,7 +9,13 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["plot_comparison", "plot_monte_carlo", "plot_time_to_upright", "plot_trajectories"]
+__all__ = [
+    "plot_comparison",
+    "plot_monte_carlo",
+    "plot_time_to_upright",
+    "plot_trajectories",
+    "with_gaps",
+]
 
 _COLORS = {"LQR": "tab:blue", "LQG": "tab:orange", "MPC": "tab:green"}
 _PANELS = (
@@ -28,6 +34,36 @@ def _pyplot() -> Any:
     return plt
 
 
+def with_gaps(t: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
+    """``t`` and ``y`` with a NaN point inside every gap, so that a line is broken there
+    rather than drawn straight across it (a log's periods without rows).
+
+    A gap is a step in ``t`` longer than 1.5 times the median step.
+
+    Parameters
+    ----------
+    t, y : array_like
+        Times (s), increasing, and the values at them.
+
+    Returns
+    -------
+    t, y : numpy.ndarray
+        The same points, with one ``(midpoint, NaN)`` point added in each gap.
+    """
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if t.size < 3:
+        return t, y
+    dt = np.diff(t)
+    gaps = np.flatnonzero(dt > 1.5 * np.median(dt))
+    if gaps.size == 0:
+        return t, y
+    return (
+        np.insert(t, gaps + 1, t[gaps] + 0.5 * dt[gaps]),
+        np.insert(y, gaps + 1, np.nan),
+    )
+
+
 def plot_trajectories(trajectories: Mapping[str, Any], quantity: str, ax: Any = None) -> Any:
     """Draw one quantity (``"arm"``, ``"pendulum"`` or ``"voltage"``) of every run on one axes.
 
@@ -39,10 +75,11 @@ def plot_trajectories(trajectories: Mapping[str, Any], quantity: str, ax: Any = 
         _, ax = plt.subplots(figsize=(8, 3.6))
     for i, (name, tr) in enumerate(trajectories.items()):
         color = _COLORS.get(name, f"C{i}")
-        ax.plot(tr.t, getattr(tr, quantity), label=name, color=color, linewidth=1.1)
+        t, y = with_gaps(tr.t, getattr(tr, quantity))
+        ax.plot(t, y, label=name, color=color, linewidth=1.1)
     if quantity == "arm":
         first = next(iter(trajectories.values()))
-        ax.plot(first.t, first.reference, "k--", linewidth=1.0, label="reference")
+        ax.plot(*with_gaps(first.t, first.reference), "k--", linewidth=1.0, label="reference")
     # A run that started hanging: its switch from swing-up to balance (the catch).
     for i, (name, tr) in enumerate(trajectories.items()):
         t_catch = getattr(tr, "catch_time", None)

@@ -45,8 +45,14 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use crate::linalg::Mat;
+
+pub mod motion;
 use crate::sim::simulate;
 use crate::spec::{ControllerKind, Design};
+pub use motion::{
+    check_excitation, check_swing_up, fit_swing_up, largest_excitation_amplitude,
+    largest_swing_arm_limit,
+};
 
 /// Longest simulated run (s) of the prediction check: long enough to see a limit cycle build
 /// up or the arm settle after the paper's step at 1 s.

@@ -7,7 +7,7 @@
 //! device's clock between them (its sampling instants, not the host's wake-ups), and its
 //! stopping point `θ + sgn(θ̇) D(|θ̇|)` the one of `rip_core::envelope`: braked at
 //! `safety.voltage_limit` with half the braking deceleration counted on
-//! ([`STOP_BRAKE_FRACTION`]), two periods of latency at full drive, and the largest inertia
+//! ([`rip_core::envelope::STOP_BRAKE_FRACTION`]), two periods of latency at full drive, and the largest inertia
 //! of the arm, all on the configuration's `[plant]` (a preset until the rig is identified).
 //! Where that point is past `safety.arm_limit − ENVELOPE_MARGIN`, the stop is simulated from
 //! the whole measured state ([`SimulatedStop`]: the pendulum's reaction on the arm from the
@@ -34,24 +34,16 @@
 //! that cannot brake (protocol.md rule 9) leaves the windings open on it; the active law does
 //! not depend on it.
 
-use rip_core::envelope::{
-    envelope_speed, excitation_breach, BrakingLaw, HoldLaw, SimulatedStop, StoppingModel,
-    STOP_BRAKE_FRACTION,
-};
-use rip_core::excitation::{ExcitationSettings, Signal};
+use rip_core::envelope::{BrakingLaw, HoldLaw, SimulatedStop, StoppingModel};
+use rip_core::excitation::ExcitationSettings;
 use rip_core::plant::{Plant, State};
-use rip_core::spec::SpecError;
 
 use crate::config::{Config, ConfigError, MAX_VOLTAGE_LIMIT};
 use crate::stop::StopReason;
 use crate::witness::WitnessFault;
 
-/// Distance (rad) inside `safety.arm_limit` at which the stop envelope ends, for the rate's
-/// quantisation and the arm's travel within the period of the decision.
-pub const ENVELOPE_MARGIN: f64 = 0.05;
-/// Loop periods between the measurement a stop is decided on and its first braking command
-/// (the decision's own period, and the next one, which sends it).
-pub const LATENCY_PERIODS: f64 = 2.0;
+pub use rip_core::preflight::motion::{ENVELOPE_MARGIN, LATENCY_PERIODS, PREFLIGHT_HEADROOM};
+
 /// The arm counts as at rest once it moved less than [`REST_TRAVEL`] over this long (s).
 pub const REST_S: f64 = 0.2;
 /// Travel (rad) below which the arm is at rest over [`REST_S`].
@@ -60,14 +52,9 @@ pub const REST_TRAVEL: f64 = 0.01;
 pub const MAX_BRAKE_S: f64 = 3.0;
 
 /// The stopping model of a configuration: its `[plant]`, `safety.voltage_limit`, two loop
-/// periods of latency (module docs).
+/// periods of latency (rip-core's [`rip_core::preflight::motion::stopping_model`]).
 pub fn stopping_model(cfg: &Config) -> StoppingModel {
-    StoppingModel::new(
-        &cfg.spec.plant.params(),
-        cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT),
-        STOP_BRAKE_FRACTION,
-        LATENCY_PERIODS * cfg.period_s(),
-    )
+    rip_core::preflight::motion::stopping_model(&cfg.spec, &cfg.rig())
 }
 
 /// The envelope's bound on the stopping point: `safety.arm_limit − ENVELOPE_MARGIN`.
@@ -161,95 +148,22 @@ impl ArmEnvelope {
 }
 
 /// Refuses a swing-up whose arm could not be stopped inside `safety.arm_limit` from every
-/// state its own envelope lets the arm into: anywhere within `±swing_up.arm_limit` at up to
-/// the swing's envelope speed `√(2 a_b (L − |θ|))` outwards (`a_b = brake_fraction ·` its stall
-/// acceleration at `swing_up.max_voltage`), braked by the stop's model with the swing's full
-/// voltage along the motion during the latency. The error names `swing_up.arm_limit`.
+/// state its own envelope lets the arm into ([`rip_core::preflight::check_swing_up`]). The
+/// error names `swing_up.arm_limit` and the largest value that passes.
 pub fn check_swing_up(cfg: &Config) -> Result<(), ConfigError> {
-    let s = &cfg.spec.swing_up;
-    let p = cfg.spec.plant.params();
-    let model = stopping_model(cfg);
-    let j = p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr + p.jp + p.mp * p.lp * p.lp / 4.0;
-    let a_b = s.brake_fraction * p.kt / p.rm * s.max_voltage / j;
-    let bound = envelope_limit(cfg);
-    let n = 400;
-    let worst = (0..=n)
-        .map(|i| {
-            let theta = -s.arm_limit + 2.0 * s.arm_limit * i as f64 / n as f64;
-            let v = envelope_speed(a_b, s.arm_limit - theta);
-            theta + model.stopping_distance_with(v, s.max_voltage)
-        })
-        .fold(f64::NEG_INFINITY, f64::max);
-    if worst > bound {
-        return Err(SpecError::new(
-            "swing_up.arm_limit",
-            format!(
-                "{} rad: a stop during the swing could carry the arm to {worst:.2} rad, past \
-                 safety.arm_limit ({} rad) less its {ENVELOPE_MARGIN} rad margin, by the \
-                 stopping model of [plant] (docs/rip-rt.md, \"Stopping\"); lower \
-                 swing_up.arm_limit or swing_up.brake_fraction, or raise safety.arm_limit",
-                s.arm_limit, cfg.safety.arm_limit
-            ),
-        ));
-    }
-    Ok(())
+    rip_core::preflight::check_swing_up(&cfg.spec, &cfg.rig())
 }
 
-/// Share of `safety.arm_limit` that an excitation's simulated stopping point keeps clear of
-/// the envelope's bound ([`check_excitation`]): the rig differs from its `[plant]` model, and
-/// an excitation accepted at the edge would be cut short by the envelope's stop.
-pub const PREFLIGHT_HEADROOM: f64 = 0.05;
-
 /// Refuses an excitation that would come within [`PREFLIGHT_HEADROOM`] of the braking
-/// envelope of `safety.arm_limit` on the configuration's `[plant]` ([`excitation_breach`]):
-/// its run would likely be cut short by the envelope's stop. The error names `--amplitude`
-/// (and, for free swing, `--kick`) and gives the largest amplitude that passes.
-pub fn check_excitation(cfg: &Config, settings: &ExcitationSettings) -> Result<(), ConfigError> {
-    let plant =
-        Plant::new(cfg.spec.plant.params()).map_err(|e| SpecError::new("plant", e.to_string()))?;
-    let model = stopping_model(cfg);
-    let bound = envelope_limit(cfg) - PREFLIGHT_HEADROOM * cfg.safety.arm_limit;
-    let ts = cfg.period_s();
-    let limit = cfg.safety.arm_limit;
-    let breach = |amplitude: f64| {
-        let s = ExcitationSettings {
-            amplitude,
-            ..*settings
-        };
-        excitation_breach(s, &plant, ts, &model, bound, limit)
-    };
-    let rip = |e: rip_core::RipError| SpecError::new("--amplitude", e.to_string());
-    let Some(b) = breach(settings.amplitude).map_err(rip)? else {
-        return Ok(());
-    };
-    // The largest amplitude without a breach, to 1 %.
-    let (mut lo, mut hi) = (0.0, settings.amplitude);
-    while hi - lo > 0.01 * settings.amplitude {
-        let mid = 0.5 * (lo + hi);
-        if breach(mid).map_err(rip)?.is_some() {
-            hi = mid;
-        } else {
-            lo = mid;
-        }
-    }
-    let what = if settings.signal == Signal::FreeSwing {
-        format!("{} V with --kick {} s", settings.amplitude, settings.kick)
-    } else {
-        format!("{} V", settings.amplitude)
-    };
-    Err(SpecError::new(
-        "--amplitude",
-        format!(
-            "{what}: on the [plant] model the arm would reach the braking envelope of \
-             safety.arm_limit ({limit} rad, less {PREFLIGHT_HEADROOM} of it as headroom) {:.2} s into the signal (at {:.2} rad and \
-             {:.1} rad/s it would stop at {:.2} rad); at most {:.2} V stays inside",
-            b.t,
-            b.theta,
-            b.rate,
-            b.stop_at,
-            (lo * 100.0).floor() / 100.0
-        ),
-    ))
+/// envelope of `safety.arm_limit` on the `[plant]` of `model` (the configuration's, or the
+/// preset's it was built from without one), by [`rip_core::preflight::check_excitation`]. The
+/// error names `--amplitude` and gives the largest amplitude that passes.
+pub fn check_excitation(
+    cfg: &Config,
+    settings: &ExcitationSettings,
+    model: &str,
+) -> Result<(), ConfigError> {
+    rip_core::preflight::check_excitation(&cfg.spec, &cfg.rig(), settings, model)
 }
 
 /// How a stop brakes the arm.
@@ -643,6 +557,7 @@ impl RestTest {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rip_core::excitation::Signal;
 
     /// Spins the paper rig's arm to `speed` (rad/s), then runs `brake` on it for 2 s, the
     /// motor's leads swapped if `reversed`, the reading that of a 2048-count encoder; the
@@ -812,7 +727,7 @@ mod tests {
                 Signal::Steps,
                 Signal::FreeSwing,
             ] {
-                check_excitation(&cfg, &ExcitationSettings::new(signal))
+                check_excitation(&cfg, &ExcitationSettings::new(signal), "the preset")
                     .unwrap_or_else(|e| panic!("{preset} {signal:?}: {e}"));
                 let loud = ExcitationSettings {
                     amplitude: 12.0,
@@ -821,7 +736,7 @@ mod tests {
                     kick: 2.0,
                     ..ExcitationSettings::new(signal)
                 };
-                let e = check_excitation(&cfg, &loud).unwrap_err();
+                let e = check_excitation(&cfg, &loud, "the preset").unwrap_err();
                 assert_eq!(e.key, "--amplitude", "{e}");
                 println!("{preset} {signal:?}: {e}");
             }

@@ -586,6 +586,47 @@ fn the_probe_times_swing_up_steps_and_refuses_slow_ones() {
 }
 
 #[test]
+fn a_swing_up_a_stop_could_not_brake_names_the_largest_arm_limit_and_that_one_runs() {
+    // A 1.8 rad safety limit: a stop from the edge of a 1.5 rad swing has no room.
+    let text = |arm_limit: &str| {
+        format!(
+            "[plant]\npreset = \"paper\"\n[safety]\narm_limit = 1.8\n\
+             [swing_up]\narm_limit = {arm_limit}\n"
+        )
+    };
+    let swing = |name: &str, arm_limit: &str| {
+        let file = scratch(name);
+        std::fs::write(&file, text(arm_limit)).unwrap();
+        let r = run(
+            std::path::Path::new("/nonexistent"),
+            "lqr",
+            &["--swing-up", "--config", file.to_str().unwrap()],
+        );
+        (r.status.code(), r.stderr)
+    };
+    let (code, err) = swing("swing-stop-wide.toml", "1.5");
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("swing_up.arm_limit: 1.5 rad"), "{err}");
+    let at = err.find("at most ").expect(&err) + "at most ".len();
+    let largest = err[at..].split(" rad").next().unwrap().to_string();
+    let value: f64 = largest.parse().expect(&err);
+    assert!(value > 0.7 && value < 1.5, "{err}");
+    assert!(!err.contains("where swing_up."), "{err}");
+    // The value named passes the check: the run goes on to the port, which does not exist.
+    let (code, err) = swing("swing-stop-largest.toml", &largest);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("--port /nonexistent"), "{err}");
+    assert!(!err.contains("swing_up.arm_limit"), "{err}");
+    // One step above it does not.
+    let (code, err) = swing("swing-stop-above.toml", &format!("{:.2}", value + 0.01));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains(&format!("at most {largest} rad passes")),
+        "{err}"
+    );
+}
+
+#[test]
 fn a_swing_up_arm_limit_outside_the_safety_limit_is_refused_naming_it() {
     let file = scratch("swing-arm-limit.toml");
     // Valid for rip-core (at most π), but not inside rip-rt's safety.arm_limit (3 rad).

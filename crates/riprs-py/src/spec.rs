@@ -377,6 +377,36 @@ impl PySpec {
             .map_err(config_err)
     }
 
+    /// A copy whose swing-up ``rip-rt run --swing-up`` accepts: ``swing_up.arm_limit``
+    /// lowered, where a stop during the swing could carry the arm past
+    /// ``safety.arm_limit``, to the largest value from which it cannot (a multiple of
+    /// 0.01 rad); the same spec where it already passes.
+    ///
+    /// The reach of a stop from every state the swing's envelope allows,
+    /// ``R(L) = max_{|θ| ≤ L} θ + D(√(2 a_b (L − θ)), U_s)``, must stay within
+    /// ``safety.arm_limit − 0.05`` (``rip_core::preflight::motion``, equation (4); ``D`` is the
+    /// stopping distance of equation (3)).
+    ///
+    /// Returns
+    /// -------
+    /// Spec
+    ///
+    /// Raises
+    /// ------
+    /// ConfigError
+    ///     No arm limit the file's other ``[swing_up]`` keys allow passes; the message names
+    ///     the keys to change.
+    fn with_stoppable_swing_up(&self, py: Python<'_>) -> PyResult<Self> {
+        let rig = rig_sections::resolve(&self.inner, &self.rig).map_err(config_err)?;
+        let inner = py
+            .allow_threads(|| rip_core::preflight::fit_swing_up(&self.inner, &rig))
+            .map_err(config_err)?;
+        Ok(Self {
+            inner,
+            rig: self.rig.clone(),
+        })
+    }
+
     /// The configured controllers (``controllers``), designed at ``Ts`` by the one assembly
     /// (LQR and LQG share the gain, LQG and MPC share one Kalman design), by name in the
     /// file's order.

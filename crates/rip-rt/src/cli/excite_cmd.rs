@@ -161,8 +161,43 @@ fn settings(args: &ExciteArgs, cfg: &Config) -> Result<Excitation, SetupError> {
             )));
         }
     }
+    let model = match &args.config {
+        Some(path) => format!("the [plant] of {}", path.display()),
+        None => format!(
+            "the [plant] of the {} preset (no --config: pass the rig's file to check its own)",
+            cfg.spec.plant.preset.name()
+        ),
+    };
     let x = Excitation::new(s, cfg.period_s()).map_err(option_error)?;
-    rip_rt::envelope::check_excitation(cfg, x.settings()).map_err(SetupError::Config)?;
+    let s = if args.amplitude.is_none() {
+        // An amplitude left to its default is the largest the rig can stop from, at most the
+        // signal's default: a file `riprs tune` wrote runs every signal as is.
+        let fits = rip_core::preflight::largest_excitation_amplitude(&cfg.spec, &cfg.rig(), &s)
+            .map_err(option_error)?;
+        if fits > 0.0 && fits < s.amplitude {
+            if !args.quiet {
+                rip_rt::say!(
+                    "rip-rt: --amplitude {fits:.2} V (the signal's default {} V would reach the \
+                     braking envelope on {model})",
+                    s.amplitude
+                );
+            }
+            ExcitationSettings {
+                amplitude: fits,
+                ..s
+            }
+        } else {
+            s
+        }
+    } else {
+        s
+    };
+    let x = if s.amplitude == x.settings().amplitude {
+        x
+    } else {
+        Excitation::new(s, cfg.period_s()).map_err(option_error)?
+    };
+    rip_rt::envelope::check_excitation(cfg, x.settings(), &model).map_err(SetupError::Config)?;
     Ok(x)
 }
 
