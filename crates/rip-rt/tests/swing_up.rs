@@ -587,7 +587,7 @@ fn the_probe_times_swing_up_steps_and_refuses_slow_ones() {
 
 #[test]
 fn a_swing_up_a_stop_could_not_brake_names_the_largest_arm_limit_and_that_one_runs() {
-    // A 1.8 rad safety limit: a stop from the edge of a 1.5 rad swing has no room.
+    // A 1.8 rad safety limit: a stop from the edge of a 1.45 rad swing has no room.
     let text = |arm_limit: &str| {
         format!(
             "[plant]\npreset = \"paper\"\n[safety]\narm_limit = 1.8\n\
@@ -604,13 +604,13 @@ fn a_swing_up_a_stop_could_not_brake_names_the_largest_arm_limit_and_that_one_ru
         );
         (r.status.code(), r.stderr)
     };
-    let (code, err) = swing("swing-stop-wide.toml", "1.5");
+    let (code, err) = swing("swing-stop-wide.toml", "1.45");
     assert_eq!(code, Some(2), "{err}");
-    assert!(err.contains("swing_up.arm_limit: 1.5 rad"), "{err}");
+    assert!(err.contains("swing_up.arm_limit: 1.45 rad"), "{err}");
     let at = err.find("at most ").expect(&err) + "at most ".len();
     let largest = err[at..].split(" rad").next().unwrap().to_string();
     let value: f64 = largest.parse().expect(&err);
-    assert!(value > 0.7 && value < 1.5, "{err}");
+    assert!(value > 0.7 && value < 1.45, "{err}");
     assert!(!err.contains("where swing_up."), "{err}");
     // The value named passes the check: the run goes on to the port, which does not exist.
     let (code, err) = swing("swing-stop-largest.toml", &largest);

@@ -38,7 +38,7 @@
 use crate::error::RipError;
 use crate::excitation::{ExcitationSettings, Signal};
 use crate::plant::Plant;
-use crate::spec::rig_sections::{RigSections, MAX_VOLTAGE_LIMIT};
+use crate::spec::rig_sections::{RigSections, MAX_ARM_LIMIT, MAX_VOLTAGE_LIMIT};
 use crate::spec::{Spec, SpecError};
 
 use crate::envelope::{
@@ -183,26 +183,51 @@ fn fit(spec: &Spec, rig: &RigSections) -> SwingFit {
 /// Refuses a swing-up whose arm could not be stopped inside `safety.arm_limit` from every
 /// state its own envelope lets the arm into (module docs, (4)). The error names
 /// `swing_up.arm_limit` and the largest value that passes, or, where none the file allows
-/// does, the keys to change.
+/// does, the keys to change. A swing-up left at its default arm limit is refused through
+/// `safety.arm_limit` instead (the key such a file narrowed), with the least value that passes
+/// (the reach does not depend on it) and the largest `swing_up.arm_limit` as the other way.
 pub fn check_swing_up(spec: &Spec, rig: &RigSections) -> Result<(), SpecError> {
-    let remedy = match fit(spec, rig) {
+    let largest = match fit(spec, rig) {
         SwingFit::Passes => return Ok(()),
-        SwingFit::Lowered(lowered) => format!(
-            "at most {:.2} rad passes (or {WIDER_STOP})",
-            lowered.swing_up.arm_limit
-        ),
-        SwingFit::Impossible(remedy) => remedy,
+        SwingFit::Lowered(lowered) => Ok(lowered.swing_up.arm_limit),
+        SwingFit::Impossible(remedy) => Err(remedy),
     };
     let arm_limit = spec.swing_up.arm_limit;
     let reach = swing_stop_reach(spec, rig, arm_limit);
+    let why = format!(
+        "a stop during the swing could carry the arm to {reach:.2} rad, past safety.arm_limit \
+         ({} rad) less its {ENVELOPE_MARGIN} rad margin, by the stopping model of [plant] \
+         (docs/rip-rt.md, \"Stopping\")",
+        rig.safety.arm_limit
+    );
+    if arm_limit == crate::swingup::SwingUpSettings::default().arm_limit {
+        let least = (reach + ENVELOPE_MARGIN) / ARM_LIMIT_STEP;
+        let least = least.ceil() / (1.0 / ARM_LIMIT_STEP);
+        let other = match largest {
+            Ok(l) => format!("set swing_up.arm_limit to at most {l:.2} rad"),
+            Err(remedy) => remedy,
+        };
+        let need = if least <= MAX_ARM_LIMIT {
+            format!("must be at least {least} rad")
+        } else {
+            format!("cannot be raised far enough ({least} rad, past its {MAX_ARM_LIMIT} rad)")
+        };
+        return Err(SpecError::new(
+            "safety.arm_limit",
+            format!(
+                "{need} for a swing-up within swing_up.arm_limit ({arm_limit} rad, its \
+                 default), got {}: {why}; or {other}",
+                rig.safety.arm_limit
+            ),
+        ));
+    }
+    let remedy = match largest {
+        Ok(l) => format!("at most {l:.2} rad passes (or {WIDER_STOP})"),
+        Err(remedy) => remedy,
+    };
     Err(SpecError::new(
         "swing_up.arm_limit",
-        format!(
-            "{arm_limit} rad: a stop during the swing could carry the arm to {reach:.2} rad, \
-             past safety.arm_limit ({} rad) less its {ENVELOPE_MARGIN} rad margin, by the \
-             stopping model of [plant] (docs/rip-rt.md, \"Stopping\"); {remedy}",
-            rig.safety.arm_limit
-        ),
+        format!("{arm_limit} rad: {why}; {remedy}"),
     ))
 }
 
@@ -337,7 +362,7 @@ mod tests {
             for (safety_arm, voltage) in [(3.0_f64, 12.0_f64), (2.0, 12.0), (1.7, 6.0), (1.3, 12.0)]
             {
                 for (swing_arm, brake, period) in
-                    [(1.5, 0.5, 10.0), (1.5, 0.9, 10.0), (1.2, 0.5, 20.0)]
+                    [(1.45, 0.5, 10.0), (1.45, 0.9, 10.0), (1.2, 0.5, 20.0)]
                 {
                     if swing_arm >= safety_arm {
                         continue;
@@ -430,6 +455,50 @@ mod tests {
         }
         // The sweep reaches each kind of file.
         assert!(refused >= 3 && none >= 1, "refused {refused}, none {none}");
+    }
+
+    #[test]
+    fn a_default_swing_up_is_refused_through_the_safety_limit_the_file_narrowed() {
+        let mut refused = 0;
+        for preset in ["paper", "qube_servo2"] {
+            for i in 0..=30 {
+                let limit = 1.55 + 0.05 * f64::from(i);
+                let text = |limit: f64| {
+                    format!("[plant]\npreset = \"{preset}\"\n[safety]\narm_limit = {limit}\n")
+                };
+                let (spec, rig) = parse_file(&text(limit)).unwrap();
+                let Err(e) = check_swing_up(&spec, &rig) else {
+                    continue;
+                };
+                refused += 1;
+                assert_eq!(e.key, "safety.arm_limit", "{e}");
+                let least: f64 = e.reason["must be at least ".len()..]
+                    .split(' ')
+                    .next()
+                    .and_then(|n| n.parse().ok())
+                    .unwrap_or_else(|| panic!("no least value in {e}"));
+                assert!(least > limit, "{e}");
+                // The least value passes; a step below it does not.
+                let (spec, rig) = parse_file(&text(least)).unwrap();
+                check_swing_up(&spec, &rig).unwrap();
+                let (spec, rig) = parse_file(&text(least - ARM_LIMIT_STEP)).unwrap();
+                assert!(check_swing_up(&spec, &rig).is_err(), "{least}");
+                // The other way, a lower swing-up limit, is named with its value.
+                let (spec, rig) = parse_file(&text(limit)).unwrap();
+                match fit_swing_up(&spec, &rig) {
+                    Ok(fitted) => {
+                        let other = format!(
+                            "or set swing_up.arm_limit to at most {:.2} rad",
+                            fitted.swing_up.arm_limit
+                        );
+                        assert!(e.reason.contains(&other), "{e}");
+                    }
+                    // Lower than the catch allows: the keys that would widen the stop.
+                    Err(_) => assert!(e.reason.ends_with(WIDER_STOP), "{e}"),
+                }
+            }
+        }
+        assert!(refused >= 4, "{refused}");
     }
 
     #[test]
