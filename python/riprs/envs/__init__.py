@@ -475,7 +475,7 @@ class PendulumVecEnv(_Shareable, VectorEnv):
         elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
             # The native side derives s + i, refusing a seed that would not fit 64 bits.
             seeds = _check_seed(seed, "seed")
-        elif isinstance(seed, (str, bytes)) or not isinstance(seed, Sequence | np.ndarray):
+        elif isinstance(seed, (str, bytes)) or not isinstance(seed, (Sequence, np.ndarray)):
             raise TypeError(f"seed must be an int or a sequence of ints, got {type(seed)}")
         else:
             seeds = [_check_seed(s, f"seed[{i}]") for i, s in enumerate(seed)]

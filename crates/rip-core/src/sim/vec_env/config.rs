@@ -6,9 +6,9 @@ use crate::error::{Result, RipError};
 use crate::plant::Param;
 use crate::plant::{FurutaParams, Plant, State};
 use crate::sim::{
-    SensorModel, DEFAULT_DURATION, DEFAULT_FALL_LIMIT, DEFAULT_SUBSTEPS, MAX_NOISE_STD,
+    SensorModel, COUNTS_PER_REV, DEFAULT_DURATION, DEFAULT_FALL_LIMIT, DEFAULT_SUBSTEPS,
+    MAX_NOISE_STD, PERIOD_MS,
 };
-use crate::spec::rig_sections::{COUNTS_PER_REV, PERIOD_MS};
 
 /// A parameter covariance (e.g. an identification's): the draw is `p = p̂ + L z`, `z ~ N(0, I)`,
 /// `L Lᵀ = Σ`, on the listed parameters about their values in the environment's plant.
