@@ -96,7 +96,15 @@ def test_parallel_stepping_is_bit_for_bit_the_serial_one() -> None:
 
 def test_the_environment_steps_rip_cores_plant_and_sensor() -> None:
     params = riprs.FurutaParams.qube_servo2()
-    env = envs.PendulumEnv(params=params, init_spread=0.0, noise_std=0.0, encoder_counts=2048)
+    # Limits it never reaches: the test follows the plant past where an episode would end.
+    env = envs.PendulumEnv(
+        params=params,
+        init_spread=0.0,
+        noise_std=0.0,
+        encoder_counts=2048,
+        fall_limit=10.0,
+        arm_limit=100.0,
+    )
     env.reset(seed=3)
     plant = riprs.Plant(params)
     actions = np.sin(np.arange(80) * 0.2).astype(np.float32)
@@ -192,7 +200,7 @@ def test_an_experiment_file_configures_plant_sensor_and_voltage(tmp_path) -> Non
         "[sensor]\nencoder_counts = [512, 4096]\nnoise_std = [0.0, 0.0]\n\n"
         "[mpc]\ninput_bounds = [[-6.0, 6.0]]\n"
     )
-    env = envs.PendulumEnv(config=rig, init_spread=0.0)
+    env = envs.PendulumEnv(config=rig, init_spread=0.0, fall_limit=10.0, arm_limit=100.0)
     assert env.u_limit == 6.0
     assert env.episode_params == riprs.FurutaParams.qube_servo2().replace(mp=0.03)
     env.reset(seed=0)
@@ -203,7 +211,9 @@ def test_an_experiment_file_configures_plant_sensor_and_voltage(tmp_path) -> Non
     y = q * np.round(np.array([theta, alpha]) / q)
     np.testing.assert_allclose(obs[[1, 3]], np.sin(y), atol=1e-7)
     # Full voltage is 6 V: the same actions on a 12 V environment move the arm further.
-    big = envs.PendulumEnv(params=env.episode_params, init_spread=0.0, noise_std=0.0)
+    big = envs.PendulumEnv(
+        params=env.episode_params, init_spread=0.0, noise_std=0.0, fall_limit=10.0, arm_limit=100.0
+    )
     big.reset(seed=0)
     for _ in range(30):
         big.step(np.array([0.5], dtype=np.float32))

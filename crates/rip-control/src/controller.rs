@@ -164,6 +164,25 @@ impl<R: Real> RateFilter<R> {
     pub fn rates(&self) -> [R; 2] {
         self.rates
     }
+
+    /// Whether an angle has been taken since construction or [`reset`](Self::reset), and how
+    /// many periods have been held since the last: with [`angles`](Self::angles) and
+    /// [`rates`](Self::rates), everything [`restore`](Self::restore) needs.
+    pub fn progress(&self) -> (bool, u32) {
+        (self.started, self.held)
+    }
+
+    /// Puts back a state read from a filter of the same period and cut-off, so that a saved
+    /// filter continues exactly as the original would.
+    pub fn restore(&mut self, angles: [R; 2], rates: [R; 2], started: bool, held: u32) {
+        *self = Self {
+            angles,
+            rates,
+            started,
+            held,
+            ..*self
+        };
+    }
 }
 
 /// The steady-state Kalman filter in current form (crate docs, "Estimator").

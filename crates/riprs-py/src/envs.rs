@@ -7,7 +7,7 @@ use numpy::ndarray::{Array1, Array2};
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadwriteArray1, PyReadwriteArray2};
 use pyo3::exceptions::{PyKeyError, PyTypeError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyBytes, PyDict, PyInt};
 use rip_core::sim::vec_env::{
     replay, EnvConfig, Observer, ParamCovariance, Randomisation, Task, VecEnv, MAX_DELAY,
     MAX_OBS_RATE, OBS_DIM,
@@ -17,6 +17,7 @@ use rip_core::spec::Param;
 use crate::convert::{matrix_arg, pair_arg, vector_arg, Count, Real};
 use crate::errors::IntoPyResult;
 use crate::plant::{PyFurutaParams, PyPlant};
+use crate::shared::Shared;
 use crate::spec::PySpec;
 
 fn opt<'py>(d: &Bound<'py, PyDict>, key: &str) -> PyResult<Option<Bound<'py, PyAny>>> {
@@ -148,7 +149,13 @@ fn env_config(spec: &PySpec, task: &str, d: &Bound<'_, PyDict>) -> PyResult<EnvC
             "encoder_offsets" => c.sensor.offsets = pair_arg(&value, &key)?,
             "rate_cutoff" => c.rate_cutoff_hz = real(&value, &key)?,
             "max_episode_steps" => {
-                c.max_steps = u32::try_from(count(&value, &key)?).unwrap_or(u32::MAX)
+                let steps = count(&value, &key)?;
+                c.max_steps = u32::try_from(steps).map_err(|_| {
+                    crate::errors::to_py(rip_core::RipError::invalid(
+                        "max_episode_steps",
+                        format!("must be at most {}, got {steps}", u32::MAX),
+                    ))
+                })?
             }
             "fall_limit" => c.fall_limit = real(&value, &key)?,
             "arm_limit" => c.arm_limit = real(&value, &key)?,
@@ -179,83 +186,127 @@ fn env_config(spec: &PySpec, task: &str, d: &Bound<'_, PyDict>) -> PyResult<EnvC
 }
 
 /// `N` pendulum environments stepped in one native call (``rip_core::sim::vec_env``).
-#[pyclass(name = "NativeVecEnv", module = "riprs._riprs")]
+///
+/// Thread-safe: the class is `frozen` with its environments in a [`Shared`] mutex, so calls
+/// from several Python threads queue and each runs whole (a step releases the GIL while it
+/// integrates; with PyO3's borrow flag a second thread's call would fail "Already borrowed").
+/// The buffers passed to `reset` and `step` are the caller's to guard (`riprs.envs` does).
+#[pyclass(name = "NativeVecEnv", module = "riprs._riprs", frozen)]
 pub struct PyVecEnv {
-    inner: VecEnv,
+    inner: Shared<VecEnv>,
+}
+
+impl PyVecEnv {
+    fn wrap(inner: VecEnv) -> Self {
+        Self {
+            inner: Shared::new(inner),
+        }
+    }
 }
 
 #[pymethods]
 impl PyVecEnv {
     #[new]
     fn new(
-        num_envs: u64,
+        num_envs: &Bound<'_, PyAny>,
         spec: PyRef<'_, PySpec>,
         task: &str,
         settings: &Bound<'_, PyDict>,
     ) -> PyResult<Self> {
+        let n = usize::try_from(count(num_envs, "num_envs")?).unwrap_or(usize::MAX);
         let config = env_config(&spec, task, settings)?;
-        let n = usize::try_from(num_envs).unwrap_or(usize::MAX);
-        Ok(Self {
-            inner: VecEnv::new(config, n).py()?,
-        })
+        Ok(Self::wrap(VecEnv::new(config, n).py()?))
+    }
+
+    /// The environment that ``state`` (``__reduce__``'s bytes) describes.
+    #[staticmethod]
+    fn _from_state(state: &[u8]) -> PyResult<Self> {
+        Ok(Self::wrap(VecEnv::from_bytes(state).py()?))
+    }
+
+    /// Pickles as the whole native state: the unpickled environment continues exactly as
+    /// this one would.
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyAny>, (Bound<'py, PyBytes>,))> {
+        let bytes = slf.get().inner.lock(py).to_bytes();
+        let rebuild = slf.get_type().getattr("_from_state")?;
+        Ok((rebuild, (PyBytes::new(py, &bytes),)))
+    }
+
+    /// An independent copy: nothing mutable is shared.
+    fn __copy__(&self, py: Python<'_>) -> Self {
+        Self::wrap(self.inner.lock(py).clone())
+    }
+
+    /// An independent copy (as ``__copy__``: the object holds no Python references).
+    fn __deepcopy__(&self, py: Python<'_>, _memo: &Bound<'_, PyAny>) -> Self {
+        self.__copy__(py)
     }
 
     /// Number of environments.
     #[getter]
-    fn num_envs(&self) -> usize {
-        self.inner.len()
+    fn num_envs(&self, py: Python<'_>) -> usize {
+        self.inner.lock(py).len()
     }
 
     /// Control period (s).
     #[getter]
     #[allow(non_snake_case)]
-    fn Ts(&self) -> f64 {
-        self.inner.config().ts
+    fn Ts(&self, py: Python<'_>) -> f64 {
+        self.inner.lock(py).config().ts
     }
 
     /// Voltage of the action 1 (V).
     #[getter]
-    fn u_limit(&self) -> f64 {
-        self.inner.config().u_limit
+    fn u_limit(&self, py: Python<'_>) -> f64 {
+        self.inner.lock(py).config().u_limit
     }
 
     /// Episode length (steps).
     #[getter]
-    fn max_episode_steps(&self) -> u32 {
-        self.inner.config().max_steps
+    fn max_episode_steps(&self, py: Python<'_>) -> u32 {
+        self.inner.lock(py).config().max_steps
     }
 
     /// Rate-filter cut-off (Hz).
     #[getter]
-    fn rate_cutoff(&self) -> f64 {
-        self.inner.config().rate_cutoff_hz
+    fn rate_cutoff(&self, py: Python<'_>) -> f64 {
+        self.inner.lock(py).config().rate_cutoff_hz
     }
 
     /// The nominal plant parameters.
     #[getter]
-    fn params(&self) -> PyFurutaParams {
+    fn params(&self, py: Python<'_>) -> PyFurutaParams {
         PyFurutaParams {
-            inner: self.inner.config().params,
+            inner: self.inner.lock(py).config().params,
         }
     }
 
-    /// Resets the environments where ``mask`` is true (all without a mask), from ``seeds``
-    /// if given, writing their observations into ``obs``.
+    /// Resets the environments where ``mask`` is true (all without a mask), writing their
+    /// observations into ``obs``. ``seeds``: one per environment, or one int ``s`` that seeds
+    /// environment ``i`` with ``s + i`` (an error if that would not fit 64 bits).
     #[pyo3(signature = (obs, seeds=None, mask=None))]
     fn reset(
-        &mut self,
+        &self,
         py: Python<'_>,
         mut obs: PyReadwriteArray2<'_, f32>,
-        seeds: Option<Vec<u64>>,
+        seeds: Option<&Bound<'_, PyAny>>,
         mask: Option<PyReadonlyArray1<'_, bool>>,
     ) -> PyResult<()> {
-        let seeds = seeds.unwrap_or_default();
         let mask: Vec<bool> = match mask {
             Some(m) => m.as_slice()?.to_vec(),
             None => Vec::new(),
         };
         let obs = obs.as_slice_mut()?;
-        let inner = &mut self.inner;
+        let mut guard = self.inner.lock(py);
+        let seeds = match seeds {
+            None => Vec::new(),
+            Some(s) if s.is_instance_of::<PyInt>() => guard.seeds_from(s.extract()?).py()?,
+            Some(s) => s.extract()?,
+        };
+        let inner: &mut VecEnv = &mut guard;
         py.allow_threads(|| inner.reset(&seeds, &mask, obs)).py()
     }
 
@@ -263,7 +314,7 @@ impl PyVecEnv {
     /// the given buffers.
     #[allow(clippy::too_many_arguments)]
     fn step(
-        &mut self,
+        &self,
         py: Python<'_>,
         actions: PyReadonlyArray1<'_, f32>,
         autoreset: bool,
@@ -275,43 +326,45 @@ impl PyVecEnv {
         let actions = actions.as_slice()?;
         let (obs, reward) = (obs.as_slice_mut()?, reward.as_slice_mut()?);
         let (terminated, truncated) = (terminated.as_slice_mut()?, truncated.as_slice_mut()?);
-        let inner = &mut self.inner;
+        let mut guard = self.inner.lock(py);
+        let inner: &mut VecEnv = &mut guard;
         py.allow_threads(|| inner.step(actions, autoreset, obs, reward, terminated, truncated))
             .py()
     }
 
     /// True state ``[theta, theta_dot, alpha, alpha_dot]`` of environment ``i``.
     fn state<'py>(&self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        self.check(i)?;
-        Ok(Array1::from_vec(self.inner.env(i).state().to_vec()).into_pyarray(py))
+        let inner = self.inner.lock(py);
+        check(&inner, i)?;
+        Ok(Array1::from_vec(inner.env(i).state().to_vec()).into_pyarray(py))
     }
 
     /// The drawn plant parameters of environment ``i``'s episode.
-    fn episode_params(&self, i: usize) -> PyResult<PyFurutaParams> {
-        self.check(i)?;
+    fn episode_params(&self, py: Python<'_>, i: usize) -> PyResult<PyFurutaParams> {
+        let inner = self.inner.lock(py);
+        check(&inner, i)?;
         Ok(PyFurutaParams {
-            inner: *self.inner.env(i).plant().params(),
+            inner: *inner.env(i).plant().params(),
         })
     }
 
     /// The drawn action delay (periods) and noise levels (rad) of environment ``i``'s episode.
-    fn episode_sensor(&self, i: usize) -> PyResult<(usize, [f64; 2])> {
-        self.check(i)?;
-        let e = self.inner.env(i);
+    fn episode_sensor(&self, py: Python<'_>, i: usize) -> PyResult<(usize, [f64; 2])> {
+        let inner = self.inner.lock(py);
+        check(&inner, i)?;
+        let e = inner.env(i);
         Ok((e.action_delay(), e.noise_std()))
     }
 }
 
-impl PyVecEnv {
-    fn check(&self, i: usize) -> PyResult<()> {
-        if i >= self.inner.len() {
-            return Err(pyo3::exceptions::PyIndexError::new_err(format!(
-                "environment {i} out of range for {} environments",
-                self.inner.len()
-            )));
-        }
-        Ok(())
+fn check(env: &VecEnv, i: usize) -> PyResult<()> {
+    if i >= env.len() {
+        return Err(pyo3::exceptions::PyIndexError::new_err(format!(
+            "environment {i} out of range for {} environments",
+            env.len()
+        )));
     }
+    Ok(())
 }
 
 /// The environments' observation of measured angles (rate filter, cos/sin), for running a

@@ -16,8 +16,10 @@ documented in ``docs/gym.md``.
 
 from __future__ import annotations
 
+import copy as _copy
 import os
 import sys
+import threading
 import types
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence, Union
@@ -104,6 +106,7 @@ def _native(num_envs: int, task: str, config: ConfigLike, settings: dict[str, An
         raise InvalidParameterError(f"invalid task: must be one of {sorted(TASKS)}, got {task!r}")
     if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
         raise TypeError(f"num_envs must be an int, got {type(num_envs)}")
+    num_envs = int(num_envs)
     spec, cov = _spec_of(config)
     settings = dict(settings)
     randomize = settings.get("randomize")
@@ -120,7 +123,7 @@ def _native(num_envs: int, task: str, config: ConfigLike, settings: dict[str, An
     if settings.get("encoder_counts", 0) is None:
         settings.pop("encoder_counts")
         settings["exact_angles"] = True
-    return _riprs.NativeVecEnv(int(num_envs), spec, task, settings)
+    return _riprs.NativeVecEnv(num_envs, spec, task, settings)
 
 
 #: The ranges of ``randomize=True``: what sim-to-real reports on Furuta pendulums blame
@@ -164,7 +167,71 @@ def _check_seed(seed: Any, name: str) -> int:
     return int(seed)
 
 
-class PendulumEnv(gymnasium.Env[np.ndarray, np.ndarray]):
+def _real_array(values: Any, name: str) -> np.ndarray:
+    """``values`` as a float32 array; anything but real numbers is a ``TypeError`` naming
+    ``name`` (numpy alone would turn None into NaN and drop an imaginary part with a
+    warning)."""
+    try:
+        a = np.asarray(values)
+    except (TypeError, ValueError):  # e.g. a ragged nested sequence
+        raise TypeError(f"{name} must be real numbers, got {values!r}") from None
+    if a.dtype.kind not in "iuf":
+        raise TypeError(f"{name} must be real numbers, got {values!r} (dtype {a.dtype})")
+    return np.ascontiguousarray(a, dtype=np.float32)
+
+
+def _check_options(options: Any, known: tuple[str, ...]) -> Mapping[str, Any]:
+    """``reset``'s ``options``, refused if not a mapping or holding a key no reset reads (a
+    misspelt option would otherwise be ignored)."""
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise TypeError(f"options must be a dict, got {type(options).__name__}")
+    unknown = [k for k in options if k not in known]
+    if unknown:
+        takes = f"it takes {', '.join(map(repr, known))}" if known else "it takes none"
+        raise InvalidParameterError(
+            f"invalid options: unknown reset option {', '.join(map(repr, unknown))}; {takes}"
+        )
+    return options
+
+
+class _Shareable:
+    """What both environments share: a lock that serialises ``reset`` and ``step`` across
+    threads (the native call releases the GIL; without it a second thread's call would fail
+    or interleave with the first's buffers), and copies and pickles that share nothing
+    mutable with the original."""
+
+    #: The instance's own output buffers: copied, never shared, by a copy or a pickle.
+    _BUFFERS = ("_obs", "_reward", "_terminated", "_truncated", "_action")
+    native: Any
+    _lock: threading.Lock
+
+    def __getstate__(self) -> dict[str, Any]:
+        # A snapshot taken between two steps: the native environments, buffers and seeding
+        # generator copied under the lock, so another thread's step cannot tear it.
+        with self._lock:
+            state = self.__dict__.copy()
+            del state["_lock"]
+            state["native"] = _copy.copy(self.native)
+            for name in self._BUFFERS:
+                if name in state:
+                    state[name] = state[name].copy()
+            if state.get("_np_random") is not None:
+                state["_np_random"] = _copy.deepcopy(state["_np_random"])
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+
+    def __copy__(self) -> Any:
+        # A shallow copy would step the same native environments as the original: a copy of
+        # an environment is an independent environment.
+        return _copy.deepcopy(self)
+
+
+class PendulumEnv(_Shareable, gymnasium.Env[np.ndarray, np.ndarray]):
     r"""One rotary inverted pendulum as a ``gymnasium.Env`` (``docs/gym.md``).
 
     Observation (float32, shape (6,)): ``[cos theta, sin theta, cos alpha, sin alpha,
@@ -191,6 +258,19 @@ class PendulumEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         ``action_cost``, ``randomize`` (True for :data:`DEFAULT_RANDOMIZATION`, or a dict of
         ``relative``, ``covariance``, ``Vd``, ``Cr``, ``Cp``, ``action_delay``,
         ``noise_std``).
+
+    Notes
+    -----
+    Thread safety: ``reset`` and ``step`` may be called from several threads; each call runs
+    whole, one after the other, in the order the threads take the environment's lock, so no
+    step is lost or torn. The steps of one episode then interleave between the threads, which
+    is rarely what training wants: give each thread its own environment (``copy.deepcopy``).
+
+    ``pickle``, ``copy.deepcopy`` and ``copy.copy`` give an independent environment that
+    continues exactly as the original would: the same observations for the same actions.
+
+    Stepping after an episode terminated goes on simulating, with a warning on the first such
+    step, as Gymnasium's own environments do; call ``reset`` instead.
     """
 
     metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012
@@ -218,6 +298,9 @@ class PendulumEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         self._truncated = np.zeros(1, dtype=bool)
         self._action = np.zeros(1, dtype=np.float32)
         self._started = False
+        self._lock = threading.Lock()
+        #: Steps taken since one returned ``terminated``; None before (Gymnasium's CartPole).
+        self.steps_beyond_terminated: int | None = None
 
     @property
     def Ts(self) -> float:
@@ -232,36 +315,61 @@ class PendulumEnv(gymnasium.Env[np.ndarray, np.ndarray]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Start an episode; ``seed`` restarts the environment's generator (module docs)."""
-        super().reset(seed=seed)
-        if seed is not None:
-            seeds: list[int] | None = [_check_seed(seed, "seed")]
-        elif not self._started:
-            seeds = [int(self.np_random.integers(_SEED_LIMIT))]
-        else:
-            seeds = None
-        self.native.reset(self._obs, seeds)
-        self._started = True
-        return self._obs[0].copy(), {}
+        """Start an episode; ``seed`` restarts the environment's generator (module docs).
+
+        Parameters
+        ----------
+        seed : int, optional
+            In ``[0, 2**64)``.
+        options : dict, optional
+            None are read; any key is an error.
+        """
+        checked = None if seed is None else _check_seed(seed, "seed")
+        _check_options(options, ())
+        with self._lock:
+            super().reset(seed=checked)
+            if checked is not None:
+                seeds: list[int] | None = [checked]
+            elif not self._started:
+                seeds = [int(self.np_random.integers(_SEED_LIMIT))]
+            else:
+                seeds = None
+            self.native.reset(self._obs, seeds)
+            self._started = True
+            self.steps_beyond_terminated = None
+            return self._obs[0].copy(), {}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        """Apply ``action`` (shape (1,), in [-1, 1]) for one control period."""
-        if not self._started:
-            raise gymnasium.error.ResetNeeded("call reset() before step()")
-        a = np.asarray(action, dtype=np.float32)
+        """Apply ``action`` (shape (1,), real, in [-1, 1]) for one control period."""
+        a = _real_array(action, "action")
         if a.size != 1:
             raise InvalidParameterError(f"invalid action: expected shape (1,), got {a.shape}")
-        self._action[0] = a.reshape(())
-        self.native.step(
-            self._action, False, self._obs, self._reward, self._terminated, self._truncated
-        )
-        return (
-            self._obs[0].copy(),
-            float(self._reward[0]),
-            bool(self._terminated[0]),
-            bool(self._truncated[0]),
-            {},
-        )
+        with self._lock:
+            if not self._started:
+                raise gymnasium.error.ResetNeeded("call reset() before step()")
+            self._action[0] = a.reshape(())
+            self.native.step(
+                self._action, False, self._obs, self._reward, self._terminated, self._truncated
+            )
+            terminated = bool(self._terminated[0])
+            if self.steps_beyond_terminated is not None:
+                if self.steps_beyond_terminated == 0:
+                    gymnasium.logger.warn(
+                        "You are calling 'step()' even though this environment has already "
+                        "returned terminated = True. You should always call 'reset()' once you "
+                        "receive 'terminated = True' -- any further steps are undefined "
+                        "behavior."
+                    )
+                self.steps_beyond_terminated += 1
+            elif terminated:
+                self.steps_beyond_terminated = 0
+            return (
+                self._obs[0].copy(),
+                float(self._reward[0]),
+                terminated,
+                bool(self._truncated[0]),
+                {},
+            )
 
     @property
     def state(self) -> np.ndarray:
@@ -274,15 +382,20 @@ class PendulumEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         return self.native.episode_params(0)
 
 
-class PendulumVecEnv(VectorEnv):
+class PendulumVecEnv(_Shareable, VectorEnv):
     """``num_envs`` pendulums stepped in one native call (``gymnasium.vector.VectorEnv``).
 
     Autoreset in Gymnasium's next-step mode: the step after an episode ends resets that
     environment, ignores its action and returns its first observation with reward 0.
-    ``reset(seed=s)`` seeds environment ``i`` with ``s + i`` (as ``SyncVectorEnv`` does), a list
+    ``reset(seed=s)`` seeds environment ``i`` with ``s + i`` (as ``SyncVectorEnv`` does; a seed
+    for which ``s + num_envs - 1`` would not fit 64 bits is refused rather than wrapped), a list
     seeds each; environment ``i`` then produces exactly what a :class:`PendulumEnv` reset with
     the same seed and given the same actions does. ``options={"reset_mask": mask}`` resets only
     where ``mask`` is true.
+
+    Threads, copies and pickles as :class:`PendulumEnv`. With ``copy=False`` the returned
+    arrays are the environment's own buffers, which the next ``step`` or ``reset`` from any
+    thread overwrites.
 
     Parameters
     ----------
@@ -329,6 +442,7 @@ class PendulumVecEnv(VectorEnv):
         self._terminated = np.zeros(n, dtype=bool)
         self._truncated = np.zeros(n, dtype=bool)
         self._started = False
+        self._lock = threading.Lock()
 
     def _out(self, a: np.ndarray) -> np.ndarray:
         return a.copy() if self.copy else a
@@ -339,8 +453,19 @@ class PendulumVecEnv(VectorEnv):
         seed: int | Sequence[int] | None = None,
         options: dict[str, Any] | None = None,
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Reset every environment (or those of ``options["reset_mask"]``)."""
+        """Reset every environment (or those of ``options["reset_mask"]``).
+
+        Parameters
+        ----------
+        seed : int or sequence of int, optional
+            ``s`` seeds environment ``i`` with ``s + i`` (every one in ``[0, 2**64)``); a
+            sequence gives each its own.
+        options : dict, optional
+            ``reset_mask`` (bool, shape (num_envs,)) only; any other key is an error.
+        """
         n = self.num_envs
+        options = _check_options(options, ("reset_mask",))
+        seeds: int | list[int] | None
         if seed is None:
             if self._started:
                 seeds = None
@@ -348,8 +473,10 @@ class PendulumVecEnv(VectorEnv):
                 rng = np.random.default_rng()
                 seeds = [int(s) for s in rng.integers(_SEED_LIMIT, size=n)]
         elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
-            base = _check_seed(seed, "seed")
-            seeds = [(base + i) % 2**64 for i in range(n)]
+            # The native side derives s + i, refusing a seed that would not fit 64 bits.
+            seeds = _check_seed(seed, "seed")
+        elif isinstance(seed, (str, bytes)) or not isinstance(seed, (Sequence, np.ndarray)):
+            raise TypeError(f"seed must be an int or a sequence of ints, got {type(seed)}")
         else:
             seeds = [_check_seed(s, f"seed[{i}]") for i, s in enumerate(seed)]
             if len(seeds) != n:
@@ -357,7 +484,7 @@ class PendulumVecEnv(VectorEnv):
                     f"invalid seed: expected {n} seeds, one per environment, got {len(seeds)}"
                 )
         mask = None
-        if options and "reset_mask" in options:
+        if "reset_mask" in options:
             mask = np.ascontiguousarray(options["reset_mask"], dtype=bool)
             if mask.shape != (n,):
                 raise InvalidParameterError(
@@ -367,39 +494,41 @@ class PendulumVecEnv(VectorEnv):
             raise InvalidParameterError(
                 "invalid reset_mask: the first reset must reset every environment"
             )
-        self.native.reset(self._obs, seeds, mask)
-        self._started = True
-        if mask is not None:
-            self._terminated[mask] = False
-            self._truncated[mask] = False
-        return self._out(self._obs), {}
+        with self._lock:
+            self.native.reset(self._obs, seeds, mask)
+            self._started = True
+            if mask is not None:
+                self._terminated[mask] = False
+                self._truncated[mask] = False
+            return self._out(self._obs), {}
 
     def step(
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every environment with its action (shape (num_envs, 1) or (num_envs,))."""
-        if not self._started:
-            raise gymnasium.error.ResetNeeded("call reset() before step()")
-        a = np.ascontiguousarray(actions, dtype=np.float32)
+        a = _real_array(actions, "actions")
         if a.size != self.num_envs:
             raise InvalidParameterError(
                 f"invalid actions: expected shape ({self.num_envs}, 1), got {a.shape}"
             )
-        self.native.step(
-            a.reshape(self.num_envs),
-            True,
-            self._obs,
-            self._reward,
-            self._terminated,
-            self._truncated,
-        )
-        return (
-            self._out(self._obs),
-            self._out(self._reward),
-            self._out(self._terminated),
-            self._out(self._truncated),
-            {},
-        )
+        with self._lock:
+            if not self._started:
+                raise gymnasium.error.ResetNeeded("call reset() before step()")
+            self.native.step(
+                a.reshape(self.num_envs),
+                True,
+                self._obs,
+                self._reward,
+                self._terminated,
+                self._truncated,
+            )
+            return (
+                self._out(self._obs),
+                self._out(self._reward),
+                self._out(self._terminated),
+                self._out(self._truncated),
+                {},
+            )
 
     def state(self, i: int) -> np.ndarray:
         """The true state of environment ``i``."""

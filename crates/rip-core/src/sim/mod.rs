@@ -92,6 +92,19 @@ impl Default for Reference {
     }
 }
 
+/// Allowed encoder resolutions (`sensor.encoder_counts` of an experiment file, and of the
+/// environments of [`vec_env`]): below 64 counts per revolution (0.1 rad) the pendulum angle is
+/// too coarse to balance on; above 2²⁴ the multi-turn i32 count overflows within 128 turns.
+/// Defined here, with the sensor model, so that `spec` and [`vec_env`] share it.
+pub const COUNTS_PER_REV: std::ops::RangeInclusive<u32> = 64..=(1 << 24);
+
+/// Allowed control periods (ms: `loop.period_ms` of a rig file, and `Ts` of the environments
+/// of [`vec_env`]). Above 20 ms the device's 50 ms command watchdog (protocol.md) would see
+/// fewer than three commands per window and the pendulum (unstable pole near 10 rad/s) is no
+/// longer controllable at that rate; below 1 ms a serial round trip cannot fit. Defined here
+/// so that `spec` and [`vec_env`] share it.
+pub const PERIOD_MS: std::ops::RangeInclusive<f64> = 1.0..=20.0;
+
 /// Largest accepted measurement-noise standard deviation (rad): far beyond any angle (noise
 /// above π already hides the angle completely), and small enough that the squared noise in an
 /// RMSE never overflows.

@@ -54,10 +54,7 @@ pub struct LoopConfig {
     pub max_consecutive_misses: u32,
 }
 
-/// Allowed `loop.period_ms`. Above 20 ms the device's 50 ms command watchdog (protocol.md)
-/// would see fewer than three commands per window and the pendulum (unstable pole near
-/// 10 rad/s) is no longer controllable at that rate; below 1 ms a serial round trip cannot fit.
-pub const PERIOD_MS: std::ops::RangeInclusive<f64> = 1.0..=20.0;
+pub use crate::sim::PERIOD_MS;
 /// Shortest `loop.reply_timeout_ms`: a USB round trip alone takes about this long.
 pub const MIN_REPLY_TIMEOUT_MS: f64 = 0.1;
 /// Allowed `loop.watchdog_periods`.

@@ -347,10 +347,7 @@ impl PlantSpec {
     }
 }
 
-/// Allowed encoder resolutions (`sensor.encoder_counts`): below 64 counts per revolution
-/// (0.1 rad) the pendulum angle is too coarse to balance on; above 2²⁴ the multi-turn i32
-/// count overflows within 128 turns.
-pub const COUNTS_PER_REV: std::ops::RangeInclusive<u32> = 64..=(1 << 24);
+pub use crate::sim::COUNTS_PER_REV;
 
 /// `[sensor]`: the encoders and white measurement noise of the rig, simulated (`riprs
 /// compare`, `rip-rt emulate`) or real (`rip-rt` turns counts into angles with

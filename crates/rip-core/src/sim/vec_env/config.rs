@@ -1,11 +1,13 @@
 //! The environment's configuration and the draws of each episode's plant, with their checks.
 
+use super::snapshot::{invalid, Reader, Writer};
 use super::{Task, DEFAULT_ACTION_COST, DEFAULT_INIT_SPREAD, MAX_DELAY};
 use crate::error::{Result, RipError};
 use crate::plant::Param;
 use crate::plant::{FurutaParams, Plant, State};
 use crate::sim::{
-    SensorModel, DEFAULT_DURATION, DEFAULT_FALL_LIMIT, DEFAULT_SUBSTEPS, MAX_NOISE_STD,
+    SensorModel, COUNTS_PER_REV, DEFAULT_DURATION, DEFAULT_FALL_LIMIT, DEFAULT_SUBSTEPS,
+    MAX_NOISE_STD, PERIOD_MS,
 };
 
 /// A parameter covariance (e.g. an identification's): the draw is `p = p̂ + L z`, `z ~ N(0, I)`,
@@ -116,12 +118,50 @@ impl EnvConfig {
     /// Checks every setting; the error names it.
     pub fn validate(&self) -> Result<()> {
         self.params.validate()?;
+        // The control period a rig's loop may run at (`[loop] period_ms`): outside it the
+        // environment would train a policy for a loop no rig runs.
+        let period_ms = self.ts * 1000.0;
+        if !PERIOD_MS.contains(&period_ms) {
+            return Err(bad(
+                "Ts",
+                format!(
+                    "must be in {}..={} s (a rig loop's period_ms, {}..={} ms), got {}",
+                    PERIOD_MS.start() / 1000.0,
+                    PERIOD_MS.end() / 1000.0,
+                    PERIOD_MS.start(),
+                    PERIOD_MS.end(),
+                    self.ts
+                ),
+            ));
+        }
         crate::plant::check_step(self.ts, self.substeps)?;
         if !(self.u_limit.is_finite() && self.u_limit > 0.0) {
             return Err(bad(
                 "u_limit",
                 format!("must be positive, got {}", self.u_limit),
             ));
+        }
+        // A dead zone at or above the voltage bound leaves the motor still whatever the action:
+        // an environment no policy can act in.
+        if self.params.vd >= self.u_limit {
+            return Err(bad(
+                "Vd",
+                format!(
+                    "the dead zone must be below u_limit ({} V), got {} V",
+                    self.u_limit, self.params.vd
+                ),
+            ));
+        }
+        if let Some([_, hi]) = self.randomisation.dead_zone {
+            if hi >= self.u_limit {
+                return Err(bad(
+                    "randomize.Vd",
+                    format!(
+                        "the dead zone must stay below u_limit ({} V), got up to {hi} V",
+                        self.u_limit
+                    ),
+                ));
+            }
         }
         if self.rate_cutoff_hz.is_nan() || self.rate_cutoff_hz <= 0.0 {
             return Err(bad(
@@ -179,11 +219,14 @@ impl EnvConfig {
             }
         }
         if let Some(cpr) = self.sensor.counts_per_rev {
+            // An experiment file's rule for its `[sensor] encoder_counts`: a whole number of
+            // counts a rig's loop accepts.
+            let (lo, hi) = (*COUNTS_PER_REV.start(), *COUNTS_PER_REV.end());
             for c in cpr {
-                if !(c.is_finite() && c >= 1.0) {
+                if !(c.fract() == 0.0 && f64::from(lo) <= c && c <= f64::from(hi)) {
                     return Err(bad(
                         "encoder_counts",
-                        format!("must be at least 1, got {c}"),
+                        format!("must be in {lo}..={hi} counts per revolution, got {c}"),
                     ));
                 }
             }
@@ -257,6 +300,169 @@ impl Randomisation {
             }
         }
         Ok(())
+    }
+}
+
+fn write_param(w: &mut Writer, p: Param) {
+    w.u8(p.index() as u8);
+}
+
+fn read_param(r: &mut Reader<'_>) -> Result<Param> {
+    Param::FIELDS
+        .get(usize::from(r.u8()?))
+        .copied()
+        .ok_or_else(|| invalid("an unknown plant parameter"))
+}
+
+impl EnvConfig {
+    /// Appends the configuration to a snapshot ([`super::snapshot`]).
+    pub(super) fn encode(&self, w: &mut Writer) {
+        // Destructured whole, so that a field added to the configuration fails to compile here
+        // until the snapshot carries it.
+        let Self {
+            task,
+            params,
+            ts,
+            substeps,
+            u_limit,
+            sensor,
+            rate_cutoff_hz,
+            max_steps,
+            fall_limit,
+            arm_limit,
+            action_delay,
+            observation_latency,
+            init_spread,
+            action_cost,
+            randomisation,
+        } = self;
+        w.u8(match task {
+            Task::Balance => 0,
+            Task::SwingUp => 1,
+        });
+        w.f64s(&params.to_array());
+        w.f64(*ts);
+        w.usize(*substeps);
+        w.f64(*u_limit);
+        let SensorModel {
+            counts_per_rev,
+            noise_std,
+            offsets,
+        } = sensor;
+        w.opt_pair(*counts_per_rev);
+        w.f64s(noise_std);
+        w.f64s(offsets);
+        w.f64(*rate_cutoff_hz);
+        w.u32(*max_steps);
+        w.f64(*fall_limit);
+        w.f64(*arm_limit);
+        w.usize(*action_delay);
+        w.usize(*observation_latency);
+        w.f64(*init_spread);
+        w.f64(*action_cost);
+        let Randomisation {
+            covariance,
+            relative,
+            dead_zone,
+            arm_friction,
+            pendulum_friction,
+            action_delay,
+            noise_std,
+        } = randomisation;
+        w.bool(covariance.is_some());
+        if let Some(c) = covariance {
+            w.usize(c.params.len());
+            for p in &c.params {
+                write_param(w, *p);
+            }
+            w.usize(c.matrix.len());
+            w.f64s(&c.matrix);
+        }
+        w.usize(relative.len());
+        for (p, half) in relative {
+            write_param(w, *p);
+            w.f64(*half);
+        }
+        w.opt_pair(*dead_zone);
+        w.opt_pair(*arm_friction);
+        w.opt_pair(*pendulum_friction);
+        w.bool(action_delay.is_some());
+        let [lo, hi] = action_delay.unwrap_or_default();
+        w.usize(lo);
+        w.usize(hi);
+        w.opt_pair(*noise_std);
+    }
+
+    /// Reads back what [`encode`](Self::encode) wrote, and validates it.
+    pub(super) fn decode(r: &mut Reader<'_>) -> Result<Self> {
+        let task = match r.u8()? {
+            0 => Task::Balance,
+            1 => Task::SwingUp,
+            _ => return Err(invalid("an unknown task")),
+        };
+        let params = FurutaParams::from_array(r.f64s()?);
+        let ts = r.f64()?;
+        let substeps = r.usize(usize::MAX)?;
+        let u_limit = r.f64()?;
+        let sensor = SensorModel {
+            counts_per_rev: r.opt_pair()?,
+            noise_std: r.f64s()?,
+            offsets: r.f64s()?,
+        };
+        let rate_cutoff_hz = r.f64()?;
+        let max_steps = r.u32()?;
+        let fall_limit = r.f64()?;
+        let arm_limit = r.f64()?;
+        let action_delay = r.usize(MAX_DELAY)?;
+        let observation_latency = r.usize(MAX_DELAY)?;
+        let init_spread = r.f64()?;
+        let action_cost = r.f64()?;
+        let covariance = if r.bool()? {
+            let n = r.len(1)?;
+            let params = (0..n).map(|_| read_param(r)).collect::<Result<Vec<_>>>()?;
+            let m = r.len(8)?;
+            let matrix = (0..m).map(|_| r.f64()).collect::<Result<Vec<_>>>()?;
+            Some(ParamCovariance { params, matrix })
+        } else {
+            None
+        };
+        let n = r.len(9)?;
+        let relative = (0..n)
+            .map(|_| Ok((read_param(r)?, r.f64()?)))
+            .collect::<Result<Vec<_>>>()?;
+        let dead_zone = r.opt_pair()?;
+        let arm_friction = r.opt_pair()?;
+        let pendulum_friction = r.opt_pair()?;
+        let some_delay = r.bool()?;
+        let delays = [r.usize(MAX_DELAY)?, r.usize(MAX_DELAY)?];
+        let noise_std = r.opt_pair()?;
+        let config = Self {
+            task,
+            params,
+            ts,
+            substeps,
+            u_limit,
+            sensor,
+            rate_cutoff_hz,
+            max_steps,
+            fall_limit,
+            arm_limit,
+            action_delay,
+            observation_latency,
+            init_spread,
+            action_cost,
+            randomisation: Randomisation {
+                covariance,
+                relative,
+                dead_zone,
+                arm_friction,
+                pendulum_friction,
+                action_delay: some_delay.then_some(delays),
+                noise_std,
+            },
+        };
+        config.validate()?;
+        Ok(config)
     }
 }
 

@@ -1,11 +1,12 @@
 //! One environment: the measurement side ([`Observer`]) and the episode's plant, delays,
 //! reward and termination.
 
-use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha12Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::config::{bad, cholesky};
+use super::snapshot::{invalid, Reader, Writer};
 use super::{EnvConfig, Task, MAX_DELAY, MAX_OBS_RATE, MAX_REDRAWS, OBS_DIM};
 use crate::error::Result;
 use crate::plant::{FurutaParams, Plant, State};
@@ -62,6 +63,21 @@ impl Observer {
         self.filter.reset();
     }
 
+    fn encode(&self, w: &mut Writer) {
+        let (started, held) = self.filter.progress();
+        w.f64s(&self.filter.angles());
+        w.f64s(&self.filter.rates());
+        w.bool(started);
+        w.u32(held);
+    }
+
+    fn decode(&mut self, r: &mut Reader<'_>) -> Result<()> {
+        let (angles, rates) = (r.f64s()?, r.f64s()?);
+        let (started, held) = (r.bool()?, r.u32()?);
+        self.filter.restore(angles, rates, started, held);
+        Ok(())
+    }
+
     /// The observation of the measured angles `y = [θ, α]` (module docs).
     #[inline]
     pub fn observe(&mut self, y: [f64; 2]) -> [f64; OBS_DIM] {
@@ -92,7 +108,9 @@ pub struct Transition {
 /// One environment (module docs).
 #[derive(Debug, Clone)]
 pub struct Env {
-    rng: StdRng,
+    /// `rand`'s `StdRng` (the same ChaCha12 bits), named so that its position in the stream
+    /// can be saved and restored ([`Env::encode`]).
+    rng: ChaCha12Rng,
     pub(super) plant: Plant,
     pub(super) x: State,
     noise_std: [f64; 2],
@@ -108,7 +126,7 @@ pub struct Env {
 impl Env {
     pub(super) fn new(config: &EnvConfig, seed: u64) -> Result<Self> {
         Ok(Self {
-            rng: StdRng::seed_from_u64(seed),
+            rng: ChaCha12Rng::seed_from_u64(seed),
             plant: Plant::new(config.params)?,
             x: State::zeros(),
             noise_std: config.sensor.noise_std,
@@ -184,7 +202,7 @@ impl Env {
     /// Starts an episode (module docs), restarting the generator from `seed` if given.
     pub fn reset(&mut self, config: &EnvConfig, seed: Option<u64>) -> Result<[f64; OBS_DIM]> {
         if let Some(s) = seed {
-            self.rng = StdRng::seed_from_u64(s);
+            self.rng = ChaCha12Rng::seed_from_u64(s);
         }
         let h = config.ts / config.substeps as f64;
         let mut drawn = None;
@@ -286,6 +304,82 @@ impl Env {
             terminated,
             truncated,
         }
+    }
+
+    /// Appends the environment's whole state to a snapshot ([`super::snapshot`]).
+    pub(super) fn encode(&self, w: &mut Writer) {
+        // Destructured whole, so that a field added to the environment fails to compile here
+        // until the snapshot carries it.
+        let Self {
+            rng,
+            plant,
+            x,
+            noise_std,
+            delay,
+            actions,
+            observations,
+            observer,
+            steps,
+            done,
+        } = self;
+        w.bytes(&rng.get_seed());
+        w.u64(rng.get_stream());
+        w.u128(rng.get_word_pos());
+        // The plant is a function of its parameters (`Plant::new`), rebuilt on reading.
+        w.f64s(&plant.params().to_array());
+        w.f64s(x.as_slice());
+        w.f64s(noise_std);
+        w.usize(*delay);
+        w.f64s(&actions.items);
+        w.usize(actions.head);
+        for o in &observations.items {
+            w.f64s(o);
+        }
+        w.usize(observations.head);
+        observer.encode(w);
+        w.u32(*steps);
+        w.bool(*done);
+    }
+
+    /// Reads back what [`encode`](Self::encode) wrote for an environment of `config`.
+    pub(super) fn decode(r: &mut Reader<'_>, config: &EnvConfig) -> Result<Self> {
+        let mut rng = ChaCha12Rng::from_seed(r.array()?);
+        rng.set_stream(r.u64()?);
+        rng.set_word_pos(r.u128()?);
+        let plant = Plant::new(FurutaParams::from_array(r.f64s()?))
+            .map_err(|_| invalid("an invalid plant"))?;
+        let x: [f64; 4] = r.f64s()?;
+        if !x.iter().all(|v| v.is_finite()) {
+            return Err(invalid("a state that is not finite"));
+        }
+        let noise_std = r.f64s()?;
+        let delay = r.usize(MAX_DELAY)?;
+        let actions = Ring {
+            items: r.f64s()?,
+            head: r.usize(MAX_DELAY)?,
+        };
+        let mut items = [[0.0; OBS_DIM]; MAX_DELAY + 1];
+        for o in &mut items {
+            *o = r.f64s()?;
+        }
+        let observations = Ring {
+            items,
+            head: r.usize(MAX_DELAY)?,
+        };
+        let mut observer = Observer::new(config.ts, config.rate_cutoff_hz);
+        observer.decode(r)?;
+        Ok(Self {
+            rng,
+            plant,
+            x: State::from_row_slice(&x),
+            noise_std,
+            delay,
+            actions,
+            observations,
+            observer,
+            steps: r.u32()?,
+            done: r.bool()?,
+        })
     }
 
     /// The transition of an autoreset step (module docs).

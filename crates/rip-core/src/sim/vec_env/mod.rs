@@ -64,6 +64,12 @@
 //! after the one that ended an episode resets that environment instead of stepping it, ignores
 //! its action and reports its first observation with reward 0 and neither flag set.
 //!
+//! # Saving
+//!
+//! [`VecEnv::to_bytes`] saves everything an environment is, its generator's position in its
+//! stream included, and [`VecEnv::from_bytes`] restores it: the restored environment continues
+//! with the same bits as the original (what `pickle` of `riprs.envs` relies on).
+//!
 //! Stepping allocates nothing; resets build the drawn [`Plant`](crate::plant::Plant) (which
 //! computes its RK4 stability limit). [`VecEnv::step`] integrates [`LANES`] environments per call
 //! of [`Plant::advance_lanes`](crate::plant::Plant::advance_lanes) (each in its own SIMD lane, with
@@ -73,6 +79,7 @@
 mod config;
 mod env;
 mod replay;
+mod snapshot;
 #[cfg(test)]
 mod tests;
 mod vector;

@@ -344,3 +344,109 @@ fn observed_rates_are_the_filtered_difference_and_a_bad_sample_spans_two_periods
     }
     assert!((o3[0] - 0.2f64.cos()).abs() < 1e-15 && (o3[3] - (-0.1f64).sin()).abs() < 1e-15);
 }
+
+/// Steps `env` `steps` times with fixed actions; the observations and rewards, as bits.
+fn trace(env: &mut VecEnv, steps: usize) -> Vec<u64> {
+    let n = env.len();
+    let mut obs = vec![0.0f32; n * OBS_DIM];
+    let (mut r, mut te, mut tr) = (vec![0.0; n], vec![false; n], vec![false; n]);
+    let mut out = Vec::new();
+    for k in 0..steps {
+        let a: Vec<f32> = (0..n)
+            .map(|i| ((k + 3 * i) % 9) as f32 / 4.0 - 1.0)
+            .collect();
+        env.step(&a, true, &mut obs, &mut r, &mut te, &mut tr)
+            .unwrap();
+        out.extend(obs.iter().map(|v| u64::from(v.to_bits())));
+        out.extend(r.iter().map(|v| v.to_bits()));
+    }
+    out
+}
+
+#[test]
+fn a_restored_environment_continues_with_the_same_bits() {
+    let mut env = VecEnv::new(randomised(), 3).unwrap();
+    let mut obs = vec![0.0f32; 3 * OBS_DIM];
+    env.reset(&[7, 8, 9], &[], &mut obs).unwrap();
+    // Mid-episode, with draws taken and delays filled; then through autoresets (max_steps 50),
+    // which draw from each generator where the original left it.
+    trace(&mut env, 37);
+    let mut restored = VecEnv::from_bytes(&env.to_bytes()).unwrap();
+    assert_eq!(restored.config(), env.config());
+    assert_eq!(trace(&mut restored, 140), trace(&mut env, 140));
+}
+
+#[test]
+fn bytes_that_are_not_a_saved_environment_are_an_error_naming_state() {
+    let mut env = VecEnv::new(randomised(), 2).unwrap();
+    let mut obs = vec![0.0f32; 2 * OBS_DIM];
+    env.reset(&[1, 2], &[], &mut obs).unwrap();
+    let bytes = env.to_bytes();
+    let named = |r: crate::error::Result<VecEnv>| matches!(r, Err(crate::error::RipError::InvalidParameter { ref name, .. }) if name == "state");
+    // Every truncation, a trailing byte, and every byte flipped to 0xff in turn: an error or
+    // a valid environment, never a panic.
+    for len in 0..bytes.len() {
+        assert!(named(VecEnv::from_bytes(&bytes[..len])), "{len}");
+    }
+    let mut longer = bytes.clone();
+    longer.push(0);
+    assert!(named(VecEnv::from_bytes(&longer)));
+    for i in 0..bytes.len() {
+        let mut b = bytes.clone();
+        b[i] = 0xff;
+        let _ = VecEnv::from_bytes(&b);
+    }
+}
+
+#[test]
+fn seeds_from_one_seed_never_wrap() {
+    let env = VecEnv::new(EnvConfig::default(), 3).unwrap();
+    assert_eq!(env.seeds_from(5).unwrap(), vec![5, 6, 7]);
+    assert_eq!(
+        env.seeds_from(u64::MAX - 2).unwrap(),
+        vec![u64::MAX - 2, u64::MAX - 1, u64::MAX]
+    );
+    for base in [u64::MAX - 1, u64::MAX] {
+        let err = env.seeds_from(base).unwrap_err();
+        assert!(
+            matches!(err, crate::error::RipError::InvalidParameter { ref name, .. } if name == "seed")
+        );
+    }
+}
+
+#[test]
+fn rig_settings_follow_the_rig_files_ranges() {
+    let bad = |c: EnvConfig, name: &str| {
+        let err = c.validate().unwrap_err();
+        assert!(
+            matches!(err, crate::error::RipError::InvalidParameter { name: ref n, .. } if n == name),
+            "{err}"
+        );
+    };
+    let counts = |c: f64| EnvConfig {
+        sensor: SensorModel {
+            counts_per_rev: Some([2048.0, c]),
+            ..EnvConfig::default().sensor
+        },
+        ..Default::default()
+    };
+    for c in [1.0, 63.0, 2048.5, f64::from(1u32 << 24) + 1.0, f64::NAN] {
+        bad(counts(c), "encoder_counts");
+    }
+    counts(64.0).validate().unwrap();
+    for ts in [1e-12, 0.0009, 0.021, f64::INFINITY] {
+        bad(
+            EnvConfig {
+                ts,
+                ..Default::default()
+            },
+            "Ts",
+        );
+    }
+    let mut c = EnvConfig::default();
+    c.randomisation.dead_zone = Some([100.0, 200.0]);
+    bad(c, "randomize.Vd");
+    let mut c = EnvConfig::default();
+    c.params.vd = c.u_limit;
+    bad(c, "Vd");
+}

@@ -3,6 +3,7 @@
 use rayon::prelude::*;
 
 use super::config::bad;
+use super::snapshot::{Reader, Writer};
 use super::{Env, EnvConfig, MAX_ENVS, OBS_DIM, PARALLEL_MIN_ENVS};
 use crate::error::{Result, RipError};
 use crate::plant::{Plant, State};
@@ -167,6 +168,53 @@ impl VecEnv {
             });
         }
         Ok(())
+    }
+
+    /// The seeds of a reset from one seed `base`: environment `i` gets `base + i`, as
+    /// Gymnasium's `SyncVectorEnv` seeds its environments. A `base` for which some `base + i`
+    /// would not fit 64 bits is an error: wrapped around, two environments' seeds would meet.
+    pub fn seeds_from(&self, base: u64) -> Result<Vec<u64>> {
+        let n = self.envs.len() as u64;
+        let last = base.checked_add(n - 1).ok_or_else(|| {
+            bad(
+                "seed",
+                format!(
+                    "environment i is seeded with seed + i, which must fit 64 bits: with {n} \
+                     environments the seed must be at most {}, got {base}",
+                    u64::MAX - (n - 1)
+                ),
+            )
+        })?;
+        Ok((base..=last).collect())
+    }
+
+    /// The whole state (configuration, and each environment's plant, generator, delays,
+    /// filter and step count) as bytes, which [`from_bytes`](Self::from_bytes) turns back into
+    /// an environment that continues exactly as this one would.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut w = Writer::new();
+        self.config.encode(&mut w);
+        w.usize(self.envs.len());
+        for env in &self.envs {
+            env.encode(&mut w);
+        }
+        w.finish()
+    }
+
+    /// The environment [`to_bytes`](Self::to_bytes) saved. Bytes that are not one are an
+    /// error naming `state`.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self> {
+        let mut r = Reader::new(bytes)?;
+        let config = EnvConfig::decode(&mut r)?;
+        let n = r.usize(MAX_ENVS)?;
+        if n == 0 {
+            return Err(super::snapshot::invalid("no environments"));
+        }
+        let envs = (0..n)
+            .map(|_| Env::decode(&mut r, &config))
+            .collect::<Result<Vec<_>>>()?;
+        r.finish()?;
+        Ok(Self { config, envs })
     }
 
     /// Resets the environments where `mask` is true (all if `mask` is empty), environment `i`
