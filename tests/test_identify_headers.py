@@ -83,6 +83,13 @@ BAD = [
 ]
 
 
+@pytest.mark.parametrize(("key", "value"), [("lab.Rm", "0"), ("lab.arm_counts", "2.5")])
+def test_a_lab_value_the_lab_file_refuses_is_refused_naming_the_log(tmp_path, rows, key, value):
+    log = write_log(tmp_path / "chirp.csv", {**GOOD, key: value}, rows)
+    with pytest.raises(IdentifyError, match=rf"chirp\.csv: header {key}: must be"):
+        riprs.identify([log], max_iter=1)
+
+
 @pytest.mark.parametrize(("key", "value"), BAD)
 def test_rip_rt_refuses_the_rig_file_these_headers_would_give(tmp_path, rip_rt, key, value):
     # The independent reference: each bad value is one rip-rt's own check refuses.

@@ -630,6 +630,11 @@ def _header_settings(
             except ValueError:
                 raise IdentifyError(f"{source}: header {key}: not a number: {text!r}") from None
             lab[key[4:]] = int(value) if key.endswith("_counts") and value.is_integer() else value
+            # The lab file's rule (rip_core::identify::lab), naming the log that recorded it.
+            try:
+                lab_start(FurutaParams.qube_servo2(), [(key[4:], value)])
+            except ConfigError as exc:
+                raise IdentifyError(f"{source}: header {exc}") from None
     return dict(sections), lab
 
 
