@@ -48,10 +48,11 @@ from riprs._riprs import PARAMETERS as _PARAMETERS
 from riprs.log import RtLog, load_log
 
 PathLike = Union[str, "os.PathLike[str]"]
-
-#: The start sets by preset name, for the held values' comparison with them.
-_PRESETS = {"paper": FurutaParams.paper, "qube_servo2": FurutaParams.qube_servo2}
 LogLike = Union[PathLike, RtLog]
+
+#: The start sets by preset name: a held value of the start that differs from its preset's is
+#: the start file's own, measured (``rip_core::identify::IdentifyOptions::preset``).
+_PRESETS = {"paper": FurutaParams.paper, "qube_servo2": FurutaParams.qube_servo2}
 
 #: The order of ``[plant]`` keys written to an identified file.
 PLANT_KEYS = tuple(_PARAMETERS)
@@ -657,8 +658,11 @@ def identify(
         ``rip-rt excite`` (or ``rip-rt run``) CSV logs, all with the same sample time, pendulum
         hanging down.
     start : {"paper", "qube_servo2"}, FurutaParams or path
-        Start set: fixes ``mp``, ``Lp``, ``mr``, ``Rm``, ``km`` and ``g`` (weigh and measure
-        the pendulum and put them in a ``[plant]`` file) and gives the initial guess.
+        Start set: fixes ``mp``, ``Lp``, ``mr``, ``Rm`` and ``g`` (weigh and measure the
+        pendulum and put them in a ``[plant]`` file or the lab file) and gives the initial
+        guess. Those of them still at the preset's values are held with a prior of
+        ``PRIOR_RSE`` (:attr:`IdentifyResult.held`); ``km`` is held equal to ``kt`` unless the
+        lab file gives it.
     holdout : float
         Fraction of each log, at its end, kept out of the fit for validation (0 to 0.9).
     segment : float

@@ -189,9 +189,10 @@ const NP: usize = FREE.len();
 /// prior [`PRIOR_RSE`].
 pub const HELD: [Param; 5] = [Param::Mp, Param::Lp, Param::Mr, Param::Rm, Param::Km];
 
-/// Relative standard deviation of a held value that was not measured (a preset's): a bench-top
-/// rig's masses, lengths and motor resistance are within about 30 % of a preset's for one of
-/// its class (the rig envelope spans factors of two to three).
+/// Relative standard deviation of a held value that was not measured (a preset's): a preset's
+/// value is one rig's, and 30 % stands for a rig of its class. The shared envelope
+/// ([`crate::rig`]) spans factors of 3 to 5 in these values, so a rig outside the preset's
+/// class is off by more than the prior says: measure the value (the lab file).
 pub const PRIOR_RSE: f64 = 0.3;
 
 /// Relative standard error above which a parameter counts as not identifiable.
