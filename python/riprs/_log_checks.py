@@ -159,6 +159,11 @@ def _check(name: str, log: RtLog, holdout: float) -> List[str]:
     """Refuses what cannot be fitted; returns warnings for what can."""
     notes = []
     n = len(log.t)
+    if n == 0:
+        raise IdentifyError(
+            f"{name}: no samples: the log has a header but no rows (a run stopped before its "
+            "first sample); record it again"
+        )
     for column in ("t", "theta", "alpha", "u"):
         bad = np.flatnonzero(~np.isfinite(getattr(log, column)))
         if bad.size:

@@ -568,10 +568,18 @@ def excitation(
 ) -> _F: ...
 def excitation_defaults(signal: _SignalName) -> dict[str, float | int | str]: ...
 IDENTIFY_MAX_SAMPLES: int
+IDENTIFY_MIN_HELDOUT_MOTION: float
+IDENTIFY_PRIOR_RSE: float
 LAB_KEYS: list[tuple[str, str]]
 
 def read_lab_file(path: str | os.PathLike[str]) -> dict[str, float | int]: ...
 def lab_start(start: FurutaParams, lab: list[tuple[str, float]]) -> FurutaParams: ...
+
+HEADER_SETTINGS: list[tuple[str, str]]
+
+def header_rig_settings(
+    given: list[tuple[str, str, str]],
+) -> dict[str, dict[str, float | str | list[int]]]: ...
 
 def identify_logs(
     logs: list[tuple[float, ArrayLike, ArrayLike]],
@@ -583,6 +591,8 @@ def identify_logs(
     substeps: int = 4,
     names: list[str] = ...,
     fixed: list[str] = ...,
+    measured: list[str] = ...,
+    preset: FurutaParams | None = None,
 ) -> dict[str, Any]: ...
 def rip_rt_main(argv: Sequence[str]) -> int: ...
 

@@ -2,12 +2,14 @@
 Furuta model (``rip_core::identify``), its report, figures and the ``[plant]`` file.
 
 The model, the identifiable parameters and the criterion are documented in
-``rip_core::identify``: the pendulum's mass and length (``mp``, ``Lp``), ``mr``, ``Rm``, ``km``
-and ``g`` are taken from the start set (or the lab file, :func:`read_lab`) and fix the scale;
+``rip_core::identify``: the pendulum's mass and length (``mp``, ``Lp``), ``mr``, ``Rm`` and ``g``
+are taken from the start set (or the lab file, :func:`read_lab`) and fix the scale; ``km`` is
+held equal to ``kt`` unless the lab file gives it (the logs determine only ``Dr + kt km / Rm``);
 ``Lr``, ``Jr``, ``Jp``, ``kt``, ``Dr``, ``Dp``, Coulomb friction ``Cr``, ``Cp`` and the dead
-zone ``Vd`` are estimated. Every result carries the core's verdict
-(:attr:`IdentifyResult.problems`): ``riprs identify`` writes no rig file for a result that
-has any.
+zone ``Vd`` are estimated. A held value that was not measured (a preset's) carries a prior of
+``PRIOR_RSE`` (30 %), named in the report and included in the standard errors. Every result
+carries the core's verdict (:attr:`IdentifyResult.problems`): ``riprs identify`` writes no rig
+file for a result that has any.
 """
 
 from __future__ import annotations
@@ -26,22 +28,31 @@ from riprs._log_checks import MAX_GAP as MAX_GAP
 from riprs._log_checks import MIN_TRAINING_SAMPLES as MIN_TRAINING_SAMPLES
 from riprs._log_checks import SATURATION_WARNING as SATURATION_WARNING
 from riprs._log_checks import IdentifyError, _check, _estimated_rows
+from riprs._riprs import HEADER_SETTINGS as _HEADER_SETTINGS
 from riprs._riprs import (
     IDENTIFY_MAX_SAMPLES,
     ConfigError,
     FurutaParams,
     Plant,
+    Spec,
+    header_rig_settings,
     identify_logs,
     lab_start,
     load_config,
     read_lab_file,
 )
+from riprs._riprs import IDENTIFY_MIN_HELDOUT_MOTION as MIN_HELDOUT_MOTION
+from riprs._riprs import IDENTIFY_PRIOR_RSE as PRIOR_RSE
 from riprs._riprs import LAB_KEYS as _LAB_KEYS
 from riprs._riprs import PARAMETERS as _PARAMETERS
 from riprs.log import RtLog, load_log
 
 PathLike = Union[str, "os.PathLike[str]"]
 LogLike = Union[PathLike, RtLog]
+
+#: The start sets by preset name: a held value of the start that differs from its preset's is
+#: the start file's own, measured (``rip_core::identify::IdentifyOptions::preset``).
+_PRESETS = {"paper": FurutaParams.paper, "qube_servo2": FurutaParams.qube_servo2}
 
 #: The order of ``[plant]`` keys written to an identified file.
 PLANT_KEYS = tuple(_PARAMETERS)
@@ -78,7 +89,16 @@ class IdentifyResult:
     std_errors : dict
         Standard error of each estimated parameter (same units; ``inf`` when not identifiable).
         From the sandwich covariance of ``rip_core::identify`` (coloured, unequal residuals
-        allowed for): 95 % intervals held the truth in 97 % of 50 re-identifications.
+        allowed for): 95 % intervals held the truth in 97 % of 50 re-identifications. The
+        priors of :attr:`held` are included (``Dr`` depends on ``Rm`` when ``km = kt``).
+    held : dict
+        The start set's values held at a preset's, not measured: name -> prior relative
+        standard deviation (``PRIOR_RSE``).
+    km_tied : bool
+        Whether ``km`` was held equal to ``kt`` (not measured).
+    not_done : tuple of str
+        Checks that were not done, neither passed nor failed: a log whose held-out part moves
+        too little to score a fit; each names the recording that would let it be done.
     fit_percent : ndarray, shape (n_logs, 2)
         Held-out fit (%) of ``[theta, alpha]`` per log, MATLAB ``compare``'s
         ``100 (1 - |y - yhat| / |y - mean(y)|)``; NaN without a held-out part.
@@ -120,7 +140,8 @@ class IdentifyResult:
     covariance : ndarray, shape (9, 9)
         Covariance of the natural logarithm of the estimated values, in the order of
         ``std_errors`` (``Jr``, ``Jp``: of the joint-axis inertias ``J0``, ``Jalpha``); infinite
-        rows for parameters the logs do not determine.
+        rows for parameters the logs do not determine. The logs' alone, given the held values
+        (without the priors of :attr:`held`, along which the dynamics do not change).
     held_out_motion : ndarray, shape (n_logs, 2)
         RMS deviation (rad) of ``[theta, alpha]`` over each log's held-out part; below
         ``MIN_HELDOUT_MOTION`` the fit is not scored (NaN, "not measurable").
@@ -168,18 +189,71 @@ class IdentifyResult:
     linear_rse: Dict[str, float] = dataclasses.field(default_factory=dict)
     plant_covariance: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
     settings: Dict[str, Dict[str, object]] = dataclasses.field(default_factory=dict)
+    held: Dict[str, float] = dataclasses.field(default_factory=dict)
+    km_tied: bool = False
+    not_done: Tuple[str, ...] = ()
 
     @property
     def trusted(self) -> bool:
-        """Whether every check of the verdict passed (no :attr:`problems`)."""
+        """Whether no check of the verdict failed (no :attr:`problems`); a check not done
+        (:attr:`not_done`) is not a pass, and the report says so."""
         return not self.problems
+
+    def held_text(self) -> str:
+        """What the fit held without the logs determining it: the preset's values with their
+        prior, and ``km = kt``; empty when nothing."""
+        parts = [
+            f"{n} = {getattr(self.start, n):.4g} (the {self.preset} preset's, not measured: "
+            f"prior +-{100 * r:.0f} %)"
+            for n, r in self.held.items()
+        ]
+        if parts:
+            parts[-1] += " (their priors are in the standard errors)"
+        if self.km_tied:
+            parts.append(
+                "km = kt (one constant of a DC motor in SI units; the logs determine only "
+                "Dr + kt km / Rm; give km in the lab file to hold it instead)"
+            )
+        return "; ".join(parts)
+
+    def verdict(self) -> List[str]:
+        """The verdict as lines: the checks failed (:attr:`problems`), not done
+        (:attr:`not_done`) or passed, and what was held (:meth:`held_text`)."""
+        lines = []
+        if self.problems:
+            lines.append("NOT TRUSTED: the model cannot be used as it is:")
+            lines += [f"  - {p}" for p in self.problems]
+        else:
+            checks = ["conditioning", "bounds", "plausibility"]
+            scored = [
+                n for n, f in zip(self.names, self.fit_percent, strict=True) if np.isfinite(f).any()
+            ]
+            if scored:
+                held_out = "held-out fit" + (
+                    f" of {', '.join(scored)}" if len(scored) < len(self.names) else ""
+                )
+                checks.insert(0, held_out)
+            lines.append(
+                "verdict: "
+                + ("every check passed" if not self.not_done else "checks passed")
+                + f" ({', '.join(checks)})"
+            )
+        if self.not_done:
+            lines.append("NOT DONE (neither passed nor failed):")
+            lines += [f"  - {p}" for p in self.not_done]
+        held = self.held_text()
+        if held:
+            lines.append(f"held, not determined by the logs: {held}")
+        return lines
 
     def report(self) -> str:
         """A plain-text report: parameters with standard errors, fits, diagnostics."""
         start = self.start.to_dict()
         lines = ["Identified parameters (start value -> estimate +- standard error):"]
-        for name, se in self.std_errors.items():
+        for i, (name, se) in enumerate(self.std_errors.items()):
             value = getattr(self.params, name)
+            # Jr's and Jp's errors are those of the joint-axis inertias the logs determine.
+            fitted = self.values[i] if i < len(self.values) else value
             note = ""
             if name in self.not_identifiable:
                 note = "  NOT IDENTIFIABLE from these logs"
@@ -187,12 +261,12 @@ class IdentifyResult:
                 note = "  at its bound"
             lines.append(
                 f"  {name:3s} {start[name]:12.5g} -> {value:12.5g} +- {se:9.2g}"
-                + (f" ({100 * se / value:.1f} %)" if value > 0 and math.isfinite(se) else "")
+                + (f" ({100 * se / fitted:.1f} %)" if fitted > 0 and math.isfinite(se) else "")
                 + note
             )
         fixed = [n for n in self.params.to_dict() if n not in self.std_errors]
         lines.append(
-            "  not estimated (start set; see the warnings if one changed): "
+            "  not estimated (start set or lab file; held values below the verdict): "
             + ", ".join(f"{n} = {getattr(self.params, n):.5g}" for n in fixed)
         )
         lines.append("")
@@ -224,16 +298,18 @@ class IdentifyResult:
             lines.append(f"warning: {w}")
         if self.problems:
             lines.append("")
-            lines.append("NOT TRUSTED: the model cannot be used as it is:")
-            lines += [f"  - {p}" for p in self.problems]
-        else:
-            lines.append("verdict: every check passed (held-out fit, conditioning, bounds, "
-                         "plausibility)")
+        lines += self.verdict()
         return "\n".join(lines)
 
     def to_toml(self, source: str = "") -> str:
         """The ``[plant]`` file of the identified rig (read by ``riprs compare --config``,
-        ``rip-rt run --config`` and ``rip-rt emulate --config``)."""
+        ``rip-rt run --config`` and ``rip-rt emulate --config``).
+
+        Raises
+        ------
+        IdentifyError
+            A file that their check would refuse (it is checked here, so never written).
+        """
         p = self.params.to_dict()
         head = [f"# Identified by riprs identify{' from ' + source if source else ''}."]
         if self.problems:
@@ -250,6 +326,16 @@ class IdentifyResult:
             head.append(
                 "# Lab measurements: " + ", ".join(f"{k} = {v!r}" for k, v in self.lab.items())
             )
+        if self.held or self.km_tied:
+            head.append(
+                "# Held: "
+                + ", ".join(
+                    [f"{n} (the preset's, prior +-{100 * r:.0f} %)" for n, r in self.held.items()]
+                    + (["km = kt"] if self.km_tied else [])
+                )
+            )
+        for note in self.not_done:
+            head.append(f"# Not done: {note.split(':')[0]}: held-out fit (nothing to score)")
         head.append(
             "# Verdict, lab values, fit report and parameter covariance: the .identification.toml "
             "file beside this one."
@@ -262,7 +348,14 @@ class IdentifyResult:
             if section in self.settings:
                 body += ["", f"[{section}]"]
                 body += [f"{k} = {_toml_value(v)}" for k, v in self.settings[section].items()]
-        return "\n".join(head + body) + "\n"
+        text = "\n".join(head + body) + "\n"
+        # The rig file's own check (riprs config's and rip-rt run's): a file it refuses is
+        # not written.
+        try:
+            Spec.from_toml(text)
+        except ConfigError as exc:
+            raise IdentifyError(f"the identified rig file would be refused: {exc}") from None
+        return text
 
     def identification_toml(self, source: str = "") -> str:
         """The identification file written beside the rig file (:func:`identification_path`):
@@ -291,7 +384,11 @@ class IdentifyResult:
             f"trusted = {'true' if self.trusted else 'false'}",
             "logs = [" + ", ".join(_toml_str(n) for n in self.names) + "]",
             "problems = [" + ", ".join(_toml_str(p) for p in self.problems) + "]",
+            "not_done = [" + ", ".join(_toml_str(p) for p in self.not_done) + "]",
             "warnings = [" + ", ".join(_toml_str(w) for w in self.warnings) + "]",
+            "# Start set's values held at a preset's (not measured): name = prior relative sd.",
+            "held = {" + ", ".join(f"{n} = {r!r}" for n, r in self.held.items()) + "}",
+            f"km_tied = {'true' if self.km_tied else 'false'}",
             "",
             "[lab]",
         ]
@@ -405,11 +502,23 @@ def _toml_str(text: str) -> str:
     return '"' + text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", " ") + '"'
 
 
+def _fit_title(result: IdentifyResult, log: int, output: int) -> str:
+    """A figure's title for one output's held-out fit; an output that was not scored says so
+    and why, not "nan %"."""
+    fit = result.fit_percent[log, output]
+    if math.isfinite(fit):
+        return f"fit {fit:.1f} % (held out)"
+    if result.holdout <= 0:
+        return "held-out fit: not done (nothing held out)"
+    motion = result.held_out_motion[log, output] if len(result.held_out_motion) else math.nan
+    return (
+        f"held-out fit: not scored (moves {motion:.3g} rad RMS, below {MIN_HELDOUT_MOTION:g} rad)"
+    )
+
+
 def _fit_text(value: float) -> str:
     """A held-out fit for reports: ``not measurable`` for NaN (no motion held out)."""
     return f"{value:6.1f}" if math.isfinite(value) else "not measurable"
-
-
 
 
 def _arrays(log: RtLog) -> Tuple[float, np.ndarray, np.ndarray]:
@@ -471,20 +580,10 @@ def _start(start: Union[str, FurutaParams, PathLike]) -> Tuple[FurutaParams, str
     return spec.params, spec.plant.preset
 
 
-#: The ``rip-rt excite`` log header's sensor, device and safety settings and the rig file's
-#: section and key each is written to: the rig file then holds what ``rip-rt run`` needs.
-HEADER_SETTINGS = {
-    "period_ms": ("loop", "period_ms", float),
-    "arm_counts_per_rev": ("device", "arm_counts_per_rev", int),
-    "pendulum_counts_per_rev": ("device", "pendulum_counts_per_rev", int),
-    "pendulum_zero": ("device", "pendulum_zero", str),
-    "arm_sign": ("device", "arm_sign", float),
-    "pendulum_sign": ("device", "pendulum_sign", float),
-    # The limits the rig was excited within (a 6 V motor's file says 6): without them the
-    # identified file would run the rig at rip-rt's defaults.
-    "voltage_limit": ("safety", "voltage_limit", float),
-    "arm_limit": ("safety", "arm_limit", float),
-}
+#: The ``rip-rt excite`` log header's loop, sensor, device and safety settings and the rig file
+#: key each is written to (``rip_core::identify::header``, the one definition): the rig file
+#: then holds what ``rip-rt run`` needs. Each value is checked by the rig file's own check.
+HEADER_SETTINGS: Dict[str, str] = dict(_HEADER_SETTINGS)
 
 
 def _number(text: str) -> float:
@@ -495,53 +594,49 @@ def _number(text: str) -> float:
 
 
 def _header_settings(
-    names: Sequence[str], logs: Sequence[RtLog]
+    names: Sequence[str], logs: Sequence[RtLog], sources: Sequence[str] | None = None
 ) -> Tuple[Dict[str, Dict[str, object]], Dict[str, float]]:
     """The rig file's ``[loop]``, ``[device]``, ``[sensor]`` and ``[safety]`` settings and the
     lab values recorded in the logs' headers (``rip-rt excite``); the logs must agree, else an
-    error names the two logs and the key."""
-    found: Dict[str, Tuple[str, str]] = {}
-    for name, log in zip(names, logs, strict=True):
+    error names the two logs and the key. A value the rig file would refuse is an error naming
+    the log (``sources``: its file) and the header key."""
+    found: Dict[str, Tuple[str, str, str]] = {}
+    sources = list(sources) if sources is not None else list(names)
+    for name, source, log in zip(names, sources, logs, strict=True):
         for key, value in log.meta.items():
-            if HEADER_SETTINGS.get(key, ("",))[0] == "safety":
+            if HEADER_SETTINGS.get(key, "").startswith("safety."):
                 # Limits may differ from run to run (a gentler chirp): the rig file keeps the
                 # tightest, checked below.
                 if key in found and _number(found[key][1]) <= _number(value):
                     continue
-                found[key] = (name, value)
+                found[key] = (name, value, source)
             elif key in HEADER_SETTINGS or key.startswith("lab."):
                 if key in found and found[key][1] != value:
                     raise IdentifyError(
                         f"{name}: header {key}: {value}, but {found[key][0]} says "
                         f"{found[key][1]}: the logs were recorded with different settings"
                     )
-                found.setdefault(key, (name, value))
-    sections: Dict[str, Dict[str, object]] = {}
-    for key, (section, field, kind) in HEADER_SETTINGS.items():
-        if key in found:
-            name, text = found[key]
-            try:
-                value = kind(float(text)) if kind is int else kind(text)
-            except ValueError:
-                raise IdentifyError(
-                    f"{name}: header {key}: not a {kind.__name__}: {text!r}"
-                ) from None
-            sections.setdefault(section, {})[field] = value
-    # The counts per revolution are the rig file's one resolution, [sensor] encoder_counts.
-    device = sections.get("device", {})
-    names = ("arm_counts_per_rev", "pendulum_counts_per_rev")
-    counts = [device.pop(k) for k in names if k in device]
-    if len(counts) == 2:
-        sections["sensor"] = {"encoder_counts": counts}
+                found.setdefault(key, (name, value, source))
+    try:
+        sections = header_rig_settings(
+            [(source, key, text) for key, (_, text, source) in found.items()]
+        )
+    except ConfigError as exc:
+        raise IdentifyError(str(exc)) from None
     lab: Dict[str, float] = {}
-    for key, (name, text) in found.items():
+    for key, (_, text, source) in found.items():
         if key.startswith("lab."):
             try:
                 value = float(text)
             except ValueError:
-                raise IdentifyError(f"{name}: header {key}: not a number: {text!r}") from None
-            lab[key[4:]] = int(value) if key.endswith("_counts") else value
-    return sections, lab
+                raise IdentifyError(f"{source}: header {key}: not a number: {text!r}") from None
+            lab[key[4:]] = int(value) if key.endswith("_counts") and value.is_integer() else value
+            # The lab file's rule (rip_core::identify::lab), naming the log that recorded it.
+            try:
+                lab_start(FurutaParams.qube_servo2(), [(key[4:], value)])
+            except ConfigError as exc:
+                raise IdentifyError(f"{source}: header {exc}") from None
+    return dict(sections), lab
 
 
 def identify(
@@ -563,8 +658,11 @@ def identify(
         ``rip-rt excite`` (or ``rip-rt run``) CSV logs, all with the same sample time, pendulum
         hanging down.
     start : {"paper", "qube_servo2"}, FurutaParams or path
-        Start set: fixes ``mp``, ``Lp``, ``mr``, ``Rm``, ``km`` and ``g`` (weigh and measure
-        the pendulum and put them in a ``[plant]`` file) and gives the initial guess.
+        Start set: fixes ``mp``, ``Lp``, ``mr``, ``Rm`` and ``g`` (weigh and measure the
+        pendulum and put them in a ``[plant]`` file or the lab file) and gives the initial
+        guess. Those of them still at the preset's values are held with a prior of
+        ``PRIOR_RSE`` (:attr:`IdentifyResult.held`); ``km`` is held equal to ``kt`` unless the
+        lab file gives it.
     holdout : float
         Fraction of each log, at its end, kept out of the fit for validation (0 to 0.9).
     segment : float
@@ -613,13 +711,16 @@ def identify(
     lab_values = read_lab(lab) if lab is not None and not isinstance(lab, dict) else dict(lab or {})
     loaded: List[RtLog] = []
     names: List[str] = []
+    sources: List[str] = []
     rows = 0
     for i, item in enumerate(logs):
         if isinstance(item, RtLog):
             names.append(f"log {i}")
+            sources.append(names[-1])
             rows += len(item.t)
         else:
             names.append(Path(os.fspath(item)).stem)
+            sources.append(os.fspath(item))
             rows += _estimated_rows(names[-1], os.fspath(item))
         if rows > IDENTIFY_MAX_SAMPLES:
             raise IdentifyError(
@@ -631,7 +732,7 @@ def identify(
         loaded.append(item if isinstance(item, RtLog) else load_log(item))
     if not loaded:
         raise IdentifyError("logs: at least one log is needed")
-    settings, header_lab = _header_settings(names, loaded)
+    settings, header_lab = _header_settings(names, loaded, sources)
     # The lab file given here, else the one rip-rt excite --lab recorded in the logs.
     if lab is None:
         lab_values = header_lab
@@ -657,6 +758,8 @@ def identify(
         substeps=substeps,
         names=names,
         fixed=["Lr"] if "Lr" in lab_values else [],
+        measured=[k for k in lab_values if k in _PARAMETERS],
+        preset=_PRESETS[preset]() if preset in _PRESETS else None,
     )
     if raw["not_identifiable"]:
         notes.append(
@@ -712,6 +815,9 @@ def identify(
         lab=dict(lab_values),
         values=tuple(raw["values"]),
         settings=settings,
+        held={name: prior for name, _, prior in raw["held"]},
+        km_tied=raw["km_tied"],
+        not_done=tuple(raw["not_done"]),
     )
     if strict and result.problems:
         raise UntrustedIdentification(
@@ -742,7 +848,7 @@ def plot_fit(result: IdentifyResult, log: RtLog, name: str, path: PathLike) -> P
             ax.axvspan(cut, t[-1], color="0.9", zorder=0, label="held out")
         ax.set_ylabel(label)
         if i is not None:
-            ax.set_title(f"fit {result.fit_percent[i, j]:.1f} % (held out)", fontsize=9)
+            ax.set_title(_fit_title(result, i, j), fontsize=9)
     axes[0].legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("t (s)")
     fig.suptitle(f"{name}: measured vs simulated")
@@ -754,6 +860,8 @@ def plot_fit(result: IdentifyResult, log: RtLog, name: str, path: PathLike) -> P
 
 
 __all__ = [
+    "MIN_HELDOUT_MOTION",
+    "PRIOR_RSE",
     "IdentifyError",
     "IdentifyResult",
     "IdentifyWarning",

@@ -3,6 +3,7 @@
 use numpy::{PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use rip_core::identify::header::rig_settings;
 use rip_core::identify::lab::Lab;
 use rip_core::identify::{identify, IdentifyOptions, LogData, FREE};
 use rip_core::RipError;
@@ -26,12 +27,17 @@ use crate::plant::PyFurutaParams;
 /// units), ``values`` (those values: ``Jr``, ``Jp`` as the joint-axis inertias), ``linear_entries``
 /// and ``linear_rse`` (relative standard errors of those entries of the continuous upright
 /// ``[A B]`` and, last, of its unstable eigenvalue) and ``problems`` (the verdict: why not to trust the result, empty when
-/// trusted; ``names`` name the logs in it). ``fixed`` (Python names of ``free``) are held at
-/// the start's values. Ctrl-C stops it (``KeyboardInterrupt``).
+/// trusted; ``names`` name the logs in it), ``not_done`` (checks not done, naming the log and
+/// the recording that would do them), ``held`` (``(name, value, prior_rse)`` of the start's
+/// values held at a preset's, their priors in ``std_errors``) and ``km_tied`` (``km`` held
+/// equal to ``kt``). ``fixed`` (Python names of ``free``) are held at the start's values;
+/// ``measured`` names the start's held values that were measured (``km`` among them: else
+/// ``km = kt``), and ``preset`` is the preset the start is based on (a held value differing
+/// from its is measured). Ctrl-C stops it (``KeyboardInterrupt``).
 #[pyfunction]
-#[pyo3(signature = (logs, start, *, segment=Real(2.0), holdout=Real(0.25), max_iter=Count::of(60), substeps=Count::of(4), names=Vec::new(), fixed=Vec::new()))]
+#[pyo3(signature = (logs, start, *, segment=Real(2.0), holdout=Real(0.25), max_iter=Count::of(60), substeps=Count::of(4), names=Vec::new(), fixed=Vec::new(), measured=Vec::new(), preset=None))]
 #[pyo3(
-    text_signature = "(logs, start, *, segment=2.0, holdout=0.25, max_iter=60, substeps=4, names=[], fixed=[])"
+    text_signature = "(logs, start, *, segment=2.0, holdout=0.25, max_iter=60, substeps=4, names=[], fixed=[], measured=[], preset=None)"
 )]
 #[allow(clippy::type_complexity, clippy::too_many_arguments)]
 fn identify_logs<'py>(
@@ -44,6 +50,8 @@ fn identify_logs<'py>(
     substeps: Count,
     names: Vec<String>,
     fixed: Vec<String>,
+    measured: Vec<String>,
+    preset: Option<PyFurutaParams>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let mut data = Vec::with_capacity(logs.len());
     for (i, (ts, u, y)) in logs.iter().enumerate() {
@@ -70,6 +78,8 @@ fn identify_logs<'py>(
         substeps: substeps.get("substeps")?,
         names,
         fixed,
+        measured,
+        preset: preset.map(|p| p.inner),
         ..Default::default()
     };
     let result = interruptible(py, |cancel| identify(&data, &options, cancel), |_| Ok(()))?.py()?;
@@ -137,6 +147,16 @@ fn identify_logs<'py>(
             .collect::<Vec<_>>(),
     )?;
     d.set_item("problems", result.problems)?;
+    d.set_item("not_done", result.not_done)?;
+    d.set_item(
+        "held",
+        result
+            .held
+            .iter()
+            .map(|h| (h.name, h.value, h.prior_rse))
+            .collect::<Vec<_>>(),
+    )?;
+    d.set_item("km_tied", result.km_tied)?;
     d.set_item("values", result.values.to_vec())?;
     d.set_item(
         "linear_entries",
@@ -175,11 +195,36 @@ fn lab_start(start: PyFurutaParams, lab: Vec<(String, f64)>) -> PyResult<PyFurut
     })
 }
 
+/// The identified rig file's ``[loop]``, ``[sensor]``, ``[device]`` and ``[safety]`` tables
+/// (a dict of dicts) of the logs' header settings (``rip_core::identify::header``): ``given``
+/// is ``(log, header key, text)`` per setting, the log that recorded it. Checked as the rig
+/// file is; raises ``ConfigError`` naming the log and ``header KEY``.
+#[pyfunction]
+fn header_rig_settings(py: Python<'_>, given: Vec<(String, String, String)>) -> PyResult<PyObject> {
+    let table = rig_settings(
+        given
+            .iter()
+            .map(|(log, k, v)| (log.as_str(), k.as_str(), v.as_str())),
+    )
+    .map_err(|e| crate::spec::ConfigError::new_err(e.to_string()))?;
+    crate::spec::from_toml(py, &toml::Value::Table(table))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(header_rig_settings, m)?)?;
+    m.add(
+        "HEADER_SETTINGS",
+        rip_core::identify::header::HEADER_SETTINGS.to_vec(),
+    )?;
     m.add_function(wrap_pyfunction!(lab_start, m)?)?;
     m.add_function(wrap_pyfunction!(identify_logs, m)?)?;
     m.add_function(wrap_pyfunction!(read_lab_file, m)?)?;
     m.add("LAB_KEYS", rip_core::identify::lab::LAB_KEYS.to_vec())?;
     m.add("IDENTIFY_MAX_SAMPLES", rip_core::identify::MAX_SAMPLES)?;
+    m.add(
+        "IDENTIFY_MIN_HELDOUT_MOTION",
+        rip_core::identify::MIN_HELDOUT_MOTION,
+    )?;
+    m.add("IDENTIFY_PRIOR_RSE", rip_core::identify::PRIOR_RSE)?;
     Ok(())
 }

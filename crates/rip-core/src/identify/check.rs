@@ -126,6 +126,50 @@ pub(super) fn log_names(logs: &[LogData], names: &[String]) -> String {
         .join(", ")
 }
 
+/// The logs whose held-out fit could not be scored (module docs, "Held-out fit"): none of
+/// their outputs moves [`MIN_HELDOUT_MOTION`] over the held-out part, or there is none. Each
+/// sentence names the log, what it held out and the recording that would let the check be
+/// done.
+pub(super) fn not_done(
+    logs: &[LogData],
+    names: &[String],
+    fit: &[[f64; 2]],
+    motion: &[[f64; 2]],
+    holdout: f64,
+) -> Vec<String> {
+    let mut out = Vec::new();
+    for (l, log) in logs.iter().enumerate() {
+        if fit[l].iter().any(|f| !f.is_nan()) {
+            continue;
+        }
+        let name = names
+            .get(l)
+            .cloned()
+            .unwrap_or_else(|| format!("logs[{l}]"));
+        let train = ((1.0 - holdout) * log.u.len() as f64).floor() as usize;
+        let seconds = (log.u.len() - train) as f64 * log.ts;
+        let percent = 100.0 * holdout;
+        if holdout == 0.0 || log.u.len() - train < 20 {
+            out.push(format!(
+                "{name}: held-out fit not done: nothing of the log is held out (holdout \
+                 {holdout}); identify with a held-out part (holdout 0.25: the last quarter of \
+                 each log)"
+            ));
+            continue;
+        }
+        out.push(format!(
+            "{name}: held-out fit not done: its held-out part (the last {percent:.0} %, \
+             {seconds:.1} s) moves the arm {:.3} rad and the pendulum {:.4} rad (RMS), less \
+             than the {MIN_HELDOUT_MOTION} rad a fit is scored on; record it with the \
+             excitation running to its end (a chirp or PRBS run, or a free swing that still \
+             swings), so that its last {percent:.0} % moves the arm or the pendulum by at \
+             least {MIN_HELDOUT_MOTION} rad RMS, or add such a log",
+            motion[l][0], motion[l][1]
+        ));
+    }
+    out
+}
+
 /// What [`verdict`] judges.
 pub(super) struct Verdict<'a> {
     pub(super) logs: &'a [LogData],

@@ -96,7 +96,9 @@ impl Lab {
     /// The identification's start set: `start` with the measured parameters in place. A
     /// measured link's centroidal inertia restarts as that of a uniform rod
     /// ([`FurutaParams::rod_inertia`]), since its old inertia belongs to another mass and
-    /// length; `km = kt` (SI units, the same motor constant) when only one is given.
+    /// length; a measured `km` is the start of `kt` too (SI units, the same motor constant).
+    /// A measured `kt` alone leaves `km` as it is: not measured, the fit holds it equal to
+    /// `kt` ([`super::IdentifyOptions::km_tied`]).
     pub fn start(&self, start: &FurutaParams) -> FurutaParams {
         let mut p = *start;
         for (key, value) in &self.values {
@@ -105,10 +107,8 @@ impl Lab {
             }
         }
         let given = |param: Param| self.get(param.name()).is_some();
-        match (given(Param::Km), given(Param::Kt)) {
-            (true, false) => p.kt = p.km,
-            (false, true) => p.km = p.kt,
-            _ => {}
+        if given(Param::Km) && !given(Param::Kt) {
+            p.kt = p.km;
         }
         if given(Param::Mp) || given(Param::Lp) {
             p.jp = FurutaParams::rod_inertia(p.mp, p.lp);

@@ -19,8 +19,11 @@
 //! ```
 //!
 //! `kt` is the motor constant the logs determine (the torque per volt `kt/rm`, with `rm` from
-//! the start set); back-EMF and the arm's viscous friction are one coefficient `c`, so `km`
-//! stays at the start set's value and `dr` takes the rest. The optimisation works on `J₀` and
+//! the start set); back-EMF and the arm's viscous friction are one coefficient `c`: the free
+//! swing's 0 V shorts the windings, so no log separates them. A DC motor has one constant in SI
+//! units (torque per ampere = back-EMF per radian per second), so `km = kt` is held unless
+//! `km` was measured ([`IdentifyOptions::measured`]), and `dr = c − kt²/rm` takes the rest;
+//! with a measured `km`, `dr = c − kt km/rm`. The optimisation works on `J₀` and
 //! `Jα` themselves; when the start's `mp`, `lp` leave no room for a positive `jp` the pendulum
 //! is taken as a uniform rod of the same `mp lp` (so `mp` and `lp` change, `G` does not), and
 //! when its `mr` leaves no room for a positive `jr` the arm is taken as a uniform rod and `mr`
@@ -81,8 +84,23 @@
 //! the residuals), `L` = 25 lags within each segment (Newey–West). The residuals of an
 //! output-error fit with quantised encoders are neither white nor of equal variance on the two
 //! outputs; `σ̂² F⁻¹` (which assumes both) gave 95 % intervals that held the truth in 85 % of
-//! re-identifications. `se(log pₖ) = √Cov(log p)ₖₖ` and `se(pₖ) = pₖ se(log pₖ)`. The
-//! condition number and rank of `F`
+//! re-identifications. `se(log pₖ) = √Cov(log p)ₖₖ` and `se(pₖ) = pₖ se(log pₖ)`.
+//!
+//! That covariance is the logs' alone, given the held values of the start set. A held value
+//! that was not measured ([`HELD`] not in [`IdentifyOptions::measured`]: a preset's) carries a
+//! prior relative standard deviation [`PRIOR_RSE`], and what depends on it inherits it: with
+//! `sₕ = ∂ log p / ∂ log h` at the same dynamics (`mp`, `lp` set the common factor of the
+//! lumped quantities; `rm` splits `b` and `c` into `kt` and `dr`),
+//!
+//! ```text
+//! se(pₖ)² = pₖ² (Cov(log p)ₖₖ + Σₕ (PRIOR_RSE sₕ,ₖ)²)
+//! ```
+//!
+//! so that `dr = c − kt²/rm` with a preset's `rm` is known no better than `rm` allows. The
+//! upright linearisation does not move along `sₕ` (the dynamics are the same), so its entries'
+//! errors, the verdict's checks and [`IdentifyResult::covariance`] use the logs' part alone.
+//!
+//! The condition number and rank of `F`
 //! (eigenvalues below `10⁻¹²` of the largest count as zero) measure identifiability, over the
 //! parameters not on a bound (those are held there: a friction or dead zone of zero carries no
 //! information, and their covariance is zero); a
@@ -97,7 +115,9 @@
 //! simulation would score the chaos rather than the model), and each output's fit
 //! is MATLAB's normalised RMSE fit `100 (1 − ‖y − ŷ‖ / ‖y − mean(y)‖)` %. An output whose
 //! held-out part moves less than [`MIN_HELDOUT_MOTION`] (root-mean-square deviation) is not
-//! scored: its fit is NaN, "not measurable", since `‖y − mean(y)‖` is then noise.
+//! scored: its fit is NaN, "not measurable", since `‖y − mean(y)‖` is then noise. A log none
+//! of whose outputs is scored has had no held-out check: it is listed in
+//! [`IdentifyResult::not_done`] (never as passed) with the recording that would score it.
 //!
 //! # Verdict
 //!
@@ -106,7 +126,8 @@
 //! would fix it; callers must refuse to use a result with problems (`riprs identify` exits
 //! non-zero and writes no rig file). The checks:
 //!
-//! - the held-out fit of every scored output is at least [`MIN_FIT_PERCENT`];
+//! - the held-out fit of every scored output is at least [`MIN_FIT_PERCENT`] (a log with no
+//!   scored output is not checked: [`IdentifyResult::not_done`]);
 //! - `F` has full rank and a condition number of at most [`MAX_CONDITION`];
 //! - every parameter of the upright linearisation ([`LINEAR`]) has a relative standard error
 //!   of at most [`MAX_RSE`];
@@ -131,6 +152,7 @@ use crate::linalg::Mat;
 use crate::plant::{FurutaParams, Param, State};
 
 mod check;
+pub mod header;
 pub mod lab;
 mod params;
 mod problem;
@@ -160,6 +182,18 @@ pub const FREE: [Param; 9] = [
     Param::Vd,
 ];
 const NP: usize = FREE.len();
+
+/// The start set's parameters that the fit holds (module docs): the pendulum's mass and
+/// length and the arm's mass, which fix the scale, and the motor's resistance and back-EMF
+/// constant (`km = kt` unless measured). Those not measured hold a preset's value, with the
+/// prior [`PRIOR_RSE`].
+pub const HELD: [Param; 5] = [Param::Mp, Param::Lp, Param::Mr, Param::Rm, Param::Km];
+
+/// Relative standard deviation of a held value that was not measured (a preset's): a preset's
+/// value is one rig's, and 30 % stands for a rig of its class. The shared envelope
+/// ([`crate::rig`]) spans factors of 3 to 5 in these values, so a rig outside the preset's
+/// class is off by more than the prior says: measure the value (the lab file).
+pub const PRIOR_RSE: f64 = 0.3;
 
 /// Relative standard error above which a parameter counts as not identifiable.
 pub const NOT_IDENTIFIABLE_RSE: f64 = 0.5;
@@ -270,6 +304,52 @@ pub struct IdentifyOptions {
     /// Names (of [`FREE`]) held at the start set's values: measured on the rig (a lab file's
     /// `Lr`), so not estimated; their standard error is zero.
     pub fixed: Vec<String>,
+    /// Names (of [`HELD`]) measured on the rig (a lab file's): held at the start set's value
+    /// without a prior. `km` not measured is held equal to `kt`.
+    pub measured: Vec<String>,
+    /// The preset the start set is based on: a [`HELD`] value not measured that differs from
+    /// its value is taken as measured (a start file's own); `None`: every one not measured is
+    /// the preset's.
+    pub preset: Option<FurutaParams>,
+}
+
+/// A start set's value the fit held without a measurement, and its prior.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Held {
+    /// The parameter's name ([`HELD`]).
+    pub name: &'static str,
+    /// The value held (the preset's).
+    pub value: f64,
+    /// Its prior relative standard deviation ([`PRIOR_RSE`]), included in the standard errors
+    /// of what depends on it.
+    pub prior_rse: f64,
+}
+
+impl IdentifyOptions {
+    /// Whether `km` is held equal to `kt` (not measured; module docs).
+    pub fn km_tied(&self) -> bool {
+        !self.is_measured(Param::Km)
+    }
+
+    fn is_measured(&self, param: Param) -> bool {
+        self.measured.iter().any(|n| n == param.name())
+            || self
+                .preset
+                .is_some_and(|p| p.get(param) != self.start.get(param))
+    }
+
+    /// The held values that are a preset's (not measured), each with its prior; `km` tied to
+    /// `kt` is not one of them.
+    pub fn held_priors(&self) -> Vec<Held> {
+        HELD.iter()
+            .filter(|&&h| h != Param::Km && !self.is_measured(h))
+            .map(|&h| Held {
+                name: h.name(),
+                value: self.start.get(h),
+                prior_rse: PRIOR_RSE,
+            })
+            .collect()
+    }
 }
 
 impl Default for IdentifyOptions {
@@ -283,6 +363,8 @@ impl Default for IdentifyOptions {
             tolerance: 1e-6,
             names: Vec::new(),
             fixed: Vec::new(),
+            measured: Vec::new(),
+            preset: None,
         }
     }
 }
@@ -293,8 +375,17 @@ pub struct IdentifyResult {
     /// The identified parameters (the start set's fixed ones unchanged).
     pub params: FurutaParams,
     /// Standard error of each of [`FREE`] (same units; `inf` when not identifiable; for `jr`
-    /// and `jp` those of the joint-axis inertias `J₀` and `Jα`, which the logs determine).
+    /// and `jp` those of the joint-axis inertias `J₀` and `Jα`, which the logs determine),
+    /// the priors of [`held`](Self::held) included (module docs).
     pub std_errors: [f64; NP],
+    /// The start set's values held at a preset's, each with its prior (module docs).
+    pub held: Vec<Held>,
+    /// Whether `km` was held equal to `kt` (not measured).
+    pub km_tied: bool,
+    /// Checks not done, one sentence each naming the log and the recording that would let it
+    /// be done: a log whose held-out part moves too little for any output to be scored
+    /// ([`MIN_HELDOUT_MOTION`]). Neither passed nor failed.
+    pub not_done: Vec<String>,
     /// Held-out fit (%) per log and output `[θ, α]`; NaN for a log without a held-out part
     /// and for an output that does not move over it (not measurable, [`MIN_HELDOUT_MOTION`]).
     pub fit_percent: Vec<[f64; 2]>,
@@ -332,7 +423,8 @@ pub struct IdentifyResult {
     /// joint-axis inertias `J₀`, `Jα` in place of `jr`, `jp` (module docs).
     pub values: [f64; NP],
     /// Covariance of `log` of [`FREE`]'s optimisation values (`jr`, `jp`: of `J₀`, `Jα`),
-    /// `σ̂² F⁺` (module docs), row-major `9 × 9`; rows and columns of parameters in a null
+    /// the sandwich (module docs), row-major `9 × 9`: the logs' alone, given the held values
+    /// (without the priors of [`held`](Self::held)); rows and columns of parameters in a null
     /// direction are infinite.
     pub covariance: Vec<f64>,
     /// Covariance of [`FREE`] as plant parameters (SI units; `jr`, `jp` the centroidal
@@ -524,7 +616,8 @@ fn fit(
         held: std::array::from_fn(|k| options.fixed.iter().any(|n| n == FREE[k].name())),
     };
     let mut logp: [f64; NP] = p0.map(f64::ln);
-    let params_of = |logp: &[f64; NP]| with(*start, &logp.map(f64::exp));
+    let tie_km = options.km_tied();
+    let params_of = |logp: &[f64; NP]| with(*start, &logp.map(f64::exp), tie_km);
     let names = log_names(logs, &options.names);
     let cx = Context {
         problem: &problem,
@@ -563,6 +656,8 @@ fn fit(
     }
     let params = params_of(&logp);
     let u = stats::uncertainty(&segments, &logp, &bounds);
+    let held = options.held_priors();
+    let std_errors = stats::with_priors(&u, &params, &held, tie_km);
     let training_fit_percent = stats::training_fit(&problem, &segments);
     let final_plant = problem
         .plant(&params)
@@ -571,6 +666,13 @@ fn fit(
         stats::held_out(&problem, &final_plant, options.holdout, seg_len, cancel)?;
     let (ad, bd) = final_plant.0.linearize_discrete(&State::zeros(), 0.0, ts)?;
     let linear_rse = stats::linear_rse(&params_of, &logp, &u.covariance);
+    let not_done = check::not_done(
+        logs,
+        &options.names,
+        &fit,
+        &held_out_motion,
+        options.holdout,
+    );
     let (problems, restartable) = verdict(&Verdict {
         logs,
         names: &options.names,
@@ -589,7 +691,10 @@ fn fit(
     let plant_covariance = stats::plant_covariance(&params, &values, &u.covariance);
     let result = IdentifyResult {
         params,
-        std_errors: u.std_errors,
+        std_errors,
+        held,
+        km_tied: tie_km,
+        not_done,
         fit_percent: fit,
         held_out_motion,
         training_fit_percent,

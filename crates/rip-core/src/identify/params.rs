@@ -2,7 +2,7 @@
 //! [`super`], "Model and parameters").
 
 use super::NP;
-use crate::plant::FurutaParams;
+use crate::plant::{FurutaParams, Param};
 
 /// The arm's inertia about the motor axis, `J₀ = jr + mr lr²/4 + mp lr²`.
 pub(super) fn arm_inertia(p: &FurutaParams) -> f64 {
@@ -39,9 +39,13 @@ pub(super) fn get(p: &FurutaParams, k: usize) -> f64 {
 /// split as `jr = J₀ − mr lr²/4 − mp lr²` with the start's `mr` while that is positive;
 /// otherwise the arm is taken as a uniform rod (`mr = 3 (J₀ − mp lr²)/lr²`, `jr = mr lr²/12`).
 /// `J₀ ≤ mp lr²` gives an invalid set (no arm can have it), which [`Plant::new`] refuses.
-pub(super) fn with(mut p: FurutaParams, v: &[f64; NP]) -> FurutaParams {
+/// With `tie_km`, `km = kt` (one motor constant, SI units; module docs).
+pub(super) fn with(mut p: FurutaParams, v: &[f64; NP], tie_km: bool) -> FurutaParams {
     let [lr, j0, ja, kt, dr, dp, cr, cp, vd] = *v;
     [p.lr, p.kt, p.dr, p.dp, p.cr, p.cp, p.vd] = [lr, kt, dr, dp, cr, cp, vd];
+    if tie_km {
+        p.km = kt;
+    }
     let jp = ja - p.mp * p.lp * p.lp / 4.0;
     if jp > 0.0 {
         p.jp = jp;
@@ -74,4 +78,31 @@ pub(super) const CEILING: [f64; NP] = [1.0, 1.0, 1.0, 10.0, 0.1, 0.01, 0.1, 0.00
 pub(super) fn initial(start: &FurutaParams) -> [f64; NP] {
     let floors = [0.0, 0.0, 0.0, 0.0, 1e-4, 1e-5, 1e-3, 1e-5, 0.1];
     std::array::from_fn(|k| get(start, k).max(floors[k]))
+}
+
+/// How the optimisation's values of `p` move with a held parameter at the same dynamics:
+/// `∂ log v / ∂ log h` with the lumped quantities (module docs of [`super`]) held up to their
+/// common factor. `mp` and `lp` set that factor (`G = mp g lp/2`): `J₀`, `Jα`, `b`, `c`, `dp`,
+/// `cr`, `cp` scale with it, `lr = 2 m₁₂/(mp lp)` and `vd` do not; so `kt = b rm` scales, and
+/// `dr = c − kt km/rm` as `1 − kt km/(rm dr)` when `km = kt` (`dr = c − b² rm`), else as
+/// `c`. `rm` moves `kt = b rm` and, with `km = kt`, `dr` by `−kt²/(rm dr)`. `mr` moves none
+/// of them (only the split of `J₀` into `jr`). The prior of a held parameter reaches the
+/// estimates' standard errors through these (module docs, "Uncertainty and identifiability").
+pub(super) fn held_sensitivity(p: &FurutaParams, held: Param, tie_km: bool) -> [f64; NP] {
+    let emf = if tie_km {
+        p.kt * p.km / (p.rm * p.dr)
+    } else {
+        0.0
+    };
+    match held {
+        Param::Mp | Param::Lp => [0.0, 1.0, 1.0, 1.0, 1.0 - emf, 1.0, 1.0, 1.0, 0.0],
+        Param::Rm => [0.0, 0.0, 0.0, 1.0, -emf, 0.0, 0.0, 0.0, 0.0],
+        // km held at a value: dr = c − b km takes its change.
+        Param::Km => {
+            let mut s = [0.0; NP];
+            s[4] = -p.kt * p.km / (p.rm * p.dr);
+            s
+        }
+        _ => [0.0; NP],
+    }
 }

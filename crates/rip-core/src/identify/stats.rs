@@ -5,11 +5,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use nalgebra::{DMatrix, SMatrix, SVector, SymmetricEigen};
 
+use super::params::held_sensitivity;
 use super::problem::{fit_initial_state, fit_percent, rms_deviation, Problem, Segment};
 use super::solve::Bounds;
-use super::{FREE, MIN_HELDOUT_MOTION, NOT_IDENTIFIABLE_RSE, NP};
+use super::{Held, FREE, MIN_HELDOUT_MOTION, NOT_IDENTIFIABLE_RSE, NP};
 use crate::error::{Result, RipError};
-use crate::plant::{FurutaParams, Plant};
+use crate::plant::{FurutaParams, Param, Plant};
 
 /// What the information matrix says about the estimates.
 pub(super) struct Uncertainty {
@@ -167,6 +168,35 @@ pub(super) fn uncertainty(segments: &[Segment], logp: &[f64; NP], bounds: &Bound
         condition_number,
         rank,
     }
+}
+
+/// The standard errors of `u` with the priors of the `held` values added (module docs):
+/// `se(pₖ)² = pₖ² (Cov(log p)ₖₖ + Σₕ (priorₕ sₕ,ₖ)²)`, the priors independent. An infinite
+/// error (a parameter the logs do not determine) stays infinite.
+pub(super) fn with_priors(
+    u: &Uncertainty,
+    p: &FurutaParams,
+    held: &[Held],
+    tie_km: bool,
+) -> [f64; NP] {
+    let sensitivities: Vec<([f64; NP], f64)> = held
+        .iter()
+        .filter_map(|h| Param::from_name(h.name).map(|param| (param, h.prior_rse)))
+        .map(|(param, prior)| (held_sensitivity(p, param, tie_km), prior))
+        .collect();
+    std::array::from_fn(|k| {
+        let rse = u.rse[k];
+        if !rse.is_finite() {
+            return u.std_errors[k];
+        }
+        let prior: f64 = sensitivities.iter().map(|(s, r)| (r * s[k]).powi(2)).sum();
+        let value = if rse > 0.0 {
+            u.std_errors[k] / rse
+        } else {
+            super::params::get(p, k)
+        };
+        value * (rse * rse + prior).sqrt()
+    })
 }
 
 /// The fit over each log's training segments (each from its estimated initial state).

@@ -195,6 +195,55 @@ fn a_held_out_part_at_rest_is_not_scored() {
     assert!(result.held_out_motion[0]
         .iter()
         .all(|m| *m < MIN_HELDOUT_MOTION));
+    // Not scored is not passed: the check is listed as not done, with what to record.
+    assert_eq!(result.not_done.len(), 1, "{:?}", result.not_done);
+    assert!(result.not_done[0].starts_with("logs[0]: held-out fit not done"));
+    assert!(result.not_done[0].contains(&format!("at least {MIN_HELDOUT_MOTION} rad")));
+}
+
+/// A held value's prior reaches the estimates along `params::held_sensitivity`: moving the
+/// held value and the estimates along it must leave the dynamics as they are (the logs cannot
+/// tell the two apart), while moving the held value alone must not.
+#[test]
+fn the_held_values_move_the_estimates_along_directions_of_equal_dynamics() {
+    let truth = hidden();
+    let states = [
+        State::new(0.3, -1.2, 2.5, 4.0),
+        State::new(-0.8, 2.0, 0.4, -3.0),
+        State::new(0.0, 0.1, std::f64::consts::PI - 0.2, 0.5),
+    ];
+    let derivatives = |p: &FurutaParams| -> Vec<f64> {
+        let plant = Plant::new(*p).unwrap();
+        states
+            .iter()
+            .flat_map(|x| [-4.0, 0.2, 3.0].map(|u| plant.derivative(x, u, 0.0)))
+            .flat_map(|d| [d[1], d[3]])
+            .collect()
+    };
+    let worst = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs() / x.abs().max(1e-3))
+            .fold(0.0, f64::max)
+    };
+    let eps: f64 = 1e-4;
+    for tie_km in [true, false] {
+        let values: [f64; NP] = std::array::from_fn(|k| params::get(&truth, k));
+        let at = derivatives(&params::with(truth, &values, tie_km));
+        let held = if tie_km { &HELD[..4] } else { &HELD[..] };
+        for &h in held {
+            let mut start = truth;
+            start.set(h, truth.get(h) * eps.exp());
+            let s = params::held_sensitivity(&truth, h, tie_km);
+            let moved: [f64; NP] = std::array::from_fn(|k| values[k] * (s[k] * eps).exp());
+            let along = worst(&at, &derivatives(&params::with(start, &moved, tie_km)));
+            let alone = worst(&at, &derivatives(&params::with(start, &values, tie_km)));
+            assert!(along < 1e-6, "{h:?} (km tied {tie_km}): {along:e}");
+            if h != Param::Mr {
+                assert!(alone > 1e-6, "{h:?} (km tied {tie_km}): {alone:e}");
+            }
+        }
+    }
 }
 
 /// An excitation run of `rig` from hanging at rest as `rip-rt excite` drives it (module
