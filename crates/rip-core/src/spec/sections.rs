@@ -335,6 +335,18 @@ impl PlantSpec {
             }
         }
         if self.initial_state[2].abs() > self.fall_limit {
+            // A file that writes only the fall limit is refused through it, not through the
+            // start state it left at its default.
+            if self.initial_state == Self::default().initial_state {
+                return Err(bad(
+                    "plant.fall_limit",
+                    format!(
+                        "must be at least |plant.initial_state[2]| ({} rad, its default: a                          simulated run starts there), got {}",
+                        self.initial_state[2].abs(),
+                        self.fall_limit
+                    ),
+                ));
+            }
             return Err(bad(
                 "plant.initial_state[2]",
                 format!(
@@ -347,10 +359,14 @@ impl PlantSpec {
     }
 }
 
-/// Allowed encoder resolutions (`sensor.encoder_counts`): below 64 counts per revolution
-/// (0.1 rad) the pendulum angle is too coarse to balance on; above 2²⁴ the multi-turn i32
-/// count overflows within 128 turns.
-pub const COUNTS_PER_REV: std::ops::RangeInclusive<u32> = 64..=(1 << 24);
+/// Allowed encoder resolutions (`sensor.encoder_counts`). Below 128 counts per revolution
+/// (0.05 rad) the calibration's rest check cannot tell a still joint from a turning one: its
+/// rate threshold must lie above 2 counts per [`RATE_SPAN_S`](super::rig_sections::RATE_SPAN_S)
+/// and at most [`MAX_REST_RATE`](super::rig_sections::MAX_REST_RATE), an empty range under
+/// 126 counts (and quadrature encoders count in fours); the pendulum angle is too coarse to
+/// balance on well before that. Above 2²⁴ the multi-turn i32 count overflows within 128
+/// turns.
+pub const COUNTS_PER_REV: std::ops::RangeInclusive<u32> = 128..=(1 << 24);
 
 /// `[sensor]`: the encoders and white measurement noise of the rig, simulated (`riprs
 /// compare`, `rip-rt emulate`) or real (`rip-rt` turns counts into angles with
