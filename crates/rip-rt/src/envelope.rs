@@ -164,7 +164,8 @@ impl ArmEnvelope {
 /// state its own envelope lets the arm into: anywhere within `±swing_up.arm_limit` at up to
 /// the swing's envelope speed `√(2 a_b (L − |θ|))` outwards (`a_b = brake_fraction ·` its stall
 /// acceleration at `swing_up.max_voltage`), braked by the stop's model with the swing's full
-/// voltage along the motion during the latency. The error names `swing_up.arm_limit`.
+/// voltage along the motion during the latency. The error names `swing_up.arm_limit`, or
+/// `safety.arm_limit` with the least value that passes when the swing-up's is its default.
 pub fn check_swing_up(cfg: &Config) -> Result<(), ConfigError> {
     let s = &cfg.spec.swing_up;
     let p = cfg.spec.plant.params();
@@ -181,6 +182,23 @@ pub fn check_swing_up(cfg: &Config) -> Result<(), ConfigError> {
         })
         .fold(f64::NEG_INFINITY, f64::max);
     if worst > bound {
+        // A file that narrows only safety.arm_limit is refused through it, with the least
+        // value that holds the default swing: the stopping distance does not depend on it.
+        let default_limit = rip_core::swingup::SwingUpSettings::default().arm_limit;
+        if s.arm_limit == default_limit {
+            let least = ((worst + ENVELOPE_MARGIN) * 100.0).ceil() / 100.0;
+            return Err(SpecError::new(
+                "safety.arm_limit",
+                format!(
+                    "must be at least {least} rad for a swing-up within swing_up.arm_limit ({} \
+                     rad, its default), got {}: a stop during the swing could carry the arm \
+                     to {worst:.2} rad, and the limit keeps a {ENVELOPE_MARGIN} rad margin \
+                     beyond that, by the stopping model of [plant] (docs/rip-rt.md, \
+                     \"Stopping\"); or lower swing_up.arm_limit or swing_up.brake_fraction",
+                    s.arm_limit, cfg.safety.arm_limit
+                ),
+            ));
+        }
         return Err(SpecError::new(
             "swing_up.arm_limit",
             format!(

@@ -422,3 +422,39 @@ fn a_forced_host_run_warns_and_goes_ahead() {
 fn a_forced_onboard_run_warns_and_goes_ahead() {
     forced_runs_warn_and_go_ahead(Mode::Onboard);
 }
+
+/// `rip-rt run --swing-up`'s stopping-distance check of a file that narrows only
+/// `safety.arm_limit`: a refusal names that key (not the default `swing_up.arm_limit` it is
+/// checked against) and the least value that passes, which does.
+#[test]
+fn a_narrow_arm_limit_for_a_swing_up_is_refused_through_the_key_written() {
+    use rip_rt::config::Config;
+    use rip_rt::envelope::check_swing_up;
+    for preset in ["paper", "qube_servo2"] {
+        let mut refused = 0;
+        for i in 0..=60 {
+            let limit = 1.55 + 0.05 * f64::from(i);
+            let text = format!("[plant]\npreset = \"{preset}\"\n[safety]\narm_limit = {limit}\n");
+            let cfg = Config::from_toml(&text).unwrap_or_else(|e| panic!("{text}: {e}"));
+            let Err(e) = check_swing_up(&cfg) else {
+                continue;
+            };
+            refused += 1;
+            assert_eq!(e.key, "safety.arm_limit", "{text}: {e}");
+            let least: f64 = e
+                .reason
+                .split("must be at least ")
+                .nth(1)
+                .and_then(|r| r.split(' ').next())
+                .and_then(|n| n.parse().ok())
+                .unwrap_or_else(|| panic!("no least value in {e}"));
+            assert!(least > limit, "{text}: {e}");
+            let fixed = format!("[plant]\npreset = \"{preset}\"\n[safety]\narm_limit = {least}\n");
+            if least <= std::f64::consts::TAU {
+                check_swing_up(&Config::from_toml(&fixed).unwrap())
+                    .unwrap_or_else(|e| panic!("{fixed}: {e}"));
+            }
+        }
+        assert!(refused > 0, "{preset}: the sweep reaches no refusal");
+    }
+}
