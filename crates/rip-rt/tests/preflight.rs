@@ -331,9 +331,21 @@ fn run_on(emu: &common::Emulator, mode: Mode, rig: &Path, extra: &[&str]) -> com
     common::run_lockstep(&emu.device, "lqr", &args)
 }
 
-/// The emulator simulating `rig` (its `[plant]`), held upright until enabled, in lockstep.
+/// The emulator simulating `rig` (its `[plant]`), held upright until enabled, in lockstep,
+/// once its record of commands exists: it creates it just after printing its device, and a
+/// run the pre-flight refuses at once can end before that.
 fn emulator(name: &str, rig: &Path) -> common::Emulator {
-    common::Emulator::lockstep(name, &["--config", rig.to_str().unwrap()])
+    let emu = common::Emulator::lockstep(name, &["--config", rig.to_str().unwrap()]);
+    let start = std::time::Instant::now();
+    while !emu.record.exists() {
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(30),
+            "{name}: no record {:?}",
+            emu.record
+        );
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    emu
 }
 
 /// Every refused rig in `mode`: exit 16 naming the reason and `--force`; nothing enabling

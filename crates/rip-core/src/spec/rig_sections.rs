@@ -41,7 +41,7 @@ pub struct LoopConfig {
     pub period_ms: f64,
     /// How long to wait for the measurement after the sample request (ms), at least
     /// [`MIN_REPLY_TIMEOUT_MS`] and shorter than the period. Default
-    /// [`DEFAULT_REPLY_TIMEOUT_MS`], or half the period when that is shorter
+    /// [`DEFAULT_REPLY_TIMEOUT_MS`], or half the period on a period no longer than that
     /// ([`RigSections::resolve_derived_defaults`]).
     pub reply_timeout_ms: f64,
     /// Consecutive periods without a valid measurement that stop the loop, in
@@ -60,7 +60,7 @@ pub struct LoopConfig {
 /// would see fewer than three commands per window and the pendulum (unstable pole near
 /// 10 rad/s) is no longer controllable at that rate; below 1 ms a serial round trip cannot fit.
 pub const PERIOD_MS: std::ops::RangeInclusive<f64> = 1.0..=20.0;
-/// Default `loop.reply_timeout_ms` (ms), on a period of at least twice as long.
+/// Default `loop.reply_timeout_ms` (ms), on a period longer than it.
 pub const DEFAULT_REPLY_TIMEOUT_MS: f64 = 5.0;
 /// Shortest `loop.reply_timeout_ms`: a USB round trip alone takes about this long.
 pub const MIN_REPLY_TIMEOUT_MS: f64 = 0.1;
@@ -129,7 +129,7 @@ pub const MAX_VOLTAGE_LIMIT: f64 = 24.0;
 pub const MAX_PENDULUM_LIMIT: f64 = std::f64::consts::FRAC_PI_2;
 /// Largest `safety.arm_limit` (rad): one turn either way, before the cable winds up.
 pub const MAX_ARM_LIMIT: f64 = std::f64::consts::TAU;
-/// Default `safety.start_tolerance` (rad), on a `safety.pendulum_limit` at least twice as wide.
+/// Default `safety.start_tolerance` (rad), on a `safety.pendulum_limit` wider than it.
 pub const DEFAULT_START_TOLERANCE: f64 = 0.15;
 /// Longest `safety.wait_upright_s` (s); the motor stays disabled while waiting.
 pub const MAX_WAIT_UPRIGHT_S: f64 = 600.0;
@@ -146,8 +146,8 @@ pub struct SafetyConfig {
     /// |arm angle| above this (rad) stops the loop, in (0, [`MAX_ARM_LIMIT`]].
     pub arm_limit: f64,
     /// Balancing starts only with |pendulum angle| below this (rad), below `pendulum_limit`.
-    /// Default [`DEFAULT_START_TOLERANCE`], or half of `pendulum_limit` when that is less
-    /// ([`RigSections::resolve_derived_defaults`]).
+    /// Default [`DEFAULT_START_TOLERANCE`], or half of `pendulum_limit` on a limit no wider
+    /// than that ([`RigSections::resolve_derived_defaults`]).
     pub start_tolerance: f64,
     /// How long to wait for the pendulum to be brought upright before refusing (s), in
     /// [0, [`MAX_WAIT_UPRIGHT_S`]]; 0 refuses at once.
@@ -190,7 +190,7 @@ pub const DEFAULT_REST_RATE: f64 = 0.2;
 pub const DEFAULT_REST_RATE_COUNTS: f64 = 3.0;
 /// Allowed `calibration.rest_window_s` (s): at least a few rate spans, at most a patient wait.
 pub const REST_WINDOW_S: std::ops::RangeInclusive<f64> = 0.2..=10.0;
-/// Default `calibration.rest_timeout_s` (s), on a window of at most a third of it.
+/// Default `calibration.rest_timeout_s` (s), on a window no longer than it.
 pub const DEFAULT_REST_TIMEOUT_S: f64 = 3.0;
 /// Longest `calibration.rest_timeout_s` (s); the motor stays disabled while waiting.
 pub const MAX_REST_TIMEOUT_S: f64 = 600.0;
@@ -213,7 +213,7 @@ pub struct CalibrationConfig {
     pub rest_window_s: f64,
     /// The check refuses when no window was still this long (s) after it started, in
     /// [`rest_window_s`, [`MAX_REST_TIMEOUT_S`]]. Default [`DEFAULT_REST_TIMEOUT_S`], or
-    /// three windows when `rest_window_s` is longer than 1 s
+    /// three windows when `rest_window_s` is longer than that
     /// ([`RigSections::resolve_derived_defaults`]).
     ///
     /// [`rest_window_s`]: Self::rest_window_s
@@ -646,11 +646,11 @@ impl RigSections {
 
     /// Fills in the defaults that follow from other keys, for each key `given` says the file
     /// did not write (`given("loop.reply_timeout_ms")`): the rest rates from the encoders'
-    /// `encoder_counts` ([`CalibrationConfig::resolve_default_rates`]); `loop.reply_timeout_ms`
-    /// at most half the period; `safety.start_tolerance` at most half of
-    /// `safety.pendulum_limit`; `calibration.rest_timeout_s` at least three windows. Each
-    /// equals its fixed default on the default keys, and a written key they follow from can
-    /// no longer make them fail.
+    /// `encoder_counts` ([`CalibrationConfig::resolve_default_rates`]); and, where the key they
+    /// are checked against leaves no room for their fixed default, `loop.reply_timeout_ms`
+    /// half the period, `safety.start_tolerance` half of `safety.pendulum_limit`,
+    /// `calibration.rest_timeout_s` three windows. Every file the fixed defaults passed keeps
+    /// them; a written key can no longer make a default it did not write fail.
     pub fn resolve_derived_defaults(
         &mut self,
         encoder_counts: [u32; 2],
@@ -663,16 +663,17 @@ impl RigSections {
                 given("calibration.rest_pendulum_rate"),
             ],
         );
-        if !given("loop.reply_timeout_ms") {
-            self.loop_.reply_timeout_ms = DEFAULT_REPLY_TIMEOUT_MS.min(self.loop_.period_ms / 2.0);
+        let l = &mut self.loop_;
+        if !given("loop.reply_timeout_ms") && l.period_ms <= DEFAULT_REPLY_TIMEOUT_MS {
+            l.reply_timeout_ms = l.period_ms / 2.0;
         }
-        if !given("safety.start_tolerance") {
-            self.safety.start_tolerance =
-                DEFAULT_START_TOLERANCE.min(self.safety.pendulum_limit / 2.0);
+        let s = &mut self.safety;
+        if !given("safety.start_tolerance") && s.pendulum_limit <= DEFAULT_START_TOLERANCE {
+            s.start_tolerance = s.pendulum_limit / 2.0;
         }
-        if !given("calibration.rest_timeout_s") {
-            self.calibration.rest_timeout_s =
-                DEFAULT_REST_TIMEOUT_S.max(3.0 * self.calibration.rest_window_s);
+        let c = &mut self.calibration;
+        if !given("calibration.rest_timeout_s") && c.rest_window_s > DEFAULT_REST_TIMEOUT_S {
+            c.rest_timeout_s = 3.0 * c.rest_window_s;
         }
     }
 }
