@@ -85,6 +85,13 @@ def test_both_tools_print_the_same_experiment_sections(tmp_path, capsys, rip_rt)
         ("[swing_up]\nmax_voltage = 13\n", "swing_up.max_voltage"),
         ("[swing_up]\narm_limit = 3.1\n", "swing_up.arm_limit"),
         ("[sefety]\n", "sefety"),
+        # A default that follows from, or is checked against, a written key: the error names
+        # the written key, never the default.
+        ("[sensor]\nencoder_counts = [64, 64]\n", "sensor.encoder_counts[0]"),
+        ("[plant]\nCr = 0.5\n", "plant.Cr"),
+        ("[safety]\narm_limit = 0.8\n", "safety.arm_limit"),
+        ("[safety]\narm_limit = 1.2\n[swing_up]\nmax_voltage = 6.0\n", "safety.arm_limit"),
+        ("[mpc]\nprediction_horizon = 2\n", "mpc.prediction_horizon"),
     ],
 )
 def test_both_tools_give_the_same_message(tmp_path, capsys, rip_rt, text, key):
@@ -98,6 +105,22 @@ def test_both_tools_give_the_same_message(tmp_path, capsys, rip_rt, text, key):
     theirs = rt.stderr.strip().removeprefix("rip-rt: error: ")
     assert ours == theirs
     assert ours.startswith(f"{path}: {key}:"), ours
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "[calibration]\nrest_window_s = 5.0\n",
+        "[safety]\npendulum_limit = 0.1\n",
+        "[loop]\nperiod_ms = 2.0\n",
+        "[sensor]\nencoder_counts = [128, 128]\n",
+    ],
+)
+def test_a_key_written_alone_takes_the_defaults_that_follow_from_it(tmp_path, capsys, text):
+    path = tmp_path / "ok.toml"
+    path.write_text(text)
+    code, _, err = _riprs_config(capsys, str(path))
+    assert code == 0, err
 
 
 def test_configuration_reference_is_generated_from_the_spec():

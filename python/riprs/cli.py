@@ -207,7 +207,10 @@ in `rip-core` (`crates/rip-core/src/spec/`), with every default and every check;
 documented there (`cargo doc -p rip-core`, module `spec`). A key that does not exist, or a
 value of the wrong type or range, is an error naming the file and the key path, e.g.
 `cfg.toml: mpc.prediction_horizon: must be in 1..=10000, got 0`, from `riprs` and `rip-rt`
-alike.
+alike. Where two keys are checked against each other and the file wrote only one (a
+`[plant] Cr` whose friction voltage the compensation's default would have to fit inside the
+input bounds, a `[safety] arm_limit` inside the default arm step), the error names the key the
+file wrote and the values of it that would work, never the default.
 
 Every key is optional. Below is the complete file with every default (the paper's settings),
 as `riprs config` prints it; `riprs config FILE` prints a file resolved the same way.
@@ -227,7 +230,7 @@ riprs reads keeps the ones it sets: `riprs config FILE`, `Spec.to_toml` and the 
   plant's linearisation at the loop period without friction and dead zone (the unchanged
   `paper` preset keeps the paper's recovered model). `substeps`, `initial_state`,
   `fall_limit` set up a simulated run.
-- `[sensor]`: the rig's encoders, simulated or real: counts per revolution (64 to 2^24; the
+- `[sensor]`: the rig's encoders, simulated or real: counts per revolution (128 to 2^24; the
   one resolution `rip-rt` turns counts into angles with, and the emulator counts in),
   white-noise standard deviation (rad) and encoder zero offsets (rad; an encoder reads
   `angle + offset`). `riprs compare` and `rip-rt emulate` simulate all three alike. The
@@ -262,7 +265,10 @@ riprs reads keeps the ones it sets: `riprs config FILE`, `Spec.to_toml` and the 
   `velocity_scale` (rad/s) are the widths of the ramps that replace their signs; the
   controllers then plan within `input_bounds` shrunk by the correction, so the voltage written
   stays inside them. `enabled = false` runs the controllers uncompensated; a rig with neither
-  (every preset) has none.
+  (every preset) has none. A dead zone and friction voltage (`Cr Rm / kt`) that together
+  leave no room inside `input_bounds` are refused through the key written for the larger of
+  the two (`compensation.dead_zone` or `plant.Vd`, `compensation.arm_friction` or
+  `plant.Cr`), with the largest value of it that fits.
 - `[monte_carlo]`: runs over noise seeds and uniform perturbations of the named parameters.
 
 ```toml

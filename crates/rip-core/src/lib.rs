@@ -27,7 +27,8 @@
 //!   can balance at the voltage bound, a controller predicted to fall.
 //! - [`tune`] — shared weights for LQR, LQG and MPC chosen for the rig in the file.
 //! - [`spec`] — the experiment file every front end reads ([`Spec`]), and the one assembly of
-//!   LQR, LQG and MPC from it.
+//!   LQR, LQG and MPC from it; [`files`] is the one bounded reader of it and of the records
+//!   beside a rig file.
 //! - [`excitation`] — chirp, PRBS, steps and free-swing signals for identification runs, and
 //!   the arm-centring law that keeps them inside the arm's travel.
 //! - [`swingup`] — energy swing-up from rest with an arm-limit barrier, and the [`SwingUp`]
@@ -43,6 +44,7 @@ pub mod dare;
 pub mod envelope;
 pub mod error;
 pub mod excitation;
+pub mod files;
 pub mod fit;
 pub mod identify;
 pub mod kalman;

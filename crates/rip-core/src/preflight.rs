@@ -11,7 +11,9 @@
 //!
 //! - **identification** — the rig file was written by `riprs identify --force` despite failed
 //!   checks: its header carries the line `# UNTRUSTED`, or the identification file beside it
-//!   (`rig.identification.toml`) says `[identification] trusted = false`.
+//!   (`rig.identification.toml`) says `[identification] trusted = false`; or that file is
+//!   there but cannot say (not a regular file, too large, not UTF-8, not TOML, no
+//!   `[identification] trusted` true or false), which refuses too.
 //! - **voltage** — no controller can balance the rig at the voltage bound. Near upright the
 //!   linearised plant `ẋ = A_c x + B_c u` has one unstable pole `p > 0`; with `wᵀ` its left
 //!   eigenvector, the unstable mode `z = wᵀ x` obeys `ż = p z + (wᵀ B_c) u` whatever the
@@ -32,7 +34,13 @@
 //!   [`PREDICTION_HORIZON`] seconds, faster than real time. A run that falls, diverges or
 //!   carries the arm past `safety.arm_limit` refuses, naming the seed, the time and the
 //!   angle. A controller too slow to simulate within [`PREDICTION_BUDGET`] is not predicted
-//!   (a warning): the loop's timing probe judges it.
+//!   (a warning): the loop's timing probe judges it. A current tuning record beside the rig
+//!   file ([`tune_record_path`]) stands for the simulation; a record that is there but cannot
+//!   be read (not a regular file, too large, not a record) refuses.
+//!
+//! Every file beside the rig file is read as the experiment file is
+//! ([`crate::spec::read_text`]): regular files only, bounded in size, so that a FIFO or a
+//! device named like a record can neither hang the check nor fill its memory.
 //!
 //! Further checks (the swing-up's feasibility, a stored tuning's verdict) join by adding a
 //! function to [`CHECKS`]; each returns `None` when it does not apply to the input.
@@ -193,9 +201,16 @@ pub fn identification_path(rig: &Path) -> PathBuf {
     rig.with_file_name(format!("{}.identification.toml", stem.unwrap_or_default()))
 }
 
-/// Why the rig file is untrusted by its identification, if it is (module docs).
+/// Whether anything is at `path`, a dangling symbolic link included: a record that is there
+/// but cannot be read is a refusal, not an absence.
+fn present(path: &Path) -> bool {
+    std::fs::symlink_metadata(path).is_ok()
+}
+
+/// Why the rig file is untrusted by its identification, if it is, or why the identification
+/// file beside it cannot say (module docs).
 pub fn untrusted_reason(rig: &Path) -> Option<String> {
-    if let Ok(text) = std::fs::read_to_string(rig) {
+    if let Ok(text) = crate::spec::read_text(rig) {
         let marked = text
             .lines()
             .take_while(|l| l.trim_start().starts_with('#') || l.trim().is_empty())
@@ -214,11 +229,34 @@ pub fn untrusted_reason(rig: &Path) -> Option<String> {
         }
     }
     let side = identification_path(rig);
-    let table: toml::Table = std::fs::read_to_string(&side).ok()?.parse().ok()?;
-    let ident = table.get("identification")?.as_table()?;
-    if ident.get("trusted")?.as_bool()? {
+    if !present(&side) {
         return None;
     }
+    let unreadable = |e: crate::spec::SpecError| {
+        Some(format!(
+            "{e}: the identification beside the rig file cannot say whether it is trusted"
+        ))
+    };
+    let table = match crate::spec::read_text(&side)
+        .and_then(|text| crate::spec::parse_table(&text).map_err(|e| e.in_file(&side)))
+    {
+        Ok(table) => table,
+        Err(e) => return unreadable(e),
+    };
+    let ident = table.get("identification").and_then(toml::Value::as_table);
+    let trusted = ident.and_then(|i| i.get("trusted"));
+    let Some(trusted) = trusted.and_then(toml::Value::as_bool) else {
+        let got = trusted.map_or_else(|| "nothing".to_string(), ToString::to_string);
+        let e = crate::spec::SpecError::new(
+            "identification.trusted",
+            format!("must be true or false, got {got}"),
+        );
+        return unreadable(e.in_file(&side));
+    };
+    if trusted {
+        return None;
+    }
+    let ident = ident?;
     let problems: Vec<&str> = ident
         .get("problems")
         .and_then(|p| p.as_array())
@@ -373,25 +411,39 @@ impl TuneRecord {
         )
     }
 
-    /// The record in the file at `path`, if there is one that parses.
-    pub fn read(path: &Path) -> Option<Self> {
-        toml::from_str(&std::fs::read_to_string(path).ok()?).ok()
+    /// The record in the file at `path`, read as the experiment file is
+    /// ([`crate::spec::read_text`]: regular files only, bounded); the error names the file and
+    /// what is wrong.
+    pub fn read(path: &Path) -> Result<Self, crate::spec::SpecError> {
+        let text = crate::spec::read_text(path)?;
+        let table = crate::spec::parse_table(&text).map_err(|e| e.in_file(path))?;
+        crate::spec::from_value(toml::Value::Table(table), "").map_err(|e| e.in_file(path))
     }
 }
 
 /// The prediction finding from a stored record, when `input.rig_file` has one matching the
-/// design; otherwise `Err` with a note to add to a recomputed finding (empty when there is no
-/// record).
+/// design, or a refusal when it has one that cannot be read; otherwise `Err` with a note to
+/// add to a recomputed finding (empty when there is no record).
 fn stored_prediction(input: &Input<'_>) -> Result<Finding, String> {
     let Some(rig) = input.rig_file else {
         return Err(String::new());
     };
     let path = tune_record_path(rig);
-    if !path.exists() {
+    if !present(&path) {
         return Err(String::new());
     }
-    let Some(record) = TuneRecord::read(&path) else {
-        return Err(format!(" ({} does not parse: recomputed)", path.display()));
+    let record = match TuneRecord::read(&path) {
+        Ok(record) => record,
+        Err(e) => {
+            return Ok(Finding::new(
+                "prediction",
+                Verdict::Refuse,
+                format!(
+                    "{e}: the tuning record beside the rig file cannot be read; remove it or \
+                     tune the rig again (riprs tune), or pass --force"
+                ),
+            ))
+        }
     };
     let kind = input.controller;
     let stored = record.prediction.get(kind.name());

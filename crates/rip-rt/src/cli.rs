@@ -57,7 +57,8 @@ Exit codes (docs/rip-rt.md has the safety rules behind each):
          encoder, or a silent encoder (the message says what to swap or flip)
     15   the rig did not move as commanded (the witness: the measured motion disagrees with
          what the applied voltage must produce; the message names the likely fault)
-    16   refused to start by the pre-flight check: an untrusted identification, a rig no
+    16   refused to start by the pre-flight check: an untrusted identification, an
+         identification or tuning record beside the rig file that cannot be read, a rig no
          controller can balance at the voltage bound, or a controller predicted to fall (the
          message says why; --force runs it anyway; motor never enabled)
     101  internal error (panic)
@@ -235,8 +236,9 @@ struct RunArgs {
     /// mode, then supervise and log the device's telemetry.
     #[arg(long, conflicts_with = "swing_up")]
     onboard: bool,
-    /// Run even when the pre-flight check refuses (an untrusted identification, a rig no
-    /// controller can balance at the voltage bound, a controller predicted to fall; exit 16).
+    /// Run even when the pre-flight check refuses (an untrusted or unreadable
+    /// identification, an unreadable tuning record, a rig no controller can balance at the
+    /// voltage bound, a controller predicted to fall; exit 16).
     #[arg(long)]
     force: bool,
 }

@@ -149,7 +149,8 @@ impl ArmEnvelope {
 
 /// Refuses a swing-up whose arm could not be stopped inside `safety.arm_limit` from every
 /// state its own envelope lets the arm into ([`rip_core::preflight::check_swing_up`]). The
-/// error names `swing_up.arm_limit` and the largest value that passes.
+/// error names `swing_up.arm_limit` and the largest value that passes, or `safety.arm_limit`
+/// with the least value that passes when the swing-up's is its default.
 pub fn check_swing_up(cfg: &Config) -> Result<(), ConfigError> {
     rip_core::preflight::check_swing_up(&cfg.spec, &cfg.rig())
 }

@@ -524,7 +524,7 @@ mod tests {
                 "calibration.rest_pendulum_rate",
             ),
             (
-                "[sensor]\nencoder_counts = [2048, 64]\n[calibration]\nrest_pendulum_rate = 0.5\n",
+                "[sensor]\nencoder_counts = [2048, 512]\n[calibration]\nrest_pendulum_rate = 0.2\n",
                 "calibration.rest_pendulum_rate",
             ),
             (

@@ -106,6 +106,115 @@ fn a_rig_that_balances_passes() {
     );
 }
 
+/// `rip-rt run` of `config` with `extra`, against a missing port, which must end within a
+/// bound (a pre-flight that blocks on a file fails the test instead of hanging it).
+fn run_promptly(config: &Path, extra: &[&str]) -> (i32, String) {
+    let mut args = vec!["--config", config.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let child = common::spawn_run(Path::new("/nonexistent/rip-rt-preflight"), "lqr", &args);
+    let r = common::wait_with_timeout(child, std::time::Duration::from_secs(60));
+    (r.status.code().unwrap_or(-1), r.stderr)
+}
+
+#[test]
+fn a_garbage_identification_beside_the_rig_file_is_refused_unless_forced() {
+    let dir = tempdir("garbage-ident");
+    let rig = write(&dir, "lab.toml", "[plant]\npreset = \"qube_servo2\"\n");
+    let side = dir.join("lab.identification.toml");
+    for (garbage, what) in [
+        (&b"\x00\xff{{ not toml"[..], "not UTF-8"),
+        (&b"[identification\ntrusted = "[..], "invalid TOML"),
+        (
+            &b"[identification]\ntrusted = \"yes\"\n"[..],
+            "identification.trusted",
+        ),
+        (&b"[fit]\nrmse = 0.1\n"[..], "identification.trusted"),
+    ] {
+        std::fs::write(&side, garbage).unwrap();
+        let (code, err) = run_promptly(&rig, &[]);
+        assert_eq!(code, 16, "{what}: {err}");
+        assert!(
+            err.contains(&side.display().to_string())
+                && err.contains(what)
+                && err.contains("--force"),
+            "{what}: {err}"
+        );
+        let (code, err) = run_promptly(&rig, &["--force"]);
+        assert_eq!(
+            code, 1,
+            "{what}: past the pre-flight, stopped by the missing port: {err}"
+        );
+        assert!(err.contains("warning: --force"), "{what}: {err}");
+    }
+}
+
+#[test]
+fn a_tuning_record_that_does_not_parse_is_refused() {
+    let dir = tempdir("garbage-record");
+    let rig = write(&dir, "tuned.toml", "[plant]\npreset = \"qube_servo2\"\n");
+    let record = write(
+        &dir,
+        "tuned.tune.toml",
+        "inputs = 3\n[prediction.LQR]\nfell = \"no\"\n",
+    );
+    let (code, err) = run_promptly(&rig, &[]);
+    assert_eq!(code, 16, "{err}");
+    assert!(
+        err.contains(&record.display().to_string()) && err.contains("--force"),
+        "{err}"
+    );
+}
+
+/// Something that is not a regular file at `path`: a FIFO no one writes (opening it blocks)
+/// or a symbolic link to `/dev/zero` (reading it never ends).
+fn plant_non_file(path: &Path, fifo: bool) {
+    let _ = std::fs::remove_file(path);
+    if fifo {
+        let c = std::ffi::CString::new(path.to_str().unwrap()).unwrap();
+        assert_eq!(
+            unsafe { libc::mkfifo(c.as_ptr(), 0o644) },
+            0,
+            "mkfifo {}",
+            path.display()
+        );
+    } else {
+        std::os::unix::fs::symlink("/dev/zero", path).unwrap();
+    }
+}
+
+#[test]
+fn a_fifo_or_dev_zero_beside_the_rig_file_is_refused_at_once() {
+    let dir = tempdir("non-file");
+    let rig = write(&dir, "rig.toml", "[plant]\npreset = \"qube_servo2\"\n");
+    let sides = [
+        dir.join("rig.tune.toml"),
+        dir.join("rig.identification.toml"),
+    ];
+    for side in &sides {
+        for fifo in [true, false] {
+            plant_non_file(side, fifo);
+            for extra in [&[][..], &["--swing-up"][..], &["--onboard"][..]] {
+                let what = format!("{} fifo={fifo} {extra:?}", side.display());
+                let (code, err) = run_promptly(&rig, extra);
+                assert_eq!(code, rip_rt::stop::exit_code::PREFLIGHT, "{what}: {err}");
+                assert!(
+                    err.contains(&side.display().to_string())
+                        && err.contains("not a regular file")
+                        && err.contains("--force"),
+                    "{what}: {err}"
+                );
+            }
+            std::fs::remove_file(side).unwrap();
+        }
+    }
+    // The experiment file itself: refused as a bad configuration (exit 2), at once.
+    let fifo = dir.join("fifo.toml");
+    plant_non_file(&fifo, true);
+    let (code, err) = run_promptly(&fifo, &[]);
+    assert_eq!(code, rip_rt::stop::exit_code::USAGE, "{err}");
+    assert!(err.contains("not a regular file"), "{err}");
+}
+
 /// Writes beside `rig` (whose text is `text`) a tuning record of its design at rip-rt's
 /// default 10 ms period and ±12 V, so that the record is current, which says LQR falls.
 fn write_lqr_falls_record(rig: &Path, text: &str) {
@@ -169,24 +278,47 @@ impl Mode {
     }
 }
 
+/// Why [`refused_rig`]'s rig file is refused.
+#[derive(Debug, Clone, Copy)]
+enum Refusal {
+    /// A tuning record of this very design says LQR falls.
+    Falls,
+    /// The identification beside it is not trusted.
+    Untrusted,
+    /// The identification beside it is garbage: nothing can vouch for the rig file.
+    Garbage,
+}
+
+impl Refusal {
+    const ALL: [Refusal; 3] = [Refusal::Falls, Refusal::Untrusted, Refusal::Garbage];
+}
+
 /// A rig file of the `qube_servo2` preset, which LQR balances, refused by the pre-flight all
-/// the same, with the words its refusal must name: `falls` — a tuning record of this very
-/// design that says LQR falls; else an identification beside it that is not trusted. A
-/// refusal is then the pre-flight's doing, and a forced run balances.
-fn refused_rig(dir: &Path, falls: bool) -> (std::path::PathBuf, &'static str) {
+/// the same for `why`, with the words its refusal must name. A refusal is then the
+/// pre-flight's doing, and a forced run balances.
+fn refused_rig(dir: &Path, why: Refusal) -> (std::path::PathBuf, &'static str) {
     let text = "[plant]\npreset = \"qube_servo2\"\n";
-    if !falls {
-        let rig = write(dir, "lab.toml", text);
-        write(
-            dir,
-            "lab.identification.toml",
-            "[identification]\ntrusted = false\nproblems = [\"condition number 1e9\"]\n",
-        );
-        return (rig, "condition number 1e9");
+    match why {
+        Refusal::Untrusted => {
+            let rig = write(dir, "lab.toml", text);
+            write(
+                dir,
+                "lab.identification.toml",
+                "[identification]\ntrusted = false\nproblems = [\"condition number 1e9\"]\n",
+            );
+            (rig, "condition number 1e9")
+        }
+        Refusal::Garbage => {
+            let rig = write(dir, "lab.toml", text);
+            std::fs::write(dir.join("lab.identification.toml"), b"\x00\xff{{ not toml").unwrap();
+            (rig, "lab.identification.toml")
+        }
+        Refusal::Falls => {
+            let rig = write(dir, "tuned.toml", text);
+            write_lqr_falls_record(&rig, text);
+            (rig, "stored by riprs tune")
+        }
     }
-    let rig = write(dir, "tuned.toml", text);
-    write_lqr_falls_record(&rig, text);
-    (rig, "stored by riprs tune")
 }
 
 /// `rip-rt run` in `mode` and lockstep against `emu`, on the rig file `rig`.
@@ -199,24 +331,32 @@ fn run_on(emu: &common::Emulator, mode: Mode, rig: &Path, extra: &[&str]) -> com
     common::run_lockstep(&emu.device, "lqr", &args)
 }
 
-/// The emulator simulating `rig` (its `[plant]`), held upright until enabled, in lockstep.
+/// The emulator simulating `rig` (its `[plant]`), held upright until enabled, in lockstep,
+/// once its record of commands exists: it creates it just after printing its device, and a
+/// run the pre-flight refuses at once can end before that.
 fn emulator(name: &str, rig: &Path) -> common::Emulator {
-    common::Emulator::lockstep(name, &["--config", rig.to_str().unwrap()])
+    let emu = common::Emulator::lockstep(name, &["--config", rig.to_str().unwrap()]);
+    let start = std::time::Instant::now();
+    while !emu.record.exists() {
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(30),
+            "{name}: no record {:?}",
+            emu.record
+        );
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    emu
 }
 
-/// Both refused rigs in `mode`: exit 16 naming the reason and `--force`; nothing enabling
+/// Every refused rig in `mode`: exit 16 naming the reason and `--force`; nothing enabling
 /// reached the device, and the simulated motor was never driven (no upload and onboard
 /// start either: those would drive it).
 fn refused_runs_never_enable_the_motor(mode: Mode) {
     let _one = common::one_at_a_time();
-    for falls in [true, false] {
-        let what = format!(
-            "{} {}",
-            mode.name(),
-            if falls { "falls" } else { "untrusted" }
-        );
+    for why in Refusal::ALL {
+        let what = format!("{} {why:?}", mode.name());
         let dir = tempdir(&what.replace(' ', "-"));
-        let (rig, reason) = refused_rig(&dir, falls);
+        let (rig, reason) = refused_rig(&dir, why);
         let mut emu = emulator(&what.replace(' ', "-"), &rig);
         let r = run_on(&emu, mode, &rig, &["--duration", "3"]);
         assert_eq!(r.status.code(), Some(16), "{what}: {}", r.stderr);
@@ -248,7 +388,7 @@ fn forced_runs_warn_and_go_ahead(mode: Mode) {
     let _one = common::one_at_a_time();
     let what = format!("{} forced", mode.name());
     let dir = tempdir(&what.replace(' ', "-"));
-    let (rig, reason) = refused_rig(&dir, true);
+    let (rig, reason) = refused_rig(&dir, Refusal::Falls);
     let mut emu = emulator(&what.replace(' ', "-"), &rig);
     let r = run_on(&emu, mode, &rig, &["--duration", "3", "--force"]);
     assert_eq!(r.status.code(), Some(0), "{what}: {}", r.stderr);
@@ -293,4 +433,40 @@ fn a_forced_host_run_warns_and_goes_ahead() {
 #[test]
 fn a_forced_onboard_run_warns_and_goes_ahead() {
     forced_runs_warn_and_go_ahead(Mode::Onboard);
+}
+
+/// `rip-rt run --swing-up`'s stopping-distance check of a file that narrows only
+/// `safety.arm_limit`: a refusal names that key (not the default `swing_up.arm_limit` it is
+/// checked against) and the least value that passes, which does.
+#[test]
+fn a_narrow_arm_limit_for_a_swing_up_is_refused_through_the_key_written() {
+    use rip_rt::config::Config;
+    use rip_rt::envelope::check_swing_up;
+    for preset in ["paper", "qube_servo2"] {
+        let mut refused = 0;
+        for i in 0..=60 {
+            let limit = 1.55 + 0.05 * f64::from(i);
+            let text = format!("[plant]\npreset = \"{preset}\"\n[safety]\narm_limit = {limit}\n");
+            let cfg = Config::from_toml(&text).unwrap_or_else(|e| panic!("{text}: {e}"));
+            let Err(e) = check_swing_up(&cfg) else {
+                continue;
+            };
+            refused += 1;
+            assert_eq!(e.key, "safety.arm_limit", "{text}: {e}");
+            let least: f64 = e
+                .reason
+                .split("must be at least ")
+                .nth(1)
+                .and_then(|r| r.split(' ').next())
+                .and_then(|n| n.parse().ok())
+                .unwrap_or_else(|| panic!("no least value in {e}"));
+            assert!(least > limit, "{text}: {e}");
+            let fixed = format!("[plant]\npreset = \"{preset}\"\n[safety]\narm_limit = {least}\n");
+            if least <= std::f64::consts::TAU {
+                check_swing_up(&Config::from_toml(&fixed).unwrap())
+                    .unwrap_or_else(|e| panic!("{fixed}: {e}"));
+            }
+        }
+        assert!(refused > 0, "{preset}: the sweep reaches no refusal");
+    }
 }

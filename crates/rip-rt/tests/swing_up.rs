@@ -664,11 +664,13 @@ fn a_swing_up_region_or_voltage_beyond_the_safety_limits_is_refused_naming_both_
             "swing_up.balance_angle",
             "safety.pendulum_limit",
         ),
+        // A file that lowers only the voltage limit is refused through it (the key it wrote),
+        // naming the default swing-up voltage it must hold.
         (
             "swing-max-voltage",
             "[safety]\nvoltage_limit = 10.0\n",
-            "swing_up.max_voltage",
             "safety.voltage_limit",
+            "swing_up.max_voltage",
         ),
     ] {
         let file = scratch(&format!("{name}.toml"));

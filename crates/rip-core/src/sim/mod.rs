@@ -93,10 +93,14 @@ impl Default for Reference {
 }
 
 /// Allowed encoder resolutions (`sensor.encoder_counts` of an experiment file, and of the
-/// environments of [`vec_env`]): below 64 counts per revolution (0.1 rad) the pendulum angle is
-/// too coarse to balance on; above 2²⁴ the multi-turn i32 count overflows within 128 turns.
-/// Defined here, with the sensor model, so that `spec` and [`vec_env`] share it.
-pub const COUNTS_PER_REV: std::ops::RangeInclusive<u32> = 64..=(1 << 24);
+/// environments of [`vec_env`]). Below 128 counts per revolution (0.05 rad) the calibration's
+/// rest check cannot tell a still joint from a turning one: its rate threshold must lie above
+/// 2 counts per `spec::rig_sections::RATE_SPAN_S` and at most
+/// `spec::rig_sections::MAX_REST_RATE`, an empty range under 126 counts (and quadrature
+/// encoders count in fours); the pendulum angle is too coarse to balance on well before that.
+/// Above 2²⁴ the multi-turn i32 count overflows within 128 turns. Defined here, with the
+/// sensor model, so that `spec` and [`vec_env`] share it.
+pub const COUNTS_PER_REV: std::ops::RangeInclusive<u32> = 128..=(1 << 24);
 
 /// Allowed control periods (ms: `loop.period_ms` of a rig file, and `Ts` of the environments
 /// of [`vec_env`]). Above 20 ms the device's 50 ms command watchdog (protocol.md) would see

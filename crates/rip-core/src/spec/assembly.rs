@@ -170,21 +170,81 @@ impl Spec {
             return Ok(None);
         }
         let (lo, hi) = self.input_bounds();
-        Compensation::new(
-            vd,
-            cr * p.rm / p.kt,
-            c.voltage_scale,
-            c.velocity_scale,
-            (lo, hi),
-        )
-        .map(Some)
-        .map_err(|e| {
-            let key = match e.name {
-                "input_bounds" => "mpc.input_bounds".to_string(),
-                name => format!("compensation.{name}"),
+        let vf = cr * p.rm / p.kt;
+        Compensation::new(vd, vf, c.voltage_scale, c.velocity_scale, (lo, hi))
+            .map(Some)
+            .map_err(|e| match e.name {
+                "input_bounds" => SpecError::new("mpc.input_bounds", e.to_string()),
+                // Both corrections default to [plant] values: the refusal names whichever key
+                // the file wrote for the larger one, with the range of it that fits.
+                "dead_zone" if e.value == vd + vf => self.no_room_to_compensate(vd, vf),
+                name => SpecError::new(format!("compensation.{name}"), e.to_string()),
+            })
+    }
+
+    /// The refusal of a dead zone `vd` and friction voltage `vf` (V) that together leave no
+    /// room inside `[mpc] input_bounds`: against the written key (`[compensation]`'s when it
+    /// is given, else `[plant]`'s) of the larger of the two, stating the values of it that
+    /// fit beside the other; against `mpc.input_bounds` when they do not hold 0 V inside.
+    fn no_room_to_compensate(&self, vd: f64, vf: f64) -> SpecError {
+        let c = &self.compensation;
+        let p = self.plant.params();
+        let (lo, hi) = self.input_bounds();
+        let room = hi.min(-lo);
+        let bounds = format!("mpc.input_bounds [{lo}, {hi}] V");
+        if room <= 0.0 {
+            return SpecError::new(
+                "mpc.input_bounds",
+                format!(
+                    "must hold 0 V strictly inside to compensate a dead zone of {vd} V and an \
+                     arm friction voltage of {vf:.2} V, got [{lo}, {hi}]; or set \
+                     compensation.enabled = false"
+                ),
+            );
+        }
+        let vd_key = match c.dead_zone {
+            Some(_) => "compensation.dead_zone",
+            None => "plant.Vd",
+        };
+        let cr_key = match c.arm_friction {
+            Some(_) => "compensation.arm_friction",
+            None => "plant.Cr",
+        };
+        let alternatives = "widen mpc.input_bounds, or set compensation.enabled = false";
+        let (key, reason) = if vf > vd {
+            let cr = vf * p.kt / p.rm;
+            let fits = if vd < room {
+                format!(
+                    "{cr_key} must be below {} N·m here (the friction voltage below {} V)",
+                    Floor4(((room - vd) * p.kt / p.rm).max(0.0)),
+                    Floor4(room - vd)
+                )
+            } else {
+                format!("and {vd_key} = {vd} V alone leaves none either")
             };
-            SpecError::new(key, e.to_string())
-        })
+            (
+                cr_key,
+                format!(
+                    "the arm friction {cr} N·m is compensated as the voltage Cr·Rm/kt = {vf:.2} V, \
+                     which with the dead zone of {vd} V leaves no room inside {bounds}: \
+                     {fits}; or {alternatives}"
+                ),
+            )
+        } else {
+            let fits = if vf < room {
+                format!("{vd_key} must be below {} V here", Floor4(room - vf))
+            } else {
+                format!("and {cr_key}'s friction voltage {vf:.2} V alone leaves none either")
+            };
+            (
+                vd_key,
+                format!(
+                    "the dead zone of {vd} V, with the arm friction voltage of {vf:.2} V, leaves \
+                     no room inside {bounds}: {fits}; or {alternatives}"
+                ),
+            )
+        };
+        SpecError::new(key, reason)
     }
 
     /// The simulation of `[plant]`, `[sensor]` and `[reference]` at sample time `ts`, started
@@ -311,6 +371,23 @@ impl Spec {
             estimator,
             compensation,
         })
+    }
+}
+
+/// A positive bound written to four significant digits, rounded down, so that every value
+/// below the written one is below the bound too.
+struct Floor4(f64);
+
+impl std::fmt::Display for Floor4 {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let v = self.0;
+        if !(v.is_finite() && v > 0.0) {
+            return write!(f, "{v}");
+        }
+        let scale = 10f64.powi(3 - v.log10().floor() as i32);
+        let down = (v * scale).floor() / scale;
+        let decimals = (3 - v.log10().floor() as i32).max(0) as usize;
+        write!(f, "{down:.decimals$}")
     }
 }
 

@@ -104,6 +104,19 @@ impl KalmanSpec {
 /// default bounds the pendulum angle (see [`crate::mpc::paper`] for why).
 pub(super) fn validate_mpc(m: &MpcSettings) -> Result<(), SpecError> {
     let in_mpc = |e| SpecError::in_section("mpc", e);
+    // A file that shortens only the prediction horizon below the default control horizon is
+    // refused through the key it wrote.
+    let default_m = MpcSettings::paper().control_horizon;
+    let p = m.prediction_horizon;
+    if m.control_horizon == default_m && (1..default_m).contains(&p) {
+        return Err(bad(
+            "mpc.prediction_horizon",
+            format!(
+                "must be at least mpc.control_horizon ({default_m}, its default), got {p}; or \
+                 set mpc.control_horizon in 1..={p}"
+            ),
+        ));
+    }
     m.check().map_err(in_mpc)?;
     m.check_sizes(1, 2).map_err(in_mpc)?;
     // The estimator's model: 4 plant states and the one output-disturbance state.

@@ -36,6 +36,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::files::{read_regular, MAX_FILE_BYTES};
 pub use crate::mpc::{MpcSettings, QpSolver};
 pub use crate::plant::Param;
 pub use assembly::{Design, Start, SWING_UP_ALLOWANCE};
@@ -70,10 +71,11 @@ fn refuse_moved_keys(table: &toml::Table) -> Result<(), SpecError> {
     Ok(())
 }
 
-/// The text of the file at `path`, the one reader of every experiment file: an unreadable
-/// file or one that is not UTF-8 is an error naming it; a leading byte-order mark is dropped.
+/// The text of the file at `path`, the one reader of every experiment file and of the
+/// records beside one ([`read_regular`]: regular files only, bounded): an unreadable file or
+/// one that is not UTF-8 is an error naming it; a leading byte-order mark is dropped.
 pub fn read_text(path: &Path) -> Result<String, SpecError> {
-    let bytes = std::fs::read(path)
+    let bytes = read_regular(path)
         .map_err(|e| SpecError::new("", format!("cannot read: {e}")).in_file(path))?;
     let text = String::from_utf8(bytes).map_err(|e| {
         SpecError::new("", format!("invalid TOML: not UTF-8 text ({e})")).in_file(path)

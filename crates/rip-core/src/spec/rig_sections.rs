@@ -40,7 +40,9 @@ pub struct LoopConfig {
     /// time.
     pub period_ms: f64,
     /// How long to wait for the measurement after the sample request (ms), at least
-    /// [`MIN_REPLY_TIMEOUT_MS`] and shorter than the period.
+    /// [`MIN_REPLY_TIMEOUT_MS`] and shorter than the period. Default
+    /// [`DEFAULT_REPLY_TIMEOUT_MS`], or half the period on a period no longer than that
+    /// ([`RigSections::resolve_derived_defaults`]).
     pub reply_timeout_ms: f64,
     /// Consecutive periods without a valid measurement that stop the loop, in
     /// [`WATCHDOG_PERIODS`], and at most [`MAX_BLIND_MS`] of driving on a repeated command.
@@ -55,6 +57,8 @@ pub struct LoopConfig {
 }
 
 pub use crate::sim::PERIOD_MS;
+/// Default `loop.reply_timeout_ms` (ms), on a period longer than it.
+pub const DEFAULT_REPLY_TIMEOUT_MS: f64 = 5.0;
 /// Shortest `loop.reply_timeout_ms`: a USB round trip alone takes about this long.
 pub const MIN_REPLY_TIMEOUT_MS: f64 = 0.1;
 /// Allowed `loop.watchdog_periods`.
@@ -73,7 +77,7 @@ impl Default for LoopConfig {
         Self {
             // The controllers are designed at the paper's sample time.
             period_ms: crate::paper::TS * 1000.0,
-            reply_timeout_ms: 5.0,
+            reply_timeout_ms: DEFAULT_REPLY_TIMEOUT_MS,
             watchdog_periods: 5,
             max_step_periods: 2.0,
             max_consecutive_misses: 5,
@@ -122,6 +126,8 @@ pub const MAX_VOLTAGE_LIMIT: f64 = 24.0;
 pub const MAX_PENDULUM_LIMIT: f64 = std::f64::consts::FRAC_PI_2;
 /// Largest `safety.arm_limit` (rad): one turn either way, before the cable winds up.
 pub const MAX_ARM_LIMIT: f64 = std::f64::consts::TAU;
+/// Default `safety.start_tolerance` (rad), on a `safety.pendulum_limit` wider than it.
+pub const DEFAULT_START_TOLERANCE: f64 = 0.15;
 /// Longest `safety.wait_upright_s` (s); the motor stays disabled while waiting.
 pub const MAX_WAIT_UPRIGHT_S: f64 = 600.0;
 
@@ -136,7 +142,9 @@ pub struct SafetyConfig {
     pub pendulum_limit: f64,
     /// |arm angle| above this (rad) stops the loop, in (0, [`MAX_ARM_LIMIT`]].
     pub arm_limit: f64,
-    /// Balancing starts only with |pendulum angle| below this (rad).
+    /// Balancing starts only with |pendulum angle| below this (rad), below `pendulum_limit`.
+    /// Default [`DEFAULT_START_TOLERANCE`], or half of `pendulum_limit` on a limit no wider
+    /// than that ([`RigSections::resolve_derived_defaults`]).
     pub start_tolerance: f64,
     /// How long to wait for the pendulum to be brought upright before refusing (s), in
     /// [0, [`MAX_WAIT_UPRIGHT_S`]]; 0 refuses at once.
@@ -149,7 +157,7 @@ impl Default for SafetyConfig {
             voltage_limit: crate::paper::INPUT_LIMIT,
             pendulum_limit: 0.6,
             arm_limit: 3.0,
-            start_tolerance: 0.15,
+            start_tolerance: DEFAULT_START_TOLERANCE,
             wait_upright_s: 0.0,
         }
     }
@@ -179,6 +187,8 @@ pub const DEFAULT_REST_RATE: f64 = 0.2;
 pub const DEFAULT_REST_RATE_COUNTS: f64 = 3.0;
 /// Allowed `calibration.rest_window_s` (s): at least a few rate spans, at most a patient wait.
 pub const REST_WINDOW_S: std::ops::RangeInclusive<f64> = 0.2..=10.0;
+/// Default `calibration.rest_timeout_s` (s), on a window no longer than it.
+pub const DEFAULT_REST_TIMEOUT_S: f64 = 3.0;
 /// Longest `calibration.rest_timeout_s` (s); the motor stays disabled while waiting.
 pub const MAX_REST_TIMEOUT_S: f64 = 600.0;
 /// Largest rate threshold (rad/s): above it a gently swinging pendulum would pass.
@@ -199,7 +209,9 @@ pub struct CalibrationConfig {
     /// are the means over this window. Default 1 s.
     pub rest_window_s: f64,
     /// The check refuses when no window was still this long (s) after it started, in
-    /// [`rest_window_s`, [`MAX_REST_TIMEOUT_S`]]. Default 3 s.
+    /// [`rest_window_s`, [`MAX_REST_TIMEOUT_S`]]. Default [`DEFAULT_REST_TIMEOUT_S`], or
+    /// three windows when `rest_window_s` is longer than that
+    /// ([`RigSections::resolve_derived_defaults`]).
     ///
     /// [`rest_window_s`]: Self::rest_window_s
     pub rest_timeout_s: f64,
@@ -234,7 +246,7 @@ impl Default for CalibrationConfig {
     fn default() -> Self {
         Self {
             rest_window_s: 1.0,
-            rest_timeout_s: 3.0,
+            rest_timeout_s: DEFAULT_REST_TIMEOUT_S,
             settle_timeout_s: 30.0,
             rest_arm_rate: DEFAULT_REST_RATE,
             rest_pendulum_rate: DEFAULT_REST_RATE,
@@ -433,6 +445,20 @@ impl RigSections {
         let s = &self.safety;
         let r = &spec.reference;
         if r.arm_step.abs() >= s.arm_limit {
+            // A file that narrows only the arm limit is refused through it, not through the
+            // step it left at its default.
+            let default_step = super::ReferenceSpec::default().arm_step;
+            if r.arm_step == default_step {
+                return Err(err(
+                    "safety.arm_limit",
+                    format!(
+                        "must be above |reference.arm_step| ({} rad, its default), got {}; or \
+                         set reference.arm_step inside it",
+                        default_step.abs(),
+                        s.arm_limit
+                    ),
+                ));
+            }
             return Err(err(
                 "reference.arm_step",
                 format!(
@@ -549,37 +575,103 @@ impl RigSections {
     /// keeps the arm in; the balance region, which replaces `safety.pendulum_limit` after the
     /// catch, within that limit, so that `[safety]` bounds the pendulum whatever `[swing_up]`
     /// says; and the swing voltage within `safety.voltage_limit` (rather than clamped
-    /// silently). The error names both keys.
+    /// silently). The error names both keys, and is against the swing-up key unless the file
+    /// left that at its default.
     pub fn validate_swing_up(&self, spec: &Spec) -> Result<(), SpecError> {
         let s = &spec.swing_up;
-        if s.arm_limit >= self.safety.arm_limit {
-            return Err(err(
+        let d = crate::swingup::SwingUpSettings::default();
+        let safety = &self.safety;
+        // (swing-up key, its value, its default, safety key, its value, whether the pair
+        // fails, what the swing-up key must be of the limit, what the limit must be of it)
+        let relations = [
+            (
                 "swing_up.arm_limit",
-                format!(
-                    "must be inside safety.arm_limit ({} rad), got {}",
-                    self.safety.arm_limit, s.arm_limit
-                ),
-            ));
-        }
-        if s.balance_angle > self.safety.pendulum_limit {
-            return Err(err(
+                s.arm_limit,
+                d.arm_limit,
+                "safety.arm_limit",
+                safety.arm_limit,
+                s.arm_limit >= safety.arm_limit,
+                ("inside", "above"),
+                "rad",
+            ),
+            (
                 "swing_up.balance_angle",
-                format!(
-                    "must be at most safety.pendulum_limit ({} rad), got {}",
-                    self.safety.pendulum_limit, s.balance_angle
-                ),
-            ));
-        }
-        if s.max_voltage > self.safety.voltage_limit {
-            return Err(err(
+                s.balance_angle,
+                d.balance_angle,
+                "safety.pendulum_limit",
+                safety.pendulum_limit,
+                s.balance_angle > safety.pendulum_limit,
+                ("at most", "at least"),
+                "rad",
+            ),
+            (
                 "swing_up.max_voltage",
-                format!(
-                    "must be at most safety.voltage_limit ({} V), got {}",
-                    self.safety.voltage_limit, s.max_voltage
-                ),
-            ));
+                s.max_voltage,
+                d.max_voltage,
+                "safety.voltage_limit",
+                safety.voltage_limit,
+                s.max_voltage > safety.voltage_limit,
+                ("at most", "at least"),
+                "V",
+            ),
+        ];
+        for (swing_key, v, default, safety_key, limit, fails, (relation, inverse), unit) in
+            relations
+        {
+            if !fails {
+                continue;
+            }
+            // A swing-up key the file left at its default is not the file's doing: the
+            // refusal names the safety limit it wrote.
+            return Err(if v == default {
+                err(
+                    safety_key,
+                    format!(
+                        "must be {inverse} {swing_key} ({v} {unit}, its default) for a \
+                         swing-up, got {limit}; or set {swing_key} to fit"
+                    ),
+                )
+            } else {
+                err(
+                    swing_key,
+                    format!("must be {relation} {safety_key} ({limit} {unit}), got {v}"),
+                )
+            });
         }
         Ok(())
+    }
+
+    /// Fills in the defaults that follow from other keys, for each key `given` says the file
+    /// did not write (`given("loop.reply_timeout_ms")`): the rest rates from the encoders'
+    /// `encoder_counts` ([`CalibrationConfig::resolve_default_rates`]); and, where the key they
+    /// are checked against leaves no room for their fixed default, `loop.reply_timeout_ms`
+    /// half the period, `safety.start_tolerance` half of `safety.pendulum_limit`,
+    /// `calibration.rest_timeout_s` three windows. Every file the fixed defaults passed keeps
+    /// them; a written key can no longer make a default it did not write fail.
+    pub fn resolve_derived_defaults(
+        &mut self,
+        encoder_counts: [u32; 2],
+        given: impl Fn(&str) -> bool,
+    ) {
+        self.calibration.resolve_default_rates(
+            encoder_counts,
+            [
+                given("calibration.rest_arm_rate"),
+                given("calibration.rest_pendulum_rate"),
+            ],
+        );
+        let l = &mut self.loop_;
+        if !given("loop.reply_timeout_ms") && l.period_ms <= DEFAULT_REPLY_TIMEOUT_MS {
+            l.reply_timeout_ms = l.period_ms / 2.0;
+        }
+        let s = &mut self.safety;
+        if !given("safety.start_tolerance") && s.pendulum_limit <= DEFAULT_START_TOLERANCE {
+            s.start_tolerance = s.pendulum_limit / 2.0;
+        }
+        let c = &mut self.calibration;
+        if !given("calibration.rest_timeout_s") && c.rest_window_s > DEFAULT_REST_TIMEOUT_S {
+            c.rest_timeout_s = 3.0 * c.rest_window_s;
+        }
     }
 }
 
@@ -599,8 +691,9 @@ fn name_every_section(e: SpecError) -> SpecError {
 }
 
 /// rip-rt's sections of a file, `runtime` as the file gave them ([`Spec::parse_with_runtime`]),
-/// completed from `spec` (the encoder resolution is `sensor.encoder_counts`; the rest rates
-/// not given follow from it) and checked in full, their relations to `spec` included
+/// completed from `spec` (the encoder resolution is `sensor.encoder_counts`) and by the
+/// defaults that follow from other keys ([`RigSections::resolve_derived_defaults`]), and
+/// checked in full, their relations to `spec` included
 /// ([`RigSections::validate`]): the one check of a file's rig, whether it was read from text
 /// or changed in memory (`riprs.Spec.updated`).
 pub fn resolve(spec: &Spec, runtime: &toml::Table) -> Result<RigSections, SpecError> {
@@ -609,16 +702,11 @@ pub fn resolve(spec: &Spec, runtime: &toml::Table) -> Result<RigSections, SpecEr
         rig.device.arm_counts_per_rev,
         rig.device.pendulum_counts_per_rev,
     ] = spec.sensor.encoder_counts;
-    let given = |key: &str| {
-        runtime
-            .get("calibration")
-            .and_then(|c| c.get(key))
-            .is_some()
+    let given = |path: &str| {
+        let (section, key) = path.split_once('.').unwrap_or((path, ""));
+        runtime.get(section).and_then(|c| c.get(key)).is_some()
     };
-    rig.calibration.resolve_default_rates(
-        spec.sensor.encoder_counts,
-        [given("rest_arm_rate"), given("rest_pendulum_rate")],
-    );
+    rig.resolve_derived_defaults(spec.sensor.encoder_counts, given);
     rig.validate(spec)?;
     Ok(rig)
 }

@@ -335,6 +335,18 @@ impl PlantSpec {
             }
         }
         if self.initial_state[2].abs() > self.fall_limit {
+            // A file that writes only the fall limit is refused through it, not through the
+            // start state it left at its default.
+            if self.initial_state == Self::default().initial_state {
+                return Err(bad(
+                    "plant.fall_limit",
+                    format!(
+                        "must be at least |plant.initial_state[2]| ({} rad, its default: a                          simulated run starts there), got {}",
+                        self.initial_state[2].abs(),
+                        self.fall_limit
+                    ),
+                ));
+            }
             return Err(bad(
                 "plant.initial_state[2]",
                 format!(

@@ -246,6 +246,50 @@ fn in_range(key: &str, v: f64, lo: f64, hi: f64, lo_open: bool, hi_open: bool) -
 }
 
 impl SwingUpSettings {
+    /// The relations between keys where one side was left at its default and the other
+    /// contradicts it: the refusal names the key that moved from its default (the one a file
+    /// wrote) and the values of it that fit, not the default it was checked against.
+    fn check_written_against_defaults(&self) -> Result<()> {
+        let d = Self::default();
+        let refuse = |key: &str, reason: String| Err(RipError::invalid(key.to_string(), reason));
+        if self.catch_arm_angle == d.catch_arm_angle && self.arm_limit < d.catch_arm_angle {
+            return refuse(
+                "swing_up.arm_limit",
+                format!(
+                    "must be at least swing_up.catch_arm_angle ({} rad, its default), got {}; \
+                     or set swing_up.catch_arm_angle in (0, {}]",
+                    d.catch_arm_angle, self.arm_limit, self.arm_limit
+                ),
+            );
+        }
+        if self.balance_angle == d.balance_angle && self.catch_angle > d.balance_angle {
+            return refuse(
+                "swing_up.catch_angle",
+                format!(
+                    "must be at most swing_up.balance_angle ({} rad, its default), got {}; or \
+                     set swing_up.balance_angle to at least it",
+                    d.balance_angle, self.catch_angle
+                ),
+            );
+        }
+        let balance_valid = self.balance_angle > 0.0 && self.balance_angle <= std::f64::consts::PI;
+        if self.catch_margin == d.catch_margin
+            && balance_valid
+            && self.balance_angle >= self.catch_angle
+            && self.balance_angle <= d.catch_margin
+        {
+            return refuse(
+                "swing_up.balance_angle",
+                format!(
+                    "must be above swing_up.catch_margin ({} rad, its default), got {}; or set \
+                     swing_up.catch_margin below it",
+                    d.catch_margin, self.balance_angle
+                ),
+            );
+        }
+        Ok(())
+    }
+
     /// Checks every value; the error names the first bad key as `swing_up.<key>`.
     pub fn validate(&self) -> Result<()> {
         use std::f64::consts::PI;
@@ -280,6 +324,7 @@ impl SwingUpSettings {
         )?;
         in_range("catch_rate", self.catch_rate, 0.0, inf, true, true)?;
         in_range("catch_arm_rate", self.catch_arm_rate, 0.0, inf, true, true)?;
+        self.check_written_against_defaults()?;
         in_range(
             "catch_arm_angle",
             self.catch_arm_angle,

@@ -157,8 +157,15 @@ pub fn stored_or_computed(
         return computed("no rig file".into());
     };
     let path = path.to_path_buf();
-    let Ok(text) = std::fs::read_to_string(&path) else {
-        return computed(format!("no tuning record {}", path.display()));
+    // The pre-flight's reader: a FIFO or a device named like the record must not hang the run
+    // (the pre-flight then refuses a record it cannot read).
+    let text = match crate::files::read_regular(&path).map(String::from_utf8) {
+        Ok(Ok(text)) => text,
+        Err(_) if !path.exists() => {
+            return computed(format!("no tuning record {}", path.display()));
+        }
+        Err(e) => return computed(format!("{}: cannot read: {e}", path.display())),
+        Ok(Err(_)) => return computed(format!("{} is not UTF-8 text", path.display())),
     };
     let Some(stored) = StoredFeasibility::from_record(&text) else {
         return computed(format!("{} has no [swing_up] verdict", path.display()));
