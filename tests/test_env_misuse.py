@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import copy
 import pickle
-import threading
 import warnings
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import pytest
+from threads import run_threads
 
 import riprs
 
@@ -19,29 +19,6 @@ from gymnasium.utils.env_checker import check_env  # noqa: E402
 from gymnasium.vector import SyncVectorEnv  # noqa: E402
 
 import riprs.envs as envs  # noqa: E402
-
-
-def _run_threads(*targets: Callable[[], None]) -> list[BaseException]:
-    errors: list[BaseException] = []
-    start = threading.Barrier(len(targets))
-
-    def guard(f: Callable[[], None]) -> Callable[[], None]:
-        def run() -> None:
-            start.wait()
-            try:
-                f()
-            except BaseException as exc:
-                errors.append(exc)
-
-        return run
-
-    threads = [threading.Thread(target=guard(t)) for t in targets]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-    return errors
-
 
 # -- threads ---------------------------------------------------------------------------------
 
@@ -63,7 +40,7 @@ def test_one_env_stepped_from_four_threads_applies_every_step_whole() -> None:
             got.append(obs)
             _ = shared.state
 
-    errors = _run_threads(stepper, stepper, stepper, stepper)
+    errors = run_threads(stepper, stepper, stepper, stepper)
     assert not errors, errors
     alone = envs.PendulumEnv("swing_up", **settings)
     alone.reset(seed=3)
@@ -85,7 +62,7 @@ def test_one_vector_env_stepped_from_four_threads_applies_every_step_whole() -> 
             rewards.append(shared.step(zero)[1])
             shared.state(299)
 
-    errors = _run_threads(stepper, stepper, stepper, stepper)
+    errors = run_threads(stepper, stepper, stepper, stepper)
     assert not errors, errors
     alone = envs.PendulumVecEnv(300, "swing_up", max_episode_steps=10_000)
     alone.reset(seed=8)
@@ -263,8 +240,8 @@ def test_rig_settings_follow_the_rig_files_rules() -> None:
         riprs.Spec.from_toml("[sensor]\nencoder_counts = [1, 2048]\n")
     with pytest.raises(ValueError, match="encoder_counts") as in_env:
         envs.PendulumEnv(encoder_counts=1)
-    assert "64..=16777216" in str(in_file.value) and "64..=16777216" in str(in_env.value)
-    envs.PendulumEnv(encoder_counts=64, Ts=0.001)
+    assert "128..=16777216" in str(in_file.value) and "128..=16777216" in str(in_env.value)
+    envs.PendulumEnv(encoder_counts=128, Ts=0.001)
     envs.PendulumEnv(encoder_counts=2**24, Ts=0.02)
 
 
@@ -368,7 +345,7 @@ def test_the_native_environment_queues_calls_from_threads() -> None:
             native.step(np.zeros(64, dtype=np.float32), True, obs, reward, flags[0], flags[1])
             native.state(63)
 
-    errors = _run_threads(stepper, stepper, stepper, stepper)
+    errors = run_threads(stepper, stepper, stepper, stepper)
     assert not errors, errors
     alone = envs.PendulumVecEnv(64, "swing_up", max_episode_steps=10_000)
     alone.reset(seed=5)

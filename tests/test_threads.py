@@ -4,11 +4,11 @@ exactly those of an unshared controller)."""
 
 from __future__ import annotations
 
-import threading
 from typing import Any, Callable
 
 import numpy as np
 import pytest
+from threads import run_threads
 
 import riprs
 from riprs import Lqg, Lqr, Mpc, Plant, simulate, simulate_batch, simulate_metrics
@@ -23,26 +23,6 @@ MAKERS: list[Callable[[], Any]] = [
 def _inputs(n: int) -> np.ndarray:
     k = np.arange(n)
     return np.column_stack([0.2 * np.sin(0.05 * k), 0.05 * np.cos(0.2 * k)])
-
-
-def _run_threads(*targets: Callable[[], None]) -> list[BaseException]:
-    errors: list[BaseException] = []
-
-    def guard(f: Callable[[], None]) -> Callable[[], None]:
-        def run() -> None:
-            try:
-                f()
-            except BaseException as exc:
-                errors.append(exc)
-
-        return run
-
-    threads = [threading.Thread(target=guard(t)) for t in targets]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-    return errors
 
 
 @pytest.mark.parametrize("make", MAKERS)
@@ -64,7 +44,7 @@ def test_stepping_while_another_thread_simulates_it(make) -> None:
             batches.append(simulate_batch(Plant.paper(), shared, 2, 0.5))
             simulate_metrics(Plant.paper(), shared, 2, 0.5)
 
-    errors = _run_threads(stepper, simulator)
+    errors = run_threads(stepper, simulator)
     assert not errors, errors
     # The object's own steps equal an unshared controller's: the simulations never touched it.
     alone = make()
@@ -89,7 +69,7 @@ def test_two_threads_stepping_one_controller(make) -> None:
             shared.reset() if len(outputs) % 97 == 0 else None
             repr(shared)
 
-    errors = _run_threads(stepper, stepper, stepper)
+    errors = run_threads(stepper, stepper, stepper)
     assert not errors, errors
     assert len(outputs) == 3 * len(ys)
     assert all(np.isfinite(outputs)) and max(map(abs, outputs)) <= 12.0
@@ -110,4 +90,4 @@ def test_mpc_solve_and_qp_matrices_alongside_steps() -> None:
         for y in _inputs(100):
             mpc.step(y)
 
-    assert not _run_threads(solver, stepper)
+    assert not run_threads(solver, stepper)

@@ -430,10 +430,10 @@ fn rig_settings_follow_the_rig_files_ranges() {
         },
         ..Default::default()
     };
-    for c in [1.0, 63.0, 2048.5, f64::from(1u32 << 24) + 1.0, f64::NAN] {
+    for c in [1.0, 127.0, 2048.5, f64::from(1u32 << 24) + 1.0, f64::NAN] {
         bad(counts(c), "encoder_counts");
     }
-    counts(64.0).validate().unwrap();
+    counts(128.0).validate().unwrap();
     for ts in [1e-12, 0.0009, 0.021, f64::INFINITY] {
         bad(
             EnvConfig {
