@@ -11,7 +11,9 @@
 //!
 //! - **identification** — the rig file was written by `riprs identify --force` despite failed
 //!   checks: its header carries the line `# UNTRUSTED`, or the identification file beside it
-//!   (`rig.identification.toml`) says `[identification] trusted = false`.
+//!   (`rig.identification.toml`) says `[identification] trusted = false`, or the tuning record
+//!   beside it (`rig.tune.toml`, [`untrusted_section`]) carries that verdict from the rig
+//!   `riprs tune` tuned.
 //! - **voltage** — no controller can balance the rig at the voltage bound. Near upright the
 //!   linearised plant `ẋ = A_c x + B_c u` has one unstable pole `p > 0`; with `wᵀ` its left
 //!   eigenvector, the unstable mode `z = wᵀ x` obeys `ż = p z + (wᵀ B_c) u` whatever the
@@ -207,6 +209,14 @@ pub fn untrusted_reason(rig: &Path) -> Option<String> {
             ));
         }
     }
+    // A tuned file keeps its rig's verdict in its record: nothing lies beside it.
+    let record = tune_record_path(rig);
+    if let Some(reason) = recorded_untrusted(&record) {
+        return Some(format!(
+            "{reason} (recorded by riprs tune in {})",
+            record.display()
+        ));
+    }
     let side = identification_path(rig);
     let table: toml::Table = std::fs::read_to_string(&side).ok()?.parse().ok()?;
     let ident = table.get("identification")?.as_table()?;
@@ -227,6 +237,28 @@ pub fn untrusted_reason(rig: &Path) -> Option<String> {
             format!(": {}", problems.join("; "))
         }
     ))
+}
+
+/// The `[identification]` table `riprs tune` adds to its record ([`tune_record_path`]) when
+/// the rig it tuned is untrusted ([`untrusted_reason`] of the rig file): the verdict then
+/// travels with the tuned file, which has no identification file beside it.
+pub fn untrusted_section(reason: &str) -> String {
+    let mut table = toml::Table::new();
+    table.insert("trusted".into(), toml::Value::Boolean(false));
+    table.insert("reason".into(), toml::Value::String(reason.into()));
+    let mut doc = toml::Table::new();
+    doc.insert("identification".into(), toml::Value::Table(table));
+    toml::to_string(&doc).expect("strings and booleans have a TOML form")
+}
+
+/// The reason of an [`untrusted_section`] in the record at `path`, if it holds one.
+fn recorded_untrusted(path: &Path) -> Option<String> {
+    let table: toml::Table = std::fs::read_to_string(path).ok()?.parse().ok()?;
+    let ident = table.get("identification")?.as_table()?;
+    if ident.get("trusted")?.as_bool()? {
+        return None;
+    }
+    Some(ident.get("reason")?.as_str()?.to_string())
 }
 
 fn identification(input: &Input<'_>) -> Option<Finding> {
@@ -278,7 +310,10 @@ pub fn mode_voltage(a: &Mat, b: &Mat, x: &[f64; 4]) -> Option<(f64, f64)> {
     Some(((p * wx / wb).abs(), p))
 }
 
-fn voltage(input: &Input<'_>) -> Option<Finding> {
+/// The voltage check (module docs): whether any controller can balance the rig of
+/// `input.design` from its start state within its voltage bound; `None` when the model has no
+/// unstable mode. `riprs tune` runs it before its search.
+pub fn voltage(input: &Input<'_>) -> Option<Finding> {
     let spec = input.design.spec();
     let (ac, bc) = spec.continuous_design_model().ok()?;
     let p = spec.plant.params();
