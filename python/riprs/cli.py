@@ -201,6 +201,7 @@ def _renamed(call: Callable[[], T], flags: Dict[str, str]) -> T:
 
 def cmd_tune(args: argparse.Namespace) -> int:
     """Choose shared LQR/LQG/MPC weights for a rig and write the tuned experiment file."""
+    from riprs._riprs import identification_untrusted
     from riprs.config import ConfigError
     from riprs.tune import check_out, tune
 
@@ -210,6 +211,10 @@ def cmd_tune(args: argparse.Namespace) -> int:
         lambda: check_out(args.out, args.rig, overwrite=args.force, key="out", force="--force"),
         {"out": "--out"},
     )
+    untrusted = identification_untrusted(args.rig)
+    if untrusted:
+        # Said before the search, not after it: the weights are only as good as this model.
+        print(f"riprs: warning: {untrusted}", file=sys.stderr)
     result = _renamed(
         lambda: tune(
             args.rig, runs=args.runs, seed=args.seed, spread=args.spread, progress=not args.quiet
@@ -217,8 +222,6 @@ def cmd_tune(args: argparse.Namespace) -> int:
         {"runs": "--runs", "seed": "--seed", "spread": "--spread"},
     )
     print(result.report())
-    if result.untrusted:
-        print(f"riprs: warning: {result.untrusted}", file=sys.stderr)
     if result.refusal is not None:
         raise ConfigError(f"{args.rig}: {result.refusal}; {out} was not written")
     side = _renamed(lambda: result.write(out, overwrite=args.force), {"out": "--out"})

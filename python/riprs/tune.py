@@ -582,7 +582,8 @@ def tune(
             bar.n = bar.total - runs
             bar.refresh()
         fractions: Dict[str, float] = {}
-        if runs > 0:
+        # Rigs drawn around one no controller balances would only confirm it.
+        if runs > 0 and refusal is None:
             counts = {n: 0.0 for n in CONTROLLERS}
             done, chunk = 0, 5
             while done < runs:

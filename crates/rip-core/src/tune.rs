@@ -477,14 +477,14 @@ pub struct Tuned {
 
 impl Tuned {
     /// Why the tuning failed outright, if it did: every controller falls on the rig's model
-    /// with the weights that missed the bar by least, so no candidate tried balances it.
+    /// with the weights that missed the bar by least.
     pub fn refusal(&self) -> Option<String> {
         if self.assessments.is_empty() || !self.assessments.iter().all(|a| a.fell) {
             return None;
         }
         Some(format!(
-            "every controller falls on this rig's model with each of the {} candidate weights \
-             tried: no shared weights balance it (see the rows above; a stronger motor, a \
+            "every controller falls on this rig's model with the weights that came closest of \
+             the {} candidates tried: no shared weights found balance it (a stronger motor, a \
              start nearer upright or a less noisy sensor may)",
             self.tried
         ))
