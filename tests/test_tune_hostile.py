@@ -280,6 +280,18 @@ def test_identify_checks_its_outputs_before_the_fit(tmp_path, capsys, monkeypatc
     assert _files(tmp_path) == before
 
 
+def test_identify_does_not_overwrite_a_log(tmp_path, capsys, monkeypatch) -> None:
+    identify_module = importlib.import_module("riprs.identify")
+    monkeypatch.setattr(identify_module, "identify", lambda *_a, **_k: pytest.fail("ran"))
+    log = tmp_path / "excite.csv"
+    log.write_text("t,theta\n")
+    before = _files(tmp_path)
+    assert main(["identify", str(log), "--out", str(log), "--no-plots"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("riprs: error: --out: ") and "input file" in err, err
+    assert _files(tmp_path) == before
+
+
 # -- arguments ---------------------------------------------------------------------------------
 
 
@@ -378,3 +390,41 @@ def test_a_trusted_rig_records_no_mark(tmp_path) -> None:
     assert "untrusted" not in side.read_text()
     found = {f.check: f for f in preflight(tmp_path / "tuned.toml", "LQR")}["identification"]
     assert found.verdict == "pass", found
+
+
+def test_ctrl_c_ends_riprs_tune_within_seconds(tmp_path) -> None:
+    import os
+    import select
+    import signal
+    import subprocess
+    import sys
+
+    rig = tmp_path / "rig.toml"
+    rig.write_text(NOISY_SENSOR)
+    # The warning of an untrusted identification is printed just before the search begins.
+    (tmp_path / "rig.identification.toml").write_text(UNTRUSTED)
+    before = _files(tmp_path)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "riprs.cli", "tune", str(rig), "--out", str(tmp_path / "t.toml")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    try:
+        seen, end = b"", time.monotonic() + 60.0
+        while b"riprs: warning:" not in seen and time.monotonic() < end:
+            if select.select([proc.stderr], [], [], 0.5)[0]:
+                seen += os.read(proc.stderr.fileno(), 4096)
+        assert b"riprs: warning:" in seen, seen
+        time.sleep(1.0)
+        assert proc.poll() is None, "the search (about half a minute) ended early"
+        proc.send_signal(signal.SIGINT)
+        start = time.monotonic()
+        _, err = proc.communicate(timeout=30)
+        assert time.monotonic() - start < 10.0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert b"riprs: interrupted" in err and b"Traceback" not in err, err
+    assert _files(tmp_path) == before
