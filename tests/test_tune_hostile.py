@@ -340,6 +340,8 @@ def test_a_seed_that_is_no_integer_is_a_usage_error(tmp_path, capsys, no_search)
         ({"seed": 10**23}, "seed"),
         ({"seed": 1e23}, "seed"),
         ({"seed": 1.5}, "seed"),
+        ({"seed": True}, "seed"),
+        ({"seed": "3"}, "seed"),
         ({"runs": -3}, "runs"),
         ({"runs": 2.5}, "runs"),
         ({"runs": 10**9}, "runs"),
@@ -350,6 +352,13 @@ def test_a_seed_that_is_no_integer_is_a_usage_error(tmp_path, capsys, no_search)
 def test_python_arguments_out_of_range_are_refused_up_front(no_search, kwargs, name) -> None:
     with pytest.raises(ValueError, match=f"^{name}: "):
         tune(riprs.Spec(), progress=False, **kwargs)
+
+
+def test_numpy_integers_are_integers() -> None:
+    import numpy as np
+
+    res = tune(riprs.Spec(), runs=np.int64(1), seed=np.uint64(2**64 - 1), progress=False)
+    assert res.runs == 1 and all(c.balanced_fraction == 1.0 for c in res.controllers.values())
 
 
 # -- an untrusted identification ---------------------------------------------------------------

@@ -7,6 +7,7 @@ tuned file. ``docs/tuning.md`` has the method and the math.
 
 from __future__ import annotations
 
+import operator
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -563,6 +564,8 @@ def tune(
     path = None if isinstance(rig, Spec) else Path(os.fspath(rig))
     spec = _spec(rig)
     tune_check(spec, Ts, runs, seed, spread)
+    # Checked as integers (NumPy's too); as Python ints the chunks' seeds cannot overflow.
+    runs, seed = operator.index(runs), operator.index(seed)
     cov = _covariance(path, spec)
     untrusted = None if path is None else identification_untrusted(path)
     bar = _progress.bar(progress, total=1 + runs, desc="riprs tune", unit="step")

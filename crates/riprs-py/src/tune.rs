@@ -136,12 +136,11 @@ fn loop_response<'py>(
 }
 
 /// An integer argument as the core's checks take it: `None` for a value that is no integer
-/// (a bool, a float) or beyond `i128`, with the value as the caller wrote it.
+/// (a bool, a float: anything without `__index__`) or beyond `i128`, with the value as the
+/// caller wrote it. A NumPy integer is one.
 fn integer(value: &Bound<'_, PyAny>) -> PyResult<(Option<i128>, String)> {
     let shown = value.repr()?.to_string();
-    if value.is_instance_of::<pyo3::types::PyBool>()
-        || !value.is_instance_of::<pyo3::types::PyInt>()
-    {
+    if value.is_instance_of::<pyo3::types::PyBool>() {
         return Ok((None, shown));
     }
     Ok((value.extract::<i128>().ok(), shown))
