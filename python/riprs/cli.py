@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Sequence
+from typing import Callable, Dict, Sequence, TypeVar
 
 import numpy as np
 
 from riprs import RiprsError, __version__, paper
+
+T = TypeVar("T")
 
 
 def _format_matrix(name: str, ours: np.ndarray, printed: np.ndarray | None) -> str:
@@ -131,6 +133,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     import warnings
     from pathlib import Path
 
+    from riprs import _outputs
     from riprs.identify import (
         IdentifyError,
         IdentifyWarning,
@@ -142,6 +145,13 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     names = [Path(p).stem for p in args.logs]
+    inputs = [*args.logs, *([args.lab] if args.lab else [])]
+    # The outputs are checked before the fit, which takes minutes; the logs are never
+    # replaced.
+    out, side = _renamed(
+        lambda: _outputs.check([out, identification_path(out)], key="out", inputs=inputs),
+        {"out": "--out"},
+    )
     with warnings.catch_warnings():
         # The report prints every warning once, after the numbers.
         warnings.simplefilter("ignore", IdentifyWarning)
@@ -161,13 +171,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
             "they name (a lab file with --lab, more excitation) or pass --force to write it "
             "marked as untrusted"
         )
-    out.parent.mkdir(parents=True, exist_ok=True)
     source = ", ".join(Path(p).name for p in args.logs)
-    side = identification_path(out)
-    for path, text in ((out, result.to_toml(source)), (side, result.identification_toml(source))):
-        staged = path.with_name(path.name + ".tmp")
-        staged.write_text(text)
-        staged.replace(path)
+    _outputs.write([(out, result.to_toml(source)), (side, result.identification_toml(source))])
     figures = []
     if not args.no_plots:
         for name, path in zip(names, args.logs, strict=True):
@@ -181,18 +186,45 @@ def cmd_identify(args: argparse.Namespace) -> int:
     return 0
 
 
+def _renamed(call: Callable[[], T], flags: Dict[str, str]) -> T:
+    """``call()``, an error whose message begins with one of the keyword arguments of
+    ``flags`` raised again naming its option instead (``seed: ...`` -> ``--seed: ...``)."""
+    try:
+        return call()
+    except RiprsError as exc:
+        text = str(exc)
+        for key, flag in flags.items():
+            if text.startswith(f"{key}: "):
+                raise RiprsError(flag + text[len(key) :]) from None
+        raise
+
+
 def cmd_tune(args: argparse.Namespace) -> int:
     """Choose shared LQR/LQG/MPC weights for a rig and write the tuned experiment file."""
-    from pathlib import Path
+    from riprs._riprs import identification_untrusted
+    from riprs.config import ConfigError
+    from riprs.tune import check_out, tune
 
-    from riprs.tune import tune
-
-    result = tune(
-        args.rig, runs=args.runs, seed=args.seed, spread=args.spread, progress=not args.quiet
+    # Everything that can be found wrong is found before the search, which takes up to a
+    # minute: the outputs, then the arguments and the rig's voltage (in tune()).
+    out, _ = _renamed(
+        lambda: check_out(args.out, args.rig, overwrite=args.force, key="out", force="--force"),
+        {"out": "--out"},
+    )
+    untrusted = identification_untrusted(args.rig)
+    if untrusted:
+        # Said before the search, not after it: the weights are only as good as this model.
+        print(f"riprs: warning: {untrusted}", file=sys.stderr)
+    result = _renamed(
+        lambda: tune(
+            args.rig, runs=args.runs, seed=args.seed, spread=args.spread, progress=not args.quiet
+        ),
+        {"runs": "--runs", "seed": "--seed", "spread": "--spread"},
     )
     print(result.report())
-    out = Path(args.out)
-    side = result.write(out)
+    if result.refusal is not None:
+        raise ConfigError(f"{args.rig}: {result.refusal}; {out} was not written")
+    side = _renamed(lambda: result.write(out, overwrite=args.force), {"out": "--out"})
     print()
     print(f"wrote {out} (riprs compare --config, riprs campaign and rip-rt run --config read it)")
     print(f"wrote {side} (the predictions rip-rt run's pre-flight reads while they are current)")
@@ -376,7 +408,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--start",
         metavar="paper|qube_servo2|FILE",
         default="qube_servo2",
-        help="start set; fixes mp, Lp, mr, Rm, km, g (default qube_servo2)",
+        help="start set; holds mp, Lp, mr, Rm and g where the lab file does not give them, "
+        "and km = kt unless it gives km (default qube_servo2)",
     )
     ident.add_argument(
         "--holdout", type=float, default=0.25, metavar="F", help="held-out fraction of each log"
@@ -419,6 +452,11 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.1,
         metavar="F",
         help="relative spread of each parameter without an identification covariance",
+    )
+    tun.add_argument(
+        "--force",
+        action="store_true",
+        help="write the tuned file even where it replaces RIG.toml",
     )
     tun.add_argument("--quiet", action="store_true", help="no progress bar")
     tun.set_defaults(func=cmd_tune)

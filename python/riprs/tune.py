@@ -7,6 +7,7 @@ tuned file. ``docs/tuning.md`` has the method and the math.
 
 from __future__ import annotations
 
+import operator
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,15 +15,17 @@ from typing import Dict, List, Tuple, Union
 
 import numpy as np
 
-from riprs import _progress
+from riprs import _outputs, _progress
 from riprs._riprs import (
     TS,
     ConfigError,
     Spec,
+    identification_untrusted,
     load_config,
     loop_margins,
     loop_response,
     preflight_check,
+    tune_check,
     tune_record_path,
     tune_robustness,
     tune_weights,
@@ -34,6 +37,7 @@ __all__ = [
     "Margins",
     "PreflightFinding",
     "TuneResult",
+    "check_out",
     "loop_response",
     "margins",
     "preflight",
@@ -163,7 +167,20 @@ class TuneResult:
     record : str
         The tuning record (TOML) that :meth:`write` puts beside the tuned file: the checksum
         of the tuned design and each controller's prediction, which ``rip-rt run``'s
-        pre-flight reads instead of simulating again while the checksum matches.
+        pre-flight reads instead of simulating again while the checksum matches, and the
+        rig's untrusted identification, if it is (``untrusted``).
+    source : pathlib.Path or None
+        The rig file tuned, which :meth:`write` does not overwrite unless asked.
+    untrusted : str or None
+        Why the rig's identification is not trusted (its ``# UNTRUSTED`` header, or the
+        ``.identification.toml`` beside it), or None: the tuning is only as good as that model.
+    refusal : str or None
+        Why the tuning failed outright (every controller falls on the rig's model with the
+        weights found), or None; :meth:`write` refuses such a result.
+    notes : list of str
+        Settings other than the weights that the tuning changed so that ``rip-rt`` runs the
+        file as written, each with why (``swing_up.arm_limit`` lowered to the largest a stop
+        during the swing can brake from inside ``safety.arm_limit``).
     """
 
     spec: Spec
@@ -176,29 +193,51 @@ class TuneResult:
     perturbation: str
     header: List[str] = field(default_factory=list)
     record: str = ""
+    source: Path | None = None
+    untrusted: str | None = None
+    refusal: str | None = None
+    notes: List[str] = field(default_factory=list)
 
-    def write(self, out: PathLike) -> Path:
+    def write(self, out: PathLike, *, overwrite: bool = False) -> Path:
         """Write the tuned file to ``out`` and its record beside it (``OUT.tune.toml``, the
-        name ``rip_core::preflight::tune_record_path`` gives), each replaced atomically.
+        name ``rip_core::preflight::tune_record_path`` gives): both, or neither.
+
+        Parameters
+        ----------
+        out : path-like
+            The tuned file.
+        overwrite : bool
+            Allow the tuned file or its record to replace the rig file tuned.
 
         Returns
         -------
         pathlib.Path
             The record's path.
+
+        Raises
+        ------
+        ConfigError
+            The tuning failed outright (``refusal``).
+        riprs._outputs.OutputError
+            ``out`` or its record is a directory, cannot be written, or is the rig file
+            tuned (without ``overwrite``); nothing is written.
         """
-        out = Path(os.fspath(out))
-        out.parent.mkdir(parents=True, exist_ok=True)
-        side = record_path(out)
-        for path, text in ((out, self.to_toml()), (side, self.record)):
-            staged = path.with_name(path.name + ".tmp")
-            staged.write_text(text)
-            staged.replace(path)
+        if self.refusal is not None:
+            raise ConfigError(self.refusal)
+        out, side = check_out(out, self.source, overwrite=overwrite)
+        _outputs.write([(out, self.to_toml()), (side, self.record)])
         return side
 
     def report(self) -> str:
         """The per-controller table ``riprs tune`` prints."""
         w = self.weights
-        lines = [
+        lines = (
+            [f"WARNING: {self.untrusted}; these weights are only as good as that model", ""]
+            if self.untrusted
+            else []
+        )
+        lines += [*self.notes, ""] if self.notes else []
+        lines += [
             "weights: "
             + (
                 "the file's own (they work)"
@@ -224,7 +263,7 @@ class TuneResult:
                 f"{m.gain_margin_db:5.1f}/{m.gain_reduction_db:5.1f} {m.phase_margin_deg:6.1f} "
                 f"{m.disk_margin:5.2f} | {c.arm_peak_to_peak:7.3f} {c.pendulum:7.3f} "
                 f"{c.offset:6.3f} {c.peak_voltage:6.2f} | {frac} of {self.runs}"
-                + ("" if c.works else "  (misses the bar)")
+                + ("  (falls)" if c.fell else "" if c.works else "  (misses the bar)")
                 + (
                     f"; the sensor's: with exact angles arm p-p {c.exact_sensor[0]:.3f}"
                     if c.sensor_limited and c.exact_sensor is not None
@@ -232,14 +271,27 @@ class TuneResult:
                 )
             )
         lines.append("")
-        lines.append(
-            "every controller meets the bar (steady-state arm p-p <= 0.05, |alpha| <= 0.02, "
-            "offset <= 0.02 rad; inside the voltage bound; margins >= 6 dB and 30 deg or disk "
-            ">= 0.67)"
-            if self.works
-            else "NOT every controller meets the bar with any candidate tried: these weights miss "
-            "it by least (see the rows marked)"
-        )
+        falls = [n for n, c in self.controllers.items() if c.fell]
+        if self.works:
+            lines.append(
+                "every controller meets the bar (steady-state arm p-p <= 0.05, |alpha| <= 0.02, "
+                "offset <= 0.02 rad; inside the voltage bound; margins >= 6 dB and 30 deg or "
+                "disk >= 0.67)"
+            )
+        elif self.refusal is not None:
+            lines.append(f"NO controller balances this rig: {self.refusal}")
+        else:
+            lines.append(
+                "NOT every controller meets the bar with any candidate tried: these weights miss "
+                "it by least (see the rows marked)"
+                + (
+                    f"; {' and '.join(falls)} {'falls' if len(falls) == 1 else 'fall'} on the "
+                    "rig's model, and rip-rt run's pre-flight refuses "
+                    + ("it" if len(falls) == 1 else "them")
+                    if falls
+                    else ""
+                )
+            )
         return "\n".join(lines)
 
     def to_toml(self) -> str:
@@ -385,6 +437,49 @@ def preflight(
     ]
 
 
+def check_out(
+    out: PathLike,
+    rig: PathLike | None,
+    *,
+    overwrite: bool = False,
+    key: str = "out",
+    force: str = "overwrite=True",
+) -> Tuple[Path, Path]:
+    """Check, before a tuning, that its tuned file ``out`` and the record beside it can be
+    written (:meth:`TuneResult.write` checks the same).
+
+    Parameters
+    ----------
+    out : path-like
+        The tuned file.
+    rig : path-like or None
+        The rig file tuned: neither output may replace it (nor its identification file)
+        unless ``overwrite``.
+    overwrite : bool
+        Allow that.
+    key, force : str
+        The argument naming ``out``, and how the caller allows overwriting, for the message.
+
+    Returns
+    -------
+    tuple of pathlib.Path
+        ``(out, record)``.
+
+    Raises
+    ------
+    riprs._outputs.OutputError
+        The message begins with ``key``.
+    """
+    path = Path(os.fspath(out))
+    inputs: List[PathLike] = []
+    if rig is not None:
+        inputs = [rig, identification_path(rig)]
+    out_path, side = _outputs.check(
+        [path, record_path(path)], key=key, inputs=inputs, overwrite=overwrite, force=force
+    )
+    return out_path, side
+
+
 def _header(path: Path | None) -> List[str]:
     if path is None:
         return []
@@ -464,41 +559,75 @@ def tune(
     Raises
     ------
     ConfigError
-        The file is invalid, or no candidate can be designed.
-    ValueError
-        ``runs`` negative or ``spread`` outside [0, 1).
+        The file is invalid, no controller can balance its rig at the voltage bound (the
+        pre-flight's voltage check, before any search), no ``swing_up.arm_limit`` leaves a
+        stop during the swing room inside ``safety.arm_limit`` (the message names the keys to
+        change), or no candidate can be designed.
+        An argument out of range is one too, naming it: ``Ts`` outside the loop periods a
+        rig file allows (1-20 ms), ``runs`` outside 0-1000, ``seed`` not an integer in
+        0..2**64-1, ``spread`` outside [0, 1) (``rip_core::tune::Settings``).
+    KeyboardInterrupt
+        Ctrl-C, within a fraction of a second.
     """
-    if runs < 0:
-        raise ValueError(f"runs: must be non-negative, got {runs}")
-    if not 0.0 <= spread < 1.0:
-        raise ValueError(f"spread: must be in [0, 1), got {spread}")
     path = None if isinstance(rig, Spec) else Path(os.fspath(rig))
     spec = _spec(rig)
-    bar = _progress.bar(progress, total=1 + runs, desc="riprs tune", unit="step")
-    tuned, weights, works, assessments, tried, record = tune_weights(spec, Ts)
-    if bar is not None:
-        bar.update(1)
+    tune_check(spec, Ts, runs, seed, spread)
+    # The swing-up's arm limit rip-rt accepts, before the search: the tuning record's
+    # swing-up verdict is then the verdict on the file as written.
+    fitted = spec.with_stoppable_swing_up()
+    notes = []
+    if fitted.swing_up["arm_limit"] != spec.swing_up["arm_limit"]:
+        notes.append(
+            f"swing_up.arm_limit: {spec.swing_up['arm_limit']:g} -> "
+            f"{fitted.swing_up['arm_limit']:g} rad, the largest from which a stop during the "
+            "swing can brake the arm inside safety.arm_limit (rip-rt run --swing-up refuses "
+            "more)"
+        )
+        spec = fitted
+    # Checked as integers (NumPy's too); as Python ints the chunks' seeds cannot overflow.
+    runs, seed = operator.index(runs), operator.index(seed)
     cov = _covariance(path, spec)
-    fractions: Dict[str, float] = {}
-    if runs > 0:
-        counts = {n: 0.0 for n in CONTROLLERS}
-        done, chunk = 0, 5
-        while done < runs:
-            n = min(chunk, runs - done)
-            if cov is not None:
-                part = tune_robustness(
-                    tuned, n, seed + done, Ts, spread, cov[0], np.ascontiguousarray(cov[1])
-                )
-            else:
-                part = tune_robustness(tuned, n, seed + done, Ts, spread)
-            for name, frac in part:
-                counts[name] += frac * n
-            done += n
-            if bar is not None:
-                bar.update(n)
-        fractions = {n: c / runs for n, c in counts.items()}
-    if bar is not None:
-        bar.close()
+    untrusted = None if path is None else identification_untrusted(path)
+    bar = _progress.bar(progress, total=1 + runs, desc="riprs tune", unit="step")
+
+    def advance(done: int, total: int) -> None:
+        # The search's steps first (their count grows when it begins its second pass), then
+        # one per robustness run.
+        bar.total = total + runs
+        bar.n = done
+        bar.refresh()
+
+    try:
+        tuned, weights, works, assessments, tried, record, refusal = tune_weights(
+            spec, Ts, untrusted, None if bar is None else advance
+        )
+        if bar is not None:
+            bar.n = bar.total - runs
+            bar.refresh()
+        fractions: Dict[str, float] = {}
+        # Rigs drawn around one no controller balances would only confirm it.
+        if runs > 0 and refusal is None:
+            counts = {n: 0.0 for n in CONTROLLERS}
+            done, chunk = 0, 5
+            while done < runs:
+                n = min(chunk, runs - done)
+                # Each chunk draws from its own seed; past the last u64 they wrap around.
+                at = (seed + done) % 2**64
+                if cov is not None:
+                    part = tune_robustness(
+                        tuned, n, at, Ts, spread, cov[0], np.ascontiguousarray(cov[1])
+                    )
+                else:
+                    part = tune_robustness(tuned, n, at, Ts, spread)
+                for name, frac in part:
+                    counts[name] += frac * n
+                done += n
+                if bar is not None:
+                    bar.update(n)
+            fractions = {n: c / runs for n, c in counts.items()}
+    finally:
+        if bar is not None:
+            bar.close()
     controllers = {}
     for a in assessments:
         name = a["controller"]
@@ -545,4 +674,8 @@ def tune(
         ),
         header=_header(path),
         record=record,
+        source=path,
+        untrusted=untrusted,
+        refusal=refusal,
+        notes=notes,
     )

@@ -11,9 +11,11 @@
 //!
 //! - **identification** — the rig file was written by `riprs identify --force` despite failed
 //!   checks: its header carries the line `# UNTRUSTED`, or the identification file beside it
-//!   (`rig.identification.toml`) says `[identification] trusted = false`; or that file is
-//!   there but cannot say (not a regular file, too large, not UTF-8, not TOML, no
-//!   `[identification] trusted` true or false), which refuses too.
+//!   (`rig.identification.toml`) says `[identification] trusted = false`, or the tuning record
+//!   beside it (`rig.tune.toml`, [`untrusted_section`]) carries that verdict from the rig
+//!   `riprs tune` tuned; or that identification file is there but cannot say (not a regular
+//!   file, too large, not UTF-8, not TOML, no `[identification] trusted` true or false),
+//!   which refuses too.
 //! - **voltage** — no controller can balance the rig at the voltage bound. Near upright the
 //!   linearised plant `ẋ = A_c x + B_c u` has one unstable pole `p > 0`; with `wᵀ` its left
 //!   eigenvector, the unstable mode `z = wᵀ x` obeys `ż = p z + (wᵀ B_c) u` whatever the
@@ -228,6 +230,14 @@ pub fn untrusted_reason(rig: &Path) -> Option<String> {
             ));
         }
     }
+    // A tuned file keeps its rig's verdict in its record: nothing lies beside it.
+    let record = tune_record_path(rig);
+    if let Some(reason) = recorded_untrusted(&record) {
+        return Some(format!(
+            "{reason} (recorded by riprs tune in {})",
+            record.display()
+        ));
+    }
     let side = identification_path(rig);
     if !present(&side) {
         return None;
@@ -271,6 +281,31 @@ pub fn untrusted_reason(rig: &Path) -> Option<String> {
             format!(": {}", problems.join("; "))
         }
     ))
+}
+
+/// The `[identification]` table `riprs tune` adds to its record ([`tune_record_path`]) when
+/// the rig it tuned is untrusted ([`untrusted_reason`] of the rig file): the verdict then
+/// travels with the tuned file, which has no identification file beside it.
+pub fn untrusted_section(reason: &str) -> String {
+    let mut table = toml::Table::new();
+    table.insert("trusted".into(), toml::Value::Boolean(false));
+    table.insert("reason".into(), toml::Value::String(reason.into()));
+    let mut doc = toml::Table::new();
+    doc.insert("identification".into(), toml::Value::Table(table));
+    toml::to_string(&doc).expect("strings and booleans have a TOML form")
+}
+
+/// The reason of an [`untrusted_section`] in the record at `path`, if it holds one. A record
+/// that cannot be read (not a regular file, too large, not TOML) holds none here: the tuning
+/// check refuses it.
+fn recorded_untrusted(path: &Path) -> Option<String> {
+    let bytes = crate::files::read_regular(path).ok()?;
+    let table: toml::Table = std::str::from_utf8(&bytes).ok()?.parse().ok()?;
+    let ident = table.get("identification")?.as_table()?;
+    if ident.get("trusted")?.as_bool()? {
+        return None;
+    }
+    Some(ident.get("reason")?.as_str()?.to_string())
 }
 
 fn identification(input: &Input<'_>) -> Option<Finding> {
@@ -322,7 +357,10 @@ pub fn mode_voltage(a: &Mat, b: &Mat, x: &[f64; 4]) -> Option<(f64, f64)> {
     Some(((p * wx / wb).abs(), p))
 }
 
-fn voltage(input: &Input<'_>) -> Option<Finding> {
+/// The voltage check (module docs): whether any controller can balance the rig of
+/// `input.design` from its start state within its voltage bound; `None` when the model has no
+/// unstable mode. `riprs tune` runs it before its search.
+pub fn voltage(input: &Input<'_>) -> Option<Finding> {
     let spec = input.design.spec();
     let (ac, bc) = spec.continuous_design_model().ok()?;
     let p = spec.plant.params();

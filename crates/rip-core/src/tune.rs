@@ -35,6 +35,8 @@
 //! [`robustness`] then draws rigs around the file's (each parameter within ±10 %, or from
 //! the identification's covariance) and counts the runs each tuned controller balances.
 
+use std::sync::atomic::AtomicBool;
+
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
@@ -45,6 +47,10 @@ use crate::preflight::{design_checksum, StoredPrediction, TuneRecord};
 use crate::sim::simulate;
 use crate::spec::rig_sections::COUNTS_PER_REV;
 use crate::spec::{ControllerKind, Spec, SpecError};
+
+mod settings;
+use settings::check_cancel;
+pub use settings::{check_spread, check_ts, check_voltage, Progress, Settings, MAX_RUNS};
 
 /// Noise seeds of each candidate's simulations.
 pub const SEEDS: [u64; 2] = [11, 12];
@@ -469,15 +475,61 @@ pub struct Tuned {
     pub tried: usize,
 }
 
+impl Tuned {
+    /// Why the tuning failed outright, if it did: every controller falls on the rig's model
+    /// with the weights that missed the bar by least.
+    pub fn refusal(&self) -> Option<String> {
+        if self.assessments.is_empty() || !self.assessments.iter().all(|a| a.fell) {
+            return None;
+        }
+        Some(format!(
+            "every controller falls on this rig's model with the weights that came closest of \
+             the {} candidates tried: no shared weights found balance it (a stronger motor, a \
+             start nearer upright or a less noisy sensor may)",
+            self.tried
+        ))
+    }
+}
+
 /// Chooses shared weights for the rig of `spec` at sample time `ts` (module docs).
 pub fn tune(spec: &Spec, ts: f64, bar: &Bar) -> Result<Tuned, SpecError> {
+    tune_with(spec, ts, bar, &Progress::default(), &AtomicBool::new(false))
+}
+
+/// [`tune`], first refusing a rig the pre-flight's voltage check refuses
+/// ([`check_voltage`]); counting its steps in `progress` (one per candidate, and one for
+/// the final assessment) and stopping with an error between two steps once `cancel` is set.
+pub fn tune_with(
+    spec: &Spec,
+    ts: f64,
+    bar: &Bar,
+    progress: &Progress,
+    cancel: &AtomicBool,
+) -> Result<Tuned, SpecError> {
+    check_voltage(spec, ts)?;
+    let candidates = candidates(spec);
+    progress.add(candidates.len() + 2);
+    let tuned = search(spec, candidates, ts, bar, progress, cancel)?;
+    progress.finish();
+    Ok(tuned)
+}
+
+fn search(
+    spec: &Spec,
+    candidates: Vec<Weights>,
+    ts: f64,
+    bar: &Bar,
+    progress: &Progress,
+    cancel: &AtomicBool,
+) -> Result<Tuned, SpecError> {
     let mut tried = 0;
     // First each candidate with the recovery its margins ask for, in order. One whose
     // recovered LQG or MPC misses the margins cannot work, so it is simulated only when no
     // candidate works and the one that misses by least is wanted.
     // Each with its shortfall once judged (`None` until then).
     let mut recovered: Vec<(Weights, Option<Shortfall>)> = Vec::new();
-    for w in std::iter::once(Weights::FILE).chain(candidates(spec)) {
+    for w in std::iter::once(Weights::FILE).chain(candidates) {
+        check_cancel(cancel)?;
         let (w, margins_met) = recover(spec, w, ts, bar);
         let mut score = None;
         if margins_met {
@@ -489,6 +541,7 @@ pub fn tune(spec: &Spec, ts: f64, bar: &Bar) -> Result<Tuned, SpecError> {
             }
         }
         recovered.push((w, score));
+        progress.step();
     }
     // None works: then those whose recovery was raised are tried again without it (the
     // recovery trusts the sensor more, which may cost the steady state on a coarse or noisy
@@ -498,11 +551,15 @@ pub fn tune(spec: &Spec, ts: f64, bar: &Bar) -> Result<Tuned, SpecError> {
         .filter(|(w, _)| w.recovery != 1.0)
         .map(|(w, _)| (w.with_recovery(1.0), None))
         .collect();
+    let unjudged = recovered.iter().filter(|(_, s)| s.is_none()).count();
+    progress.add(unjudged + unrecovered.len());
     let mut best: Option<((f64, f64), Weights)> = None;
     for (w, score) in recovered.into_iter().chain(unrecovered) {
         let score = match score {
             Some(s) => s,
             None => {
+                check_cancel(cancel)?;
+                progress.step();
                 tried += 1;
                 match judge(spec, w, ts, bar) {
                     Judgement::Works(tuned) => return Ok(Tuned { tried, ..*tuned }),
@@ -520,6 +577,7 @@ pub fn tune(spec: &Spec, ts: f64, bar: &Bar) -> Result<Tuned, SpecError> {
     let (_, weights) = best.ok_or_else(|| {
         SpecError::new("lqr", "no candidate weights could be designed for this rig")
     })?;
+    check_cancel(cancel)?;
     let spec = weights.apply(spec);
     let mut assessments = assess(&spec, ts, bar)?;
     explain_misses(&spec, ts, bar, &mut assessments)?;
@@ -716,11 +774,24 @@ pub fn robustness(
     runs: usize,
     seed: u64,
 ) -> Result<Vec<(ControllerKind, f64)>, SpecError> {
+    robustness_with(spec, ts, perturbation, runs, seed, &AtomicBool::new(false))
+}
+
+/// [`robustness`], stopping with an error between two runs once `cancel` is set.
+pub fn robustness_with(
+    spec: &Spec,
+    ts: f64,
+    perturbation: &Perturbation,
+    runs: usize,
+    seed: u64,
+    cancel: &AtomicBool,
+) -> Result<Vec<(ControllerKind, f64)>, SpecError> {
     let design = spec.design(ts)?;
     let nominal = spec.plant.params();
     let mut rng = StdRng::seed_from_u64(seed);
     let mut plants = Vec::with_capacity(runs);
     while plants.len() < runs {
+        check_cancel(cancel)?;
         let p = perturb(&nominal, perturbation, &mut rng);
         if let Ok(mut plant) = Plant::new(p) {
             if let Some(cs) = spec.plant.arm_breakaway {
@@ -734,6 +805,7 @@ pub fn robustness(
         let mut controller = design.controller(kind)?;
         let mut ok = 0usize;
         for (i, plant) in plants.iter().enumerate() {
+            check_cancel(cancel)?;
             let cfg = spec.sim_config(ts, seed.wrapping_add(i as u64));
             let run = simulate(plant, controller.as_mut(), &cfg)
                 .map_err(|e| SpecError::new("plant", format!("simulation: {e}")))?;

@@ -3,6 +3,7 @@
 //! Python package (`riprs.tune`) shapes the results into typed objects.
 
 use std::path::PathBuf;
+use std::sync::atomic::Ordering;
 
 use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
@@ -11,8 +12,9 @@ use pyo3::types::PyDict;
 use rip_core::margins::Margins;
 use rip_core::preflight;
 use rip_core::spec::{ControllerKind, SpecError};
-use rip_core::tune::{self, Assessment, Bar, Perturbation, Weights};
+use rip_core::tune::{self, Assessment, Bar, Perturbation, Progress, Settings, Weights};
 
+use crate::interrupt::interruptible;
 use crate::spec::{ConfigError, PySpec};
 
 fn config_err(e: SpecError) -> PyErr {
@@ -133,19 +135,68 @@ fn loop_response<'py>(
     }))
 }
 
-/// Chooses shared weights for the spec's rig (``rip_core::tune::tune``). Returns
-/// ``(tuned spec, weights, works, assessments, tried, record)``, the record the TOML text of
-/// ``rip_core::preflight::TuneRecord`` that the pre-flight reads beside the tuned file,
-/// followed by the swing-up feasibility verdict's ``[swing_up]`` table
-/// (``rip_core::swingup::StoredFeasibility``) that ``rip-rt run --swing-up`` reads.
+/// An integer argument as the core's checks take it: `None` for a value that is no integer
+/// (a bool, a float: anything without `__index__`) or beyond `i128`, with the value as the
+/// caller wrote it. A NumPy integer is one.
+fn integer(value: &Bound<'_, PyAny>) -> PyResult<(Option<i128>, String)> {
+    let shown = value.repr()?.to_string();
+    if value.is_instance_of::<pyo3::types::PyBool>() {
+        return Ok((None, shown));
+    }
+    Ok((value.extract::<i128>().ok(), shown))
+}
+
+/// What a tuning checks before its search: the settings (``rip_core::tune::Settings``, a
+/// ``ConfigError`` naming the argument: ``Ts``, ``runs``, ``seed``, ``spread``), then the
+/// pre-flight's voltage check on the spec's rig (``rip_core::tune::check_voltage``, a
+/// ``ConfigError`` giving the voltage it would need).
 #[pyfunction]
-#[pyo3(signature = (spec, Ts = rip_core::paper::TS))]
+#[pyo3(signature = (spec, Ts, runs, seed, spread))]
+#[allow(non_snake_case)]
+fn tune_check(
+    py: Python<'_>,
+    spec: PyRef<'_, PySpec>,
+    Ts: f64,
+    runs: &Bound<'_, PyAny>,
+    seed: &Bound<'_, PyAny>,
+    spread: f64,
+) -> PyResult<()> {
+    let (runs, runs_shown) = integer(runs)?;
+    let (seed, seed_shown) = integer(seed)?;
+    Settings::new(Ts, runs, seed, spread, [&runs_shown, &seed_shown]).map_err(config_err)?;
+    let s = spec.inner.clone();
+    py.allow_threads(|| tune::check_voltage(&s, Ts))
+        .map_err(config_err)
+}
+
+/// Why the rig file is not trusted by its identification, if it is not
+/// (``rip_core::preflight::untrusted_reason``: its header, the identification file or the
+/// tuning record beside it).
+#[pyfunction]
+fn identification_untrusted(rig_file: PathBuf) -> Option<String> {
+    preflight::untrusted_reason(&rig_file)
+}
+
+/// Chooses shared weights for the spec's rig (``rip_core::tune::tune_with``: a rig the
+/// pre-flight's voltage check refuses is a ``ConfigError`` before any search). Returns
+/// ``(tuned spec, weights, works, assessments, tried, record, refusal)``: the record the TOML
+/// text of ``rip_core::preflight::TuneRecord`` that the pre-flight reads beside the tuned
+/// file, followed by the swing-up feasibility verdict's ``[swing_up]`` table
+/// (``rip_core::swingup::StoredFeasibility``) that ``rip-rt run --swing-up`` reads and, with
+/// ``untrusted`` (why the rig's identification is not trusted), its ``[identification]``
+/// verdict; ``refusal`` says why the tuning failed outright (``Tuned::refusal``), or is None.
+/// ``progress(done, total)`` is called as the search advances; Ctrl-C (or an exception from
+/// ``progress``) stops it.
+#[pyfunction]
+#[pyo3(signature = (spec, Ts = rip_core::paper::TS, untrusted = None, progress = None))]
 #[allow(non_snake_case)]
 #[allow(clippy::type_complexity)]
 fn tune_weights<'py>(
     py: Python<'py>,
     spec: PyRef<'py, PySpec>,
     Ts: f64,
+    untrusted: Option<String>,
+    progress: Option<Bound<'py, PyAny>>,
 ) -> PyResult<(
     PySpec,
     Bound<'py, PyDict>,
@@ -153,22 +204,42 @@ fn tune_weights<'py>(
     Vec<Bound<'py, PyDict>>,
     usize,
     String,
+    Option<String>,
 )> {
-    check_ts(Ts)?;
+    tune::check_ts(Ts).map_err(config_err)?;
     let s = spec.inner.clone();
     let bar = Bar::default();
-    let (t, record) = py
-        .allow_threads(|| {
-            let t = tune::tune(&s, Ts, &bar)?;
+    let steps = Progress::default();
+    let mut reported = (0, 0);
+    let (t, record) = interruptible(
+        py,
+        |cancel| {
+            let t = tune::tune_with(&s, Ts, &bar, &steps, cancel)?;
             let record = tune::record(&t, Ts, &bar)?;
             // The swing-up verdict beside the predictions, so that `rip-rt run --swing-up`
             // reads it instead of computing it (rip_core::swingup::stored).
             let verdict =
                 rip_core::swingup::StoredFeasibility::compute(&t.spec.plant()?, &t.spec.swing_up);
-            let text = format!("{}{}", record.to_toml(), verdict.to_section());
+            let mut text = format!("{}{}", record.to_toml(), verdict.to_section());
+            if let Some(reason) = &untrusted {
+                text.push_str(&preflight::untrusted_section(reason));
+            }
             Ok::<_, rip_core::spec::SpecError>((t, text))
-        })
-        .map_err(config_err)?;
+        },
+        |_| {
+            let now = (
+                steps.done.load(Ordering::Relaxed),
+                steps.total.load(Ordering::Relaxed),
+            );
+            if let Some(callback) = progress.as_ref().filter(|_| now != reported) {
+                callback.call1(now)?;
+                reported = now;
+            }
+            Ok(())
+        },
+    )?
+    .map_err(config_err)?;
+    let refusal = t.refusal();
     let w = PyDict::new(py);
     let Weights {
         arm,
@@ -199,6 +270,7 @@ fn tune_weights<'py>(
         list,
         t.tried,
         record,
+        refusal,
     ))
 }
 
@@ -219,12 +291,8 @@ fn tune_robustness(
     names: Option<Vec<String>>,
     log_covariance: Option<PyReadonlyArray2<'_, f64>>,
 ) -> PyResult<Vec<(String, f64)>> {
-    check_ts(Ts)?;
-    if !(spread.is_finite() && (0.0..1.0).contains(&spread)) {
-        return Err(PyValueError::new_err(format!(
-            "spread: must be in [0, 1), got {spread}"
-        )));
-    }
+    tune::check_ts(Ts).map_err(config_err)?;
+    tune::check_spread(spread).map_err(config_err)?;
     let perturbation = match (names, log_covariance) {
         (Some(names), Some(cov)) => {
             let n = names.len();
@@ -248,9 +316,12 @@ fn tune_robustness(
         }
     };
     let s = spec.inner.clone();
-    let out = py
-        .allow_threads(|| tune::robustness(&s, Ts, &perturbation, runs, seed))
-        .map_err(config_err)?;
+    let out = interruptible(
+        py,
+        |cancel| tune::robustness_with(&s, Ts, &perturbation, runs, seed, cancel),
+        |_| Ok(()),
+    )?
+    .map_err(config_err)?;
     Ok(out
         .into_iter()
         .map(|(k, f)| (k.name().to_string(), f))
@@ -306,5 +377,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(tune_robustness, m)?)?;
     m.add_function(wrap_pyfunction!(preflight_check, m)?)?;
     m.add_function(wrap_pyfunction!(tune_record_path, m)?)?;
+    m.add_function(wrap_pyfunction!(tune_check, m)?)?;
+    m.add_function(wrap_pyfunction!(identification_untrusted, m)?)?;
     Ok(())
 }
