@@ -454,6 +454,21 @@ fn prepare(args: &RunArgs) -> Result<(Config, Law, SerialPort, Option<LogWriter>
         for f in report.refusals() {
             rip_rt::say!("rip-rt: warning: --force: {f}");
         }
+    } else {
+        // Silence after a pass read as a check that never ran; its warnings were not shown.
+        let verdicts: Vec<String> = report
+            .findings
+            .iter()
+            .map(|f| format!("{} {}", f.check, f.verdict.name()))
+            .collect();
+        rip_rt::say!("rip-rt: pre-flight: passed ({})", verdicts.join(", "));
+        for f in report
+            .findings
+            .iter()
+            .filter(|f| f.verdict == rip_core::preflight::Verdict::Warn)
+        {
+            rip_rt::say!("rip-rt: pre-flight: {f}");
+        }
     }
     stop::install_signal_handlers()?;
     let port = SerialPort::open(&args.port, args.baud).map_err(SetupError::Port)?;
