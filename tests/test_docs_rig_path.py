@@ -42,12 +42,7 @@ MARKER = re.compile(r"<!-- rig-path: (?P<name>[^,>]+?)(?:, exit (?P<exit>\d+))? 
 #: Generated rigs the path is run on, the first in the pull-request tier: each has a dead
 #: zone (0.53, 0.89 and 0.27 V) and arm Coulomb friction (4.7e-3, 1.9e-3 and 2.8e-3 N m),
 #: and a motor constant (kt = km = 0.059, 0.057 and 0.035) unlike the QUBE-Servo 2 preset's
-#: 0.042 that start.toml starts from. Rigs the path does not take to the bar today (run
-#: when this was written, docs/rig.md's path as it stands): rig 15, LQR balanced at a true
-#: arm peak-to-peak of 0.052 rad; rig 21, LQG at 0.087 rad; rigs 6 and 31, a free swing
-#: too narrow to determine the pendulum's damping (peaks 0.78 and 0.84 rad); rigs 3, 7, 16,
-#: 26, 27 and 32, the 6 V kick refused (exit 2: the arm could not be stopped from it); rigs
-#: 2, 29, 30 and 35, no catch within swing_up.max_time (exit 13).
+#: 0.042 that start.toml starts from.
 RIGS = (5, 17, 20)
 
 #: The bar of `riprs tune` (rip_core::tune), over the last BAR_WINDOW seconds of balancing.
