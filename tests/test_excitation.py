@@ -89,7 +89,7 @@ def test_defaults_are_the_documented_ones() -> None:
         ({"signal": "prbs", "prbs_bits": -1}, "prbs_bits"),
         ({"signal": "prbs", "seed": -3}, "seed"),
         ({"signal": "steps", "step_hold": 0.0}, "step_hold"),
-        ({"signal": "free-swing", "kick": 10.0}, "kick"),
+        ({"signal": "free-swing", "kick": 20.0}, "kick"),
         ({"signal": "chirp", "dt": 1e-9}, "dt"),
         ({"signal": "chirp", "duration": float("nan")}, "duration"),
     ],

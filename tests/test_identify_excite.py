@@ -99,9 +99,9 @@ def test_a_generated_rig_through_rip_rt_excite_is_identified_or_refused(
         done = excite(rip_rt, truth, config, lab, name, args, log, 10 * seed + i)
         if name == "free-swing" and done.returncode == 5 and "braking envelope" in done.stderr:
             # docs/rig.md: a light arm that the wide kick would carry past its braking
-            # envelope is stopped (exit 5); the default kick (3 V, 0.15 s) then, whose swing is
-            # wide on it.
-            args = ["--duration", "60"]
+            # envelope is stopped (exit 5: the arm is lighter than the file's [plant], here a
+            # preset's); a 3 V kick of 0.15 s then, whose swing is wide on it.
+            args = ["--amplitude", "3", "--kick", "0.15", "--duration", "60"]
             done = excite(rip_rt, truth, config, lab, name, args, log, 10 * seed + i)
         assert done.returncode == 0, done.stdout + done.stderr
         logs.append(log)

@@ -231,7 +231,7 @@ impl ExcitationSettings {
     /// | chirp | 2 V | 30 s | 0.2 → 10 Hz, logarithmic |
     /// | prbs | 1.5 V | 30 s | 9 bits (511 clocks), 0.03 s clock (15.33 s period), seed 1 |
     /// | steps | 1.5 V | 24 s | 1.5 s per level (two rounds of [`STEP_LEVELS`]) |
-    /// | free-swing | 3 V | 20 s | kick of 0.15 s at +3 V, 0.15 s at −3 V |
+    /// | free-swing | 6 V | 30 s | kick of 0.15 s at +6 V, 0.15 s at −6 V |
     ///
     /// and a centring gain of 1 V/rad with a damping of 0.2 V·s/rad.
     pub fn new(signal: Signal) -> Self {
@@ -239,7 +239,10 @@ impl ExcitationSettings {
             Signal::Chirp => (2.0, 30.0),
             Signal::Prbs => (1.5, 30.0),
             Signal::Steps => (1.5, 24.0),
-            Signal::FreeSwing => (3.0, 20.0),
+            // A free swing determines the pendulum's damping only when it swings wide, so it
+            // kicks hard; `rip-rt excite` lowers a default amplitude to what the rig's arm
+            // can be stopped from.
+            Signal::FreeSwing => (6.0, 30.0),
         };
         Self {
             signal,
@@ -673,6 +676,7 @@ mod tests {
         let s = ExcitationSettings {
             kick: 0.2,
             duration: 1.0,
+            amplitude: 3.0,
             ..ExcitationSettings::new(Signal::FreeSwing)
         };
         let mut x = Excitation::new(s, DT).unwrap();

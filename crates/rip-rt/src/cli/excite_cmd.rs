@@ -131,7 +131,10 @@ fn settings(args: &ExciteArgs, cfg: &Config) -> Result<Excitation, SetupError> {
             *field = v;
         }
     };
-    set(&mut s.amplitude, args.amplitude);
+    // A default is a suggestion within what the rig allows; a given amplitude is checked.
+    s.amplitude = args
+        .amplitude
+        .unwrap_or(s.amplitude.min(cfg.safety.voltage_limit));
     set(&mut s.duration, args.duration);
     set(&mut s.f_start, args.f_start);
     set(&mut s.f_end, args.f_end);
