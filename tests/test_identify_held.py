@@ -8,17 +8,15 @@ pass. The truth is the hidden rig the logs are simulated from."""
 from __future__ import annotations
 
 import math
-import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
+from identify_logs import excitation_run, quiet_identify, write_log
 
 import riprs
 from riprs.identify import MIN_HELDOUT_MOTION, _fit_title
 
-TS = 0.01
-COLUMNS = "t,seq,theta,alpha,theta_ref,u,compute_us,jitter_us,status"
 QUBE = riprs.FurutaParams.qube_servo2()
 #: The issue's DIY rig: a motor whose one constant (0.03) is not the preset's 0.042, with
 #: Rm = 7 ohm (the preset's 8.4), Dr = 1.2e-3; links a little off the QUBE's.
@@ -39,51 +37,11 @@ DIY = riprs.FurutaParams(
 )
 
 
-def excitation_run(params: riprs.FurutaParams, signal: str, seed: int) -> tuple[np.ndarray, ...]:
-    """``(t, theta, alpha, u)`` of a run from hanging at rest as rip-rt excite drives it (the
-    signal through a 1 V/rad arm-centring pull; a free swing's kick and coast without it),
-    2048-count encoders plus 0.5 mrad noise, alpha wrapped to (-pi, pi]."""
-    plant = riprs.Plant(params)
-    rng = np.random.default_rng(seed)
-    free = signal == "free-swing"
-    if free:
-        e = riprs.excitation(signal, dt=TS, duration=40.0, amplitude=6.0, kick=0.3)
-    else:
-        e = riprs.excitation(signal, dt=TS, duration=30.0, amplitude=2.5, seed=seed)
-    q = 2 * math.pi / 2048
-    x = np.array([0.0, 0.0, math.pi, 0.0])
-    y = np.empty((len(e), 2))
-    u = np.empty(len(e))
-    for k in range(len(e)):
-        y[k] = np.round(x[[0, 2]] / q) * q + rng.normal(0.0, 5e-4, 2)
-        u[k] = float(e[k] if free else np.clip(e[k] - y[k, 0], -10.0, 10.0))
-        x = plant.step(x, u[k], TS, 10)
-    alpha = np.remainder(y[:, 1] + math.pi, 2 * math.pi) - math.pi
-    return np.arange(len(e)) * TS, y[:, 0], alpha, u
-
-
-def write_log(path: Path, run: tuple[np.ndarray, ...]) -> Path:
-    t, theta, alpha, u = run
-    lines = ["# rip-rt excite log", "# period_ms: 10", COLUMNS]
-    lines += [
-        f"{t[k]:.3f},{k},{theta[k]:.17g},{alpha[k]:.17g},0,{u[k]:.17g},50,10,0"
-        for k in range(len(t))
-    ]
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
-def quiet_identify(*args, **kw) -> riprs.IdentifyResult:
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return riprs.identify(*args, **kw)
-
-
 @pytest.fixture(scope="module")
 def diy_logs(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
     d = tmp_path_factory.mktemp("diy")
     return [
-        write_log(d / f"diy-{signal}.csv", excitation_run(DIY, signal, seed))
+        write_log(d / f"diy-{signal}.csv", excitation_run(DIY, signal, seed, free_duration=40.0))
         for seed, signal in enumerate(("chirp", "prbs", "free-swing"), start=1)
     ]
 

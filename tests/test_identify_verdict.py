@@ -11,7 +11,6 @@ from __future__ import annotations
 import math
 import sys
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +21,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
+from identify_logs import COLUMNS, excitation_run, quiet_identify, write_log
 from scale import sweep
 
 import riprs
@@ -29,8 +29,6 @@ import riprs.envs
 from riprs.cli import main
 from riprs.identify import IdentifyError, UntrustedIdentification, identification_path, read_lab
 
-TS = 0.01
-COLUMNS = "t,seq,theta,alpha,theta_ref,u,compute_us,jitter_us,status"
 QUBE = riprs.FurutaParams.qube_servo2()
 #: The issue's rig far from the start set: a heavy, long pendulum, a large dead zone and arm
 #: Coulomb friction.
@@ -44,64 +42,10 @@ HEAVY = riprs.FurutaParams(
         "Cr": 0.006,
     }
 )
-#: Kick (V, s) and length (s) of the free-swing runs docs/rig.md asks for: a kick that swings
-#: the pendulum wide, so that its decay determines its damping.
-FREE_AMPLITUDE = 6.0
-FREE_KICK = 0.3
 #: The heavy pendulum's kick: the verdict's remedy. With 0.3 s it swings to 0.81 rad, its damping
 #: entries are 2 % uncertain, and the verdict asks for a kick of 0.55 s.
 HEAVY_KICK = 0.55
-FREE_DURATION = 60.0
 LAB_KEYS = ("mp", "Lp", "mr", "Lr", "Rm", "km")
-
-
-def excitation_run(
-    params: riprs.FurutaParams,
-    signal: str,
-    seed: int,
-    *,
-    duration: float = 30.0,
-    counts: int = 2048,
-    noise: float = 5e-4,
-    kick: float = FREE_KICK,
-) -> tuple[np.ndarray, ...]:
-    """``(t, theta, alpha, u)`` of an excitation run from hanging at rest, as rip-rt excite
-    drives it (the signal through a 1 V/rad arm-centring pull on the measured arm angle; a
-    free swing's kick and coast without it), through ``counts``-count encoders plus Gaussian
-    noise, alpha wrapped to (-pi, pi]."""
-    plant = riprs.Plant(params)
-    rng = np.random.default_rng(seed)
-    free = signal == "free-swing"
-    if free:
-        e = riprs.excitation(
-            signal, dt=TS, duration=FREE_DURATION, amplitude=FREE_AMPLITUDE, kick=kick
-        )
-    else:
-        e = riprs.excitation(signal, dt=TS, duration=duration, amplitude=2.5, seed=seed)
-    q = 2 * math.pi / counts
-    x = np.array([0.0, 0.0, math.pi, 0.0])
-    y = np.empty((len(e), 2))
-    u = np.empty(len(e))
-    for k in range(len(e)):
-        y[k] = np.round(x[[0, 2]] / q) * q + rng.normal(0.0, noise, 2)
-        u[k] = float(e[k] if free else np.clip(e[k] - y[k, 0], -10.0, 10.0))
-        x = plant.step(x, u[k], TS, 10)
-    alpha = np.remainder(y[:, 1] + math.pi, 2 * math.pi) - math.pi
-    return np.arange(len(e)) * TS, y[:, 0], alpha, u
-
-
-def write_log(path: Path, run: tuple[np.ndarray, ...], *, period_ms: int | None = 10) -> Path:
-    t, theta, alpha, u = run
-    lines = ["# rip-rt excite log"]
-    if period_ms is not None:
-        lines.append(f"# period_ms: {period_ms}")
-    lines.append(COLUMNS)
-    lines += [
-        f"{t[k]:.3f},{k},{theta[k]:.17g},{alpha[k]:.17g},0,{u[k]:.17g},50,10,0"
-        for k in range(len(t))
-    ]
-    path.write_text("\n".join(lines) + "\n")
-    return path
 
 
 def logs_of(d: Path, name: str, params: riprs.FurutaParams, seed: int = 1, **kw) -> list[Path]:
@@ -130,12 +74,6 @@ def linearisation_error(
     rel = np.where(mask, np.abs(got - true) / np.where(mask, np.abs(true), 1.0), 0.0)
     lam, lam0 = np.linalg.eigvals(a).real.max(), np.linalg.eigvals(a0).real.max()
     return float(rel.max()), abs(lam - lam0) / lam0
-
-
-def quiet_identify(*args, **kw) -> riprs.IdentifyResult:
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return riprs.identify(*args, **kw)
 
 
 # --- input sanity: refused before the fit, naming the log and the column ---------------------
@@ -282,9 +220,7 @@ def test_lab_file_errors_name_the_file_and_key(tmp_path):
 
 
 @pytest.mark.slow
-def test_the_heavy_rig_from_its_lab_file_is_identified_and_the_files_carry_it(
-    heavy_logs, tmp_path
-):
+def test_the_heavy_rig_from_its_lab_file_is_identified_and_the_files_carry_it(heavy_logs, tmp_path):
     lab = write_lab(tmp_path / "lab.toml", {**lab_of(HEAVY), "arm_counts": 2048})
     out = tmp_path / "rig.toml"
     assert main(["identify", *map(str, heavy_logs), "--out", str(out), "--no-plots",
