@@ -57,9 +57,10 @@ pub fn stopping_model(cfg: &Config) -> StoppingModel {
     rip_core::preflight::motion::stopping_model(&cfg.spec, &cfg.rig())
 }
 
-/// The envelope's bound on the stopping point: `safety.arm_limit − ENVELOPE_MARGIN`.
+/// The envelope's bound on the stopping point: `safety.arm_limit − ENVELOPE_MARGIN`
+/// ([`rip_core::preflight::motion::envelope_limit`]).
 pub fn envelope_limit(cfg: &Config) -> f64 {
-    cfg.safety.arm_limit - ENVELOPE_MARGIN
+    rip_core::preflight::motion::envelope_limit(&cfg.rig())
 }
 
 /// The braking envelope of `safety.arm_limit` in the loop (module docs). Allocation-free.

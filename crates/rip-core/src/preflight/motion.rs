@@ -161,10 +161,19 @@ enum SwingFit {
 const WIDER_STOP: &str = "lower swing_up.brake_fraction or swing_up.max_voltage, or raise \
                           safety.arm_limit";
 
-fn fit(spec: &Spec, rig: &RigSections) -> SwingFit {
-    if swing_stop_reach(spec, rig, spec.swing_up.arm_limit) <= envelope_limit(rig) {
-        return SwingFit::Passes;
-    }
+/// The file's swing-up against the stop, with its reach `R(L)` at the file's arm limit.
+fn fit(spec: &Spec, rig: &RigSections) -> (f64, SwingFit) {
+    let reach = swing_stop_reach(spec, rig, spec.swing_up.arm_limit);
+    let fitted = if reach <= envelope_limit(rig) {
+        SwingFit::Passes
+    } else {
+        lower(spec, rig)
+    };
+    (reach, fitted)
+}
+
+/// [`fit`] of a swing-up whose own arm limit does not pass.
+fn lower(spec: &Spec, rig: &RigSections) -> SwingFit {
     let Some(arm_limit) = largest_swing_arm_limit(spec, rig) else {
         return SwingFit::Impossible(format!("no swing_up.arm_limit passes: {WIDER_STOP}"));
     };
@@ -187,13 +196,19 @@ fn fit(spec: &Spec, rig: &RigSections) -> SwingFit {
 /// `safety.arm_limit` instead (the key such a file narrowed), with the least value that passes
 /// (the reach does not depend on it) and the largest `swing_up.arm_limit` as the other way.
 pub fn check_swing_up(spec: &Spec, rig: &RigSections) -> Result<(), SpecError> {
-    let largest = match fit(spec, rig) {
-        SwingFit::Passes => return Ok(()),
-        SwingFit::Lowered(lowered) => Ok(lowered.swing_up.arm_limit),
-        SwingFit::Impossible(remedy) => Err(remedy),
-    };
+    match fit(spec, rig) {
+        (_, SwingFit::Passes) => Ok(()),
+        (reach, SwingFit::Lowered(lowered)) => {
+            Err(refusal(spec, rig, reach, Ok(lowered.swing_up.arm_limit)))
+        }
+        (reach, SwingFit::Impossible(remedy)) => Err(refusal(spec, rig, reach, Err(remedy))),
+    }
+}
+
+/// [`check_swing_up`]'s refusal of a swing-up whose stop reaches `reach`, with the largest arm
+/// limit that passes or, where none the file allows does, what to change instead.
+fn refusal(spec: &Spec, rig: &RigSections, reach: f64, largest: Result<f64, String>) -> SpecError {
     let arm_limit = spec.swing_up.arm_limit;
-    let reach = swing_stop_reach(spec, rig, arm_limit);
     let why = format!(
         "a stop during the swing could carry the arm to {reach:.2} rad, past safety.arm_limit \
          ({} rad) less its {ENVELOPE_MARGIN} rad margin, by the stopping model of [plant] \
@@ -212,23 +227,23 @@ pub fn check_swing_up(spec: &Spec, rig: &RigSections) -> Result<(), SpecError> {
         } else {
             format!("cannot be raised far enough ({least} rad, past its {MAX_ARM_LIMIT} rad)")
         };
-        return Err(SpecError::new(
+        return SpecError::new(
             "safety.arm_limit",
             format!(
                 "{need} for a swing-up within swing_up.arm_limit ({arm_limit} rad, its \
                  default), got {}: {why}; or {other}",
                 rig.safety.arm_limit
             ),
-        ));
+        );
     }
     let remedy = match largest {
         Ok(l) => format!("at most {l:.2} rad passes (or {WIDER_STOP})"),
         Err(remedy) => remedy,
     };
-    Err(SpecError::new(
+    SpecError::new(
         "swing_up.arm_limit",
         format!("{arm_limit} rad: {why}; {remedy}"),
-    ))
+    )
 }
 
 /// `spec` with `swing_up.arm_limit` lowered, where [`check_swing_up`] refuses it, to the
@@ -240,9 +255,9 @@ pub fn check_swing_up(spec: &Spec, rig: &RigSections) -> Result<(), SpecError> {
 /// other keys allow passes.
 pub fn fit_swing_up(spec: &Spec, rig: &RigSections) -> Result<Spec, SpecError> {
     match fit(spec, rig) {
-        SwingFit::Passes => Ok(spec.clone()),
-        SwingFit::Lowered(lowered) => Ok(*lowered),
-        SwingFit::Impossible(_) => check_swing_up(spec, rig).map(|()| spec.clone()),
+        (_, SwingFit::Passes) => Ok(spec.clone()),
+        (_, SwingFit::Lowered(lowered)) => Ok(*lowered),
+        (reach, SwingFit::Impossible(remedy)) => Err(refusal(spec, rig, reach, Err(remedy))),
     }
 }
 
@@ -282,11 +297,20 @@ pub fn largest_excitation_amplitude(
     rig: &RigSections,
     settings: &ExcitationSettings,
 ) -> Result<f64, RipError> {
+    if excitation_breach_at(spec, rig, settings, settings.amplitude)?.is_none() {
+        return Ok(settings.amplitude);
+    }
+    largest_below_breach(spec, rig, settings)
+}
+
+/// [`largest_excitation_amplitude`] of `settings` whose own amplitude breaches.
+fn largest_below_breach(
+    spec: &Spec,
+    rig: &RigSections,
+    settings: &ExcitationSettings,
+) -> Result<f64, RipError> {
     let clear = |a: f64| excitation_breach_at(spec, rig, settings, a).map(|b| b.is_none());
     let top = settings.amplitude;
-    if clear(top)? {
-        return Ok(top);
-    }
     let (mut lo, mut hi) = (0.0, top);
     while hi - lo > 0.1 * AMPLITUDE_STEP {
         let mid = 0.5 * (lo + hi);
@@ -326,7 +350,7 @@ pub fn check_excitation(
     else {
         return Ok(());
     };
-    let largest = largest_excitation_amplitude(spec, rig, settings).map_err(rip)?;
+    let largest = largest_below_breach(spec, rig, settings).map_err(rip)?;
     let what = if settings.signal == Signal::FreeSwing {
         format!("{} V with --kick {} s", settings.amplitude, settings.kick)
     } else {

@@ -171,37 +171,28 @@ fn settings(args: &ExciteArgs, cfg: &Config) -> Result<Excitation, SetupError> {
             cfg.spec.plant.preset.name()
         ),
     };
-    let x = Excitation::new(s, cfg.period_s()).map_err(option_error)?;
-    let s = if args.amplitude.is_none() {
+    // Bad settings are named as options before the envelope simulates them.
+    s.validate(cfg.period_s()).map_err(option_error)?;
+    if args.amplitude.is_none() {
         // An amplitude left to its default is the largest the rig can stop from, at most the
-        // signal's default: a file `riprs tune` wrote runs every signal as is.
+        // signal's default: a file `riprs tune` wrote runs every signal as is. One that clears
+        // needs no second check; none at all is refused below, with the check's reason.
         let fits = rip_core::preflight::largest_excitation_amplitude(&cfg.spec, &cfg.rig(), &s)
             .map_err(option_error)?;
-        if fits > 0.0 && fits < s.amplitude {
-            if !args.quiet {
+        if fits > 0.0 {
+            if fits < s.amplitude && !args.quiet {
                 rip_rt::say!(
                     "rip-rt: --amplitude {fits:.2} V (the signal's default {} V would reach the \
                      braking envelope on {model})",
                     s.amplitude
                 );
             }
-            ExcitationSettings {
-                amplitude: fits,
-                ..s
-            }
-        } else {
-            s
+            s.amplitude = fits;
+            return Excitation::new(s, cfg.period_s()).map_err(option_error);
         }
-    } else {
-        s
-    };
-    let x = if s.amplitude == x.settings().amplitude {
-        x
-    } else {
-        Excitation::new(s, cfg.period_s()).map_err(option_error)?
-    };
-    rip_rt::envelope::check_excitation(cfg, x.settings(), &model).map_err(SetupError::Config)?;
-    Ok(x)
+    }
+    rip_rt::envelope::check_excitation(cfg, &s, &model).map_err(SetupError::Config)?;
+    Excitation::new(s, cfg.period_s()).map_err(option_error)
 }
 
 /// The log's header: the run's settings, and the sensor and device settings the rig was excited
