@@ -142,29 +142,22 @@ def test_the_bar_ends_full(monkeypatch) -> None:
 # -- outputs ---------------------------------------------------------------------------------
 
 
-def test_a_directory_as_out_is_refused_before_the_search(tmp_path, capsys, no_search) -> None:
-    rig = tmp_path / "rig.toml"
-    rig.write_text(PAPER)
-    (tmp_path / "dir").mkdir()
-    before = _files(tmp_path)
-    code = main(["tune", str(rig), "--out", str(tmp_path / "dir"), "--quiet"])
-    err = capsys.readouterr().err
-    assert code == 1 and err.startswith("riprs: error: --out: "), err
-    assert "is a directory" in err
-    assert _files(tmp_path) == before
-
-
-def test_a_directory_where_the_record_goes_is_refused_before_the_search(
-    tmp_path, capsys, no_search
+@pytest.mark.parametrize(
+    ("in_the_way", "out", "named"),
+    [("dir", "dir", ""), ("tuned.tune.toml", "tuned.toml", "tuned.tune.toml")],
+    ids=["the output", "its record"],
+)
+def test_a_directory_in_the_way_is_refused_before_the_search(
+    tmp_path, capsys, no_search, in_the_way, out, named
 ) -> None:
     rig = tmp_path / "rig.toml"
     rig.write_text(PAPER)
-    (tmp_path / "tuned.tune.toml").mkdir()
+    (tmp_path / in_the_way).mkdir()
     before = _files(tmp_path)
-    code = main(["tune", str(rig), "--out", str(tmp_path / "tuned.toml"), "--quiet"])
+    code = main(["tune", str(rig), "--out", str(tmp_path / out), "--quiet"])
     err = capsys.readouterr().err
     assert code == 1 and err.startswith("riprs: error: --out: "), err
-    assert "tuned.tune.toml" in err and "is a directory" in err, err
+    assert named in err and "is a directory" in err, err
     assert _files(tmp_path) == before
 
 

@@ -283,8 +283,11 @@ class CompareResult:
     start: str = "up"
     #: The logged runs drawn over the simulations (``overlays``), by label.
     overlays: dict[str, Trajectory] = field(default_factory=dict)
-    #: Each logged run's own Tab. 1 indices, over the same window as a simulation's.
-    logged: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+
+    @property
+    def logged(self) -> dict[str, tuple[float, float, float]]:
+        """Each logged run's own Tab. 1 indices, over the same window as a simulation's."""
+        return {name: rmse(_paper_window(tr, self.config)) for name, tr in self.overlays.items()}
 
     def table(self) -> str:
         """The Tab. 1 layout: each simulation and each logged run, the paper's experiment
@@ -440,8 +443,6 @@ def compare(
         mc = None
         if cfg.monte_carlo.runs > 0:
             mc = _monte_carlo(cfg, controllers, seed, progress, start)
-        overlays = dict(overlays or {})
-        logged = {name: rmse(_paper_window(tr, cfg)) for name, tr in overlays.items()}
         result = CompareResult(
             cfg,
             seed,
@@ -450,8 +451,7 @@ def compare(
             summary,
             mc,
             start=start,
-            overlays=overlays,
-            logged=logged,
+            overlays=dict(overlays or {}),
         )
         if staging is not None:
             written = write_outputs(result, staging.path, plots=plots)
