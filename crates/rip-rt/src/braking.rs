@@ -11,8 +11,27 @@ use crate::exchange::exchange;
 use crate::loop_core::LoopCore;
 use crate::protocol::{encode, Command, Frame, Message, MAX_FRAME, STATUS_FAULT};
 use crate::serial::Fd;
-use crate::stop::{next_seq, StopReason};
+use crate::stop::{next_seq, signal_name, StopReason, StopWatch};
 use crate::timing::Periodic;
+
+/// The longest an active stop runs (s): the braking law for up to [`MAX_BRAKE_S`], the hold
+/// law for up to [`MAX_HOLD_S`], all within this one bound on the stop's clock; then the stop
+/// frame goes out regardless.
+pub const MAX_STOP_S: f64 = MAX_BRAKE_S + MAX_HOLD_S;
+
+/// The line that says at once what a stop after `reason` does, how long it may take, and what
+/// a signal during it does: the stop is silent for up to [`MAX_STOP_S`] otherwise.
+pub fn stop_announcement(reason: &StopReason) -> String {
+    let (what, again) = match reason {
+        StopReason::Signal(libc::SIGINT) => ("Ctrl-C".to_string(), "Ctrl-C again"),
+        StopReason::Signal(sig) => (signal_name(*sig), "Ctrl-C"),
+        other => (other.name().to_string(), "Ctrl-C"),
+    };
+    format!(
+        "rip-rt: {what}: stopping: bringing the arm to rest (at most {MAX_STOP_S:.0} s); \
+         {again} disables the driver at once (the arm may then coast past safety.arm_limit)"
+    )
+}
 
 fn send(io: &Fd, command: Command) -> bool {
     let mut out = [0u8; MAX_FRAME];
@@ -31,6 +50,10 @@ fn send(io: &Fd, command: Command) -> bool {
 /// enabling command (without one the arm was never driven, and nothing is sent).
 /// `wiring_checked`: whether the wiring's sign is known, i.e. the run has no sign check or
 /// its sign check passed ([`stop_mode`]). Returns at once when nothing can or need be braked.
+///
+/// A stop signal during it ([`StopWatch`]) ends it within a period,
+/// [`BrakeReport::cut_short`] naming the signal, so that the caller's stop frame disables the
+/// driver at once. The caller says first what the stop does ([`stop_announcement`]).
 pub fn bring_to_rest(
     io: &Fd,
     core: &mut LoopCore,
@@ -46,10 +69,12 @@ pub fn bring_to_rest(
         seconds: 0.0,
         max_rate: 0.0,
         at_rest: mode == BrakeMode::None,
+        cut_short: None,
     };
     if mode == BrakeMode::None {
         return report;
     }
+    let watch = StopWatch::for_stop(reason);
     let brake = if mode == BrakeMode::Modelled {
         Brake::modelled(cfg, core.witness_estimate(), core.held_voltage())
     } else {
@@ -65,12 +90,16 @@ pub fn bring_to_rest(
     // A fresh grid: the run may have stopped in the middle of a period, or after a stall.
     periodic.restart();
     let start_ns = periodic.next_deadline_ns();
-    let end_ns = start_ns + ((MAX_BRAKE_S + MAX_HOLD_S) * 1e9) as u64;
+    let end_ns = start_ns + (MAX_STOP_S * 1e9) as u64;
     loop {
         let tick = periodic.wait();
         report.seconds = (tick.deadline_ns - start_ns) as f64 * 1e-9;
         report.mode = stop.mode();
         if tick.deadline_ns >= end_ns {
+            return report;
+        }
+        if let Some(sig) = watch.interrupted() {
+            report.cut_short = Some(sig);
             return report;
         }
         let reply = match exchange(io, core, periodic, &mut tx, &mut rx, reply_timeout_ns) {
@@ -138,5 +167,27 @@ pub fn bring_to_rest(
         if !send(io, command) {
             return report;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_stop_says_how_long_it_may_take_and_what_a_second_ctrl_c_does() {
+        let line = stop_announcement(&StopReason::Signal(libc::SIGINT));
+        assert_eq!(
+            line,
+            "rip-rt: Ctrl-C: stopping: bringing the arm to rest (at most 8 s); Ctrl-C again \
+             disables the driver at once (the arm may then coast past safety.arm_limit)"
+        );
+        let term = stop_announcement(&StopReason::Signal(libc::SIGTERM));
+        assert!(term.starts_with("rip-rt: SIGTERM: stopping"), "{term}");
+        let fault = stop_announcement(&StopReason::Watchdog(5));
+        assert!(
+            fault.starts_with("rip-rt: watchdog: stopping") && fault.contains("; Ctrl-C disables"),
+            "{fault}"
+        );
     }
 }

@@ -199,6 +199,7 @@ pub fn brake_mode(reason: &StopReason) -> BrakeMode {
     match reason {
         StopReason::Finished
         | StopReason::Signal(_)
+        | StopReason::SignalAgain { .. }
         | StopReason::AngleLimit { .. }
         | StopReason::ArmEnvelope { .. }
         | StopReason::Fell { .. }
@@ -487,6 +488,8 @@ pub struct BrakeReport {
     pub max_rate: f64,
     /// The arm came to rest.
     pub at_rest: bool,
+    /// The stop signal that cut the stop short (the driver then disabled at once), if any.
+    pub cut_short: Option<i32>,
 }
 
 impl std::fmt::Display for BrakeReport {
@@ -501,6 +504,16 @@ impl std::fmt::Display for BrakeReport {
             BrakeMode::Short => "braked with the windings shorted",
             BrakeMode::None => return write!(f, "no braking (motor not driven)"),
         };
+        if let Some(sig) = self.cut_short {
+            return write!(
+                f,
+                "{how} for {:.2} s (arm rate up to {:.2} rad/s), cut short by {}: \
+                 the driver disabled before the arm was at rest",
+                self.seconds,
+                self.max_rate,
+                crate::stop::signal_name(sig)
+            );
+        }
         let end = if self.at_rest {
             "to rest"
         } else {

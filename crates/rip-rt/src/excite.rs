@@ -266,7 +266,7 @@ pub fn run(
             }
         };
     let wiring_checked = exciter.as_ref().is_some_and(|e| e.sign_report.is_some());
-    driver.bring_to_rest(cfg, &reason, wiring_checked);
+    let (reason, _) = driver.bring_to_rest(cfg, reason, wiring_checked);
     let stop_sent = guard.stop();
     drop(guard);
     let (sign_check, excited_s, max_arm) = match exciter {

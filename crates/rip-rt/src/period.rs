@@ -163,28 +163,46 @@ impl<'a> Period<'a> {
 
     /// Brings the arm to rest after the run stopped for `reason`
     /// ([`crate::braking::bring_to_rest`], driven or not as this run was), on this run's
-    /// clock, and says how unless quiet; the caller then sends the stop frame.
-    /// `wiring_checked`: the run has no sign check or its sign check passed.
+    /// clock, and says how unless quiet (what it does and how long it may take as it begins,
+    /// [`crate::braking::stop_announcement`]; after a signal whatever quiet); the caller then
+    /// sends the stop frame.
+    /// `wiring_checked`: the run has no sign check or its sign check passed. Returns the run's
+    /// stop reason: `reason`, or [`StopReason::SignalAgain`] when a second signal cut a
+    /// signal's stop short ([`crate::stop::cut_short`]).
     pub fn bring_to_rest(
         &mut self,
         cfg: &Config,
-        reason: &StopReason,
+        reason: StopReason,
         wiring_checked: bool,
-    ) -> crate::envelope::BrakeReport {
+    ) -> (StopReason, crate::envelope::BrakeReport) {
         let driven = self.driven();
+        let brakes = crate::envelope::stop_mode(&reason, driven, wiring_checked)
+            != crate::envelope::BrakeMode::None;
+        // After a signal whatever --quiet: the line answers the operator's own Ctrl-C, and the
+        // stop that follows is silent for seconds.
+        if brakes && (!self.quiet || matches!(reason, StopReason::Signal(_))) {
+            crate::say!("{}", crate::braking::stop_announcement(&reason));
+        }
         let braking = crate::braking::bring_to_rest(
             self.io,
             self.core,
             cfg,
             &mut self.clock,
-            reason,
+            &reason,
             driven,
             wiring_checked,
         );
-        if !self.quiet && braking.mode != crate::envelope::BrakeMode::None {
+        // A stop cut short is said whatever --quiet, as its start was.
+        if braking.cut_short.is_some()
+            || (!self.quiet && braking.mode != crate::envelope::BrakeMode::None)
+        {
             crate::say!("rip-rt: stop: {braking}");
         }
-        braking
+        let reason = match braking.cut_short {
+            Some(sig) => crate::stop::cut_short(reason, sig),
+            None => reason,
+        };
+        (reason, braking)
     }
 
     /// The log, for the caller's own rows.

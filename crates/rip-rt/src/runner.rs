@@ -566,7 +566,7 @@ pub fn run(
     };
     // A swing-up run drives its sign-check pulse before the wiring is known.
     let wiring_checked = !driver.core.supervises_swing_up() || sign_check.is_some();
-    driver.bring_to_rest(cfg, &reason, wiring_checked);
+    let (reason, _) = driver.bring_to_rest(cfg, reason, wiring_checked);
     let stop_sent = guard.stop();
     drop(guard);
     RunReport {

@@ -19,7 +19,7 @@
 //!
 //! | class | signals | effect |
 //! |---|---|---|
-//! | stop | HUP INT QUIT USR1 USR2 ALRM TERM STKFLT TSTP TTIN XCPU VTALRM PROF IO PWR, RTMIN…RTMAX | the loop ends at its next period with the stop frame; exit code 128 + signal |
+//! | stop | HUP INT QUIT USR1 USR2 ALRM TERM STKFLT TSTP TTIN XCPU VTALRM PROF IO PWR, RTMIN…RTMAX | the loop ends at its next period and brings the arm to rest, then the stop frame; exit code 128 + signal. Another one during that stop sends the stop frame at once ([`StopWatch`], [`StopReason::SignalAgain`]) |
 //! | fatal | ILL TRAP ABRT BUS FPE SEGV SYS | the handler writes the stop frame, then the signal's default action ends the process (core dump) |
 //! | ignored | PIPE XFSZ TTOU | a broken pipe or a log over the file-size limit fails the write instead (a device loss or a log fault, both stops); a background write to the terminal proceeds instead of stopping the process |
 //! | harmless | CHLD CONT URG WINCH | default (nothing happens); a resumed loop finds its deadlines missed and stops as stalled |
@@ -84,7 +84,9 @@ pub mod exit_code {
     pub const PREFLIGHT: i32 = 16;
     /// A panic (Rust's own exit code for one).
     pub const PANIC: i32 = 101;
-    /// Stopped by a signal: 128 + its number (130 SIGINT, 143 SIGTERM, 129 SIGHUP, …).
+    /// Stopped by a signal: 128 + its number (130 SIGINT, 143 SIGTERM, 129 SIGHUP, …); a
+    /// second signal during the stop ([`super::StopReason::SignalAgain`]) exits with 128 + the
+    /// second one's number, the log's footer saying `stop=signal_again`.
     pub const SIGNAL_BASE: i32 = 128;
 }
 
@@ -121,6 +123,20 @@ pub enum StopReason {
     /// A stop signal (its number).
     #[error("stopped by {name} ({0})", name = signal_name(*.0))]
     Signal(i32),
+    /// A second stop signal while the stop after the first brought the arm to rest: the
+    /// driver was disabled at once, before the arm was at rest ([`StopWatch`]).
+    #[error(
+        "stopped by {first_name} ({first}), then {second_name} ({second}) during the stop: \
+         the driver was disabled before the arm was at rest (it may coast past safety.arm_limit)",
+        first_name = signal_name(*.first),
+        second_name = signal_name(*.second)
+    )]
+    SignalAgain {
+        /// The signal that began the stop.
+        first: i32,
+        /// The signal that cut it short.
+        second: i32,
+    },
     /// Reading from or writing to the device failed, or it went away.
     #[error("device lost: {0}")]
     DeviceLost(#[source] io::Error),
@@ -251,6 +267,8 @@ impl StopReason {
         match self {
             StopReason::Finished => exit_code::FINISHED,
             StopReason::Signal(s) => exit_code::SIGNAL_BASE + s,
+            // The signal that ended the process, as a shell expects of one it interrupted.
+            StopReason::SignalAgain { second, .. } => exit_code::SIGNAL_BASE + second,
             StopReason::DeviceLost(_) => exit_code::DEVICE_LOST,
             StopReason::Watchdog(_) => exit_code::WATCHDOG,
             StopReason::AngleLimit { .. } | StopReason::ArmEnvelope { .. } => {
@@ -278,6 +296,7 @@ impl StopReason {
         match self {
             StopReason::Finished => "finished",
             StopReason::Signal(_) => "signal",
+            StopReason::SignalAgain { .. } => "signal_again",
             StopReason::DeviceLost(_) => "device_lost",
             StopReason::Watchdog(_) => "watchdog",
             StopReason::AngleLimit { .. } | StopReason::ArmEnvelope { .. } => "angle_limit",
@@ -301,7 +320,10 @@ impl StopReason {
     /// Whether this is an orderly stop (the duration, or an operator's signal) rather than a
     /// fault.
     pub fn is_orderly(&self) -> bool {
-        matches!(self, StopReason::Finished | StopReason::Signal(_))
+        matches!(
+            self,
+            StopReason::Finished | StopReason::Signal(_) | StopReason::SignalAgain { .. }
+        )
     }
 }
 
@@ -434,6 +456,10 @@ pub const IGNORED_SIGNALS: [i32; 3] = [libc::SIGPIPE, libc::SIGXFSZ, libc::SIGTT
 // The stop request: 0 for none, a signal number, or PANIC_REQUEST.
 static STOP_REQUEST: AtomicUsize = AtomicUsize::new(0);
 const PANIC_REQUEST: usize = usize::MAX;
+// Every stop signal received, and the latest one: the stop request keeps only the first, and
+// the active stop must see the ones after it ([`StopWatch`]).
+static SIGNALS: AtomicUsize = AtomicUsize::new(0);
+static LAST_SIGNAL: AtomicI32 = AtomicI32::new(0);
 
 /// The stop requested by a signal or by a panic on another thread, if any.
 pub fn requested_stop() -> Option<StopReason> {
@@ -447,8 +473,53 @@ pub fn requested_stop() -> Option<StopReason> {
 /// Asks the running loop to stop at its next period with [`StopReason::Signal`]`(sig)`.
 /// Async-signal-safe.
 pub(crate) fn request_stop(sig: i32) {
+    LAST_SIGNAL.store(sig, Ordering::Relaxed);
+    // Counted after the signal is stored, so that a watcher that sees the count sees it.
+    SIGNALS.fetch_add(1, Ordering::Release);
     // The first request wins: its signal is the one reported.
     let _ = STOP_REQUEST.compare_exchange(0, sig as usize, Ordering::Relaxed, Ordering::Relaxed);
+}
+
+/// Watches, period by period, for a stop signal that arrives while the active stop brings the
+/// arm to rest: an operator who signals again (a second Ctrl-C) wants the driver disabled at
+/// once, not in up to [`crate::braking::MAX_STOP_S`]. Lock-free (two atomic loads).
+#[derive(Debug, Clone, Copy)]
+pub struct StopWatch {
+    seen: usize,
+}
+
+impl StopWatch {
+    /// The watch of the stop after `reason`: a stop begun by a signal counts that signal as
+    /// seen, and any signal after it cuts the stop short; any other stop (a fault, the
+    /// duration) is cut short by the first.
+    pub fn for_stop(reason: &StopReason) -> Self {
+        let seen = match reason {
+            StopReason::Signal(_) => 1,
+            _ => 0,
+        };
+        Self { seen }
+    }
+
+    /// The latest signal, if one arrived that the stop has not seen.
+    pub fn interrupted(&self) -> Option<i32> {
+        self.interrupted_after(SIGNALS.load(Ordering::Acquire), || {
+            LAST_SIGNAL.load(Ordering::Relaxed)
+        })
+    }
+
+    fn interrupted_after(&self, received: usize, last: impl FnOnce() -> i32) -> Option<i32> {
+        (received > self.seen).then(last)
+    }
+}
+
+/// The reason of a stop that a signal, `by`, cut short ([`StopWatch`]): a signal's stop becomes
+/// [`StopReason::SignalAgain`]; any other stop keeps its own reason (its exit code says what
+/// went wrong; the stop's line says it was cut short).
+pub fn cut_short(reason: StopReason, by: i32) -> StopReason {
+    match reason {
+        StopReason::Signal(first) => StopReason::SignalAgain { first, second: by },
+        other => other,
+    }
 }
 
 extern "C" fn on_fatal_signal(sig: libc::c_int) {
@@ -661,6 +732,41 @@ mod tests {
         codes.dedup();
         assert_eq!(codes.len(), n);
         assert_eq!(StopReason::Signal(libc::SIGINT).exit_code(), 130);
+    }
+
+    #[test]
+    fn a_second_signal_cuts_a_signals_stop_short_and_the_first_signal_any_other() {
+        let sigint = StopWatch::for_stop(&StopReason::Signal(libc::SIGINT));
+        assert_eq!(sigint.interrupted_after(1, || libc::SIGINT), None);
+        assert_eq!(
+            sigint.interrupted_after(2, || libc::SIGTERM),
+            Some(libc::SIGTERM)
+        );
+        let fault = StopWatch::for_stop(&StopReason::Watchdog(5));
+        assert_eq!(fault.interrupted_after(0, || 0), None);
+        assert_eq!(
+            fault.interrupted_after(1, || libc::SIGINT),
+            Some(libc::SIGINT)
+        );
+        let again = cut_short(StopReason::Signal(libc::SIGINT), libc::SIGINT);
+        assert!(matches!(
+            again,
+            StopReason::SignalAgain {
+                first: libc::SIGINT,
+                second: libc::SIGINT
+            }
+        ));
+        assert_eq!(again.exit_code(), 130);
+        assert_eq!(again.name(), "signal_again");
+        assert!(again.is_orderly());
+        assert!(again
+            .to_string()
+            .contains("disabled before the arm was at rest"));
+        let term = cut_short(StopReason::Signal(libc::SIGINT), libc::SIGTERM);
+        assert_eq!(term.exit_code(), 143);
+        // A fault's stop keeps its own code: it says what went wrong.
+        let fault = cut_short(StopReason::Watchdog(5), libc::SIGINT);
+        assert_eq!(fault.exit_code(), exit_code::WATCHDOG);
     }
 
     #[test]

@@ -529,3 +529,189 @@ fn a_fall_cycle_that_uses_up_the_swing_up_time_leaves_the_arm_inside_its_limit()
     assert!(out.stderr.contains("stop: braked"), "{}", out.stderr);
     out.assert_safe("fall cycle until swing_up.max_time", ARM_LIMIT);
 }
+
+/// What one double Ctrl-C did: the seconds from the first SIGINT to the stop's line on
+/// stderr, and from the second to the stop frame in the device's record.
+struct DoubleCtrlC {
+    first_line_s: f64,
+    second_to_stop_frame_s: f64,
+    second_to_exit_s: f64,
+}
+
+/// What drives the motor when the operator presses Ctrl-C twice.
+#[derive(Clone, Copy)]
+enum Driving {
+    /// `rip-rt run` balancing (LQR).
+    Balance,
+    /// `rip-rt excite --signal free-swing`, its pendulum swinging from the kick.
+    FreeSwing,
+}
+
+/// Runs `driving` in real time, sends SIGINT once it drives, then a second SIGINT `gap` after
+/// the first, and times what the operator sees and what the device receives.
+fn double_ctrl_c(name: &str, driving: Driving, gap: Duration) -> DoubleCtrlC {
+    use std::io::BufRead;
+    use std::sync::mpsc;
+    use std::time::Instant;
+    let log_path = scratch(&format!("{name}.csv"));
+    let log_arg = log_path.to_str().unwrap();
+    let pi = std::f64::consts::PI.to_string();
+    let (emu, mut child, started) = match driving {
+        Driving::Balance => {
+            let emu = Emulator::start(name, &["--seed", "3"]);
+            let child = spawn_run(&emu.device, "lqr", &["--log", log_arg]);
+            (emu, child, "balancing")
+        }
+        Driving::FreeSwing => {
+            let emu = Emulator::start(name, &["--seed", "3", "--initial-pendulum", &pi]);
+            let cfg = swing_config(name, 10.0, "");
+            let child = std::process::Command::new(BIN)
+                .arg("excite")
+                .arg("--port")
+                .arg(&emu.device)
+                .args(["--signal", "free-swing", "--config"])
+                .arg(&cfg)
+                .args(["--log", log_arg])
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .expect("spawn excite");
+            (emu, child, "free-swing for")
+        }
+    };
+    let pid = child.id() as i32;
+    // Every stderr line with the time it arrived.
+    let (tx, lines) = mpsc::channel::<(Instant, String)>();
+    let stderr = child.stderr.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stderr).lines() {
+            let Ok(line) = line else { break };
+            if tx.send((Instant::now(), line)).is_err() {
+                break;
+            }
+        }
+    });
+    let mut seen = Vec::new();
+    let next_line = |timeout: Duration, seen: &mut Vec<String>| {
+        let (at, line) = lines
+            .recv_timeout(timeout)
+            .unwrap_or_else(|_| panic!("no stderr line within {timeout:?}: {seen:#?}"));
+        seen.push(line.clone());
+        (at, line)
+    };
+    while !next_line(Duration::from_secs(30), &mut seen)
+        .1
+        .contains(started)
+    {}
+    // A second of balance (or of the kick's swing), so that the stop has a swinging or
+    // falling pendulum to take in hand.
+    std::thread::sleep(Duration::from_secs(1));
+    let first = Instant::now();
+    unsafe { libc::kill(pid, libc::SIGINT) };
+    let (said_at, said) = loop {
+        let (at, line) = next_line(Duration::from_secs(5), &mut seen);
+        if line.contains("stopping") {
+            break (at, line);
+        }
+    };
+    assert!(
+        said.contains("Ctrl-C: stopping: bringing the arm to rest (at most 8 s)")
+            && said.contains("Ctrl-C again disables the driver at once"),
+        "{said}"
+    );
+    // The stop must still be braking when the second signal lands.
+    std::thread::sleep(gap.saturating_sub(first.elapsed()));
+    let before = emu.commands_so_far().len();
+    let second = Instant::now();
+    unsafe { libc::kill(pid, libc::SIGINT) };
+    let stop_frame_at = loop {
+        let commands = emu.commands_so_far();
+        if commands[before.min(commands.len())..].contains(&(0, 0)) {
+            break Instant::now();
+        }
+        assert!(
+            second.elapsed() < Duration::from_secs(5),
+            "no stop frame within 5 s of the second SIGINT: {:?}",
+            &commands[before.min(commands.len())..]
+        );
+        std::thread::sleep(Duration::from_millis(1));
+    };
+    let exited_at = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            assert_eq!(status.code(), Some(130), "{seen:#?}");
+            break Instant::now();
+        }
+        assert!(second.elapsed() < Duration::from_secs(5), "still running");
+        std::thread::sleep(Duration::from_millis(1));
+    };
+    reader.join().unwrap();
+    seen.extend(lines.try_iter().map(|(_, l)| l));
+    let all = seen.join("\n");
+    assert!(
+        all.contains("cut short by SIGINT")
+            && all.contains("then SIGINT (2) during the stop: the driver was disabled"),
+        "{all}"
+    );
+    let log = Log::read(&log_path);
+    assert_eq!(log.meta("stop"), Some("signal_again"), "{all}");
+    assert_eq!(log.meta("exit_code"), Some("130"));
+    assert_eq!(log.meta("stop_sent"), Some("true"));
+    // The driver was left disabled: the commands after the second signal end with the stop
+    // frame, and nothing enabling follows it.
+    let commands = emu.commands();
+    let last_stop = commands.iter().rposition(|c| *c == (0, 0)).unwrap();
+    assert!(commands[last_stop..].iter().all(|c| *c == (0, 0)));
+    DoubleCtrlC {
+        first_line_s: (said_at - first).as_secs_f64(),
+        second_to_stop_frame_s: (stop_frame_at - second).as_secs_f64(),
+        second_to_exit_s: (exited_at - second).as_secs_f64(),
+    }
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Issue 44: a stop says at once what it does, and a second Ctrl-C disables the driver at
+/// once. In real time: the latencies are the subject.
+#[test]
+fn a_stop_says_at_once_what_it_does_and_a_second_ctrl_c_disables_the_driver() {
+    let _serial = one_at_a_time();
+    let gap = Duration::from_millis(300);
+    let mut runs: Vec<DoubleCtrlC> = (0..3)
+        .map(|i| double_ctrl_c(&format!("double-ctrl-c-{i}"), Driving::Balance, gap))
+        .collect();
+    // `rip-rt excite` stops the same way.
+    runs.push(double_ctrl_c(
+        "double-ctrl-c-excite",
+        Driving::FreeSwing,
+        gap,
+    ));
+    for (i, r) in runs.iter().enumerate() {
+        let what = if i < 3 { "balance" } else { "excite" };
+        println!(
+            "run {i} ({what}): stop line {:.1} ms after SIGINT; stop frame {:.1} ms and exit {:.1} ms \
+             after the second SIGINT",
+            r.first_line_s * 1e3,
+            r.second_to_stop_frame_s * 1e3,
+            r.second_to_exit_s * 1e3
+        );
+        assert!(r.first_line_s < 0.5, "run {i}: {:.3} s", r.first_line_s);
+        assert!(
+            r.second_to_stop_frame_s < 0.2,
+            "run {i}: {:.3} s",
+            r.second_to_stop_frame_s
+        );
+    }
+    println!(
+        "median: stop line {:.1} ms, stop frame {:.1} ms, exit {:.1} ms",
+        median(runs.iter().map(|r| r.first_line_s * 1e3).collect()),
+        median(
+            runs.iter()
+                .map(|r| r.second_to_stop_frame_s * 1e3)
+                .collect()
+        ),
+        median(runs.iter().map(|r| r.second_to_exit_s * 1e3).collect())
+    );
+}
