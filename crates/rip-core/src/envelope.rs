@@ -259,6 +259,12 @@ impl HoldLaw {
     /// (rad/s), the pendulum at `alpha` (rad, 0 upright) moving at `alpha_rate` (rad/s).
     pub fn voltage(&self, offset: f64, rate: f64, alpha: f64, alpha_rate: f64) -> f64 {
         let phi = crate::trig::wrap_angle(alpha - std::f64::consts::PI);
+        self.voltage_from_hanging(offset, rate, phi, alpha_rate)
+    }
+
+    /// [`voltage`](Self::voltage) with the pendulum's angle from hanging `phi` (rad) given
+    /// rather than wrapped from `α` ([`Lowering::pendulum_angle`]).
+    pub fn voltage_from_hanging(&self, offset: f64, rate: f64, phi: f64, alpha_rate: f64) -> f64 {
         let u = -(self.k[0] * offset + self.k[1] * rate + self.k[2] * phi + self.k[3] * alpha_rate);
         if u.is_finite() {
             u.clamp(-self.voltage, self.voltage)
@@ -283,8 +289,9 @@ impl HoldLaw {
 /// letting the pendulum fall and braking the arm against it).
 ///
 /// The law is [`HoldLaw`]'s — the discrete LQR about the hanging equilibrium, run on the whole
-/// circle (its pendulum term `φ = wrap(α − π)` is ±π at upright, so it tips the pendulum off
-/// at once, and then takes the energy of its fall out through the arm) — with the weights
+/// circle (its pendulum term is ±π at upright, kept on one side by
+/// [`pendulum_angle`](Self::pendulum_angle), so it tips the pendulum off at once, and then takes
+/// the energy of its fall out through the arm) — with the weights
 /// `Q = diag(1/θ_m², q_θ̇, 1/φ_m², q_α̇)` chosen per rig from [`LOWER_ARM_RAD`] ×
 /// [`LOWER_RATE_WEIGHTS`] × [`LOWER_PENDULUM_RAD`] × [`LOWER_PENDULUM_RATE_WEIGHTS`] by simulating the lowering on the model: from upright at rest
 /// (tilted by [`LOWER_START_TILT`]), the command applied one period late, the law that
@@ -415,6 +422,30 @@ impl Lowering {
         Ok(Some(found))
     }
 
+    /// The pendulum's angle from hanging (rad) that the lowering law takes, for the pendulum
+    /// at `alpha` (rad, 0 upright) on the `side` (±1) it is lowered on, which it updates.
+    ///
+    /// `wrap(α − π)` jumps from +π to −π as the pendulum crosses upright: the law's pendulum
+    /// term flips with it, and a pendulum near upright is balanced there by it rather than
+    /// lowered (on the emulator it stayed up for 3.4 s). In the upper half the angle is kept
+    /// on the side the pendulum was last on in the lower half (or first found on), past ±π
+    /// if it crosses upright, so that the law keeps tipping it the one way.
+    pub fn pendulum_angle(alpha: f64, side: &mut f64) -> f64 {
+        let phi = crate::trig::wrap_angle(alpha - std::f64::consts::PI);
+        if !phi.is_finite() {
+            return phi;
+        }
+        if alpha.cos() < 0.0 || *side == 0.0 {
+            *side = if phi < 0.0 { -1.0 } else { 1.0 };
+            return phi;
+        }
+        if phi * *side < 0.0 {
+            phi + *side * std::f64::consts::TAU
+        } else {
+            phi
+        }
+    }
+
     /// The settling time and the arm's largest travel of `law` on `plant` (class docs);
     /// `None` when it does not settle or its arm travels farther than `max_travel`.
     fn simulate(
@@ -429,8 +460,10 @@ impl Lowering {
         let mut held = 0.0;
         let mut travel: f64 = 0.0;
         let mut settled_at = None;
+        let mut side = 0.0;
         for k in 0..periods {
-            let u = law.voltage(x[0], x[1], x[2], x[3]);
+            let phi = Self::pendulum_angle(x[2], &mut side);
+            let u = law.voltage_from_hanging(x[0], x[1], phi, x[3]);
             plant.advance(&mut x, held, 0.0, ts, substeps);
             held = u;
             travel = travel.max(x[0].abs());
@@ -688,7 +721,9 @@ mod tests {
             ("paper".to_string(), FurutaParams::paper()),
             ("qube_servo2".to_string(), FurutaParams::qube_servo2()),
         ];
-        rigs.extend((0..8).map(|seed| (format!("rig {seed}"), crate::rig::Rig::random(seed).params)));
+        rigs.extend(
+            (0..8).map(|seed| (format!("rig {seed}"), crate::rig::Rig::random(seed).params)),
+        );
         for (name, p) in rigs {
             let voltage = 10.0;
             // The design's share of the default safety.arm_limit's envelope (3 − 0.05 rad).
@@ -704,8 +739,10 @@ mod tests {
                 let mut x = State::new(0.0, 0.0, tilt, 0.0);
                 let mut held = 0.0;
                 let mut last_unsettled = 0.0;
+                let mut side = 0.0;
                 for k in 0..(MAX_LOWER_S / ts) as usize {
-                    let u = lowering.law.voltage(x[0], x[1], x[2], x[3]);
+                    let phi = Lowering::pendulum_angle(x[2], &mut side);
+                    let u = lowering.law.voltage_from_hanging(x[0], x[1], phi, x[3]);
                     plant.advance(&mut x, held, 0.0, ts, substeps);
                     held = u;
                     assert!(x[0].abs() < limit, "{name}: arm {} at {k}", x[0]);
@@ -714,8 +751,14 @@ mod tests {
                         last_unsettled = (k + 1) as f64 * ts;
                     }
                 }
-                assert!(last_unsettled < 5.0, "{name} {tilt}: settled at {last_unsettled} s");
-                println!("{name}: designed {:.2} s, replayed {last_unsettled:.2} s", lowering.seconds);
+                assert!(
+                    last_unsettled < 5.0,
+                    "{name} {tilt}: settled at {last_unsettled} s"
+                );
+                println!(
+                    "{name}: designed {:.2} s, replayed {last_unsettled:.2} s",
+                    lowering.seconds
+                );
             }
         }
     }

@@ -19,17 +19,49 @@ use crate::timing::Periodic;
 /// frame goes out regardless.
 pub const MAX_STOP_S: f64 = MAX_BRAKE_S + MAX_HOLD_S;
 
+/// The longest the gentle end of a run takes (s): the lowering for up to
+/// [`MAX_LOWER_S`](rip_core::envelope::MAX_LOWER_S), then, if it did not bring the pendulum
+/// down, the fault's stop for up to [`MAX_STOP_S`].
+pub const MAX_GENTLE_STOP_S: f64 = rip_core::envelope::MAX_LOWER_S + MAX_STOP_S;
+
+/// The gentle end's law for the stop after `reason` in `mode` on `core`'s rig: an orderly end
+/// (the duration, a first stop signal) of a balancing run whose wiring's sign is trusted
+/// ([`BrakeMode::Active`]). Faults, a second signal and a swing-up still swinging keep the
+/// fault's stop.
+pub fn lowering_for<'a>(
+    core: &'a LoopCore,
+    reason: &StopReason,
+    mode: BrakeMode,
+) -> Option<&'a rip_core::envelope::Lowering> {
+    let orderly = matches!(reason, StopReason::Finished | StopReason::Signal(_));
+    (orderly && mode == BrakeMode::Active && core.phase() == rip_core::Phase::Balance)
+        .then(|| core.lowering())
+        .flatten()
+}
+
 /// The line that says at once what a stop after `reason` does, how long it may take, and what
-/// a signal during it does: the stop is silent for up to [`MAX_STOP_S`] otherwise.
-pub fn stop_announcement(reason: &StopReason) -> String {
+/// a signal during it does: the stop is silent for up to [`MAX_STOP_S`] otherwise. `lowering`:
+/// the gentle end's law when the stop begins with it ([`lowering_for`]).
+pub fn stop_announcement(
+    reason: &StopReason,
+    lowering: Option<&rip_core::envelope::Lowering>,
+) -> String {
     let (what, again) = match reason {
         StopReason::Signal(libc::SIGINT) => ("Ctrl-C".to_string(), "Ctrl-C again"),
         StopReason::Signal(sig) => (signal_name(*sig), "Ctrl-C"),
         other => (other.name().to_string(), "Ctrl-C"),
     };
+    let doing = match lowering {
+        Some(l) => format!(
+            "lowering the pendulum and bringing the arm to rest (about {:.0} s, at most \
+             {MAX_GENTLE_STOP_S:.0} s)",
+            l.seconds.ceil()
+        ),
+        None => format!("bringing the arm to rest (at most {MAX_STOP_S:.0} s)"),
+    };
     format!(
-        "rip-rt: {what}: stopping: bringing the arm to rest (at most {MAX_STOP_S:.0} s); \
-         {again} disables the driver at once (the arm may then coast past safety.arm_limit)"
+        "rip-rt: {what}: stopping: {doing}; {again} disables the driver at once (the arm may \
+         then coast past safety.arm_limit)"
     )
 }
 
@@ -70,6 +102,7 @@ pub fn bring_to_rest(
         max_rate: 0.0,
         at_rest: mode == BrakeMode::None,
         cut_short: None,
+        lowered: false,
     };
     if mode == BrakeMode::None {
         return report;
@@ -80,7 +113,14 @@ pub fn bring_to_rest(
     } else {
         Brake::new(cfg, mode)
     };
+    let lowering = lowering_for(core, reason, mode).copied();
     let mut stop = StopSequence::new(cfg, brake);
+    // The loop's own braking envelope watches the gentle end as it watched the run.
+    let mut envelope = None;
+    if let Some(lowering) = &lowering {
+        stop = stop.lowering(lowering);
+        envelope = Some(crate::envelope::ArmEnvelope::new(cfg));
+    }
     let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
     let mut last: Option<(f64, f64, u32)> = None;
     // Whether the last period went without a reply (its successor is shorted too).
@@ -90,7 +130,12 @@ pub fn bring_to_rest(
     // A fresh grid: the run may have stopped in the middle of a period, or after a stall.
     periodic.restart();
     let start_ns = periodic.next_deadline_ns();
-    let end_ns = start_ns + (MAX_STOP_S * 1e9) as u64;
+    let bound_s = if lowering.is_some() {
+        MAX_GENTLE_STOP_S
+    } else {
+        MAX_STOP_S
+    };
+    let end_ns = start_ns + (bound_s * 1e9) as u64;
     loop {
         let tick = periodic.wait();
         report.seconds = (tick.deadline_ns - start_ns) as f64 * 1e-9;
@@ -153,8 +198,19 @@ pub fn bring_to_rest(
             _ => (0.0, 0.0),
         };
         report.max_rate = report.max_rate.max(rate.abs());
+        if stop.is_lowering() {
+            if let Some(envelope) = envelope.as_mut() {
+                if envelope
+                    .check(theta, alpha, now_us, stop.last_volts())
+                    .is_err()
+                {
+                    stop.give_up_lowering();
+                }
+            }
+        }
         let Some(command) = stop.step(theta, rate, alpha, alpha_rate) else {
             report.at_rest = true;
+            report.lowered = stop.lowered();
             return report;
         };
         let command = match command {
@@ -176,15 +232,15 @@ mod tests {
 
     #[test]
     fn the_stop_says_how_long_it_may_take_and_what_a_second_ctrl_c_does() {
-        let line = stop_announcement(&StopReason::Signal(libc::SIGINT));
+        let line = stop_announcement(&StopReason::Signal(libc::SIGINT), None);
         assert_eq!(
             line,
             "rip-rt: Ctrl-C: stopping: bringing the arm to rest (at most 8 s); Ctrl-C again \
              disables the driver at once (the arm may then coast past safety.arm_limit)"
         );
-        let term = stop_announcement(&StopReason::Signal(libc::SIGTERM));
+        let term = stop_announcement(&StopReason::Signal(libc::SIGTERM), None);
         assert!(term.starts_with("rip-rt: SIGTERM: stopping"), "{term}");
-        let fault = stop_announcement(&StopReason::Watchdog(5));
+        let fault = stop_announcement(&StopReason::Watchdog(5), None);
         assert!(
             fault.starts_with("rip-rt: watchdog: stopping") && fault.contains("; Ctrl-C disables"),
             "{fault}"

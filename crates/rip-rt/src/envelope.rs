@@ -34,7 +34,7 @@
 //! that cannot brake (protocol.md rule 9) leaves the windings open on it; the active law does
 //! not depend on it.
 
-use rip_core::envelope::{BrakingLaw, HoldLaw, SimulatedStop, StoppingModel};
+use rip_core::envelope::{BrakingLaw, HoldLaw, Lowering, SimulatedStop, StoppingModel};
 use rip_core::excitation::ExcitationSettings;
 use rip_core::plant::{Plant, State};
 
@@ -61,6 +61,18 @@ pub fn stopping_model(cfg: &Config) -> StoppingModel {
 /// ([`rip_core::preflight::motion::envelope_limit`]).
 pub fn envelope_limit(cfg: &Config) -> f64 {
     rip_core::preflight::motion::envelope_limit(&cfg.rig())
+}
+
+/// The gentle end's law of `cfg` ([`Lowering`]): designed on `[plant]` at
+/// `safety.voltage_limit` and the loop's period, its arm's travel within
+/// [`rip_core::envelope::LOWER_TRAVEL_SHARE`] of [`envelope_limit`]; `None` without a plant or
+/// where no law settles.
+pub fn lowering(cfg: &Config) -> Option<Lowering> {
+    let voltage = cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT);
+    let room = rip_core::envelope::LOWER_TRAVEL_SHARE * envelope_limit(cfg);
+    Lowering::design(&cfg.spec.plant.params(), voltage, cfg.period_s(), room)
+        .ok()
+        .flatten()
 }
 
 /// The braking envelope of `safety.arm_limit` in the loop (module docs). Allocation-free.
@@ -490,6 +502,8 @@ pub struct BrakeReport {
     pub at_rest: bool,
     /// The stop signal that cut the stop short (the driver then disabled at once), if any.
     pub cut_short: Option<i32>,
+    /// The gentle end brought the pendulum down and the arm to rest (no braking).
+    pub lowered: bool,
 }
 
 impl std::fmt::Display for BrakeReport {
@@ -512,6 +526,14 @@ impl std::fmt::Display for BrakeReport {
                 self.seconds,
                 self.max_rate,
                 crate::stop::signal_name(sig)
+            );
+        }
+        if self.lowered {
+            return write!(
+                f,
+                "lowered the pendulum to hanging and the arm to rest in {:.2} s (arm rate up \
+                 to {:.2} rad/s)",
+                self.seconds, self.max_rate
             );
         }
         let end = if self.at_rest {

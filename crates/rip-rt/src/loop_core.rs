@@ -66,6 +66,9 @@ pub struct LoopCore {
     lockstep: bool,
     // `safety.arm_limit` for the arm's stopping point (crate::envelope).
     envelope: crate::envelope::ArmEnvelope,
+    // The gentle end's law for this rig, designed before the motor is enabled (the search
+    // takes tens of milliseconds, too long for the period the run ends in).
+    lowering: Option<rip_core::envelope::Lowering>,
 }
 
 impl fmt::Debug for LoopCore {
@@ -142,7 +145,14 @@ impl LoopCore {
             host_interval_s: None,
             lockstep: false,
             envelope: crate::envelope::ArmEnvelope::new(cfg),
+            lowering: crate::envelope::lowering(cfg),
         })
+    }
+
+    /// The gentle end's law for this rig ([`rip_core::envelope::Lowering`]), if one settles
+    /// on its model.
+    pub fn lowering(&self) -> Option<&rip_core::envelope::Lowering> {
+        self.lowering.as_ref()
     }
 
     /// The parser's counters.

@@ -181,7 +181,9 @@ impl<'a> Period<'a> {
         // After a signal whatever --quiet: the line answers the operator's own Ctrl-C, and the
         // stop that follows is silent for seconds.
         if brakes && (!self.quiet || matches!(reason, StopReason::Signal(_))) {
-            crate::say!("{}", crate::braking::stop_announcement(&reason));
+            let mode = crate::envelope::stop_mode(&reason, driven, wiring_checked);
+            let lowering = crate::braking::lowering_for(self.core, &reason, mode);
+            crate::say!("{}", crate::braking::stop_announcement(&reason, lowering));
         }
         let braking = crate::braking::bring_to_rest(
             self.io,

@@ -615,7 +615,9 @@ fn double_ctrl_c(name: &str, driving: Driving, gap: Duration) -> DoubleCtrlC {
         }
     };
     assert!(
-        said.contains("Ctrl-C: stopping: bringing the arm to rest (at most 8 s)")
+        (said.contains("Ctrl-C: stopping: bringing the arm to rest (at most 8 s)")
+            || said
+                .contains("Ctrl-C: stopping: lowering the pendulum and bringing the arm to rest"))
             && said.contains("Ctrl-C again disables the driver at once"),
         "{said}"
     );

@@ -18,8 +18,23 @@ pub const HOLD_GIVE_UP_RAD: f64 = 0.5;
 /// pendulum's terms would drive the arm blind.
 pub const HOLD_BLIND_PERIODS: u32 = 5;
 
+/// Pendulum angle from upright (rad) within which an orderly stop lowers it
+/// ([`StopSequence::lowering`]): a balanced pendulum. Farther out (an excitation, a swing) the
+/// stop brakes as it always did.
+pub const LOWER_FROM_RAD: f64 = 0.3;
+
+/// The arm's distance from the centre (rad) past which the gentle end tips the pendulum the
+/// way the arm's term pushes it; nearer, the way it leans.
+pub const LOWER_SIDE_FROM_RAD: f64 = 0.05;
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Stage {
+    /// The gentle end ([`rip_core::envelope::Lowering`]): the pendulum lowered to hanging and
+    /// the arm brought to its hold point `at` (the centre; NaN until the first measurement).
+    Lowering {
+        at: f64,
+        periods: u32,
+    },
     Braking,
     Holding {
         at: f64,
@@ -62,6 +77,11 @@ pub struct StopSequence {
     momentum_still: u32,
     // The last command's voltage (0 for the short).
     last_volts: f64,
+    // The gentle end's law while it may still run, and the side the pendulum is lowered on.
+    lower: Option<HoldLaw>,
+    lower_side: f64,
+    // Whether the gentle end brought the pendulum down.
+    lowered: bool,
 }
 
 impl StopSequence {
@@ -83,7 +103,52 @@ impl StopSequence {
             period_s,
             voltage,
             last_volts: 0.0,
+            lower: None,
+            lower_side: 0.0,
+            lowered: false,
         }
+    }
+
+    /// The same stop beginning with the gentle end of an orderly stop: `lowering`'s law
+    /// brings a balanced pendulum (within [`LOWER_FROM_RAD`] of upright at the first
+    /// measurement) down to hanging at rest with the arm brought to the centre, at most
+    /// [`rip_core::envelope::MAX_LOWER_S`]; then the stop ends. Past that time, or given up
+    /// ([`give_up_lowering`](Self::give_up_lowering)), the stop brakes and holds as after a
+    /// fault. Only for a brake whose sign is trusted ([`BrakeMode::Active`]).
+    pub fn lowering(mut self, lowering: &rip_core::envelope::Lowering) -> Self {
+        if self.brake.mode() == BrakeMode::Active {
+            self.lower = Some(lowering.law);
+            self.stage = Stage::Lowering {
+                at: f64::NAN,
+                periods: 0,
+            };
+        }
+        self
+    }
+
+    /// Whether the gentle end is running.
+    pub fn is_lowering(&self) -> bool {
+        matches!(self.stage, Stage::Lowering { .. })
+    }
+
+    /// Whether the gentle end brought the pendulum down (the stop then ended without braking).
+    pub fn lowered(&self) -> bool {
+        self.lowered
+    }
+
+    /// Ends the gentle end for the fault's stop (braking, then holding) from this period on:
+    /// the loop's braking envelope found the arm's stopping point past its bound.
+    pub fn give_up_lowering(&mut self) {
+        if self.is_lowering() {
+            self.stage = Stage::Braking;
+            self.arm_rest = RestTest::new(self.period_s);
+            self.pendulum_rest = RestTest::new(self.period_s);
+        }
+    }
+
+    /// The last command's voltage (V; 0 for the short).
+    pub fn last_volts(&self) -> f64 {
+        self.last_volts
     }
 
     /// How it brakes now.
@@ -121,6 +186,45 @@ impl StopSequence {
             .arm_rest
             .observe(self.brake.model_arm().unwrap_or(theta));
         let hold_ready = self.hold.is_some() && self.hold_sign().is_some();
+        if let (Stage::Lowering { at, periods }, Some(law)) = (self.stage, self.lower) {
+            // The centre: a run that ends after its reference step has the arm out by the
+            // step, and the law's swing about a hold point there came within 0.26 rad of the
+            // limit (paper preset, MPC).
+            let at = if at.is_nan() {
+                // An arm out from the centre (a run that ends after its reference step): the
+                // pendulum tipped so that its term first opposes the arm's, which softens the
+                // first command and lets the fall's reaction carry the arm back. Tipped the
+                // other way, the arm's term and the pendulum's added up and the arm swung to
+                // 2.47 rad against 2.10 (paper preset, 1 rad step, LQR and LQG).
+                let push = law.k[0] * theta * law.k[2];
+                if theta.abs() > LOWER_SIDE_FROM_RAD && push != 0.0 {
+                    self.lower_side = -push.signum();
+                }
+                0.0
+            } else {
+                at
+            };
+            let phi = rip_core::swingup::wrap_angle(alpha - std::f64::consts::PI);
+            let pendulum_rests = self.pendulum_rest.observe_within(phi, PENDULUM_REST_RAD);
+            let upright = rip_core::swingup::wrap_angle(alpha).abs() <= LOWER_FROM_RAD;
+            let expired = f64::from(periods) * self.period_s >= rip_core::envelope::MAX_LOWER_S;
+            if (periods == 0 && !upright) || expired || !theta.is_finite() {
+                self.give_up_lowering();
+            } else if arm_rests && pendulum_rests {
+                self.lowered = true;
+                self.last_volts = 0.0;
+                return None;
+            } else {
+                self.stage = Stage::Lowering {
+                    at,
+                    periods: periods + 1,
+                };
+                let phi = rip_core::envelope::Lowering::pendulum_angle(alpha, &mut self.lower_side);
+                let v = law.voltage_from_hanging(theta - at, rate, phi, alpha_rate);
+                self.last_volts = v;
+                return Some(BrakeCommand::Volts(v));
+            }
+        }
         match self.stage {
             // The arm at rest, or its momentum braked out (the law at 0 V for REST_S): under a
             // pendulum still swinging the arm swings with it and never rests, and the hold
