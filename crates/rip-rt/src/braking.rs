@@ -115,11 +115,8 @@ pub fn bring_to_rest(
     };
     let lowering = lowering_for(core, reason, mode).copied();
     let mut stop = StopSequence::new(cfg, brake);
-    // The loop's own braking envelope watches the gentle end as it watched the run.
-    let mut envelope = None;
     if let Some(lowering) = &lowering {
-        stop = stop.lowering(lowering);
-        envelope = Some(crate::envelope::ArmEnvelope::new(cfg));
+        stop = stop.lowering(cfg, lowering);
     }
     let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
     let mut last: Option<(f64, f64, u32)> = None;
@@ -198,16 +195,6 @@ pub fn bring_to_rest(
             _ => (0.0, 0.0),
         };
         report.max_rate = report.max_rate.max(rate.abs());
-        if stop.is_lowering() {
-            if let Some(envelope) = envelope.as_mut() {
-                if envelope
-                    .check(theta, alpha, now_us, stop.last_volts())
-                    .is_err()
-                {
-                    stop.give_up_lowering();
-                }
-            }
-        }
         let Some(command) = stop.step(theta, rate, alpha, alpha_rate) else {
             report.at_rest = true;
             report.lowered = stop.lowered();

@@ -141,6 +141,19 @@ impl ArmEnvelope {
             }
             None => (0.0, 0.0),
         };
+        self.check_state(theta, rate, alpha, alpha_rate, applied)
+    }
+
+    /// [`check`](Self::check) on a state whose rates the caller measured: the arm at `theta`
+    /// moving at `rate`, the pendulum at `alpha` moving at `alpha_rate` (rad, rad/s).
+    pub fn check_state(
+        &self,
+        theta: f64,
+        rate: f64,
+        alpha: f64,
+        alpha_rate: f64,
+        applied: f64,
+    ) -> Result<(), StopReason> {
         let mut stop_at = self.model.stopping_point(theta, rate, applied);
         if stop_at.abs() > self.bound {
             if let Some(sim) = &self.simulated {

@@ -19,6 +19,7 @@ use rip_rt::controllers::{self, ControllerKind};
 use rip_rt::envelope::{
     brake_mode, Brake, BrakeCommand, BrakeMode, StopSequence, MAX_BRAKE_S, MAX_HOLD_S,
 };
+use rip_rt::braking::MAX_GENTLE_STOP_S;
 use rip_rt::plant::{Model, PlantSim, Windings};
 use rip_rt::stop::StopReason;
 use rip_rt::witness::{Witness, WitnessFault, WitnessLimits};
@@ -260,6 +261,18 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
         *max_abs = max_abs.max(x[0].abs());
     };
     let mut stop = StopSequence::new(cfg, brake);
+    // An orderly end of a balancing run lowers the pendulum first, as rip-rt's does
+    // (`braking::lowering_for`).
+    let lowering = match (&reason, controller.phase()) {
+        (StopReason::Finished, rip_core::Phase::Balance) => rip_rt::envelope::lowering(cfg),
+        _ => None,
+    };
+    let budget = if let Some(lowering) = &lowering {
+        stop = stop.lowering(cfg, lowering);
+        MAX_GENTLE_STOP_S
+    } else {
+        MAX_BRAKE_S + MAX_HOLD_S
+    };
     let read_alpha = |x: [f64; 4], rng: &mut StdRng| {
         rip_core::swingup::wrap_angle(
             ((x[2] - std::f64::consts::PI + noise[1].sample(rng)) / q[1]).round() * q[1]
@@ -268,8 +281,8 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
     };
     let mut last_theta = measure_arm(sim.state()[0], onset, &mut rng);
     let mut last_alpha = read_alpha(sim.state(), &mut rng);
-    let mut stop_s = MAX_BRAKE_S + MAX_HOLD_S;
-    for k in 0..((MAX_BRAKE_S + MAX_HOLD_S) / ts) as usize {
+    let mut stop_s = budget;
+    for k in 0..(budget / ts) as usize {
         let theta = measure_arm(sim.state()[0], onset, &mut rng);
         let alpha = read_alpha(sim.state(), &mut rng);
         let rate = (theta - last_theta) / ts;

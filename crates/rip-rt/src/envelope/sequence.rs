@@ -77,8 +77,10 @@ pub struct StopSequence {
     momentum_still: u32,
     // The last command's voltage (0 for the short).
     last_volts: f64,
-    // The gentle end's law while it may still run, and the side the pendulum is lowered on.
+    // The gentle end's law while it may still run, the loop's braking envelope that watches
+    // it, and the side the pendulum is lowered on.
     lower: Option<HoldLaw>,
+    lower_envelope: Option<ArmEnvelope>,
     lower_side: f64,
     // Whether the gentle end brought the pendulum down.
     lowered: bool,
@@ -104,6 +106,7 @@ impl StopSequence {
             voltage,
             last_volts: 0.0,
             lower: None,
+            lower_envelope: None,
             lower_side: 0.0,
             lowered: false,
         }
@@ -112,12 +115,14 @@ impl StopSequence {
     /// The same stop beginning with the gentle end of an orderly stop: `lowering`'s law
     /// brings a balanced pendulum (within [`LOWER_FROM_RAD`] of upright at the first
     /// measurement) down to hanging at rest with the arm brought to the centre, at most
-    /// [`rip_core::envelope::MAX_LOWER_S`]; then the stop ends. Past that time, or given up
-    /// ([`give_up_lowering`](Self::give_up_lowering)), the stop brakes and holds as after a
-    /// fault. Only for a brake whose sign is trusted ([`BrakeMode::Active`]).
-    pub fn lowering(mut self, lowering: &rip_core::envelope::Lowering) -> Self {
+    /// [`rip_core::envelope::MAX_LOWER_S`]; then the stop ends. Past that time, or where the
+    /// loop's braking envelope ([`ArmEnvelope`] of `cfg`) finds the arm's stopping point past
+    /// its bound, the stop brakes and holds as after a fault. Only for a brake whose sign is
+    /// trusted ([`BrakeMode::Active`]).
+    pub fn lowering(mut self, cfg: &Config, lowering: &rip_core::envelope::Lowering) -> Self {
         if self.brake.mode() == BrakeMode::Active {
             self.lower = Some(lowering.law);
+            self.lower_envelope = Some(ArmEnvelope::new(cfg));
             self.stage = Stage::Lowering {
                 at: f64::NAN,
                 periods: 0,
@@ -136,8 +141,7 @@ impl StopSequence {
         self.lowered
     }
 
-    /// Ends the gentle end for the fault's stop (braking, then holding) from this period on:
-    /// the loop's braking envelope found the arm's stopping point past its bound.
+    /// Ends the gentle end for the fault's stop (braking, then holding) from this period on.
     pub fn give_up_lowering(&mut self) {
         if self.is_lowering() {
             self.stage = Stage::Braking;
@@ -208,7 +212,12 @@ impl StopSequence {
             let pendulum_rests = self.pendulum_rest.observe_within(phi, PENDULUM_REST_RAD);
             let upright = rip_core::swingup::wrap_angle(alpha).abs() <= LOWER_FROM_RAD;
             let expired = f64::from(periods) * self.period_s >= rip_core::envelope::MAX_LOWER_S;
-            if (periods == 0 && !upright) || expired || !theta.is_finite() {
+            let breach = self.lower_envelope.as_ref().is_some_and(|envelope| {
+                envelope
+                    .check_state(theta, rate, alpha, alpha_rate, self.last_volts)
+                    .is_err()
+            });
+            if (periods == 0 && !upright) || expired || breach || !theta.is_finite() {
                 self.give_up_lowering();
             } else if arm_rests && pendulum_rests {
                 self.lowered = true;
