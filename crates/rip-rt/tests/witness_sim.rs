@@ -14,12 +14,12 @@ use rand_distr::{Distribution, Normal};
 use rip_core::plant::{Plant, State};
 use rip_core::rig::Rig;
 use rip_core::Phase;
+use rip_rt::braking::MAX_GENTLE_STOP_S;
 use rip_rt::config::Config;
 use rip_rt::controllers::{self, ControllerKind};
 use rip_rt::envelope::{
     brake_mode, Brake, BrakeCommand, BrakeMode, StopSequence, MAX_BRAKE_S, MAX_HOLD_S,
 };
-use rip_rt::braking::MAX_GENTLE_STOP_S;
 use rip_rt::plant::{Model, PlantSim, Windings};
 use rip_rt::stop::StopReason;
 use rip_rt::witness::{Witness, WitnessFault, WitnessLimits};
@@ -48,6 +48,9 @@ struct Case {
     /// Share of periods whose command reaches the plant late, by 2–9.5 ms (a loaded machine:
     /// the loop, or the device, starved of the CPU), and whether the witness is told.
     late: Late,
+    /// The arm reference steps to `reference.arm_step` at `reference.step_time` (after the
+    /// catch of a swing-up), as on the rig.
+    reference: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -88,6 +91,10 @@ struct Outcome {
     ended: &'static str,
     /// The fault began before the run ended.
     faulted: bool,
+    /// The true arm angle each period of the run, up to its stop (the trip, or the end).
+    arm: Vec<f64>,
+    /// The period the fault began in.
+    onset_period: Option<usize>,
 }
 
 struct Rigged {
@@ -163,6 +170,10 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
     let mut ended = "finished";
     let mut max_abs: f64 = 0.0;
     let mut applied_last = 0.0;
+    let mut arm = Vec::with_capacity(steps);
+    let mut onset_period = case.fault_at.is_none().then_some(0);
+    // When the reference's clock started: the start of balancing, or the catch.
+    let mut reference_from: Option<f64> = None;
     // What the arm encoder reports for the true arm angle `theta` (the fault, if active).
     let measure_arm = |theta: f64, onset: Option<f64>, rng: &mut StdRng| -> f64 {
         let true_theta = theta + noise[0].sample(rng);
@@ -180,7 +191,9 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
         if onset.is_none() && case.fault_at.is_some_and(|at| t >= at) {
             onset = Some(x[0]);
             arm_at_fault = x[0];
+            onset_period = Some(k);
         }
+        arm.push(x[0]);
         let active = onset.is_some();
         if active {
             excursion = excursion.max((x[0] - arm_at_fault).abs());
@@ -210,7 +223,16 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
             break;
         }
         let mut u = [0.0];
-        controller.step(&[theta, alpha], &[0.0, 0.0], &mut u);
+        let r = match reference_from {
+            Some(from) if case.reference && t >= from + cfg.spec.reference.step_time => {
+                cfg.spec.reference.arm_step
+            }
+            _ => 0.0,
+        };
+        controller.step(&[theta, alpha], &[r, 0.0], &mut u);
+        if reference_from.is_none() && controller.phase() == Phase::Balance {
+            reference_from = Some(t);
+        }
         match controller.phase() {
             Phase::Balance => caught = true,
             Phase::Stopped(_) => {
@@ -324,6 +346,8 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
         excursion_after_stop: after,
         ended,
         faulted: onset.is_some(),
+        arm,
+        onset_period,
     }
 }
 
@@ -352,6 +376,7 @@ fn rigs(n_generated: usize) -> Vec<(String, Rigged)> {
                 fault_at: None,
                 seed,
                 late: ON_TIME,
+                reference: false,
             },
             15.0,
         );
@@ -389,6 +414,7 @@ fn normal_runs_never_trip_the_witness() {
                     fault_at: None,
                     seed: 1,
                     late: ON_TIME,
+                    reference: false,
                 };
                 let o = simulate(&r, case, if swing_up { 15.0 } else { 5.0 });
                 let id = format!("{name} {kind} swing_up={swing_up}");
@@ -411,6 +437,7 @@ fn each_normal_run(r: &Rigged, mut each: impl FnMut(Case, Outcome)) {
                     fault_at: None,
                     seed,
                     late: ON_TIME,
+                    reference: false,
                 };
                 each(case, simulate(r, case, if swing_up { 15.0 } else { 5.0 }));
             }
@@ -472,6 +499,7 @@ fn late_commands_are_no_evidence_of_a_fault() {
                             share: LOADED,
                             told,
                         },
+                        reference: false,
                     };
                     let o = simulate(&r, case, if swing_up { 15.0 } else { 5.0 });
                     if told {
@@ -605,6 +633,7 @@ fn wiring_faults_are_stopped_in(n_generated: usize, inside: bool, late: Late) {
                         .and_then(|s| s.parse().ok())
                         .unwrap_or(2),
                     late,
+                    reference: false,
                 };
                 if let Some(only) = &only {
                     if !format!("{name} {kind} {fault:?} {swing_up}").contains(only.as_str()) {
@@ -703,6 +732,7 @@ fn measure() {
                         fault_at,
                         seed: 3,
                         late: ON_TIME,
+                        reference: false,
                     },
                     10.0,
                 );
@@ -774,4 +804,132 @@ fn replay() {
         }
         prev = Some((t, u));
     }
+}
+
+/// Generated rigs and noise seeds of [`every_stop_on_generated_rigs_ends_inside_the_limit`] at
+/// the full scale (at the small one: 8 rigs, 2 seeds).
+const SWEEP_RIGS: usize = 40;
+const SWEEP_SEEDS: u64 = 6;
+
+/// Every stop the run can make, simulated on the presets and generated rigs with each
+/// controller and several noise seeds: the end of a balance (with and without the reference
+/// step) and of a swing-up, caught or not, and every wiring fault of the witness's table,
+/// mid-swing, after the catch and from the start. The true arm stays inside
+/// `safety.arm_limit` through the run, its stop and 3 s with the windings open, in every case.
+#[test]
+fn every_stop_on_generated_rigs_ends_inside_the_limit() {
+    let n_rigs = rip_test_scale::size(8, SWEEP_RIGS);
+    let seeds = rip_test_scale::size(2, SWEEP_SEEDS);
+    let mut failures = Vec::new();
+    let mut cases = 0;
+    let mut worst: (f64, String) = (0.0, String::new());
+    let faults: Vec<_> = [(Fault::None, false, None), (Fault::None, true, None)]
+        .into_iter()
+        .chain(fault_cases())
+        .chain(scale_cases())
+        .collect();
+    for (name, r) in rigs(n_rigs) {
+        for kind in KINDS {
+            for &(fault, swing_up, fault_at) in &faults {
+                for reference in [false, true] {
+                    if reference && fault != Fault::None {
+                        continue;
+                    }
+                    for seed in 0..seeds {
+                        let case = Case {
+                            kind,
+                            swing_up,
+                            fault,
+                            fault_at,
+                            seed,
+                            late: ON_TIME,
+                            reference,
+                        };
+                        let o = simulate(&r, case, if swing_up { 15.0 } else { 8.0 });
+                        cases += 1;
+                        let id = format!(
+                            "{name} {kind} {fault:?} swing_up={swing_up} reference={reference} \
+                             seed {seed}: ended {}, max |arm| {:.2}",
+                            o.ended, o.max_abs_arm
+                        );
+                        if o.max_abs_arm > worst.0 {
+                            worst = (o.max_abs_arm, id.clone());
+                        }
+                        inside_the_limit(&r.cfg, &o, &id, &mut failures);
+                    }
+                }
+            }
+        }
+    }
+    println!(
+        "{cases} cases; largest true |arm|: {:.2} rad ({})",
+        worst.0, worst.1
+    );
+    assert!(
+        failures.is_empty(),
+        "{} of {cases}:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
+}
+
+/// A wiring fault's own effect on the arm: the true arm's largest distance from the same run
+/// without the fault (same rig, controller, noise), from the fault's onset until the run
+/// stops driving with its controller. At most 0.4 rad over the witness's fault cases (a
+/// reversed motor or arm encoder, a stopped arm encoder, mid-swing and after the catch; the
+/// arm sign configured wrong from the start) on both presets and 8 generated rigs, each
+/// controller, noise seed 2 (seeds 0–5 at the full scale). A wrong `arm_counts_per_rev` cannot be told from a different rig within half a
+/// radian (the witness's module docs) and is held to the arm limit apart.
+#[test]
+fn a_wiring_fault_moves_the_arm_at_most_four_tenths_of_a_radian_from_the_run_without_it() {
+    let mut failures = Vec::new();
+    let mut worst: (f64, String) = (0.0, String::new());
+    let seeds: Vec<u64> = rip_test_scale::size(vec![2], (0..6).collect());
+    for (name, r) in rigs(GENERATED) {
+        for kind in KINDS {
+            for (fault, swing_up, fault_at) in fault_cases() {
+                for &seed in &seeds {
+                    let case = Case {
+                        kind,
+                        swing_up,
+                        fault,
+                        fault_at,
+                        seed,
+                        late: ON_TIME,
+                        reference: false,
+                    };
+                    let faulty = simulate(&r, case, 10.0);
+                    if !faulty.faulted {
+                        continue;
+                    }
+                    let healthy = simulate(
+                        &r,
+                        Case {
+                            fault: Fault::None,
+                            ..case
+                        },
+                        10.0,
+                    );
+                    let from = faulty.onset_period.unwrap_or(0);
+                    let deviation = faulty.arm[from..]
+                        .iter()
+                        .zip(healthy.arm.get(from..).unwrap_or(&[]))
+                        .map(|(a, b)| (a - b).abs())
+                        .fold(0.0, f64::max);
+                    let id = format!(
+                    "{name} {kind} {fault:?} swing_up={swing_up} seed {seed}: {deviation:.3} rad"
+                );
+                    println!("{id}");
+                    if deviation > worst.0 {
+                        worst = (deviation, id.clone());
+                    }
+                    if deviation > 0.4 {
+                        failures.push(id);
+                    }
+                }
+            }
+        }
+    }
+    println!("largest: {}", worst.1);
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
