@@ -255,13 +255,14 @@ riprs reads keeps the ones it sets: `riprs config FILE`, `Spec.to_toml` and the 
 - `[plant]`: `preset` (`paper` or `qube_servo2`) and the physical parameters
   `mr, Lr, Jr, mp, Lp, Jp, Dr, Dp, Rm, kt, km` (SI units), Coulomb friction `Cr, Cp` (N m,
   sign smoothed as `tanh(rate / 0.05 rad/s)`) and the voltage dead zone `Vd` (V, applied
-  voltage `u - clip(u, -Vd, Vd)`), each overriding the preset, and optionally the arm's
-  breakaway torque `arm_breakaway` (N m, at least `Cr`: stiction of the simulated plant,
-  friction decaying as `exp(-(rate / 0.1 rad/s)^2)` to `Cr`, which no controller knows), so
-  an identified rig (`riprs identify`) is a file; the controllers are designed on this
-  plant's linearisation at the loop period without friction and dead zone (the unchanged
-  `paper` preset keeps the paper's recovered model). `substeps`, `initial_state`,
-  `fall_limit` set up a simulated run.
+  voltage `u - clip(u, -Vd, Vd)`) and the cable's stiffness `Kc` (N m/rad, a torque
+  `-Kc theta` on the arm about its zero; 0 in both presets), each overriding the preset, and
+  optionally the arm's breakaway torque `arm_breakaway` (N m, at least `Cr`: stiction of the
+  simulated plant, friction decaying as `exp(-(rate / 0.1 rad/s)^2)` to `Cr`, which no
+  controller knows), so an identified rig (`riprs identify`) is a file; the controllers are
+  designed on this plant's linearisation at the loop period without friction and dead zone
+  but with the cable (the unchanged `paper` preset keeps the paper's recovered model).
+  `substeps`, `initial_state`, `fall_limit` set up a simulated run.
 - `[sensor]`: the rig's encoders, simulated or real: counts per revolution (128 to 2^24; the
   one resolution `rip-rt` turns counts into angles with, and the emulator counts in),
   white-noise standard deviation (rad) and encoder zero offsets (rad; an encoder reads
