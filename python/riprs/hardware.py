@@ -12,7 +12,8 @@ The paper states neither when its arm step happens nor over which window its RMS
 study fixed one window for all three controllers before it ran: a run of :data:`DURATION`
 seconds, the arm reference stepping 0 -> 1 rad at :data:`STEP_TIME`, the indices over
 ``[WINDOW_START, DURATION)``: the steady state, three seconds after the step, when each
-controller on the nominal plant has settled within a few mrad. (Its LQR and MPC arm RMSE,
+controller on the nominal plant has settled (its arm RMSE over the window is 4-8 mrad with the
+default sensor). (Its LQR and MPC arm RMSE,
 0.061 and 0.073 rad, are below what the step's transient alone gives over any window that
 holds it, about 0.2 rad over 10 s; and the paper describes them as oscillation around the
 reference.)
@@ -74,6 +75,16 @@ def spec(rig: Mapping[str, float] = RIG) -> Spec:
     """The experiment file of the paper's rig: the ``paper`` plant with ``rig``'s dead zone,
     arm friction and cable, its encoders and noise, and the study's run and step.
 
+    Parameters
+    ----------
+    rig : mapping of str to float
+        ``Vd`` (V), ``Cr`` (N m), ``Kc`` (N m/rad), ``counts`` (per revolution, both
+        encoders) and ``noise`` (rad), as :data:`RIG`.
+
+    Returns
+    -------
+    Spec
+
     Raises
     ------
     ConfigError
@@ -91,14 +102,31 @@ def spec(rig: Mapping[str, float] = RIG) -> Spec:
 
 def controllers() -> dict[str, object]:
     """LQR, LQG and MPC as the paper printed them: designed on its model with its weights,
-    no compensation."""
+    no compensation.
+
+    Returns
+    -------
+    dict
+        ``{"LQR": Lqr, "LQG": Lqg, "MPC": Mpc}``, the default experiment file's controllers.
+    """
     return Spec().build_controllers(paper.TS)
 
 
 def table1(result: SimResult) -> tuple[float, float, float]:
-    """Tab. 1's indices of one run over the study's window: RMSE of the measured arm angle
-    against its reference and of the measured pendulum angle (rad), RMS voltage (V). NaN for
-    a run that fell before the window ends."""
+    """Tab. 1's indices of one run over the study's window.
+
+    Parameters
+    ----------
+    result : SimResult
+        A run of :data:`DURATION` seconds.
+
+    Returns
+    -------
+    tuple of float
+        RMSE of the measured arm angle against its reference and of the measured pendulum
+        angle (rad), RMS voltage (V), over ``[WINDOW_START, DURATION)``; NaN for a run that
+        fell.
+    """
     if result.fell:
         return (math.nan,) * 3
     w = result.t >= WINDOW_START - 1e-9
@@ -113,8 +141,21 @@ def table1(result: SimResult) -> tuple[float, float, float]:
 def run(
     rig: Mapping[str, float] = RIG, seeds: tuple[int, ...] = (0, 1, 2)
 ) -> dict[str, tuple[float, float, float]]:
-    """The paper's experiment on ``rig``: per controller, Tab. 1's indices over the window,
-    each the mean over the noise ``seeds`` (NaN when any run fell)."""
+    """The paper's experiment on ``rig`` (``riprs compare --hardware``).
+
+    Parameters
+    ----------
+    rig : mapping of str to float
+        The rig (:func:`spec`); the fitted one by default.
+    seeds : tuple of int
+        Noise seeds; the study's are 0, 1, 2.
+
+    Returns
+    -------
+    dict of str to tuple of float
+        Per controller, Tab. 1's indices (:func:`table1`), each the mean over ``seeds`` (NaN
+        when any run fell).
+    """
     cfg = spec(rig)
     plant = cfg.build_plant()
     options = cfg.simulation_options("up", paper.TS)
@@ -127,8 +168,18 @@ def run(
 
 def objective(summary: Mapping[str, tuple[float, float, float]]) -> float:
     r"""The study's objective: the sum over the nine numbers of Tab. 1 of the squared log
-    ratio of simulated to printed,
-    :math:`J = \sum_{c,s} \ln^2(\hat e_{c,s} / e_{c,s})`; infinite when a controller fell."""
+    ratio of simulated to printed, :math:`J = \sum_{c,s} \ln^2(\hat e_{c,s} / e_{c,s})`.
+
+    Parameters
+    ----------
+    summary : mapping of str to tuple of float
+        Per controller, ``(arm, pendulum, voltage)`` as :func:`run` returns them.
+
+    Returns
+    -------
+    float
+        ``J``; infinite when a controller fell.
+    """
     total = 0.0
     for name, printed in paper.TABLE1.items():
         for sim, ref in zip(summary[name], printed, strict=True):
@@ -139,7 +190,17 @@ def objective(summary: Mapping[str, tuple[float, float, float]]) -> float:
 
 
 def format_table(summary: Mapping[str, tuple[float, float, float]]) -> str:
-    """Tab. 1 of the rig beside the paper's hardware column, and the log ratio of each."""
+    """Tab. 1 of the rig beside the paper's hardware column, and the objective.
+
+    Parameters
+    ----------
+    summary : mapping of str to tuple of float
+        As :func:`run` returns it.
+
+    Returns
+    -------
+    str
+    """
     groups = ("arm angle [rad]", "pendulum angle [rad]", "voltage [V]")
     lines = [
         "Tab. 1 on the paper's rig (riprs.hardware.RIG), RMSE over "
