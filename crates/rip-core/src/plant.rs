@@ -111,13 +111,13 @@
 //! which, for `kc = 0`, is the structure
 //! `ẋ = [0 1 0 0; 0 a₁₁ a₁₂ a₁₃; 0 0 0 1; 0 a₃₁ a₃₂ a₃₃] x + [0 b₁ 0 b₃]ᵀu`
 //! of [`crate::paper::continuous_model`]; the cable adds the arm-spring column
-//! `a₁₀ = −kc (M⁻¹)₀₀ = −kc Jα / det M`, `a₃₀ = −kc (M⁻¹)₁₀ = −kc m₁₂ / det M`. Being smooth, the
-//! cable is part of the model the controllers are designed on. [`Plant::linearize`] returns the exact Jacobian at
-//! any state and input of the plant *without* its Coulomb friction and dead zone, of which
-//! this is the special case. Those two are left out on purpose: at rest they are not
-//! differentiable (the smoothing slope `c/v_c` is a numerical device, not a damping the
-//! controller can rely on, and `z′(0) = 0` inside the dead zone would say that the motor
-//! cannot move the arm at all). The controllers are designed on this smooth part; friction and
+//! `a₁₀ = −kc (M⁻¹)₀₀ = −kc Jα / det M`, `a₃₀ = −kc (M⁻¹)₁₀ = −kc m₁₂ / det M`. Being smooth,
+//! the cable is part of the model the controllers are designed on. [`Plant::linearize`]
+//! returns the exact Jacobian at any state and input of the plant *without* its Coulomb
+//! friction and dead zone, of which this is the special case. Those two are left out on
+//! purpose: at rest they are not differentiable (the smoothing slope `c/v_c` is a numerical
+//! device, not a damping the controller can rely on, and `z′(0) = 0` inside the dead zone
+//! would say that the motor cannot move the arm at all). The controllers are designed on this smooth part; friction and
 //! dead zone act on them as the disturbances they are.
 
 use nalgebra::{SMatrix, SVector};
