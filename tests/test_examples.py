@@ -22,6 +22,7 @@ SITE_HOOK = ROOT / "docs" / "hooks" / "riprs_site.py"
 WRITES = {
     "getting_started": ["arm_angle.svg", "pendulum_angle.svg", "control_voltage.svg"],
     "design_controllers": ["controllers.svg"],
+    "paper_rig": ["paper_rig_map.svg"],
     "swing_up": ["swing_up.svg"],
     "rig_emulator": ["mpc.csv", "compare/arm_angle_with_logs.svg"],
     "rig_swing_up": ["swing_up.csv", "swing_up.svg"],

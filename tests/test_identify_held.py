@@ -89,6 +89,9 @@ def test_without_km_in_the_lab_file_km_is_kt_and_what_depends_on_a_held_value_sa
     assert held.held == {"Rm": pytest.approx(0.3)}
     verdict = "\n".join(held.verdict())
     assert "Rm = 8.4" in verdict and "prior +-30 %" in verdict, verdict
+    # The cable's stiffness is never estimated: held at the start set's (the preset's 0), named.
+    assert p.Kc == QUBE.Kc == 0.0
+    assert "Kc = 0 N m/rad (the cable's stiffness, never estimated)" in verdict, verdict
     assert "Rm" in held.to_toml() and "held = {Rm = 0.3}" in held.identification_toml()
 
 

@@ -40,7 +40,7 @@ def test_the_stub_parameter_names_are_the_core_table():
     # PARAMETERS is the core's Param table ([plant] keys); the stub's Literal must list
     # exactly those, in the same order.
     assert _literal(_stub(), "_ParameterName") == list(PARAMETERS)
-    assert len(PARAMETERS) == 14
+    assert len(PARAMETERS) == 15
 
 
 def test_furuta_params_properties_are_the_core_fields():

@@ -48,6 +48,7 @@ offline = _sibling("offline")
 EXAMPLES: dict[str, list[str]] = {
     "getting_started": [],
     "paper_model": [],
+    "paper_rig": [],
     "design_controllers": [],
     "matlab_conventions": [],
     "swing_up": [],

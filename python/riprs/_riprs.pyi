@@ -13,7 +13,8 @@ _PresetName = Literal["paper", "qube_servo2"]
 _SolverName = Literal["active_set", "clarabel"]
 _ControllerName = Literal["LQR", "LQG", "MPC"]
 _ParameterName = Literal[
-    "mr", "Lr", "Jr", "mp", "Lp", "Jp", "Dr", "Dp", "Rm", "kt", "km", "Cr", "Cp", "Vd"
+    "mr", "Lr", "Jr", "mp", "Lp", "Jp", "Dr", "Dp", "Rm", "kt", "km", "Cr", "Cp", "Vd",
+    "Kc",
 ]
 
 class _Controller(Protocol):
@@ -142,6 +143,8 @@ class FurutaParams:
     def Cp(self) -> float: ...
     @property
     def Vd(self) -> float: ...
+    @property
+    def Kc(self) -> float: ...
 
 @final
 class Plant:

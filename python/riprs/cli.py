@@ -54,6 +54,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
     )
     from riprs.log import load_log
 
+    if args.hardware:
+        return _compare_hardware(args)
     # Logs are read first, so that a wrong path fails before the runs, not after them; their
     # phase column says how the runs started, and the simulations start alike.
     read = {p: load_log(p) for p in args.log or []}
@@ -79,6 +81,34 @@ def cmd_compare(args: argparse.Namespace) -> int:
     print()
     where = result.files[0].parent if result.files else Path(args.out).absolute()
     print(f"wrote {len(result.files)} files to {where}")
+    return 0
+
+
+def _compare_hardware(args: argparse.Namespace) -> int:
+    """``riprs compare --hardware``: the paper's controllers on its fitted rig, Tab. 1 beside
+    the paper's hardware column (docs/paper.md, "The hardware column")."""
+    from riprs import hardware
+
+    given = [
+        flag
+        for flag, value in (
+            ("--config", args.config),
+            ("--log", args.log),
+            ("--monte-carlo", args.monte_carlo),
+            ("--start", args.start),
+        )
+        if value is not None
+    ]
+    if given:
+        print(
+            f"riprs: error: --hardware runs the paper's rig as the study fitted it; it takes no "
+            f"{', '.join(given)}",
+            file=sys.stderr,
+        )
+        return 2
+    seeds = (args.seed, args.seed + 1, args.seed + 2)
+    print(hardware.format_table(hardware.run(seeds=seeds)))
+    print(f"(the mean over noise seeds {', '.join(map(str, seeds))}; no files written)")
     return 0
 
 
@@ -255,13 +285,14 @@ riprs reads keeps the ones it sets: `riprs config FILE`, `Spec.to_toml` and the 
 - `[plant]`: `preset` (`paper` or `qube_servo2`) and the physical parameters
   `mr, Lr, Jr, mp, Lp, Jp, Dr, Dp, Rm, kt, km` (SI units), Coulomb friction `Cr, Cp` (N m,
   sign smoothed as `tanh(rate / 0.05 rad/s)`) and the voltage dead zone `Vd` (V, applied
-  voltage `u - clip(u, -Vd, Vd)`), each overriding the preset, and optionally the arm's
-  breakaway torque `arm_breakaway` (N m, at least `Cr`: stiction of the simulated plant,
-  friction decaying as `exp(-(rate / 0.1 rad/s)^2)` to `Cr`, which no controller knows), so
-  an identified rig (`riprs identify`) is a file; the controllers are designed on this
-  plant's linearisation at the loop period without friction and dead zone (the unchanged
-  `paper` preset keeps the paper's recovered model). `substeps`, `initial_state`,
-  `fall_limit` set up a simulated run.
+  voltage `u - clip(u, -Vd, Vd)`) and the cable's stiffness `Kc` (N m/rad, a torque
+  `-Kc theta` on the arm about its zero; 0 in both presets), each overriding the preset, and
+  optionally the arm's breakaway torque `arm_breakaway` (N m, at least `Cr`: stiction of the
+  simulated plant, friction decaying as `exp(-(rate / 0.1 rad/s)^2)` to `Cr`, which no
+  controller knows), so an identified rig (`riprs identify`) is a file; the controllers are
+  designed on this plant's linearisation at the loop period without friction and dead zone
+  but with the cable (the unchanged `paper` preset keeps the paper's recovered model).
+  `substeps`, `initial_state`, `fall_limit` set up a simulated run.
 - `[sensor]`: the rig's encoders, simulated or real: counts per revolution (128 to 2^24; the
   one resolution `rip-rt` turns counts into angles with, and the emulator counts in),
   white-noise standard deviation (rad) and encoder zero offsets (rad; an encoder reads
@@ -362,6 +393,14 @@ def build_parser() -> argparse.ArgumentParser:
         "drawn from the start of its swing",
     )
     comp.add_argument("--log", action="append", metavar="FILE.csv", help="rip-rt log to overlay")
+    comp.add_argument(
+        "--hardware",
+        action="store_true",
+        help="the paper's controllers as printed on the rig its hardware study fitted (dead "
+        "zone, arm friction, cable, encoders, noise: riprs.hardware.RIG); prints Tab. 1 over "
+        "the study's window beside the paper's hardware column, the mean over seeds N, N+1, "
+        "N+2; writes no files",
+    )
     comp.add_argument("--no-plots", action="store_true", help="skip the figures")
     comp.add_argument("--quiet", action="store_true", help="no progress bars")
     comp.set_defaults(func=cmd_compare)

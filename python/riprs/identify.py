@@ -201,7 +201,7 @@ class IdentifyResult:
 
     def held_text(self) -> str:
         """What the fit held without the logs determining it: the preset's values with their
-        prior, and ``km = kt``; empty when nothing."""
+        prior, the cable's stiffness ``Kc`` (never estimated) and ``km = kt``."""
         parts = [
             f"{n} = {getattr(self.start, n):.4g} (the {self.preset} preset's, not measured: "
             f"prior +-{100 * r:.0f} %)"
@@ -209,6 +209,7 @@ class IdentifyResult:
         ]
         if parts:
             parts[-1] += " (their priors are in the standard errors)"
+        parts.append(f"Kc = {self.start.Kc:.4g} N m/rad (the cable's stiffness, never estimated)")
         if self.km_tied:
             parts.append(
                 "km = kt (one constant of a DC motor in SI units; the logs determine only "
@@ -241,9 +242,7 @@ class IdentifyResult:
         if self.not_done:
             lines.append("NOT DONE (neither passed nor failed):")
             lines += [f"  - {p}" for p in self.not_done]
-        held = self.held_text()
-        if held:
-            lines.append(f"held, not determined by the logs: {held}")
+        lines.append(f"held, not determined by the logs: {self.held_text()}")
         return lines
 
     def report(self) -> str:

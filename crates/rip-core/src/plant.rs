@@ -29,12 +29,12 @@
 //! T = ½ (J₀ + Jα sin²α) θ̇² − m₁₂ cos α θ̇ α̇ + ½ Jα α̇²,      V = G cos α
 //! ```
 //!
-//! and Lagrange's equations with viscous friction `dr`, `dp`, Coulomb friction `cr`, `cp` and
-//! the motor torque give
+//! and Lagrange's equations with viscous friction `dr`, `dp`, Coulomb friction `cr`, `cp`, the
+//! cable's torque `τ_c` and the motor torque give
 //!
 //! ```text
 //! (J₀ + Jα sin²α) θ̈ − m₁₂ cos α α̈ + 2 Jα sin α cos α θ̇ α̇ + m₁₂ sin α α̇²
-//!                                            = τ − dr θ̇ − cr sgnₛ(θ̇) + τ_d
+//!                                            = τ − dr θ̇ − cr sgnₛ(θ̇) + τ_c + τ_d
 //! −m₁₂ cos α θ̈ + Jα α̈ − Jα sin α cos α θ̇² − G sin α = −dp α̇ − cp sgnₛ(α̇)
 //! τ = kt (z(u) − km θ̇) / rm
 //! ```
@@ -84,21 +84,40 @@
 //! With `cr = cp = vd = 0` (every preset) both terms vanish exactly and the model is the
 //! smooth one above, bit for bit.
 //!
+//! # The cable
+//!
+//! The encoder and motor wiring of a bench rig runs from the base to the arm and bends as the
+//! arm turns: a spring on the arm about the angle at which it hangs relaxed. That angle is the
+//! arm's zero (a rig is zeroed at rest, where the cable holds it), so the cable's torque is
+//!
+//! ```text
+//! τ_c = −kc θ          (cable_torque)
+//! ```
+//!
+//! with `kc` (N·m/rad, `[plant] Kc`) its stiffness; an identification of a QUBE-Servo 3 measured
+//! 2.384·10⁻³ N·m/rad. Only the stiffness is modelled: a hysteresis or a Coulomb-like part of
+//! the cable would be indistinguishable, in the logs riprs fits and in the paper's RMSE, from
+//! the arm's own Coulomb friction `cr`, which the model has. `kc = 0` (every preset) leaves the
+//! equations above bit for bit.
+//!
 //! # Linearisation about upright
 //!
 //! With `M = [J₀ −m₁₂; −m₁₂ Jα]` and `c = dr + kt km/rm`, `b = kt/rm`:
 //!
 //! ```text
-//! [θ̈; α̈] = M⁻¹ ([−c θ̇ + b u; G α − dp α̇])
+//! [θ̈; α̈] = M⁻¹ ([−kc θ − c θ̇ + b u; G α − dp α̇])
 //! ```
 //!
-//! which is the structure `ẋ = [0 1 0 0; 0 a₁₁ a₁₂ a₁₃; 0 0 0 1; 0 a₃₁ a₃₂ a₃₃] x + [0 b₁ 0 b₃]ᵀu`
-//! of [`crate::paper::continuous_model`]. [`Plant::linearize`] returns the exact Jacobian at
-//! any state and input of the plant *without* its Coulomb friction and dead zone, of which
-//! this is the special case. Those two are left out on purpose: at rest they are not
-//! differentiable (the smoothing slope `c/v_c` is a numerical device, not a damping the
-//! controller can rely on, and `z′(0) = 0` inside the dead zone would say that the motor
-//! cannot move the arm at all). The controllers are designed on this smooth part; friction and
+//! which, for `kc = 0`, is the structure
+//! `ẋ = [0 1 0 0; 0 a₁₁ a₁₂ a₁₃; 0 0 0 1; 0 a₃₁ a₃₂ a₃₃] x + [0 b₁ 0 b₃]ᵀu`
+//! of [`crate::paper::continuous_model`]; the cable adds the arm-spring column
+//! `a₁₀ = −kc (M⁻¹)₀₀ = −kc Jα / det M`, `a₃₀ = −kc (M⁻¹)₁₀ = −kc m₁₂ / det M`. Being smooth,
+//! the cable is part of the model the controllers are designed on. [`Plant::linearize`]
+//! returns the exact Jacobian at any state and input of the plant *without* its Coulomb
+//! friction and dead zone, of which this is the special case. Those two are left out on
+//! purpose: at rest they are not differentiable (the smoothing slope `c/v_c` is a numerical
+//! device, not a damping the controller can rely on, and `z′(0) = 0` inside the dead zone
+//! would say that the motor cannot move the arm at all). The controllers are designed on this smooth part; friction and
 //! dead zone act on them as the disturbances they are.
 
 use nalgebra::{SMatrix, SVector};
@@ -130,6 +149,14 @@ pub const STRIBECK_VELOCITY: f64 = 0.1;
 #[inline]
 pub fn dead_zone(u: f64, vd: f64) -> f64 {
     u - u.clamp(-vd, vd)
+}
+
+/// The cable's torque on the arm, `τ_c = −kc θ` (N·m) at arm angle `theta` (module docs, "The
+/// cable"): the one definition the simulator, the emulator, the identification and the
+/// linearisation use. Exactly 0 when `kc = 0`.
+#[inline(always)]
+pub fn cable_torque(theta: f64, kc: f64) -> f64 {
+    -kc * theta
 }
 
 /// State vector `[θ, θ̇, α, α̇]`.
@@ -207,6 +234,8 @@ pub struct Plant {
     vd: f64,
     /// The arm's breakaway torque above `cr` (stiction, module docs), `cs − cr`; 0 for none.
     stiction: f64,
+    /// The cable's stiffness `kc` (module docs).
+    kc: f64,
     /// [`max_rk4_substep`](Self::max_rk4_substep), computed once: it takes two eigenvalue
     /// problems, far more than a checked step itself.
     max_substep: f64,
@@ -229,6 +258,7 @@ impl Plant {
             coulomb: [p.cr, p.cp],
             vd: p.vd,
             stiction: 0.0,
+            kc: p.kc,
             max_substep: f64::INFINITY,
         };
         plant.max_substep = plant.rk4_stability_limit();
@@ -491,7 +521,7 @@ impl Plant {
     /// Angular momentum about the arm's (vertical) axis (kg m²/s), `H = ∂T/∂θ̇ =
     /// (J₀ + J_α sin²α) θ̇ − m₁₂ cos α α̇` (the first row of the module docs' mass matrix
     /// times the rates). Gravity and the pendulum's reaction act in planes through that axis,
-    /// so only the arm's torques change it: `Ḣ = τ_m − d_r θ̇ − c_r sgn θ̇ + τ_d`. An arm
+    /// so only the arm's torques change it: `Ḣ = τ_m − d_r θ̇ − c_r sgn θ̇ + τ_c + τ_d`. An arm
     /// whose rate is braked to 0 under a swinging pendulum keeps whatever `H` the pendulum
     /// holds, and walks at `H / (J₀ + J_α sin²α)` on average once nothing holds it.
     pub fn arm_momentum(&self, x: &State) -> f64 {
@@ -513,7 +543,8 @@ impl Plant {
     }
 
     /// Total mechanical energy `T + V` (J), with `V = G cos α` (module docs). Conserved when
-    /// `km = dr = dp = cr = cp = 0` and `u = τ_d = 0`.
+    /// `km = dr = dp = cr = cp = kc = 0` and `u = τ_d = 0` (the cable's potential `kc θ²/2` is
+    /// not counted: the swing-up's energy is the pendulum's).
     pub fn energy(&self, x: &State) -> f64 {
         let (s, c) = crate::trig::sin_cos(x[2]);
         let (td, ad) = (x[1], x[3]);
@@ -539,7 +570,7 @@ impl Plant {
         let acc = self.smooth_derivative(x, u);
         let (thdd, addd) = (acc[1], acc[3]);
         let c2 = c * c - s * s;
-        // ∂F/∂z for z = (θ̇, α, α̇, u); F does not depend on θ.
+        // ∂F/∂z for z = (θ̇, α, α̇, u); θ enters only through the cable (below).
         let df1 = [
             -self.c_arm - 2.0 * self.ja * s * c * ad,
             -2.0 * self.ja * c2 * td * ad - self.m12 * c * ad * ad,
@@ -562,6 +593,13 @@ impl Plant {
         let mut a = SMatrix::<f64, 4, 4>::zeros();
         a[(0, 1)] = 1.0;
         a[(2, 3)] = 1.0;
+        // θ enters F only through the cable, ∂F₁/∂θ = ∂τ_c/∂θ = −kc (module docs); without one
+        // the column stays an exact +0, as the paper's structure has it.
+        if self.kc != 0.0 {
+            let dcable = cable_torque(1.0, self.kc);
+            a[(1, 0)] = minv[0][0] * dcable;
+            a[(3, 0)] = minv[1][0] * dcable;
+        }
         let cols = [1usize, 2, 3];
         for (k, &col) in cols.iter().enumerate() {
             a[(1, col)] = minv[0][0] * g1[k] + minv[0][1] * g2[k];
@@ -637,6 +675,7 @@ struct Coefficients<const L: usize> {
     stiction: [f64; L],
     cp: [f64; L],
     vd: [f64; L],
+    kc: [f64; L],
 }
 
 impl<const L: usize> Coefficients<L> {
@@ -654,11 +693,12 @@ impl<const L: usize> Coefficients<L> {
             stiction: p.map(|p| p.stiction),
             cp: p.map(|p| p.coulomb[1]),
             vd: p.map(|p| p.vd),
+            kc: p.map(|p| p.kc),
         }
     }
 
     /// `(M₁₁, M₁₂, M₂₂)` and `(f₁, f₂)` of the module docs without Coulomb friction and dead
-    /// zone, per lane.
+    /// zone (the cable included), per lane.
     #[inline(always)]
     fn mass_and_forces(
         &self,
@@ -675,7 +715,9 @@ impl<const L: usize> Coefficients<L> {
             m[0][l] = self.j0[l] + ja * s * s;
             m[1][l] = -self.m12[l] * c;
             m[2][l] = ja;
-            f[0][l] = self.b[l] * u[l] - self.c_arm[l] * td + tau_d[l]
+            f[0][l] = self.b[l] * u[l] - self.c_arm[l] * td
+                + cable_torque(x[0][l], self.kc[l])
+                + tau_d[l]
                 - 2.0 * ja * s * c * td * ad
                 - self.m12[l] * s * ad * ad;
             f[1][l] = -self.dp[l] * ad + ja * s * c * td * td + self.grav[l] * s;

@@ -279,6 +279,8 @@ impl Rig {
                 cr,
                 cp,
                 vd,
+                // No cable is drawn: every seed keeps the rig it has always generated.
+                kc: 0.0,
             },
             encoder_counts,
             noise_std,

@@ -64,6 +64,9 @@ fn state_to_py<'py>(py: Python<'py>, x: &State) -> Py1<'py> {
 /// Vd : float
 ///     Voltage dead zone of the motor drive (V), >= 0; 0 by default: the applied voltage is
 ///     ``u - clip(u, -Vd, Vd)``.
+/// Kc : float
+///     Stiffness of the cable on the arm (N m/rad), >= 0; 0 by default: a torque
+///     ``-Kc * theta`` about the arm's zero.
 ///
 /// Raises
 /// ------
@@ -282,6 +285,10 @@ impl PyFurutaParams {
     fn vd(&self) -> f64 {
         self.inner.vd
     }
+    #[getter(Kc)]
+    fn kc(&self) -> f64 {
+        self.inner.kc
+    }
 
     fn __repr__(&self) -> String {
         let body: Vec<String> = Param::FIELDS
@@ -304,7 +311,7 @@ impl PyFurutaParams {
 ///
 ///     (J_0 + J_\alpha \sin^2\alpha)\ddot\theta - m_{12}\cos\alpha\,\ddot\alpha
 ///       + 2J_\alpha\sin\alpha\cos\alpha\,\dot\theta\dot\alpha + m_{12}\sin\alpha\,\dot\alpha^2
-///       = \tau - D_r\dot\theta + \tau_d
+///       = \tau - D_r\dot\theta - K_c\theta + \tau_d
 ///
 ///     -m_{12}\cos\alpha\,\ddot\theta + J_\alpha\ddot\alpha
 ///       - J_\alpha\sin\alpha\cos\alpha\,\dot\theta^2 - G\sin\alpha = -D_p\dot\alpha
@@ -315,7 +322,8 @@ impl PyFurutaParams {
 /// :math:`-C_r \tanh(\dot\theta/v_c)` and :math:`-C_p \tanh(\dot\alpha/v_c)`
 /// (:math:`v_c` = 0.05 rad/s) to the right-hand sides, and the dead zone replaces ``u`` by
 /// ``u - clip(u, -Vd, Vd)``; :meth:`linearize` leaves both out (they are not differentiable at
-/// rest), as the controller designs do.
+/// rest), as the controller designs do. The cable's torque :math:`-K_c\theta`
+/// is smooth: :meth:`linearize` and the designs include it.
 ///
 /// Parameters
 /// ----------

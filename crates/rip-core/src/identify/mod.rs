@@ -32,6 +32,14 @@
 //! allows), the parameter that takes the difference runs into its lower bound and the result
 //! lists it in [`IdentifyResult::at_bounds`].
 //!
+//! The cable's stiffness `kc` ([`crate::plant`], "The cable") is not estimated: it is held at
+//! the start set's value (a start file's `[plant] Kc`, or the preset's 0) and the report names
+//! it as held. Its torque `−kc θ` is a spring on the arm, which the excitations (about the
+//! arm's zero, hanging) show only through the slow drift of the arm's mean angle, where the
+//! arm's Coulomb friction and the dead zone act alike; a stiffness measured on the rig (the
+//! arm's rest angle `θ` under a constant voltage `V`, `kc ≈ kt (V − vd) / (rm θ)` with the
+//! friction's share taken out by approaching from both sides) belongs in the start file.
+//!
 //! # Criterion
 //!
 //! The training part of each log (all but its last `holdout` fraction) is cut into segments of

@@ -24,7 +24,22 @@ pub(crate) fn hidden() -> FurutaParams {
         cr: 2.5e-3,
         cp: 1.5e-5,
         vd: 0.35,
+        kc: 0.0,
     }
+}
+
+#[test]
+fn the_cable_is_held_at_the_start_sets_stiffness() {
+    // The fit never moves kc (module docs): whatever values it tries, the start's stays.
+    let start = FurutaParams {
+        kc: 2.384e-3,
+        ..hidden()
+    };
+    let values: [f64; NP] = std::array::from_fn(|k| 1.3 * params::get(&start, k));
+    for tie_km in [true, false] {
+        assert_eq!(params::with(start, &values, tie_km).kc, start.kc);
+    }
+    assert!(!FREE.contains(&Param::Kc) && !HELD.contains(&Param::Kc));
 }
 
 /// An excitation run of `plant` from hanging at rest: the excitation through the arm-centring

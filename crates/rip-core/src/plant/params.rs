@@ -79,16 +79,18 @@ params! {
     Cp => "Cp", cp, true;
     /// Voltage dead zone of the motor drive (V).
     Vd => "Vd", vd, true;
+    /// Stiffness of the cable on the arm (N·m/rad): a torque `−Kc θ` about the arm's zero.
+    Kc => "Kc", kc, true;
 }
 
 impl Param {
     /// Number of parameters (fields of [`FurutaParams`]).
-    pub const COUNT: usize = 15;
+    pub const COUNT: usize = 16;
 
     /// The `[plant]` keys (every parameter but [`G`](Self::G)), in the order of the
     /// `[plant]` section and of `riprs.PARAMETERS`; the default perturbed set of
     /// `[monte_carlo]`.
-    pub const ALL: [Param; 14] = [
+    pub const ALL: [Param; 15] = [
         Self::Mr,
         Self::Lr,
         Self::Jr,
@@ -103,6 +105,7 @@ impl Param {
         Self::Cr,
         Self::Cp,
         Self::Vd,
+        Self::Kc,
     ];
 
     /// The position in [`FIELDS`](Self::FIELDS) (and in [`FurutaParams::to_array`]).
@@ -144,7 +147,7 @@ impl std::fmt::Display for Param {
 /// Physical parameters of the pendulum and its motor (SI units).
 ///
 /// Masses, lengths, inertias, `rm`, `kt` and `g` must be positive; `km`, `dr`, `dp`, `cr`,
-/// `cp`, `vd` may be zero (zero back-EMF and friction give the conservative plant). See the
+/// `cp`, `vd`, `kc` may be zero (zero back-EMF and friction give the conservative plant). See the
 /// module docs for how each enters the equations of motion.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FurutaParams {
@@ -178,6 +181,9 @@ pub struct FurutaParams {
     pub cp: f64,
     /// Voltage dead zone of the motor drive (V): `|u| ≤ vd` does not move the motor.
     pub vd: f64,
+    /// Stiffness of the cable on the arm (N·m/rad): the cable torque `−kc θ` about the arm's
+    /// zero ([`crate::plant::cable_torque`]).
+    pub kc: f64,
 }
 
 impl FurutaParams {
@@ -238,6 +244,7 @@ impl FurutaParams {
             cr: 0.0,
             cp: 0.0,
             vd: 0.0,
+            kc: 0.0,
         }
     }
 

@@ -61,7 +61,17 @@ fn a_substep_beyond_rk4_stability_is_refused_and_the_limit_is_real() {
 
 #[test]
 fn linearization_matches_central_differences() {
-    let plant = Plant::qube_servo2();
+    for kc in [0.0, 2.384e-3] {
+        linearization_matches_central_differences_with_cable(kc);
+    }
+}
+
+fn linearization_matches_central_differences_with_cable(kc: f64) {
+    let plant = Plant::new(FurutaParams {
+        kc,
+        ..FurutaParams::qube_servo2()
+    })
+    .unwrap();
     let points = [
         (State::zeros(), 0.0),
         (State::new(0.3, 0.0, std::f64::consts::PI, 0.0), 0.0),
@@ -331,4 +341,63 @@ fn upright_linearization_has_the_paper_structure_and_signs() {
             assert!((a[(i, j)] - ap[(i, j)]).abs() < tol, "A[{i}][{j}]");
         }
     }
+}
+
+/// The QUBE-Servo 3 cable stiffness an identification measured (N·m/rad).
+const QUBE3_CABLE: f64 = 2.384e-3;
+
+#[test]
+fn the_cable_holds_the_arm_where_its_spring_balances_the_motor() {
+    // Statics, independent of the equations' form: at rest the motor's torque kt V / Rm
+    // (no back-EMF) balances the cable's kc θ, so θ = kt V / (Rm kc).
+    let p = FurutaParams {
+        kc: QUBE3_CABLE,
+        ..FurutaParams::qube_servo2()
+    };
+    let plant = Plant::new(p).unwrap();
+    let v = 0.5;
+    let mut x = State::new(0.0, 0.0, std::f64::consts::PI, 0.0);
+    for _ in 0..6000 {
+        plant.advance(&mut x, v, 0.0, 0.01, 10);
+    }
+    let expected = p.kt * v / (p.rm * p.kc);
+    assert!(
+        (x[0] - expected).abs() < 1e-3,
+        "{} against {expected}",
+        x[0]
+    );
+    assert_eq!(cable_torque(x[0], p.kc), -p.kc * x[0]);
+    // Without a cable nothing holds it: the arm runs away.
+    let mut free = State::new(0.0, 0.0, std::f64::consts::PI, 0.0);
+    for _ in 0..200 {
+        Plant::qube_servo2().advance(&mut free, v, 0.0, 0.01, 10);
+    }
+    assert!(free[0] > 2.0 * expected, "{}", free[0]);
+}
+
+#[test]
+fn the_cable_adds_the_arm_spring_column_to_the_upright_linearisation() {
+    let p = FurutaParams {
+        kc: QUBE3_CABLE,
+        ..FurutaParams::paper()
+    };
+    let (a, b) = Plant::new(p).unwrap().linearize_upright();
+    let (a0, b0) = Plant::paper().linearize_upright();
+    // M⁻¹ column of the arm's force: (Jα, m₁₂) / det M (module docs).
+    let (j0, ja) = (
+        p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr,
+        p.jp + p.mp * p.lp * p.lp / 4.0,
+    );
+    let m12 = p.mp * p.lr * p.lp / 2.0;
+    let det = j0 * ja - m12 * m12;
+    let expected = [0.0, -p.kc * ja / det, 0.0, -p.kc * m12 / det];
+    for i in 0..4 {
+        assert!((a[(i, 0)] - expected[i]).abs() < 1e-12 * (1.0 + expected[i].abs()));
+        assert_eq!(b[(i, 0)], b0[(i, 0)]);
+        for j in 1..4 {
+            assert_eq!(a[(i, j)], a0[(i, j)], "A[{i}][{j}]");
+        }
+    }
+    // Without a cable the arm column is an exact zero, as in the paper's structure.
+    assert!((0..4).all(|i| a0[(i, 0)] == 0.0 && a0[(i, 0)].is_sign_positive()));
 }

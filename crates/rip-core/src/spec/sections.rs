@@ -127,10 +127,10 @@ impl Preset {
 /// `[plant]`: the simulated (or emulated) nonlinear plant, and through it the design model.
 ///
 /// `preset` names a parameter set; each [`Param::ALL`] key given (`mr, Lr, Jr, mp, Lp, Jp,
-/// Dr, Dp, Rm, kt, km, Cr, Cp, Vd`) overrides the preset's value, so an identified rig is a
+/// Dr, Dp, Rm, kt, km, Cr, Cp, Vd, Kc`) overrides the preset's value, so an identified rig is a
 /// file of its own. `Cr`, `Cp` (Coulomb friction) and `Vd` (dead zone) are 0 in both presets;
 /// they act on the simulated plant but not on the design model ([`crate::plant`] explains
-/// why). The controllers are designed on this plant's linearisation about upright, discretised
+/// why). `Kc` (the cable's stiffness, 0 in both presets) is smooth and enters both. The controllers are designed on this plant's linearisation about upright, discretised
 /// at the loop period; the `paper` preset without changed parameters keeps the paper's
 /// recovered model ([`paper::continuous_model`]) so that the paper's numbers do not move.
 ///

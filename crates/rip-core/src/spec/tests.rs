@@ -330,6 +330,31 @@ fn friction_dead_zone_and_offsets_reach_the_plant_and_the_simulation() {
 }
 
 #[test]
+fn the_cable_reaches_the_plant_and_the_design_and_a_bad_one_is_named() {
+    let spec = Spec::parse("[plant]\nKc = 2.384e-3\n").unwrap();
+    assert_eq!(spec.plant.params().kc, 2.384e-3);
+    assert!(!spec.plant.is_paper_model());
+    assert_eq!(spec.plant().unwrap().params().kc, 2.384e-3);
+    // A spring on the arm is smooth: the design model has it, the paper's has not.
+    let a = spec.design(paper::TS).unwrap().a;
+    assert!(a[(1, 0)] < 0.0, "{a}");
+    assert_eq!(Spec::default().design(paper::TS).unwrap().a[(1, 0)], 0.0);
+    for bad in ["-1e-3", "nan", "inf"] {
+        assert_eq!(
+            key_of(&format!("[plant]\nKc = {bad}\n")),
+            "plant.Kc",
+            "{bad}"
+        );
+    }
+    let text = spec.to_toml();
+    assert!(text.contains("Kc = 0.002384"), "{text}");
+    assert_eq!(
+        Spec::parse(&text).unwrap().plant.params(),
+        spec.plant.params()
+    );
+}
+
+#[test]
 fn a_rig_without_dead_zone_or_friction_gets_the_controllers_unchanged() {
     for text in ["", "[plant]\npreset = 'qube_servo2'\n"] {
         let design = Spec::parse(text).unwrap().design(paper::TS).unwrap();
