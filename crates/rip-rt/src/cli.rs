@@ -241,6 +241,11 @@ struct RunArgs {
     /// voltage bound, a controller predicted to fall; exit 16).
     #[arg(long)]
     force: bool,
+    /// Publish every period's telemetry to `riprs watch` on UDP port PORT of 127.0.0.1
+    /// (overrides `[loop] live_port`; docs/live.md). A slow or absent viewer loses frames,
+    /// never the loop's timing.
+    #[arg(long, value_name = "PORT", value_parser = clap::value_parser!(u16).range(1..))]
+    live: Option<u16>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -349,6 +354,10 @@ struct EmulateArgs {
     /// time; after 1.5 s without a host frame the plant runs on in real time.
     #[arg(long)]
     lockstep: bool,
+    /// Publish the plant's true state to `riprs watch` on UDP port PORT of 127.0.0.1, every
+    /// --true-state-period (default: `[loop] live_port` of --config; docs/live.md).
+    #[arg(long, value_name = "PORT", value_parser = clap::value_parser!(u16).range(1..))]
+    live: Option<u16>,
 }
 
 /// The loop's clock for a `--lockstep` flag.
@@ -415,10 +424,13 @@ enum Law {
 /// log untouched), the log with its header flushed. Both modes come through here, so that no
 /// path to an enabled motor skips the pre-flight or its `--force`.
 fn prepare(args: &RunArgs) -> Result<(Config, Law, SerialPort, Option<LogWriter>), SetupError> {
-    let cfg = match &args.config {
+    let mut cfg = match &args.config {
         Some(path) => Config::load(path)?,
         None => Config::default(),
     };
+    if let Some(port) = args.live {
+        cfg.loop_.live_port = port;
+    }
     let law = if args.onboard {
         // The device's design is the host loop's (the one assembly; only an MPC's iteration
         // cap may be lowered to fit the device's period), so the pre-flight's verdict on the
@@ -654,11 +666,13 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
     // The pose: the flags, else the file's initial state, else the defaults (upright). A file
     // also gives the plant's sensor, as the simulation reads it (`Spec::simulation`): encoder
     // resolutions, zero offsets and noise.
+    let mut live_cfg = Config::default();
     let (model, sensor, mut initial_arm, mut initial_pendulum, period_s) = match &args.config {
         Some(path) => match Config::load(path) {
             Ok(c) => {
                 let x0 = c.spec.plant.initial_state;
                 let period_s = c.period_s();
+                live_cfg = c.clone();
                 (
                     match c.spec.plant.arm_breakaway {
                         Some(cs) => Model::Stiction(c.spec.plant.params(), cs),
@@ -714,6 +728,9 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
         fault_at_s: args.fault_at,
         silence: args.silent_at.zip(args.silent_for),
         lockstep_period_s: args.lockstep.then_some(period_s),
+        live: Some(args.live.unwrap_or(live_cfg.loop_.live_port))
+            .filter(|&port| port != 0)
+            .map(|port| (port, rip_rt::live::Bounds::of(&live_cfg))),
         ..EmulatorConfig::default()
     }
     .with_sensor(&sensor);
