@@ -17,11 +17,13 @@ one definition of it.
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import json
 import os
 import socket
 import struct
+import threading
 import time
 from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Tuple, Union
 
@@ -419,29 +421,45 @@ def watch(
     _positive("idle", idle)
     layout = _Layout()
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    received: collections.deque[Tuple[bytes, Any]] = collections.deque()
+    done = threading.Event()
+
+    def read() -> None:
+        # The socket is drained by its own thread, so that drawing a burst (a lockstep run
+        # sends hundreds of periods a second) queues frames here instead of the kernel's
+        # buffer, which would drop them.
+        while not done.is_set():
+            try:
+                received.append(sock.recvfrom(4096))
+            except TimeoutError:
+                continue
+            except OSError:
+                break
+
     try:
-        # Room for a few seconds of frames while the viewer draws.
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
         try:
             sock.bind(("127.0.0.1", port))
         except OSError as e:
             raise OSError(e.errno, f"port {port}: {e.strerror}") from None
+        sock.settimeout(0.05)
+        viewer = Viewer(save=save, spawn=spawn, name=f"rip-rt live on port {port}")
+        live = _Live(viewer)
+        reader = threading.Thread(target=read, name="riprs-watch", daemon=True)
+        reader.start()
         if ready is not None:
             with open(ready, "w"):
                 pass
-        viewer = Viewer(save=save, spawn=spawn, name=f"rip-rt live on port {port}")
-        live = _Live(viewer)
         last = time.monotonic()
-        sock.settimeout(0.1)
         try:
             while True:
-                try:
-                    data, sender = sock.recvfrom(4096)
-                except TimeoutError:
+                if not received:
                     if idle is not None and time.monotonic() - last >= idle:
                         break
+                    time.sleep(0.002)
                     continue
                 last = time.monotonic()
+                data, sender = received.popleft()
                 f = layout.decode(data)
                 if f is None:
                     live.stats.bad += 1
@@ -451,6 +469,9 @@ def watch(
                     break
         except KeyboardInterrupt:
             pass
+        finally:
+            done.set()
+            reader.join()
         result = live.finish()
         viewer.close()
     finally:
@@ -466,8 +487,8 @@ def _series_of_log(v: Viewer, who: str, log: RtLog, t: np.ndarray, sl: slice) ->
     nan = np.full(n, np.nan)
     xhat = np.asarray(log.xhat)[sl]
     est = (lambda i: xhat[:, i]) if xhat.ndim == 2 and xhat.shape[1] >= 4 else (lambda i: nan)
-    limits = {k: float(log.meta[k]) for k in ("voltage_limit",) if k in log.meta}
-    u_lim = limits.get("voltage_limit", np.nan)
+    # The header's limits (rip-rt run writes all three, excite the first two).
+    u_lim = float(log.meta.get("voltage_limit", "nan"))
     arm_lim = float(log.meta.get("arm_limit", "nan"))
     pend_lim = float(log.meta.get("pendulum_limit", "nan"))
     ones = np.ones(n)

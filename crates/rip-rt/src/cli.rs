@@ -498,6 +498,9 @@ fn prepare(args: &RunArgs) -> Result<(Config, Law, SerialPort, Option<LogWriter>
                 ("port", args.port.display().to_string()),
                 ("period_ms", cfg.loop_.period_ms.to_string()),
                 ("voltage_limit", cfg.safety.voltage_limit.to_string()),
+                // The limits a replay of the log draws (riprs watch --log).
+                ("arm_limit", cfg.safety.arm_limit.to_string()),
+                ("pendulum_limit", cfg.safety.pendulum_limit.to_string()),
             ];
             // The onboard telemetry carries no state estimate.
             let n_estimates = match &law {

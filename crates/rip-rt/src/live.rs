@@ -209,9 +209,9 @@ macro_rules! frame {
 frame! {
     /// `RIPL`.
     magic: [u8; 4],
-    /// The layout's version ([`VERSION`]).
+    /// The layout's version.
     version: u16,
-    /// [`Kind`]: 1 period, 2 the emulator's true state, 3 the run's stop.
+    /// What the frame reports: 1 a period, 2 the emulator's true state, 3 the run's stop.
     kind: u16,
     /// The sender's frame counter, from 0: a gap is frames lost on the way.
     counter: u32,

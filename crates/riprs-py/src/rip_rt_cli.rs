@@ -34,16 +34,16 @@ fn rip_rt_main(py: Python<'_>, argv: Vec<OsString>) -> u8 {
 /// version : int
 ///     The layout's version, the frame's second field.
 #[pyfunction]
-fn live_frame_layout() -> (Vec<(&'static str, String, usize, &'static str)>, String, u16) {
+fn live_frame_layout() -> (
+    Vec<(&'static str, String, usize, &'static str)>,
+    String,
+    u16,
+) {
     let fields = rip_rt::live::FIELDS
         .iter()
         .map(|f| (f.name, f.ty.struct_code(1), f.count, f.doc))
         .collect();
-    (
-        fields,
-        rip_rt::live::struct_format(),
-        rip_rt::live::VERSION,
-    )
+    (fields, rip_rt::live::struct_format(), rip_rt::live::VERSION)
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
