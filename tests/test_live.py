@@ -48,14 +48,15 @@ def _wait_for(path: Path, what: str, proc: subprocess.Popen[str], timeout: float
         time.sleep(0.05)
 
 
-@pytest.fixture(scope="module")
-def watched_run(rip_rt: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """A lockstep LQG run of 3 s on the emulator, the run's stream switched on by its file's
-    ``[loop] live_port`` and the emulator's by ``--live``, watched by ``riprs watch --save``."""
-    d = tmp_path_factory.mktemp("live")
+def _watched(
+    rip_rt: Path, d: Path, emulate: list[str], command: list[str], config: str = ""
+) -> dict[str, Path]:
+    """``riprs watch --save`` on a free port, then a lockstep emulator (``emulate`` args and
+    ``--live``) and a rip-rt ``command`` on it with ``--log``, ``{device}`` and ``{config}``
+    (the file ``config``, its ``{port}`` filled in) filled in; the viewer ends with the
+    command's stop frame."""
     port = _free_port()
-    cfg = d / "rig.toml"
-    cfg.write_text(f"[loop]\nlive_port = {port}\n")
+    (d / "rig.toml").write_text(config.format(port=port))
     files = {k: d / n for k, n in [("rrd", "run.rrd"), ("stats", "stats.json"), ("log", "run.csv")]}
     ready = d / "ready"
     watcher = subprocess.Popen(
@@ -68,17 +69,17 @@ def watched_run(rip_rt: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[
     try:
         _wait_for(ready, "viewer", watcher)
         emulator = subprocess.Popen(
-            [str(rip_rt), "emulate", "--lockstep", "--live", str(port)],
+            [str(rip_rt), "emulate", "--lockstep", "--live", str(port), *emulate],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         )  # fmt: skip
         assert emulator.stdout is not None
         device = emulator.stdout.readline().strip().removeprefix("device: ")
-        run = subprocess.run(
-            [str(rip_rt), "run", "--port", device, "--controller", "lqg", "--lockstep",
-             "--duration", "3", "--config", str(cfg), "--log", str(files["log"]), "--quiet"],
+        args = [a.format(port=port, device=device, config=d / "rig.toml") for a in command]
+        done = subprocess.run(
+            [str(rip_rt), *args, "--lockstep", "--log", str(files["log"]), "--quiet"],
             capture_output=True, text=True, timeout=120,
         )  # fmt: skip
-        assert run.returncode == 0, run.stderr
+        assert done.returncode == 0, done.stderr
         _, err = watcher.communicate(timeout=120)
         assert watcher.returncode == 0, err
     finally:
@@ -89,7 +90,32 @@ def watched_run(rip_rt: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[
     return files
 
 
-@pytest.mark.slow
+@pytest.fixture(scope="module")
+def watched_run(rip_rt: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """A lockstep LQG run of 3 s on the emulator, the run's stream switched on by its file's
+    ``[loop] live_port`` and the emulator's by ``--live``, watched by ``riprs watch --save``."""
+    command = ["run", "--port", "{device}", "--controller", "lqg", "--duration", "3"]
+    return _watched(
+        rip_rt,
+        tmp_path_factory.mktemp("live"),
+        [],
+        [*command, "--config", "{config}"],
+        "[loop]\nlive_port = {port}\n",
+    )
+
+
+@pytest.fixture(scope="module")
+def watched_excitation(rip_rt: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """A lockstep chirp of 3 s on the emulator hanging down, streamed with ``--live``."""
+    command = ["excite", "--port", "{device}", "--signal", "chirp", "--duration", "3"]
+    return _watched(
+        rip_rt,
+        tmp_path_factory.mktemp("live-excite"),
+        ["--start", "down"],
+        [*command, "--live", "{port}"],
+    )
+
+
 def test_the_viewer_receives_and_records_every_period_of_a_run(
     watched_run: dict[str, Path],
 ) -> None:
@@ -106,7 +132,16 @@ def test_the_viewer_receives_and_records_every_period_of_a_run(
     assert counts["/rig/true"] == stats["frames"]["truth"], counts
 
 
-@pytest.mark.slow
+def test_an_excitation_is_watched_whole(watched_excitation: dict[str, Path]) -> None:
+    log = load_log(watched_excitation["log"])
+    stats = json.loads(watched_excitation["stats"].read_text())
+    # Every logged period, its stages (sign check, chirp) among them, reaches the viewer.
+    assert stats["frames"]["period"] >= 0.99 * len(log.t) > 0, stats
+    assert stats["exit_codes"] == [0], stats
+    counts = live.recorded_counts(watched_excitation["rrd"])
+    assert counts["/scopes/voltage/measured"] == stats["frames"]["period"], counts
+
+
 def test_a_log_and_its_simulation_show_the_live_views_panels(
     watched_run: dict[str, Path], tmp_path: Path
 ) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Callable, Dict, Sequence, TypeVar
+from typing import Any, Callable, Dict, Sequence, TypeVar
 
 import numpy as np
 
@@ -528,6 +528,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     tun.add_argument("--quiet", action="store_true", help="no progress bar")
     tun.set_defaults(func=cmd_tune)
+    _watch_parser(sub)
+    return parser
+
+
+def _watch_parser(sub: Any) -> None:
     wat = sub.add_parser(
         "watch",
         help="watch a rip-rt run live (scopes and the rig), or a log or simulation after it",
@@ -579,7 +584,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     wat.add_argument("--quiet", action="store_true", help="no messages")
     wat.set_defaults(func=cmd_watch)
-    return parser
 
 
 def _port(text: str) -> int:

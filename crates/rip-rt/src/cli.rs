@@ -242,8 +242,7 @@ struct RunArgs {
     #[arg(long)]
     force: bool,
     /// Publish every period's telemetry to `riprs watch` on UDP port PORT of 127.0.0.1
-    /// (overrides `[loop] live_port`; docs/live.md). A slow or absent viewer loses frames,
-    /// never the loop's timing.
+    /// (overrides `[loop] live_port`; docs/live.md); a slow viewer loses frames, not time.
     #[arg(long, value_name = "PORT", value_parser = clap::value_parser!(u16).range(1..))]
     live: Option<u16>,
 }
@@ -354,8 +353,8 @@ struct EmulateArgs {
     /// time; after 1.5 s without a host frame the plant runs on in real time.
     #[arg(long)]
     lockstep: bool,
-    /// Publish the plant's true state to `riprs watch` on UDP port PORT of 127.0.0.1, every
-    /// --true-state-period (default: `[loop] live_port` of --config; docs/live.md).
+    /// Publish the true state to `riprs watch` on UDP port PORT of 127.0.0.1 every
+    /// --true-state-period (default: `[loop] live_port` of --config).
     #[arg(long, value_name = "PORT", value_parser = clap::value_parser!(u16).range(1..))]
     live: Option<u16>,
 }
@@ -498,7 +497,6 @@ fn prepare(args: &RunArgs) -> Result<(Config, Law, SerialPort, Option<LogWriter>
                 ("port", args.port.display().to_string()),
                 ("period_ms", cfg.loop_.period_ms.to_string()),
                 ("voltage_limit", cfg.safety.voltage_limit.to_string()),
-                // The limits a replay of the log draws (riprs watch --log).
                 ("arm_limit", cfg.safety.arm_limit.to_string()),
                 ("pendulum_limit", cfg.safety.pendulum_limit.to_string()),
             ];
