@@ -22,6 +22,9 @@ fn rip_rt_main(py: Python<'_>, argv: Vec<OsString>) -> u8 {
     })
 }
 
+/// One field of the live frame: name, `struct` code, element count, what it holds.
+type LiveField = (&'static str, String, usize, &'static str);
+
 /// The live stream's datagram layout, rip-rt's one definition of it (``docs/live.md``).
 ///
 /// Returns
@@ -34,11 +37,7 @@ fn rip_rt_main(py: Python<'_>, argv: Vec<OsString>) -> u8 {
 /// version : int
 ///     The layout's version, the frame's second field.
 #[pyfunction]
-fn live_frame_layout() -> (
-    Vec<(&'static str, String, usize, &'static str)>,
-    String,
-    u16,
-) {
+fn live_frame_layout() -> (Vec<LiveField>, String, u16) {
     let fields = rip_rt::live::FIELDS
         .iter()
         .map(|f| (f.name, f.ty.struct_code(1), f.count, f.doc))
