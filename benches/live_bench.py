@@ -4,7 +4,7 @@ Runs rip-rt's real-time loop (LQG, 100 Hz, on the emulator) in rounds of three i
 runs: without a stream or viewer, with ``riprs watch --save`` reading at full rate, and with a
 viewer stopped by SIGSTOP (its socket buffer full: every frame dropped by the kernel). Prints
 per run the loop's wake-up jitter (p50/p99/max), its deadline misses, and for the reading
-viewer the share of the run's periods it received and its lag (send to drawn, p50/p99); then
+viewer the share of the run's periods it received and its lag (send to recorded, p50/p99); then
 the verdict against the issue's bars: 0 deadline misses with either viewer, p99 jitter within
 the spread of the runs without one, at least 99 % of the frames and a p99 lag of at most
 200 ms.

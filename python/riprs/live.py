@@ -167,7 +167,6 @@ class Viewer:
         elif spawn:
             self.rec.spawn(default_blueprint=blueprint)
         self._series_named: set[str] = set()
-        self._limits: Dict[str, Tuple[float, ...]] = {}
 
     def series(self, path: str, names: List[str], colors: List[List[int]]) -> None:
         """Names and colours of the scalars at ``path`` (once)."""
@@ -178,12 +177,15 @@ class Viewer:
         self.rec.log(path, rr.SeriesLines(names=names, colors=colors), static=True)
 
     def scalars(self, path: str, values: List[float]) -> None:
+        """One sample of each series at ``path`` at the current time."""
         self.rec.log(path, self.rr.Scalars(values))
 
     def event(self, text: str, level: str = "INFO") -> None:
+        """A line in the events panel at the current time."""
         self.rec.log("events", self.rr.TextLog(text, level=level))
 
     def rig(self, which: str, theta: float, alpha: float, color: List[int]) -> None:
+        """The rig drawn at angles ``theta`` and ``alpha`` (rad) as ``rig/which``."""
         if not (np.isfinite(theta) and np.isfinite(alpha)):
             return
         self.rec.log(
@@ -192,6 +194,7 @@ class Viewer:
         )
 
     def time(self, timeline: str, seconds: float) -> None:
+        """Sets the current time on ``timeline``."""
         self.rec.set_time(timeline, duration=seconds)
 
     def columns(self, path: str, t: np.ndarray, values: np.ndarray) -> None:
@@ -262,7 +265,7 @@ class WatchStats:
     expected : dict of str to int
         Frames sent by kind, from the senders' counters (first to last received).
     lag_ms : list of float
-        Send-to-drawn time of each period frame (ms).
+        Time from the send to the frame handed to the viewer's recording, per period frame (ms).
     exit_codes : list of int
         The exit codes of the stop frames received.
     bad : int
