@@ -195,6 +195,20 @@ def test_bad_input_is_an_error_naming_the_argument(
     assert "Traceback" not in err, err
 
 
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["run", "--port", "/dev/null", "--controller", "lqr", "--live", "0"],
+        ["excite", "--port", "/dev/null", "--signal", "chirp", "--log", "x.csv", "--live", "x"],
+        ["emulate", "--live", "70000"],
+    ],
+    ids=["run", "excite", "emulate"],
+)
+def test_a_bad_live_port_is_refused_naming_live(rip_rt: Path, args: list[str]) -> None:
+    done = subprocess.run([str(rip_rt), *args], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "--live" in done.stderr, done.stderr
+
+
 def test_the_documented_frame_layout_is_the_one_rip_rt_sends() -> None:
     fields, fmt, version = live_frame_layout()
     doc = (ROOT / "docs" / "live.md").read_text()
