@@ -17,10 +17,10 @@ one definition of it.
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 import json
 import os
+import queue
 import socket
 import struct
 import threading
@@ -424,7 +424,7 @@ def watch(
     _positive("idle", idle)
     layout = _Layout()
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    received: collections.deque[Tuple[bytes, Any]] = collections.deque()
+    received: queue.SimpleQueue[Tuple[bytes, Any]] = queue.SimpleQueue()
     done = threading.Event()
 
     def read() -> None:
@@ -433,7 +433,7 @@ def watch(
         # buffer, which would drop them.
         while not done.is_set():
             try:
-                received.append(sock.recvfrom(4096))
+                received.put(sock.recvfrom(4096))
             except TimeoutError:
                 continue
             except OSError:
@@ -456,13 +456,14 @@ def watch(
         last = time.monotonic()
         try:
             while True:
-                if not received:
+                try:
+                    # Woken by the next frame, not by polling: an idle viewer takes no CPU.
+                    data, sender = received.get(timeout=0.1)
+                except queue.Empty:
                     if idle is not None and time.monotonic() - last >= idle:
                         break
-                    time.sleep(0.002)
                     continue
                 last = time.monotonic()
-                data, sender = received.popleft()
                 f = layout.decode(data)
                 if f is None:
                     live.stats.bad += 1
