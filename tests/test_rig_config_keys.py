@@ -46,7 +46,7 @@ def _changed(value: Any) -> str:
 
 def test_every_rig_key_reaches_rip_rts_configuration(rip_rt: Path, tmp_path: Path) -> None:
     defaults = _defaults(rip_rt)
-    assert len(defaults) == 20 and {k.split(".")[0] for k in defaults} == set(RIG_SECTIONS)
+    assert len(defaults) == 21 and {k.split(".")[0] for k in defaults} == set(RIG_SECTIONS)
     for key, default in defaults.items():
         section, name = key.split(".")
         value = CHANGES.get(key) or _changed(default)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Callable, Dict, Sequence, TypeVar
+from typing import Any, Callable, Dict, Sequence, TypeVar
 
 import numpy as np
 
@@ -227,6 +227,74 @@ def _renamed(call: Callable[[], T], flags: Dict[str, str]) -> T:
             if text.startswith(f"{key}: "):
                 raise RiprsError(flag + text[len(key) :]) from None
         raise
+
+
+def cmd_watch(args: argparse.Namespace) -> int:
+    """Watch rip-rt's live stream, or draw a log, a simulation or both, in the live view."""
+    from riprs.config import ConfigError
+
+    try:
+        from riprs import live
+    except ImportError as exc:  # pragma: no cover - the extension is part of riprs
+        raise ConfigError(str(exc)) from exc
+    if args.compare and not args.log:
+        raise ConfigError("--compare needs --log FILE.csv (the log to compare with its simulation)")
+    if args.log and args.simulate:
+        raise ConfigError("--log and --simulate draw different things: give one of them")
+    for name in ("once", "idle", "stats", "ready"):
+        if (args.log or args.simulate) and getattr(args, name) not in (None, False):
+            raise ConfigError(f"--{name} applies to the live stream, not to --log or --simulate")
+    spawn = args.save is None
+    try:
+        if args.log and args.compare:
+            live.show_comparison(
+                args.log, args.config, controller=args.controller, save=args.save, spawn=spawn
+            )
+        elif args.log:
+            live.show_log(args.log, save=args.save, spawn=spawn)
+        elif args.simulate:
+            from riprs import compare as cmp
+            from riprs.config import Spec, load_config
+            from riprs.sim import simulate
+
+            cfg = load_config(args.config) if args.config else Spec()
+            controllers = cmp.build_controllers(cfg)
+            if args.start == "down":
+                controllers = cmp._supervised(cfg, controllers)
+            duration = args.duration or cmp._duration(cfg, args.start)
+            result = simulate(
+                cfg.build_plant(),
+                controllers[args.simulate.upper()],
+                duration,
+                **cmp._sim_options(cfg, args.start),
+            )
+            live.show_simulation(result, save=args.save, spawn=spawn)
+        else:
+            if not args.quiet:
+                print(
+                    f"riprs: watching 127.0.0.1:{args.port} (rip-rt ... --live {args.port}); "
+                    "Ctrl-C stops",
+                    file=sys.stderr,
+                )
+            stats = live.watch(
+                args.port,
+                save=args.save,
+                spawn=spawn,
+                once=args.once,
+                idle=args.idle,
+                stats=args.stats,
+                ready=args.ready,
+            )
+            if not args.quiet:
+                s = stats.summary()
+                print(
+                    f"riprs: received {s['frames']} of {s['expected']} frames; "
+                    f"lag p50 {s['lag_ms']['p50']} ms, p99 {s['lag_ms']['p99']} ms",
+                    file=sys.stderr,
+                )
+    except ImportError as exc:
+        raise ConfigError(str(exc)) from exc
+    return 0
 
 
 def cmd_tune(args: argparse.Namespace) -> int:
@@ -499,7 +567,72 @@ def build_parser() -> argparse.ArgumentParser:
     )
     tun.add_argument("--quiet", action="store_true", help="no progress bar")
     tun.set_defaults(func=cmd_tune)
+    _watch_parser(sub)
     return parser
+
+
+def _watch_parser(sub: Any) -> None:
+    wat = sub.add_parser(
+        "watch",
+        help="watch a rip-rt run live (scopes and the rig), or a log or simulation after it",
+        description="Receives the telemetry of `rip-rt run/excite/emulate --live PORT` and "
+        "draws it in the Rerun viewer (the live extra: pip install 'riprs[live]'): scopes of "
+        "the arm, pendulum and voltage with their limits, the loop's timing, events and the "
+        "rig, measured and true. With --log, --simulate or --log --compare, the same panels "
+        "after the fact. --save writes a .rrd recording instead of opening a window "
+        "(`rerun FILE.rrd` opens it).",
+    )
+    wat.add_argument(
+        "--port",
+        type=_port,
+        default=9870,
+        metavar="N",
+        help="UDP port on 127.0.0.1 to listen on (default 9870)",
+    )
+    wat.add_argument("--save", metavar="FILE.rrd", help="write a recording, no window")
+    wat.add_argument("--once", action="store_true", help="end after the first run's stop")
+    wat.add_argument(
+        "--idle", type=float, metavar="S", help="end after S seconds without a frame"
+    )
+    wat.add_argument(
+        "--stats", metavar="FILE.json", help="write the frames received and the lag at the end"
+    )
+    wat.add_argument(
+        "--ready", metavar="FILE", help="create FILE once listening (for scripts)"
+    )
+    wat.add_argument("--log", metavar="FILE.csv", help="draw this rip-rt log")
+    wat.add_argument(
+        "--compare",
+        action="store_true",
+        help="with --log: also its simulation, aligned as riprs compare --log aligns them",
+    )
+    wat.add_argument(
+        "--simulate", choices=["lqr", "lqg", "mpc"], help="draw a simulation of this controller"
+    )
+    wat.add_argument(
+        "--controller",
+        choices=["lqr", "lqg", "mpc"],
+        help="with --compare: the controller to simulate (default: the log's)",
+    )
+    wat.add_argument("--config", metavar="FILE.toml", help="experiment file (default: paper)")
+    wat.add_argument(
+        "--start", choices=["up", "down"], default="up", help="with --simulate: the start"
+    )
+    wat.add_argument(
+        "--duration", type=float, metavar="S", help="with --simulate: seconds (default: file's)"
+    )
+    wat.add_argument("--quiet", action="store_true", help="no messages")
+    wat.set_defaults(func=cmd_watch)
+
+
+def _port(text: str) -> int:
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer in 1..65535, got {text!r}") from None
+    if not 1 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"must be in 1..65535, got {port}")
+    return port
 
 
 def main(argv: Sequence[str] | None = None) -> int:

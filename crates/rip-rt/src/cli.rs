@@ -244,6 +244,10 @@ struct RunArgs {
     /// voltage bound, a controller predicted to fall; exit 16).
     #[arg(long)]
     force: bool,
+    /// Publish every period's telemetry to `riprs watch` on UDP port PORT of 127.0.0.1
+    /// (overrides `[loop] live_port`; docs/live.md); a slow viewer loses frames, not time.
+    #[arg(long, value_name = "PORT", value_parser = clap::value_parser!(u16).range(1..))]
+    live: Option<u16>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -352,6 +356,10 @@ struct EmulateArgs {
     /// time; after 1.5 s without a host frame the plant runs on in real time.
     #[arg(long)]
     lockstep: bool,
+    /// Publish the true state to `riprs watch` on UDP port PORT of 127.0.0.1 every
+    /// --true-state-period (default: `[loop] live_port` of --config).
+    #[arg(long, value_name = "PORT", value_parser = clap::value_parser!(u16).range(1..))]
+    live: Option<u16>,
 }
 
 /// The loop's clock for a `--lockstep` flag.
@@ -418,10 +426,13 @@ enum Law {
 /// log untouched), the log with its header flushed. Both modes come through here, so that no
 /// path to an enabled motor skips the pre-flight or its `--force`.
 fn prepare(args: &RunArgs) -> Result<(Config, Law, SerialPort, Option<LogWriter>), SetupError> {
-    let cfg = match &args.config {
+    let mut cfg = match &args.config {
         Some(path) => Config::load(path)?,
         None => Config::default(),
     };
+    if let Some(port) = args.live {
+        cfg.loop_.live_port = port;
+    }
     let law = if args.onboard {
         // The device's design is the host loop's (the one assembly; only an MPC's iteration
         // cap may be lowered to fit the device's period), so the pre-flight's verdict on the
@@ -489,6 +500,8 @@ fn prepare(args: &RunArgs) -> Result<(Config, Law, SerialPort, Option<LogWriter>
                 ("port", args.port.display().to_string()),
                 ("period_ms", cfg.loop_.period_ms.to_string()),
                 ("voltage_limit", cfg.safety.voltage_limit.to_string()),
+                ("arm_limit", cfg.safety.arm_limit.to_string()),
+                ("pendulum_limit", cfg.safety.pendulum_limit.to_string()),
             ];
             // The onboard telemetry carries no state estimate.
             let n_estimates = match &law {
@@ -657,11 +670,13 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
     // The pose: the flags, else the file's initial state, else the defaults (upright). A file
     // also gives the plant's sensor, as the simulation reads it (`Spec::simulation`): encoder
     // resolutions, zero offsets and noise.
+    let mut live_cfg = Config::default();
     let (model, sensor, mut initial_arm, mut initial_pendulum, period_s) = match &args.config {
         Some(path) => match Config::load(path) {
             Ok(c) => {
                 let x0 = c.spec.plant.initial_state;
                 let period_s = c.period_s();
+                live_cfg = c.clone();
                 (
                     match c.spec.plant.arm_breakaway {
                         Some(cs) => Model::Stiction(c.spec.plant.params(), cs),
@@ -717,6 +732,9 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
         fault_at_s: args.fault_at,
         silence: args.silent_at.zip(args.silent_for),
         lockstep_period_s: args.lockstep.then_some(period_s),
+        live: Some(args.live.unwrap_or(live_cfg.loop_.live_port))
+            .filter(|&port| port != 0)
+            .map(|port| (port, rip_rt::live::Bounds::of(&live_cfg))),
         ..EmulatorConfig::default()
     }
     .with_sensor(&sensor);

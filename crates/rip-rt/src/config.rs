@@ -210,6 +210,9 @@ mod tests {
                 "[loop]\nmax_consecutive_misses = 1000\n",
                 "loop.max_consecutive_misses",
             ),
+            ("[loop]\nlive_port = 70000\n", "loop.live_port"),
+            ("[loop]\nlive_port = -1\n", "loop.live_port"),
+            ("[loop]\nlive_port = \"9870\"\n", "loop.live_port"),
             (
                 "[sensor]\nencoder_counts = [1, 2048]\n",
                 "sensor.encoder_counts[0]",

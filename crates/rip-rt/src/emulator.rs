@@ -455,27 +455,40 @@ fn write_record(rec: &mut Option<BufWriter<File>>, t: f64, frame: &Frame) -> io:
 /// ([`Device::driver_state`]).
 pub const TRUE_STATE_HEADER: &str = "t_s,theta,theta_dot,alpha,alpha_dot,voltage,current,driver";
 
-/// The true-state record: a row every `period` of simulated time, each flushed at once so a
-/// reader sees the plant while the emulator runs; a last row when it exits.
+/// The true-state record (`--true-state`) and the live stream's truth frames (`--live`): a
+/// row every `period` of simulated time, each flushed at once so a reader sees the plant while
+/// the emulator runs; a last row when it exits.
 struct TrueState {
-    w: BufWriter<File>,
+    w: Option<BufWriter<File>>,
+    live: Option<crate::live::Live>,
     period_ns: u64,
     next_ns: u64,
 }
 
 impl TrueState {
     fn create(cfg: &EmulatorConfig) -> io::Result<Option<Self>> {
-        let Some(path) = &cfg.true_state else {
+        let live = match cfg.live {
+            Some((port, bounds)) => Some(crate::live::Live::open(port, bounds)?),
+            None => None,
+        };
+        let w = match &cfg.true_state {
+            Some(path) => {
+                let named = |e: io::Error| {
+                    io::Error::new(e.kind(), format!("--true-state {}: {e}", path.display()))
+                };
+                let mut w = BufWriter::new(File::create(path).map_err(named)?);
+                writeln!(w, "{TRUE_STATE_HEADER}").map_err(named)?;
+                w.flush().map_err(named)?;
+                Some(w)
+            }
+            None => None,
+        };
+        if w.is_none() && live.is_none() {
             return Ok(None);
-        };
-        let named = |e: io::Error| {
-            io::Error::new(e.kind(), format!("--true-state {}: {e}", path.display()))
-        };
-        let mut w = BufWriter::new(File::create(path).map_err(named)?);
-        writeln!(w, "{TRUE_STATE_HEADER}").map_err(named)?;
-        w.flush().map_err(named)?;
+        }
         Ok(Some(Self {
             w,
+            live,
             period_ns: (cfg.true_state_period_s * 1e9).round() as u64,
             next_ns: 0,
         }))
@@ -495,8 +508,25 @@ impl TrueState {
     }
 
     fn row(&mut self, device: &Device) -> io::Result<()> {
-        device.write_true_state(&mut self.w)?;
-        self.w.flush()
+        if let Some(live) = self.live.as_mut() {
+            let x = device.state();
+            let mut f = live
+                .frame(crate::live::Kind::Truth)
+                .with_phase(device.driver_state())
+                .with_estimate(Some(&x));
+            f.t = device.time_s();
+            f.theta = x[0];
+            f.alpha = rip_core::trig::wrap_angle(x[2]);
+            f.u_written = device.motor_voltage();
+            live.send(f);
+        }
+        match self.w.as_mut() {
+            Some(w) => {
+                device.write_true_state(w)?;
+                w.flush()
+            }
+            None => Ok(()),
+        }
     }
 }
 

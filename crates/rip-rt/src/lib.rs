@@ -19,7 +19,8 @@
 //!   on the device.
 //! - [`stop`] — stop reasons and exit codes, the stop frame on every exit path, signals.
 //! - [`step`] — what one period produced (the log's row data and status bits).
-//! - [`log`] — the CSV log and its writer thread.
+//! - [`log`] — the CSV log and its writer thread; [`live`] — the live telemetry stream for
+//!   `riprs watch`, which never holds the loop up.
 //! - [`timing`] — absolute-deadline scheduling, latency histograms, real-time settings.
 //! - [`rest`] — the rest check and the encoder zeros taken hanging down, without I/O;
 //!   [`calibrate`] runs it on the device.
@@ -42,6 +43,7 @@ pub mod emulator;
 pub mod envelope;
 pub mod exchange;
 pub mod excite;
+pub mod live;
 pub mod log;
 pub mod loop_core;
 pub mod onboard;

@@ -44,6 +44,8 @@ pub struct LoopCore {
     y: [f64; 2],
     r: [f64; 2],
     u: [f64; 1],
+    // The last command's voltage before the clamp, for the live stream.
+    planned: f64,
     last_command: Command,
     // Periods since the last command computed from a measurement, and the most of them an
     // enabling command may be repeated for.
@@ -133,6 +135,7 @@ impl LoopCore {
             y: [0.0; 2],
             r: [0.0; 2],
             u: [0.0],
+            planned: f64::NAN,
             last_command: Command::STOP,
             blind_periods: 0,
             blind_limit,
@@ -158,6 +161,12 @@ impl LoopCore {
     /// The parser's counters.
     pub fn parser_stats(&self) -> ParserStats {
         self.parser.stats()
+    }
+
+    /// The last enabling command's voltage before the clamp (V): the controller's, or the
+    /// open-loop drive's; NaN before the first.
+    pub fn planned_voltage(&self) -> f64 {
+        self.planned
     }
 
     /// The controller's state estimate, if it has one.
@@ -456,6 +465,7 @@ impl LoopCore {
             flags |= FLAG_FALLBACK;
         }
         let raw = self.u[0];
+        self.planned = raw;
         if !raw.is_finite() {
             return Err(StopReason::ControllerFault { voltage: raw, t });
         }
@@ -528,6 +538,7 @@ impl LoopCore {
         if !voltage.is_finite() {
             return Err(StopReason::ControllerFault { voltage, t });
         }
+        self.planned = voltage;
         let clamped = voltage.clamp(-self.voltage_limit, self.voltage_limit);
         let mut flags = m.status as u32;
         if clamped.abs() >= self.voltage_limit {

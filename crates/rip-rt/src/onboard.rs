@@ -22,6 +22,7 @@ use rip_protocol::{
 
 use crate::config::Config;
 use crate::controllers::{self, ControllerKind};
+use crate::live::{Bounds, Kind, Live};
 use crate::log::{LogWriter, Row};
 use crate::serial::{Fd, Readiness};
 use crate::step::{StepOutput, FLAG_FALLBACK};
@@ -403,6 +404,8 @@ pub fn run(
         image_len: image.len(),
     };
     let mut logged = 0;
+    let mut live = Live::for_port(cfg.loop_.live_port, Bounds::of(cfg));
+    let mut published = 0;
     let mut end = supervise(
         &mut link,
         cfg,
@@ -411,6 +414,10 @@ pub fn run(
         lockstep,
         decimation,
         &mut |link: &Link<'_>| {
+            if let Some(live) = live.as_mut() {
+                publish(live, cfg, image, &link.telemetry, published);
+                published = link.telemetry.len();
+            }
             let Some(log) = log.as_deref_mut() else {
                 return Ok(());
             };
@@ -428,6 +435,14 @@ pub fn run(
                 end = OnboardEnd::Log(e);
             }
         }
+    }
+    if let Some(live) = live.as_mut() {
+        publish(live, cfg, image, &link.telemetry, published);
+        let t = link
+            .telemetry
+            .last()
+            .map_or(f64::NAN, |r| r.step as f64 * cfg.period_s());
+        live.stop(t, end.exit_code(), "onboard");
     }
     report.end = end;
     report.telemetry = std::mem::take(&mut link.telemetry);
@@ -449,32 +464,8 @@ fn log_rows(
     let Some(sensor) = Sensor::read(image) else {
         return Ok(());
     };
-    for (i, t) in records.iter().enumerate().skip(first) {
-        let previous_fallbacks = i.checked_sub(1).map_or(0, |p| records[p].fallbacks);
-        let fell_back = t.fallbacks > previous_fallbacks;
-        let [theta, alpha] = sensor.angles([t.arm_counts, t.pendulum_counts]);
-        let time = t.step as f64 * cfg.period_s();
-        let row = Row {
-            t: time,
-            seq: t.step as u16,
-            step: StepOutput {
-                theta,
-                alpha,
-                reference: if time >= sensor.step_time {
-                    sensor.arm_step
-                } else {
-                    0.0
-                },
-                voltage: t.applied_mv as f64 / 1000.0,
-                flags: t.status as u32 | if fell_back { FLAG_FALLBACK } else { 0 },
-                len: 0,
-                phase: rip_core::Phase::Balance,
-            },
-            estimate: None,
-            compute_us: t.step_cycles as f64 / 168.0,
-            jitter_us: 0.0,
-            phase: "onboard",
-        };
+    for i in first..records.len() {
+        let row = telemetry_row(&sensor, cfg, records, i);
         // A burst beyond the queue waits for the writer rather than failing the run.
         let mut tries = 0;
         loop {
@@ -489,6 +480,56 @@ fn log_rows(
         }
     }
     Ok(())
+}
+
+/// The log row of telemetry record `i` (see [`log_rows`]).
+fn telemetry_row(sensor: &Sensor, cfg: &Config, records: &[Telemetry], i: usize) -> Row {
+    let t = &records[i];
+    let previous_fallbacks = i.checked_sub(1).map_or(0, |p| records[p].fallbacks);
+    let fell_back = t.fallbacks > previous_fallbacks;
+    let [theta, alpha] = sensor.angles([t.arm_counts, t.pendulum_counts]);
+    let time = t.step as f64 * cfg.period_s();
+    Row {
+        t: time,
+        seq: t.step as u16,
+        step: StepOutput {
+            theta,
+            alpha,
+            reference: if time >= sensor.step_time {
+                sensor.arm_step
+            } else {
+                0.0
+            },
+            voltage: t.applied_mv as f64 / 1000.0,
+            flags: t.status as u32 | if fell_back { FLAG_FALLBACK } else { 0 },
+            len: 0,
+            phase: rip_core::Phase::Balance,
+        },
+        estimate: None,
+        compute_us: t.step_cycles as f64 / 168.0,
+        jitter_us: 0.0,
+        phase: "onboard",
+    }
+}
+
+/// Publishes telemetry records from `first` on to the live stream, as their log rows.
+fn publish(live: &mut Live, cfg: &Config, image: &[u8], records: &[Telemetry], first: usize) {
+    let Some(sensor) = Sensor::read(image) else {
+        return;
+    };
+    for i in first..records.len() {
+        let row = telemetry_row(&sensor, cfg, records, i);
+        let mut f = live.frame(Kind::Period).with_phase(row.phase);
+        f.t = row.t;
+        f.seq = records[i].step;
+        f.theta = row.step.theta;
+        f.alpha = row.step.alpha;
+        f.theta_ref = row.step.reference;
+        f.u_written = row.step.voltage;
+        f.status = row.step.flags;
+        f.compute_us = row.compute_us;
+        live.send(f);
+    }
 }
 
 #[allow(clippy::too_many_arguments)]

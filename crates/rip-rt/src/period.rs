@@ -25,6 +25,7 @@
 pub use crate::exchange::{exchange, Reply};
 
 use crate::config::{Config, MAX_BLIND_MS};
+use crate::live::{Bounds, Kind, Live};
 use crate::log::{LogWriter, Row};
 use crate::loop_core::{LoopCore, StepOutput, FLAG_DEADLINE_MISS, FLAG_NO_REPLY};
 use crate::protocol::MAX_FRAME;
@@ -96,6 +97,8 @@ pub struct Period<'a> {
     /// The run's one clock.
     pub clock: Periodic,
     log: Option<&'a mut LogWriter>,
+    // The live stream (`loop.live_port`): published beside the log row, never waited for.
+    live: Option<Live>,
     quiet: bool,
     period_ns: u64,
     reply_timeout_ns: u64,
@@ -133,6 +136,7 @@ impl<'a> Period<'a> {
             core,
             clock,
             log,
+            live: Live::for_port(cfg.loop_.live_port, Bounds::of(cfg)),
             quiet,
             period_ns,
             reply_timeout_ns: (cfg.loop_.reply_timeout_ms * 1e6).round() as u64,
@@ -204,6 +208,10 @@ impl<'a> Period<'a> {
             Some(sig) => crate::stop::cut_short(reason, sig),
             None => reason,
         };
+        if let Some(live) = self.live.as_mut() {
+            let t = self.last.map_or(f64::NAN, |l| l.t);
+            live.stop(t, reason.exit_code(), reason.name());
+        }
         (reason, braking)
     }
 
@@ -303,14 +311,36 @@ impl<'a> Period<'a> {
         compute_ns: u64,
         tick: &Tick,
     ) -> Result<(), StopReason> {
-        let Some(log) = self.log.as_deref_mut() else {
-            return Ok(());
-        };
         let estimate = if logged.with_estimate {
-            Row::estimate_from(self.core.state_estimate())
+            self.core.state_estimate()
         } else {
             None
         };
+        if let Some(live) = self.live.as_mut() {
+            let mut f = live
+                .frame(Kind::Period)
+                .with_phase(logged.phase)
+                .with_estimate(estimate);
+            f.t = logged.t;
+            f.seq = u32::from(seq);
+            f.theta = logged.step.theta;
+            f.alpha = logged.step.alpha;
+            f.theta_ref = logged.step.reference;
+            f.u_planned = if logged.step.flags & FLAG_NO_REPLY != 0 {
+                logged.step.voltage
+            } else {
+                self.core.planned_voltage()
+            };
+            f.u_written = logged.step.voltage;
+            f.status = logged.step.flags;
+            f.compute_us = compute_ns as f64 / 1e3;
+            f.jitter_us = tick.lateness_ns as f64 / 1e3;
+            live.send(f);
+        }
+        let Some(log) = self.log.as_deref_mut() else {
+            return Ok(());
+        };
+        let estimate = Row::estimate_from(estimate);
         log.push(Row {
             t: logged.t,
             seq,

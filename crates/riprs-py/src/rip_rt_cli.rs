@@ -22,6 +22,30 @@ fn rip_rt_main(py: Python<'_>, argv: Vec<OsString>) -> u8 {
     })
 }
 
+/// One field of the live frame: name, `struct` code, element count, what it holds.
+type LiveField = (&'static str, String, usize, &'static str);
+
+/// The live stream's datagram layout, rip-rt's one definition of it (``docs/live.md``).
+///
+/// Returns
+/// -------
+/// fields : list of (str, str, int, str)
+///     Each field in wire order: its name, its Python ``struct`` code (one element), its
+///     element count and what it holds.
+/// format : str
+///     The whole datagram's ``struct`` format (little-endian, no padding).
+/// version : int
+///     The layout's version, the frame's second field.
+#[pyfunction]
+fn live_frame_layout() -> (Vec<LiveField>, String, u16) {
+    let fields = rip_rt::live::FIELDS
+        .iter()
+        .map(|f| (f.name, f.ty.struct_code(1), f.count, f.doc))
+        .collect();
+    (fields, rip_rt::live::struct_format(), rip_rt::live::VERSION)
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(rip_rt_main, m)?)
+    m.add_function(wrap_pyfunction!(rip_rt_main, m)?)?;
+    m.add_function(wrap_pyfunction!(live_frame_layout, m)?)
 }

@@ -54,6 +54,10 @@ pub struct LoopConfig {
     /// This many periods in a row whose work (wake-up to command sent) took longer than a
     /// period are a compute overrun. In [`MAX_CONSECUTIVE_MISSES`].
     pub max_consecutive_misses: u32,
+    /// UDP port on 127.0.0.1 to which every period's telemetry is published for `riprs
+    /// watch` (rip-rt's `live` module), 0 for none; `--live PORT` overrides it. A viewer that
+    /// is slow or absent loses frames, never the loop's timing.
+    pub live_port: u16,
 }
 
 pub use crate::sim::PERIOD_MS;
@@ -81,6 +85,7 @@ impl Default for LoopConfig {
             watchdog_periods: 5,
             max_step_periods: 2.0,
             max_consecutive_misses: 5,
+            live_port: 0,
         }
     }
 }

@@ -58,6 +58,10 @@ pub(crate) struct ExciteArgs {
     /// Amplitude (V), at most safety.voltage_limit (default: the signal's, docs/rip-rt.md).
     #[arg(long, value_name = "V", allow_negative_numbers = true, value_parser = number)]
     amplitude: Option<f64>,
+    /// Publish every period's telemetry to `riprs watch` on UDP port PORT of 127.0.0.1
+    /// (overrides `[loop] live_port`; docs/live.md).
+    #[arg(long, value_name = "PORT", value_parser = clap::value_parser!(u16).range(1..))]
+    live: Option<u16>,
     /// Length of the signal (s) (default: the signal's).
     #[arg(long, value_name = "S", allow_negative_numbers = true, value_parser = positive_seconds)]
     duration: Option<f64>,
@@ -258,10 +262,13 @@ fn header(args: &ExciteArgs, cfg: &Config, x: &Excitation, lab: &Lab) -> Vec<(St
 fn prepare(
     args: &ExciteArgs,
 ) -> Result<(Config, Excitation, LoopCore, SerialPort, LogWriter), SetupError> {
-    let cfg = match &args.config {
+    let mut cfg = match &args.config {
         Some(path) => Config::load(path)?,
         None => Config::default(),
     };
+    if let Some(port) = args.live {
+        cfg.loop_.live_port = port;
+    }
     let excitation = settings(args, &cfg)?;
     let lab = match &args.lab {
         Some(path) => Lab::load(path).map_err(SetupError::Config)?,

@@ -55,6 +55,9 @@ pub struct EmulatorConfig {
     pub true_state: Option<PathBuf>,
     /// Interval between rows of `true_state` (s); 0 writes a row every simulation step.
     pub true_state_period_s: f64,
+    /// Publish the true state on the live stream to `127.0.0.1:port` (`--live`), every
+    /// `true_state_period_s`, with these bounds ([`crate::live`]).
+    pub live: Option<(u16, crate::live::Bounds)>,
     /// Wiring faults, for testing the sign check ([`crate::sign_check`]) and the witness
     /// ([`crate::witness`]).
     pub wiring: Wiring,
@@ -113,6 +116,7 @@ impl Default for EmulatorConfig {
             record: None,
             true_state: None,
             true_state_period_s: 0.01,
+            live: None,
             wiring: Wiring::default(),
             fault_at_s: None,
             can_brake: true,
