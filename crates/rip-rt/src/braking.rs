@@ -103,6 +103,7 @@ pub fn bring_to_rest(
         at_rest: mode == BrakeMode::None,
         cut_short: None,
         lowered: false,
+        witness: None,
     };
     if mode == BrakeMode::None {
         return report;
@@ -119,6 +120,8 @@ pub fn bring_to_rest(
         stop = stop.lowering(cfg, lowering);
     }
     let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
+    // The last command the stop sent (V; the run's until the first), for the witness.
+    let mut commanded = core.held_voltage();
     let mut last: Option<(f64, f64, u32)> = None;
     // Whether the last period went without a reply (its successor is shorted too).
     let mut blind = false;
@@ -165,6 +168,9 @@ pub fn bring_to_rest(
             continue;
         };
         let resumed = std::mem::take(&mut blind);
+        if resumed {
+            core.witness_restart();
+        }
         if reply.m.status & STATUS_FAULT != 0 {
             // A faulted driver opens the windings itself; nothing to drive.
             send(io, Command::BRAKE);
@@ -195,10 +201,29 @@ pub fn bring_to_rest(
             _ => (0.0, 0.0),
         };
         report.max_rate = report.max_rate.max(rate.abs());
+        if stop.is_lowering() {
+            if let Err(StopReason::Witness(fault)) =
+                core.witness_stop_period(&reply.m, theta, alpha, commanded)
+            {
+                let fault_reason = StopReason::Witness(fault);
+                let brake = match crate::envelope::brake_mode(&fault_reason) {
+                    BrakeMode::Modelled => {
+                        Brake::modelled(cfg, core.witness_estimate(), commanded)
+                    }
+                    mode => Brake::new(cfg, mode),
+                };
+                stop.lowering_faulted(brake);
+                report.witness = Some(fault);
+            }
+        }
         let Some(command) = stop.step(theta, rate, alpha, alpha_rate) else {
             report.at_rest = true;
             report.lowered = stop.lowered();
             return report;
+        };
+        commanded = match command {
+            BrakeCommand::Volts(v) => v,
+            BrakeCommand::Short => 0.0,
         };
         let command = match command {
             BrakeCommand::Volts(v) => Command {

@@ -517,6 +517,9 @@ pub struct BrakeReport {
     pub cut_short: Option<i32>,
     /// The gentle end brought the pendulum down and the arm to rest (no braking).
     pub lowered: bool,
+    /// The fault the witness found while the gentle end lowered the pendulum, which then
+    /// stopped as after that fault.
+    pub witness: Option<WitnessFault>,
 }
 
 impl std::fmt::Display for BrakeReport {

@@ -401,34 +401,8 @@ impl LoopCore {
                 limit: self.arm_limit,
             });
         }
-        // Since the previous sample (on the device's clock, so skipped periods and late
-        // wake-ups count as they were) the device applied what it reported then, until the
-        // last command arrived.
-        let reported = f64::from(m.applied_mv) / 1000.0;
-        let previous = self.last_sample.replace((m.device_time_us, reported));
         let commanded = self.held_voltage();
-        if let Some(w) = self.witness.as_mut() {
-            let (dt, before) = previous.map_or((0.0, 0.0), |(us, v)| {
-                (f64::from(m.device_time_us.wrapping_sub(us)) * 1e-6, v)
-            });
-            let volts = (before, commanded);
-            // The last command reached the device about when it was written after its sample
-            // (at once in lockstep); a period the loop cannot time is held (crate::witness).
-            let delay = if self.lockstep { 0.0 } else { self.sent_s };
-            let device_late = self
-                .host_interval_s
-                .is_some_and(|host| previous.is_some() && (host - dt).abs() > LATE_S);
-            if !self.lockstep
-                && (self.woke_late
-                    || device_late
-                    || self.latency_s > LATE_S
-                    || self.sent_s > LATE_S)
-            {
-                w.timing_unknown();
-            }
-            w.observe(theta, alpha, volts, dt, delay)
-                .map_err(StopReason::Witness)?;
-        }
+        self.witness_observe(m, theta, alpha, commanded)?;
         self.envelope
             .check(theta, alpha, m.device_time_us, m.applied_mv as f64 * 1e-3)?;
         let reference = self.reference_at(t);
@@ -499,6 +473,68 @@ impl LoopCore {
         self.r = r;
         self.controller.step(&self.y, &self.r, &mut self.u);
         self.u[0]
+    }
+
+    /// The witness's judgement of measurement `m` (its angles `theta`, `alpha`) after the
+    /// device applied what it reported at the previous sample until `commanded` (V) arrived.
+    fn witness_observe(
+        &mut self,
+        m: &Measurement,
+        theta: f64,
+        alpha: f64,
+        commanded: f64,
+    ) -> Result<(), StopReason> {
+        // Since the previous sample (on the device's clock, so skipped periods and late
+        // wake-ups count as they were) the device applied what it reported then, until the
+        // last command arrived.
+        let reported = f64::from(m.applied_mv) / 1000.0;
+        let previous = self.last_sample.replace((m.device_time_us, reported));
+        if let Some(w) = self.witness.as_mut() {
+            let (dt, before) = previous.map_or((0.0, 0.0), |(us, v)| {
+                (f64::from(m.device_time_us.wrapping_sub(us)) * 1e-6, v)
+            });
+            let volts = (before, commanded);
+            // The last command reached the device about when it was written after its sample
+            // (at once in lockstep); a period the loop cannot time is held (crate::witness).
+            let delay = if self.lockstep { 0.0 } else { self.sent_s };
+            let device_late = self
+                .host_interval_s
+                .is_some_and(|host| previous.is_some() && (host - dt).abs() > LATE_S);
+            if !self.lockstep
+                && (self.woke_late
+                    || device_late
+                    || self.latency_s > LATE_S
+                    || self.sent_s > LATE_S)
+            {
+                w.timing_unknown();
+            }
+            w.observe(theta, alpha, volts, dt, delay)
+                .map_err(StopReason::Witness)?;
+        }
+        Ok(())
+    }
+
+    /// The witness on a period of the gentle end's lowering (`crate::braking`), which drives
+    /// the rig as hard as a swing: measurement `m` with its angles `theta`, `alpha`, the
+    /// lowering's last command `commanded` (V). A wrong `arm_counts_per_rev` that balancing
+    /// never showed, or an encoder that failed unseen, would otherwise steer the lowering.
+    pub fn witness_stop_period(
+        &mut self,
+        m: &Measurement,
+        theta: f64,
+        alpha: f64,
+        commanded: f64,
+    ) -> Result<(), StopReason> {
+        self.witness_observe(m, theta, alpha, commanded)
+    }
+
+    /// Restarts the witness's observer from the next measurement: a period the stop shorted
+    /// the windings in (no reply) is no input the observer models.
+    pub fn witness_restart(&mut self) {
+        if let Some(w) = self.witness.as_mut() {
+            w.reset();
+        }
+        self.last_sample = None;
     }
 
     /// A loop core for open-loop runs (`rip-rt excite`): no controller; its enabling

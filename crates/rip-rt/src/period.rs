@@ -204,9 +204,15 @@ impl<'a> Period<'a> {
         {
             crate::say!("rip-rt: stop: {braking}");
         }
-        let reason = match braking.cut_short {
-            Some(sig) => crate::stop::cut_short(reason, sig),
-            None => reason,
+        let reason = match (braking.cut_short, braking.witness) {
+            (Some(sig), _) => crate::stop::cut_short(reason, sig),
+            // The rig did not move as commanded while it was lowered: the run ends as the
+            // witness's stop (exit 15), whatever ended it before.
+            (None, Some(fault)) => {
+                crate::say!("rip-rt: stop: the lowering was given up: {fault}");
+                StopReason::Witness(fault)
+            }
+            (None, None) => reason,
         };
         if let Some(live) = self.live.as_mut() {
             let t = self.last.map_or(f64::NAN, |l| l.t);

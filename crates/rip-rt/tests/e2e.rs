@@ -722,8 +722,8 @@ fn suspend_while_waiting_for_a_reply(name: &str) -> (RunResult, Emulator, Option
 /// reply) must not, on resuming, send an enabling command resting on the measurement of before
 /// the suspension, held or freshly computed: the stall stops it first. A run stopped before
 /// the suspension did not reach the subject and is run again, at most three times: by the
-/// witness (exit 15; about 1 in 6 real-time runs with a quarter of the replies dropped), or by
-/// its own watchdog (exit 4), which two CPU-bound processes beside it caused in 2 of 7 runs.
+/// witness (exit 15) or by its own watchdog (exit 4: five replies lost in a row, or two
+/// CPU-bound processes beside it, which caused it in 2 of 7 runs).
 /// A suspension that lands outside the reply wait is lifted at once and tried again within
 /// the run ([`suspend_while_waiting_for_a_reply`]). Neither retry can pass a run that sent a
 /// stale command: the verdict is judged on the run that reached the subject.

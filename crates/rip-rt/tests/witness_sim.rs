@@ -304,6 +304,10 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
     let mut last_theta = measure_arm(sim.state()[0], onset, &mut rng);
     let mut last_alpha = read_alpha(sim.state(), &mut rng);
     let mut stop_s = budget;
+    // The witness keeps watching a lowering, as rip-rt's does (`LoopCore::witness_stop_period`):
+    // the voltage commanded over the interval before each sample, the first spanning the
+    // run's last period and the stop's latency.
+    let (mut before_v, mut interval_v, mut dt_v) = (u_prev, u_prev, 2.0 * ts);
     for k in 0..(budget / ts) as usize {
         let theta = measure_arm(sim.state()[0], onset, &mut rng);
         let alpha = read_alpha(sim.state(), &mut rng);
@@ -311,9 +315,26 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
         let alpha_rate = rip_core::swingup::wrap_angle(alpha - last_alpha) / ts;
         last_theta = theta;
         last_alpha = alpha;
+        if stop.is_lowering() {
+            if let Err(f) = witness.observe(theta, alpha, (before_v, interval_v), dt_v, 0.0) {
+                let reason = StopReason::Witness(f);
+                let brake = match brake_mode(&reason) {
+                    BrakeMode::Modelled => Brake::modelled(cfg, witness.estimate(), interval_v),
+                    mode => Brake::new(cfg, mode),
+                };
+                stop.lowering_faulted(brake);
+                ended = "witness_in_lowering";
+            }
+        }
+        dt_v = ts;
         let Some(command) = stop.step(theta, rate, alpha, alpha_rate) else {
             stop_s = k as f64 * ts;
             break;
+        };
+        before_v = interval_v;
+        interval_v = match command {
+            BrakeCommand::Volts(v) => v,
+            BrakeCommand::Short => 0.0,
         };
         let w = match command {
             BrakeCommand::Volts(v) if case.fault == Fault::ReverseMotor && onset.is_some() => {

@@ -34,6 +34,8 @@ enum Stage {
     Lowering {
         at: f64,
         periods: u32,
+        last: f64,
+        unmoved: u32,
     },
     Braking,
     Holding {
@@ -126,6 +128,8 @@ impl StopSequence {
             self.stage = Stage::Lowering {
                 at: f64::NAN,
                 periods: 0,
+                last: f64::NAN,
+                unmoved: 0,
             };
         }
         self
@@ -139,6 +143,15 @@ impl StopSequence {
     /// Whether the gentle end brought the pendulum down (the stop then ended without braking).
     pub fn lowered(&self) -> bool {
         self.lowered
+    }
+
+    /// Ends the gentle end for the stop of a fault found during it (the witness's): `brake`
+    /// from this period on, then the hold as after that fault.
+    pub fn lowering_faulted(&mut self, brake: Brake) {
+        if self.is_lowering() {
+            self.brake = brake;
+            self.give_up_lowering();
+        }
     }
 
     /// Ends the gentle end for the fault's stop (braking, then holding) from this period on.
@@ -190,7 +203,16 @@ impl StopSequence {
             .arm_rest
             .observe(self.brake.model_arm().unwrap_or(theta));
         let hold_ready = self.hold.is_some() && self.hold_sign().is_some();
-        if let (Stage::Lowering { at, periods }, Some(law)) = (self.stage, self.lower) {
+        if let (
+            Stage::Lowering {
+                at,
+                periods,
+                last,
+                unmoved,
+            },
+            Some(law),
+        ) = (self.stage, self.lower)
+        {
             // The centre: a run that ends after its reference step has the arm out by the
             // step, and the law's swing about a hold point there came within 0.26 rad of the
             // limit (paper preset, MPC).
@@ -217,7 +239,17 @@ impl StopSequence {
                     .check_state(theta, rate, alpha, alpha_rate, self.last_volts)
                     .is_err()
             });
-            if (periods == 0 && !upright) || expired || breach || !theta.is_finite() {
+            // The hold law's rule: a reading that does not change while the law drives is not
+            // the arm's (an arm encoder that stopped counting unseen), and the law would drive
+            // the arm blind (217 rad in simulation, generated rig 33, MPC).
+            let driven = self.last_volts.abs() >= 0.25 * self.voltage;
+            let unmoved = if driven && theta == last {
+                unmoved + 1
+            } else {
+                0
+            };
+            let blind = unmoved >= HOLD_BLIND_PERIODS;
+            if (periods == 0 && !upright) || expired || breach || blind || !theta.is_finite() {
                 self.give_up_lowering();
             } else if arm_rests && pendulum_rests {
                 self.lowered = true;
@@ -227,6 +259,8 @@ impl StopSequence {
                 self.stage = Stage::Lowering {
                     at,
                     periods: periods + 1,
+                    last: theta,
+                    unmoved,
                 };
                 let phi = rip_core::envelope::Lowering::pendulum_angle(alpha, &mut self.lower_side);
                 let v = law.voltage_from_hanging(theta - at, rate, phi, alpha_rate);
