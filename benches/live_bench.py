@@ -5,9 +5,9 @@ runs: without a stream or viewer, with ``riprs watch --save`` reading at full ra
 viewer stopped by SIGSTOP (its socket buffer full: every frame dropped by the kernel). Prints
 per run the loop's wake-up jitter (p50/p99/max), its deadline misses, and for the reading
 viewer the share of the run's periods it received and its lag (send to recorded, p50/p99); then
-the verdict against the issue's bars: 0 deadline misses with either viewer, p99 jitter within
-the spread of the runs without one, at least 99 % of the frames and a p99 lag of at most
-200 ms.
+the verdict against the issue's bars: 0 deadline misses with either viewer, the median over
+the rounds of each viewer's p99 jitter within the spread of the runs without one, at least
+99 % of the frames and a p99 lag of at most 200 ms.
 
     python benches/live_bench.py [--rounds 3] [--duration 10] [--rt-priority 50] [--json F]
 
@@ -26,6 +26,7 @@ import os
 import re
 import signal
 import socket
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -173,8 +174,14 @@ def main(argv: list[str] | None = None) -> int:
     verdict = {
         "every_run_completed": len(done) == len(runs),
         "no_deadline_misses": all(x["deadline_misses"] == 0 for x in watched),
+        # Per viewer mode, the median of its runs' p99: one run alone lands inside the range
+        # of three runs drawn from its own distribution only half the time, so a verdict on
+        # every run would fail a viewer that costs the loop nothing.
         "p99_jitter_within_baseline_spread": all(
-            x["jitter_us"]["p99"] <= hi for x in watched
+            lo <= statistics.median(
+                x["jitter_us"]["p99"] for x in watched if x["mode"] == mode
+            ) <= hi
+            for mode in {x["mode"] for x in watched}
         ),
         "received_at_least_99_pct": all(
             x["received_pct"] >= 99.0 for x in watched if "received_pct" in x
