@@ -467,7 +467,7 @@ impl Lowering {
             plant.advance(&mut x, held, 0.0, ts, substeps);
             held = u;
             travel = travel.max(x[0].abs());
-            if !(travel <= max_travel) {
+            if travel.is_nan() || travel > max_travel {
                 return None;
             }
             let phi = crate::trig::wrap_angle(x[2] - std::f64::consts::PI);

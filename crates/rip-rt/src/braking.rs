@@ -162,6 +162,8 @@ pub fn bring_to_rest(
                 // see leaves it apart from the arm for good.
                 stop.short();
             }
+            // Shorted windings: 0 V across the motor, as the witness models it.
+            commanded = 0.0;
             if !send(io, Command::BRAKE) {
                 return report;
             }
@@ -183,6 +185,8 @@ pub fn bring_to_rest(
             // A rate across the gap is the mean over the blind periods, not the arm's rate
             // now: short once more, and resume the law on the next period's difference.
             last = Some((theta, alpha, now_us));
+            // Shorted windings: 0 V across the motor, as the witness models it.
+            commanded = 0.0;
             if !send(io, Command::BRAKE) {
                 return report;
             }
@@ -207,9 +211,7 @@ pub fn bring_to_rest(
             {
                 let fault_reason = StopReason::Witness(fault);
                 let brake = match crate::envelope::brake_mode(&fault_reason) {
-                    BrakeMode::Modelled => {
-                        Brake::modelled(cfg, core.witness_estimate(), commanded)
-                    }
+                    BrakeMode::Modelled => Brake::modelled(cfg, core.witness_estimate(), commanded),
                     mode => Brake::new(cfg, mode),
                 };
                 stop.lowering_faulted(brake);

@@ -71,6 +71,8 @@ pub struct LoopCore {
     // The gentle end's law for this rig, designed before the motor is enabled (the search
     // takes tens of milliseconds, too long for the period the run ends in).
     lowering: Option<rip_core::envelope::Lowering>,
+    // The witness's next measurement follows a gap (`witness_restart`).
+    witness_gap: bool,
 }
 
 impl fmt::Debug for LoopCore {
@@ -149,6 +151,7 @@ impl LoopCore {
             lockstep: false,
             envelope: crate::envelope::ArmEnvelope::new(cfg),
             lowering: crate::envelope::lowering(cfg),
+            witness_gap: false,
         })
     }
 
@@ -493,6 +496,11 @@ impl LoopCore {
             let (dt, before) = previous.map_or((0.0, 0.0), |(us, v)| {
                 (f64::from(m.device_time_us.wrapping_sub(us)) * 1e-6, v)
             });
+            let dt = if std::mem::take(&mut self.witness_gap) {
+                f64::INFINITY
+            } else {
+                dt
+            };
             let volts = (before, commanded);
             // The last command reached the device about when it was written after its sample
             // (at once in lockstep); a period the loop cannot time is held (crate::witness).
@@ -516,8 +524,9 @@ impl LoopCore {
 
     /// The witness on a period of the gentle end's lowering (`crate::braking`), which drives
     /// the rig as hard as a swing: measurement `m` with its angles `theta`, `alpha`, the
-    /// lowering's last command `commanded` (V). A wrong `arm_counts_per_rev` that balancing
-    /// never showed, or an encoder that failed unseen, would otherwise steer the lowering.
+    /// lowering's last command `commanded` (V), against the lowering's thresholds
+    /// ([`WitnessLimits::lowering`]). A wrong `arm_counts_per_rev` that balancing never showed,
+    /// or an encoder that failed unseen, would otherwise steer the lowering.
     pub fn witness_stop_period(
         &mut self,
         m: &Measurement,
@@ -525,16 +534,21 @@ impl LoopCore {
         alpha: f64,
         commanded: f64,
     ) -> Result<(), StopReason> {
+        if let Some(w) = self.witness.as_mut() {
+            let lowering = WitnessLimits::default().lowering();
+            if w.limits() != lowering {
+                w.set_limits(lowering);
+            }
+        }
         self.witness_observe(m, theta, alpha, commanded)
     }
 
-    /// Restarts the witness's observer from the next measurement: a period the stop shorted
-    /// the windings in (no reply) is no input the observer models.
+    /// Has the witness take its next measurement as one after a gap: the rig moving as it was,
+    /// its rates acquired from the measurement after it (`Witness::observe`), as after
+    /// periods the stop went without a reply. Restarted at rest instead, the observer of a
+    /// lowering swinging the arm at several rad/s tripped on its first prediction.
     pub fn witness_restart(&mut self) {
-        if let Some(w) = self.witness.as_mut() {
-            w.reset();
-        }
-        self.last_sample = None;
+        self.witness_gap = true;
     }
 
     /// A loop core for open-loop runs (`rip-rt excite`): no controller; its enabling

@@ -196,6 +196,28 @@ pub struct WitnessLimits {
     pub sign: f64,
 }
 
+/// Factor on the arm's, the pendulum's and the sign statistic's thresholds while the gentle end
+/// lowers the pendulum ([`WitnessLimits::lowering`]).
+pub const LOWERING_THRESHOLD_FACTOR: f64 = 2.0;
+
+impl WitnessLimits {
+    /// The thresholds while the gentle end lowers the pendulum: the lowering law drives at the
+    /// voltage bound and reverses it every few periods, where the prediction hangs most on when
+    /// each command arrived, and with a quarter of the replies lost the balance's thresholds
+    /// were crossed by 1 lockstep run in 100 and 1 real-time run in 20 (statistics 27–40
+    /// against 25–40). The faults the lowering must not steer (an arm read at a quarter of its
+    /// motion, an encoder that stopped) move the arm by many σ a period under it and cross
+    /// [`LOWERING_THRESHOLD_FACTOR`] times them too.
+    pub fn lowering(self) -> Self {
+        Self {
+            drift: self.drift,
+            arm: LOWERING_THRESHOLD_FACTOR * self.arm,
+            pendulum: LOWERING_THRESHOLD_FACTOR * self.pendulum,
+            sign: LOWERING_THRESHOLD_FACTOR * self.sign,
+        }
+    }
+}
+
 impl Default for WitnessLimits {
     fn default() -> Self {
         Self {
@@ -324,6 +346,16 @@ impl Witness {
             history: 0,
             peak: [0.0; 4],
         })
+    }
+
+    /// Its thresholds from now on (the statistics so far are kept).
+    pub fn set_limits(&mut self, limits: WitnessLimits) {
+        self.limits = limits;
+    }
+
+    /// Its thresholds.
+    pub fn limits(&self) -> WitnessLimits {
+        self.limits
     }
 
     /// Forgets the state: the next [`observe`](Self::observe) starts the observer afresh at
