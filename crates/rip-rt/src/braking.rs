@@ -65,6 +65,29 @@ pub fn stop_announcement(
     )
 }
 
+/// The witness on a period of the gentle end (measurement `m`, the stop's last command
+/// `commanded` in V): a fault it finds gives the lowering up for that fault's brake, and is
+/// returned.
+fn witness_lowering(
+    core: &mut LoopCore,
+    cfg: &Config,
+    stop: &mut StopSequence,
+    m: &crate::protocol::Measurement,
+    commanded: f64,
+) -> Option<crate::witness::WitnessFault> {
+    let (theta, alpha) = core.angles(m);
+    let Err(StopReason::Witness(fault)) = core.witness_stop_period(m, theta, alpha, commanded)
+    else {
+        return None;
+    };
+    let brake = match crate::envelope::brake_mode(&StopReason::Witness(fault)) {
+        BrakeMode::Modelled => Brake::modelled(cfg, core.witness_estimate(), commanded),
+        mode => Brake::new(cfg, mode),
+    };
+    stop.lowering_faulted(brake);
+    Some(fault)
+}
+
 fn send(io: &Fd, command: Command) -> bool {
     let mut out = [0u8; MAX_FRAME];
     let n = encode(
@@ -206,15 +229,7 @@ pub fn bring_to_rest(
         };
         report.max_rate = report.max_rate.max(rate.abs());
         if stop.is_lowering() {
-            if let Err(StopReason::Witness(fault)) =
-                core.witness_stop_period(&reply.m, theta, alpha, commanded)
-            {
-                let fault_reason = StopReason::Witness(fault);
-                let brake = match crate::envelope::brake_mode(&fault_reason) {
-                    BrakeMode::Modelled => Brake::modelled(cfg, core.witness_estimate(), commanded),
-                    mode => Brake::new(cfg, mode),
-                };
-                stop.lowering_faulted(brake);
+            if let Some(fault) = witness_lowering(core, cfg, &mut stop, &reply.m, commanded) {
                 report.witness = Some(fault);
             }
         }

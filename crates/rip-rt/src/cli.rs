@@ -62,12 +62,10 @@ Exit codes (docs/rip-rt.md has the safety rules behind each):
          controller can balance at the voltage bound, or a controller predicted to fall (the
          message says why; --force runs it anyway; motor never enabled)
     101  internal error (panic)
-    128+N  stopped by signal N: 129 SIGHUP, 130 SIGINT (Ctrl-C), 131 SIGQUIT, 138 SIGUSR1,
-         143 SIGTERM, 148 SIGTSTP (Ctrl-Z ends the run), ...; the arm is brought to rest
-         first (at most 8 s), and a second signal N during that stop disables the driver at
-         once, giving up safety.arm_limit (the arm may coast past it; log footer
-         stop: signal_again); a fatal signal (SIGSEGV, SIGABRT, ...) ends the process by that
-         signal after the stop command
+    128+N  stopped by signal N: 129 SIGHUP, 130 SIGINT (Ctrl-C), 131 SIGQUIT, 143 SIGTERM,
+         148 SIGTSTP (Ctrl-Z), ...; the stop runs first (a balanced pendulum lowered; at most
+         14 s); a second one disables the driver at once, giving up safety.arm_limit (log:
+         stop: signal_again); a fatal signal (SIGSEGV, ...) ends it after the stop command
 Every exit after the device was opened sends 0 V with the driver disabled.";
 
 #[derive(Debug, Parser)]

@@ -203,70 +203,8 @@ impl StopSequence {
             .arm_rest
             .observe(self.brake.model_arm().unwrap_or(theta));
         let hold_ready = self.hold.is_some() && self.hold_sign().is_some();
-        if let (
-            Stage::Lowering {
-                at,
-                periods,
-                last,
-                unmoved,
-            },
-            Some(law),
-        ) = (self.stage, self.lower)
-        {
-            // The centre: a run that ends after its reference step has the arm out by the
-            // step, and the law's swing about a hold point there came within 0.26 rad of the
-            // limit (paper preset, MPC).
-            let at = if at.is_nan() {
-                // An arm out from the centre (a run that ends after its reference step): the
-                // pendulum tipped so that its term first opposes the arm's, which softens the
-                // first command and lets the fall's reaction carry the arm back. Tipped the
-                // other way, the arm's term and the pendulum's added up and the arm swung to
-                // 2.47 rad against 2.10 (paper preset, 1 rad step, LQR and LQG).
-                let push = law.k[0] * theta * law.k[2];
-                if theta.abs() > LOWER_SIDE_FROM_RAD && push != 0.0 {
-                    self.lower_side = -push.signum();
-                }
-                0.0
-            } else {
-                at
-            };
-            let phi = rip_core::swingup::wrap_angle(alpha - std::f64::consts::PI);
-            let pendulum_rests = self.pendulum_rest.observe_within(phi, PENDULUM_REST_RAD);
-            let upright = rip_core::swingup::wrap_angle(alpha).abs() <= LOWER_FROM_RAD;
-            let expired = f64::from(periods) * self.period_s >= rip_core::envelope::MAX_LOWER_S;
-            let breach = self.lower_envelope.as_ref().is_some_and(|envelope| {
-                envelope
-                    .check_state(theta, rate, alpha, alpha_rate, self.last_volts)
-                    .is_err()
-            });
-            // The hold law's rule: a reading that does not change while the law drives is not
-            // the arm's (an arm encoder that stopped counting unseen), and the law would drive
-            // the arm blind (217 rad in simulation, generated rig 33, MPC).
-            let driven = self.last_volts.abs() >= 0.25 * self.voltage;
-            let unmoved = if driven && theta == last {
-                unmoved + 1
-            } else {
-                0
-            };
-            let blind = unmoved >= HOLD_BLIND_PERIODS;
-            if (periods == 0 && !upright) || expired || breach || blind || !theta.is_finite() {
-                self.give_up_lowering();
-            } else if arm_rests && pendulum_rests {
-                self.lowered = true;
-                self.last_volts = 0.0;
-                return None;
-            } else {
-                self.stage = Stage::Lowering {
-                    at,
-                    periods: periods + 1,
-                    last: theta,
-                    unmoved,
-                };
-                let phi = rip_core::envelope::Lowering::pendulum_angle(alpha, &mut self.lower_side);
-                let v = law.voltage_from_hanging(theta - at, rate, phi, alpha_rate);
-                self.last_volts = v;
-                return Some(BrakeCommand::Volts(v));
-            }
+        if let Some(command) = self.lowering_step(arm_rests, theta, rate, alpha, alpha_rate) {
+            return command;
         }
         match self.stage {
             // The arm at rest, or its momentum braked out (the law at 0 V for REST_S): under a
@@ -363,6 +301,85 @@ impl StopSequence {
             BrakeCommand::Short => 0.0,
         };
         Some(command)
+    }
+
+    /// The gentle end's period (`Stage::Lowering`): `None` when the stop is not lowering (or
+    /// gives the lowering up this period), else the period's command, `Some(None)` once the
+    /// pendulum hangs at rest and the arm rests (the stop is done).
+    fn lowering_step(
+        &mut self,
+        arm_rests: bool,
+        theta: f64,
+        rate: f64,
+        alpha: f64,
+        alpha_rate: f64,
+    ) -> Option<Option<BrakeCommand>> {
+        if let (
+            Stage::Lowering {
+                at,
+                periods,
+                last,
+                unmoved,
+            },
+            Some(law),
+        ) = (self.stage, self.lower)
+        {
+            // The centre: about a hold point where the run left the arm (out by its reference
+            // step) the law's swing came within 0.26 rad of the limit (paper preset, MPC).
+            let at = if at.is_nan() {
+                // An arm out from the centre (a run that ends after its reference step): the
+                // pendulum tipped so that its term first opposes the arm's, which softens the
+                // first command and lets the fall's reaction carry the arm back. Tipped the
+                // other way, the arm's term and the pendulum's added up and the arm swung to
+                // 2.47 rad against 2.10 (paper preset, 1 rad step, LQR and LQG).
+                let push = law.k[0] * theta * law.k[2];
+                if theta.abs() > LOWER_SIDE_FROM_RAD && push != 0.0 {
+                    self.lower_side = -push.signum();
+                }
+                0.0
+            } else {
+                at
+            };
+            let phi = rip_core::swingup::wrap_angle(alpha - std::f64::consts::PI);
+            let pendulum_rests = self.pendulum_rest.observe_within(phi, PENDULUM_REST_RAD);
+            let upright = rip_core::swingup::wrap_angle(alpha).abs() <= LOWER_FROM_RAD;
+            let expired = f64::from(periods) * self.period_s >= rip_core::envelope::MAX_LOWER_S;
+            let breach = self.lower_envelope.as_ref().is_some_and(|envelope| {
+                envelope
+                    .check_state(theta, rate, alpha, alpha_rate, self.last_volts)
+                    .is_err()
+            });
+            // The hold law's rule: a reading that does not change while the law drives is not
+            // the arm's (an arm encoder that stopped counting unseen), and the law would drive
+            // the arm blind (217 rad in simulation, generated rig 33, MPC).
+            let driven = self.last_volts.abs() >= 0.25 * self.voltage;
+            let unmoved = if driven && theta == last {
+                unmoved + 1
+            } else {
+                0
+            };
+            let blind = unmoved >= HOLD_BLIND_PERIODS;
+            if (periods == 0 && !upright) || expired || breach || blind || !theta.is_finite() {
+                self.give_up_lowering();
+                return None;
+            } else if arm_rests && pendulum_rests {
+                self.lowered = true;
+                self.last_volts = 0.0;
+                return Some(None);
+            } else {
+                self.stage = Stage::Lowering {
+                    at,
+                    periods: periods + 1,
+                    last: theta,
+                    unmoved,
+                };
+                let phi = rip_core::envelope::Lowering::pendulum_angle(alpha, &mut self.lower_side);
+                let v = law.voltage_from_hanging(theta - at, rate, phi, alpha_rate);
+                self.last_volts = v;
+                return Some(Some(BrakeCommand::Volts(v)));
+            }
+        }
+        None
     }
 
     /// The rate the braking law takes: [`momentum_rate`] while the wiring is trusted and the
