@@ -285,17 +285,18 @@ impl HoldLaw {
 }
 
 /// The gentle end of a run: the balanced pendulum lowered to hanging at rest under control,
-/// the arm brought to rest near where it balanced, before the driver is disabled (rather than
-/// letting the pendulum fall and braking the arm against it).
+/// the arm brought to rest at its hold point (rip-rt's: the centre), before the driver is
+/// disabled (rather than letting the pendulum fall and braking the arm against it).
 ///
 /// The law is [`HoldLaw`]'s — the discrete LQR about the hanging equilibrium, run on the whole
 /// circle (its pendulum term is ±π at upright, kept on one side by
 /// [`pendulum_angle`](Self::pendulum_angle), so it tips the pendulum off at once, and then takes
 /// the energy of its fall out through the arm) — with the weights
 /// `Q = diag(1/θ_m², q_θ̇, 1/φ_m², q_α̇)` chosen per rig from [`LOWER_ARM_RAD`] ×
-/// [`LOWER_RATE_WEIGHTS`] × [`LOWER_PENDULUM_RAD`] × [`LOWER_PENDULUM_RATE_WEIGHTS`] by simulating the lowering on the model: from upright at rest
-/// (tilted by [`LOWER_START_TILT`]), the command applied one period late, the law that
-/// settles first — pendulum within [`LOWERED_PENDULUM_RAD`] of hanging and arm slower than
+/// [`LOWER_RATE_WEIGHTS`] × [`LOWER_PENDULUM_RAD`] × [`LOWER_PENDULUM_RATE_WEIGHTS`] by
+/// simulating the lowering on the model: from upright at rest (tilted by
+/// [`LOWER_START_TILT`]), the command applied one period late, the law that settles first —
+/// pendulum within [`LOWERED_PENDULUM_RAD`] of hanging and arm slower than
 /// [`LOWERED_ARM_RATE`] from then on — among those whose arm stays within a given travel of
 /// the hold point all along, refined weight by weight from the best of the
 /// grid ([`LOWER_REFINE_STEP`]). Hand-picked weights settled the paper's rig in
@@ -710,10 +711,10 @@ fn stable_substeps(plant: &Plant, ts: f64) -> usize {
 mod tests {
     use super::*;
 
-    /// The lowering found for the presets and generated rigs, replayed on the whole model
-    /// with ten times finer steps and the command one period late: the pendulum hangs within 0.1 rad and the
-    /// arm moves slower than 0.2 rad/s within 5 s of the start, and the arm stays inside the
-    /// room it was designed for.
+    /// The lowering found for the presets and generated rigs, replayed on the whole model with
+    /// ten times finer steps and the command one period late: the pendulum hangs within
+    /// 0.1 rad and the arm moves slower than 0.2 rad/s within 5 s of the start, and the arm
+    /// stays inside the default safety.arm_limit's envelope.
     #[test]
     fn the_lowering_brings_a_balanced_pendulum_down_within_five_seconds() {
         let ts = 0.01;

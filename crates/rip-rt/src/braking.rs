@@ -26,15 +26,21 @@ pub const MAX_GENTLE_STOP_S: f64 = rip_core::envelope::MAX_LOWER_S + MAX_STOP_S;
 
 /// The gentle end's law for the stop after `reason` in `mode` on `core`'s rig: an orderly end
 /// (the duration, a first stop signal) of a balancing run whose wiring's sign is trusted
-/// ([`BrakeMode::Active`]). Faults, a second signal and a swing-up still swinging keep the
-/// fault's stop.
+/// ([`BrakeMode::Active`]) and whose pendulum was last measured within
+/// [`LOWER_FROM_RAD`](crate::envelope::LOWER_FROM_RAD) of upright. Faults, a second signal, a
+/// swing-up still swinging and open-loop runs (no lowering designed) keep the fault's stop.
 pub fn lowering_for<'a>(
     core: &'a LoopCore,
     reason: &StopReason,
     mode: BrakeMode,
 ) -> Option<&'a rip_core::envelope::Lowering> {
-    let orderly = matches!(reason, StopReason::Finished | StopReason::Signal(_));
-    (orderly && mode == BrakeMode::Active && core.phase() == rip_core::Phase::Balance)
+    let upright = core.last_angles().is_some_and(|(_, alpha)| {
+        rip_core::swingup::wrap_angle(alpha).abs() <= crate::envelope::LOWER_FROM_RAD
+    });
+    (reason.is_orderly()
+        && mode == BrakeMode::Active
+        && core.phase() == rip_core::Phase::Balance
+        && upright)
         .then(|| core.lowering())
         .flatten()
 }
@@ -140,7 +146,7 @@ pub fn bring_to_rest(
     let lowering = lowering_for(core, reason, mode).copied();
     let mut stop = StopSequence::new(cfg, brake);
     if let Some(lowering) = &lowering {
-        stop = stop.lowering(cfg, lowering);
+        stop = stop.lowering(cfg, lowering, core.held_voltage());
     }
     let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
     // The last command the stop sent (V; the run's until the first), for the witness.
@@ -170,11 +176,25 @@ pub fn bring_to_rest(
             report.cut_short = Some(sig);
             return report;
         }
+        // The lowering's time on the stop's clock: periods without a reply count too.
+        if stop.is_lowering() && report.seconds >= rip_core::envelope::MAX_LOWER_S {
+            stop.give_up_lowering();
+        }
         let reply = match exchange(io, core, periodic, &mut tx, &mut rx, reply_timeout_ns) {
             Ok((_, reply)) => reply,
             // The device is gone: nothing more can be sent.
             Err(_) => return report,
         };
+        if let Some(reply) = &reply {
+            // The stop's own timing for the witness, as the run's periods note theirs.
+            core.note_latency(reply.rx_ns.saturating_sub(reply.req_ns));
+            core.note_period(
+                tick.lateness_ns,
+                tick.skipped,
+                periodic.mode() == crate::timing::ClockMode::Lockstep,
+                reply.req_ns,
+            );
+        }
         let Some(reply) = reply else {
             // Without a fresh measurement the law has no rate: short the windings for this
             // period only. Giving the law up for good left the pendulum free to walk the arm
@@ -187,11 +207,13 @@ pub fn bring_to_rest(
             }
             // Shorted windings: 0 V across the motor, as the witness models it.
             commanded = 0.0;
+            stop.note_short();
             if !send(io, Command::BRAKE) {
                 return report;
             }
             continue;
         };
+        let sample_ns = reply.req_ns;
         let resumed = std::mem::take(&mut blind);
         if resumed {
             core.witness_restart();
@@ -210,6 +232,7 @@ pub fn bring_to_rest(
             last = Some((theta, alpha, now_us));
             // Shorted windings: 0 V across the motor, as the witness models it.
             commanded = 0.0;
+            stop.note_short();
             if !send(io, Command::BRAKE) {
                 return report;
             }
@@ -252,6 +275,7 @@ pub fn bring_to_rest(
         if !send(io, command) {
             return report;
         }
+        core.note_sent(periodic.now_ns().saturating_sub(sample_ns));
     }
 }
 

@@ -498,8 +498,8 @@ impl Brake {
 
 mod sequence;
 pub use sequence::{
-    momentum_rate, StopSequence, HOLD_BLIND_PERIODS, HOLD_GIVE_UP_RAD, MAX_HOLD_S,
-    MOMENTUM_ENERGY_GAIN, PENDULUM_REST_RAD,
+    momentum_rate, StopSequence, HOLD_BLIND_PERIODS, HOLD_GIVE_UP_RAD, LOWERED_HANGING_RAD,
+    LOWER_FROM_RAD, LOWER_SIDE_FROM_RAD, MAX_HOLD_S, MOMENTUM_ENERGY_GAIN, PENDULUM_REST_RAD,
 };
 
 /// What an active stop did.

@@ -155,6 +155,11 @@ impl LoopCore {
         })
     }
 
+    /// The last measured arm and pendulum angles (rad) the loop judged, if any.
+    pub fn last_angles(&self) -> Option<(f64, f64)> {
+        self.last_sample.map(|_| (self.y[0], self.y[1]))
+    }
+
     /// The gentle end's law for this rig ([`rip_core::envelope::Lowering`]), if one settles
     /// on its model.
     pub fn lowering(&self) -> Option<&rip_core::envelope::Lowering> {
@@ -555,9 +560,12 @@ impl LoopCore {
     /// commands come from [`drive`](Self::drive), with the same hard bounds as
     /// [`new`](Self::new)'s.
     pub fn open_loop(cfg: &Config) -> Self {
-        Self::new(Box::new(OpenLoop), cfg)
+        let mut core = Self::new(Box::new(OpenLoop), cfg)
             .expect("OpenLoop has the pendulum's shape")
-            .without_witness()
+            .without_witness();
+        // No controller balances: nothing to lower at the end.
+        core.lowering = None;
+        core
     }
 
     /// One open-loop command on measurement `m` at `t` seconds: checks the device status and

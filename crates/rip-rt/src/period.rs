@@ -204,14 +204,14 @@ impl<'a> Period<'a> {
         {
             crate::say!("rip-rt: stop: {braking}");
         }
+        // The rig did not move as commanded while it was lowered: said whatever ended the
+        // stop, and the run ends as the witness's stop (exit 15) unless a signal cut it short.
+        if let Some(fault) = braking.witness {
+            crate::say!("rip-rt: stop: the lowering was given up: {fault}");
+        }
         let reason = match (braking.cut_short, braking.witness) {
             (Some(sig), _) => crate::stop::cut_short(reason, sig),
-            // The rig did not move as commanded while it was lowered: the run ends as the
-            // witness's stop (exit 15), whatever ended it before.
-            (None, Some(fault)) => {
-                crate::say!("rip-rt: stop: the lowering was given up: {fault}");
-                StopReason::Witness(fault)
-            }
+            (None, Some(fault)) => StopReason::Witness(fault),
             (None, None) => reason,
         };
         if let Some(live) = self.live.as_mut() {

@@ -14,12 +14,10 @@ use rand_distr::{Distribution, Normal};
 use rip_core::plant::{Plant, State};
 use rip_core::rig::Rig;
 use rip_core::Phase;
-use rip_rt::braking::MAX_GENTLE_STOP_S;
+use rip_rt::braking::{MAX_GENTLE_STOP_S, MAX_STOP_S};
 use rip_rt::config::Config;
 use rip_rt::controllers::{self, ControllerKind};
-use rip_rt::envelope::{
-    brake_mode, Brake, BrakeCommand, BrakeMode, StopSequence, MAX_BRAKE_S, MAX_HOLD_S,
-};
+use rip_rt::envelope::{brake_mode, Brake, BrakeCommand, BrakeMode, StopSequence};
 use rip_rt::plant::{Model, PlantSim, Windings};
 use rip_rt::stop::StopReason;
 use rip_rt::witness::{Witness, WitnessFault, WitnessLimits};
@@ -290,10 +288,10 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
         _ => None,
     };
     let budget = if let Some(lowering) = &lowering {
-        stop = stop.lowering(cfg, lowering);
+        stop = stop.lowering(cfg, lowering, u_prev);
         MAX_GENTLE_STOP_S
     } else {
-        MAX_BRAKE_S + MAX_HOLD_S
+        MAX_STOP_S
     };
     let read_alpha = |x: [f64; 4], rng: &mut StdRng| {
         rip_core::swingup::wrap_angle(

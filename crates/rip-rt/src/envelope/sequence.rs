@@ -23,6 +23,10 @@ pub const HOLD_BLIND_PERIODS: u32 = 5;
 /// stop brakes as it always did.
 pub const LOWER_FROM_RAD: f64 = 0.3;
 
+/// Pendulum angle from hanging (rad) within which the gentle end may count it lowered (with arm
+/// and pendulum at rest): the bar the end of a run is judged by.
+pub const LOWERED_HANGING_RAD: f64 = 0.1;
+
 /// The arm's distance from the centre (rad) past which the gentle end tips the pendulum the
 /// way the arm's term pushes it; nearer, the way it leans.
 pub const LOWER_SIDE_FROM_RAD: f64 = 0.05;
@@ -119,10 +123,19 @@ impl StopSequence {
     /// measurement) down to hanging at rest with the arm brought to the centre, at most
     /// [`rip_core::envelope::MAX_LOWER_S`]; then the stop ends. Past that time, or where the
     /// loop's braking envelope ([`ArmEnvelope`] of `cfg`) finds the arm's stopping point past
-    /// its bound, the stop brakes and holds as after a fault. Only for a brake whose sign is
-    /// trusted ([`BrakeMode::Active`]).
-    pub fn lowering(mut self, cfg: &Config, lowering: &rip_core::envelope::Lowering) -> Self {
+    /// its bound, the stop brakes and holds as after a fault; a reading that does not change
+    /// while the law drives shorts the windings as the hold's blind rule does. Only for a brake
+    /// whose sign is trusted ([`BrakeMode::Active`]). `held` (V): the run's last command,
+    /// which acts until the stop's first.
+    pub fn lowering(
+        mut self,
+        cfg: &Config,
+        lowering: &rip_core::envelope::Lowering,
+        held: f64,
+    ) -> Self {
         if self.brake.mode() == BrakeMode::Active {
+            // The run's last command acts until the stop's first.
+            self.last_volts = held;
             self.lower = Some(lowering.law);
             self.lower_envelope = Some(ArmEnvelope::new(cfg));
             self.stage = Stage::Lowering {
@@ -143,6 +156,11 @@ impl StopSequence {
     /// Whether the gentle end brought the pendulum down (the stop then ended without braking).
     pub fn lowered(&self) -> bool {
         self.lowered
+    }
+
+    /// A period without a measurement, which the stop shorted: 0 V across the motor.
+    pub fn note_short(&mut self) {
+        self.last_volts = 0.0;
     }
 
     /// Ends the gentle end for the stop of a fault found during it (the witness's): `brake`
@@ -359,10 +377,21 @@ impl StopSequence {
                 0
             };
             let blind = unmoved >= HOLD_BLIND_PERIODS;
-            if (periods == 0 && !upright) || expired || breach || blind || !theta.is_finite() {
+            if blind || !theta.is_finite() {
+                // As the hold's blind rule: the reading is not the arm's, and a law on it (the
+                // braking law's included) would drive the arm blind; the short until the
+                // pendulum rests.
+                self.brake.short();
+                self.stage = Stage::Shorted { blind: true };
+                self.arm_rest = RestTest::new(self.period_s);
+                self.pendulum_rest = RestTest::new(self.period_s);
+                self.last_volts = 0.0;
+                return Some(Some(BrakeCommand::Short));
+            }
+            if (periods == 0 && !upright) || expired || breach {
                 self.give_up_lowering();
                 return None;
-            } else if arm_rests && pendulum_rests {
+            } else if arm_rests && pendulum_rests && phi.abs() <= LOWERED_HANGING_RAD {
                 self.lowered = true;
                 self.last_volts = 0.0;
                 return Some(None);
