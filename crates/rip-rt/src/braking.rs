@@ -94,6 +94,48 @@ fn witness_lowering(
     Some(fault)
 }
 
+/// The stop's own timing for the witness, as the run's periods note theirs.
+fn note_timing(
+    core: &mut LoopCore,
+    periodic: &Periodic,
+    tick: &crate::timing::Tick,
+    reply: &crate::exchange::Reply,
+) {
+    core.note_latency(reply.rx_ns.saturating_sub(reply.req_ns));
+    core.note_period(
+        tick.lateness_ns,
+        tick.skipped,
+        periodic.mode() == crate::timing::ClockMode::Lockstep,
+        reply.req_ns,
+    );
+}
+
+/// The arm's and the pendulum's rates (rad/s) from the sample `before` (angles and the
+/// device's clock in µs) to this one; 0 without one, or across a clock that did not advance.
+fn rates(before: Option<(f64, f64, u32)>, theta: f64, alpha: f64, now_us: u32) -> (f64, f64) {
+    match before {
+        Some((theta0, alpha0, at)) if (1..u32::MAX / 2).contains(&now_us.wrapping_sub(at)) => {
+            let dt = now_us.wrapping_sub(at) as f64 * 1e-6;
+            (
+                (theta - theta0) / dt,
+                rip_core::swingup::wrap_angle(alpha - alpha0) / dt,
+            )
+        }
+        _ => (0.0, 0.0),
+    }
+}
+
+/// The command frame's content for the stop's `command`.
+fn command_of(command: BrakeCommand) -> Command {
+    match command {
+        BrakeCommand::Volts(v) => Command {
+            voltage_mv: (v * 1000.0).round() as i16,
+            flags: crate::protocol::COMMAND_ENABLE,
+        },
+        BrakeCommand::Short => Command::BRAKE,
+    }
+}
+
 fn send(io: &Fd, command: Command) -> bool {
     let mut out = [0u8; MAX_FRAME];
     let n = encode(
@@ -186,14 +228,7 @@ pub fn bring_to_rest(
             Err(_) => return report,
         };
         if let Some(reply) = &reply {
-            // The stop's own timing for the witness, as the run's periods note theirs.
-            core.note_latency(reply.rx_ns.saturating_sub(reply.req_ns));
-            core.note_period(
-                tick.lateness_ns,
-                tick.skipped,
-                periodic.mode() == crate::timing::ClockMode::Lockstep,
-                reply.req_ns,
-            );
+            note_timing(core, periodic, &tick, reply);
         }
         let Some(reply) = reply else {
             // Without a fresh measurement the law has no rate: short the windings for this
@@ -238,18 +273,7 @@ pub fn bring_to_rest(
             }
             continue;
         }
-        let (rate, alpha_rate) = match last.replace((theta, alpha, now_us)) {
-            Some((before, alpha_before, at))
-                if (1..u32::MAX / 2).contains(&now_us.wrapping_sub(at)) =>
-            {
-                let dt = now_us.wrapping_sub(at) as f64 * 1e-6;
-                (
-                    (theta - before) / dt,
-                    rip_core::swingup::wrap_angle(alpha - alpha_before) / dt,
-                )
-            }
-            _ => (0.0, 0.0),
-        };
+        let (rate, alpha_rate) = rates(last.replace((theta, alpha, now_us)), theta, alpha, now_us);
         report.max_rate = report.max_rate.max(rate.abs());
         if stop.is_lowering() {
             if let Some(fault) = witness_lowering(core, cfg, &mut stop, &reply.m, commanded) {
@@ -265,14 +289,7 @@ pub fn bring_to_rest(
             BrakeCommand::Volts(v) => v,
             BrakeCommand::Short => 0.0,
         };
-        let command = match command {
-            BrakeCommand::Volts(v) => Command {
-                voltage_mv: (v * 1000.0).round() as i16,
-                flags: crate::protocol::COMMAND_ENABLE,
-            },
-            BrakeCommand::Short => Command::BRAKE,
-        };
-        if !send(io, command) {
+        if !send(io, command_of(command)) {
             return report;
         }
         core.note_sent(periodic.now_ns().saturating_sub(sample_ns));
