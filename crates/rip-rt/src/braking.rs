@@ -5,7 +5,8 @@
 
 use crate::config::Config;
 use crate::envelope::{
-    stop_mode, Brake, BrakeCommand, BrakeMode, BrakeReport, StopSequence, MAX_BRAKE_S, MAX_HOLD_S,
+    sample_rates, stop_mode, Brake, BrakeCommand, BrakeMode, BrakeReport, StopSequence,
+    MAX_BRAKE_S, MAX_HOLD_S,
 };
 use crate::exchange::exchange;
 use crate::loop_core::LoopCore;
@@ -71,26 +72,28 @@ pub fn stop_announcement(
     )
 }
 
-/// The witness on a period of the gentle end (measurement `m`, the stop's last command
-/// `commanded` in V): a fault it finds gives the lowering up for that fault's brake, and is
-/// returned.
+/// The witness on a period of the gentle end (measurement `m`; the stop's last command,
+/// [`StopSequence::last_volts`]): a fault it finds gives the lowering up for that fault's
+/// brake, and is returned.
 fn witness_lowering(
     core: &mut LoopCore,
     cfg: &Config,
     stop: &mut StopSequence,
     m: &crate::protocol::Measurement,
-    commanded: f64,
 ) -> Option<crate::witness::WitnessFault> {
     let (theta, alpha) = core.angles(m);
+    let commanded = stop.last_volts();
     let Err(StopReason::Witness(fault)) = core.witness_stop_period(m, theta, alpha, commanded)
     else {
         return None;
     };
-    let brake = match crate::envelope::brake_mode(&StopReason::Witness(fault)) {
-        BrakeMode::Modelled => Brake::modelled(cfg, core.witness_estimate(), commanded),
-        mode => Brake::new(cfg, mode),
-    };
-    stop.lowering_faulted(brake);
+    let mode = crate::envelope::brake_mode(&StopReason::Witness(fault));
+    stop.lowering_faulted(Brake::for_mode(
+        cfg,
+        mode,
+        core.witness_estimate(),
+        commanded,
+    ));
     Some(fault)
 }
 
@@ -108,21 +111,6 @@ fn note_timing(
         periodic.mode() == crate::timing::ClockMode::Lockstep,
         reply.req_ns,
     );
-}
-
-/// The arm's and the pendulum's rates (rad/s) from the sample `before` (angles and the
-/// device's clock in µs) to this one; 0 without one, or across a clock that did not advance.
-fn rates(before: Option<(f64, f64, u32)>, theta: f64, alpha: f64, now_us: u32) -> (f64, f64) {
-    match before {
-        Some((theta0, alpha0, at)) if (1..u32::MAX / 2).contains(&now_us.wrapping_sub(at)) => {
-            let dt = now_us.wrapping_sub(at) as f64 * 1e-6;
-            (
-                (theta - theta0) / dt,
-                rip_core::swingup::wrap_angle(alpha - alpha0) / dt,
-            )
-        }
-        _ => (0.0, 0.0),
-    }
 }
 
 /// The command frame's content for the stop's `command`.
@@ -180,19 +168,13 @@ pub fn bring_to_rest(
         return report;
     }
     let watch = StopWatch::for_stop(reason);
-    let brake = if mode == BrakeMode::Modelled {
-        Brake::modelled(cfg, core.witness_estimate(), core.held_voltage())
-    } else {
-        Brake::new(cfg, mode)
-    };
+    let brake = Brake::for_mode(cfg, mode, core.witness_estimate(), core.held_voltage());
     let lowering = lowering_for(core, reason, mode).copied();
     let mut stop = StopSequence::new(cfg, brake);
     if let Some(lowering) = &lowering {
         stop = stop.lowering(cfg, lowering, core.held_voltage());
     }
     let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
-    // The last command the stop sent (V; the run's until the first), for the witness.
-    let mut commanded = core.held_voltage();
     let mut last: Option<(f64, f64, u32)> = None;
     // Whether the last period went without a reply (its successor is shorted too).
     let mut blind = false;
@@ -240,8 +222,6 @@ pub fn bring_to_rest(
                 // see leaves it apart from the arm for good.
                 stop.short();
             }
-            // Shorted windings: 0 V across the motor, as the witness models it.
-            commanded = 0.0;
             stop.note_short();
             if !send(io, Command::BRAKE) {
                 return report;
@@ -265,18 +245,17 @@ pub fn bring_to_rest(
             // A rate across the gap is the mean over the blind periods, not the arm's rate
             // now: short once more, and resume the law on the next period's difference.
             last = Some((theta, alpha, now_us));
-            // Shorted windings: 0 V across the motor, as the witness models it.
-            commanded = 0.0;
             stop.note_short();
             if !send(io, Command::BRAKE) {
                 return report;
             }
             continue;
         }
-        let (rate, alpha_rate) = rates(last.replace((theta, alpha, now_us)), theta, alpha, now_us);
+        let before = last.replace((theta, alpha, now_us));
+        let (rate, alpha_rate) = sample_rates(before, theta, alpha, now_us);
         report.max_rate = report.max_rate.max(rate.abs());
         if stop.is_lowering() {
-            if let Some(fault) = witness_lowering(core, cfg, &mut stop, &reply.m, commanded) {
+            if let Some(fault) = witness_lowering(core, cfg, &mut stop, &reply.m) {
                 report.witness = Some(fault);
             }
         }
@@ -284,10 +263,6 @@ pub fn bring_to_rest(
             report.at_rest = true;
             report.lowered = stop.lowered();
             return report;
-        };
-        commanded = match command {
-            BrakeCommand::Volts(v) => v,
-            BrakeCommand::Short => 0.0,
         };
         if !send(io, command_of(command)) {
             return report;

@@ -75,6 +75,29 @@ pub fn lowering(cfg: &Config) -> Option<Lowering> {
         .flatten()
 }
 
+/// The arm's and the pendulum's rates (rad/s) from the sample `before` (its angles, rad, and
+/// the device's clock, µs, wrapping) to this one at `theta`, `alpha` and `now_us`: the
+/// difference over the device's clock between the two sampling instants, not the host's
+/// wake-ups. 0 without a sample before, or for two samples in the same microsecond or a clock
+/// that jumped back.
+pub fn sample_rates(
+    before: Option<(f64, f64, u32)>,
+    theta: f64,
+    alpha: f64,
+    now_us: u32,
+) -> (f64, f64) {
+    match before {
+        Some((theta0, alpha0, at)) if (1..u32::MAX / 2).contains(&now_us.wrapping_sub(at)) => {
+            let dt = now_us.wrapping_sub(at) as f64 * 1e-6;
+            (
+                (theta - theta0) / dt,
+                rip_core::trig::wrap_angle(alpha - alpha0) / dt,
+            )
+        }
+        _ => (0.0, 0.0),
+    }
+}
+
 /// The braking envelope of `safety.arm_limit` in the loop (module docs). Allocation-free.
 #[derive(Debug, Clone)]
 pub struct ArmEnvelope {
@@ -125,22 +148,8 @@ impl ArmEnvelope {
         device_us: u32,
         applied: f64,
     ) -> Result<(), StopReason> {
-        let (rate, alpha_rate) = match self.last.replace((theta, alpha, device_us)) {
-            Some((before, alpha_before, at)) => {
-                let dt = device_us.wrapping_sub(at);
-                // Two samples in the same microsecond, or a clock that jumped back: no rate.
-                if dt > 0 && dt < u32::MAX / 2 {
-                    let dt = dt as f64 * 1e-6;
-                    (
-                        (theta - before) / dt,
-                        rip_core::trig::wrap_angle(alpha - alpha_before) / dt,
-                    )
-                } else {
-                    (0.0, 0.0)
-                }
-            }
-            None => (0.0, 0.0),
-        };
+        let before = self.last.replace((theta, alpha, device_us));
+        let (rate, alpha_rate) = sample_rates(before, theta, alpha, device_us);
         self.check_state(theta, rate, alpha, alpha_rate, applied)
     }
 
@@ -351,6 +360,16 @@ impl Brake {
             brake.mode = BrakeMode::Modelled;
         }
         brake
+    }
+
+    /// The stop of `cfg` braking in `mode`: [`modelled`](Self::modelled) from the witness's
+    /// `estimate` with `held` (V) still applied for [`BrakeMode::Modelled`], else
+    /// [`new`](Self::new).
+    pub fn for_mode(cfg: &Config, mode: BrakeMode, estimate: Option<State>, held: f64) -> Self {
+        match mode {
+            BrakeMode::Modelled => Self::modelled(cfg, estimate, held),
+            mode => Self::new(cfg, mode),
+        }
     }
 
     /// The model's arm angle (rad) in [`BrakeMode::Modelled`].

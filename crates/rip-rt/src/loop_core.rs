@@ -96,6 +96,15 @@ impl LoopCore {
     ///
     /// [`encode_held`]: Self::encode_held
     pub fn new(controller: Box<dyn Controller>, cfg: &Config) -> Result<Self, SetupError> {
+        Self::build(controller, cfg, crate::envelope::lowering(cfg))
+    }
+
+    /// [`new`](Self::new) with the gentle end's law given (`None`: no lowering).
+    fn build(
+        controller: Box<dyn Controller>,
+        cfg: &Config,
+        lowering: Option<rip_core::envelope::Lowering>,
+    ) -> Result<Self, SetupError> {
         if controller.n_outputs() != 2 || controller.n_inputs() != 1 {
             return Err(SetupError::ControllerShape {
                 outputs: controller.n_outputs(),
@@ -150,7 +159,7 @@ impl LoopCore {
             host_interval_s: None,
             lockstep: false,
             envelope: crate::envelope::ArmEnvelope::new(cfg),
-            lowering: crate::envelope::lowering(cfg),
+            lowering,
             witness_gap: false,
         })
     }
@@ -560,12 +569,10 @@ impl LoopCore {
     /// commands come from [`drive`](Self::drive), with the same hard bounds as
     /// [`new`](Self::new)'s.
     pub fn open_loop(cfg: &Config) -> Self {
-        let mut core = Self::new(Box::new(OpenLoop), cfg)
+        // No controller balances: nothing to lower at the end (and no law to design).
+        Self::build(Box::new(OpenLoop), cfg, None)
             .expect("OpenLoop has the pendulum's shape")
-            .without_witness();
-        // No controller balances: nothing to lower at the end.
-        core.lowering = None;
-        core
+            .without_witness()
     }
 
     /// One open-loop command on measurement `m` at `t` seconds: checks the device status and

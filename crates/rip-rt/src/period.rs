@@ -180,12 +180,12 @@ impl<'a> Period<'a> {
         wiring_checked: bool,
     ) -> (StopReason, crate::envelope::BrakeReport) {
         let driven = self.driven();
-        let brakes = crate::envelope::stop_mode(&reason, driven, wiring_checked)
-            != crate::envelope::BrakeMode::None;
+        let mode = crate::envelope::stop_mode(&reason, driven, wiring_checked);
         // After a signal whatever --quiet: the line answers the operator's own Ctrl-C, and the
         // stop that follows is silent for seconds.
-        if brakes && (!self.quiet || matches!(reason, StopReason::Signal(_))) {
-            let mode = crate::envelope::stop_mode(&reason, driven, wiring_checked);
+        if mode != crate::envelope::BrakeMode::None
+            && (!self.quiet || matches!(reason, StopReason::Signal(_)))
+        {
             let lowering = crate::braking::lowering_for(self.core, &reason, mode);
             crate::say!("{}", crate::braking::stop_announcement(&reason, lowering));
         }

@@ -265,11 +265,7 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
         None => StopReason::Finished,
     };
     let mode = brake_mode(&reason);
-    let brake = if mode == BrakeMode::Modelled {
-        Brake::modelled(cfg, witness.estimate(), u_prev)
-    } else {
-        Brake::new(cfg, mode)
-    };
+    let brake = Brake::for_mode(cfg, mode, witness.estimate(), u_prev);
     let mut sim = PlantSim::new(Model::Params(cfg.spec.plant.params()), 0.0, 0.0);
     sim.set_state([x[0], x[1], x[2], x[3]]);
     sim.step_windings(Windings::Driven(applied_last), ts);
@@ -317,10 +313,8 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
             witness.set_limits(WitnessLimits::default().lowering());
             if let Err(f) = witness.observe(theta, alpha, (before_v, interval_v), dt_v, 0.0) {
                 let reason = StopReason::Witness(f);
-                let brake = match brake_mode(&reason) {
-                    BrakeMode::Modelled => Brake::modelled(cfg, witness.estimate(), interval_v),
-                    mode => Brake::new(cfg, mode),
-                };
+                let brake =
+                    Brake::for_mode(cfg, brake_mode(&reason), witness.estimate(), interval_v);
                 stop.lowering_faulted(brake);
                 ended = "witness_in_lowering";
             }

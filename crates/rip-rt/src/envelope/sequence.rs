@@ -158,7 +158,21 @@ impl StopSequence {
         self.lowered
     }
 
-    /// A period without a measurement, which the stop shorted: 0 V across the motor.
+    /// The blind rule's count ([`HOLD_BLIND_PERIODS`]) after a period whose arm reading is
+    /// `theta`, the last one `last`, `unmoved` periods in a row so far: one more when the last
+    /// command drove with at least a quarter of the voltage bound and the reading did not
+    /// change, else 0.
+    fn unmoved_while_driven(&self, theta: f64, last: f64, unmoved: u32) -> u32 {
+        let driven = self.last_volts.abs() >= 0.25 * self.voltage;
+        if driven && theta == last {
+            unmoved + 1
+        } else {
+            0
+        }
+    }
+
+    /// A period without a measurement, which the stop shorted: 0 V across the motor, as the
+    /// witness models it.
     pub fn note_short(&mut self) {
         self.last_volts = 0.0;
     }
@@ -254,12 +268,7 @@ impl StopSequence {
                 last,
                 unmoved,
             } => {
-                let driven = self.last_volts.abs() >= 0.25 * self.voltage;
-                let unmoved = if driven && theta == last {
-                    unmoved + 1
-                } else {
-                    0
-                };
+                let unmoved = self.unmoved_while_driven(theta, last, unmoved);
                 let phi = rip_core::swingup::wrap_angle(alpha - std::f64::consts::PI);
                 let pendulum_rests = self.pendulum_rest.observe_within(phi, PENDULUM_REST_RAD);
                 let done = (arm_rests && pendulum_rests)
@@ -370,12 +379,7 @@ impl StopSequence {
             // The hold law's rule: a reading that does not change while the law drives is not
             // the arm's (an arm encoder that stopped counting unseen), and the law would drive
             // the arm blind (217 rad in simulation, generated rig 33, MPC).
-            let driven = self.last_volts.abs() >= 0.25 * self.voltage;
-            let unmoved = if driven && theta == last {
-                unmoved + 1
-            } else {
-                0
-            };
+            let unmoved = self.unmoved_while_driven(theta, last, unmoved);
             let blind = unmoved >= HOLD_BLIND_PERIODS;
             if blind || !theta.is_finite() {
                 // As the hold's blind rule: the reading is not the arm's, and a law on it (the
