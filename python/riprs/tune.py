@@ -413,7 +413,9 @@ def preflight(
     Ts: float = TS,
     arm_limit: float | None = None,
 ) -> List[PreflightFinding]:
-    """The pre-flight check ``rip-rt run`` makes before enabling the motor.
+    """The pre-flight check ``rip-rt run`` makes before enabling the motor, for a run that
+    starts balanced: the swing_up check of ``rip-rt run --swing-up`` (whether the rig can be
+    swung up at all) is not made.
 
     Parameters
     ----------

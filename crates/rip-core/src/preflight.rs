@@ -1,11 +1,12 @@
 //! The pre-flight check: what is known, before the motor is enabled, about whether a controller
-//! will balance the rig it is about to run on.
+//! will balance the rig it is about to run on (and, for a run that starts hanging, whether the
+//! rig can be swung up at all).
 //!
 //! One list of checks ([`CHECKS`]) runs over the same input ([`Input`]: the designed
-//! controllers of the experiment file, the controller chosen, the rig file); each gives a
-//! [`Finding`] that passes, warns or refuses with its reason. `rip-rt run` runs them after the
-//! controller design and before the port is opened, and refuses a run that any check refuses
-//! (exit 16) unless `--force` is given.
+//! controllers of the experiment file, the controller chosen, the rig file, whether the run
+//! swings up); each gives a [`Finding`] that passes, warns or refuses with its reason. `rip-rt
+//! run` runs them after the controller design and before the port is opened, and refuses a
+//! run that any check refuses (exit 16) unless `--force` is given.
 //!
 //! The checks, in order:
 //!
@@ -39,13 +40,20 @@
 //!   (a warning): the loop's timing probe judges it. A current tuning record beside the rig
 //!   file ([`tune_record_path`]) stands for the simulation; a record that is there but cannot
 //!   be read (not a regular file, too large, not a record) refuses.
+//! - **swing_up** — for a run that swings up ([`Input::swing_up`]) only: the rig cannot be
+//!   swung up at all by rip-core's energy balance of the last swing
+//!   ([`crate::swingup::feasibility()`]), whatever the law. The verdict is the one `riprs tune`
+//!   stored in the tuning record beside the rig file while its checksum matches, otherwise
+//!   computed now ([`crate::swingup::stored_or_computed`]). A refusal names the key whose
+//!   bound is short (`swing_up.max_voltage` or `swing_up.arm_limit`) and what it would need; a
+//!   pass says where the verdict came from ([`swing`]).
 //!
 //! Every file beside the rig file is read as the experiment file is
 //! ([`crate::spec::read_text`]): regular files only, bounded in size, so that a FIFO or a
 //! device named like a record can neither hang the check nor fill its memory.
 //!
-//! Further checks (the swing-up's feasibility, a stored tuning's verdict) join by adding a
-//! function to [`CHECKS`]; each returns `None` when it does not apply to the input.
+//! Further checks (a stored tuning's verdict) join by adding a function to [`CHECKS`]; each
+//! returns `None` when it does not apply to the input.
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -57,6 +65,7 @@ use serde::{Deserialize, Serialize};
 use crate::linalg::Mat;
 
 pub mod motion;
+pub mod swing;
 use crate::sim::simulate;
 use crate::spec::{ControllerKind, Design};
 pub use motion::{
@@ -143,13 +152,16 @@ pub struct Input<'a> {
     /// `safety.arm_limit` (rad), when the caller enforces one: a predicted arm beyond it is a
     /// refusal.
     pub arm_limit: Option<f64>,
+    /// Whether the run starts hanging and swings up (`rip-rt run --swing-up`): only then does
+    /// the swing_up check apply.
+    pub swing_up: bool,
 }
 
 /// A check: `None` when it does not apply to the input.
 pub type Check = fn(&Input<'_>) -> Option<Finding>;
 
 /// Every check, in the order they run (module docs).
-pub const CHECKS: [Check; 3] = [identification, voltage, prediction];
+pub const CHECKS: [Check; 4] = [identification, voltage, prediction, swing::swing_up];
 
 /// The findings of every check.
 #[derive(Debug, Clone, PartialEq)]
@@ -668,6 +680,7 @@ mod tests {
                 controller: kind,
                 rig_file: None,
                 arm_limit: Some(2.0),
+                swing_up: false,
             });
             assert!(!report.refused(), "{kind:?}: {report}");
             assert_eq!(report.findings.len(), 2);
@@ -696,6 +709,7 @@ mod tests {
             controller: ControllerKind::Lqr,
             rig_file: None,
             arm_limit: None,
+            swing_up: false,
         });
         let v = report.finding("voltage").unwrap();
         assert_eq!(v.verdict, Verdict::Refuse, "{report}");

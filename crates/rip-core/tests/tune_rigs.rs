@@ -88,6 +88,7 @@ fn judge(name: &str, text: &str, bar: &Bar) -> Judged {
                 controller: a.kind,
                 rig_file: None,
                 arm_limit: Some(3.0),
+                swing_up: false,
             });
             if !report.refused() {
                 bad.push(format!(
@@ -204,6 +205,7 @@ fn a_rig_whose_controller_falls_is_refused_by_the_preflight() {
         controller: falls.kind,
         rig_file: None,
         arm_limit: Some(3.0),
+        swing_up: false,
     });
     let p = report.finding("prediction").unwrap();
     assert_eq!(p.verdict, Verdict::Refuse, "{report}");

@@ -28,6 +28,7 @@ use rip_rt::stop::{self, exit_code, SetupError, StopReason};
 use rip_rt::timing;
 
 mod excite_cmd;
+mod preflight_cmd;
 use excite_cmd::{ExciteArgs, EXCITE_AFTER_HELP};
 
 const RUN_AFTER_HELP: &str = "\
@@ -59,7 +60,8 @@ Exit codes (docs/rip-rt.md has the safety rules behind each):
          what the applied voltage must produce; the message names the likely fault)
     16   refused to start by the pre-flight check: an untrusted identification, an
          identification or tuning record beside the rig file that cannot be read, a rig no
-         controller can balance at the voltage bound, or a controller predicted to fall (the
+         controller can balance at the voltage bound, a controller predicted to fall, or with
+         --swing-up a rig that cannot be swung up (the energy balance of the last swing) (the
          message says why; --force runs it anyway; motor never enabled)
     101  internal error (panic)
     128+N  stopped by signal N: 129 SIGHUP, 130 SIGINT (Ctrl-C), 131 SIGQUIT, 143 SIGTERM,
@@ -239,7 +241,7 @@ struct RunArgs {
     onboard: bool,
     /// Run even when the pre-flight check refuses (an untrusted or unreadable
     /// identification, an unreadable tuning record, a rig no controller can balance at the
-    /// voltage bound, a controller predicted to fall; exit 16).
+    /// voltage bound, a controller predicted to fall, a rig that cannot be swung up; exit 16).
     #[arg(long)]
     force: bool,
     /// Publish every period's telemetry to `riprs watch` on UDP port PORT of 127.0.0.1
@@ -441,11 +443,8 @@ fn prepare(args: &RunArgs) -> Result<(Config, Law, SerialPort, Option<LogWriter>
         Law::Onboard(image)
     } else {
         let controller = if args.swing_up {
-            cfg.validate_swing_up(args.config.as_deref())
-                .and_then(|(f, source)| {
-                    rip_rt::say!("rip-rt: swing-up feasibility: {f} (verdict {source})");
-                    rip_rt::envelope::check_swing_up(&cfg)
-                })
+            cfg.validate_swing_up()
+                .and_then(|()| rip_rt::envelope::check_swing_up(&cfg))
                 .map_err(|e| match &args.config {
                     Some(path) => e.in_file(path),
                     None => e,
@@ -457,31 +456,7 @@ fn prepare(args: &RunArgs) -> Result<(Config, Law, SerialPort, Option<LogWriter>
         .map_err(SetupError::Design)?;
         Law::Host(Box::new(LoopCore::new(controller, &cfg)?))
     };
-    let report = controllers::preflight(args.controller, &cfg, args.config.as_deref())
-        .map_err(SetupError::Design)?;
-    if report.refused() {
-        if !args.force {
-            return Err(SetupError::Preflight(report.to_string()));
-        }
-        for f in report.refusals() {
-            rip_rt::say!("rip-rt: warning: --force: {f}");
-        }
-    } else {
-        // Silence after a pass read as a check that never ran; its warnings were not shown.
-        let verdicts: Vec<String> = report
-            .findings
-            .iter()
-            .map(|f| format!("{} {}", f.check, f.verdict.name()))
-            .collect();
-        rip_rt::say!("rip-rt: pre-flight: passed ({})", verdicts.join(", "));
-        for f in report
-            .findings
-            .iter()
-            .filter(|f| f.verdict == rip_core::preflight::Verdict::Warn)
-        {
-            rip_rt::say!("rip-rt: pre-flight: {f}");
-        }
-    }
+    preflight_cmd::check(args, &cfg)?;
     stop::install_signal_handlers()?;
     let port = SerialPort::open(&args.port, args.baud).map_err(SetupError::Port)?;
     let log = match &args.log {

@@ -91,36 +91,11 @@ impl Config {
 
     /// The swing-up's settings against the safety limits, as [`RigSections::validate`] checks
     /// them for a file that sets `[swing_up]`: what `rip-rt run --swing-up` requires whatever
-    /// the file sets, before its braking envelope (`envelope::check_swing_up`). Then whether
-    /// the rig can be swung up at all (rip-core's energy balance of the last swing): the
-    /// verdict `riprs tune` stored in the tuning record beside `rig_file` while its checksum
-    /// matches, otherwise computed now. Returns the verdict and where it came from; a rig the
-    /// voltage bound and the arm travel cannot swing up is refused before the motor moves,
-    /// naming what it would need.
-    pub fn validate_swing_up(
-        &self,
-        rig_file: Option<&std::path::Path>,
-    ) -> Result<
-        (
-            rip_core::swingup::Feasibility,
-            rip_core::swingup::VerdictSource,
-        ),
-        ConfigError,
-    > {
-        self.rig().validate_swing_up(&self.spec)?;
-        let s = &self.spec.swing_up;
-        let plant = self.spec.plant()?;
-        let record = rig_file.map(rip_core::preflight::tune_record_path);
-        let (f, source) = rip_core::swingup::stored_or_computed(&plant, s, record.as_deref());
-        if f.verdict == rip_core::swingup::Verdict::Impossible {
-            let key = if f.voltage_needed.is_some() || f.arm_travel_needed.is_none() {
-                "swing_up.max_voltage"
-            } else {
-                "swing_up.arm_limit"
-            };
-            return Err(SpecError::new(key, format!("{f} (verdict {source})")));
-        }
-        Ok((f, source))
+    /// the file sets, before its braking envelope (`envelope::check_swing_up`). Whether the rig
+    /// can be swung up at all is not a setting's fault but the rig's: the pre-flight's
+    /// swing_up check judges it (`rip_core::preflight::swing`), which `--force` can override.
+    pub fn validate_swing_up(&self) -> Result<(), ConfigError> {
+        self.rig().validate_swing_up(&self.spec)
     }
 
     /// The control period in nanoseconds.
@@ -148,15 +123,25 @@ mod tests {
     }
 
     #[test]
-    fn a_rig_that_cannot_be_swung_up_is_refused_naming_the_voltage_it_needs() {
+    fn a_rig_that_cannot_be_swung_up_is_left_to_the_preflight() {
+        // Its settings are valid: the refusal is the pre-flight's, which --force overrides.
         let cfg = Config::from_toml("[swing_up]\nmax_voltage = 0.05\n").unwrap();
-        let e = cfg.validate_swing_up(None).unwrap_err().to_string();
-        assert!(e.contains("swing_up.max_voltage"), "{e}");
+        cfg.validate_swing_up().unwrap();
+        let lqr = crate::controllers::ControllerKind::Lqr;
+        let report = crate::controllers::preflight(lqr, &cfg, None, true).unwrap();
+        let f = report.finding("swing_up").unwrap();
+        assert_eq!(f.verdict, rip_core::preflight::Verdict::Refuse, "{report}");
+        assert!(f.message.contains("swing_up.max_voltage"), "{f}");
         assert!(
-            e.contains("no swing-up is possible") && e.contains(" V "),
-            "{e}"
+            f.message.contains("no swing-up is possible") && f.message.contains(" V "),
+            "{f}"
         );
-        Config::default().validate_swing_up(None).unwrap();
+        Config::default().validate_swing_up().unwrap();
+        // A bad setting is still the configuration's error.
+        let mut wide = Config::default();
+        wide.spec.swing_up.max_voltage = wide.safety.voltage_limit + 1.0;
+        let e = wide.validate_swing_up().unwrap_err();
+        assert_eq!(e.key, "swing_up.max_voltage", "{e}");
     }
 
     #[test]

@@ -82,11 +82,13 @@ pub(crate) fn design(kind: ControllerKind, cfg: &Config) -> Result<rip_core::spe
 
 /// The pre-flight check (rip-core's [`rip_core::preflight`]) of the balance controller `kind`
 /// as [`build`] designs it, on the rig of `cfg` (from the file `rig_file`), with
-/// `safety.arm_limit` as the arm's bound.
+/// `safety.arm_limit` as the arm's bound; with `swing_up`, for a run that swings up first
+/// (its swing_up check, the rig's feasibility, then applies).
 pub fn preflight(
     kind: ControllerKind,
     cfg: &Config,
     rig_file: Option<&std::path::Path>,
+    swing_up: bool,
 ) -> Result<rip_core::preflight::Report, String> {
     let design = design(kind, cfg)?;
     Ok(rip_core::preflight::run(&rip_core::preflight::Input {
@@ -94,6 +96,7 @@ pub fn preflight(
         controller: kind.into(),
         rig_file,
         arm_limit: Some(cfg.safety.arm_limit),
+        swing_up,
     }))
 }
 

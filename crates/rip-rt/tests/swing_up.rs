@@ -813,22 +813,60 @@ fn a_reversed_motor_or_arm_encoder_is_refused_before_the_swing_with_exit_14() {
     }
 }
 
+/// 0.05 V cannot make up the pendulum's friction over its last swing (rip-core's energy
+/// balance): the pre-flight's swing_up check refuses the run (exit 16), naming the voltage it
+/// would need, before the port is opened, so before any enabling command. `--force` overrides
+/// it as it does every pre-flight refusal: the run goes on to the rest check and the sign
+/// check's pulse, and then swings in vain until `swing_up.max_time`.
 #[test]
-fn a_rig_that_cannot_be_swung_up_is_refused_before_the_port_is_opened() {
-    // 0.05 V cannot make up the pendulum's friction over its last swing (rip-core's energy
-    // balance): the run ends with the configuration error, naming the voltage it would need,
-    // before the (nonexistent) port is touched, so before any enabling command.
-    let file = scratch("swing-impossible.toml");
-    std::fs::write(&file, "[swing_up]\nmax_voltage = 0.05\n").unwrap();
-    let r = run(
-        std::path::Path::new("/nonexistent"),
-        "lqr",
-        &["--swing-up", "--config", file.to_str().unwrap()],
+fn a_rig_that_cannot_be_swung_up_is_refused_by_the_preflight_unless_forced() {
+    let _serial = one_at_a_time();
+    let cfg = config(
+        "swing-impossible",
+        "[swing_up]\nmax_voltage = 0.05\nmax_time = 1.0\n",
     );
-    assert_eq!(r.status.code(), Some(2), "{}", r.stderr);
-    assert!(r.stderr.contains("swing_up.max_voltage"), "{}", r.stderr);
-    assert!(r.stderr.contains("no swing-up is possible"), "{}", r.stderr);
+    let args = ["--swing-up", "--config", cfg.to_str().unwrap()];
+    let refused = |r: &RunResult| {
+        assert_eq!(r.status.code(), Some(16), "{}", r.stderr);
+        assert!(
+            r.stderr
+                .contains("swing_up [refuse]: swing_up.max_voltage: no swing-up is possible")
+                && r.stderr.contains("it would need about")
+                && r.stderr.contains("--force"),
+            "{}",
+            r.stderr
+        );
+    };
+    let r = run(std::path::Path::new("/nonexistent"), "lqr", &args);
+    refused(&r);
     assert!(!r.stderr.contains("/nonexistent"), "{}", r.stderr);
+
+    let emu = hanging_rig("swing-impossible", &cfg, &[], true);
+    refused(&run_lockstep(&emu.device, "lqr", &args));
+    // The emulator writes its record once it runs; a refusal can come before that.
+    let start = std::time::Instant::now();
+    while !emu.record.exists() {
+        assert!(start.elapsed().as_secs() < 30, "no record {:?}", emu.record);
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    assert_eq!(before_enabling(&emu.commands()), emu.commands().len());
+
+    let mut forced = args.to_vec();
+    forced.push("--force");
+    let r = run_lockstep(&emu.device, "lqr", &forced);
+    assert_ne!(r.status.code(), Some(16), "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("warning: --force: swing_up [refuse]: swing_up.max_voltage"),
+        "{}",
+        r.stderr
+    );
+    let commands = emu.commands();
+    assert!(
+        before_enabling(&commands) < commands.len(),
+        "the motor was never enabled: {}",
+        r.stderr
+    );
 }
 
 /// The feasibility verdict `riprs tune` stored beside the rig file is the one the run uses
@@ -860,7 +898,8 @@ fn the_run_reads_the_stored_swing_up_verdict_while_its_checksum_matches() {
     let nowhere = std::path::Path::new("/nonexistent");
     let args = ["--swing-up", "--config", file.to_str().unwrap()];
     let r = run(nowhere, "lqr", &args);
-    assert_eq!(r.status.code(), Some(2), "{}", r.stderr);
+    assert_eq!(r.status.code(), Some(16), "{}", r.stderr);
+    assert!(r.stderr.contains("swing_up [refuse]"), "{}", r.stderr);
     assert!(r.stderr.contains("about 99.0 V"), "{}", r.stderr);
     assert!(r.stderr.contains("stored by riprs tune"), "{}", r.stderr);
     assert!(!r.stderr.contains("/nonexistent"), "{}", r.stderr);

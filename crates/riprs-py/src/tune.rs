@@ -328,8 +328,9 @@ fn tune_robustness(
         .collect())
 }
 
-/// The pre-flight check of ``controller`` on the spec's rig (``rip_core::preflight``):
-/// ``(check, verdict, message)`` per check that applied.
+/// The pre-flight check of ``controller`` on the spec's rig (``rip_core::preflight``) for a run
+/// that starts balanced: ``(check, verdict, message)`` per check that applied. The swing_up
+/// check, which only ``rip-rt run --swing-up`` makes, does not apply.
 #[pyfunction]
 #[pyo3(signature = (spec, controller, Ts = rip_core::paper::TS, rig_file = None, arm_limit = None))]
 #[allow(non_snake_case)]
@@ -352,6 +353,7 @@ fn preflight_check(
                     controller: kind,
                     rig_file: rig_file.as_deref(),
                     arm_limit,
+                    swing_up: false,
                 })
             })
         })

@@ -1,7 +1,8 @@
 //! The feasibility verdict stored in the tuning record: `riprs tune` computes it when the rig
 //! file is made and writes it as the record's `[swing_up]` table
-//! (beside the rig file, `crate::preflight::tune_record_path`); `rip-rt run --swing-up` reads
-//! it while its checksum matches the inputs and computes it again otherwise.
+//! (beside the rig file, `crate::preflight::tune_record_path`); the swing_up check of `rip-rt
+//! run --swing-up`'s pre-flight (`crate::preflight::swing`) reads it while its checksum matches
+//! the inputs and computes it again otherwise.
 
 use std::path::{Path, PathBuf};
 

@@ -136,6 +136,7 @@ pub fn check_voltage(spec: &Spec, ts: f64) -> Result<(), SpecError> {
         controller: ControllerKind::Lqr,
         rig_file: None,
         arm_limit: None,
+        swing_up: false,
     });
     match finding {
         Some(f) if f.verdict == Verdict::Refuse => Err(SpecError::new("", f.message)),

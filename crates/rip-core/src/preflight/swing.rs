@@ -1,0 +1,95 @@
+//! The pre-flight's **swing_up** check: whether the rig can be swung up at all, for a run that
+//! starts hanging (`rip-rt run --swing-up`).
+//!
+//! The verdict is rip-core's energy balance of the last swing
+//! ([`crate::swingup::feasibility()`]): the one `riprs tune` stored in the tuning record beside
+//! the rig file ([`super::tune_record_path`]) while its checksum matches the model and the
+//! swing-up's bounds, otherwise computed now ([`crate::swingup::stored_or_computed`]). A rig
+//! the balance declares impossible refuses, naming the key whose bound is short and what it
+//! would need; a rig it does not exclude passes, saying where the verdict came from. The
+//! balance is a necessary condition: a rig that passes may still not swing up.
+
+use crate::swingup::{stored_or_computed, Feasibility, Verdict as Balance};
+
+use super::{tune_record_path, Finding, Input, Verdict};
+
+/// The key a refusal names: the voltage where more of it would do (or where nothing named
+/// would), otherwise the arm travel, the one bound left that could.
+fn short_key(f: &Feasibility) -> &'static str {
+    if f.voltage_needed.is_some() || f.arm_travel_needed.is_none() {
+        "swing_up.max_voltage"
+    } else {
+        "swing_up.arm_limit"
+    }
+}
+
+/// The swing_up check (module docs); `None` when the run does not swing up.
+pub fn swing_up(input: &Input<'_>) -> Option<Finding> {
+    if !input.swing_up {
+        return None;
+    }
+    let spec = input.design.spec();
+    let plant = match spec.plant() {
+        Ok(p) => p,
+        Err(e) => return Some(Finding::new("swing_up", Verdict::Refuse, e.to_string())),
+    };
+    let record = input.rig_file.map(tune_record_path);
+    let (f, source) = stored_or_computed(&plant, &spec.swing_up, record.as_deref());
+    Some(match f.verdict {
+        Balance::Impossible => Finding::new(
+            "swing_up",
+            Verdict::Refuse,
+            format!(
+                "{}: {f} (verdict {source}); change the rig or its [swing_up] settings, or \
+                 pass --force",
+                short_key(&f)
+            ),
+        ),
+        Balance::NotExcluded => {
+            Finding::new("swing_up", Verdict::Pass, format!("{f} (verdict {source})"))
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::preflight::run;
+    use crate::spec::{ControllerKind, Spec};
+
+    fn report(text: &str, swing_up: bool) -> crate::preflight::Report {
+        let design = Spec::parse(text).unwrap().design(crate::paper::TS).unwrap();
+        run(&Input {
+            design: &design,
+            controller: ControllerKind::Lqr,
+            rig_file: None,
+            arm_limit: Some(2.0),
+            swing_up,
+        })
+    }
+
+    #[test]
+    fn a_rig_too_weak_to_swing_up_is_refused_naming_the_voltage_it_needs() {
+        let weak = report("[swing_up]\nmax_voltage = 0.05\n", true);
+        let f = weak.finding("swing_up").unwrap();
+        assert_eq!(f.verdict, Verdict::Refuse, "{weak}");
+        assert!(f.message.starts_with("swing_up.max_voltage: "), "{f}");
+        assert!(f.message.contains("no swing-up is possible"), "{f}");
+        assert!(f.message.contains("it would need about"), "{f}");
+        assert!(f.message.contains("computed now (no rig file)"), "{f}");
+        assert!(f.message.ends_with("or pass --force"), "{f}");
+        // The balance controller is not what is refused.
+        assert_eq!(weak.refusals().count(), 1, "{weak}");
+    }
+
+    #[test]
+    fn the_default_rig_passes_and_a_balance_run_is_not_checked() {
+        let swing = report("", true);
+        let f = swing.finding("swing_up").unwrap();
+        assert_eq!(f.verdict, Verdict::Pass, "{swing}");
+        assert!(f.message.contains("a swing-up is not excluded"), "{f}");
+        assert!(!swing.refused(), "{swing}");
+        let balance = report("[swing_up]\nmax_voltage = 0.05\n", false);
+        assert!(balance.finding("swing_up").is_none(), "{balance}");
+    }
+}
