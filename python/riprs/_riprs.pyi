@@ -701,7 +701,17 @@ def tune_weights(
     Ts: float = ...,
     untrusted: str | None = ...,
     progress: Callable[[int, int], object] | None = ...,
-) -> tuple[Spec, dict[str, float], bool, list[dict[str, Any]], int, str, str | None]: ...
+) -> tuple[
+    Spec,
+    dict[str, float],
+    bool,
+    list[dict[str, Any]],
+    int,
+    str,
+    str | None,
+    dict[str, str],
+    dict[str, Any],
+]: ...
 def tune_robustness(
     spec: Spec,
     runs: int,

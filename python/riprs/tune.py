@@ -33,6 +33,7 @@ from riprs._riprs import (
 from riprs.identify import IdentifyError, identification_path, read_plant_covariance
 
 __all__ = [
+    "Bar",
     "ControllerTuning",
     "Margins",
     "PreflightFinding",
@@ -88,6 +89,58 @@ class Margins:
 
 
 @dataclass(frozen=True)
+class Bar:
+    """The bar a tuned controller is held to on one rig (``rip_core::tune::Bar::for_rig``).
+
+    Attributes
+    ----------
+    arm_peak_to_peak : float
+        Largest steady-state arm peak-to-peak (rad): ``max(0.05, 2 * floor)``.
+    floor : float
+        The sensor's floor: the arm peak-to-peak of the file's own LQR on the same rig
+        without dead zone, Coulomb friction or stiction, with the same encoders and noise
+        (rad; ``inf`` when that LQR falls).
+    pendulum, offset : float
+        Largest steady-state ``|alpha|`` and arm offset from the reference (rad).
+    gain_margin_db, phase_margin_deg : float
+        LQR's smallest gain margin both ways (dB) and phase margin (degrees).
+    disk_margin : float
+        LQG's and the MPC's smallest balanced disk margin.
+    off_compensation : float
+        The relative error of the compensation (0.3: the dead zone and arm friction it
+        assumes 0.7 and 1.3 times the plant's, with the arm's stiction on).
+    off_peak_to_peak, off_peak_to_peak_mpc : float
+        Largest arm peak-to-peak with the compensation off (rad): LQR and LQG, the MPC.
+    summary : str
+        The bar in one line.
+    """
+
+    arm_peak_to_peak: float
+    floor: float
+    pendulum: float
+    offset: float
+    gain_margin_db: float
+    phase_margin_deg: float
+    disk_margin: float
+    off_compensation: float
+    off_peak_to_peak: float
+    off_peak_to_peak_mpc: float
+    summary: str
+
+    @classmethod
+    def _from(cls, d: Dict[str, object]) -> Bar:
+        floor = d["floor"]
+        return cls(
+            **{
+                k: (str(v) if k == "summary" else float(v))  # type: ignore[arg-type]
+                for k, v in d.items()
+                if k != "floor"
+            },
+            floor=float("nan") if floor is None else float(floor),  # type: ignore[arg-type]
+        )
+
+
+@dataclass(frozen=True)
 class ControllerTuning:
     """How one tuned controller does on the rig's model.
 
@@ -109,11 +162,14 @@ class ControllerTuning:
         Steady state over the last 3 s (rad): arm peak-to-peak, largest ``|alpha|``, arm offset.
     margins_ok, works : bool
         Whether the margins, and everything of the bar, hold.
-    exact_sensor : tuple of float or None
-        For a controller that balances outside the steady-state bar: its steady state
-        ``(arm peak-to-peak, |alpha|, offset)`` with exact angles (no quantisation, no noise).
-    sensor_limited : bool
-        Whether the miss is the sensor's: with exact angles the same design meets the bar.
+    off_compensation_peak_to_peak : float
+        Steady-state arm peak-to-peak (rad) with the compensation 30 % off either way and the
+        arm's stiction on, the worst over both; NaN where the rig compensates nothing.
+    off_compensation_fell : bool
+        Whether a run with the compensation off fell.
+    misses : str or None
+        What of :class:`Bar` it misses on this rig, or None when it works; ``rip-rt run``'s
+        pre-flight warns with the same words.
     balanced_fraction : float
         Fraction of the robustness runs (rigs drawn around this one) it balanced; NaN when
         none were run.
@@ -130,8 +186,9 @@ class ControllerTuning:
     offset: float
     margins_ok: bool
     works: bool
-    exact_sensor: Tuple[float, float, float] | None = None
-    sensor_limited: bool = False
+    off_compensation_peak_to_peak: float = float("nan")
+    off_compensation_fell: bool = False
+    misses: str | None = None
     balanced_fraction: float = float("nan")
 
 
@@ -148,11 +205,20 @@ class TuneResult:
         and on the MPC's weights by their square roots), ``measurement_noise`` (on
         ``kalman.measurement_noise``), the ``integral_weight`` set and ``recovery``, the
         loop-transfer-recovery parameter ``q`` (``kalman.disturbance_gain`` and
-        ``kalman.measurement_noise`` divided by it: ``rip_core::tune::RECOVERY``).
+        ``kalman.measurement_noise`` divided by it: ``rip_core::tune::RECOVERY``); and the
+        controllers' own keys changed on top of these where the shared cost left them short
+        of the bar (``rip_core::tune::own``): LQG's filter, ``lqg_measurement_noise`` and
+        ``lqg_disturbance`` (factors on ``kalman.measurement_noise`` and
+        ``kalman.disturbance_gain``, which the MPC shares), and the MPC's weights,
+        ``mpc_arm``, ``mpc_pendulum``, ``mpc_rate`` (factors on its output and input-rate
+        weights, by their square roots) and ``mpc_input`` (an input weight, relative to the
+        input-rate weight).
     kept_file_weights : bool
         Whether the file's own weights were kept (they already worked).
     works : bool
         Whether every controller meets the bar with them.
+    bar : Bar
+        The rig's bar.
     controllers : dict
         :class:`ControllerTuning` per controller name.
     tried : int
@@ -187,6 +253,7 @@ class TuneResult:
     weights: Dict[str, float]
     kept_file_weights: bool
     works: bool
+    bar: Bar
     controllers: Dict[str, ControllerTuning]
     tried: int
     runs: int
@@ -246,6 +313,21 @@ class TuneResult:
                 f"kalman.measurement_noise x{w['measurement_noise']:g}, "
                 f"lqr.integral_weight {w['integral_weight']:g}, "
                 f"loop transfer recovery q = {w['recovery']:g}"
+                + (
+                    f"; LQG's own filter: kalman.measurement_noise "
+                    f"x{w['lqg_measurement_noise']:g}, kalman.disturbance_gain "
+                    f"x{w['lqg_disturbance']:g}"
+                    if (w["lqg_measurement_noise"], w["lqg_disturbance"]) != (1.0, 1.0)
+                    else ""
+                )
+                + (
+                    f"; the MPC's own: output weights x sqrt({w['mpc_arm']:g}), "
+                    f"x sqrt({w['mpc_pendulum']:g}), input rate x sqrt({w['mpc_rate']:g}), "
+                    f"input weight {w['mpc_input']:g} x the rate's"
+                    if (w["mpc_arm"], w["mpc_pendulum"], w["mpc_rate"], w["mpc_input"])
+                    != (1.0, 1.0, 1.0, 0.0)
+                    else ""
+                )
             ),
             f"lqr.Q = {list(self.spec.lqr.Q)}, lqr.R = {self.spec.lqr.R:g}, "
             f"mpc.output_weights = {list(self.spec.mpc.output_weights)}, "
@@ -264,34 +346,30 @@ class TuneResult:
                 f"{m.disk_margin:5.2f} | {c.arm_peak_to_peak:7.3f} {c.pendulum:7.3f} "
                 f"{c.offset:6.3f} {c.peak_voltage:6.2f} | {frac} of {self.runs}"
                 + ("  (falls)" if c.fell else "" if c.works else "  (misses the bar)")
-                + (
-                    f"; the sensor's: with exact angles arm p-p {c.exact_sensor[0]:.3f}"
-                    if c.sensor_limited and c.exact_sensor is not None
-                    else ""
-                )
             )
+        off = [
+            f"{n} falls"
+            if c.off_compensation_fell
+            else f"{n} p-p {c.off_compensation_peak_to_peak:.3f}"
+            for n, c in self.controllers.items()
+        ]
+        lines.append(
+            f"with the compensation {self.bar.off_compensation:.0%} off and stiction: "
+            + ", ".join(off)
+        )
         lines.append("")
-        falls = [n for n, c in self.controllers.items() if c.fell]
+        lines.append(f"the rig's bar: {self.bar.summary}")
+        short = {n: c for n, c in self.controllers.items() if c.misses is not None}
         if self.works:
-            lines.append(
-                "every controller meets the bar (steady-state arm p-p <= 0.05, |alpha| <= 0.02, "
-                "offset <= 0.02 rad; inside the voltage bound; margins >= 6 dB and 30 deg or "
-                "disk >= 0.67)"
-            )
+            lines.append("every controller meets the bar")
         elif self.refusal is not None:
             lines.append(f"NO controller balances this rig: {self.refusal}")
         else:
             lines.append(
                 "NOT every controller meets the bar with any candidate tried: these weights miss "
-                "it by least (see the rows marked)"
-                + (
-                    f"; {' and '.join(falls)} {'falls' if len(falls) == 1 else 'fall'} on the "
-                    "rig's model, and rip-rt run's pre-flight refuses "
-                    + ("it" if len(falls) == 1 else "them")
-                    if falls
-                    else ""
-                )
+                "it by least (rip-rt run's pre-flight warns with the same words):"
             )
+            lines += [f"  SHORT {n}: {c.misses}" for n, c in short.items()]
         return "\n".join(lines)
 
     def to_toml(self) -> str:
@@ -600,9 +678,17 @@ def tune(
         bar.refresh()
 
     try:
-        tuned, weights, works, assessments, tried, record, refusal = tune_weights(
-            spec, Ts, untrusted, None if bar is None else advance
-        )
+        (
+            tuned,
+            weights,
+            works,
+            assessments,
+            tried,
+            record,
+            refusal,
+            shortfalls,
+            rig_bar,
+        ) = tune_weights(spec, Ts, untrusted, None if bar is None else advance)
         if bar is not None:
             bar.n = bar.total - runs
             bar.refresh()
@@ -645,14 +731,11 @@ def tune(
             offset=float(a["offset"]),
             margins_ok=bool(a["margins_ok"]),
             works=bool(a["works"]),
-            exact_sensor=None
-            if a["exact_sensor"] is None
-            else (
-                float(a["exact_sensor"][0]),
-                float(a["exact_sensor"][1]),
-                float(a["exact_sensor"][2]),
-            ),
-            sensor_limited=bool(a["sensor_limited"]),
+            off_compensation_peak_to_peak=float("nan")
+            if a["off_compensation_peak_to_peak"] is None
+            else float(a["off_compensation_peak_to_peak"]),
+            off_compensation_fell=bool(a["off_compensation_fell"]),
+            misses=shortfalls.get(name),
             balanced_fraction=fractions.get(name, float("nan")),
         )
     kept = weights == {
@@ -662,12 +745,19 @@ def tune(
         "integral_weight": 0.0,
         "measurement_noise": 1.0,
         "recovery": 1.0,
+        "lqg_measurement_noise": 1.0,
+        "lqg_disturbance": 1.0,
+        "mpc_arm": 1.0,
+        "mpc_pendulum": 1.0,
+        "mpc_rate": 1.0,
+        "mpc_input": 0.0,
     }
     return TuneResult(
         spec=tuned,
         weights=dict(weights),
         kept_file_weights=kept,
         works=bool(works),
+        bar=Bar._from(rig_bar),
         controllers=controllers,
         tried=int(tried),
         runs=runs,

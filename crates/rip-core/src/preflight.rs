@@ -422,7 +422,7 @@ pub fn design_checksum(design: &Design) -> String {
 }
 
 /// What `riprs tune` predicted for one controller, as stored in its record.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StoredPrediction {
     /// Whether a predicted run fell or diverged.
     pub fell: bool,
@@ -436,6 +436,9 @@ pub struct StoredPrediction {
     pub disk_margin: f64,
     /// Whether it met the whole bar of the tuning.
     pub works: bool,
+    /// What of the rig's bar it misses, when it did not work.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub misses: Option<String>,
 }
 
 /// The record `riprs tune` writes beside the tuned file ([`tune_record_path`]): the checksum
@@ -532,7 +535,7 @@ fn stored_prediction(input: &Input<'_>) -> Result<Finding, String> {
             ));
         }
     }
-    Ok(Finding::new(
+    let finding = Finding::new(
         "prediction",
         if p.works {
             Verdict::Pass
@@ -547,13 +550,14 @@ fn stored_prediction(input: &Input<'_>) -> Result<Finding, String> {
             p.arm_peak_to_peak,
             p.pendulum,
             p.disk_margin,
-            if p.works {
-                ""
-            } else {
-                "; it misses the tuning's bar"
+            match (&p.misses, p.works) {
+                (_, true) => String::new(),
+                (Some(why), false) => format!("; but {why}"),
+                (None, false) => "; it misses the tuning's bar".to_string(),
             }
         ),
-    ))
+    );
+    Ok(finding)
 }
 
 fn prediction(input: &Input<'_>) -> Option<Finding> {

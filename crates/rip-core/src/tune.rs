@@ -11,106 +11,67 @@
 //! `q` of [`RECOVERY`] with which the margins of LQG and the MPC, the two controllers on the
 //! shared estimator, meet the bar ([`choose_recovery`]; LQR's margins do not depend on it).
 //!
-//! A candidate **works** when every controller, on the rig's nonlinear model (its dead zone,
-//! friction and stiction; `[sensor]`; the `[reference]` step, [`SEEDS`] noise seeds) and with
-//! the file's compensation:
+//! A candidate **works** when every controller meets the rig's bar ([`Bar::for_rig`], whose
+//! docs give it whole), on the rig's nonlinear model (its dead zone, friction and stiction;
+//! `[sensor]`; the `[reference]` step, [`SEEDS`] noise seeds):
 //!
-//! - balances (no fall, no divergence), with the steady state over the last
-//!   [`Bar::window`] seconds inside the bar: arm peak-to-peak, pendulum `|α|`, arm offset
+//! - with the file's compensation it balances (no fall, no divergence), with the steady state
+//!   over the last [`Bar::window`] seconds inside the bar: arm peak-to-peak (raised above
+//!   0.05 rad by what the sensor alone costs the rig), pendulum `|α|`, arm offset
 //!   `|mean θ − θ_ref|`;
-//! - respects the voltage bound: LQR and LQG never reach their clamp (the MPC plans within
+//! - it respects the voltage bound: LQR and LQG never reach their clamp (the MPC plans within
 //!   it by construction);
-//! - has robustness margins of its linearised loop at the plant input (crate::margins) of at
-//!   least [`Bar::gain_margin_db`] both ways and [`Bar::phase_margin_deg`], or the disk margin
-//!   of the same disk ([`Bar::disk_margin`]).
+//! - with the compensation 30 % off either way and the arm's stiction on, it does not fall and
+//!   its arm stays within [`Bar::off_limit`]: the candidates are scored with the error a
+//!   compensation identified on a real rig has in view;
+//! - the margins of its linearised loop at the plant input (crate::margins) meet the bar:
+//!   LQR's classical ones, LQG's and the MPC's disk margin.
 //!
 //! [`tune`] tries the file's own weights first and keeps them when they work; otherwise the
 //! candidates of [`candidates`] in order (closest to the file's first) and keeps the first
 //! that works (a candidate whose recovered LQG or MPC misses the margins cannot work, so it is
 //! simulated only once none does). When none does, it tries again those whose recovery was
 //! raised, without it (a recovered estimator trusts the sensor more, which a coarse or noisy
-//! one may not bear), and keeps the one that misses the bar by least (and says so): one that balances
+//! one may not bear), and keeps the one that misses the bar by least: one that balances
 //! within the bar and the voltage bound beats any that does not, and among equals the one
-//! nearer the margins wins.
+//! nearer the margins wins; the MPC's own weights are then searched where the shared ones leave
+//! it short ([`own`]). Each controller that still misses the bar is said to, with what it
+//! misses ([`Tuned::shortfalls`]), and `rip-rt run`'s pre-flight says so through the record
+//! ([`record`]).
 //! [`robustness`] then draws rigs around the file's (each parameter within ±10 %, or from
 //! the identification's covariance) and counts the runs each tuned controller balances.
 
 use std::sync::atomic::AtomicBool;
 
-use rand::rngs::StdRng;
-use rand::{Rng, SeedableRng};
-
-use crate::margins::Margins;
-use crate::metrics::table1_rmse;
-use crate::plant::{FurutaParams, Plant};
 use crate::preflight::{design_checksum, StoredPrediction, TuneRecord};
-use crate::sim::simulate;
-use crate::spec::rig_sections::COUNTS_PER_REV;
 use crate::spec::{ControllerKind, Spec, SpecError};
 
+mod assess;
+mod bar;
+pub mod own;
+mod robustness;
 mod settings;
+pub use assess::{assess, steady_state, Assessment, OffCompensation};
+pub(crate) use assess::{assess_kinds, assess_until};
+pub use bar::{
+    frictionless, off_compensation, sensor_floor, Bar, BASE_PEAK_TO_PEAK, GUARD, OFF_COMPENSATION,
+    STICTION_RATIO,
+};
+pub use robustness::{perturb, robustness, robustness_with, Perturbation};
 use settings::check_cancel;
 pub use settings::{check_spread, check_ts, check_voltage, Progress, Settings, MAX_RUNS};
 
-/// Noise seeds of each candidate's simulations.
-pub const SEEDS: [u64; 2] = [11, 12];
+/// Noise seeds of an assessment's simulations. The search screens each candidate on the
+/// first [`SCREEN`] and confirms one that works there on all of them before keeping it: a
+/// steady state at the bar on two seeds may be past it on the next.
+pub const SEEDS: [u64; 4] = [11, 12, 13, 14];
 
-/// What "works" means (module docs). `Default` is the issue's bar: 0.05 rad arm
-/// peak-to-peak, 0.02 rad pendulum, 0.02 rad offset over the last 3 s; 6 dB and 30°.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Bar {
-    /// Largest steady-state arm peak-to-peak (rad).
-    pub arm_peak_to_peak: f64,
-    /// Largest steady-state `|α|` (rad).
-    pub pendulum: f64,
-    /// Largest steady-state arm offset from the reference (rad).
-    pub offset: f64,
-    /// The steady-state window at the end of the run (s).
-    pub window: f64,
-    /// Smallest gain margin, both ways (dB).
-    pub gain_margin_db: f64,
-    /// Smallest phase margin (degrees).
-    pub phase_margin_deg: f64,
-    /// The disk margin accepted in place of the classical ones: the `α` whose disk gives
-    /// `gain_margin_db` (`(2 + α)/(2 − α) = 10^{gm/20}`, 0.67 for 6 dB; its phase margin
-    /// `2 atan(α/2)` is 36.9°).
-    pub disk_margin: f64,
-}
+/// How many of [`SEEDS`] screen a candidate.
+pub const SCREEN: usize = 2;
 
-impl Bar {
-    /// Whether `m` meets the margins of the bar: the classical ones both ways, or the disk's.
-    pub fn margins_ok(&self, m: &Margins) -> bool {
-        m.meets(self.gain_margin_db, self.phase_margin_deg)
-            || (m.stable && m.disk_margin >= self.disk_margin)
-    }
-
-    /// How far `m` is from the margins of the bar: 0 when [`margins_ok`](Self::margins_ok),
-    /// else the disk margin's relative shortfall (2 for an unstable loop).
-    pub fn margin_shortfall(&self, m: &Margins) -> f64 {
-        if self.margins_ok(m) {
-            0.0
-        } else if m.stable {
-            (1.0 - m.disk_margin / self.disk_margin).max(0.0)
-        } else {
-            2.0
-        }
-    }
-}
-
-impl Default for Bar {
-    fn default() -> Self {
-        let f = 10f64.powf(6.0 / 20.0);
-        Self {
-            arm_peak_to_peak: 0.05,
-            pendulum: 0.02,
-            offset: 0.02,
-            window: 3.0,
-            gain_margin_db: 6.0,
-            phase_margin_deg: 30.0,
-            disk_margin: 2.0 * (f - 1.0) / (f + 1.0),
-        }
-    }
-}
+/// How many of the candidates nearest the bar are assessed whole when none works, to keep the
+/// one with which most controllers work.
+pub const FINALISTS: usize = 6;
 
 /// One candidate's change to the file's weights (module docs).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -235,229 +196,21 @@ pub fn candidates(spec: &Spec) -> Vec<Weights> {
 /// keeps the weights it had.
 pub const PENDULUM: [f64; 2] = [1.0, 0.25];
 
-/// How one controller does on the rig (module docs), the worst over [`SEEDS`].
+/// The controllers' own keys [`tune`] changed on top of the shared weights ([`own`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Assessment {
-    /// The controller.
-    pub kind: ControllerKind,
-    /// Its margins at the plant input.
-    pub margins: Margins,
-    /// The paper's Tab. 1 RMSE `[θ, α, u]` of the first seed's run.
-    pub rmse: [f64; 3],
-    /// Largest `|u|` applied (V).
-    pub peak_voltage: f64,
-    /// Whether LQR or LQG reached its clamp.
-    pub saturated: bool,
-    /// Whether a run fell or diverged.
-    pub fell: bool,
-    /// Largest `|θ|` over the runs (rad).
-    pub arm_max: f64,
-    /// Steady-state arm peak-to-peak (rad).
-    pub arm_peak_to_peak: f64,
-    /// Steady-state largest `|α|` (rad).
-    pub pendulum: f64,
-    /// Steady-state `|mean θ − θ_ref|` (rad).
-    pub offset: f64,
-    /// The steady state `(arm peak-to-peak, |α|, offset)` of the same controller with exact
-    /// angles (no quantisation, no noise), measured by [`tune`] only for a controller that
-    /// balances outside the steady-state bar: when it meets the bar, the miss is the
-    /// sensor's ([`sensor_limited`](Self::sensor_limited)), not the weights'.
-    pub exact_sensor: Option<(f64, f64, f64)>,
+pub struct OwnWeights {
+    /// LQG's filter (which the MPC shares).
+    pub kalman: own::KalmanWeights,
+    /// The MPC's weights.
+    pub mpc: own::MpcWeights,
 }
 
-impl Assessment {
-    /// Whether the margins meet the bar (classical, or the disk's).
-    pub fn margins_ok(&self, bar: &Bar) -> bool {
-        bar.margins_ok(&self.margins)
-    }
-
-    /// Whether the steady state meets the bar and the run did not fall.
-    pub fn balances(&self, bar: &Bar) -> bool {
-        !self.fell
-            && self.arm_peak_to_peak <= bar.arm_peak_to_peak
-            && self.pendulum <= bar.pendulum
-            && self.offset <= bar.offset
-    }
-
-    /// Whether the controller misses the steady-state bar only through the rig's sensor: it
-    /// balances, and with exact angles ([`exact_sensor`](Self::exact_sensor)) it meets the
-    /// bar. A coarse pendulum encoder (or its noise) is read by the controller as a tilt
-    /// `δ`, which it balances by moving the arm about `(K_α / K_θ) δ`: with a few hundred
-    /// counts a revolution that alone exceeds the bar, whatever the shared weights.
-    pub fn sensor_limited(&self, bar: &Bar) -> bool {
-        !self.fell
-            && !self.balances(bar)
-            && self.exact_sensor.is_some_and(|(pp, alpha, offset)| {
-                pp <= bar.arm_peak_to_peak && alpha <= bar.pendulum && offset <= bar.offset
-            })
-    }
-
-    /// Whether everything of the bar holds (module docs).
-    pub fn works(&self, bar: &Bar) -> bool {
-        self.balances(bar) && !self.saturated && self.margins_ok(bar)
-    }
-
-    /// How far from the bar (0 when it [works](Self::works)): the
-    /// [balance shortfall](Self::balance_shortfall) and the margins'
-    /// ([`Bar::margin_shortfall`]).
-    pub fn shortfall(&self, bar: &Bar) -> f64 {
-        self.balance_shortfall(bar) + bar.margin_shortfall(&self.margins)
-    }
-
-    /// How far from balancing within the bar and the voltage bound: the relative excess of
-    /// each steady-state figure, a fall or saturation counting 10 and 1.
-    pub fn balance_shortfall(&self, bar: &Bar) -> f64 {
-        let over = |v: f64, limit: f64| (v / limit - 1.0).max(0.0);
-        let mut s = if self.fell { 10.0 } else { 0.0 };
-        if !self.fell {
-            s += over(self.arm_peak_to_peak, bar.arm_peak_to_peak)
-                + over(self.pendulum, bar.pendulum)
-                + over(self.offset, bar.offset);
-        }
-        if self.saturated {
-            s += 1.0;
-        }
-        s
-    }
-}
-
-/// Assesses every controller of `spec` on its rig at sample time `ts` (module docs).
-pub fn assess(spec: &Spec, ts: f64, bar: &Bar) -> Result<Vec<Assessment>, SpecError> {
-    Ok(assess_until(spec, ts, bar, false)?.0)
-}
-
-/// [`assess`]; with `stop_early`, the assessment stops at the first controller that does not
-/// balance within the bar and the voltage bound, and the margins are measured only when all
-/// do (the search needs no more to rank such a candidate). The flag says whether it is
-/// complete.
-fn assess_until(
-    spec: &Spec,
-    ts: f64,
-    bar: &Bar,
-    stop_early: bool,
-) -> Result<(Vec<Assessment>, bool), SpecError> {
-    let design = spec.design(ts)?;
-    let plant = spec.plant()?;
-    let (lo, hi) = design.bounds();
-    let clamp = hi.min(-lo);
-    let comp = design
-        .compensation()
-        .map_or(0.0, |c| c.dead_zone() + c.friction_voltage());
-    let mut out = Vec::new();
-    for kind in ControllerKind::ALL {
-        let mut controller = design.controller(kind)?;
-        let mut a = Assessment {
-            kind,
-            margins: Margins::unstable(),
-            rmse: [f64::NAN; 3],
-            peak_voltage: 0.0,
-            saturated: false,
-            fell: false,
-            arm_max: 0.0,
-            arm_peak_to_peak: 0.0,
-            pendulum: 0.0,
-            offset: 0.0,
-            exact_sensor: None,
-        };
-        for (i, seed) in SEEDS.into_iter().enumerate() {
-            let cfg = spec.sim_config(ts, seed);
-            let run = simulate(&plant, controller.as_mut(), &cfg)
-                .map_err(|e| SpecError::new("plant", format!("simulation: {e}")))?;
-            if i == 0 {
-                a.rmse = table1_rmse(&run);
-            }
-            a.fell |= run.fell || run.diverged;
-            a.arm_max = run.x.iter().map(|x| x[0].abs()).fold(a.arm_max, f64::max);
-            let peak = run.u.iter().map(|u| u.abs()).fold(0.0, f64::max);
-            a.peak_voltage = a.peak_voltage.max(peak);
-            // The written voltage exceeds the planned clamp by at most the compensation; the
-            // controller's own clamp is what saturation means here.
-            if kind != ControllerKind::Mpc {
-                a.saturated |= peak >= clamp + comp - 1e-9;
-            }
-            let s = steady_state(&run, bar.window);
-            a.arm_peak_to_peak = a.arm_peak_to_peak.max(s.0);
-            a.pendulum = a.pendulum.max(s.1);
-            a.offset = a.offset.max(s.2);
-        }
-        let failed = !a.balances(bar) || a.saturated;
-        out.push(a);
-        if stop_early && failed {
-            return Ok((out, false));
-        }
-    }
-    for a in out.iter_mut() {
-        a.margins = design.margins(a.kind)?;
-    }
-    Ok((out, true))
-}
-
-/// `(arm peak-to-peak, max |α|, |mean θ − θ_ref|)` of the true state over the last `window`
-/// seconds of `run`.
-pub fn steady_state(run: &crate::sim::SimResult, window: f64) -> (f64, f64, f64) {
-    let Some(&end) = run.t.last() else {
-        return (f64::NAN, f64::NAN, f64::NAN);
+impl OwnWeights {
+    /// Nothing changed: the shared weights throughout.
+    pub const SHARED: OwnWeights = OwnWeights {
+        kalman: own::KalmanWeights::SHARED,
+        mpc: own::MpcWeights::SHARED,
     };
-    let (mut lo, mut hi, mut alpha, mut sum, mut n) =
-        (f64::INFINITY, f64::NEG_INFINITY, 0.0f64, 0.0, 0usize);
-    for k in 0..run.len() {
-        if run.t[k] >= end - window {
-            let th = run.x[k][0];
-            lo = lo.min(th);
-            hi = hi.max(th);
-            alpha = alpha.max(run.x[k][2].abs());
-            sum += th - run.r[k][0];
-            n += 1;
-        }
-    }
-    (hi - lo, alpha, (sum / n.max(1) as f64).abs())
-}
-
-/// The rig of `spec` read by exact sensors: the finest resolution the schema accepts
-/// (2²⁴ counts, a step of 0.37 µrad, far below any rig's noise), no noise, no offsets; a
-/// spec that stays inside [`COUNTS_PER_REV`] so that every run of it can be validated.
-fn exact_sensor(spec: &Spec) -> Spec {
-    let mut s = spec.clone();
-    s.sensor.encoder_counts = [*COUNTS_PER_REV.end(); 2];
-    s.sensor.noise_std = [0.0; 2];
-    s.sensor.encoder_offsets = [0.0; 2];
-    s
-}
-
-/// Fills [`Assessment::exact_sensor`] of every controller of `assessments` that balances
-/// outside the steady-state bar: the same design (same weights, same estimator) run on the
-/// rig read by exact sensors.
-fn explain_misses(
-    spec: &Spec,
-    ts: f64,
-    bar: &Bar,
-    assessments: &mut [Assessment],
-) -> Result<(), SpecError> {
-    if assessments.iter().all(|a| a.fell || a.balances(bar)) {
-        return Ok(());
-    }
-    let exact = exact_sensor(spec);
-    let design = spec.design(ts)?;
-    let plant = spec.plant()?;
-    for a in assessments
-        .iter_mut()
-        .filter(|a| !a.fell && !a.balances(bar))
-    {
-        let mut controller = design.controller(a.kind)?;
-        let mut worst = (0.0f64, 0.0f64, 0.0f64);
-        for seed in SEEDS {
-            let run = simulate(&plant, controller.as_mut(), &exact.sim_config(ts, seed))
-                .map_err(|e| SpecError::new("plant", format!("simulation: {e}")))?;
-            let s = if run.fell || run.diverged {
-                (f64::INFINITY, f64::INFINITY, f64::INFINITY)
-            } else {
-                steady_state(&run, bar.window)
-            };
-            worst = (worst.0.max(s.0), worst.1.max(s.1), worst.2.max(s.2));
-        }
-        a.exact_sensor = Some(worst);
-    }
-    Ok(())
 }
 
 /// The outcome of [`tune`].
@@ -473,9 +226,65 @@ pub struct Tuned {
     pub assessments: Vec<Assessment>,
     /// Candidates assessed.
     pub tried: usize,
+    /// The controllers' own keys changed on top of [`weights`](Self::weights), where the
+    /// shared cost left them short of the bar ([`own`]).
+    pub own: OwnWeights,
+    /// The rig's bar ([`Bar::for_rig`]); the search held its simulations to
+    /// [`Bar::guarded`] of it, and so do [`works`](Self::works) and the shortfalls.
+    pub bar: Bar,
 }
 
 impl Tuned {
+    /// Each controller that misses the bar with the weights chosen, with what it misses: the
+    /// report says so, and `rip-rt run`'s pre-flight says it through the record
+    /// ([`record`]). Empty when every controller works.
+    pub fn shortfalls(&self) -> Vec<(ControllerKind, String)> {
+        self.assessments
+            .iter()
+            .filter(|a| !a.works(&self.bar.guarded()))
+            .map(|a| {
+                (
+                    a.kind,
+                    format!(
+                        "{} cannot meet the bar on this rig's model with any of the {} shared \
+                         weights tried: {} (the tuning holds each steady-state figure to {:.0} \
+                         % of the bar: {})",
+                        a.kind.name(),
+                        self.tried,
+                        a.misses(&self.bar.guarded()).join("; "),
+                        GUARD * 100.0,
+                        self.bar_summary()
+                    ),
+                )
+            })
+            .collect()
+    }
+
+    /// The bar in one line, with the floor it was raised from.
+    pub fn bar_summary(&self) -> String {
+        let b = &self.bar;
+        let floor = match b.floor {
+            Some(f) if f.is_finite() => format!(", the sensor's floor {f:.3} rad"),
+            Some(_) => {
+                ", the sensor's floor unknown: the file's LQR falls without friction".to_string()
+            }
+            None => String::new(),
+        };
+        format!(
+            "steady-state arm peak-to-peak <= {:.3} rad{floor}, |alpha| and offset <= {} rad; \
+             LQR margins >= {} dB and {} deg, LQG and MPC disk margin >= {}; with the \
+             compensation {:.0} % off, arm peak-to-peak <= {:.3} rad (MPC {:.3})",
+            b.arm_peak_to_peak,
+            b.pendulum,
+            b.gain_margin_db,
+            b.phase_margin_deg,
+            b.disk_margin,
+            OFF_COMPENSATION * 100.0,
+            b.off_limit(ControllerKind::Lqr),
+            b.off_limit(ControllerKind::Mpc)
+        )
+    }
+
     /// Why the tuning failed outright, if it did: every controller falls on the rig's model
     /// with the weights that missed the bar by least.
     pub fn refusal(&self) -> Option<String> {
@@ -491,9 +300,10 @@ impl Tuned {
     }
 }
 
-/// Chooses shared weights for the rig of `spec` at sample time `ts` (module docs).
-pub fn tune(spec: &Spec, ts: f64, bar: &Bar) -> Result<Tuned, SpecError> {
-    tune_with(spec, ts, bar, &Progress::default(), &AtomicBool::new(false))
+/// Chooses shared weights for the rig of `spec` at sample time `ts`, held to the rig's bar
+/// ([`Bar::for_rig`]; module docs).
+pub fn tune(spec: &Spec, ts: f64) -> Result<Tuned, SpecError> {
+    tune_with(spec, ts, &Progress::default(), &AtomicBool::new(false))
 }
 
 /// [`tune`], first refusing a rig the pre-flight's voltage check refuses
@@ -502,16 +312,61 @@ pub fn tune(spec: &Spec, ts: f64, bar: &Bar) -> Result<Tuned, SpecError> {
 pub fn tune_with(
     spec: &Spec,
     ts: f64,
-    bar: &Bar,
     progress: &Progress,
     cancel: &AtomicBool,
 ) -> Result<Tuned, SpecError> {
     check_voltage(spec, ts)?;
+    let bar = Bar::for_rig(spec, ts)?;
     let candidates = candidates(spec);
     progress.add(candidates.len() + 2);
-    let tuned = search(spec, candidates, ts, bar, progress, cancel)?;
+    let held = bar.guarded();
+    let mut tuned = search(spec, candidates, ts, &held, progress, cancel)?;
+    own_keys(&mut tuned, ts, &held, cancel)?;
+    tuned.bar = bar;
     progress.finish();
     Ok(tuned)
+}
+
+/// Whether `kind` of `tuned` is short of `bar`.
+fn short(tuned: &Tuned, kind: ControllerKind, bar: &Bar) -> bool {
+    tuned
+        .assessments
+        .iter()
+        .any(|a| a.kind == kind && !a.works(bar))
+}
+
+/// `tuned`'s assessment of `a.kind` replaced by `a`.
+fn replace(tuned: &mut Tuned, a: Assessment) {
+    for slot in tuned.assessments.iter_mut().filter(|s| s.kind == a.kind) {
+        *slot = a;
+    }
+}
+
+/// The controllers' own keys searched where the shared weights leave them short
+/// ([`own`] module docs: LQG's filter first, then the MPC's weights).
+fn own_keys(tuned: &mut Tuned, ts: f64, bar: &Bar, cancel: &AtomicBool) -> Result<(), SpecError> {
+    if short(tuned, ControllerKind::Lqg, bar) {
+        check_cancel(cancel)?;
+        if let Some((w, spec, a)) = own::search_lqg(&tuned.spec, ts, bar)? {
+            let (mut mpc, _) = assess_kinds(&spec, ts, bar, &[ControllerKind::Mpc], &SEEDS, false)?;
+            tuned.spec = spec;
+            tuned.own.kalman = w;
+            replace(tuned, a);
+            if let Some(m) = mpc.pop() {
+                replace(tuned, m);
+            }
+        }
+    }
+    if short(tuned, ControllerKind::Mpc, bar) {
+        check_cancel(cancel)?;
+        if let Some((w, spec, a)) = own::search(&tuned.spec, ts, bar)? {
+            tuned.spec = spec;
+            tuned.own.mpc = w;
+            replace(tuned, a);
+        }
+    }
+    tuned.works = tuned.assessments.iter().all(|a| a.works(bar));
+    Ok(())
 }
 
 fn search(
@@ -553,7 +408,7 @@ fn search(
         .collect();
     let unjudged = recovered.iter().filter(|(_, s)| s.is_none()).count();
     progress.add(unjudged + unrecovered.len());
-    let mut best: Option<((f64, f64), Weights)> = None;
+    let mut scored: Vec<((f64, f64), Weights)> = Vec::new();
     for (w, score) in recovered.into_iter().chain(unrecovered) {
         let score = match score {
             Some(s) => s,
@@ -569,24 +424,44 @@ fn search(
             }
         };
         if let Some(s) = score {
-            if best.as_ref().map_or(true, |b| s < b.0) {
-                best = Some((s, w));
-            }
+            scored.push((s, w));
         }
     }
-    let (_, weights) = best.ok_or_else(|| {
+    if scored.is_empty() {
+        return Err(SpecError::new(
+            "lqr",
+            "no candidate weights could be designed for this rig",
+        ));
+    }
+    // The screening stops at a candidate's first failing controller, so its score cannot say
+    // with which of the nearest the most controllers work: those are assessed whole, and the
+    // one with which most work is kept, the nearest on a tie (the first in order on an exact
+    // one: the sort is stable).
+    scored.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap_or(std::cmp::Ordering::Equal));
+    let mut best: Option<((usize, f64), Weights, Vec<Assessment>)> = None;
+    for (_, w) in scored.into_iter().take(FINALISTS) {
+        check_cancel(cancel)?;
+        let Ok(assessments) = assess(&w.apply(spec), ts, bar) else {
+            continue;
+        };
+        let failing = assessments.iter().filter(|a| !a.works(bar)).count();
+        let shortfall: f64 = assessments.iter().map(|a| a.shortfall(bar)).sum();
+        let key = (failing, shortfall);
+        if best.as_ref().map_or(true, |(k, _, _)| key < *k) {
+            best = Some((key, w, assessments));
+        }
+    }
+    let (_, weights, assessments) = best.ok_or_else(|| {
         SpecError::new("lqr", "no candidate weights could be designed for this rig")
     })?;
-    check_cancel(cancel)?;
-    let spec = weights.apply(spec);
-    let mut assessments = assess(&spec, ts, bar)?;
-    explain_misses(&spec, ts, bar, &mut assessments)?;
     Ok(Tuned {
-        spec,
+        spec: weights.apply(spec),
         weights,
         works: false,
         assessments,
         tried,
+        own: OwnWeights::SHARED,
+        bar: *bar,
     })
 }
 
@@ -610,17 +485,28 @@ enum Judgement {
 /// a fall.
 fn judge(spec: &Spec, w: Weights, ts: f64, bar: &Bar) -> Judgement {
     let candidate = w.apply(spec);
-    let Ok((assessments, complete)) = assess_until(&candidate, ts, bar, true) else {
+    let Ok((mut assessments, mut complete)) =
+        assess_until(&candidate, ts, bar, &SEEDS[..SCREEN], true)
+    else {
         return Judgement::NoDesign;
     };
     if complete && assessments.iter().all(|a| a.works(bar)) {
-        return Judgement::Works(Box::new(Tuned {
-            spec: candidate,
-            weights: w,
-            works: true,
-            assessments,
-            tried: 0,
-        }));
+        // Confirmed on every seed before it is kept.
+        let Ok(confirmed) = assess_until(&candidate, ts, bar, &SEEDS, false) else {
+            return Judgement::NoDesign;
+        };
+        (assessments, complete) = confirmed;
+        if assessments.iter().all(|a| a.works(bar)) {
+            return Judgement::Works(Box::new(Tuned {
+                spec: candidate,
+                weights: w,
+                works: true,
+                assessments,
+                tried: 0,
+                own: OwnWeights::SHARED,
+                bar: *bar,
+            }));
+        }
     }
     let missing = ControllerKind::ALL.len() - assessments.len();
     let balance: f64 = assessments
@@ -634,7 +520,7 @@ fn judge(spec: &Spec, w: Weights, ts: f64, bar: &Bar) -> Judgement {
         };
     let margins: f64 = assessments
         .iter()
-        .map(|a| bar.margin_shortfall(&a.margins))
+        .map(|a| bar.margin_shortfall(a.kind, &a.margins))
         .sum();
     Judgement::Misses((balance, margins))
 }
@@ -658,7 +544,7 @@ fn recover(spec: &Spec, w: Weights, ts: f64, bar: &Bar) -> (Weights, bool) {
         for kind in [ControllerKind::Lqg, ControllerKind::Mpc] {
             short += design
                 .margins(kind)
-                .map_or(2.0, |m| bar.margin_shortfall(&m));
+                .map_or(2.0, |m| bar.margin_shortfall(kind, &m));
         }
         if short == 0.0 {
             return (w.with_recovery(q), true);
@@ -671,8 +557,11 @@ fn recover(spec: &Spec, w: Weights, ts: f64, bar: &Bar) -> (Weights, bool) {
 }
 
 /// The record `riprs tune` writes beside the tuned file (crate::preflight::TuneRecord):
-/// the checksum of the tuned design at sample time `ts` and each controller's prediction.
-pub fn record(tuned: &Tuned, ts: f64, bar: &Bar) -> Result<TuneRecord, SpecError> {
+/// the checksum of the tuned design at sample time `ts` and each controller's prediction,
+/// with what of the rig's bar it misses ([`Tuned::shortfalls`]).
+pub fn record(tuned: &Tuned, ts: f64) -> Result<TuneRecord, SpecError> {
+    let bar = &tuned.bar.guarded();
+    let shortfalls = tuned.shortfalls();
     let design = tuned.spec.design(ts)?;
     Ok(TuneRecord {
         inputs: design_checksum(&design),
@@ -691,6 +580,10 @@ pub fn record(tuned: &Tuned, ts: f64, bar: &Bar) -> Result<TuneRecord, SpecError
                     pendulum: a.pendulum,
                     disk_margin: a.margins.disk_margin,
                     works: a.works(bar),
+                    misses: shortfalls
+                        .iter()
+                        .find(|(k, _)| *k == a.kind)
+                        .map(|(_, why)| why.clone()),
                 };
                 (a.kind.name().to_string(), p)
             })
@@ -698,139 +591,32 @@ pub fn record(tuned: &Tuned, ts: f64, bar: &Bar) -> Result<TuneRecord, SpecError
     })
 }
 
-/// How the robustness runs perturb the rig.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Perturbation {
-    /// Each physical parameter times an independent uniform factor in `1 ± spread`.
-    Relative(f64),
-    /// `values · exp(N(0, log_covariance))` on the named parameters (the identification's
-    /// `[covariance]`; names as [`crate::spec::Param`] spells them), the rest as they are.
-    LogNormal {
-        /// The parameters.
-        names: Vec<String>,
-        /// The covariance of their logarithms (row-major, `n × n`).
-        log_covariance: Vec<f64>,
-    },
-}
-
-/// A rig drawn around `p` by `perturbation` with `rng`.
-pub fn perturb(p: &FurutaParams, perturbation: &Perturbation, rng: &mut StdRng) -> FurutaParams {
-    let mut v = p.to_array();
-    match perturbation {
-        Perturbation::Relative(spread) => {
-            // g (the last entry of to_array's order is not a rig property) stays.
-            let g = p.g;
-            for x in v.iter_mut() {
-                *x *= 1.0 + spread * (2.0 * rng.gen::<f64>() - 1.0);
-            }
-            let mut out = FurutaParams::from_array(v);
-            out.g = g;
-            out
-        }
-        Perturbation::LogNormal {
-            names,
-            log_covariance,
-        } => {
-            let n = names.len();
-            let cov = nalgebra::DMatrix::from_row_slice(n, n, log_covariance);
-            // Parameters the logs do not determine (inf) or held (0) are left as they are.
-            let finite: Vec<usize> = (0..n)
-                .filter(|&i| cov[(i, i)].is_finite() && cov[(i, i)] > 0.0)
-                .collect();
-            let sub = nalgebra::DMatrix::from_fn(finite.len(), finite.len(), |i, j| {
-                cov[(finite[i], finite[j])]
-            });
-            let Some(chol) = sub.cholesky() else {
-                return *p;
-            };
-            let z = nalgebra::DVector::from_fn(finite.len(), |_, _| standard_normal(rng));
-            let d = chol.l() * z;
-            let mut out = *p;
-            for (k, &i) in finite.iter().enumerate() {
-                if let Some(param) = crate::spec::Param::from_name(&names[i]) {
-                    let f = param.field(&mut out);
-                    *f *= d[k].exp();
-                }
-            }
-            out
-        }
-    }
-}
-
-fn standard_normal(rng: &mut StdRng) -> f64 {
-    // Box–Muller.
-    let u1 = rng.gen::<f64>().max(f64::MIN_POSITIVE);
-    let u2 = rng.gen::<f64>();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-}
-
-/// For each controller of `spec` (designed on the file's model), the fraction of `runs`
-/// rigs drawn by `perturbation` (seeds from `seed`) on which it balances: no fall over the
-/// `[reference]` run. Runs whose drawn parameters are not a valid rig are redrawn.
-pub fn robustness(
-    spec: &Spec,
-    ts: f64,
-    perturbation: &Perturbation,
-    runs: usize,
-    seed: u64,
-) -> Result<Vec<(ControllerKind, f64)>, SpecError> {
-    robustness_with(spec, ts, perturbation, runs, seed, &AtomicBool::new(false))
-}
-
-/// [`robustness`], stopping with an error between two runs once `cancel` is set.
-pub fn robustness_with(
-    spec: &Spec,
-    ts: f64,
-    perturbation: &Perturbation,
-    runs: usize,
-    seed: u64,
-    cancel: &AtomicBool,
-) -> Result<Vec<(ControllerKind, f64)>, SpecError> {
-    let design = spec.design(ts)?;
-    let nominal = spec.plant.params();
-    let mut rng = StdRng::seed_from_u64(seed);
-    let mut plants = Vec::with_capacity(runs);
-    while plants.len() < runs {
-        check_cancel(cancel)?;
-        let p = perturb(&nominal, perturbation, &mut rng);
-        if let Ok(mut plant) = Plant::new(p) {
-            if let Some(cs) = spec.plant.arm_breakaway {
-                plant = plant.with_arm_breakaway(cs.max(p.cr)).unwrap_or(plant);
-            }
-            plants.push(plant);
-        }
-    }
-    let mut out = Vec::new();
-    for kind in ControllerKind::ALL {
-        let mut controller = design.controller(kind)?;
-        let mut ok = 0usize;
-        for (i, plant) in plants.iter().enumerate() {
-            check_cancel(cancel)?;
-            let cfg = spec.sim_config(ts, seed.wrapping_add(i as u64));
-            let run = simulate(plant, controller.as_mut(), &cfg)
-                .map_err(|e| SpecError::new("plant", format!("simulation: {e}")))?;
-            if !(run.fell || run.diverged) {
-                ok += 1;
-            }
-        }
-        out.push((kind, ok as f64 / runs.max(1) as f64));
-    }
-    Ok(out)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// The diagnosis run must be a spec every command would accept, or its verdict would
-    /// describe a rig no one can run.
+    /// The floor's rig and the off-compensation rigs must be specs every command would accept,
+    /// or the bar would be measured on a rig no one can run.
     #[test]
-    fn the_exact_sensor_rig_is_a_valid_spec() {
-        let spec = Spec::default();
-        let exact = exact_sensor(&spec);
-        exact.validate().expect("exact-sensor spec validates");
-        exact
-            .design(crate::paper::TS)
-            .expect("exact-sensor spec designs");
+    fn the_bar_rigs_are_valid_specs() {
+        let spec = Spec::parse(&crate::rig::Rig::random(3).to_toml()).unwrap();
+        let floor = frictionless(&spec);
+        floor.validate().unwrap();
+        let p = floor.plant.params();
+        assert_eq!((p.vd, p.cr, p.cp), (0.0, 0.0, 0.0));
+        assert!(floor.compensation().unwrap().is_none());
+        for e in [-OFF_COMPENSATION, OFF_COMPENSATION] {
+            let off = off_compensation(&spec, e).unwrap();
+            off.validate().unwrap();
+            let c = off.compensation().unwrap().unwrap();
+            let p = spec.plant.params();
+            assert!((c.dead_zone() - (1.0 + e) * p.vd).abs() < 1e-12);
+            assert!((c.friction_voltage() - (1.0 + e) * p.cr * p.rm / p.kt).abs() < 1e-12);
+            assert_eq!(off.plant.arm_breakaway, Some(STICTION_RATIO * p.cr));
+            // The plant itself is the file's: only what the compensation assumes is off.
+            assert_eq!(off.plant.params(), p);
+        }
+        // The paper preset compensates nothing: no error to apply.
+        assert!(off_compensation(&Spec::default(), 0.3).is_none());
     }
 }

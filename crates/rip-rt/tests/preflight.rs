@@ -230,6 +230,7 @@ fn write_lqr_falls_record(rig: &Path, text: &str) {
         pendulum: f64::NAN,
         disk_margin: 0.7,
         works: false,
+        misses: None,
     };
     let record = TuneRecord {
         inputs: design_checksum(&design),

@@ -68,12 +68,36 @@ fn assessment_dict<'py>(
     d.set_item("pendulum", a.pendulum)?;
     d.set_item("offset", a.offset)?;
     d.set_item(
-        "exact_sensor",
-        a.exact_sensor.map(|(pp, alpha, off)| [pp, alpha, off]),
+        "off_compensation_peak_to_peak",
+        a.off_compensation.map(|o| o.arm_peak_to_peak),
     )?;
-    d.set_item("sensor_limited", a.sensor_limited(bar))?;
+    d.set_item("off_compensation_fell", a.off_compensation.map(|o| o.fell))?;
     d.set_item("margins_ok", a.margins_ok(bar))?;
     d.set_item("works", a.works(bar))?;
+    d.set_item("misses", a.misses(bar))?;
+    Ok(d)
+}
+
+fn bar_dict<'py>(py: Python<'py>, t: &tune::Tuned) -> PyResult<Bound<'py, PyDict>> {
+    let b = &t.bar;
+    let d = PyDict::new(py);
+    d.set_item("arm_peak_to_peak", b.arm_peak_to_peak)?;
+    d.set_item("floor", b.floor)?;
+    d.set_item("pendulum", b.pendulum)?;
+    d.set_item("offset", b.offset)?;
+    d.set_item("gain_margin_db", b.gain_margin_db)?;
+    d.set_item("phase_margin_deg", b.phase_margin_deg)?;
+    d.set_item("disk_margin", b.disk_margin)?;
+    d.set_item("off_compensation", tune::OFF_COMPENSATION)?;
+    d.set_item(
+        "off_peak_to_peak",
+        b.off_limit(rip_core::spec::ControllerKind::Lqr),
+    )?;
+    d.set_item(
+        "off_peak_to_peak_mpc",
+        b.off_limit(rip_core::spec::ControllerKind::Mpc),
+    )?;
+    d.set_item("summary", t.bar_summary())?;
     Ok(d)
 }
 
@@ -184,7 +208,10 @@ fn identification_untrusted(rig_file: PathBuf) -> Option<String> {
 /// file, followed by the swing-up feasibility verdict's ``[swing_up]`` table
 /// (``rip_core::swingup::StoredFeasibility``) that ``rip-rt run --swing-up`` reads and, with
 /// ``untrusted`` (why the rig's identification is not trusted), its ``[identification]``
-/// verdict; ``refusal`` says why the tuning failed outright (``Tuned::refusal``), or is None.
+/// verdict; ``refusal`` says why the tuning failed outright (``Tuned::refusal``), or is None;
+/// ``shortfalls`` maps each controller short of the bar (``Tuned::shortfalls``) to what it
+/// misses; ``bar``
+/// is the rig's bar (``rip_core::tune::Bar::for_rig``) with its one-line ``summary``.
 /// ``progress(done, total)`` is called as the search advances; Ctrl-C (or an exception from
 /// ``progress``) stops it.
 #[pyfunction]
@@ -205,17 +232,18 @@ fn tune_weights<'py>(
     usize,
     String,
     Option<String>,
+    Bound<'py, PyDict>,
+    Bound<'py, PyDict>,
 )> {
     tune::check_ts(Ts).map_err(config_err)?;
     let s = spec.inner.clone();
-    let bar = Bar::default();
     let steps = Progress::default();
     let mut reported = (0, 0);
     let (t, record) = interruptible(
         py,
         |cancel| {
-            let t = tune::tune_with(&s, Ts, &bar, &steps, cancel)?;
-            let record = tune::record(&t, Ts, &bar)?;
+            let t = tune::tune_with(&s, Ts, &steps, cancel)?;
+            let record = tune::record(&t, Ts)?;
             // The swing-up verdict beside the predictions, so that `rip-rt run --swing-up`
             // reads it instead of computing it (rip_core::swingup::stored).
             let verdict =
@@ -255,11 +283,22 @@ fn tune_weights<'py>(
     w.set_item("integral_weight", integral_weight)?;
     w.set_item("measurement_noise", measurement_noise)?;
     w.set_item("recovery", recovery)?;
+    let m = t.own.mpc;
+    w.set_item("lqg_measurement_noise", t.own.kalman.measurement_noise)?;
+    w.set_item("lqg_disturbance", t.own.kalman.disturbance)?;
+    w.set_item("mpc_arm", m.arm)?;
+    w.set_item("mpc_pendulum", m.pendulum)?;
+    w.set_item("mpc_rate", m.rate)?;
+    w.set_item("mpc_input", m.input)?;
     let list = t
         .assessments
         .iter()
-        .map(|a| assessment_dict(py, a, &bar))
+        .map(|a| assessment_dict(py, a, &t.bar.guarded()))
         .collect::<PyResult<Vec<_>>>()?;
+    let shortfalls = PyDict::new(py);
+    for (kind, why) in t.shortfalls() {
+        shortfalls.set_item(kind.name(), why)?;
+    }
     Ok((
         PySpec {
             inner: t.spec.resolved(),
@@ -271,6 +310,8 @@ fn tune_weights<'py>(
         t.tried,
         record,
         refusal,
+        shortfalls,
+        bar_dict(py, &t)?,
     ))
 }
 

@@ -146,7 +146,7 @@ pub fn check_voltage(spec: &Spec, ts: f64) -> Result<(), SpecError> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{candidates, tune_with, Bar};
+    use super::super::{candidates, tune_with};
     use super::*;
 
     #[test]
@@ -181,14 +181,7 @@ mod tests {
             Spec::parse("[plant]\npreset = \"qube_servo2\"\nkt = 0.004\nkm = 0.004\nRm = 30.0\n")
                 .unwrap();
         let progress = Progress::default();
-        let e = tune_with(
-            &spec,
-            0.01,
-            &Bar::default(),
-            &progress,
-            &AtomicBool::new(false),
-        )
-        .unwrap_err();
+        let e = tune_with(&spec, 0.01, &progress, &AtomicBool::new(false)).unwrap_err();
         assert!(e.to_string().contains("would need"), "{e}");
         assert_eq!(progress.total.load(Ordering::Relaxed), 0);
     }
@@ -197,14 +190,7 @@ mod tests {
     fn the_search_counts_its_steps_and_stops_when_cancelled() {
         let spec = Spec::default();
         let progress = Progress::default();
-        let t = tune_with(
-            &spec,
-            crate::paper::TS,
-            &Bar::default(),
-            &progress,
-            &AtomicBool::new(false),
-        )
-        .unwrap();
+        let t = tune_with(&spec, crate::paper::TS, &progress, &AtomicBool::new(false)).unwrap();
         assert!(t.works && t.refusal().is_none());
         let total = progress.total.load(Ordering::Relaxed);
         assert!(total > candidates(&spec).len());
@@ -212,7 +198,6 @@ mod tests {
         let cancelled = tune_with(
             &spec,
             crate::paper::TS,
-            &Bar::default(),
             &Progress::default(),
             &AtomicBool::new(true),
         );

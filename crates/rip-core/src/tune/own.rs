@@ -1,0 +1,197 @@
+//! Keys of one controller's own, where the shared cost leaves it short of the bar.
+//!
+//! The shared cost is the paper's thesis, and [`super::tune`] looks for it first. Where it
+//! leaves a controller short, what that controller uses alone is changed on top of it, in an
+//! order that leaves every controller already judged as it was:
+//!
+//! 1. LQG: the Kalman filter's noise model (`kalman.measurement_noise`,
+//!    `kalman.disturbance_gain`; [`KalmanWeights`], [`search_lqg`]). LQR does not use the
+//!    filter; the MPC does, and is judged again on the filter chosen.
+//! 2. The MPC: its weights (`mpc.output_weights`, `mpc.input_rate_weights`,
+//!    `mpc.input_weights`; [`MpcWeights`], [`search`]). Its loop differs from LQR's: it
+//!    weights the input's rate, not the input, which adds an integrator's phase lag at the
+//!    plant input and costs disk margin.
+//!
+//! LQR has no key of its own here: its weights are LQG's too. The report says what changed
+//! (`Tuned::own`).
+
+use crate::spec::{ControllerKind, Spec, SpecError};
+
+use super::{assess_kinds, Assessment, Bar, SCREEN, SEEDS};
+
+/// A change to the MPC's own weights on top of the shared ones: its output weights scaled by
+/// `√arm` and `√pendulum`, its input-rate weight by `√rate`, and an input weight added of
+/// `input` times the input-rate weight (the MPC's weights enter its cost squared).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MpcWeights {
+    /// Factor on the arm's output weight, squared.
+    pub arm: f64,
+    /// Factor on the pendulum's output weight, squared.
+    pub pendulum: f64,
+    /// Factor on the input-rate weight, squared.
+    pub rate: f64,
+    /// The input weight set, relative to the (scaled) input-rate weight.
+    pub input: f64,
+}
+
+impl MpcWeights {
+    /// No change: the shared weights.
+    pub const SHARED: MpcWeights = MpcWeights {
+        arm: 1.0,
+        pendulum: 1.0,
+        rate: 1.0,
+        input: 0.0,
+    };
+
+    /// `spec` with this change to its `[mpc]` weights.
+    pub fn apply(&self, spec: &Spec) -> Spec {
+        let mut s = spec.clone();
+        s.mpc.output_weights[0] *= self.arm.sqrt();
+        s.mpc.output_weights[1] *= self.pendulum.sqrt();
+        s.mpc.input_rate_weights[0] *= self.rate.sqrt();
+        if self.input > 0.0 {
+            s.mpc.input_weights[0] = self.input * s.mpc.input_rate_weights[0];
+        }
+        s
+    }
+}
+
+/// The changes tried, the gentlest (nearest the shared weights) first: the input-rate weight
+/// raised (a slower, better-margined loop) or lowered, an input weight added (a loop nearer
+/// LQR's, whose margins the rate weight costs), then the arm and pendulum reweighted.
+pub fn candidates() -> Vec<MpcWeights> {
+    let mut out = Vec::new();
+    for arm in [1.0, 4.0, 0.25, 16.0] {
+        for pendulum in [1.0, 0.25, 4.0] {
+            for input in [0.0, 1.0] {
+                for rate in [1.0, 3.0, 0.3, 10.0, 0.1, 30.0] {
+                    let w = MpcWeights {
+                        arm,
+                        pendulum,
+                        rate,
+                        input,
+                    };
+                    if w != MpcWeights::SHARED {
+                        out.push(w);
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The first of [`candidates`] with which the MPC of `spec` meets `bar`: its margins first
+/// (no simulation), then [`SCREEN`] noise seeds, then all of [`SEEDS`]. `None` when none
+/// does.
+pub fn search(
+    spec: &Spec,
+    ts: f64,
+    bar: &Bar,
+) -> Result<Option<(MpcWeights, Spec, Assessment)>, SpecError> {
+    first_that_works(
+        candidates(),
+        |w| w.apply(spec),
+        ControllerKind::Mpc,
+        ts,
+        bar,
+    )
+}
+
+/// A change to the shared Kalman filter's noise model on top of the shared weights, for LQG
+/// ([`search_lqg`]): `kalman.measurement_noise` times `measurement_noise`,
+/// `kalman.disturbance_gain` times `disturbance`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KalmanWeights {
+    /// Factor on `kalman.measurement_noise`.
+    pub measurement_noise: f64,
+    /// Factor on `kalman.disturbance_gain`.
+    pub disturbance: f64,
+}
+
+impl KalmanWeights {
+    /// No change: the shared filter.
+    pub const SHARED: KalmanWeights = KalmanWeights {
+        measurement_noise: 1.0,
+        disturbance: 1.0,
+    };
+
+    /// `spec` with this change to its `[kalman]` noise model.
+    pub fn apply(&self, spec: &Spec) -> Spec {
+        let mut s = spec.clone();
+        for v in s.kalman.measurement_noise.iter_mut() {
+            *v *= self.measurement_noise;
+        }
+        s.kalman.disturbance_gain *= self.disturbance;
+        s
+    }
+}
+
+/// The filters [`search_lqg`] tries, nearest the shared one first.
+pub fn kalman_candidates() -> Vec<KalmanWeights> {
+    let mut out = Vec::new();
+    for disturbance in [1.0, 0.3, 3.0, 0.1, 10.0, 0.01, 100.0] {
+        for measurement_noise in [1.0, 0.3, 3.0, 0.1, 10.0, 0.03, 0.01, 0.001] {
+            let w = KalmanWeights {
+                measurement_noise,
+                disturbance,
+            };
+            if w != KalmanWeights::SHARED {
+                out.push(w);
+            }
+        }
+    }
+    out
+}
+
+/// The first of [`kalman_candidates`] with which the LQG of `spec` meets `bar` (margins,
+/// then [`SCREEN`] seeds, then all of [`SEEDS`]). LQR does not use the filter, so it keeps
+/// what it had; the MPC does, and is to be assessed again on the filter returned.
+pub fn search_lqg(
+    spec: &Spec,
+    ts: f64,
+    bar: &Bar,
+) -> Result<Option<(KalmanWeights, Spec, Assessment)>, SpecError> {
+    first_that_works(
+        kalman_candidates(),
+        |w| w.apply(spec),
+        ControllerKind::Lqg,
+        ts,
+        bar,
+    )
+}
+
+/// The first of `candidates` whose spec (`apply`) gives `kind` a loop that meets `bar`.
+fn first_that_works<W: Copy>(
+    candidates: Vec<W>,
+    apply: impl Fn(&W) -> Spec,
+    kind: ControllerKind,
+    ts: f64,
+    bar: &Bar,
+) -> Result<Option<(W, Spec, Assessment)>, SpecError> {
+    let kinds = [kind];
+    for w in candidates {
+        let candidate = apply(&w);
+        let Ok(design) = candidate.design(ts) else {
+            continue;
+        };
+        let Ok(margins) = design.margins(kind) else {
+            continue;
+        };
+        if !bar.margins_ok(kind, &margins) {
+            continue;
+        }
+        let Ok((screened, _)) = assess_kinds(&candidate, ts, bar, &kinds, &SEEDS[..SCREEN], true)
+        else {
+            continue;
+        };
+        if !screened.iter().all(|a| a.works(bar)) {
+            continue;
+        }
+        let (mut confirmed, _) = assess_kinds(&candidate, ts, bar, &kinds, &SEEDS, false)?;
+        if let Some(a) = confirmed.pop().filter(|a| a.works(bar)) {
+            return Ok(Some((w, candidate, a)));
+        }
+    }
+    Ok(None)
+}
