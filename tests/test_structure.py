@@ -99,6 +99,46 @@ def test_no_new_import_cycle(crate: str) -> None:
     assert not problems, "\n".join(problems)
 
 
+#: Definitions that have one home each (the file that holds it), found in the non-test Rust
+#: sources after comments and literals are blanked: the plant's lumped constants (J0, Jalpha,
+#: m12, G), the stop's braking time and the envelope's margin.
+ONE_HOME: dict[str, tuple[str, str]] = {
+    "J0 = jr + mr lr^2/4 + mp lr^2": (
+        r"\bjr\s*\+\s*\w+\.mr\s*\*\s*\w+\.lr\s*\*\s*\w+\.lr\s*/\s*4",
+        "crates/rip-core/src/plant/params.rs",
+    ),
+    "Jalpha = jp + mp lp^2/4": (
+        r"\bjp\s*\+\s*\w+\.mp\s*\*\s*\w+\.lp\s*\*\s*\w+\.lp\s*/\s*4",
+        "crates/rip-core/src/plant/params.rs",
+    ),
+    "m12 = mp lr lp/2": (
+        r"\bmp\s*\*\s*\w+\.lr\s*\*\s*\w+\.lp\s*/\s*2",
+        "crates/rip-core/src/plant/params.rs",
+    ),
+    "the stop's braking time": (
+        r"\bconst\s+\w*(?:BRAKE|STOP)_S\s*:\s*f64\s*=\s*3\.0",
+        "crates/rip-core/src/envelope.rs",
+    ),
+    "the stop envelope's margin": (
+        r"\bconst\s+ENVELOPE_MARGIN\b",
+        "crates/rip-core/src/preflight/motion.rs",
+    ),
+}
+
+
+@pytest.mark.parametrize("what", sorted(ONE_HOME))
+def test_one_definition_has_one_home(what: str) -> None:
+    import re
+
+    pattern, home = ONE_HOME[what]
+    found = []
+    for path in rules.rust_sources(ROOT):
+        code = rules.blank_rust(path.read_text())
+        code = rules._without(code, rules.rust_test_spans(code))
+        found += [str(path.relative_to(ROOT))] * len(re.findall(pattern, code))
+    assert found == [home], f"{what}: defined in {found}, its one home is {home}"
+
+
 def test_the_sources_are_found() -> None:
     """The rules see the sources they are about (a glob gone wrong would pass everything)."""
     sizes = rules.file_sizes(ROOT)

@@ -75,11 +75,9 @@ impl StoppingModel {
     /// The model of plant `p` braked at `voltage` (V) with the share `fraction` of (1), the
     /// stop starting `latency` seconds after the state was measured.
     pub fn new(p: &FurutaParams, voltage: f64, fraction: f64, latency: f64) -> Self {
-        let j0 = p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr;
-        let ja = p.jp + p.mp * p.lp * p.lp / 4.0;
-        let m12 = p.mp * p.lr * p.lp / 2.0;
-        let j = j0 + ja;
-        let j_min = (j0 - m12 * m12 / ja).max(1e-3 * j0);
+        let l = p.lumped();
+        let j = l.arm_axis();
+        let j_min = l.arm_min();
         let b = p.kt / p.rm;
         let c = p.dr + p.kt * p.km / p.rm;
         Self {
@@ -172,9 +170,7 @@ pub struct BrakingLaw {
 impl BrakingLaw {
     /// The law for plant `p`, voltage bound `voltage` (V) and loop period `ts` (s).
     pub fn new(p: &FurutaParams, voltage: f64, ts: f64) -> Self {
-        let j0 = p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr;
-        let ja = p.jp + p.mp * p.lp * p.lp / 4.0;
-        let gain = (j0 + ja) / (2.0 * p.kt / p.rm * ts);
+        let gain = p.lumped().arm_axis() / (2.0 * p.kt / p.rm * ts);
         Self {
             voltage,
             linear_below: voltage / gain,
@@ -488,9 +484,10 @@ impl Lowering {
 /// identification). The pendulum's reaction on the arm is simulated, not reserved for.
 pub const SIMULATED_BRAKE_FRACTION: f64 = 0.7;
 
-/// Seconds of braking after which [`SimulatedStop`] takes an arm still moving outwards as
-/// one it cannot stop: the stop's own braking time (`rip-rt`'s `MAX_BRAKE_S`).
-pub const SIMULATED_STOP_S: f64 = 3.0;
+/// The longest an active stop brakes (s): `rip-rt` sends the stop frame after it whatever
+/// the arm does, and [`SimulatedStop`] takes an arm still moving outwards after it as one it
+/// cannot stop.
+pub const MAX_BRAKE_S: f64 = 3.0;
 
 /// Seconds the simulated arm must stay at rest or move back before [`SimulatedStop`] takes
 /// its farthest point as reached: longer than the half swing of a hanging pendulum
@@ -517,7 +514,7 @@ pub const SIMULATED_REST_RATE: f64 = 0.05;
 ///
 /// on the model without its Coulomb friction (which only helps the stop, and would need
 /// small integration steps), until the arm has stayed at rest or moved back for
-/// [`SIMULATED_REST_S`], at most [`SIMULATED_STOP_S`]; the stopping point is the farthest the
+/// [`SIMULATED_REST_S`], at most [`MAX_BRAKE_S`]; the stopping point is the farthest the
 /// arm went along its motion, and an arm that moved outwards all along the last
 /// [`SIMULATED_REST_S`] of that time has none (±∞).
 #[derive(Debug, Clone)]
@@ -584,7 +581,7 @@ impl SimulatedStop {
         }
         let mut last = x[0];
         let mut rate = x[1];
-        let periods = (SIMULATED_STOP_S / self.ts).ceil() as usize;
+        let periods = (MAX_BRAKE_S / self.ts).ceil() as usize;
         let rest = (SIMULATED_REST_S / self.ts).ceil() as u32;
         let (mut still, mut escaping) = (0, 0);
         for _ in 0..periods {

@@ -127,7 +127,7 @@ use crate::linalg::spectral_radius;
 use crate::linalg::{c2d, Mat};
 
 mod params;
-pub use params::{FurutaParams, Param};
+pub use params::{FurutaParams, Lumped, Param};
 
 /// Most RK4 substeps per control period.
 pub const MAX_SUBSTEPS: usize = 100_000;
@@ -246,12 +246,13 @@ impl Plant {
     pub fn new(params: FurutaParams) -> Result<Self> {
         params.validate()?;
         let p = params;
+        let l = p.lumped();
         let mut plant = Self {
             params,
-            j0: p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr,
-            ja: p.jp + p.mp * p.lp * p.lp / 4.0,
-            m12: p.mp * p.lr * p.lp / 2.0,
-            grav: p.mp * p.g * p.lp / 2.0,
+            j0: l.j0,
+            ja: l.ja,
+            m12: l.m12,
+            grav: l.grav,
             b: p.kt / p.rm,
             c_arm: p.dr + p.kt * p.km / p.rm,
             dp: p.dp,

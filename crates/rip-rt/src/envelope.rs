@@ -42,14 +42,13 @@ use crate::config::{Config, ConfigError, MAX_VOLTAGE_LIMIT};
 use crate::stop::StopReason;
 use crate::witness::WitnessFault;
 
+pub use rip_core::envelope::MAX_BRAKE_S;
 pub use rip_core::preflight::motion::{ENVELOPE_MARGIN, LATENCY_PERIODS, PREFLIGHT_HEADROOM};
 
 /// The arm counts as at rest once it moved less than [`REST_TRAVEL`] over this long (s).
 pub const REST_S: f64 = 0.2;
 /// Travel (rad) below which the arm is at rest over [`REST_S`].
 pub const REST_TRAVEL: f64 = 0.01;
-/// The longest an active stop brakes (s) before the stop frame goes out regardless.
-pub const MAX_BRAKE_S: f64 = 3.0;
 
 /// The stopping model of a configuration: its `[plant]`, `safety.voltage_limit`, two loop
 /// periods of latency (rip-core's [`rip_core::preflight::motion::stopping_model`]).

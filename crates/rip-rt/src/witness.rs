@@ -257,10 +257,7 @@ impl Witness {
         ];
         let s = cfg.spec.sensor.noise_std;
         let p = cfg.spec.plant.params();
-        let j0 = p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr;
-        let ja = p.jp + p.mp * p.lp * p.lp / 4.0;
-        let m12 = p.mp * p.lr * p.lp / 2.0;
-        let j_min = (j0 - m12 * m12 / ja).max(1e-3 * j0);
+        let j_min = p.lumped().arm_min();
         let breakaway = cfg.spec.plant.arm_breakaway.unwrap_or(0.0).max(p.cr);
         let sigma = [
             (q[0] * q[0] / 12.0 + s[0] * s[0]).sqrt(),

@@ -4,14 +4,14 @@
 use super::NP;
 use crate::plant::{FurutaParams, Param};
 
-/// The arm's inertia about the motor axis, `J₀ = jr + mr lr²/4 + mp lr²`.
+/// The arm's inertia about the motor axis, `J₀` ([`crate::plant::Lumped`]).
 pub(super) fn arm_inertia(p: &FurutaParams) -> f64 {
-    p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr
+    p.lumped().j0
 }
 
-/// The pendulum's inertia about its joint, `Jα = jp + mp lp²/4`.
+/// The pendulum's inertia about its joint, `Jα` ([`crate::plant::Lumped`]).
 pub(super) fn pendulum_inertia(p: &FurutaParams) -> f64 {
-    p.jp + p.mp * p.lp * p.lp / 4.0
+    p.lumped().ja
 }
 
 /// The values the optimisation works on: [`FREE`] with `jr` replaced by `J₀` and `jp` by `Jα`,

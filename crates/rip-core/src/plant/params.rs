@@ -186,7 +186,45 @@ pub struct FurutaParams {
     pub kc: f64,
 }
 
+/// The lumped constants of the equations of motion ([`crate::plant`] module docs), the one
+/// place they are computed from the physical parameters ([`FurutaParams::lumped`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Lumped {
+    /// `J₀ = jr + mr lr²/4 + mp lr²`: the arm-axis inertia at `α = 0` (kg·m²).
+    pub j0: f64,
+    /// `Jα = jp + mp lp²/4`: the pendulum's inertia about its joint (kg·m²).
+    pub ja: f64,
+    /// `m₁₂ = mp lr lp/2`: the coupling (kg·m²).
+    pub m12: f64,
+    /// `G = mp g lp/2`: the gravity stiffness (N·m).
+    pub grav: f64,
+}
+
+impl Lumped {
+    /// `J₀ + Jα`: the arm-axis inertia with the pendulum hanging or upright (kg·m²).
+    pub fn arm_axis(&self) -> f64 {
+        self.j0 + self.ja
+    }
+
+    /// `J₀ − m₁₂²/Jα`, at least `10⁻³ J₀`: the arm's effective inertia when the pendulum's
+    /// reaction takes the most of a torque (kg·m²).
+    pub fn arm_min(&self) -> f64 {
+        (self.j0 - self.m12 * self.m12 / self.ja).max(1e-3 * self.j0)
+    }
+}
+
 impl FurutaParams {
+    /// The lumped constants of the equations of motion ([`Lumped`]).
+    pub fn lumped(&self) -> Lumped {
+        let p = self;
+        Lumped {
+            j0: p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr,
+            ja: p.jp + p.mp * p.lp * p.lp / 4.0,
+            m12: p.mp * p.lr * p.lp / 2.0,
+            grav: p.mp * p.g * p.lp / 2.0,
+        }
+    }
+
     /// The same rig without its dead zone and Coulomb friction (`V_d = C_r = C_p = 0`): the
     /// smooth model the swing-up plans on while the compensation clears the rest.
     pub fn smooth(&self) -> FurutaParams {

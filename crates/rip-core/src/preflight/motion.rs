@@ -92,7 +92,7 @@ pub fn swing_stop_reach(spec: &Spec, rig: &RigSections, arm_limit: f64) -> f64 {
     let s = &spec.swing_up;
     let p = spec.plant.params();
     let model = stopping_model(spec, rig);
-    let j = p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr + p.jp + p.mp * p.lp * p.lp / 4.0;
+    let j = p.lumped().arm_axis();
     let a_b = s.brake_fraction * p.kt / p.rm * s.max_voltage / j;
     // With the room `r = L − θ` left to the swing's limit, (4) is `L + max g(r)` over
     // `0 ≤ r ≤ 2L`, `g(r) = D(v(r)) − r`: evaluated on a grid of `r` that does not depend on

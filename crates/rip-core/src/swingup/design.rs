@@ -10,23 +10,24 @@ use crate::plant::Plant;
 use super::catch::prediction;
 use super::settings::{OnFall, SwingUpSettings};
 
-/// Least distance (rad) inside `arm_limit` at which the braking envelope ends: the
-/// continuous-time argument of the law's docs holds for the nominal model, while the loop
+/// Least distance (rad) inside `swing_up.arm_limit` at which the swing's braking envelope
+/// ends (not the stop's, `preflight::motion::ENVELOPE_MARGIN`, inside `safety.arm_limit`):
+/// the continuous-time argument of the law's docs holds for the nominal model, while the loop
 /// samples every `Ts` and the rig differs from the model by some percent. The envelope ends
 /// one period at its top speed `√(2 a_b θ_L)` inside the limit, and at least this far.
-const ENVELOPE_MARGIN: f64 = 0.05;
+const SWING_ENVELOPE_MARGIN: f64 = 0.05;
 
 /// The supervisor's parameters for `plant` (the nominal model), `s` and the period `ts`;
 /// `None` when the model has no real unstable mode about upright to catch.
 pub(crate) fn params(plant: &Plant, s: &SwingUpSettings, ts: f64) -> Option<SwingParams> {
     let p = plant.params();
-    let ja = p.jp + p.mp * p.lp * p.lp / 4.0;
-    let j0 = p.jr + p.mr * p.lr * p.lr / 4.0 + p.mp * p.lr * p.lr;
-    let grav = p.mp * p.g * p.lp / 2.0;
+    let crate::plant::Lumped { j0, ja, grav, .. } = p.lumped();
     let stall = p.kt / p.rm * s.max_voltage / (j0 + ja);
     let brake = s.brake_fraction * stall;
     let top_speed = envelope_speed(brake, s.arm_limit);
-    let margin = (top_speed * ts).max(ENVELOPE_MARGIN).min(0.5 * s.arm_limit);
+    let margin = (top_speed * ts)
+        .max(SWING_ENVELOPE_MARGIN)
+        .min(0.5 * s.arm_limit);
     Some(SwingParams {
         ts,
         // The law plans the voltage the smooth model needs; the dead zone and the arm's

@@ -134,9 +134,7 @@ impl std::fmt::Display for Feasibility {
 /// The balance `(W, L, G, ω)` at voltage bound `u_max` and arm travel `arm_limit`.
 fn balance(p: &FurutaParams, u_max: f64, arm_limit: f64) -> (f64, f64, f64, f64) {
     use std::f64::consts::{PI, TAU};
-    let ja = p.jp + p.mp * p.lp * p.lp / 4.0;
-    let grav = p.mp * p.g * p.lp / 2.0;
-    let m12 = p.mp * p.lr * p.lp / 2.0;
+    let crate::plant::Lumped { ja, grav, m12, .. } = p.lumped();
     let w = (grav / ja).sqrt();
     // The smooth model, with the dead zone and the arm's Coulomb friction taken off the
     // voltage instead.
