@@ -101,7 +101,7 @@ def test_no_new_import_cycle(crate: str) -> None:
 
 #: Definitions that have one home each (the file that holds it), found in the non-test Rust
 #: sources after comments and literals are blanked: the plant's lumped constants (J0, Jalpha,
-#: m12, G), the stop's braking time and the envelope's margin.
+#: m12, G), the arm's stopping model, the stop's braking time and the envelope's margin.
 ONE_HOME: dict[str, tuple[str, str]] = {
     "J0 = jr + mr lr^2/4 + mp lr^2": (
         r"\bjr\s*\+\s*\w+\.mr\s*\*\s*\w+\.lr\s*\*\s*\w+\.lr\s*/\s*4",
@@ -118,6 +118,10 @@ ONE_HOME: dict[str, tuple[str, str]] = {
     "the stop's braking time": (
         r"\bconst\s+\w*(?:BRAKE|STOP)_S\s*:\s*f64\s*=\s*3\.0",
         "crates/rip-core/src/envelope.rs",
+    ),
+    "the arm's stopping model": (
+        r"\bstruct\s+StoppingModel\b",
+        "crates/rip-control/src/swing/model.rs",
     ),
     "the stop envelope's margin": (
         r"\bconst\s+ENVELOPE_MARGIN\b",

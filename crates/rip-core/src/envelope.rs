@@ -56,97 +56,30 @@ pub fn envelope_speed(a_b: f64, room: f64) -> f64 {
     rip_control::swing::envelope_speed(a_b, room)
 }
 
-/// The arm's stopping model (module docs, (1)–(3)) for one plant, voltage bound and latency.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct StoppingModel {
-    /// `a₀ = f b U / J` (rad/s²).
-    pub a0: f64,
-    /// `k = f c / J` (1/s).
-    pub k: f64,
-    /// `b / J_min` (rad/s² per V), the drive's acceleration per volt at the least inertia.
-    pub drive_per_volt: f64,
-    /// `τ` (s).
-    pub latency: f64,
-    /// The voltage bound `U` (V).
-    pub voltage: f64,
-}
+/// The arm's stopping model (module docs, (1)–(3)): the `no_std` one the swing-up
+/// supervisor, the stop and the device evaluate, defined once in `rip-control`; rip-core
+/// designs it for a plant ([`stopping_model`]).
+pub use rip_control::swing::StoppingModel;
 
-impl StoppingModel {
-    /// The model of plant `p` braked at `voltage` (V) with the share `fraction` of (1), the
-    /// stop starting `latency` seconds after the state was measured.
-    pub fn new(p: &FurutaParams, voltage: f64, fraction: f64, latency: f64) -> Self {
-        let l = p.lumped();
-        let j = l.arm_axis();
-        let j_min = l.arm_min();
-        let b = p.kt / p.rm;
-        let c = p.dr + p.kt * p.km / p.rm;
-        Self {
-            a0: fraction * b * voltage / j,
-            k: fraction * c / j,
-            drive_per_volt: b / j_min,
-            latency,
-            voltage,
-        }
-    }
-
-    /// The same model in the `no_std` form the swing-up supervisor and the device evaluate:
-    /// the one implementation of (2) and (3).
-    pub fn control(&self) -> rip_control::swing::StoppingModel {
-        rip_control::swing::StoppingModel {
-            a0: self.a0,
-            k: self.k,
-            drive_per_volt: self.drive_per_volt,
-            latency: self.latency,
-            voltage: self.voltage,
-        }
-    }
-
-    /// The braking distance `d(ω)` of (2) from speed `omega` (rad/s, its magnitude is used),
-    /// without the latency.
-    pub fn braking_distance(&self, omega: f64) -> f64 {
-        self.control().braking_distance(omega)
-    }
-
-    /// The stopping distance `D(ω, u_a)` of (3) (rad), latency included, with `along` (V)
-    /// the voltage applied along the motion during the latency (clamped to `[0, U]`).
-    pub fn stopping_distance_with(&self, omega: f64, along: f64) -> f64 {
-        self.control().stopping_distance_with(omega, along)
-    }
-
-    /// The stopping distance `D(ω, U)` (rad): the full voltage along the motion during the
-    /// latency.
-    pub fn stopping_distance(&self, omega: f64) -> f64 {
-        self.stopping_distance_with(omega, self.voltage)
-    }
-
-    /// Where the arm at `theta` moving at `rate` stops with `applied` (V) acting during the
-    /// latency: `θ + sgn(θ̇) D(|θ̇|, sgn(θ̇) u_a)`.
-    pub fn stopping_point(&self, theta: f64, rate: f64, applied: f64) -> f64 {
-        self.control().stopping_point(theta, rate, applied)
-    }
-
-    /// The largest speed (rad/s) from which the arm stops within `room` (rad) by (3) with
-    /// `along` (V) during the latency; 0 when even an arm at rest could not.
-    pub fn max_speed(&self, room: f64, along: f64) -> f64 {
-        let d = |w: f64| self.stopping_distance_with(w, along);
-        if d(0.0) >= room {
-            return 0.0;
-        }
-        // D is increasing in ω: bisect between 0 and a speed that is too fast.
-        let mut hi = 1.0;
-        while d(hi) < room && hi < 1e6 {
-            hi *= 2.0;
-        }
-        let mut lo = 0.0;
-        for _ in 0..60 {
-            let mid = 0.5 * (lo + hi);
-            if d(mid) < room {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        lo
+/// The stopping model of plant `p` braked at `voltage` (V) with the share `fraction` of (1),
+/// the stop starting `latency` seconds after the state was measured.
+pub fn stopping_model(
+    p: &FurutaParams,
+    voltage: f64,
+    fraction: f64,
+    latency: f64,
+) -> StoppingModel {
+    let l = p.lumped();
+    let j = l.arm_axis();
+    let j_min = l.arm_min();
+    let b = p.kt / p.rm;
+    let c = p.dr + p.kt * p.km / p.rm;
+    StoppingModel {
+        a0: fraction * b * voltage / j,
+        k: fraction * c / j,
+        drive_per_volt: b / j_min,
+        latency,
+        voltage,
     }
 }
 
@@ -765,7 +698,7 @@ mod tests {
     #[test]
     fn the_braking_distance_is_the_integral_of_the_deceleration() {
         let p = FurutaParams::qube_servo2();
-        let m = StoppingModel::new(&p, 12.0, 0.5, 0.0);
+        let m = stopping_model(&p, 12.0, 0.5, 0.0);
         for w0 in [0.5, 3.0, 10.0, 40.0] {
             // ω̇ = −(a₀ + k ω), integrated with small Euler steps until rest.
             let (mut w, mut x, h) = (w0, 0.0, 1e-6);
@@ -779,7 +712,7 @@ mod tests {
             assert!(d < w0 * w0 / (2.0 * m.a0));
         }
         assert_eq!(m.braking_distance(0.0), 0.0);
-        let with_latency = StoppingModel::new(&p, 12.0, 0.5, 0.02);
+        let with_latency = stopping_model(&p, 12.0, 0.5, 0.02);
         assert!(with_latency.stopping_distance(5.0) > m.stopping_distance(5.0) + 5.0 * 0.02);
         // max_speed inverts D.
         let v = with_latency.max_speed(2.0, 12.0);
@@ -802,7 +735,7 @@ mod tests {
         for p in [FurutaParams::qube_servo2(), FurutaParams::paper()] {
             let plant = Plant::new(p).unwrap();
             let ts = 0.01;
-            let model = StoppingModel::new(&p, 12.0, STOP_BRAKE_FRACTION, 2.0 * ts);
+            let model = stopping_model(&p, 12.0, STOP_BRAKE_FRACTION, 2.0 * ts);
             let law = BrakingLaw::new(&p, 12.0, ts);
             for (alpha, alpha_dot) in [(std::f64::consts::PI, 0.0), (0.3, 4.0), (2.0, -6.0)] {
                 for w in [2.0, 8.0, 20.0] {
@@ -872,7 +805,7 @@ mod tests {
         }
         // The catch of the QUBE: upright, the arm at 15.7 rad/s with the controller braking.
         let p = FurutaParams::qube_servo2();
-        let analytic = StoppingModel::new(&p, 12.0, STOP_BRAKE_FRACTION, 2.0 * ts);
+        let analytic = stopping_model(&p, 12.0, STOP_BRAKE_FRACTION, 2.0 * ts);
         let sim = SimulatedStop::new(&p, 12.0, ts, 2).unwrap();
         let x = State::new(-0.18, 15.7, 0.05, 1.0);
         // The analytic distance stops this arm (exit 5 in 3 of 60 emulated swing-ups); the

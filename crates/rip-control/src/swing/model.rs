@@ -129,11 +129,42 @@ impl<R: Real> StoppingModel<R> {
         w * tau + c::<R>(0.5) * a * tau * tau + self.braking_distance(w + a * tau)
     }
 
+    /// The stopping distance `D(ω, U)` (rad): the full voltage along the motion during the
+    /// latency.
+    pub fn stopping_distance(&self, omega: R) -> R {
+        self.stopping_distance_with(omega, self.voltage)
+    }
+
     /// Where the arm at `theta` moving at `rate` stops with `applied` (V) acting during the
     /// latency: `θ + sgn(θ̇) D(|θ̇|, sgn(θ̇) u_a)`.
     pub fn stopping_point(&self, theta: R, rate: R, applied: R) -> R {
         let along = if rate >= R::ZERO { applied } else { -applied };
         theta + rate.signum() * self.stopping_distance_with(rate, along)
+    }
+
+    /// The largest speed (rad/s) from which the arm stops within `room` (rad) with `along`
+    /// (V) during the latency; 0 when even an arm at rest could not. `D` increases with `ω`:
+    /// a bisection of 60 steps between 0 and the first doubling of 1 rad/s that is too fast
+    /// (at most 10⁶ rad/s), so its work is bounded whatever the model.
+    pub fn max_speed(&self, room: R, along: R) -> R {
+        let d = |w: R| self.stopping_distance_with(w, along);
+        if d(R::ZERO) >= room {
+            return R::ZERO;
+        }
+        let mut hi = R::ONE;
+        while d(hi) < room && hi < c(1e6) {
+            hi *= c(2.0);
+        }
+        let mut lo = R::ZERO;
+        for _ in 0..60 {
+            let mid = c::<R>(0.5) * (lo + hi);
+            if d(mid) < room {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        lo
     }
 }
 

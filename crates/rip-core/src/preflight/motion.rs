@@ -73,7 +73,7 @@ fn period_s(rig: &RigSections) -> f64 {
 
 /// The stop's model of a rig file (module docs).
 pub fn stopping_model(spec: &Spec, rig: &RigSections) -> StoppingModel {
-    StoppingModel::new(
+    crate::envelope::stopping_model(
         &spec.plant.params(),
         rig.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT),
         STOP_BRAKE_FRACTION,

@@ -4,7 +4,7 @@
 
 use rip_control::swing::CatchPrediction;
 
-use crate::envelope::StoppingModel;
+use crate::envelope::stopping_model;
 use crate::linalg::c2d;
 use crate::lqr::dlqr;
 use crate::plant::Plant;
@@ -33,7 +33,7 @@ pub(crate) fn prediction(plant: &Plant, s: &SwingUpSettings, ts: f64) -> Option<
         substeps: SUBSTEPS,
         arm_room: s.arm_limit - s.catch_margin,
         pendulum_room: s.balance_angle - s.catch_margin,
-        stopping: StoppingModel::new(smooth.params(), s.max_voltage, 1.0, ts).control(),
+        stopping: stopping_model(smooth.params(), s.max_voltage, 1.0, ts),
     })
 }
 #[cfg(test)]

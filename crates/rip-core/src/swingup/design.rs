@@ -4,7 +4,7 @@
 
 use rip_control::swing::{self as control, SwingParams, UnstableMode};
 
-use crate::envelope::{envelope_speed, StoppingModel};
+use crate::envelope::{envelope_speed, stopping_model};
 use crate::plant::Plant;
 
 use super::catch::prediction;
@@ -58,7 +58,7 @@ pub(crate) fn params(plant: &Plant, s: &SwingUpSettings, ts: f64) -> Option<Swin
         prediction: prediction(plant, s, ts),
         balance_angle: s.balance_angle,
         arm_limit: s.arm_limit,
-        stopping: StoppingModel::new(p, s.max_voltage, 1.0, ts).control(),
+        stopping: stopping_model(p, s.max_voltage, 1.0, ts),
         handover_time: s.handover_time,
         reference_return_rate: s.reference_return_rate,
         max_time: s.max_time,
