@@ -19,7 +19,7 @@
 //!
 //! | class | signals | effect |
 //! |---|---|---|
-//! | stop | HUP INT QUIT USR1 USR2 ALRM TERM STKFLT TSTP TTIN XCPU VTALRM PROF IO PWR, RTMIN…RTMAX | the loop ends at its next period and brings the arm to rest, then the stop frame; exit code 128 + signal. Another one during that stop sends the stop frame at once ([`StopWatch`], [`StopReason::SignalAgain`]) |
+//! | stop | HUP INT QUIT USR1 USR2 ALRM TERM STKFLT TSTP TTIN XCPU VTALRM PROF IO PWR, RTMIN…RTMAX | the loop ends at its next period and brings the arm to rest, then the stop frame; exit code 128 + signal. Another one during that stop sends the stop frame at once ([`StopWatch`], [`StopReason::SignalAgain`]); one during the stop of a run that reached its duration does too, and the run exits 128 + that signal ([`cut_short`]) |
 //! | fatal | ILL TRAP ABRT BUS FPE SEGV SYS | the handler writes the stop frame, then the signal's default action ends the process (core dump) |
 //! | ignored | PIPE XFSZ TTOU | a broken pipe or a log over the file-size limit fails the write instead (a device loss or a log fault, both stops); a background write to the terminal proceeds instead of stopping the process |
 //! | harmless | CHLD CONT URG WINCH | default (nothing happens); a resumed loop finds its deadlines missed and stops as stalled |
@@ -513,11 +513,14 @@ impl StopWatch {
 }
 
 /// The reason of a stop that a signal, `by`, cut short ([`StopWatch`]): a signal's stop becomes
-/// [`StopReason::SignalAgain`]; any other stop keeps its own reason (its exit code says what
-/// went wrong; the stop's line says it was cut short).
+/// [`StopReason::SignalAgain`]; the stop of a run that reached its duration becomes the
+/// signal's ([`StopReason::Signal`], exit 128 + `by`): the run did not end as it was asked to,
+/// the arm-limit guarantee was given up, and exit 0 would say otherwise; a fault's stop keeps
+/// its own reason (its exit code says what went wrong; the stop's line says it was cut short).
 pub fn cut_short(reason: StopReason, by: i32) -> StopReason {
     match reason {
         StopReason::Signal(first) => StopReason::SignalAgain { first, second: by },
+        StopReason::Finished => StopReason::Signal(by),
         other => other,
     }
 }
@@ -767,6 +770,14 @@ mod tests {
         // A fault's stop keeps its own code: it says what went wrong.
         let fault = cut_short(StopReason::Watchdog(5), libc::SIGINT);
         assert_eq!(fault.exit_code(), exit_code::WATCHDOG);
+        // A finished run's stop cut short is no longer a clean end.
+        let finished = cut_short(StopReason::Finished, libc::SIGINT);
+        assert_eq!(finished.exit_code(), 130);
+        assert_eq!(finished.name(), "signal");
+        assert_ne!(
+            cut_short(StopReason::Finished, libc::SIGTERM).exit_code(),
+            exit_code::FINISHED
+        );
     }
 
     #[test]

@@ -683,6 +683,57 @@ fn double_ctrl_c(name: &str, driving: Driving, gap: Duration) -> DoubleCtrlC {
     }
 }
 
+/// A run that reached its `--duration` is lowering its pendulum when a Ctrl-C comes: the stop
+/// frame goes out at once, and the run exits 130 (the signal's), not 0: it did not end as it
+/// was asked to, and the arm-limit guarantee was given up. In real time: the stop's own time
+/// is what the signal interrupts.
+#[test]
+fn a_ctrl_c_during_the_end_of_a_finished_run_disables_the_driver_and_exits_130() {
+    use std::io::BufRead;
+    use std::time::Instant;
+    let _serial = one_at_a_time();
+    let name = "finished-cut-short";
+    let log_path = scratch(&format!("{name}.csv"));
+    let emu = Emulator::start(name, &["--seed", "3"]);
+    let mut child = spawn_run(
+        &emu.device,
+        "lqr",
+        &["--duration", "2", "--log", log_path.to_str().unwrap()],
+    );
+    let pid = child.id() as i32;
+    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    let mut seen = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        let mut line = String::new();
+        assert!(
+            stderr.read_line(&mut line).unwrap() > 0 && Instant::now() < deadline,
+            "no lowering announced: {seen:#?}"
+        );
+        seen.push(line.clone());
+        if line.contains("finished: stopping: lowering the pendulum") {
+            break;
+        }
+    }
+    let before = emu.commands_so_far().len();
+    unsafe { libc::kill(pid, libc::SIGINT) };
+    let mut rest = String::new();
+    std::io::Read::read_to_string(&mut stderr, &mut rest).unwrap();
+    let status = child.wait().unwrap();
+    let all = format!("{}{rest}", seen.concat());
+    assert_eq!(status.code(), Some(130), "{all}");
+    assert!(all.contains("cut short by SIGINT"), "{all}");
+    let log = Log::read(&log_path);
+    assert_eq!(log.meta("stop"), Some("signal"), "{all}");
+    assert_eq!(log.meta("exit_code"), Some("130"));
+    assert_eq!(log.meta("stop_sent"), Some("true"));
+    // The driver was left disabled: after the signal the commands end with the stop frame.
+    let commands = emu.commands();
+    assert!(commands[before..].contains(&(0, 0)), "{all}");
+    let last_stop = commands.iter().rposition(|c| *c == (0, 0)).unwrap();
+    assert!(commands[last_stop..].iter().all(|c| *c == (0, 0)));
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
