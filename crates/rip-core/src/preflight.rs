@@ -535,7 +535,7 @@ fn stored_prediction(input: &Input<'_>) -> Result<Finding, String> {
             ));
         }
     }
-    let finding = Finding::new(
+    Ok(Finding::new(
         "prediction",
         if p.works {
             Verdict::Pass
@@ -556,8 +556,7 @@ fn stored_prediction(input: &Input<'_>) -> Result<Finding, String> {
                 (None, false) => "; it misses the tuning's bar".to_string(),
             }
         ),
-    );
-    Ok(finding)
+    ))
 }
 
 fn prediction(input: &Input<'_>) -> Option<Finding> {

@@ -52,7 +52,7 @@ pub mod own;
 mod robustness;
 mod settings;
 pub use assess::{assess, steady_state, Assessment, OffCompensation};
-pub(crate) use assess::{assess_kinds, assess_until};
+pub(crate) use assess::{assess_kinds, screen_then_confirm};
 pub use bar::{
     frictionless, off_compensation, sensor_floor, Bar, BASE_PEAK_TO_PEAK, GUARD, OFF_COMPENSATION,
     STICTION_RATIO,
@@ -485,28 +485,21 @@ enum Judgement {
 /// a fall.
 fn judge(spec: &Spec, w: Weights, ts: f64, bar: &Bar) -> Judgement {
     let candidate = w.apply(spec);
-    let Ok((mut assessments, mut complete)) =
-        assess_until(&candidate, ts, bar, &SEEDS[..SCREEN], true)
+    let Ok((assessments, complete)) =
+        screen_then_confirm(&candidate, ts, bar, &ControllerKind::ALL)
     else {
         return Judgement::NoDesign;
     };
     if complete && assessments.iter().all(|a| a.works(bar)) {
-        // Confirmed on every seed before it is kept.
-        let Ok(confirmed) = assess_until(&candidate, ts, bar, &SEEDS, false) else {
-            return Judgement::NoDesign;
-        };
-        (assessments, complete) = confirmed;
-        if assessments.iter().all(|a| a.works(bar)) {
-            return Judgement::Works(Box::new(Tuned {
-                spec: candidate,
-                weights: w,
-                works: true,
-                assessments,
-                tried: 0,
-                own: OwnWeights::SHARED,
-                bar: *bar,
-            }));
-        }
+        return Judgement::Works(Box::new(Tuned {
+            spec: candidate,
+            weights: w,
+            works: true,
+            assessments,
+            tried: 0,
+            own: OwnWeights::SHARED,
+            bar: *bar,
+        }));
     }
     let missing = ControllerKind::ALL.len() - assessments.len();
     let balance: f64 = assessments

@@ -6,7 +6,7 @@ use crate::metrics::table1_rmse;
 use crate::sim::simulate;
 use crate::spec::{ControllerKind, Spec, SpecError};
 
-use super::{off_compensation, Bar, OFF_COMPENSATION, SEEDS};
+use super::{off_compensation, Bar, OFF_COMPENSATION, SCREEN, SEEDS};
 
 /// How one controller does on the rig with the compensation off ([`bar`](Bar) module docs),
 /// the worst over both errors and [`SEEDS`].
@@ -167,7 +167,7 @@ pub fn assess(spec: &Spec, ts: f64, bar: &Bar) -> Result<Vec<Assessment>, SpecEr
 /// balance within the bar and the voltage bound (with the compensation exact or off), and the
 /// margins are measured only when all do (the search needs no more to rank such a
 /// candidate). The flag says whether it is complete.
-pub(crate) fn assess_until(
+fn assess_until(
     spec: &Spec,
     ts: f64,
     bar: &Bar,
@@ -175,6 +175,23 @@ pub(crate) fn assess_until(
     stop_early: bool,
 ) -> Result<(Vec<Assessment>, bool), SpecError> {
     assess_kinds(spec, ts, bar, &ControllerKind::ALL, seeds, stop_early)
+}
+
+/// The assessment of the controllers `kinds` of `spec` a search judges a candidate by: screened
+/// on the first [`SCREEN`] of [`SEEDS`], stopping at the first controller that does not balance
+/// within the bar; when every one works there, confirmed on all of [`SEEDS`] (a steady state
+/// at the bar on two seeds may be past it on the next). The flag says whether it is complete.
+pub(crate) fn screen_then_confirm(
+    spec: &Spec,
+    ts: f64,
+    bar: &Bar,
+    kinds: &[ControllerKind],
+) -> Result<(Vec<Assessment>, bool), SpecError> {
+    let (screened, complete) = assess_kinds(spec, ts, bar, kinds, &SEEDS[..SCREEN], true)?;
+    if complete && screened.iter().all(|a| a.works(bar)) {
+        return assess_kinds(spec, ts, bar, kinds, &SEEDS, false);
+    }
+    Ok((screened, complete))
 }
 
 /// [`assess_until`] of the controllers `kinds` only.

@@ -17,7 +17,7 @@
 
 use crate::spec::{ControllerKind, Spec, SpecError};
 
-use super::{assess_kinds, Assessment, Bar, SCREEN, SEEDS};
+use super::{screen_then_confirm, Assessment, Bar};
 
 /// A change to the MPC's own weights on top of the shared ones: its output weights scaled by
 /// `√arm` and `√pendulum`, its input-rate weight by `√rate`, and an input weight added of
@@ -82,7 +82,7 @@ pub fn candidates() -> Vec<MpcWeights> {
 }
 
 /// The first of [`candidates`] with which the MPC of `spec` meets `bar`: its margins first
-/// (no simulation), then [`SCREEN`] noise seeds, then all of [`SEEDS`]. `None` when none
+/// (no simulation), then [`SCREEN`](super::SCREEN) noise seeds, then all of [`SEEDS`](super::SEEDS). `None` when none
 /// does.
 pub fn search(
     spec: &Spec,
@@ -145,7 +145,7 @@ pub fn kalman_candidates() -> Vec<KalmanWeights> {
 }
 
 /// The first of [`kalman_candidates`] with which the LQG of `spec` meets `bar` (margins,
-/// then [`SCREEN`] seeds, then all of [`SEEDS`]). LQR does not use the filter, so it keeps
+/// then [`SCREEN`](super::SCREEN) seeds, then all of [`SEEDS`](super::SEEDS)). LQR does not use the filter, so it keeps
 /// what it had; the MPC does, and is to be assessed again on the filter returned.
 pub fn search_lqg(
     spec: &Spec,
@@ -169,7 +169,6 @@ fn first_that_works<W: Copy>(
     ts: f64,
     bar: &Bar,
 ) -> Result<Option<(W, Spec, Assessment)>, SpecError> {
-    let kinds = [kind];
     for w in candidates {
         let candidate = apply(&w);
         let Ok(design) = candidate.design(ts) else {
@@ -181,15 +180,10 @@ fn first_that_works<W: Copy>(
         if !bar.margins_ok(kind, &margins) {
             continue;
         }
-        let Ok((screened, _)) = assess_kinds(&candidate, ts, bar, &kinds, &SEEDS[..SCREEN], true)
-        else {
+        let Ok((mut assessed, _)) = screen_then_confirm(&candidate, ts, bar, &[kind]) else {
             continue;
         };
-        if !screened.iter().all(|a| a.works(bar)) {
-            continue;
-        }
-        let (mut confirmed, _) = assess_kinds(&candidate, ts, bar, &kinds, &SEEDS, false)?;
-        if let Some(a) = confirmed.pop().filter(|a| a.works(bar)) {
+        if let Some(a) = assessed.pop().filter(|a| a.works(bar)) {
             return Ok(Some((w, candidate, a)));
         }
     }
