@@ -117,11 +117,32 @@ ONE_HOME: dict[str, tuple[str, str]] = {
     ),
     "the stop's braking time": (
         r"\bconst\s+\w*(?:BRAKE|STOP)_S\s*:\s*f64\s*=\s*3\.0",
-        "crates/rip-core/src/envelope.rs",
+        "crates/rip-control/src/stop.rs",
     ),
     "the arm's stopping model": (
         r"\bstruct\s+StoppingModel\b",
-        "crates/rip-control/src/swing/model.rs",
+        "crates/rip-control/src/stop.rs",
+    ),
+    "the stop's braking law": (r"\bstruct\s+BrakingLaw\b", "crates/rip-control/src/stop.rs"),
+    "the stop's hold law": (r"\bstruct\s+HoldLaw\b", "crates/rip-control/src/stop.rs"),
+    "the stop simulated from the whole state": (
+        r"\bstruct\s+SimulatedStop\b",
+        "crates/rip-control/src/stop.rs",
+    ),
+    "the loop's braking envelope": (r"\bstruct\s+ArmEnvelope\b", "crates/rip-control/src/stop.rs"),
+    "the stop's rest test": (r"\bstruct\s+RestTest\b", "crates/rip-control/src/stop.rs"),
+    "the stop's command by mode": (r"\bstruct\s+Brake\b", "crates/rip-control/src/stop/brake.rs"),
+    "the stop's sequence": (
+        r"\bstruct\s+StopSequence\b",
+        "crates/rip-control/src/stop/sequence.rs",
+    ),
+    "the lowering's longest time": (
+        r"\bconst\s+MAX_LOWER_S\b",
+        "crates/rip-control/src/stop/sequence.rs",
+    ),
+    "the rates from two samples on the device's clock": (
+        r"\(1\.\.u32::MAX\s*/\s*2\)",
+        "crates/rip-control/src/stop.rs",
     ),
     "the stop envelope's margin": (
         r"\bconst\s+ENVELOPE_MARGIN\b",

@@ -131,6 +131,7 @@ mod controller;
 mod design;
 pub mod qp;
 mod real;
+pub mod stop;
 pub mod swing;
 
 pub use controller::{Controller, Measurement, Move, Phase, RateFilter, Stats, Status};

@@ -1,6 +1,9 @@
-//! The arm's braking envelope: how far the arm still travels when it is braked at the voltage
-//! bound, and the law that brakes it. One definition for every bound on the arm's travel:
-//! the swing-up's limit ([`crate::swingup`]) and the stops of `rip-rt` (`safety.arm_limit`).
+//! The design of the arm's stop for a plant: the stopping model, the braking and hold laws'
+//! gains, the simulated stop and the gentle end's lowering, each filled from the plant's
+//! lumped constants into the run-time types of [`rip_control::stop`], which run the rule on
+//! the host, in `rip-rt` and on the device. One definition for every bound on the arm's
+//! travel: the swing-up's limit ([`crate::swingup`]) and the stops of `rip-rt`
+//! (`safety.arm_limit`).
 //!
 //! # Stopping distance
 //!
@@ -83,39 +86,17 @@ pub fn stopping_model(
     }
 }
 
-/// The stop's braking law: full voltage against the arm's motion, proportional near rest so
-/// that it does not chatter about zero speed.
-///
-/// ```text
-/// u = −U · clamp(θ̇ / ω_lin, −1, 1),    ω_lin = U / K,   K = J / (2 b T_s)
-/// ```
-///
-/// The gain `K` removes half the arm's speed per period on the model (a faster gain would
-/// overshoot through the loop's delay); `ω_lin` is the speed below which the law is linear.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct BrakingLaw {
-    /// `U` (V).
-    pub voltage: f64,
-    /// `ω_lin` (rad/s).
-    pub linear_below: f64,
-}
+/// The stop's braking law ([`rip_control::stop::BrakingLaw`]).
+pub use rip_control::stop::BrakingLaw;
 
-impl BrakingLaw {
-    /// The law for plant `p`, voltage bound `voltage` (V) and loop period `ts` (s).
-    pub fn new(p: &FurutaParams, voltage: f64, ts: f64) -> Self {
-        let gain = p.lumped().arm_axis() / (2.0 * p.kt / p.rm * ts);
-        Self {
-            voltage,
-            linear_below: voltage / gain,
-        }
-    }
-
-    /// The voltage for arm rate `rate` (rad/s).
-    pub fn voltage(&self, rate: f64) -> f64 {
-        if !rate.is_finite() {
-            return 0.0;
-        }
-        -self.voltage * (rate / self.linear_below).clamp(-1.0, 1.0)
+/// The braking law of plant `p` at voltage bound `voltage` (V) and loop period `ts` (s):
+/// `ω_lin = U / K` with `K = J / (2 b T_s)`, the gain that removes half the arm's speed per
+/// period on the model (a faster gain would overshoot through the loop's delay).
+pub fn braking_law(p: &FurutaParams, voltage: f64, ts: f64) -> BrakingLaw {
+    let gain = p.lumped().arm_axis() / (2.0 * p.kt / p.rm * ts);
+    BrakingLaw {
+        voltage,
+        linear_below: voltage / gain,
     }
 }
 
@@ -136,14 +117,8 @@ impl BrakingLaw {
 /// (Bryson's rule: the arm held within `θ_m` = [`HOLD_ARM_RAD`], the pendulum brought within
 /// `φ_m` = [`HOLD_PENDULUM_RAD`], with up to the voltage bound). When only the arm's reading
 /// can be trusted (the wiring's sign learnt from the arm's response, the pendulum's not),
-/// [`HoldLaw::arm_voltage`] uses the arm's terms alone: a stiff, damped position loop.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct HoldLaw {
-    /// The gain `K` on `(θ − θ_h, θ̇, φ, α̇)`.
-    pub k: [f64; 4],
-    /// `U` (V).
-    pub voltage: f64,
-}
+/// [`HoldLaw::arm_voltage`](rip_control::stop::HoldLaw::arm_voltage) uses the arm's terms alone: a stiff, damped position loop.
+pub use rip_control::stop::HoldLaw;
 
 /// `θ_m` of [`HoldLaw`] (rad): the arm's deviation from its hold point weighed against a
 /// full-voltage command.
@@ -151,66 +126,37 @@ pub const HOLD_ARM_RAD: f64 = 0.05;
 /// `φ_m` of [`HoldLaw`] (rad): the pendulum's swing weighed against a full-voltage command.
 pub const HOLD_PENDULUM_RAD: f64 = 0.5;
 
-impl HoldLaw {
-    /// The law for plant `p`, voltage bound `voltage` (V) and loop period `ts` (s).
-    pub fn new(p: &FurutaParams, voltage: f64, ts: f64) -> crate::error::Result<Self> {
-        let q = [
-            1.0 / (HOLD_ARM_RAD * HOLD_ARM_RAD),
-            0.0,
-            1.0 / (HOLD_PENDULUM_RAD * HOLD_PENDULUM_RAD),
-            0.0,
-        ];
-        Self::with_weights(p, voltage, ts, q)
-    }
+/// The hold law of plant `p` at voltage bound `voltage` (V) and loop period `ts` (s) ([`HoldLaw`]
+/// above: Bryson's weights [`HOLD_ARM_RAD`], [`HOLD_PENDULUM_RAD`]).
+pub fn hold_law(p: &FurutaParams, voltage: f64, ts: f64) -> crate::error::Result<HoldLaw> {
+    let q = [
+        1.0 / (HOLD_ARM_RAD * HOLD_ARM_RAD),
+        0.0,
+        1.0 / (HOLD_PENDULUM_RAD * HOLD_PENDULUM_RAD),
+        0.0,
+    ];
+    hold_law_with_weights(p, voltage, ts, q)
+}
 
-    /// The law of the class docs with `Q = diag(q)` on `z = (θ − θ_h, θ̇, φ, α̇)` ([`Lowering`]
-    /// searches over it).
-    pub fn with_weights(
-        p: &FurutaParams,
-        voltage: f64,
-        ts: f64,
-        q: [f64; 4],
-    ) -> crate::error::Result<Self> {
-        use crate::linalg::Mat;
-        let plant = Plant::new(*p)?;
-        let hanging = State::new(0.0, 0.0, std::f64::consts::PI, 0.0);
-        let (a, b) = plant.linearize_discrete(&hanging, 0.0, ts)?;
-        let q = Mat::from_diagonal(&nalgebra::DVector::from_vec(q.to_vec()));
-        let r = Mat::from_element(1, 1, 1.0 / (voltage * voltage).max(1e-6));
-        let design = crate::lqr::dlqr(&a, &b, &q, &r, None)?;
-        Ok(Self {
-            k: std::array::from_fn(|i| design.k[(0, i)]),
-            voltage,
-        })
-    }
-
-    /// The voltage for the arm at `offset` (rad) from its hold point moving at `rate`
-    /// (rad/s), the pendulum at `alpha` (rad, 0 upright) moving at `alpha_rate` (rad/s).
-    pub fn voltage(&self, offset: f64, rate: f64, alpha: f64, alpha_rate: f64) -> f64 {
-        let phi = crate::trig::wrap_angle(alpha - std::f64::consts::PI);
-        self.voltage_from_hanging(offset, rate, phi, alpha_rate)
-    }
-
-    /// [`voltage`](Self::voltage) with the pendulum's angle from hanging `phi` (rad) given
-    /// rather than wrapped from `α` ([`Lowering::pendulum_angle`]).
-    pub fn voltage_from_hanging(&self, offset: f64, rate: f64, phi: f64, alpha_rate: f64) -> f64 {
-        let u = -(self.k[0] * offset + self.k[1] * rate + self.k[2] * phi + self.k[3] * alpha_rate);
-        if u.is_finite() {
-            u.clamp(-self.voltage, self.voltage)
-        } else {
-            0.0
-        }
-    }
-
-    /// [`voltage`](Self::voltage) with the arm's terms alone (class docs).
-    pub fn arm_voltage(&self, offset: f64, rate: f64) -> f64 {
-        let u = -(self.k[0] * offset + self.k[1] * rate);
-        if u.is_finite() {
-            u.clamp(-self.voltage, self.voltage)
-        } else {
-            0.0
-        }
-    }
+/// The law of [`HoldLaw`] with `Q = diag(q)` on `z = (θ − θ_h, θ̇, φ, α̇)` ([`Lowering`]
+/// searches over it).
+pub fn hold_law_with_weights(
+    p: &FurutaParams,
+    voltage: f64,
+    ts: f64,
+    q: [f64; 4],
+) -> crate::error::Result<HoldLaw> {
+    use crate::linalg::Mat;
+    let plant = Plant::new(*p)?;
+    let hanging = State::new(0.0, 0.0, std::f64::consts::PI, 0.0);
+    let (a, b) = plant.linearize_discrete(&hanging, 0.0, ts)?;
+    let q = Mat::from_diagonal(&nalgebra::DVector::from_vec(q.to_vec()));
+    let r = Mat::from_element(1, 1, 1.0 / (voltage * voltage).max(1e-6));
+    let design = crate::lqr::dlqr(&a, &b, &q, &r, None)?;
+    Ok(HoldLaw {
+        k: std::array::from_fn(|i| design.k[(0, i)]),
+        voltage,
+    })
 }
 
 /// The gentle end of a run: the balanced pendulum lowered to hanging at rest under control,
@@ -273,9 +219,8 @@ pub const LOWERED_ARM_RATE: f64 = 0.1;
 /// design lets the arm travel: the rest is for the rig's difference from the model and for the
 /// stopping distance the loop's envelope keeps.
 pub const LOWER_TRAVEL_SHARE: f64 = 2.0 / 3.0;
-/// The longest a lowering may take (s), on the model in its design and on the rig: past it
-/// the stop brakes and holds as after a fault.
-pub const MAX_LOWER_S: f64 = 6.0;
+/// The longest a lowering may take (s) ([`rip_control::stop::MAX_LOWER_S`]).
+pub use rip_control::stop::MAX_LOWER_S;
 
 impl Lowering {
     /// The lowering of plant `p` at voltage bound `voltage` (V) and loop period `ts` (s)
@@ -293,7 +238,7 @@ impl Lowering {
         let substeps = (ts / plant.max_rk4_substep()).ceil().clamp(1.0, 1000.0) as usize;
         let periods = (MAX_LOWER_S / ts).ceil() as usize;
         let candidate = |q: [f64; 4]| -> Option<Self> {
-            let law = HoldLaw::with_weights(p, voltage, ts, q).ok()?;
+            let law = hold_law_with_weights(p, voltage, ts, q).ok()?;
             let (seconds, travel) =
                 Self::simulate(&plant, &law, ts, substeps, periods, max_travel)?;
             Some(Self {
@@ -352,28 +297,10 @@ impl Lowering {
         Ok(Some(found))
     }
 
-    /// The pendulum's angle from hanging (rad) that the lowering law takes, for the pendulum
-    /// at `alpha` (rad, 0 upright) on the `side` (±1) it is lowered on, which it updates.
-    ///
-    /// `wrap(α − π)` jumps from +π to −π as the pendulum crosses upright: the law's pendulum
-    /// term flips with it, and a pendulum near upright is balanced there by it rather than
-    /// lowered (on the emulator it stayed up for 3.4 s). In the upper half the angle is kept
-    /// on the side the pendulum was last on in the lower half (or first found on), past ±π
-    /// if it crosses upright, so that the law keeps tipping it the one way.
+    /// The pendulum's angle from hanging (rad) that the lowering law takes
+    /// ([`rip_control::stop::pendulum_angle`]).
     pub fn pendulum_angle(alpha: f64, side: &mut f64) -> f64 {
-        let phi = crate::trig::wrap_angle(alpha - std::f64::consts::PI);
-        if !phi.is_finite() {
-            return phi;
-        }
-        if alpha.cos() < 0.0 || *side == 0.0 {
-            *side = if phi < 0.0 { -1.0 } else { 1.0 };
-            return phi;
-        }
-        if phi * *side < 0.0 {
-            phi + *side * std::f64::consts::TAU
-        } else {
-            phi
-        }
+        rip_control::stop::pendulum_angle(alpha, side)
     }
 
     /// The settling time and the arm's largest travel of `law` on `plant` (class docs);
@@ -412,144 +339,33 @@ impl Lowering {
     }
 }
 
-/// Share of the braking law's voltage that [`SimulatedStop`] counts on: the rest is kept for a
-/// motor weaker than `[plant]` says and a larger dead zone (tens of percent before
-/// identification). The pendulum's reaction on the arm is simulated, not reserved for.
-pub const SIMULATED_BRAKE_FRACTION: f64 = 0.7;
+pub use rip_control::stop::{
+    SimulatedStop, MAX_BRAKE_S, SIMULATED_BRAKE_FRACTION, SIMULATED_REST_RATE, SIMULATED_REST_S,
+};
 
-/// The longest an active stop brakes (s): `rip-rt` sends the stop frame after it whatever
-/// the arm does, and [`SimulatedStop`] takes an arm still moving outwards after it as one it
-/// cannot stop.
-pub const MAX_BRAKE_S: f64 = 3.0;
-
-/// Seconds the simulated arm must stay at rest or move back before [`SimulatedStop`] takes
-/// its farthest point as reached: longer than the half swing of a hanging pendulum
-/// (`π √(J_α / G)`, 0.13–0.4 s across the rigs of shared/DESIGN.md), whose reaction can push
-/// a braked arm out again.
-pub const SIMULATED_REST_S: f64 = 0.5;
-/// Arm speed (rad/s) below which [`SimulatedStop`] counts the arm at rest.
-pub const SIMULATED_REST_RATE: f64 = 0.05;
-
-/// The stop simulated from the rig's whole state: the braking law run on the model of
-/// `[plant]`, the pendulum's reaction on the arm included, from the measured arm and pendulum
-/// angles and rates.
-///
-/// The analytic distance (3) cannot know the pendulum: it reserves a share of the braking
-/// torque for its reaction (`STOP_BRAKE_FRACTION`), which is too much for an upright
-/// pendulum just caught (its reaction is small; a controlled catch moves the arm fast) and
-/// too little for a heavy pendulum falling on a light arm. The simulation takes the reaction
-/// from the equations of motion of [`crate::plant`] instead:
-///
-/// ```text
-/// u = applied (full along the motion, SIMULATED_BRAKE_FRACTION of it against)   τ periods
-/// u = SIMULATED_BRAKE_FRACTION · BrakingLaw(θ̇_sampled)                          after
-/// ```
-///
-/// on the model without its Coulomb friction (which only helps the stop, and would need
-/// small integration steps), until the arm has stayed at rest or moved back for
-/// [`SIMULATED_REST_S`], at most [`MAX_BRAKE_S`]; the stopping point is the farthest the
-/// arm went along its motion, and an arm that moved outwards all along the last
-/// [`SIMULATED_REST_S`] of that time has none (±∞).
-#[derive(Debug, Clone)]
-pub struct SimulatedStop {
-    plant: Plant,
-    law: BrakingLaw,
-    ts: f64,
-    substeps: usize,
-    latency_periods: usize,
+/// The simulated stop ([`SimulatedStop`]) of plant `p` braked at `voltage` (V), sampled every
+/// `ts` (s), the applied voltage acting for `latency_periods` periods before the braking law:
+/// the smooth model of `p` with its dead zone, integrated within its RK4 stability limit.
+pub fn simulated_stop(
+    p: &FurutaParams,
     voltage: f64,
-}
-
-impl SimulatedStop {
-    /// The simulated stop of plant `p` braked at `voltage` (V), sampled every `ts` (s), the
-    /// applied voltage acting for `latency_periods` periods before the braking law.
-    pub fn new(
-        p: &FurutaParams,
-        voltage: f64,
-        ts: f64,
-        latency_periods: usize,
-    ) -> crate::error::Result<Self> {
-        let smooth = FurutaParams {
-            cr: 0.0,
-            cp: 0.0,
-            ..*p
-        };
-        let plant = Plant::new(smooth)?;
-        let substeps = stable_substeps(&plant, ts);
-        Ok(Self {
-            plant,
-            law: BrakingLaw::new(p, voltage, ts),
-            ts,
-            substeps,
-            latency_periods,
-            voltage,
-        })
-    }
-
-    /// The farthest arm angle (rad) along its motion from state `x` (the pendulum's angle 0
-    /// upright) with `applied` (V) across the motor until the stop's first command (class
-    /// docs); `x[0]` for an arm at rest, ±∞ for one the stop cannot bring to rest.
-    pub fn stopping_point(&self, x: State, applied: f64) -> f64 {
-        let dir = x[1].signum();
-        if x[1] == 0.0 || !x.iter().all(|v| v.is_finite()) {
-            return x[0];
-        }
-        let along = applied.clamp(-self.voltage, self.voltage);
-        let held = if along * dir > 0.0 {
-            along
-        } else {
-            SIMULATED_BRAKE_FRACTION * along
-        };
-        let mut x = x;
-        let mut far = x[0];
-        let outwards = |x: &State| x[1] * dir > 0.0;
-        for _ in 0..self.latency_periods {
-            self.plant
-                .advance(&mut x, held, 0.0, self.ts, self.substeps);
-            far = if dir > 0.0 {
-                far.max(x[0])
-            } else {
-                far.min(x[0])
-            };
-        }
-        let mut last = x[0];
-        let mut rate = x[1];
-        let periods = (MAX_BRAKE_S / self.ts).ceil() as usize;
-        let rest = (SIMULATED_REST_S / self.ts).ceil() as u32;
-        let (mut still, mut escaping) = (0, 0);
-        for _ in 0..periods {
-            let u = SIMULATED_BRAKE_FRACTION * self.law.voltage(rate);
-            self.plant.advance(&mut x, u, 0.0, self.ts, self.substeps);
-            rate = (x[0] - last) / self.ts;
-            last = x[0];
-            far = if dir > 0.0 {
-                far.max(x[0])
-            } else {
-                far.min(x[0])
-            };
-            if !far.is_finite() {
-                break;
-            }
-            // At rest, or on its way back, for long enough that the pendulum's reaction has
-            // had its swing to push the arm out again.
-            if outwards(&x) && x[1].abs() > SIMULATED_REST_RATE {
-                (still, escaping) = (0, escaping + 1);
-            } else {
-                (still, escaping) = (still + 1, 0);
-            }
-            if still >= rest {
-                return far;
-            }
-        }
-        // Still swinging with its pendulum after the braking time, the arm has its farthest
-        // point behind it; one that has moved outwards all along its last SIMULATED_REST_S
-        // is not being stopped.
-        if far.is_finite() && escaping < rest {
-            far
-        } else {
-            dir * f64::INFINITY
-        }
-    }
+    ts: f64,
+    latency_periods: usize,
+) -> crate::error::Result<SimulatedStop> {
+    let smooth = FurutaParams {
+        cr: 0.0,
+        cp: 0.0,
+        ..*p
+    };
+    let plant = Plant::new(smooth)?;
+    Ok(SimulatedStop {
+        model: plant.arm_model(),
+        dead_zone: p.vd,
+        law: braking_law(p, voltage, ts),
+        ts,
+        substeps: stable_substeps(&plant, ts) as u32,
+        latency_periods: u32::try_from(latency_periods).unwrap_or(u32::MAX),
+    })
 }
 
 /// Where a simulated run first left the envelope: the stop that the loop would make there.
@@ -736,7 +552,7 @@ mod tests {
             let plant = Plant::new(p).unwrap();
             let ts = 0.01;
             let model = stopping_model(&p, 12.0, STOP_BRAKE_FRACTION, 2.0 * ts);
-            let law = BrakingLaw::new(&p, 12.0, ts);
+            let law = braking_law(&p, 12.0, ts);
             for (alpha, alpha_dot) in [(std::f64::consts::PI, 0.0), (0.3, 4.0), (2.0, -6.0)] {
                 for w in [2.0, 8.0, 20.0] {
                     let mut x = State::new(0.0, w, alpha, alpha_dot);
@@ -771,8 +587,8 @@ mod tests {
                 ..p
             };
             let plant = Plant::new(rough).unwrap();
-            let sim = SimulatedStop::new(&rough, 12.0, ts, 2).unwrap();
-            let law = BrakingLaw::new(&rough, 12.0, ts);
+            let sim = simulated_stop(&rough, 12.0, ts, 2).unwrap();
+            let law = braking_law(&rough, 12.0, ts);
             for (w, alpha, alpha_dot, applied) in [
                 (15.7, 0.05, 1.0, -6.0),
                 (15.7, 0.05, 1.0, 12.0),
@@ -782,7 +598,7 @@ mod tests {
                 (3.0, -0.4, 5.0, 0.0),
                 (17.18, 0.05, 1.0, 12.0),
             ] {
-                let predicted = sim.stopping_point(State::new(0.0, w, alpha, alpha_dot), applied);
+                let predicted = sim.stopping_point([0.0, w, alpha, alpha_dot], applied);
                 let mut x = State::new(0.0, w, alpha, alpha_dot);
                 let (mut far, mut last, mut rate) = (0.0f64, 0.0, w);
                 for k in 0..400 {
@@ -806,21 +622,18 @@ mod tests {
         // The catch of the QUBE: upright, the arm at 15.7 rad/s with the controller braking.
         let p = FurutaParams::qube_servo2();
         let analytic = stopping_model(&p, 12.0, STOP_BRAKE_FRACTION, 2.0 * ts);
-        let sim = SimulatedStop::new(&p, 12.0, ts, 2).unwrap();
+        let sim = simulated_stop(&p, 12.0, ts, 2).unwrap();
         let x = State::new(-0.18, 15.7, 0.05, 1.0);
         // The analytic distance stops this arm (exit 5 in 3 of 60 emulated swing-ups); the
         // simulated one, full voltage along the motion for the latency and all, does not.
         assert!(analytic.stopping_point(-0.18, 15.7, 12.0) > 2.95);
-        let simulated = sim.stopping_point(x, 12.0);
+        let simulated = sim.stopping_point(x.into(), 12.0);
         assert!(simulated < 2.5, "{simulated}");
-        assert!(sim.stopping_point(x, -6.0) < simulated);
+        assert!(sim.stopping_point(x.into(), -6.0) < simulated);
         // The fastest catch seen (17.2 rad/s): the pendulum falls as the arm brakes and swings
         // on for seconds, and the arm with it, inside.
-        let fastest = sim.stopping_point(State::new(-0.182, 17.18, 0.05, 1.0), 12.0);
+        let fastest = sim.stopping_point([-0.182, 17.18, 0.05, 1.0], 12.0);
         assert!(fastest < 2.95, "{fastest}");
-        assert_eq!(
-            sim.stopping_point(State::new(0.3, 0.0, 0.0, 0.0), 12.0),
-            0.3
-        );
+        assert_eq!(sim.stopping_point([0.3, 0.0, 0.0, 0.0], 12.0), 0.3);
     }
 }

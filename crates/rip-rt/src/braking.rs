@@ -5,8 +5,8 @@
 
 use crate::config::Config;
 use crate::envelope::{
-    sample_rates, stop_mode, Brake, BrakeCommand, BrakeMode, BrakeReport, StopSequence,
-    MAX_BRAKE_S, MAX_HOLD_S,
+    arm_envelope, brake_for_mode, sample_rates, stop_mode, stop_sequence, BrakeCommand, BrakeMode,
+    BrakeReport, StopSequence, MAX_BRAKE_S, MAX_HOLD_S,
 };
 use crate::exchange::exchange;
 use crate::loop_core::LoopCore;
@@ -88,7 +88,7 @@ fn witness_lowering(
         return None;
     };
     let mode = crate::envelope::brake_mode(&StopReason::Witness(fault));
-    stop.lowering_faulted(Brake::for_mode(
+    stop.lowering_faulted(brake_for_mode(
         cfg,
         mode,
         core.witness_estimate(),
@@ -168,11 +168,11 @@ pub fn bring_to_rest(
         return report;
     }
     let watch = StopWatch::for_stop(reason);
-    let brake = Brake::for_mode(cfg, mode, core.witness_estimate(), core.held_voltage());
+    let brake = brake_for_mode(cfg, mode, core.witness_estimate(), core.held_voltage());
     let lowering = lowering_for(core, reason, mode).copied();
-    let mut stop = StopSequence::new(cfg, brake);
+    let mut stop = stop_sequence(cfg, brake);
     if let Some(lowering) = &lowering {
-        stop = stop.lowering(cfg, lowering, core.held_voltage());
+        stop = stop.lowering(lowering.law, arm_envelope(cfg), core.held_voltage());
     }
     let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
     let mut last: Option<(f64, f64, u32)> = None;

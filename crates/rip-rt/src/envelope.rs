@@ -34,21 +34,22 @@
 //! that cannot brake (protocol.md rule 9) leaves the windings open on it; the active law does
 //! not depend on it.
 
-use rip_core::envelope::{BrakingLaw, HoldLaw, Lowering, SimulatedStop, StoppingModel};
+use rip_core::envelope::{Lowering, SimulatedStop, StoppingModel};
 use rip_core::excitation::ExcitationSettings;
-use rip_core::plant::{Plant, State};
+use rip_core::plant::State;
 
 use crate::config::{Config, ConfigError, MAX_VOLTAGE_LIMIT};
 use crate::stop::StopReason;
 use crate::witness::WitnessFault;
 
-pub use rip_core::envelope::MAX_BRAKE_S;
+/// The stop's rule, defined once in the `no_std` run-time layer ([`rip_control::stop`]).
+pub use rip_control::stop::{
+    momentum_rate, sample_rates, ArmEnvelope, Brake, BrakeCommand, BrakeMode, Breach, RestTest,
+    StopSequence, HOLD_BLIND_PERIODS, HOLD_GIVE_UP_RAD, LOWERED_HANGING_RAD, LOWER_FROM_RAD,
+    LOWER_SIDE_FROM_RAD, MAX_BRAKE_S, MAX_HOLD_S, MAX_LOWER_S, MOMENTUM_ENERGY_GAIN,
+    PENDULUM_REST_RAD, PROGRESS_PERIODS, REST_S, REST_TRAVEL, WRONG_SIGN_PERIODS,
+};
 pub use rip_core::preflight::motion::{ENVELOPE_MARGIN, LATENCY_PERIODS, PREFLIGHT_HEADROOM};
-
-/// The arm counts as at rest once it moved less than [`REST_TRAVEL`] over this long (s).
-pub const REST_S: f64 = 0.2;
-/// Travel (rad) below which the arm is at rest over [`REST_S`].
-pub const REST_TRAVEL: f64 = 0.01;
 
 /// The stopping model of a configuration: its `[plant]`, `safety.voltage_limit`, two loop
 /// periods of latency (rip-core's [`rip_core::preflight::motion::stopping_model`]).
@@ -67,117 +68,55 @@ pub fn envelope_limit(cfg: &Config) -> f64 {
 /// [`rip_core::envelope::LOWER_TRAVEL_SHARE`] of [`envelope_limit`]; `None` without a plant or
 /// where no law settles.
 pub fn lowering(cfg: &Config) -> Option<Lowering> {
-    let voltage = cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT);
     let room = rip_core::envelope::LOWER_TRAVEL_SHARE * envelope_limit(cfg);
-    Lowering::design(&cfg.spec.plant.params(), voltage, cfg.period_s(), room)
-        .ok()
-        .flatten()
+    Lowering::design(
+        &cfg.spec.plant.params(),
+        stop_voltage(cfg),
+        cfg.period_s(),
+        room,
+    )
+    .ok()
+    .flatten()
 }
 
-/// The arm's and the pendulum's rates (rad/s) from the sample `before` (its angles, rad, and
-/// the device's clock, µs, wrapping) to this one at `theta`, `alpha` and `now_us`: the
-/// difference over the device's clock between the two sampling instants, not the host's
-/// wake-ups. 0 without a sample before, or for two samples in the same microsecond or a clock
-/// that jumped back.
-pub fn sample_rates(
-    before: Option<(f64, f64, u32)>,
-    theta: f64,
-    alpha: f64,
-    now_us: u32,
-) -> (f64, f64) {
-    match before {
-        Some((theta0, alpha0, at)) if (1..u32::MAX / 2).contains(&now_us.wrapping_sub(at)) => {
-            let dt = now_us.wrapping_sub(at) as f64 * 1e-6;
-            (
-                (theta - theta0) / dt,
-                rip_core::trig::wrap_angle(alpha - alpha0) / dt,
-            )
-        }
-        _ => (0.0, 0.0),
-    }
+/// The voltage the stops of `cfg` brake with: `safety.voltage_limit` within the driver's.
+fn stop_voltage(cfg: &Config) -> f64 {
+    cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT)
 }
 
-/// The braking envelope of `safety.arm_limit` in the loop (module docs). Allocation-free.
-#[derive(Debug, Clone)]
-pub struct ArmEnvelope {
-    model: StoppingModel,
-    simulated: Option<SimulatedStop>,
-    bound: f64,
-    // The last arm and pendulum angles and the device's clock (µs, wrapping) when they were
-    // sampled.
-    last: Option<(f64, f64, u32)>,
+/// The stop of `cfg` simulated from the whole state ([`SimulatedStop`]): `[plant]` braked at
+/// [`stop_voltage`], [`LATENCY_PERIODS`] of latency at the loop's period; `None` without a
+/// plant.
+pub fn simulated_stop(cfg: &Config) -> Option<SimulatedStop> {
+    rip_core::envelope::simulated_stop(
+        &cfg.spec.plant.params(),
+        stop_voltage(cfg),
+        cfg.period_s(),
+        LATENCY_PERIODS as usize,
+    )
+    .ok()
 }
 
-impl ArmEnvelope {
-    /// The envelope of `cfg`.
-    pub fn new(cfg: &Config) -> Self {
-        Self {
-            model: stopping_model(cfg),
-            simulated: SimulatedStop::new(
-                &cfg.spec.plant.params(),
-                cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT),
-                cfg.period_s(),
-                LATENCY_PERIODS as usize,
-            )
-            .ok(),
-            bound: envelope_limit(cfg),
-            last: None,
+/// The braking envelope of `safety.arm_limit` in the loop (module docs): the stopping model
+/// and the simulated stop of `cfg` on [`envelope_limit`].
+pub fn arm_envelope(cfg: &Config) -> ArmEnvelope {
+    ArmEnvelope::new(
+        stopping_model(cfg),
+        simulated_stop(cfg),
+        envelope_limit(cfg),
+    )
+}
+
+/// The envelope's breach is the run's stop ([`StopReason::ArmEnvelope`], exit 5), reported
+/// against `safety.arm_limit` (the bound plus [`ENVELOPE_MARGIN`]).
+impl From<Breach> for StopReason {
+    fn from(b: Breach) -> Self {
+        StopReason::ArmEnvelope {
+            angle: b.angle,
+            rate: b.rate,
+            stop_at: b.stop_at,
+            limit: b.bound + ENVELOPE_MARGIN,
         }
-    }
-
-    /// The stopping model it uses.
-    pub fn model(&self) -> &StoppingModel {
-        &self.model
-    }
-
-    /// Forgets the last measurement (a new phase of the run).
-    pub fn reset(&mut self) {
-        self.last = None;
-    }
-
-    /// Takes the arm angle `theta` and the pendulum angle `alpha` (rad, 0 upright) sampled at
-    /// the device's clock `device_us` with `applied` (V) across the motor (the device's
-    /// report, which acts until the stop's first command); the stop reason when the arm's
-    /// stopping point is past the envelope's bound (module docs: the analytic distance first,
-    /// and where it is past the bound, the stop simulated from the whole state).
-    pub fn check(
-        &mut self,
-        theta: f64,
-        alpha: f64,
-        device_us: u32,
-        applied: f64,
-    ) -> Result<(), StopReason> {
-        let before = self.last.replace((theta, alpha, device_us));
-        let (rate, alpha_rate) = sample_rates(before, theta, alpha, device_us);
-        self.check_state(theta, rate, alpha, alpha_rate, applied)
-    }
-
-    /// [`check`](Self::check) on a state whose rates the caller measured: the arm at `theta`
-    /// moving at `rate`, the pendulum at `alpha` moving at `alpha_rate` (rad, rad/s).
-    pub fn check_state(
-        &self,
-        theta: f64,
-        rate: f64,
-        alpha: f64,
-        alpha_rate: f64,
-        applied: f64,
-    ) -> Result<(), StopReason> {
-        let mut stop_at = self.model.stopping_point(theta, rate, applied);
-        if stop_at.abs() > self.bound {
-            if let Some(sim) = &self.simulated {
-                stop_at = sim.stopping_point(State::new(theta, rate, alpha, alpha_rate), applied);
-            }
-        }
-        // A NaN stopping point (no finite state to simulate) stops too.
-        if stop_at.is_nan() || stop_at.abs() > self.bound {
-            return Err(StopReason::ArmEnvelope {
-                angle: theta,
-                rate,
-                stop_at,
-                limit: self.bound + ENVELOPE_MARGIN,
-            });
-        }
-        Ok(())
     }
 }
 
@@ -199,32 +138,6 @@ pub fn check_excitation(
     model: &str,
 ) -> Result<(), ConfigError> {
     rip_core::preflight::check_excitation(&cfg.spec, &cfg.rig(), settings, model)
-}
-
-/// How a stop brakes the arm.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum BrakeMode {
-    /// The braking law on the measured rate (the motor and encoders are trusted).
-    Active,
-    /// The braking law with its sign reversed: the witness saw the arm move against the
-    /// voltage (a swapped motor lead or a reversed arm encoder), and in both cases a voltage
-    /// along the *measured* motion is the one that opposes the true motion. The sign is
-    /// checked on the arm's response ([`Brake`]): wrong, the law flips once to
-    /// [`BrakeMode::Checked`].
-    Reversed,
-    /// The braking law with the model's sign, checked on the arm's response: the witness found
-    /// the rig's motion unlike the model's, its arm encoder still counting (a wrong scale, a
-    /// pendulum that disagrees), so the sign is not known for sure. Wrong, the law flips once
-    /// to [`BrakeMode::Reversed`]; a law that fails both ways gives way to the short.
-    Checked,
-    /// The braking law on the model's arm rate, run open loop from the witness's estimate
-    /// at the stop (the arm encoder stopped counting; the motor is trusted), until the
-    /// model's arm is at rest; then the short.
-    Modelled,
-    /// The brake command only: windings shorted, whatever the wiring's sign.
-    Short,
-    /// Nothing can be sent (the device is gone), or the motor was never enabled.
-    None,
 }
 
 /// How the stop after `reason` brakes (module docs).
@@ -280,245 +193,52 @@ pub fn stop_mode(reason: &StopReason, driven: bool, wiring_checked: bool) -> Bra
     }
 }
 
-/// Periods in a row of a rising arm speed under the saturated braking law with the sign under
-/// test after which that sign is taken to be wrong (the sign the arm showed was not the
-/// wiring's: a wrong scale, say): the law flips once, then gives way to the short.
-pub const WRONG_SIGN_PERIODS: u32 = 4;
-/// Periods over which the saturated law with the sign under test must take a tenth off the
-/// arm's speed, or the sign is taken to be wrong.
-pub const PROGRESS_PERIODS: u32 = 10;
-
-/// What the stop applies for one period.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum BrakeCommand {
-    /// Drive this voltage (V).
-    Volts(f64),
-    /// Short the windings (the brake command).
-    Short,
+/// One encoder count and a half per period (rad/s) on the arm of `cfg`: below it the measured
+/// rate is the encoder's quantisation, and the braking law would chatter between ± its gain
+/// per count.
+fn dead_band(cfg: &Config) -> f64 {
+    1.5 * std::f64::consts::TAU / cfg.device.arm_counts_per_rev.max(1) as f64 / cfg.period_s()
 }
 
-/// The stop's command, period by period (module docs): one definition for `rip-rt`'s stops
-/// and for the simulations that test them. Allocation-free.
-#[derive(Debug, Clone)]
-pub struct Brake {
-    mode: BrakeMode,
-    law: BrakingLaw,
-    dead_band: f64,
-    last_speed: f64,
-    rising: u32,
-    // The speed at the start of the current progress window, and the periods into it.
-    window_speed: f64,
-    window: u32,
-    // Whether the checked law may still flip its sign once; the largest saturated speed
-    // since its sign was last set, and whether the law has since halved it (its sign shown
-    // right on the arm's response).
-    may_flip: bool,
-    peak_speed: f64,
-    verified: bool,
-    // The model braked open loop (BrakeMode::Modelled): the plant, its state, RK4 substeps
-    // per period, the period (s), and how long its arm has been at rest (periods).
-    model: Option<(Plant, State, usize, f64, u32)>,
+/// The stop of `cfg` braking in `mode` ([`Brake`]): the braking law of `[plant]` at
+/// [`stop_voltage`] and the loop's period.
+pub fn brake(cfg: &Config, mode: BrakeMode) -> Brake {
+    let law = rip_core::envelope::braking_law(
+        &cfg.spec.plant.params(),
+        stop_voltage(cfg),
+        cfg.period_s(),
+    );
+    Brake::new(law, dead_band(cfg), mode)
 }
 
-impl Brake {
-    /// The stop of `cfg` braking in `mode`.
-    pub fn new(cfg: &Config, mode: BrakeMode) -> Self {
-        let period_s = cfg.period_s();
-        let voltage = cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT);
-        Self {
-            mode,
-            law: BrakingLaw::new(&cfg.spec.plant.params(), voltage, period_s),
-            // One count per period and a half: below it the measured rate is the encoder's
-            // quantisation, and the law would chatter between ±its gain per count.
-            dead_band: 1.5 * std::f64::consts::TAU
-                / cfg.device.arm_counts_per_rev.max(1) as f64
-                / period_s,
-            last_speed: f64::INFINITY,
-            rising: 0,
-            window_speed: f64::INFINITY,
-            window: 0,
-            may_flip: matches!(mode, BrakeMode::Reversed | BrakeMode::Checked),
-            peak_speed: 0.0,
-            verified: false,
-            model: None,
+/// The stop of `cfg` braking in `mode`: in [`BrakeMode::Modelled`] the law on the simulated
+/// stop's model from the witness's `estimate` with `held` (V) still applied for the period
+/// until the stop's first command (the short without an estimate or a plant), else
+/// [`brake`].
+pub fn brake_for_mode(cfg: &Config, mode: BrakeMode, estimate: Option<State>, held: f64) -> Brake {
+    match (mode, simulated_stop(cfg)) {
+        (BrakeMode::Modelled, Some(stop)) => {
+            Brake::modelled(&stop, dead_band(cfg), estimate.map(Into::into), held)
         }
-    }
-
-    /// The stop of `cfg` in [`BrakeMode::Modelled`] from the model's state `x` at the stop
-    /// decision, `held` (V) still applied for the period until the stop's first command (the
-    /// short when there is no state, or the configuration has no plant).
-    pub fn modelled(cfg: &Config, x: Option<State>, held: f64) -> Self {
-        let plant = cfg.spec.plant().ok();
-        let mut brake = Self::new(cfg, BrakeMode::Short);
-        if let (Some(plant), Some(x)) = (plant, x) {
-            let ts = cfg.period_s();
-            let substeps = (ts / plant.max_rk4_substep()).ceil().clamp(1.0, 1000.0) as usize;
-            let mut x = x;
-            plant.advance(&mut x, held, 0.0, ts, substeps);
-            brake.model = Some((plant, x, substeps, ts, 0));
-            brake.mode = BrakeMode::Modelled;
-        }
-        brake
-    }
-
-    /// The stop of `cfg` braking in `mode`: [`modelled`](Self::modelled) from the witness's
-    /// `estimate` with `held` (V) still applied for [`BrakeMode::Modelled`], else
-    /// [`new`](Self::new).
-    pub fn for_mode(cfg: &Config, mode: BrakeMode, estimate: Option<State>, held: f64) -> Self {
-        match mode {
-            BrakeMode::Modelled => Self::modelled(cfg, estimate, held),
-            mode => Self::new(cfg, mode),
-        }
-    }
-
-    /// The model's arm angle (rad) in [`BrakeMode::Modelled`].
-    pub fn model_arm(&self) -> Option<f64> {
-        self.model.as_ref().map(|m| m.1[0])
-    }
-
-    /// Whether the law's sign is known: trusted ([`BrakeMode::Active`]), or shown on the arm's
-    /// response (the saturated law has halved the arm's speed with it).
-    pub fn sign_known(&self) -> bool {
-        match self.mode {
-            BrakeMode::Active => true,
-            BrakeMode::Checked | BrakeMode::Reversed => self.verified,
-            _ => false,
-        }
-    }
-
-    /// How it brakes now (a law whose sign proved wrong became [`BrakeMode::Short`]).
-    pub fn mode(&self) -> BrakeMode {
-        self.mode
-    }
-
-    /// Whether arm speed `speed` (rad/s) is within the law's dead band (0 V).
-    pub(crate) fn below_dead_band(&self, speed: f64) -> bool {
-        speed <= self.dead_band
-    }
-
-    /// Whether the law is saturated at arm speed `speed` (rad/s).
-    pub(crate) fn saturates(&self, speed: f64) -> bool {
-        speed > self.law.linear_below
-    }
-
-    /// Gives up the law for the short from now on.
-    pub fn short(&mut self) {
-        if self.mode != BrakeMode::None {
-            self.mode = BrakeMode::Short;
-        }
-    }
-
-    /// The command for the measured arm rate `rate` (rad/s; `None` without a fresh
-    /// measurement, which shorts the windings for that period).
-    pub fn command(&mut self, rate: Option<f64>) -> BrakeCommand {
-        let sign = match self.mode {
-            BrakeMode::Active | BrakeMode::Checked => 1.0,
-            BrakeMode::Reversed => -1.0,
-            // A reading that moves after all: the model's arm is not the arm.
-            BrakeMode::Modelled if rate.is_some_and(|r| r.abs() > self.dead_band) => {
-                self.mode = BrakeMode::Short;
-                return BrakeCommand::Short;
-            }
-            BrakeMode::Modelled => return self.modelled_command(),
-            BrakeMode::Short | BrakeMode::None => return BrakeCommand::Short,
-        };
-        let Some(rate) = rate.filter(|r| r.is_finite()) else {
-            return BrakeCommand::Short;
-        };
-        let speed = rate.abs();
-        let mut sign = sign;
-        if matches!(self.mode, BrakeMode::Reversed | BrakeMode::Checked) && self.wrong_sign(speed) {
-            if !self.may_flip {
-                self.mode = BrakeMode::Short;
-                return BrakeCommand::Short;
-            }
-            // The sign the diagnosis suggested drove the arm on: the other one brakes it.
-            self.may_flip = false;
-            self.mode = if self.mode == BrakeMode::Reversed {
-                BrakeMode::Checked
-            } else {
-                BrakeMode::Reversed
-            };
-            self.rising = 0;
-            self.window = 0;
-            self.last_speed = f64::INFINITY;
-            self.peak_speed = 0.0;
-            sign = -sign;
-        }
-        if speed > self.law.linear_below {
-            self.peak_speed = self.peak_speed.max(speed);
-        } else if self.peak_speed > 0.0 && speed < 0.5 * self.peak_speed {
-            self.verified = true;
-        }
-        if speed <= self.dead_band {
-            BrakeCommand::Volts(0.0)
-        } else {
-            BrakeCommand::Volts(sign * self.law.voltage(rate))
-        }
-    }
-
-    /// The law on the model's arm rate; the model then advances a period under it.
-    fn modelled_command(&mut self) -> BrakeCommand {
-        let rest_periods = (REST_S / self.law_period()).ceil() as u32;
-        let Some((plant, x, substeps, ts, still)) = self.model.as_mut() else {
-            self.mode = BrakeMode::Short;
-            return BrakeCommand::Short;
-        };
-        let rate = x[1];
-        let v = if rate.abs() <= self.dead_band {
-            *still += 1;
-            0.0
-        } else {
-            *still = 0;
-            self.law.voltage(rate)
-        };
-        plant.advance(x, v, 0.0, *ts, *substeps);
-        if *still >= rest_periods {
-            self.mode = BrakeMode::Short;
-            return BrakeCommand::Short;
-        }
-        BrakeCommand::Volts(v)
-    }
-
-    fn law_period(&self) -> f64 {
-        self.model.as_ref().map_or(0.01, |m| m.3)
-    }
-
-    /// Whether the law with the sign under test proves not to brake: a law that opposes the
-    /// motion slows the arm after the latency; one whose sign is wrong speeds it up period
-    /// after period, or holds it at the speed where the motor's back-EMF balances it (both
-    /// judged while the law is saturated: in its linear range the pendulum's push on the arm
-    /// is as large as the law's, and a test there flips a law that was right).
-    fn wrong_sign(&mut self, speed: f64) -> bool {
-        let saturated = speed > self.law.linear_below;
-        if saturated && speed > self.last_speed + self.dead_band {
-            self.rising += 1;
-        } else {
-            self.rising = 0;
-        }
-        self.last_speed = speed;
-        if !saturated {
-            self.window = 0;
-            self.window_speed = f64::INFINITY;
-            return false;
-        }
-        if self.window == 0 {
-            self.window_speed = speed;
-        }
-        self.window += 1;
-        let stalled = self.window > PROGRESS_PERIODS && speed > 0.9 * self.window_speed;
-        if self.window > PROGRESS_PERIODS {
-            self.window = 0;
-        }
-        self.rising >= WRONG_SIGN_PERIODS || stalled
+        (BrakeMode::Modelled, None) => brake(cfg, BrakeMode::Short),
+        (mode, _) => brake(cfg, mode),
     }
 }
 
-mod sequence;
-pub use sequence::{
-    momentum_rate, StopSequence, HOLD_BLIND_PERIODS, HOLD_GIVE_UP_RAD, LOWERED_HANGING_RAD,
-    LOWER_FROM_RAD, LOWER_SIDE_FROM_RAD, MAX_HOLD_S, MOMENTUM_ENERGY_GAIN, PENDULUM_REST_RAD,
-};
+/// The stop of `cfg` with `brake` ([`StopSequence`]): the hold law of `[plant]` and its smooth
+/// model for the arm's momentum.
+pub fn stop_sequence(cfg: &Config, brake: Brake) -> StopSequence {
+    let period_s = cfg.period_s();
+    let voltage = stop_voltage(cfg);
+    let params = cfg.spec.plant.params();
+    StopSequence::new(
+        brake,
+        rip_core::envelope::hold_law(&params, voltage, period_s).ok(),
+        cfg.spec.plant().ok().map(|p| p.arm_model()),
+        period_s,
+        voltage,
+    )
+}
 
 /// What an active stop did.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -583,48 +303,6 @@ impl std::fmt::Display for BrakeReport {
     }
 }
 
-/// The stop's rest test: the arm moved less than [`REST_TRAVEL`] over the last [`REST_S`].
-/// Allocation-free (a ring of the recent angles).
-#[derive(Debug, Clone)]
-pub struct RestTest {
-    history: [f64; 64],
-    ring: usize,
-    seen: usize,
-}
-
-impl RestTest {
-    /// The test for a loop of period `period_s` (s).
-    pub fn new(period_s: f64) -> Self {
-        let rest_periods = (REST_S / period_s).ceil().max(1.0) as usize;
-        Self {
-            history: [f64::NAN; 64],
-            ring: (rest_periods + 1).min(64),
-            seen: 0,
-        }
-    }
-
-    /// Takes the next measured arm angle (rad); whether the arm is at rest.
-    pub fn observe(&mut self, theta: f64) -> bool {
-        self.observe_within(theta, REST_TRAVEL)
-    }
-
-    /// Takes the next angle (rad); whether it moved less than `travel` (rad) over
-    /// [`REST_S`].
-    pub fn observe_within(&mut self, theta: f64, travel: f64) -> bool {
-        self.history[self.seen % self.ring] = theta;
-        self.seen += 1;
-        if self.seen < self.ring {
-            return false;
-        }
-        let (lo, hi) = self.history[..self.ring]
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
-                (lo.min(v), hi.max(v))
-            });
-        hi - lo < travel
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -663,8 +341,8 @@ mod tests {
         let cfg = Config::from_toml("").unwrap();
         // The law as it stands drives a reversed rig away; reversed, it brakes it, as far as
         // the trusted law brakes a rig wired right.
-        let (right, v_right) = braked(Brake::new(&cfg, BrakeMode::Active), false, 10.0);
-        let (rev, v_rev) = braked(Brake::new(&cfg, BrakeMode::Reversed), true, 10.0);
+        let (right, v_right) = braked(brake(&cfg, BrakeMode::Active), false, 10.0);
+        let (rev, v_rev) = braked(brake(&cfg, BrakeMode::Reversed), true, 10.0);
         assert!(
             v_right.abs() < 0.1 && v_rev.abs() < 0.1,
             "{v_right} {v_rev}"
@@ -673,8 +351,8 @@ mod tests {
         // The reversed law on a rig wired right speeds the arm up: the stop shorts instead
         // after a few periods (here 9.2 rad of travel from 10 rad/s, against 6.9 rad for the
         // short alone and 1.4 rad for the law with the right sign).
-        let (short, _) = braked(Brake::new(&cfg, BrakeMode::Short), false, 10.0);
-        let (travel, v) = braked(Brake::new(&cfg, BrakeMode::Reversed), false, 10.0);
+        let (short, _) = braked(brake(&cfg, BrakeMode::Short), false, 10.0);
+        let (travel, v) = braked(brake(&cfg, BrakeMode::Reversed), false, 10.0);
         assert!(v.abs() < 1.0, "{v}");
         assert!(travel < 1.4 * short, "{travel} vs {short}");
         assert!(short > 2.0 * right, "{short} {right}");
@@ -694,9 +372,9 @@ mod tests {
         );
         // On a rig with its motor leads swapped, the trusted law drives the arm away; the
         // checked law flips and stops it, within a few times the travel of a right rig.
-        let (right, _) = braked(Brake::new(&cfg, BrakeMode::Active), false, 10.0);
-        let (away, _) = braked(Brake::new(&cfg, BrakeMode::Active), true, 10.0);
-        let (checked, v) = braked(Brake::new(&cfg, BrakeMode::Checked), true, 10.0);
+        let (right, _) = braked(brake(&cfg, BrakeMode::Active), false, 10.0);
+        let (away, _) = braked(brake(&cfg, BrakeMode::Active), true, 10.0);
+        let (checked, v) = braked(brake(&cfg, BrakeMode::Checked), true, 10.0);
         assert!(v.abs() < 1.0, "{v}");
         assert!(away > 5.0 * right, "{away} vs {right}");
         assert!(checked < 0.5 * away, "{checked} vs {away}");
@@ -706,9 +384,9 @@ mod tests {
     fn a_modelled_stop_brakes_as_the_trusted_law_and_a_moving_reading_ends_it() {
         let cfg = Config::from_toml("").unwrap();
         let x = State::new(0.0, 10.0, std::f64::consts::PI, 0.0);
-        let (right, _) = braked(Brake::new(&cfg, BrakeMode::Active), false, 10.0);
+        let (right, _) = braked(brake(&cfg, BrakeMode::Active), false, 10.0);
         // The reading is frozen: the model's rate is all the stop has.
-        let mut brake = Brake::modelled(&cfg, Some(x), 0.0);
+        let mut brake = brake_for_mode(&cfg, BrakeMode::Modelled, Some(x), 0.0);
         assert_eq!(brake.mode(), BrakeMode::Modelled);
         let mut sim = crate::plant::PlantSim::new(crate::plant::Model::Paper, 0.0, 0.0);
         sim.set_state([0.0, 10.0, std::f64::consts::PI, 0.0]);
@@ -731,16 +409,19 @@ mod tests {
         // against 1.07 rad from 10 rad/s; the short alone: 6.9 rad).
         assert!(travel < right + 0.5, "{travel} vs {right}");
         // A reading that moves: the model is not the arm.
-        let mut brake = Brake::modelled(&cfg, Some(x), 0.0);
+        let mut brake = brake_for_mode(&cfg, BrakeMode::Modelled, Some(x), 0.0);
         assert_eq!(brake.command(Some(3.0)), BrakeCommand::Short);
         assert_eq!(brake.mode(), BrakeMode::Short);
-        assert_eq!(Brake::modelled(&cfg, None, 0.0).mode(), BrakeMode::Short);
+        assert_eq!(
+            brake_for_mode(&cfg, BrakeMode::Modelled, None, 0.0).mode(),
+            BrakeMode::Short
+        );
     }
 
     #[test]
     fn the_envelope_stops_a_fast_arm_before_its_limit_and_lets_a_slow_one_run() {
         let cfg = Config::from_toml("").unwrap();
-        let mut env = ArmEnvelope::new(&cfg);
+        let mut env = arm_envelope(&cfg);
         let model = *env.model();
         let hanging = std::f64::consts::PI;
         // At 2 rad from the 3 rad limit, the fastest speed it may still move outwards: by the
@@ -748,10 +429,10 @@ mod tests {
         // hanging still), which decides.
         let room = envelope_limit(&cfg) - 2.0;
         let v = model.max_speed(room, 12.0);
-        let sim = SimulatedStop::new(&cfg.spec.plant.params(), 12.0, 0.01, 2).unwrap();
-        let stops_inside = |w: f64| {
-            sim.stopping_point(State::new(2.0, w, hanging, 0.0), 12.0) <= envelope_limit(&cfg)
-        };
+        let sim =
+            rip_core::envelope::simulated_stop(&cfg.spec.plant.params(), 12.0, 0.01, 2).unwrap();
+        let stops_inside =
+            |w: f64| sim.stopping_point([2.0, w, hanging, 0.0], 12.0) <= envelope_limit(&cfg);
         let (mut lo, mut hi) = (v, 10.0 * v);
         assert!(stops_inside(lo) && !stops_inside(hi));
         while hi - lo > 1e-3 * v {
@@ -771,7 +452,7 @@ mod tests {
         env.check(2.0 - 1.1 * w * 0.01, hanging, u32::MAX - 4_999, 12.0)
             .unwrap();
         // Across the wrap of the device's clock.
-        let stop = env.check(2.0, hanging, 5_000, 12.0).unwrap_err();
+        let stop = StopReason::from(env.check(2.0, hanging, 5_000, 12.0).unwrap_err());
         assert!(
             matches!(stop, StopReason::ArmEnvelope { stop_at, .. } if stop_at > 2.95),
             "{stop}"

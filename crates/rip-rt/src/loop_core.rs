@@ -158,7 +158,7 @@ impl LoopCore {
             last_request_ns: None,
             host_interval_s: None,
             lockstep: false,
-            envelope: crate::envelope::ArmEnvelope::new(cfg),
+            envelope: crate::envelope::arm_envelope(cfg),
             lowering,
             witness_gap: false,
         })

@@ -251,6 +251,7 @@ mod law;
 mod model;
 mod supervisor;
 
+pub use crate::stop::StoppingModel;
 pub use law::*;
 pub use model::*;
 pub use supervisor::*;

@@ -1,5 +1,5 @@
-//! The stop's sequence, period by period: the braking law, the hold law, the short (module
-//! docs of [`crate::envelope`]).
+//! The stop's sequence, period by period: the gentle end's lowering, the braking law, the hold
+//! law, the short (module docs).
 
 use super::*;
 
@@ -27,25 +27,61 @@ pub const LOWER_FROM_RAD: f64 = 0.3;
 /// and pendulum at rest): the bar the end of a run is judged by.
 pub const LOWERED_HANGING_RAD: f64 = 0.1;
 
+/// The longest a lowering may take (s), on the model in its design and on the rig: past it
+/// the stop brakes and holds as after a fault.
+pub const MAX_LOWER_S: f64 = 6.0;
+
 /// The arm's distance from the centre (rad) past which the gentle end tips the pendulum the
 /// way the arm's term pushes it; nearer, the way it leans.
 pub const LOWER_SIDE_FROM_RAD: f64 = 0.05;
 
+/// Share of the pendulum's swing energy (`2 G`) that the rig may gain under the braking law on
+/// [`momentum_rate`] before that law gives way to the arm's rate.
+pub const MOMENTUM_ENERGY_GAIN: f64 = 1.0;
+
+/// The arm rate that the braking law takes when the wiring is trusted: the arm's angular
+/// momentum about its axis in units of its inertia,
+///
+/// ```text
+/// ω_H = H / (J₀ + J_α sin²α),   H = (J₀ + J_α sin²α) θ̇ − m₁₂ cos α α̇
+/// ```
+///
+/// from the measured rates. Only the motor's torque changes `H`, so a law on `ω_H` leaves
+/// nothing to walk the arm once the windings open; a law on `θ̇` under a pendulum still
+/// swinging from its fall held the arm near still for 8 s and left `H` to the pendulum, and
+/// the arm walked on to 10.2 rad with the windings open (generated rig 79, a healthy rig, at
+/// the end of an MPC balance). `ω_H = θ̇` when the pendulum rests.
+pub fn momentum_rate<R: Real>(model: &ArmModel<R>, rate: R, alpha: R, alpha_rate: R) -> R {
+    let (s, co) = (alpha.sin(), alpha.cos());
+    let inertia = model.j0 + model.ja * s * s;
+    (inertia * rate - model.m12 * co * alpha_rate) / inertia
+}
+
+/// The mechanical energy `T + V` (J) of the arm at rate `rate` and the pendulum at `alpha`,
+/// `alpha_rate`, with `V = G cos α` (rip-core's `Plant::energy`).
+fn energy<R: Real>(model: &ArmModel<R>, rate: R, alpha: R, alpha_rate: R) -> R {
+    let (s, co) = (alpha.sin(), alpha.cos());
+    let half: R = c(0.5);
+    half * (model.j0 + model.ja * s * s) * rate * rate - model.m12 * co * rate * alpha_rate
+        + half * model.ja * alpha_rate * alpha_rate
+        + model.grav * co
+}
+
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Stage {
-    /// The gentle end ([`rip_core::envelope::Lowering`]): the pendulum lowered to hanging and
-    /// the arm brought to its hold point `at` (the centre; NaN until the first measurement).
+enum Stage<R: Real> {
+    /// The gentle end: the pendulum lowered to hanging and the arm brought to its hold point
+    /// `at` (the centre; NaN until the first measurement).
     Lowering {
-        at: f64,
+        at: R,
         periods: u32,
-        last: f64,
+        last: R,
         unmoved: u32,
     },
     Braking,
     Holding {
-        at: f64,
+        at: R,
         periods: u32,
-        last: f64,
+        last: R,
         unmoved: u32,
     },
     /// `blind`: the arm's reading was found not to be the arm's (it did not change while the
@@ -57,91 +93,91 @@ enum Stage {
 
 /// A stop, period by period, after the run ended: the braking law of the stop's mode
 /// ([`Brake`]; with the wiring trusted, on the arm's angular momentum, [`momentum_rate`])
-/// until the arm rests or that momentum is braked out; then, where the wiring's sign is known, the hold law
-/// (`rip_core::envelope::HoldLaw`: the arm held where it stopped, the pendulum's energy taken
-/// out through it; the arm's terms alone when only the arm's sign was learnt) until arm and
+/// until the arm rests or that momentum is braked out; then, where the wiring's sign is known,
+/// the hold law ([`HoldLaw`]: the arm held where it stopped, the pendulum's energy taken out
+/// through it; the arm's terms alone when only the arm's sign was learnt) until arm and
 /// pendulum rest, at most [`MAX_HOLD_S`]; then the windings shorted until the arm rests once
-/// more. One definition for `rip-rt`'s stops ([`crate::braking::bring_to_rest`]) and for
-/// the simulations that test them. Allocation-free per period.
-#[derive(Debug, Clone)]
-pub struct StopSequence {
-    brake: Brake,
-    hold: Option<HoldLaw>,
-    arm_rest: RestTest,
-    pendulum_rest: RestTest,
-    stage: Stage,
+/// more. One definition for `rip-rt`'s stops, the device's and the simulations that test
+/// them. Allocation-free, `Copy`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StopSequence<R: Real = f64> {
+    brake: Brake<R>,
+    hold: Option<HoldLaw<R>>,
+    arm_rest: RestTest<R>,
+    pendulum_rest: RestTest<R>,
+    stage: Stage<R>,
     period_s: f64,
-    voltage: f64,
-    // The plant of `[plant]`, for the arm's angular momentum; the periods in a row the
-    // saturated law on it has seen its speed rise (`None` once it gave way), that speed,
-    // and the rig's energy (measured) when the law began.
-    plant: Option<Plant>,
+    voltage: R,
+    // The smooth model, for the arm's angular momentum; the periods in a row the saturated
+    // law on it has seen its speed rise (`None` once it gave way), that speed, and the rig's
+    // energy (measured) when the law began.
+    model: Option<ArmModel<R>>,
     momentum_rising: Option<u32>,
-    momentum_speed: f64,
-    momentum_energy: Option<f64>,
+    momentum_speed: R,
+    momentum_energy: Option<R>,
     // Periods in a row the law on it has had `ω_H` within its dead band.
     momentum_still: u32,
     // The last command's voltage (0 for the short).
-    last_volts: f64,
+    last_volts: R,
     // The gentle end's law while it may still run, the loop's braking envelope that watches
     // it, and the side the pendulum is lowered on.
-    lower: Option<HoldLaw>,
-    lower_envelope: Option<ArmEnvelope>,
-    lower_side: f64,
+    lower: Option<HoldLaw<R>>,
+    lower_envelope: Option<ArmEnvelope<R>>,
+    lower_side: R,
     // Whether the gentle end brought the pendulum down.
     lowered: bool,
 }
 
-impl StopSequence {
-    /// The stop of `cfg` with `brake`.
-    pub fn new(cfg: &Config, brake: Brake) -> Self {
-        let period_s = cfg.period_s();
-        let voltage = cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT);
+impl<R: Real> StopSequence<R> {
+    /// The stop with `brake`, the hold law `hold` (none: the short after the braking), the
+    /// smooth `model` for the arm's momentum (none: the braking law on the arm's rate), at a
+    /// loop period of `period_s` (s) and a voltage bound `voltage` (V).
+    pub fn new(
+        brake: Brake<R>,
+        hold: Option<HoldLaw<R>>,
+        model: Option<ArmModel<R>>,
+        period_s: f64,
+        voltage: R,
+    ) -> Self {
         Self {
-            plant: cfg.spec.plant().ok(),
+            model,
             momentum_rising: Some(0),
-            momentum_speed: f64::INFINITY,
+            momentum_speed: c(f64::INFINITY),
             momentum_energy: None,
             momentum_still: 0,
             brake,
-            hold: HoldLaw::new(&cfg.spec.plant.params(), voltage, period_s).ok(),
+            hold,
             arm_rest: RestTest::new(period_s),
             pendulum_rest: RestTest::new(period_s),
             stage: Stage::Braking,
             period_s,
             voltage,
-            last_volts: 0.0,
+            last_volts: R::ZERO,
             lower: None,
             lower_envelope: None,
-            lower_side: 0.0,
+            lower_side: R::ZERO,
             lowered: false,
         }
     }
 
-    /// The same stop beginning with the gentle end of an orderly stop: `lowering`'s law
+    /// The same stop beginning with the gentle end of an orderly stop: the lowering `law`
     /// brings a balanced pendulum (within [`LOWER_FROM_RAD`] of upright at the first
     /// measurement) down to hanging at rest with the arm brought to the centre, at most
-    /// [`rip_core::envelope::MAX_LOWER_S`]; then the stop ends. Past that time, or where the
-    /// loop's braking envelope ([`ArmEnvelope`] of `cfg`) finds the arm's stopping point past
-    /// its bound, the stop brakes and holds as after a fault; a reading that does not change
-    /// while the law drives shorts the windings as the hold's blind rule does. Only for a brake
-    /// whose sign is trusted ([`BrakeMode::Active`]). `held` (V): the run's last command,
-    /// which acts until the stop's first.
-    pub fn lowering(
-        mut self,
-        cfg: &Config,
-        lowering: &rip_core::envelope::Lowering,
-        held: f64,
-    ) -> Self {
+    /// [`MAX_LOWER_S`]; then the stop ends. Past that time, or where the loop's braking
+    /// `envelope` finds the arm's stopping point past its bound, the stop brakes and holds as
+    /// after a fault; a reading that does not change while the law drives shorts the windings
+    /// as the hold's blind rule does. Only for a brake whose sign is trusted
+    /// ([`BrakeMode::Active`]). `held` (V): the run's last command, which acts until the
+    /// stop's first.
+    pub fn lowering(mut self, law: HoldLaw<R>, envelope: ArmEnvelope<R>, held: R) -> Self {
         if self.brake.mode() == BrakeMode::Active {
-            // The run's last command acts until the stop's first.
             self.last_volts = held;
-            self.lower = Some(lowering.law);
-            self.lower_envelope = Some(ArmEnvelope::new(cfg));
+            self.lower = Some(law);
+            self.lower_envelope = Some(envelope);
             self.stage = Stage::Lowering {
-                at: f64::NAN,
+                at: c(f64::NAN),
                 periods: 0,
-                last: f64::NAN,
+                last: c(f64::NAN),
                 unmoved: 0,
             };
         }
@@ -162,8 +198,8 @@ impl StopSequence {
     /// `theta`, the last one `last`, `unmoved` periods in a row so far: one more when the last
     /// command drove with at least a quarter of the voltage bound and the reading did not
     /// change, else 0.
-    fn unmoved_while_driven(&self, theta: f64, last: f64, unmoved: u32) -> u32 {
-        let driven = self.last_volts.abs() >= 0.25 * self.voltage;
+    fn unmoved_while_driven(&self, theta: R, last: R, unmoved: u32) -> u32 {
+        let driven = self.last_volts.abs() >= c::<R>(0.25) * self.voltage;
         if driven && theta == last {
             unmoved + 1
         } else {
@@ -171,15 +207,14 @@ impl StopSequence {
         }
     }
 
-    /// A period without a measurement, which the stop shorted: 0 V across the motor, as the
-    /// witness models it.
+    /// A period without a measurement, which the stop shorted: 0 V across the motor.
     pub fn note_short(&mut self) {
-        self.last_volts = 0.0;
+        self.last_volts = R::ZERO;
     }
 
-    /// Ends the gentle end for the stop of a fault found during it (the witness's): `brake`
-    /// from this period on, then the hold as after that fault.
-    pub fn lowering_faulted(&mut self, brake: Brake) {
+    /// Ends the gentle end for the stop of a fault found during it: `brake` from this period
+    /// on, then the hold as after that fault.
+    pub fn lowering_faulted(&mut self, brake: Brake<R>) {
         if self.is_lowering() {
             self.brake = brake;
             self.give_up_lowering();
@@ -196,7 +231,7 @@ impl StopSequence {
     }
 
     /// The last command's voltage (V; 0 for the short).
-    pub fn last_volts(&self) -> f64 {
+    pub fn last_volts(&self) -> R {
         self.last_volts
     }
 
@@ -219,17 +254,16 @@ impl StopSequence {
         }
     }
 
+    /// Seconds in `periods` periods.
+    fn seconds(&self, periods: u32) -> f64 {
+        f64::from(periods) * self.period_s
+    }
+
     /// The command for this period from the measured arm angle `theta` (rad) and rate `rate`
     /// (rad/s), pendulum angle `alpha` (rad, 0 upright) and rate `alpha_rate` (rad/s);
     /// `None` once the stop is done (the arm at rest with the windings shorted, or with the
     /// short its only brake).
-    pub fn step(
-        &mut self,
-        theta: f64,
-        rate: f64,
-        alpha: f64,
-        alpha_rate: f64,
-    ) -> Option<BrakeCommand> {
+    pub fn step(&mut self, theta: R, rate: R, alpha: R, alpha_rate: R) -> Option<BrakeCommand<R>> {
         // The model's arm while the stop runs on it: the reading is not the arm's.
         let arm_rests = self
             .arm_rest
@@ -238,13 +272,13 @@ impl StopSequence {
         if let Some(command) = self.lowering_step(arm_rests, theta, rate, alpha, alpha_rate) {
             return command;
         }
+        let pi: R = c(core::f64::consts::PI);
+        let pendulum_rest: R = c(PENDULUM_REST_RAD);
         match self.stage {
             // The arm at rest, or its momentum braked out (the law at 0 V for REST_S): under a
             // pendulum still swinging the arm swings with it and never rests, and the hold
             // law is what takes the pendulum's energy out.
-            Stage::Braking
-                if arm_rests || f64::from(self.momentum_still) * self.period_s >= REST_S =>
-            {
+            Stage::Braking if arm_rests || self.seconds(self.momentum_still) >= REST_S => {
                 if self.brake.mode() == BrakeMode::Short {
                     return None;
                 }
@@ -269,11 +303,11 @@ impl StopSequence {
                 unmoved,
             } => {
                 let unmoved = self.unmoved_while_driven(theta, last, unmoved);
-                let phi = rip_core::swingup::wrap_angle(alpha - std::f64::consts::PI);
-                let pendulum_rests = self.pendulum_rest.observe_within(phi, PENDULUM_REST_RAD);
+                let phi = wrap_angle(alpha - pi);
+                let pendulum_rests = self.pendulum_rest.observe_within(phi, pendulum_rest);
                 let done = (arm_rests && pendulum_rests)
-                    || f64::from(periods + 1) * self.period_s >= MAX_HOLD_S
-                    || (theta - at).abs() > HOLD_GIVE_UP_RAD
+                    || self.seconds(periods + 1) >= MAX_HOLD_S
+                    || (theta - at).abs() > c(HOLD_GIVE_UP_RAD)
                     || unmoved >= HOLD_BLIND_PERIODS
                     || !theta.is_finite();
                 if done {
@@ -297,8 +331,8 @@ impl StopSequence {
             // arm through the coupling: a swinging pendulum left with the windings open walked
             // an arm that read at rest to 5.1 rad (generated rig 33, MPC, arm encoder stopped).
             Stage::Shorted { blind: true } => {
-                let phi = rip_core::swingup::wrap_angle(alpha - std::f64::consts::PI);
-                if self.pendulum_rest.observe_within(phi, PENDULUM_REST_RAD) {
+                let phi = wrap_angle(alpha - pi);
+                if self.pendulum_rest.observe_within(phi, pendulum_rest) {
                     return None;
                 }
             }
@@ -313,7 +347,7 @@ impl StopSequence {
                 // The pendulum's terms are the linearisation's about hanging: in the upper
                 // half (a pendulum still falling from upright) they would drive the arm hard
                 // on a state they do not describe.
-                let lower = alpha.cos() < 0.0;
+                let lower = alpha.cos() < R::ZERO;
                 let v = if full && lower {
                     law.voltage(theta - at, rate, alpha, alpha_rate)
                 } else {
@@ -325,7 +359,7 @@ impl StopSequence {
         };
         self.last_volts = match command {
             BrakeCommand::Volts(v) => v,
-            BrakeCommand::Short => 0.0,
+            BrakeCommand::Short => R::ZERO,
         };
         Some(command)
     }
@@ -336,12 +370,12 @@ impl StopSequence {
     fn lowering_step(
         &mut self,
         arm_rests: bool,
-        theta: f64,
-        rate: f64,
-        alpha: f64,
-        alpha_rate: f64,
-    ) -> Option<Option<BrakeCommand>> {
-        if let (
+        theta: R,
+        rate: R,
+        alpha: R,
+        alpha_rate: R,
+    ) -> Option<Option<BrakeCommand<R>>> {
+        let (
             Stage::Lowering {
                 at,
                 periods,
@@ -350,69 +384,68 @@ impl StopSequence {
             },
             Some(law),
         ) = (self.stage, self.lower)
-        {
-            // The centre: about a hold point where the run left the arm (out by its reference
-            // step) the law's swing came within 0.26 rad of the limit (paper preset, MPC).
-            let at = if at.is_nan() {
-                // An arm out from the centre (a run that ends after its reference step): the
-                // pendulum tipped so that its term first opposes the arm's, which softens the
-                // first command and lets the fall's reaction carry the arm back. Tipped the
-                // other way, the arm's term and the pendulum's added up and the arm swung to
-                // 2.47 rad against 2.10 (paper preset, 1 rad step, LQR and LQG).
-                let push = law.k[0] * theta * law.k[2];
-                if theta.abs() > LOWER_SIDE_FROM_RAD && push != 0.0 {
-                    self.lower_side = -push.signum();
-                }
-                0.0
-            } else {
-                at
-            };
-            let phi = rip_core::swingup::wrap_angle(alpha - std::f64::consts::PI);
-            let pendulum_rests = self.pendulum_rest.observe_within(phi, PENDULUM_REST_RAD);
-            let upright = rip_core::swingup::wrap_angle(alpha).abs() <= LOWER_FROM_RAD;
-            let expired = f64::from(periods) * self.period_s >= rip_core::envelope::MAX_LOWER_S;
-            let breach = self.lower_envelope.as_ref().is_some_and(|envelope| {
-                envelope
-                    .check_state(theta, rate, alpha, alpha_rate, self.last_volts)
-                    .is_err()
-            });
-            // The hold law's rule: a reading that does not change while the law drives is not
-            // the arm's (an arm encoder that stopped counting unseen), and the law would drive
-            // the arm blind (217 rad in simulation, generated rig 33, MPC).
-            let unmoved = self.unmoved_while_driven(theta, last, unmoved);
-            let blind = unmoved >= HOLD_BLIND_PERIODS;
-            if blind || !theta.is_finite() {
-                // As the hold's blind rule: the reading is not the arm's, and a law on it (the
-                // braking law's included) would drive the arm blind; the short until the
-                // pendulum rests.
-                self.brake.short();
-                self.stage = Stage::Shorted { blind: true };
-                self.arm_rest = RestTest::new(self.period_s);
-                self.pendulum_rest = RestTest::new(self.period_s);
-                self.last_volts = 0.0;
-                return Some(Some(BrakeCommand::Short));
+        else {
+            return None;
+        };
+        // The centre: about a hold point where the run left the arm (out by its reference
+        // step) the law's swing came within 0.26 rad of the limit (paper preset, MPC).
+        let at = if at.is_finite() {
+            at
+        } else {
+            // An arm out from the centre (a run that ends after its reference step): the
+            // pendulum tipped so that its term first opposes the arm's, which softens the
+            // first command and lets the fall's reaction carry the arm back. Tipped the
+            // other way, the arm's term and the pendulum's added up and the arm swung to
+            // 2.47 rad against 2.10 (paper preset, 1 rad step, LQR and LQG).
+            let push = law.k[0] * theta * law.k[2];
+            if theta.abs() > c(LOWER_SIDE_FROM_RAD) && push != R::ZERO {
+                self.lower_side = -push.signum();
             }
-            if (periods == 0 && !upright) || expired || breach {
-                self.give_up_lowering();
-                return None;
-            } else if arm_rests && pendulum_rests && phi.abs() <= LOWERED_HANGING_RAD {
-                self.lowered = true;
-                self.last_volts = 0.0;
-                return Some(None);
-            } else {
-                self.stage = Stage::Lowering {
-                    at,
-                    periods: periods + 1,
-                    last: theta,
-                    unmoved,
-                };
-                let phi = rip_core::envelope::Lowering::pendulum_angle(alpha, &mut self.lower_side);
-                let v = law.voltage_from_hanging(theta - at, rate, phi, alpha_rate);
-                self.last_volts = v;
-                return Some(Some(BrakeCommand::Volts(v)));
-            }
+            R::ZERO
+        };
+        let phi = wrap_angle(alpha - c(core::f64::consts::PI));
+        let pendulum_rests = self.pendulum_rest.observe_within(phi, c(PENDULUM_REST_RAD));
+        let upright = wrap_angle(alpha).abs() <= c(LOWER_FROM_RAD);
+        let expired = self.seconds(periods) >= MAX_LOWER_S;
+        let breach = self.lower_envelope.as_ref().is_some_and(|envelope| {
+            envelope
+                .check_state(theta, rate, alpha, alpha_rate, self.last_volts)
+                .is_err()
+        });
+        // The hold law's rule: a reading that does not change while the law drives is not
+        // the arm's (an arm encoder that stopped counting unseen), and the law would drive
+        // the arm blind (217 rad in simulation, generated rig 33, MPC).
+        let unmoved = self.unmoved_while_driven(theta, last, unmoved);
+        if unmoved >= HOLD_BLIND_PERIODS || !theta.is_finite() {
+            // As the hold's blind rule: the reading is not the arm's, and a law on it (the
+            // braking law's included) would drive the arm blind; the short until the
+            // pendulum rests.
+            self.brake.short();
+            self.stage = Stage::Shorted { blind: true };
+            self.arm_rest = RestTest::new(self.period_s);
+            self.pendulum_rest = RestTest::new(self.period_s);
+            self.last_volts = R::ZERO;
+            return Some(Some(BrakeCommand::Short));
         }
-        None
+        if (periods == 0 && !upright) || expired || breach {
+            self.give_up_lowering();
+            return None;
+        }
+        if arm_rests && pendulum_rests && phi.abs() <= c(LOWERED_HANGING_RAD) {
+            self.lowered = true;
+            self.last_volts = R::ZERO;
+            return Some(None);
+        }
+        self.stage = Stage::Lowering {
+            at,
+            periods: periods + 1,
+            last: theta,
+            unmoved,
+        };
+        let phi = pendulum_angle(alpha, &mut self.lower_side);
+        let v = law.voltage_from_hanging(theta - at, rate, phi, alpha_rate);
+        self.last_volts = v;
+        Some(Some(BrakeCommand::Volts(v)))
     }
 
     /// The rate the braking law takes: [`momentum_rate`] while the wiring is trusted and the
@@ -422,13 +455,12 @@ impl StopSequence {
     /// [`WRONG_SIGN_PERIODS`] periods in a row it gives way to the arm rate for the rest of
     /// the stop (without that guard, 14 more generated rigs' LQR balances with the wrong
     /// scale ended past the limit). A brake takes energy out; a law on `ω_H` whose rig gained
-    /// [`MOMENTUM_ENERGY_GAIN`] of the pendulum's swing energy (`2 m_p g L_p/2`) since it
-    /// began is pumping the pendulum (that wrong scale spun one to 115 rad/s, generated rig
-    /// 71) and gives way too.
-    fn braked_rate(&mut self, rate: f64, alpha: f64, alpha_rate: f64) -> f64 {
-        let Some(plant) = self
-            .plant
-            .as_ref()
+    /// [`MOMENTUM_ENERGY_GAIN`] of the pendulum's swing energy (`2 G`) since it began is
+    /// pumping the pendulum (that wrong scale spun one to 115 rad/s, generated rig 71) and
+    /// gives way too.
+    fn braked_rate(&mut self, rate: R, alpha: R, alpha_rate: R) -> R {
+        let Some(model) = self
+            .model
             .filter(|_| self.brake.mode() == BrakeMode::Active)
         else {
             return rate;
@@ -436,7 +468,7 @@ impl StopSequence {
         let Some(rising) = self.momentum_rising.as_mut() else {
             return rate;
         };
-        let omega = momentum_rate(plant, rate, alpha, alpha_rate);
+        let omega = momentum_rate(&model, rate, alpha, alpha_rate);
         let speed = omega.abs();
         *rising = if self.brake.saturates(speed) && speed > self.momentum_speed {
             *rising + 1
@@ -444,10 +476,11 @@ impl StopSequence {
             0
         };
         self.momentum_speed = speed;
-        let energy = plant.energy(&State::new(0.0, rate, alpha, alpha_rate));
+        let energy = energy(&model, rate, alpha, alpha_rate);
         let start = *self.momentum_energy.get_or_insert(energy);
+        let swing_energy = c::<R>(2.0) * model.grav;
         if *rising >= WRONG_SIGN_PERIODS
-            || energy > start + MOMENTUM_ENERGY_GAIN * plant.swing_energy()
+            || energy > start + c::<R>(MOMENTUM_ENERGY_GAIN) * swing_energy
         {
             self.momentum_rising = None;
             self.momentum_still = 0;
@@ -465,31 +498,15 @@ impl StopSequence {
     /// the model's sign with both angles when the wiring is trusted; the sign the arm showed,
     /// arm terms alone, once the braking law proved it on the arm's response; none otherwise
     /// (an unproven sign could drive the arm off its hold point).
-    fn hold_sign(&self) -> Option<(f64, bool)> {
+    fn hold_sign(&self) -> Option<(R, bool)> {
         if !self.brake.sign_known() {
             return None;
         }
         match self.brake.mode() {
-            BrakeMode::Active => Some((1.0, true)),
-            BrakeMode::Checked => Some((1.0, false)),
-            BrakeMode::Reversed => Some((-1.0, false)),
+            BrakeMode::Active => Some((R::ONE, true)),
+            BrakeMode::Checked => Some((R::ONE, false)),
+            BrakeMode::Reversed => Some((-R::ONE, false)),
             _ => None,
         }
     }
-}
-
-/// Share of the pendulum's swing energy ([`Plant::swing_energy`]) that the rig may gain under
-/// the braking law on [`momentum_rate`] before that law gives way to the arm's rate.
-pub const MOMENTUM_ENERGY_GAIN: f64 = 1.0;
-
-/// The arm rate that the braking law takes when the wiring is trusted: the arm's angular
-/// momentum about its axis in units of its inertia, `ω_H = H / (J₀ + J_α sin²α)`
-/// ([`Plant::arm_momentum`]), from the measured rates. Only the motor's torque changes `H`,
-/// so a law on `ω_H` leaves nothing to walk the arm once the windings open; a law on `θ̇`
-/// under a pendulum still swinging from its fall held the arm near still for 8 s and left
-/// `H` to the pendulum, and the arm walked on to 10.2 rad with the windings open (generated
-/// rig 79, a healthy rig, at the end of an MPC balance). `ω_H = θ̇` when the pendulum rests.
-pub fn momentum_rate(plant: &Plant, rate: f64, alpha: f64, alpha_rate: f64) -> f64 {
-    let x = State::new(0.0, rate, alpha, alpha_rate);
-    plant.arm_momentum(&x) / plant.arm_inertia(alpha)
 }

@@ -1,0 +1,253 @@
+//! The stop's braking command, period by period, in the mode the stop's cause allows.
+
+use super::*;
+
+/// How a stop brakes the arm.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BrakeMode {
+    /// The braking law on the measured rate (the motor and encoders are trusted).
+    Active,
+    /// The braking law with its sign reversed: the arm was seen to move against the voltage (a
+    /// swapped motor lead or a reversed arm encoder), and in both cases a voltage along the
+    /// *measured* motion is the one that opposes the true motion. The sign is checked on the
+    /// arm's response ([`Brake`]): wrong, the law flips once to [`BrakeMode::Checked`].
+    Reversed,
+    /// The braking law with the model's sign, checked on the arm's response: the rig's motion
+    /// was found unlike the model's, its arm encoder still counting (a wrong scale, a pendulum
+    /// that disagrees), so the sign is not known for sure. Wrong, the law flips once to
+    /// [`BrakeMode::Reversed`]; a law that fails both ways gives way to the short.
+    Checked,
+    /// The braking law on the model's arm rate, run open loop from an estimate of the state at
+    /// the stop (the arm encoder stopped counting; the motor is trusted), until the model's
+    /// arm is at rest; then the short.
+    Modelled,
+    /// The brake command only: windings shorted, whatever the wiring's sign.
+    Short,
+    /// Nothing can be sent (the device is gone), or the motor was never enabled.
+    None,
+}
+
+/// Periods in a row of a rising arm speed under the saturated braking law with the sign under
+/// test after which that sign is taken to be wrong (the sign the arm showed was not the
+/// wiring's: a wrong scale, say): the law flips once, then gives way to the short.
+pub const WRONG_SIGN_PERIODS: u32 = 4;
+/// Periods over which the saturated law with the sign under test must take a tenth off the
+/// arm's speed, or the sign is taken to be wrong.
+pub const PROGRESS_PERIODS: u32 = 10;
+
+/// What the stop applies for one period.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum BrakeCommand<R: Real = f64> {
+    /// Drive this voltage (V).
+    Volts(R),
+    /// Short the windings (the brake command).
+    Short,
+}
+
+/// The model braked open loop ([`BrakeMode::Modelled`]): its stop, its state, and how long
+/// its arm has been at rest (periods).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Modelled<R: Real> {
+    stop: SimulatedStop<R>,
+    x: [R; 4],
+    still: u32,
+}
+
+/// The stop's command, period by period (module docs): one definition for `rip-rt`'s stops,
+/// the device's and the simulations that test them. Allocation-free, `Copy`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Brake<R: Real = f64> {
+    mode: BrakeMode,
+    law: BrakingLaw<R>,
+    dead_band: R,
+    last_speed: R,
+    rising: u32,
+    // The speed at the start of the current progress window, and the periods into it.
+    window_speed: R,
+    window: u32,
+    // Whether the checked law may still flip its sign once; the largest saturated speed
+    // since its sign was last set, and whether the law has since halved it (its sign shown
+    // right on the arm's response).
+    may_flip: bool,
+    peak_speed: R,
+    verified: bool,
+    model: Option<Modelled<R>>,
+}
+
+impl<R: Real> Brake<R> {
+    /// The stop braking with `law` in `mode`; below `dead_band` (rad/s: the rate of one
+    /// encoder count and a half per period, the encoder's quantisation) the law applies 0 V
+    /// rather than chatter between ± its gain per count.
+    pub fn new(law: BrakingLaw<R>, dead_band: R, mode: BrakeMode) -> Self {
+        Self {
+            mode,
+            law,
+            dead_band,
+            last_speed: c(f64::INFINITY),
+            rising: 0,
+            window_speed: c(f64::INFINITY),
+            window: 0,
+            may_flip: matches!(mode, BrakeMode::Reversed | BrakeMode::Checked),
+            peak_speed: R::ZERO,
+            verified: false,
+            model: None,
+        }
+    }
+
+    /// The stop in [`BrakeMode::Modelled`]: `stop`'s law on its model's arm from the state
+    /// `x` at the stop decision, `held` (V) still applied for the period until the stop's
+    /// first command (the short when there is no state).
+    pub fn modelled(stop: &SimulatedStop<R>, dead_band: R, x: Option<[R; 4]>, held: R) -> Self {
+        let mut brake = Self::new(stop.law, dead_band, BrakeMode::Short);
+        if let Some(mut x) = x.filter(|x| x.iter().all(|v| v.is_finite())) {
+            stop.advance(&mut x, held);
+            brake.model = Some(Modelled {
+                stop: *stop,
+                x,
+                still: 0,
+            });
+            brake.mode = BrakeMode::Modelled;
+        }
+        brake
+    }
+
+    /// The model's arm angle (rad) in [`BrakeMode::Modelled`].
+    pub fn model_arm(&self) -> Option<R> {
+        self.model.as_ref().map(|m| m.x[0])
+    }
+
+    /// Whether the law's sign is known: trusted ([`BrakeMode::Active`]), or shown on the arm's
+    /// response (the saturated law has halved the arm's speed with it).
+    pub fn sign_known(&self) -> bool {
+        match self.mode {
+            BrakeMode::Active => true,
+            BrakeMode::Checked | BrakeMode::Reversed => self.verified,
+            _ => false,
+        }
+    }
+
+    /// How it brakes now (a law whose sign proved wrong became [`BrakeMode::Short`]).
+    pub fn mode(&self) -> BrakeMode {
+        self.mode
+    }
+
+    /// Whether arm speed `speed` (rad/s) is within the law's dead band (0 V).
+    pub fn below_dead_band(&self, speed: R) -> bool {
+        speed <= self.dead_band
+    }
+
+    /// Whether the law is saturated at arm speed `speed` (rad/s).
+    pub fn saturates(&self, speed: R) -> bool {
+        speed > self.law.linear_below
+    }
+
+    /// Gives up the law for the short from now on.
+    pub fn short(&mut self) {
+        if self.mode != BrakeMode::None {
+            self.mode = BrakeMode::Short;
+        }
+    }
+
+    /// The command for the measured arm rate `rate` (rad/s; `None` without a fresh
+    /// measurement, which shorts the windings for that period).
+    pub fn command(&mut self, rate: Option<R>) -> BrakeCommand<R> {
+        let sign = match self.mode {
+            BrakeMode::Active | BrakeMode::Checked => R::ONE,
+            BrakeMode::Reversed => -R::ONE,
+            // A reading that moves after all: the model's arm is not the arm.
+            BrakeMode::Modelled if rate.is_some_and(|r| r.abs() > self.dead_band) => {
+                self.mode = BrakeMode::Short;
+                return BrakeCommand::Short;
+            }
+            BrakeMode::Modelled => return self.modelled_command(),
+            BrakeMode::Short | BrakeMode::None => return BrakeCommand::Short,
+        };
+        let Some(rate) = rate.filter(|r| r.is_finite()) else {
+            return BrakeCommand::Short;
+        };
+        let speed = rate.abs();
+        let mut sign = sign;
+        if matches!(self.mode, BrakeMode::Reversed | BrakeMode::Checked) && self.wrong_sign(speed) {
+            if !self.may_flip {
+                self.mode = BrakeMode::Short;
+                return BrakeCommand::Short;
+            }
+            // The sign the diagnosis suggested drove the arm on: the other one brakes it.
+            self.may_flip = false;
+            self.mode = if self.mode == BrakeMode::Reversed {
+                BrakeMode::Checked
+            } else {
+                BrakeMode::Reversed
+            };
+            self.rising = 0;
+            self.window = 0;
+            self.last_speed = c(f64::INFINITY);
+            self.peak_speed = R::ZERO;
+            sign = -sign;
+        }
+        if speed > self.law.linear_below {
+            self.peak_speed = self.peak_speed.max(speed);
+        } else if self.peak_speed > R::ZERO && speed < c::<R>(0.5) * self.peak_speed {
+            self.verified = true;
+        }
+        if speed <= self.dead_band {
+            BrakeCommand::Volts(R::ZERO)
+        } else {
+            BrakeCommand::Volts(sign * self.law.voltage(rate))
+        }
+    }
+
+    /// The law on the model's arm rate; the model then advances a period under it.
+    fn modelled_command(&mut self) -> BrakeCommand<R> {
+        let dead_band = self.dead_band;
+        let Some(m) = self.model.as_mut() else {
+            self.mode = BrakeMode::Short;
+            return BrakeCommand::Short;
+        };
+        let rest_periods = periods_in(REST_S, m.stop.ts.to_f64());
+        let rate = m.x[1];
+        let v = if rate.abs() <= dead_band {
+            m.still += 1;
+            R::ZERO
+        } else {
+            m.still = 0;
+            m.stop.law.voltage(rate)
+        };
+        let stop = m.stop;
+        stop.advance(&mut m.x, v);
+        if m.still >= rest_periods {
+            self.mode = BrakeMode::Short;
+            return BrakeCommand::Short;
+        }
+        BrakeCommand::Volts(v)
+    }
+
+    /// Whether the law with the sign under test proves not to brake: a law that opposes the
+    /// motion slows the arm after the latency; one whose sign is wrong speeds it up period
+    /// after period, or holds it at the speed where the motor's back-EMF balances it (both
+    /// judged while the law is saturated: in its linear range the pendulum's push on the arm
+    /// is as large as the law's, and a test there flips a law that was right).
+    fn wrong_sign(&mut self, speed: R) -> bool {
+        let saturated = speed > self.law.linear_below;
+        if saturated && speed > self.last_speed + self.dead_band {
+            self.rising += 1;
+        } else {
+            self.rising = 0;
+        }
+        self.last_speed = speed;
+        if !saturated {
+            self.window = 0;
+            self.window_speed = c(f64::INFINITY);
+            return false;
+        }
+        if self.window == 0 {
+            self.window_speed = speed;
+        }
+        self.window += 1;
+        let stalled = self.window > PROGRESS_PERIODS && speed > c::<R>(0.9) * self.window_speed;
+        if self.window > PROGRESS_PERIODS {
+            self.window = 0;
+        }
+        self.rising >= WRONG_SIGN_PERIODS || stalled
+    }
+}

@@ -1,0 +1,235 @@
+//! Host tests of the stop's rule in `f64` and `f32`, against the physics it models and the
+//! behaviour the module docs promise, on the `paper` preset's lumped constants.
+
+use super::*;
+
+/// rip-core's `paper` preset, lumped (`FurutaParams::paper().lumped()` and `k_t / R_m`,
+/// `d_r + k_t k_m / R_m`, `d_p`).
+fn model() -> ArmModel<f64> {
+    let (rm, kt, km, mr, lr, jr) = (8.4, 0.042, 0.042, 0.095, 0.149_100_677_558_3, 4.956_5e-4);
+    let (mp, lp, jp, dr, dp, g) = (
+        0.024,
+        0.278_813_714_302_3,
+        3.289_1e-4,
+        1.894_4e-3,
+        4.513e-4,
+        9.81,
+    );
+    ArmModel {
+        j0: jr + mr * lr * lr / 4.0 + mp * lr * lr,
+        ja: jp + mp * lp * lp / 4.0,
+        m12: mp * lr * lp / 2.0,
+        grav: mp * g * lp / 2.0,
+        b: kt / rm,
+        c_arm: dr + kt * km / rm,
+        dp,
+    }
+}
+
+const TS: f64 = 0.01;
+const U: f64 = 12.0;
+
+fn law() -> BrakingLaw<f64> {
+    let m = model();
+    let gain = (m.j0 + m.ja) / (2.0 * m.b * TS);
+    BrakingLaw {
+        voltage: U,
+        linear_below: U / gain,
+    }
+}
+
+fn simulated() -> SimulatedStop<f64> {
+    SimulatedStop {
+        model: model(),
+        dead_zone: 0.3,
+        law: law(),
+        ts: TS,
+        substeps: 10,
+        latency_periods: 2,
+    }
+}
+
+fn to_f32(s: &SimulatedStop<f64>) -> SimulatedStop<f32> {
+    let m = s.model;
+    SimulatedStop {
+        model: ArmModel {
+            j0: m.j0 as f32,
+            ja: m.ja as f32,
+            m12: m.m12 as f32,
+            grav: m.grav as f32,
+            b: m.b as f32,
+            c_arm: m.c_arm as f32,
+            dp: m.dp as f32,
+        },
+        dead_zone: s.dead_zone as f32,
+        law: BrakingLaw {
+            voltage: s.law.voltage as f32,
+            linear_below: s.law.linear_below as f32,
+        },
+        ts: s.ts as f32,
+        substeps: s.substeps,
+        latency_periods: s.latency_periods,
+    }
+}
+
+/// Full voltage against the motion above `ω_lin`, proportional below it, nothing for a rate
+/// that is not finite.
+#[test]
+fn the_braking_law_opposes_the_motion_and_is_linear_near_rest() {
+    let l = law();
+    assert_eq!(l.voltage(10.0 * l.linear_below), -U);
+    assert_eq!(l.voltage(-10.0 * l.linear_below), U);
+    assert!((l.voltage(0.5 * l.linear_below) + 0.5 * U).abs() < 1e-12);
+    assert_eq!(l.voltage(f64::NAN), 0.0);
+    assert_eq!(l.voltage(f64::INFINITY), 0.0);
+}
+
+/// The simulated stop against the analytic distance (2) on a model whose pendulum cannot
+/// push (hanging at rest, no coupling): the same share of the voltage, no latency and no dead
+/// zone. The law is linear near rest, where (2) brakes at full voltage, and samples the rate
+/// a period late: the arm stops past the analytic distance, by less than the travel of the
+/// law's linear range and a period at the start speed.
+#[test]
+fn the_simulated_stop_of_a_lone_arm_matches_the_analytic_distance() {
+    let mut m = model();
+    m.m12 = 0.0;
+    let fraction = SIMULATED_BRAKE_FRACTION;
+    let j = m.j0;
+    let analytic = StoppingModel {
+        a0: fraction * m.b * U / j,
+        // The back-EMF and the viscous friction act whole: only the voltage is a share.
+        k: m.c_arm / j,
+        drive_per_volt: m.b / j,
+        latency: 0.0,
+        voltage: U,
+    };
+    let stop = SimulatedStop {
+        model: m,
+        dead_zone: 0.0,
+        law: law(),
+        ts: TS,
+        substeps: 10,
+        latency_periods: 0,
+    };
+    for w in [2.0, 8.0, 20.0] {
+        let d = analytic.braking_distance(w);
+        let far = stop.stopping_point([0.0, w, core::f64::consts::PI, 0.0], 0.0);
+        let linear = stop.law.linear_below;
+        let slack = w * TS + linear * linear / (2.0 * analytic.a0) + linear * 2.0 * TS;
+        assert!(far >= d && far <= d + slack, "{w}: {far} vs {d} + {slack}");
+        let back = stop.stopping_point([0.0, -w, core::f64::consts::PI, 0.0], 0.0);
+        assert!((back + far).abs() < 1e-9, "{back} vs {far}");
+    }
+    assert_eq!(stop.stopping_point([0.4, 0.0, 0.0, 0.0], 12.0), 0.4);
+    assert_eq!(stop.stopping_point([0.4, f64::NAN, 0.0, 0.0], 12.0), 0.4);
+}
+
+/// The device runs the rule in `f32`: its simulated stop agrees with the host's `f64` one
+/// within a millimetre's worth of arm angle over the states of a swing, a catch and a fall.
+#[test]
+fn the_simulated_stop_in_f32_agrees_with_f64() {
+    let s64 = simulated();
+    let s32 = to_f32(&s64);
+    for (w, alpha, alpha_rate, applied) in [
+        (15.7, 0.05, 1.0, 12.0),
+        (8.0, core::f64::consts::PI, 0.0, -3.0),
+        (-5.0, 2.5, 8.0, -12.0),
+        (3.0, -0.4, 5.0, 0.0),
+    ] {
+        let x = [0.2, w, alpha, alpha_rate];
+        let a = s64.stopping_point(x, applied);
+        let b = s32.stopping_point(x.map(|v| v as f32), applied as f32);
+        assert!((a - f64::from(b)).abs() < 5e-3, "{x:?}: {a} vs {b}");
+    }
+}
+
+/// `f32` and `f64` brakes give the same commands on the same readings, the sign flipping
+/// alike when the arm speeds up under it.
+#[test]
+fn the_brake_in_f32_commands_as_in_f64() {
+    let l32 = BrakingLaw {
+        voltage: U as f32,
+        linear_below: law().linear_below as f32,
+    };
+    let mut b64 = Brake::new(law(), 0.5, BrakeMode::Checked);
+    let mut b32 = Brake::new(l32, 0.5f32, BrakeMode::Checked);
+    // A rig wired the other way: the arm speeds up under the checked law, then slows.
+    let rates = (0..40).map(|k| {
+        if k < 8 {
+            5.0 + k as f64
+        } else {
+            12.0 - 0.3 * k as f64
+        }
+    });
+    for rate in rates {
+        let (c64, c32) = (b64.command(Some(rate)), b32.command(Some(rate as f32)));
+        match (c64, c32) {
+            (BrakeCommand::Volts(a), BrakeCommand::Volts(b)) => {
+                assert!((a - f64::from(b)).abs() < 1e-4, "{rate}: {a} vs {b}")
+            }
+            (a, b) => assert_eq!(
+                matches!(a, BrakeCommand::Short),
+                matches!(b, BrakeCommand::Short)
+            ),
+        }
+        assert_eq!(b64.mode(), b32.mode());
+    }
+    assert_eq!(b64.mode(), BrakeMode::Reversed);
+    assert!(b64.sign_known());
+}
+
+/// Rest is less than [`REST_TRAVEL`] over [`REST_S`]; a reading that is not finite never rests.
+#[test]
+fn the_rest_test_waits_for_rest_s_of_stillness() {
+    let mut r = RestTest::<f64>::new(TS);
+    let periods = (REST_S / TS).ceil() as usize;
+    for k in 0..periods {
+        assert!(!r.observe(1.0 + 1e-4 * k as f64), "{k}");
+    }
+    assert!(r.observe(1.0));
+    assert!(!r.observe(1.0 + REST_TRAVEL));
+    let mut r = RestTest::<f64>::new(TS);
+    for _ in 0..2 * periods {
+        assert!(!r.observe(f64::NAN));
+    }
+}
+
+/// The rates over the device's clock: across its wrap, and 0 for a clock that stood still or
+/// jumped back.
+#[test]
+fn sample_rates_use_the_devices_clock_across_its_wrap() {
+    let (w, a) = sample_rates(Some((1.0, 3.1, u32::MAX - 4_999)), 1.1, -3.1, 5_000);
+    assert!((w - 10.0).abs() < 1e-9, "{w}");
+    let expected = (2.0 * core::f64::consts::PI - 6.2) / 0.01;
+    assert!((a - expected).abs() < 1e-6, "{a} vs {expected}");
+    assert_eq!(
+        sample_rates(Some((1.0, 0.0, 5_000)), 1.1, 0.0, 5_000),
+        (0.0, 0.0)
+    );
+    assert_eq!(
+        sample_rates(Some((1.0, 0.0, 5_000)), 1.1, 0.0, 4_000),
+        (0.0, 0.0)
+    );
+    assert_eq!(sample_rates::<f64>(None, 1.1, 0.0, 4_000), (0.0, 0.0));
+}
+
+/// The envelope stops where the stopping point leaves the bound, never for a motion inwards,
+/// and always for a state it cannot simulate.
+#[test]
+fn the_envelope_breaches_past_its_bound_only() {
+    let m = model();
+    let analytic = StoppingModel {
+        a0: 0.5 * m.b * U / (m.j0 + m.ja),
+        k: 0.5 * m.c_arm / (m.j0 + m.ja),
+        drive_per_volt: m.b / (m.j0 - m.m12 * m.m12 / m.ja),
+        latency: 2.0 * TS,
+        voltage: U,
+    };
+    let env = ArmEnvelope::new(analytic, Some(simulated()), 2.95);
+    let hanging = core::f64::consts::PI;
+    assert!(env.check_state(2.0, 1.0, hanging, 0.0, 0.0).is_ok());
+    assert!(env.check_state(2.9, -20.0, hanging, 0.0, -12.0).is_ok());
+    let b = env.check_state(2.9, 20.0, hanging, 0.0, 12.0).unwrap_err();
+    assert!(b.stop_at > 2.95 && b.bound == 2.95, "{b:?}");
+    assert!(env.check_state(f64::NAN, 1.0, hanging, 0.0, 0.0).is_err());
+}
