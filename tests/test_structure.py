@@ -140,6 +140,15 @@ ONE_HOME: dict[str, tuple[str, str]] = {
         r"\bconst\s+MAX_LOWER_S\b",
         "crates/rip-control/src/stop/sequence.rs",
     ),
+    "counts to angles": (
+        r"\*\s*(?:self\.)?\w*rad_per_count(?:\[\w+\])?\s*-\s*(?:self\.)?\w*offset",
+        "crates/rip-control/src/stop.rs",
+    ),
+    "the angle wrap": (
+        r"-\s*tau\s*\*\s*(?:libm::round\(\s*a\s*/\s*tau\s*\)|\(\s*a\s*/\s*tau\s*\)\.round\(\))",
+        "crates/rip-control/src/swing/mod.rs",
+    ),
+    "the position rule": (r"\bfn\s+past_limit\b", "crates/rip-control/src/stop.rs"),
     "the rates from two samples on the device's clock": (
         r"\(1\.\.u32::MAX\s*/\s*2\)",
         "crates/rip-control/src/stop.rs",

@@ -513,6 +513,42 @@ impl<R: Real> ArmEnvelope<R> {
     }
 }
 
+/// The angles `[θ, α]` (rad) of the encoder counts `[n_θ, n_α]`: one definition for the host's
+/// loop and the device's onboard law,
+///
+/// ```text
+/// θ = n_θ s_θ − o_θ,   α = wrap(n_α s_α − o_α) ∈ (−π, π]
+/// ```
+///
+/// with `rad_per_count = [s_θ, s_α]` (signed: a reversed encoder counts the other way) and
+/// `offsets = [o_θ, o_α]`.
+#[inline]
+pub fn angles<R: Real>(counts: [i32; 2], rad_per_count: [R; 2], offsets: [R; 2]) -> [R; 2] {
+    let angle = |i: usize| {
+        angle_of(
+            R::from_f64(f64::from(counts[i])),
+            rad_per_count[i],
+            offsets[i],
+        )
+    };
+    [angle(0), wrap_angle(angle(1))]
+}
+
+/// `n s − o`: the angle (rad, unwrapped) of a count `n` (or a mean of counts) on an encoder of
+/// `rad_per_count` `s` and offset `o` ([`angles`]).
+#[inline]
+pub fn angle_of<R: Real>(counts: R, rad_per_count: R, offset: R) -> R {
+    counts * rad_per_count - offset
+}
+
+/// The position rule, the last resort behind the envelope: whether the arm at `theta` (rad)
+/// is past `limit` (rad) from the centre. An angle that is not a number is past it.
+#[inline]
+pub fn past_limit<R: Real>(theta: R, limit: R) -> bool {
+    use core::cmp::Ordering::{Equal, Less};
+    !matches!(theta.abs().partial_cmp(&limit), Some(Less | Equal))
+}
+
 /// The stop's rest test: the arm moved less than a travel over the last [`REST_S`].
 /// Allocation-free (a ring of the recent angles).
 #[derive(Debug, Clone, Copy, PartialEq)]

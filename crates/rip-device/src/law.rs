@@ -103,24 +103,13 @@ impl Sensor {
         ok.then_some(s)
     }
 
-    /// The angles `[θ, α]` of the positions (module docs).
-    pub fn angles(&self, [arm, pendulum]: [i32; 2]) -> [f64; 2] {
-        let theta = arm as f64 * self.arm_rad_per_count - self.arm_offset;
-        [
-            theta,
-            wrap(pendulum as f64 * self.pendulum_rad_per_count - self.pendulum_offset),
-        ]
-    }
-}
-
-/// `a` wrapped into (−π, π] (as rip-rt's loop).
-fn wrap(a: f64) -> f64 {
-    let tau = core::f64::consts::TAU;
-    let w = a - tau * libm::round(a / tau);
-    if w <= -core::f64::consts::PI {
-        w + tau
-    } else {
-        w
+    /// The angles `[θ, α]` of the positions (module docs; [`rip_control::stop::angles`]).
+    pub fn angles(&self, positions: [i32; 2]) -> [f64; 2] {
+        rip_control::stop::angles(
+            positions,
+            [self.arm_rad_per_count, self.pendulum_rad_per_count],
+            [self.arm_offset, self.pendulum_offset],
+        )
     }
 }
 

@@ -85,7 +85,7 @@ fn stop_voltage(cfg: &Config) -> f64 {
 }
 
 /// The stop of `cfg` simulated from the whole state ([`SimulatedStop`]): `[plant]` braked at
-/// [`stop_voltage`], [`LATENCY_PERIODS`] of latency at the loop's period; `None` without a
+/// `safety.voltage_limit`, [`LATENCY_PERIODS`] of latency at the loop's period; `None` without a
 /// plant.
 pub fn simulated_stop(cfg: &Config) -> Option<SimulatedStop> {
     rip_core::envelope::simulated_stop(
@@ -201,7 +201,7 @@ fn dead_band(cfg: &Config) -> f64 {
 }
 
 /// The stop of `cfg` braking in `mode` ([`Brake`]): the braking law of `[plant]` at
-/// [`stop_voltage`] and the loop's period.
+/// `safety.voltage_limit` and the loop's period.
 pub fn brake(cfg: &Config, mode: BrakeMode) -> Brake {
     let law = rip_core::envelope::braking_law(
         &cfg.spec.plant.params(),

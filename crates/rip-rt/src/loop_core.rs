@@ -84,8 +84,6 @@ impl fmt::Debug for LoopCore {
     }
 }
 
-use rip_core::trig::wrap_angle;
-
 impl LoopCore {
     /// Wraps `controller` (2 outputs: arm, pendulum angle; 1 input: voltage) with the settings
     /// of `cfg`.
@@ -333,11 +331,25 @@ impl LoopCore {
 
     /// Arm and pendulum angles (rad; pendulum wrapped to (−π, π], 0 upright) of a measurement.
     pub fn angles(&self, m: &Measurement) -> (f64, f64) {
-        let theta = m.arm_counts as f64 * self.arm_rad_per_count - self.arm_offset;
-        let alpha = wrap_angle(
-            m.pendulum_counts as f64 * self.pendulum_rad_per_count - self.pendulum_offset,
+        let [theta, alpha] = rip_control::stop::angles(
+            [m.arm_counts, m.pendulum_counts],
+            [self.arm_rad_per_count, self.pendulum_rad_per_count],
+            [self.arm_offset, self.pendulum_offset],
         );
         (theta, alpha)
+    }
+
+    /// The position rule ([`rip_control::stop::past_limit`]): the run's stop when the arm at
+    /// `theta` is past `safety.arm_limit`.
+    fn check_arm_limit(&self, theta: f64) -> Result<(), StopReason> {
+        if rip_control::stop::past_limit(theta, self.arm_limit) {
+            return Err(StopReason::AngleLimit {
+                which: "arm",
+                angle: theta,
+                limit: self.arm_limit,
+            });
+        }
+        Ok(())
     }
 
     /// `Ok` when the pendulum is close enough to upright (and the arm inside its limit) to
@@ -350,13 +362,7 @@ impl LoopCore {
                 tolerance: self.start_tolerance,
             });
         }
-        if theta.abs() > self.arm_limit {
-            return Err(StopReason::AngleLimit {
-                which: "arm",
-                angle: theta,
-                limit: self.arm_limit,
-            });
-        }
+        self.check_arm_limit(theta)?;
         Ok(())
     }
 
@@ -411,13 +417,7 @@ impl LoopCore {
                 limit: self.pendulum_limit,
             });
         }
-        if theta.abs() > self.arm_limit {
-            return Err(StopReason::AngleLimit {
-                which: "arm",
-                angle: theta,
-                limit: self.arm_limit,
-            });
-        }
+        self.check_arm_limit(theta)?;
         let commanded = self.held_voltage();
         self.witness_observe(m, theta, alpha, commanded)?;
         self.envelope
@@ -591,13 +591,7 @@ impl LoopCore {
             return Err(StopReason::DeviceFault(m.status));
         }
         let (theta, alpha) = self.angles(m);
-        if theta.abs() > self.arm_limit {
-            return Err(StopReason::AngleLimit {
-                which: "arm",
-                angle: theta,
-                limit: self.arm_limit,
-            });
-        }
+        self.check_arm_limit(theta)?;
         self.envelope
             .check(theta, alpha, m.device_time_us, m.applied_mv as f64 * 1e-3)?;
         if !voltage.is_finite() {

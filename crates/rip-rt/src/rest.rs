@@ -279,7 +279,11 @@ impl RestCheck {
             return Ok(RestVerdict::Waiting);
         }
         let pi = std::f64::consts::PI;
-        let alpha = wrap_angle(stats.mean[1] * self.rad_per_count[1] - self.configured_offset);
+        let alpha = wrap_angle(rip_control::stop::angle_of(
+            stats.mean[1],
+            self.rad_per_count[1],
+            self.configured_offset,
+        ));
         let offset = pi - alpha.abs();
         if offset > self.cfg.max_pendulum_offset {
             return Err(RestFault::NotHanging {

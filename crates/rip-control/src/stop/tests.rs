@@ -233,3 +233,20 @@ fn the_envelope_breaches_past_its_bound_only() {
     assert!(b.stop_at > 2.95 && b.bound == 2.95, "{b:?}");
     assert!(env.check_state(f64::NAN, 1.0, hanging, 0.0, 0.0).is_err());
 }
+
+/// Counts to angles: the pendulum wrapped into (−π, π], a reversed encoder by its sign; the
+/// position rule stops at a NaN angle as past the limit.
+#[test]
+fn counts_become_angles_and_the_position_rule_takes_nan_as_past() {
+    let q = core::f64::consts::TAU / 2048.0;
+    let [theta, alpha] = angles([512, 1024 + 2048], [-q, q], [0.0, core::f64::consts::PI]);
+    assert!(
+        (theta + core::f64::consts::FRAC_PI_2).abs() < 1e-12,
+        "{theta}"
+    );
+    assert!(alpha.abs() < 1e-12, "{alpha}");
+    let [_, alpha] = angles::<f64>([0, 1024], [q, q], [0.0, 0.0]);
+    assert_eq!(alpha, core::f64::consts::PI);
+    assert!(!past_limit(3.0, 3.0) && past_limit(-3.01, 3.0));
+    assert!(past_limit(f64::NAN, 3.0) && past_limit(f32::INFINITY, 3.0));
+}
