@@ -1,6 +1,7 @@
-//! Onboard mode (protocol v2) on arbitrary traffic: uploads, commits, starts, stops, PIL
-//! steps, v1 commands and controller steps in any order, with the encoders moving and the
-//! fault line toggling. The device never panics, never drives beyond its limit, drives only
+//! Onboard mode (protocol v2 and v3) on arbitrary traffic: uploads, commits, starts (with the
+//! wiring verified or not, so that the device's own stop runs too), stops, PIL steps, v1
+//! commands and controller steps in any order, with the encoders moving and the fault line
+//! toggling. The device never panics, never drives beyond its limit, drives only
 //! while onboard mode runs or after a host's enabling command, and never while faulted.
 //!
 //! Input layout: records of a control byte and a payload. Control bits 0–3 pick the action
@@ -11,6 +12,8 @@
 
 use libfuzzer_sys::fuzz_target;
 use rip_control::{Design, Kind};
+use rip_control::stop::{BrakingLaw, HoldLaw, StopDesign};
+use rip_control::swing::ArmModel;
 use rip_device::law::{write_image, ControlLaw, Sensor};
 use rip_device::{Config, Device, Inputs};
 use rip_protocol::{
@@ -31,8 +34,30 @@ fn image() -> ([u8; 512], usize) {
         pendulum_offset: 3.14159,
         ..Sensor::default()
     };
+    // The device's own stop too, which a start with the wiring verified lets it run.
+    let stop = StopDesign {
+        law: BrakingLaw {
+            voltage: 12.0,
+            linear_below: 0.5,
+        },
+        dead_band: 0.2,
+        hold: HoldLaw {
+            k: [-30.0, -2.0, 20.0, 0.5],
+            voltage: 12.0,
+        },
+        model: ArmModel {
+            j0: 1e-3,
+            ja: 5e-4,
+            m12: 3e-4,
+            grav: 0.03,
+            b: 5e-3,
+            c_arm: 2e-4,
+            dp: 1e-5,
+        },
+        dead_zone: 0.2,
+    };
     let mut out = [0u8; 512];
-    let n = write_image(&sensor, &design, &mut out).expect("image");
+    let n = write_image(&sensor, Some(&stop), &design, &mut out).expect("image");
     (out, n)
 }
 
@@ -105,6 +130,7 @@ fuzz_target!(|data: &[u8]| {
                 arm_limit: p[4] as u32 * 8,
                 pendulum_center: 1024,
                 pendulum_limit: p[5] as u32 * 4,
+                flags: p[6] & 1,
             }),
             5 => Message::OnboardStop { flags: p[2] },
             6 => Message::PilStep(PilStep {

@@ -55,9 +55,11 @@ use crate::real::Real;
 use crate::swing::{wrap_angle, ArmModel};
 
 mod brake;
+mod design;
 mod sequence;
 
 pub use brake::{Brake, BrakeCommand, BrakeMode, PROGRESS_PERIODS, WRONG_SIGN_PERIODS};
+pub use design::{StopDesign, StopDesignError, STOP_DESIGN_LEN, STOP_LAYOUT_VERSION, STOP_MAGIC};
 pub use sequence::{
     momentum_rate, StopSequence, HOLD_BLIND_PERIODS, HOLD_GIVE_UP_RAD, LOWERED_HANGING_RAD,
     LOWER_FROM_RAD, LOWER_SIDE_FROM_RAD, MAX_HOLD_S, MAX_LOWER_S, MOMENTUM_ENERGY_GAIN,
@@ -181,6 +183,10 @@ pub const MAX_BRAKE_S: f64 = 3.0;
 pub const SIMULATED_REST_S: f64 = 0.5;
 /// Arm speed (rad/s) below which [`SimulatedStop`] counts the arm at rest.
 pub const SIMULATED_REST_RATE: f64 = 0.05;
+
+/// The longest a stop after a fault runs (s): the braking law for up to [`MAX_BRAKE_S`], the
+/// hold law for up to [`MAX_HOLD_S`]; then the driver is disabled whatever the arm does.
+pub const MAX_STOP_S: f64 = MAX_BRAKE_S + MAX_HOLD_S;
 
 /// The arm counts as at rest once it moved less than [`REST_TRAVEL`] over this long (s).
 pub const REST_S: f64 = 0.2;

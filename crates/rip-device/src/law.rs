@@ -2,10 +2,11 @@
 //! [`Onboard`] interface, with the conversion from encoder counts to the controller's angles
 //! and the reference step, which the host uploads ahead of the design.
 //!
-//! # Onboard image (version 1)
+//! # Onboard image (version 2)
 //!
-//! The bytes the host uploads are a header followed by the design in rip-control's layout
-//! ([`Design::to_bytes`], which has its own magic, length and CRC-32):
+//! The bytes the host uploads are a header, the stop's design where the host sends one
+//! ([`StopDesign::write`], magic `"RIPS"`; version 1 images have none), and the design in
+//! rip-control's layout ([`Design::to_bytes`], which has its own magic, length and CRC-32):
 //!
 //! | offset | size | field |
 //! |---|---|---|
@@ -16,7 +17,8 @@
 //! | 28 | 8 | pendulum offset `o_α` (rad) |
 //! | 36 | 8 | reference step height `r_θ` (rad) |
 //! | 44 | 8 | reference step time `t_r` (s after the start) |
-//! | 52 | … | the design |
+//! | 52 | 128 | the stop's design, when the next four bytes are `"RIPS"` |
+//! | 52 or 180 | … | the design |
 //!
 //! At step `k` of a run (time `t = k T_s`), from positions `(n_θ, n_α)`:
 //!
@@ -24,8 +26,18 @@
 //! θ = n_θ s_θ − o_θ,   α = wrap(n_α s_α − o_α) ∈ (−π, π],   r = [r_θ if t ≥ t_r else 0, 0]
 //! ```
 //!
-//! the same conversion as rip-rt's loop on the host.
+//! the same conversion as rip-rt's loop on the host ([`rip_control::stop::angles`]).
+//!
+//! # The device's stop
+//!
+//! When a run stops on the device's own account (its limits, a silent host, a non-finite move)
+//! and the start said the wiring was verified, the law runs the stop of the image's stop
+//! design ([`StopDesign::sequence`]: the braking law, then the hold law, then the short, the
+//! rule of `rip_control::stop` that rip-rt runs on the host) on the angles and the rates over
+//! the device's clock ([`rip_control::stop::sample_rates`]); otherwise the device shorts the
+//! windings at once.
 
+use rip_control::stop::{sample_rates, BrakeCommand, StopDesign, StopSequence, STOP_MAGIC};
 use rip_control::{Controller, Design, Measurement, Phase, Real};
 use rip_protocol::{PIL_PHASE_CONVERT, PIL_PHASE_ESTIMATE, PIL_PHASE_LINEAR, PIL_PHASE_QP};
 
@@ -113,14 +125,32 @@ impl Sensor {
     }
 }
 
-/// An onboard image assembled on the host: `sensor`'s header, then `design`'s bytes, into
-/// `out`; returns the length, or `None` if `out` is too short or the design is invalid.
-pub fn write_image<R: Real>(sensor: &Sensor, design: &Design<R>, out: &mut [u8]) -> Option<usize> {
+/// An onboard image assembled on the host: `sensor`'s header, `stop`'s design where there is
+/// one, then `design`'s bytes, into `out`; returns the length, or `None` if `out` is too short
+/// or a design is invalid.
+pub fn write_image<R: Real>(
+    sensor: &Sensor,
+    stop: Option<&StopDesign<R>>,
+    design: &Design<R>,
+    out: &mut [u8],
+) -> Option<usize> {
     if !sensor.write(out) {
         return None;
     }
-    let n = design.to_bytes(out.get_mut(IMAGE_HEADER_LEN..)?).ok()?;
-    Some(IMAGE_HEADER_LEN + n)
+    let mut at = IMAGE_HEADER_LEN;
+    if let Some(stop) = stop {
+        at += stop.write(out.get_mut(at..)?).ok()?;
+    }
+    let n = design.to_bytes(out.get_mut(at..)?).ok()?;
+    Some(at + n)
+}
+
+/// The device's own stop in progress (module docs): its sequence, and the last sample's
+/// angles and device clock, for the rates.
+#[derive(Debug, Clone, Copy)]
+struct Stopping<R: Real> {
+    sequence: StopSequence<R>,
+    last: Option<(R, R, u32)>,
 }
 
 /// rip-control's controller in scalar `R` as the device's [`Onboard`] law, with a design
@@ -135,6 +165,8 @@ pub struct ControlLaw<R: Real, const N: usize> {
     loaded: bool,
     step: u32,
     last: Option<rip_control::Move<R>>,
+    stop: Option<StopDesign<R>>,
+    stopping: Option<Stopping<R>>,
 }
 
 impl<R: Real, const N: usize> Default for ControlLaw<R, N> {
@@ -160,6 +192,8 @@ impl<R: Real, const N: usize> ControlLaw<R, N> {
             loaded: false,
             step: 0,
             last: None,
+            stop: None,
+            stopping: None,
         }
     }
 
@@ -171,6 +205,16 @@ impl<R: Real, const N: usize> ControlLaw<R, N> {
     /// The loaded image's counts → angles conversion and reference.
     pub fn sensor(&self) -> &Sensor {
         &self.sensor
+    }
+
+    /// The loaded image's stop design, if it has one.
+    pub fn stop_design(&self) -> Option<&StopDesign<R>> {
+        self.loaded.then_some(self.stop.as_ref()).flatten()
+    }
+
+    /// The device's own stop in progress, if any (module docs, "The device's stop").
+    pub fn stop_sequence(&self) -> Option<&StopSequence<R>> {
+        self.stopping.as_ref().map(|s| &s.sequence)
     }
 
     /// The last step's move (its status and QP iterations).
@@ -201,13 +245,27 @@ impl<R: Real, const N: usize> Onboard for ControlLaw<R, N> {
 
     fn load(&mut self, len: usize) -> Result<(), DesignRefused> {
         self.loaded = false;
+        self.stopping = None;
         let bytes = self.buf.get(..len).ok_or(DesignRefused)?;
         let sensor = Sensor::read(bytes).ok_or(DesignRefused)?;
         if len <= IMAGE_HEADER_LEN {
             return Err(DesignRefused);
         }
+        let rest = &bytes[IMAGE_HEADER_LEN..];
+        let (stop, at) = if rest.starts_with(&STOP_MAGIC) {
+            let stop = StopDesign::read(rest).map_err(|_| DesignRefused)?;
+            (
+                Some(stop),
+                IMAGE_HEADER_LEN + rip_control::stop::STOP_DESIGN_LEN,
+            )
+        } else {
+            (None, IMAGE_HEADER_LEN)
+        };
+        if len <= at {
+            return Err(DesignRefused);
+        }
         self.controller
-            .load(&self.buf[IMAGE_HEADER_LEN..len])
+            .load(&self.buf[at..len])
             .map_err(|_| DesignRefused)?;
         let design = self.controller.design();
         let ts = design.ts.to_f64();
@@ -218,6 +276,7 @@ impl<R: Real, const N: usize> Onboard for ControlLaw<R, N> {
         // fit (an MPC's iteration bound too high for its rate) is refused before it starts.
         design.check_step_budget().map_err(|_| DesignRefused)?;
         self.sensor = sensor;
+        self.stop = stop;
         self.loaded = true;
         Ok(())
     }
@@ -229,9 +288,38 @@ impl<R: Real, const N: usize> Onboard for ControlLaw<R, N> {
 
     fn reset(&mut self, _positions: [i32; 2]) {
         self.step = 0;
+        self.stopping = None;
         if self.loaded {
             self.controller.reset();
         }
+    }
+
+    fn begin_stop(&mut self, verified: bool) -> bool {
+        let period_s = f64::from(self.period_us()) * 1e-6;
+        self.stopping = self
+            .stop_design()
+            .filter(|_| verified && period_s > 0.0)
+            .map(|d| Stopping {
+                sequence: d.sequence(period_s, true),
+                last: None,
+            });
+        self.stopping.is_some()
+    }
+
+    fn stop_step(&mut self, positions: [i32; 2], now_us: u32) -> Option<BrakeCommand<f64>> {
+        let [theta, alpha] = self.sensor.angles(positions);
+        let (theta, alpha) = (R::from_f64(theta), R::from_f64(alpha));
+        let stopping = self.stopping.as_mut()?;
+        let before = stopping.last.replace((theta, alpha, now_us));
+        let (rate, alpha_rate) = sample_rates(before, theta, alpha, now_us);
+        let command = stopping.sequence.step(theta, rate, alpha, alpha_rate);
+        if command.is_none() {
+            self.stopping = None;
+        }
+        command.map(|c| match c {
+            BrakeCommand::Volts(v) => BrakeCommand::Volts(v.to_f64()),
+            BrakeCommand::Short => BrakeCommand::Short,
+        })
     }
 
     fn step(&mut self, positions: [i32; 2]) -> f64 {

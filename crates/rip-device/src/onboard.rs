@@ -35,6 +35,20 @@ pub trait Onboard {
     fn fallbacks(&self) -> u32 {
         0
     }
+    /// Begins the device's own stop of the run (`rip_control::stop`, the rule rip-rt runs):
+    /// with the wiring `verified`, the braking and hold laws of the law's stop design; whether
+    /// there is such a stop to run (otherwise the device shorts the windings at once). The
+    /// default: none.
+    fn begin_stop(&mut self, verified: bool) -> bool {
+        let _ = verified;
+        false
+    }
+    /// One period of that stop on the positions sampled at the device's clock `now_us`: the
+    /// command, or `None` once the stop is done (or none runs).
+    fn stop_step(&mut self, positions: [i32; 2], now_us: u32) -> Option<BrakeCommand<f64>> {
+        let _ = (positions, now_us);
+        None
+    }
 }
 
 /// The device without an onboard controller (the v1 device): every upload is refused as too
@@ -75,6 +89,19 @@ pub(crate) struct Run {
     pub(crate) last_host_us: u32,
     pub(crate) last_cycles: u32,
     pub(crate) overruns: u16,
+    /// The device's own stop in progress (crate docs, "The device's stop"): the state the run
+    /// stopped with, and the periods the stop has run.
+    pub(crate) stopping: Option<(u8, u32)>,
+}
+
+/// The states whose stop the device makes itself with the law's stop (crate docs): the run's
+/// own limits, a silent host, a non-finite move. A driver fault cannot drive, an overrun's
+/// timing cannot be trusted to close a loop, and the host's stops are the host's.
+fn stops_itself(state: u8) -> bool {
+    matches!(
+        state,
+        ONBOARD_ARM_LIMIT | ONBOARD_PENDULUM_LIMIT | ONBOARD_HOST_SILENT | ONBOARD_BAD_MOVE
+    )
 }
 
 impl<C: Onboard> Device<C> {
@@ -240,6 +267,7 @@ impl<C: Onboard> Device<C> {
             last_host_us: inputs.now_us,
             last_cycles: 0,
             overruns: 0,
+            stopping: None,
         });
         self.watchdog = false;
         self.onboard_state = ONBOARD_RUNNING;
@@ -290,31 +318,11 @@ impl<C: Onboard> Device<C> {
         self.tick(inputs);
         let mut run = self.run?;
         let positions = self.positions();
-        let silent = inputs.now_us.wrapping_sub(run.last_host_us)
-            > run.settings.host_timeout_ms as u32 * 1000;
-        let stop = if self.fault {
-            Some((ONBOARD_DRIVER_FAULT, false))
-        } else if silent {
-            Some((ONBOARD_HOST_SILENT, true))
+        let mut stop = if run.stopping.is_some() {
+            self.stop_period(&mut run, positions, inputs.now_us)
         } else {
-            Self::outside_limits(&run.settings, positions).map(|s| (s, true))
+            self.control_period(&run, positions, inputs.now_us)
         };
-        let stop = stop.or_else(|| {
-            let u = self.onboard.step(positions);
-            if !u.is_finite() {
-                return Some((ONBOARD_BAD_MOVE, true));
-            }
-            let limit = self.cfg.voltage_limit_mv.min(i16::MAX as u16) as f64;
-            let mv = (u * 1000.0).clamp(-limit, limit);
-            self.command = Command {
-                voltage_mv: libm_round(mv) as i16,
-                flags: COMMAND_ENABLE,
-            };
-            self.brake = false;
-            // Each step is the command the v1 watchdog waits for (module docs).
-            self.last_command_us = inputs.now_us;
-            None
-        });
         let period = self.onboard.period_us().max(1);
         run.due_us = run.due_us.wrapping_add(period);
         if (inputs.now_us.wrapping_sub(run.due_us) as i32) > 0 {
@@ -323,12 +331,96 @@ impl<C: Onboard> Device<C> {
         }
         let step = run.step;
         run.step = run.step.wrapping_add(1);
+        if let Some((state, true)) = stop.filter(|_| run.stopping.is_none()) {
+            let verified = run.settings.flags & ONBOARD_WIRING_VERIFIED != 0;
+            if stops_itself(state) && self.onboard.begin_stop(verified) {
+                run.stopping = Some((state, 0));
+                self.onboard_state = state;
+                stop = self.stop_period(&mut run, positions, inputs.now_us);
+            }
+        }
         self.run = Some(run);
         if let Some((state, brake)) = stop {
             self.stop_onboard(state, brake);
         }
         let report = stop.is_some() || step % run.settings.decimation.max(1) as u32 == 0;
         report.then(|| self.telemetry(&run, step, positions, inputs.now_us))
+    }
+
+    /// A period of the controller: the checks of the module docs, then its move applied; the
+    /// state and brake to stop with, if it stops.
+    fn control_period(
+        &mut self,
+        run: &Run,
+        positions: [i32; 2],
+        now_us: u32,
+    ) -> Option<(u8, bool)> {
+        let silent =
+            now_us.wrapping_sub(run.last_host_us) > run.settings.host_timeout_ms as u32 * 1000;
+        let stop = if self.fault {
+            Some((ONBOARD_DRIVER_FAULT, false))
+        } else if silent {
+            Some((ONBOARD_HOST_SILENT, true))
+        } else {
+            Self::outside_limits(&run.settings, positions).map(|s| (s, true))
+        };
+        stop.or_else(|| {
+            let u = self.onboard.step(positions);
+            if !u.is_finite() {
+                return Some((ONBOARD_BAD_MOVE, true));
+            }
+            self.drive(u, now_us);
+            None
+        })
+    }
+
+    /// Drives `u` (V), clamped to the device's limit; each such period is the command the v1
+    /// watchdog waits for (module docs).
+    fn drive(&mut self, u: f64, now_us: u32) {
+        let limit = self.cfg.voltage_limit_mv.min(i16::MAX as u16) as f64;
+        let mv = (u * 1000.0).clamp(-limit, limit);
+        self.command = Command {
+            voltage_mv: libm_round(mv) as i16,
+            flags: COMMAND_ENABLE,
+        };
+        self.brake = false;
+        self.last_command_us = now_us;
+    }
+
+    /// A period of the device's own stop (crate docs, "The device's stop"): the law's command
+    /// for it, at most [`MAX_STOP_S`] of them; the state and brake to end the run with once it
+    /// is done, or at once on a driver fault.
+    fn stop_period(
+        &mut self,
+        run: &mut Run,
+        positions: [i32; 2],
+        now_us: u32,
+    ) -> Option<(u8, bool)> {
+        let (state, periods) = run.stopping?;
+        if self.fault {
+            return Some((ONBOARD_DRIVER_FAULT, false));
+        }
+        run.stopping = Some((state, periods.saturating_add(1)));
+        let period_s = f64::from(self.onboard.period_us().max(1)) * 1e-6;
+        let command = if f64::from(periods) * period_s >= MAX_STOP_S {
+            None
+        } else {
+            self.onboard.stop_step(positions, now_us)
+        };
+        match command {
+            Some(BrakeCommand::Volts(v)) if v.is_finite() => {
+                self.drive(v, now_us);
+                None
+            }
+            Some(_) => {
+                // The short: not driven, the windings shorted.
+                self.command = Command::STOP;
+                self.brake = true;
+                self.last_command_us = now_us;
+                None
+            }
+            None => Some((state, true)),
+        }
     }
 
     pub(crate) fn telemetry(

@@ -127,8 +127,8 @@ fn a_version_mismatch_disables_at_once_until_a_new_enabling_command() {
 
 #[test]
 fn a_frame_of_another_version_on_the_wire_disables_through_the_parser() {
-    // A command of a future version 3: the same layout with version byte 3 and a valid CRC.
-    let mut raw = vec![0xA5, 0x5A, 0x03, 0x02, 0x00, 0x00, 0x03, 0x88, 0x13, 0x01];
+    // A command of a future version 4: the same layout with version byte 4 and a valid CRC.
+    let mut raw = vec![0xA5, 0x5A, 0x04, 0x02, 0x00, 0x00, 0x03, 0x88, 0x13, 0x01];
     let crc = rip_protocol::crc16(&raw[2..]).to_le_bytes();
     raw.extend_from_slice(&crc);
     let mut dev = Device::new(Config::DEFAULT, &at(0));

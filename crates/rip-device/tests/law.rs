@@ -37,7 +37,7 @@ fn send(dev: &mut Device<ControlLaw<f64, 4096>>, message: Message) -> Option<Fra
 /// A device in onboard mode with no design yet, and the LQR's upload image for it.
 fn device_and_lqr_image() -> (Device<ControlLaw<f64, 4096>>, Vec<u8>) {
     let mut img = vec![0u8; 4096];
-    let n = write_image(&sensor(), &lqr(), &mut img).unwrap();
+    let n = write_image(&sensor(), None, &lqr(), &mut img).unwrap();
     img.truncate(n);
     let dev = Device::with_onboard(
         Config::DEFAULT,

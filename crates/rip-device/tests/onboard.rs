@@ -142,6 +142,7 @@ fn start_settings() -> OnboardStart {
         arm_limit: 1000,
         pendulum_center: 2048,
         pendulum_limit: 300,
+        flags: 0,
     }
 }
 
@@ -537,7 +538,7 @@ fn a_frame_of_another_version_stops_onboard_mode() {
     let mut dev = running(1000);
     dev.onboard_step(&inputs(0, 500, 2048));
     dev.handle(
-        Event::Rejected(Rejection::Version(3)),
+        Event::Rejected(Rejection::Version(4)),
         &inputs(100, 500, 2048),
     );
     assert_eq!(dev.onboard_state(), ONBOARD_PROTOCOL);

@@ -1,6 +1,6 @@
 //! # rip-protocol
 //!
-//! Wire protocol v2 between the PC (host) and the pendulum's microcontroller (device). The PC's
+//! Wire protocol v3 between the PC (host) and the pendulum's microcontroller (device). The PC's
 //! control loop (`rip-rt`), its device emulator and the STM32 firmware all use this crate, so
 //! both ends of the wire run the same code.
 //!
@@ -10,6 +10,13 @@
 //! command, sample request) are unchanged and still carry version byte 1, so a v1 peer and a v2
 //! peer interoperate on them; a v2 parser accepts them with version byte 1 or 2. The new frames
 //! carry version byte 2: a v1 device rejects them as another version, which stops its motor.
+//!
+//! Version 3 adds one frame: an onboard start with a flags byte ([`ONBOARD_WIRING_VERIFIED`]:
+//! the wiring's sign was checked, so the device may stop the arm with its own braking and hold
+//! laws, `rip_control::stop`). It carries version byte 3 and is sent only with a flag set; a
+//! start without flags is v2's frame, unchanged. Every other frame keeps its version byte, and
+//! version byte 3 carries nothing else. A v2 device rejects the v3 start as another version,
+//! which stops its motor.
 //!
 //! The byte-level specification lives in `docs/protocol.md`; this crate is its reference
 //! implementation and `crates/rip-protocol/vectors.toml` holds the conformance vectors that both
@@ -51,10 +58,13 @@
 pub const SYNC0: u8 = 0xA5;
 /// Second sync byte.
 pub const SYNC1: u8 = 0x5A;
-/// The newest protocol version: the version byte of v2's messages (upload, onboard, ack,
-/// telemetry).
-pub const VERSION: u8 = 2;
-/// The version byte of v1's messages (measurement, command, sample request), which v2 keeps.
+/// The newest protocol version: the version byte of v3's one new frame, an [`OnboardStart`]
+/// with flags ([`ONBOARD_WIRING_VERIFIED`]).
+pub const VERSION: u8 = 3;
+/// The version byte of v2's messages (upload, onboard, ack, telemetry), which v3 keeps.
+pub const VERSION_2: u8 = 2;
+/// The version byte of v1's messages (measurement, command, sample request), which v2 and v3
+/// keep.
 pub const VERSION_1: u8 = 1;
 /// Offset of the version byte.
 const VERSION_AT: usize = 2;
@@ -103,8 +113,10 @@ pub const UPLOAD_BEGIN_LEN: usize = 4;
 pub const CHUNK_MAX: usize = MAX_PAYLOAD - 4;
 /// Payload length of an upload commit.
 pub const UPLOAD_COMMIT_LEN: usize = 8;
-/// Payload length of an onboard start.
+/// Payload length of an onboard start (v2: no flags).
 pub const ONBOARD_START_LEN: usize = 20;
+/// Payload length of an onboard start with flags (v3).
+pub const ONBOARD_START_V3_LEN: usize = 21;
 /// Payload length of an onboard stop.
 pub const ONBOARD_STOP_LEN: usize = 1;
 /// Payload length of a PIL step.
@@ -263,11 +275,13 @@ pub enum Message {
 }
 
 impl Message {
-    /// The version byte this message is sent with: v1's messages keep 1 (module docs).
+    /// The version byte this message is sent with: v1's messages keep 1, v2's 2; an onboard
+    /// start with flags is v3's (module docs).
     pub fn version(&self) -> u8 {
         match self {
             Message::Measurement(_) | Message::Command(_) | Message::SampleRequest => VERSION_1,
-            _ => VERSION,
+            Message::OnboardStart(s) if s.flags != 0 => VERSION,
+            _ => VERSION_2,
         }
     }
 
@@ -378,14 +392,22 @@ pub fn encode(frame: &Frame, out: &mut [u8; MAX_FRAME]) -> usize {
             (TYPE_UPLOAD_COMMIT, UPLOAD_COMMIT_LEN)
         }
         Message::OnboardStart(s) => {
-            let p = &mut out[HEADER_LEN..HEADER_LEN + ONBOARD_START_LEN];
+            let len = if s.flags != 0 {
+                ONBOARD_START_V3_LEN
+            } else {
+                ONBOARD_START_LEN
+            };
+            let p = &mut out[HEADER_LEN..HEADER_LEN + len];
             p[0..2].copy_from_slice(&s.decimation.to_le_bytes());
             p[2..4].copy_from_slice(&s.host_timeout_ms.to_le_bytes());
             p[4..8].copy_from_slice(&s.arm_center.to_le_bytes());
             p[8..12].copy_from_slice(&s.arm_limit.to_le_bytes());
             p[12..16].copy_from_slice(&s.pendulum_center.to_le_bytes());
             p[16..20].copy_from_slice(&s.pendulum_limit.to_le_bytes());
-            (TYPE_ONBOARD_START, ONBOARD_START_LEN)
+            if s.flags != 0 {
+                p[20] = s.flags;
+            }
+            (TYPE_ONBOARD_START, len)
         }
         Message::OnboardStop { flags } => {
             out[HEADER_LEN] = flags;
@@ -442,12 +464,32 @@ pub fn encode(frame: &Frame, out: &mut [u8; MAX_FRAME]) -> usize {
     end + TRAILER_LEN
 }
 
-/// Decodes the payload of a CRC-valid frame of version byte `version` (1 or 2); `None` for an
-/// unknown type, a wrong length, or a v2 message with version byte 1.
+/// Decodes the payload of a CRC-valid frame of version byte `version` (1, 2 or 3); `None` for
+/// an unknown type, a wrong length, a v2 message with version byte 1, or anything but an
+/// onboard start with flags with version byte 3.
 fn decode_payload(version: u8, kind: u8, p: &[u8]) -> Option<Message> {
     let u16_at = |i: usize| u16::from_le_bytes([p[i], p[i + 1]]);
     let i16_at = |i: usize| i16::from_le_bytes([p[i], p[i + 1]]);
     let u32_at = |i: usize| u32::from_le_bytes([p[i], p[i + 1], p[i + 2], p[i + 3]]);
+    let onboard_start = |flags: u8| {
+        Message::OnboardStart(OnboardStart {
+            decimation: u16_at(0),
+            host_timeout_ms: u16_at(2),
+            arm_center: u32_at(4) as i32,
+            arm_limit: u32_at(8),
+            pendulum_center: u32_at(12) as i32,
+            pendulum_limit: u32_at(16),
+            flags,
+        })
+    };
+    if version == VERSION {
+        // v3 adds one frame, the onboard start with flags; a start without any is v2's (the
+        // encoder's rule), and every other frame keeps its own version byte.
+        return match (kind, p.len()) {
+            (TYPE_ONBOARD_START, ONBOARD_START_V3_LEN) if p[20] != 0 => Some(onboard_start(p[20])),
+            _ => None,
+        };
+    }
     match (kind, p.len()) {
         (TYPE_MEASUREMENT, MEASUREMENT_LEN) => Some(Message::Measurement(Measurement {
             ack_seq: u16_at(0),
@@ -473,14 +515,7 @@ fn decode_payload(version: u8, kind: u8, p: &[u8]) -> Option<Message> {
             len: u32_at(0),
             crc32: u32_at(4),
         })),
-        (TYPE_ONBOARD_START, ONBOARD_START_LEN) => Some(Message::OnboardStart(OnboardStart {
-            decimation: u16_at(0),
-            host_timeout_ms: u16_at(2),
-            arm_center: u32_at(4) as i32,
-            arm_limit: u32_at(8),
-            pendulum_center: u32_at(12) as i32,
-            pendulum_limit: u32_at(16),
-        })),
+        (TYPE_ONBOARD_START, ONBOARD_START_LEN) => Some(onboard_start(0)),
         (TYPE_ONBOARD_STOP, ONBOARD_STOP_LEN) => Some(Message::OnboardStop { flags: p[0] }),
         (TYPE_PIL_STEP, PIL_STEP_LEN) => Some(Message::PilStep(PilStep {
             arm_counts: u32_at(0) as i32,
@@ -678,7 +713,7 @@ impl Parser {
             let version = self.buf[VERSION_AT];
             let kind = self.buf[3];
             let seq = u16::from_le_bytes([self.buf[4], self.buf[5]]);
-            let known = version == VERSION_1 || version == VERSION;
+            let known = version == VERSION_1 || version == VERSION_2 || version == VERSION;
             let decoded = if known {
                 decode_payload(version, kind, &self.buf[HEADER_LEN..end])
             } else {

@@ -72,7 +72,15 @@ pub struct OnboardStart {
     pub pendulum_center: i32,
     /// Pendulum limit, counts from `pendulum_center`.
     pub pendulum_limit: u32,
+    /// `ONBOARD_*` flags (v3; 0 for a v2 start): [`ONBOARD_WIRING_VERIFIED`].
+    pub flags: u8,
 }
+
+/// [`OnboardStart`] flag (v3): the host's sign check passed on this rig since the device's
+/// power-up, so the wiring's sign is known and the device may stop the arm with the braking
+/// and hold laws of the onboard image's stop design; without it the device's stop is the
+/// passive short.
+pub const ONBOARD_WIRING_VERIFIED: u8 = 1 << 0;
 
 /// Host → device (v2): processor-in-the-loop. Step the loaded controller once on these
 /// encoder positions (in place of the device's own) and answer with a [`PilMove`]. The motor

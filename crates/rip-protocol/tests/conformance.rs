@@ -69,6 +69,7 @@ fn frame_of(v: &Value) -> Frame {
             arm_limit: int(v, "arm_limit") as u32,
             pendulum_center: int(v, "pendulum_center") as i32,
             pendulum_limit: int(v, "pendulum_limit") as u32,
+            flags: v.get("flags").map_or(0, |_| int(v, "flags") as u8),
         }),
         "onboard_stop" => Message::OnboardStop {
             flags: int(v, "flags") as u8,
@@ -264,9 +265,9 @@ fn the_version_rejection_reports_the_version() {
     let t = vectors();
     let v = entries(&t, "stream")
         .iter()
-        .find(|v| name(v).contains("version 3 is rejected whole"))
+        .find(|v| name(v).contains("version 4 is rejected whole"))
         .expect("version vector");
     let (ev, parser) = events(&hex(v["hex"].as_str().unwrap()));
-    assert_eq!(ev[0], Event::Rejected(Rejection::Version(3)));
+    assert_eq!(ev[0], Event::Rejected(Rejection::Version(4)));
     assert_eq!(parser.stats().version_mismatches, 1);
 }

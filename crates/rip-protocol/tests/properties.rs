@@ -55,9 +55,10 @@ fn v2_message() -> impl Strategy<Value = Message> {
             any::<i32>(),
             any::<u32>(),
             any::<i32>(),
-            any::<u32>()
+            any::<u32>(),
+            any::<u8>()
         )
-            .prop_map(|(decimation, host_timeout_ms, ac, al, pc, pl)| {
+            .prop_map(|(decimation, host_timeout_ms, ac, al, pc, pl, flags)| {
                 Message::OnboardStart(OnboardStart {
                     decimation,
                     host_timeout_ms,
@@ -65,6 +66,7 @@ fn v2_message() -> impl Strategy<Value = Message> {
                     arm_limit: al,
                     pendulum_center: pc,
                     pendulum_limit: pl,
+                    flags,
                 })
             }),
         any::<u8>().prop_map(|flags| Message::OnboardStop { flags }),

@@ -419,6 +419,7 @@ const WIDE_OPEN: OnboardStart = OnboardStart {
     arm_limit: u32::MAX,
     pendulum_center: 0,
     pendulum_limit: u32::MAX,
+    flags: 0,
 };
 
 /// Uploads `image` and starts it with [`WIDE_OPEN`], then collects telemetry until `done`

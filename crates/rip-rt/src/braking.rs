@@ -6,7 +6,7 @@
 use crate::config::Config;
 use crate::envelope::{
     arm_envelope, brake_for_mode, sample_rates, stop_mode, stop_sequence, BrakeCommand, BrakeMode,
-    BrakeReport, StopSequence, MAX_BRAKE_S, MAX_HOLD_S,
+    BrakeReport, StopSequence,
 };
 use crate::exchange::exchange;
 use crate::loop_core::LoopCore;
@@ -15,10 +15,9 @@ use crate::serial::Fd;
 use crate::stop::{next_seq, signal_name, StopReason, StopWatch};
 use crate::timing::Periodic;
 
-/// The longest an active stop runs (s): the braking law for up to [`MAX_BRAKE_S`], the hold
-/// law for up to [`MAX_HOLD_S`], all within this one bound on the stop's clock; then the stop
-/// frame goes out regardless.
-pub const MAX_STOP_S: f64 = MAX_BRAKE_S + MAX_HOLD_S;
+/// The longest an active stop runs (s), on the stop's clock; then the stop frame goes out
+/// regardless ([`rip_control::stop::MAX_STOP_S`], the device's bound too).
+pub use rip_control::stop::MAX_STOP_S;
 
 /// The longest the gentle end of a run takes (s): the lowering for up to
 /// [`MAX_LOWER_S`](rip_core::envelope::MAX_LOWER_S), then, if it did not bring the pendulum

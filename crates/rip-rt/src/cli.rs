@@ -344,6 +344,11 @@ struct EmulateArgs {
     /// counts backwards from it).
     #[arg(long, allow_negative_numbers = true, value_name = "S", value_parser = nonnegative)]
     fault_at: Option<f64>,
+    /// An operator raises the pendulum this many seconds after the first enabling command:
+    /// set 0.05 rad from upright at rest and held there until the next enabling command (a
+    /// run that checked the wiring with the pendulum hanging, then waits for it upright).
+    #[arg(long, allow_negative_numbers = true, value_name = "S", value_parser = nonnegative)]
+    raise_at: Option<f64>,
     /// Answer nothing for --silent-for seconds starting this many seconds after the first
     /// enabling command (every measurement in the window lost; commands still arrive).
     #[arg(long, allow_negative_numbers = true, value_name = "S", value_parser = nonnegative, requires = "silent_for")]
@@ -703,6 +708,7 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
             encoder_frozen: [args.freeze_arm_encoder, args.freeze_pendulum_encoder],
         },
         fault_at_s: args.fault_at,
+        raise_at_s: args.raise_at,
         silence: args.silent_at.zip(args.silent_for),
         lockstep_period_s: args.lockstep.then_some(period_s),
         live: Some(args.live.unwrap_or(live_cfg.loop_.live_port))

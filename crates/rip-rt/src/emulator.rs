@@ -12,7 +12,8 @@
 //!
 //! Until the first enabling command arrives the pendulum is held still at its initial pose, the
 //! way an operator holds it upright before the loop takes over; `hold_until_enabled = false`
-//! lets it fall from the start.
+//! lets it fall from the start. `raise_at_s` has the operator raise it later and hold it
+//! again until the next enabling command.
 
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
@@ -37,7 +38,10 @@ use crate::timing::now_ns;
 pub const PWM_MAX_DUTY: u16 = 8400;
 
 mod config;
+mod true_state;
 pub use config::{EmulatorConfig, EmulatorConfigError, Wiring};
+use true_state::TrueState;
+pub use true_state::TRUE_STATE_HEADER;
 
 /// After its host hung up, the emulator (in lockstep or real time) runs its plant on, unpaced,
 /// until it has rested ([`RUN_ON_REST_RATE`], the motor not driven) for this long (s of
@@ -66,6 +70,8 @@ pub struct Device {
     // Frames the firmware sent on its own (onboard telemetry), waiting to be written.
     outgoing: Vec<Frame>,
     released: bool,
+    // Whether the operator of `raise_at_s` has raised the pendulum.
+    raised: bool,
     commands_seen: bool,
     time_ns: u64,
     // When the first enabling command arrived (simulated time).
@@ -120,6 +126,7 @@ impl Device {
             firmware: firmware(firmware_cfg, &Inputs::default(), [0, 0]),
             outgoing: Vec::with_capacity(64),
             released: !cfg.hold_until_enabled,
+            raised: false,
             commands_seen: false,
             time_ns: 0,
             enabled_at_ns: None,
@@ -297,6 +304,15 @@ impl Device {
                 self.fault_onset = Some(self.true_counts());
             }
         }
+        if let (false, Some(at), Some(t0)) = (self.raised, self.cfg.raise_at_s, self.enabled_at_ns)
+        {
+            if self.time_ns >= t0 + (at * 1e9).round() as u64 && !self.firmware.enabled() {
+                let x = self.plant.state();
+                self.plant.set_state([x[0], 0.0, 0.05, 0.0]);
+                self.raised = true;
+                self.released = false;
+            }
+        }
         let inputs = self.inputs();
         if self.firmware.onboard_running() {
             if let Some(frame) = self.firmware.onboard_tick(&inputs) {
@@ -446,88 +462,6 @@ fn write_record(rec: &mut Option<BufWriter<File>>, t: f64, frame: &Frame) -> io:
         w.flush()?;
     }
     Ok(())
-}
-
-/// Columns of the emulator's true-state record (`rip-rt emulate --true-state`): simulated time
-/// (s), the plant's state `θ, θ̇, α, α̇` (rad, rad/s; α from upright, θ unwrapped) straight
-/// from the simulation rather than from the encoders, the voltage across the motor's windings
-/// and the motor current in the plant's sign convention (V, A), and the bridge's state
-/// ([`Device::driver_state`]).
-pub const TRUE_STATE_HEADER: &str = "t_s,theta,theta_dot,alpha,alpha_dot,voltage,current,driver";
-
-/// The true-state record (`--true-state`) and the live stream's truth frames (`--live`): a
-/// row every `period` of simulated time, each flushed at once so a reader sees the plant while
-/// the emulator runs; a last row when it exits.
-struct TrueState {
-    w: Option<BufWriter<File>>,
-    live: Option<crate::live::Live>,
-    period_ns: u64,
-    next_ns: u64,
-}
-
-impl TrueState {
-    fn create(cfg: &EmulatorConfig) -> io::Result<Option<Self>> {
-        let live = match cfg.live {
-            Some((port, bounds)) => Some(crate::live::Live::open(port, bounds)?),
-            None => None,
-        };
-        let w = match &cfg.true_state {
-            Some(path) => {
-                let named = |e: io::Error| {
-                    io::Error::new(e.kind(), format!("--true-state {}: {e}", path.display()))
-                };
-                let mut w = BufWriter::new(File::create(path).map_err(named)?);
-                writeln!(w, "{TRUE_STATE_HEADER}").map_err(named)?;
-                w.flush().map_err(named)?;
-                Some(w)
-            }
-            None => None,
-        };
-        if w.is_none() && live.is_none() {
-            return Ok(None);
-        }
-        Ok(Some(Self {
-            w,
-            live,
-            period_ns: (cfg.true_state_period_s * 1e9).round() as u64,
-            next_ns: 0,
-        }))
-    }
-
-    /// Writes a row if one is due at the device's time.
-    fn sample(&mut self, device: &Device) -> io::Result<()> {
-        if device.time_ns >= self.next_ns {
-            self.next_ns += self.period_ns.max(1);
-            if self.next_ns <= device.time_ns {
-                // Behind (a stalled machine): the next row is a period from now.
-                self.next_ns = device.time_ns + self.period_ns.max(1);
-            }
-            self.row(device)?;
-        }
-        Ok(())
-    }
-
-    fn row(&mut self, device: &Device) -> io::Result<()> {
-        if let Some(live) = self.live.as_mut() {
-            let x = device.state();
-            let mut f = live
-                .frame(crate::live::Kind::Truth)
-                .with_phase(device.driver_state())
-                .with_estimate(Some(&x));
-            f.t = device.time_s();
-            f.theta = x[0];
-            f.alpha = rip_core::trig::wrap_angle(x[2]);
-            f.u_written = device.motor_voltage();
-            live.send(f);
-        }
-        match self.w.as_mut() {
-            Some(w) => {
-                device.write_true_state(w)?;
-                w.flush()
-            }
-            None => Ok(()),
-        }
-    }
 }
 
 /// Runs the emulator on `pty` until `stop` is set, the duration passes or the device vanishes.

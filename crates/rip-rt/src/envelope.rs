@@ -45,9 +45,10 @@ use crate::witness::WitnessFault;
 /// The stop's rule, defined once in the `no_std` run-time layer ([`rip_control::stop`]).
 pub use rip_control::stop::{
     momentum_rate, sample_rates, ArmEnvelope, Brake, BrakeCommand, BrakeMode, Breach, RestTest,
-    StopSequence, HOLD_BLIND_PERIODS, HOLD_GIVE_UP_RAD, LOWERED_HANGING_RAD, LOWER_FROM_RAD,
-    LOWER_SIDE_FROM_RAD, MAX_BRAKE_S, MAX_HOLD_S, MAX_LOWER_S, MOMENTUM_ENERGY_GAIN,
-    PENDULUM_REST_RAD, PROGRESS_PERIODS, REST_S, REST_TRAVEL, WRONG_SIGN_PERIODS,
+    StopDesign, StopSequence, HOLD_BLIND_PERIODS, HOLD_GIVE_UP_RAD, LOWERED_HANGING_RAD,
+    LOWER_FROM_RAD, LOWER_SIDE_FROM_RAD, MAX_BRAKE_S, MAX_HOLD_S, MAX_LOWER_S,
+    MOMENTUM_ENERGY_GAIN, PENDULUM_REST_RAD, PROGRESS_PERIODS, REST_S, REST_TRAVEL,
+    WRONG_SIGN_PERIODS,
 };
 pub use rip_core::preflight::motion::{ENVELOPE_MARGIN, LATENCY_PERIODS, PREFLIGHT_HEADROOM};
 
@@ -223,6 +224,23 @@ pub fn brake_for_mode(cfg: &Config, mode: BrakeMode, estimate: Option<State>, he
         (BrakeMode::Modelled, None) => brake(cfg, BrakeMode::Short),
         (mode, _) => brake(cfg, mode),
     }
+}
+
+/// What the device needs to run the stop of `cfg` itself ([`StopDesign`]): the braking law and
+/// dead band of [`brake`], the hold law and the smooth model of `[plant]`, its dead zone.
+/// `None` without a plant or a hold law.
+pub fn stop_design(cfg: &Config) -> Option<StopDesign> {
+    let params = cfg.spec.plant.params();
+    let voltage = stop_voltage(cfg);
+    let law = rip_core::envelope::braking_law(&params, voltage, cfg.period_s());
+    let design = StopDesign {
+        law,
+        dead_band: dead_band(cfg),
+        hold: rip_core::envelope::hold_law(&params, voltage, cfg.period_s()).ok()?,
+        model: cfg.spec.plant().ok()?.arm_model(),
+        dead_zone: params.vd,
+    };
+    design.validate().is_ok().then_some(design)
 }
 
 /// The stop of `cfg` with `brake` ([`StopSequence`]): the hold law of `[plant]` and its smooth

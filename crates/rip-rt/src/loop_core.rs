@@ -410,7 +410,7 @@ impl LoopCore {
         let (theta, alpha) = self.angles(m);
         // A hanging or swinging pendulum is no fall during a swing-up, and after its catch the
         // supervisor's balance region decides (retry or stop, below).
-        if !self.supervised && alpha.abs() > self.pendulum_limit {
+        if !self.supervised && rip_control::stop::past_limit(alpha, self.pendulum_limit) {
             return Err(StopReason::AngleLimit {
                 which: "pendulum",
                 angle: alpha,
@@ -435,7 +435,9 @@ impl LoopCore {
                 },
                 // The balance region bounds both joints: name the one that left it (the arm
                 // when it is past its bound, else the pendulum).
-                StopCause::LeftBalanceRegion if theta.abs() > self.swing_arm_limit => {
+                StopCause::LeftBalanceRegion
+                    if rip_control::stop::past_limit(theta, self.swing_arm_limit) =>
+                {
                     StopReason::Fell {
                         part: "arm",
                         key: "swing_up.arm_limit",

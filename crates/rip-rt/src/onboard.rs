@@ -1,14 +1,19 @@
-//! `rip-rt run --onboard`: the controller runs on the device (protocol v2, `rip-device`'s
+//! `rip-rt run --onboard`: the controller runs on the device (protocol v2 and v3, `rip-device`'s
 //! onboard mode). The host makes the design from the experiment file with the same assembly
 //! as the host loop ([`crate::controllers`]) and puts it through the same pre-flight check
 //! (`rip_rt::cli` prepares both modes), uploads it as an onboard image
-//! ([`rip_device::law`]: the counts → angles conversion and the reference step, then
-//! rip-control's design bytes) in acknowledged chunks, commits it with its CRC-32 and checks
-//! the CRC the device computed, starts onboard mode with the device's own limits in counts, and
+//! ([`rip_device::law`]: the counts → angles conversion and the reference step, the stop's
+//! design, then rip-control's design bytes) in acknowledged chunks, commits it with its CRC-32
+//! and checks the CRC the device computed. With the pendulum hanging it checks the wiring's
+//! sign and waits for the pendulum to be raised ([`wiring`]); it starts onboard mode with the
+//! device's own limits in counts, saying whether the wiring was verified (the device's own stop
+//! then brakes and holds the arm, `rip_control::stop`; otherwise it shorts the windings), and
 //! then only supervises: every period it sends a sample request (the heartbeat the device's
 //! host-silence watchdog waits for), logs the telemetry the device streams, and on any end —
 //! `--duration`, a signal, a device stop, a silent device — sends the onboard stop and the v1
 //! stop frame (0 V, disabled).
+
+pub mod wiring;
 
 use std::time::{Duration, Instant};
 
@@ -74,15 +79,12 @@ pub fn design(kind: ControllerKind, cfg: &Config) -> Result<OnboardDesign, Strin
     Ok(out)
 }
 
-/// The onboard image of `design` with the conversion of `cfg`'s `[device]` and the
-/// `[reference]` step.
-///
-/// # Errors
-/// A design the layout refuses, or an image beyond [`MAX_IMAGE`].
-pub fn image(design: &OnboardDesign, cfg: &Config) -> Result<Vec<u8>, String> {
+/// The counts → angles conversion of `cfg`'s `[device]` and its `[reference]` step: the
+/// onboard image's header.
+pub fn sensor(cfg: &Config) -> Sensor {
     let tau = std::f64::consts::TAU;
     let d = &cfg.device;
-    let sensor = Sensor {
+    Sensor {
         arm_rad_per_count: d.arm_sign * tau / d.arm_counts_per_rev as f64,
         pendulum_rad_per_count: d.pendulum_sign * tau / d.pendulum_counts_per_rev as f64,
         arm_offset: 0.0,
@@ -92,17 +94,33 @@ pub fn image(design: &OnboardDesign, cfg: &Config) -> Result<Vec<u8>, String> {
         },
         arm_step: cfg.spec.reference.arm_step,
         step_time: cfg.spec.reference.step_time,
-    };
+    }
+}
+
+/// The onboard image of `design` with the conversion of `cfg`'s `[device]`, the `[reference]`
+/// step and the stop's design of `cfg` ([`crate::envelope::stop_design`]) for the device's own
+/// stop.
+///
+/// # Errors
+/// A design the layout refuses, or an image beyond [`MAX_IMAGE`].
+pub fn image(design: &OnboardDesign, cfg: &Config) -> Result<Vec<u8>, String> {
+    let stop = crate::envelope::stop_design(cfg);
     let mut buf = vec![0u8; MAX_IMAGE];
-    let n = write_image(&sensor, design, &mut buf)
+    let n = write_image(&sensor(cfg), stop.as_ref(), design, &mut buf)
         .ok_or_else(|| format!("--onboard: the design does not fit {MAX_IMAGE} bytes"))?;
     buf.truncate(n);
     Ok(buf)
 }
 
 /// The device's limits in counts around the pendulum's upright position nearest to the
-/// measurement `m` (the host's `safety.arm_limit` and `safety.pendulum_limit`).
-pub fn start_settings(cfg: &Config, m: &Measurement, decimation: u16) -> OnboardStart {
+/// measurement `m` (the host's `safety.arm_limit` and `safety.pendulum_limit`), and whether the
+/// wiring's sign was `verified` ([`ONBOARD_WIRING_VERIFIED`](rip_protocol::ONBOARD_WIRING_VERIFIED)).
+pub fn start_settings(
+    cfg: &Config,
+    m: &Measurement,
+    decimation: u16,
+    verified: bool,
+) -> OnboardStart {
     let tau = std::f64::consts::TAU;
     let d = &cfg.device;
     let s_arm = tau / d.arm_counts_per_rev as f64;
@@ -121,6 +139,11 @@ pub fn start_settings(cfg: &Config, m: &Measurement, decimation: u16) -> Onboard
         arm_limit: (cfg.safety.arm_limit / s_arm).floor() as u32,
         pendulum_center: center.round() as i32,
         pendulum_limit: (cfg.safety.pendulum_limit / s_pend.abs()).floor() as u32,
+        flags: if verified {
+            rip_protocol::ONBOARD_WIRING_VERIFIED
+        } else {
+            0
+        },
     }
 }
 
@@ -142,6 +165,9 @@ pub enum OnboardEnd {
     Duration,
     /// A stop signal.
     Signal(crate::stop::StopReason),
+    /// The host stopped before the start ([`wiring`]): a failed sign check, a pendulum not
+    /// raised in time.
+    Host(crate::stop::StopReason),
     /// The device stopped on its own, with this `ONBOARD_*` state.
     Device(u8),
     /// No reply for [`MISSING_LIMIT`] periods.
@@ -161,7 +187,7 @@ impl OnboardEnd {
         use rip_protocol as p;
         match self {
             OnboardEnd::Duration => x::FINISHED,
-            OnboardEnd::Signal(r) => r.exit_code(),
+            OnboardEnd::Signal(r) | OnboardEnd::Host(r) => r.exit_code(),
             OnboardEnd::Device(p::ONBOARD_ARM_LIMIT | p::ONBOARD_PENDULUM_LIMIT) => x::ANGLE_LIMIT,
             OnboardEnd::Device(p::ONBOARD_HOST_SILENT) => x::WATCHDOG,
             OnboardEnd::Device(p::ONBOARD_OVERRUN) => x::OVERRUN,
@@ -179,7 +205,7 @@ impl std::fmt::Display for OnboardEnd {
         use rip_protocol as p;
         match self {
             OnboardEnd::Duration => f.write_str("finished (--duration)"),
-            OnboardEnd::Signal(r) => write!(f, "{r}"),
+            OnboardEnd::Signal(r) | OnboardEnd::Host(r) => write!(f, "{r}"),
             OnboardEnd::Device(s) => f.write_str(match *s {
                 p::ONBOARD_ARM_LIMIT => "the device stopped: arm limit (safety.arm_limit)",
                 p::ONBOARD_PENDULUM_LIMIT => {
@@ -560,7 +586,11 @@ fn supervise(
     if lockstep && first.status & STATUS_LOCKSTEP == 0 {
         return OnboardEnd::Setup("--lockstep: the device is not an emulator in lockstep".into());
     }
-    let settings = start_settings(cfg, &first, decimation);
+    let (first, verified) = match wiring::prepare(link, cfg, first, period, lockstep) {
+        Ok(prepared) => prepared,
+        Err(end) => return end,
+    };
+    let settings = start_settings(cfg, &first, decimation, verified);
     match link.request(Message::OnboardStart(settings)) {
         Ok((ACK_OK, _)) => {}
         Ok((code, _)) => {

@@ -8,8 +8,11 @@ pub const MAX_HOLD_S: f64 = 5.0;
 /// Swing of the pendulum (rad, its range over [`REST_S`]) below which the hold law has
 /// taken out what it needs to.
 pub const PENDULUM_REST_RAD: f64 = 0.05;
-/// Distance (rad) from its hold point past which the hold law is given up for the short (a
-/// sign learnt wrong, a reading that is not the arm's).
+/// Distance (rad) from its hold point past which a hold law whose sign was learnt on the arm's
+/// response is given up for the short (a sign learnt wrong, a reading that is not the arm's).
+/// A trusted sign holds on: the arm swings with a pendulum still falling past its hold point
+/// by more than this (0.56 rad on generated rig 1), and the short in its place let the
+/// pendulum walk the arm 3.7 rad.
 pub const HOLD_GIVE_UP_RAD: f64 = 0.5;
 
 /// Periods in a row in which the hold law drives with at least a quarter of the voltage bound
@@ -277,8 +280,16 @@ impl<R: Real> StopSequence<R> {
         match self.stage {
             // The arm at rest, or its momentum braked out (the law at 0 V for REST_S): under a
             // pendulum still swinging the arm swings with it and never rests, and the hold
-            // law is what takes the pendulum's energy out.
-            Stage::Braking if arm_rests || self.seconds(self.momentum_still) >= REST_S => {
+            // law is what takes the pendulum's energy out. Not while the pendulum is still in
+            // its upper half, where it is yet to fall: its fall pushes the arm with a torque the
+            // hold law's arm terms give up against (HOLD_GIVE_UP_RAD), and the short that
+            // follows left a heavy pendulum to walk a light arm 3.7 rad (generated rig 1, the
+            // device's stop after its host died while balancing). The braking law on the arm's
+            // momentum takes the fall.
+            Stage::Braking
+                if (arm_rests || self.seconds(self.momentum_still) >= REST_S)
+                    && (self.brake.mode() == BrakeMode::Short || alpha.cos() < R::ZERO) =>
+            {
                 if self.brake.mode() == BrakeMode::Short {
                     return None;
                 }
@@ -307,7 +318,8 @@ impl<R: Real> StopSequence<R> {
                 let pendulum_rests = self.pendulum_rest.observe_within(phi, pendulum_rest);
                 let done = (arm_rests && pendulum_rests)
                     || self.seconds(periods + 1) >= MAX_HOLD_S
-                    || (theta - at).abs() > c(HOLD_GIVE_UP_RAD)
+                    || ((theta - at).abs() > c(HOLD_GIVE_UP_RAD)
+                        && self.brake.mode() != BrakeMode::Active)
                     || unmoved >= HOLD_BLIND_PERIODS
                     || !theta.is_finite();
                 if done {

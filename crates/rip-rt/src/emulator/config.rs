@@ -78,6 +78,11 @@ pub struct EmulatorConfig {
     /// hiccup, every measurement in the window lost while commands still arrive. Unlike
     /// `drop_rate` it starts mid-run, so that a stop can be made to run blind.
     pub silence: Option<(f64, f64)>,
+    /// An operator raises the pendulum (`--raise-at`): this many seconds after the first
+    /// enabling command it is set 0.05 rad from upright at rest, the arm where it is, and held
+    /// there until the next enabling command (a run that checked the wiring with the pendulum
+    /// hanging, then waits for it upright).
+    pub raise_at_s: Option<f64>,
 }
 
 /// How the emulated rig is wired: the motor's leads and each encoder's direction, and
@@ -122,6 +127,7 @@ impl Default for EmulatorConfig {
             can_brake: true,
             lockstep_period_s: None,
             silence: None,
+            raise_at_s: None,
         }
     }
 }
@@ -257,6 +263,14 @@ impl EmulatorConfig {
                         "the host period must be in [{dt}, 1] s (one simulation step to 1 s), \
                          got {p}"
                     ),
+                ));
+            }
+        }
+        if let Some(t) = self.raise_at_s {
+            if !(t.is_finite() && t >= 0.0) {
+                return Err(EmulatorConfigError::new(
+                    "--raise-at",
+                    format!("must be a non-negative number of seconds, got {t}"),
                 ));
             }
         }

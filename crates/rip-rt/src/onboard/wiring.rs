@@ -1,0 +1,156 @@
+//! Before an onboard start: the wiring's sign, checked with the pendulum hanging.
+//!
+//! The device stops a run on its own account (its limits, a silent host) with the braking and
+//! hold laws of the image's stop design only when the start says the wiring's sign is known
+//! (`ONBOARD_WIRING_VERIFIED`): a voltage of the wrong sign would drive the arm on, so an
+//! unverified device shorts the windings instead. A run whose pendulum hangs at the first
+//! measurement gets rip-rt's sign check ([`crate::sign_check`]: the pulse, driven over the
+//! link period by period) and then waits, up to `safety.wait_upright_s`, for the operator to
+//! raise the pendulum within `safety.start_tolerance` of upright; one that starts upright is
+//! unverified, and says so.
+
+use std::time::{Duration, Instant};
+
+use rip_protocol::{Command, Measurement, Message, COMMAND_BRAKE, COMMAND_ENABLE};
+
+use super::{sensor, Link, OnboardEnd, ACK_TIMEOUT, MISSING_LIMIT};
+use crate::config::Config;
+use crate::sign_check::{SignCheck, PULSE_VOLTAGE};
+use crate::stop::StopReason;
+
+/// Pendulum angle from hanging (rad) within which the first measurement counts as hanging,
+/// so that the sign check runs.
+pub const HANGING_RAD: f64 = 0.2;
+
+/// The measurement to start from and whether the wiring's sign was verified (module docs).
+///
+/// # Errors
+/// The run's end: a failed sign check (its fault), a pendulum not raised in time, a signal, a
+/// silent device.
+pub fn prepare(
+    link: &mut Link<'_>,
+    cfg: &Config,
+    first: Measurement,
+    period: Duration,
+    lockstep: bool,
+) -> Result<(Measurement, bool), OnboardEnd> {
+    let angles = |m: &Measurement| sensor(cfg).angles([m.arm_counts, m.pendulum_counts]);
+    let [_, alpha] = angles(&first);
+    if std::f64::consts::PI - alpha.abs() > HANGING_RAD {
+        crate::say!(
+            "rip-rt: the wiring's sign is unchecked, so a stop the device makes itself (host \
+             lost, a limit) shorts the windings; start with the pendulum hanging to have it \
+             checked, and the device brakes and holds the arm instead"
+        );
+        return Ok((first, false));
+    }
+    let mut pace = Pace::new(period, lockstep);
+    let mut check = SignCheck::new(cfg, PULSE_VOLTAGE);
+    check.push(angles(&first)[0], alpha);
+    let mut k = 0u64;
+    let verdict = loop {
+        let Some(v) = check.command(k as f64 * cfg.period_s()) else {
+            break check.verdict();
+        };
+        let command = Command {
+            voltage_mv: (v * 1000.0).round() as i16,
+            flags: COMMAND_ENABLE,
+        };
+        let m = pace
+            .next(link, Some(command))
+            .inspect_err(|_| brake(link))?;
+        let [theta, alpha] = angles(&m);
+        check.push(theta, alpha);
+        k += 1;
+    };
+    brake(link);
+    let report = verdict.map_err(|f| OnboardEnd::Host(StopReason::SignCheck(f)))?;
+    let wait = cfg.safety.wait_upright_s;
+    crate::say!(
+        "rip-rt: sign check {report}; raise the pendulum upright to start (within \
+         safety.wait_upright_s = {wait} s)"
+    );
+    let periods = (wait / cfg.period_s()).ceil() as u64;
+    for _ in 0..periods {
+        let m = pace.next(link, None)?;
+        let [theta, alpha] = angles(&m);
+        if alpha.abs() <= cfg.safety.start_tolerance && theta.abs() <= cfg.safety.arm_limit {
+            return Ok((m, true));
+        }
+    }
+    let [_, alpha] = link.last_measurement.as_ref().map_or([0.0, alpha], angles);
+    Err(OnboardEnd::Host(StopReason::NotUpright {
+        angle: alpha,
+        tolerance: cfg.safety.start_tolerance,
+    }))
+}
+
+/// 0 V with the windings shorted: the end of the sign check's pulse, or of a check cut short.
+fn brake(link: &mut Link<'_>) {
+    let _ = link.send(Message::Command(Command {
+        voltage_mv: 0,
+        flags: COMMAND_BRAKE,
+    }));
+}
+
+/// The host's periods before the start: a command (if any) and a sample request each, on the
+/// wall clock or, in lockstep, one emulated period per sample.
+struct Pace {
+    period: Duration,
+    lockstep: bool,
+    next: Instant,
+    missing: u32,
+}
+
+impl Pace {
+    fn new(period: Duration, lockstep: bool) -> Self {
+        Self {
+            period,
+            lockstep,
+            next: Instant::now() + period,
+            missing: 0,
+        }
+    }
+
+    /// One period: `command` sent, then the measurement.
+    fn next(
+        &mut self,
+        link: &mut Link<'_>,
+        command: Option<Command>,
+    ) -> Result<Measurement, OnboardEnd> {
+        loop {
+            if let Some(reason) = crate::stop::requested_stop() {
+                return Err(OnboardEnd::Signal(reason));
+            }
+            if let Some(c) = command {
+                link.send(Message::Command(c))
+                    .map_err(|e| OnboardEnd::Io(e.to_string()))?;
+            }
+            if !self.lockstep {
+                let now = Instant::now();
+                if self.next > now {
+                    std::thread::sleep(self.next - now);
+                }
+                self.next += self.period;
+            }
+            let timeout = if self.lockstep {
+                ACK_TIMEOUT
+            } else {
+                self.period
+            };
+            match link.sample(timeout) {
+                Ok(Some(m)) => {
+                    self.missing = 0;
+                    return Ok(m);
+                }
+                Ok(None) => {
+                    self.missing += 1;
+                    if self.missing >= MISSING_LIMIT {
+                        return Err(OnboardEnd::Silent);
+                    }
+                }
+                Err(e) => return Err(OnboardEnd::Io(e.to_string())),
+            }
+        }
+    }
+}

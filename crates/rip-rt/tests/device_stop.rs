@@ -1,0 +1,191 @@
+//! The device's own stop (`rip_control::stop`, run by `rip-device` in onboard mode), judged on
+//! the emulator's true state: `rip-rt run --onboard` checks the wiring with the pendulum
+//! hanging, the operator raises it (`emulate --raise-at`), the device balances it, and the
+//! host dies (SIGKILL: no stop frame) while it balances and during the reference step. The
+//! device, its wiring verified, brakes the arm to rest and holds it inside
+//! `safety.arm_limit`, then disables the driver.
+
+mod common;
+
+use std::time::Duration;
+
+use common::*;
+use rip_core::rig::Rig;
+
+/// Seconds after the first enabling command (the sign check's pulse) at which the operator
+/// raises the pendulum: after the pulse and its watch (0.6 s), the pendulum's swing from it
+/// left to the onboard start's limits.
+const RAISE_AT: f64 = 1.5;
+
+/// When the host dies, in seconds after the onboard start: while balancing, and during the
+/// reference step (at `reference.step_time`, 1 s).
+const KILLS: [(&str, f64); 2] = [("balancing", 0.6), ("during the step", 1.3)];
+
+/// Arm speed (rad/s) below which the arm counts as at rest at the end.
+const REST_RATE: f64 = 0.05;
+
+/// The rigs: both presets, and at the full scale two generated rigs.
+fn rigs() -> Vec<(String, String)> {
+    let mut out = vec![
+        (
+            "paper".to_string(),
+            "[plant]\npreset = \"paper\"\n".to_string(),
+        ),
+        (
+            "qube_servo2".to_string(),
+            "[plant]\npreset = \"qube_servo2\"\n".to_string(),
+        ),
+    ];
+    for seed in rip_test_scale::cases(1..=2u64, |_| false) {
+        out.push((format!("generated rig {seed}"), Rig::random(seed).to_toml()));
+    }
+    out
+}
+
+/// One case: the true state from the onboard start to the end, the time of the kill, and
+/// the rig's `safety.arm_limit`.
+fn host_killed(name: &str, rig_toml: &str, offset: f64) -> (Vec<Truth>, f64, f64, String) {
+    let file = name.replace([' ', ','], "-");
+    let cfg = scratch(&format!("device-stop-{file}.toml"));
+    // Time for the operator to raise the pendulum after the sign check.
+    let rig_toml = format!("{rig_toml}\n[safety]\nwait_upright_s = 30.0\n");
+    let rig_toml = rig_toml.as_str();
+    std::fs::write(&cfg, rig_toml).unwrap();
+    let cfg_arg = cfg.to_str().unwrap();
+    let limit = rip_rt::config::Config::from_toml(rig_toml)
+        .unwrap()
+        .safety
+        .arm_limit;
+    let raise = RAISE_AT.to_string();
+    let emu = Emulator::lockstep(
+        &format!("device-stop-{file}"),
+        &["--config", cfg_arg, "--start", "down", "--raise-at", &raise],
+    );
+    let mut child = spawn_run(
+        &emu.device,
+        "lqr",
+        &["--onboard", "--lockstep", "--config", cfg_arg],
+    );
+    // The onboard start: the first driven row after the operator raised the pendulum.
+    let start = |rows: &[Truth]| {
+        let pulse = rows.iter().find(|r| r.driver == "drive")?.t;
+        rows.iter()
+            .find(|r| r.t > pulse + RAISE_AT && r.driver == "drive")
+            .map(|r| r.t)
+    };
+    let rows = emu.suspend_run_when(
+        &mut child,
+        &format!("{name}: the host {offset} s into the onboard run"),
+        Duration::from_secs(60),
+        |rows| start(rows).is_some_and(|s| rows.last().unwrap().t > s + offset - 0.1),
+        |rows| start(rows).is_some_and(|s| rows.last().unwrap().t >= s + offset),
+    );
+    let started = start(&rows).unwrap();
+    let killed_at = rows.last().unwrap().t;
+    // SIGKILL: no stop frame can be sent.
+    unsafe { libc::kill(child.id() as i32, libc::SIGKILL) };
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+    let rows = emu.wait_for_rest(REST_RATE, 1.0, Duration::from_secs(60));
+    let rows = rows.into_iter().filter(|r| r.t >= started).collect();
+    (rows, killed_at, limit, stderr)
+}
+
+#[test]
+fn a_device_whose_host_dies_brakes_and_holds_the_arm_inside_the_limit() {
+    let _one = one_at_a_time();
+    let mut wrong = Vec::new();
+    for (name, toml) in rigs() {
+        for (when, offset) in KILLS {
+            let case = format!("{name}, host killed {when}");
+            let (rows, killed_at, limit, stderr) = host_killed(&case, &toml, offset);
+            assert!(
+                stderr.contains("sign check passed"),
+                "{case}: no sign check:\n{stderr}"
+            );
+            let max_theta = max_excursion(&rows);
+            let last = rows.last().unwrap();
+            // The device's own stop drives the arm (the braking law) after the host timeout.
+            let braked = rows
+                .iter()
+                .any(|r| r.t > killed_at + 0.06 && r.driver == "drive");
+            let stopped_driving = rows
+                .iter()
+                .rev()
+                .find(|r| r.driver == "drive")
+                .map_or(killed_at, |r| r.t);
+            println!(
+                "{case}: true max |theta| {max_theta:.3} rad (limit {limit}), device's stop drove \
+                 until {:.2} s after the kill, end: theta {:.3} rad, rate {:.4} rad/s, driver {}",
+                stopped_driving - killed_at,
+                last.theta,
+                last.theta_dot,
+                last.driver
+            );
+            if max_theta.is_nan() || max_theta >= limit {
+                wrong.push(format!("{case}: the arm reached {max_theta:.3} rad"));
+            }
+            if !braked {
+                wrong.push(format!("{case}: the device did not brake the arm itself"));
+            }
+            if last.theta_dot.abs() > REST_RATE || last.driver == "drive" {
+                wrong.push(format!("{case}: not at rest with the driver off: {last:?}"));
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+}
+
+#[test]
+fn an_unverified_device_shorts_the_windings_rather_than_drive() {
+    let _one = one_at_a_time();
+    // Upright from the start: no sign check, so the device's stop is the short (the stop of
+    // every onboard run before the device had its own).
+    for (name, toml) in rigs().into_iter().take(2) {
+        for (when, offset) in KILLS {
+            let case = format!("{name}, unverified, host killed {when}");
+            let file = case.replace([' ', ','], "-");
+            let cfg = scratch(&format!("device-stop-{file}.toml"));
+            std::fs::write(&cfg, &toml).unwrap();
+            let cfg_arg = cfg.to_str().unwrap();
+            let emu = Emulator::lockstep(&format!("device-stop-{file}"), &["--config", cfg_arg]);
+            let mut child = spawn_run(
+                &emu.device,
+                "lqr",
+                &["--onboard", "--lockstep", "--config", cfg_arg],
+            );
+            let start = |rows: &[Truth]| rows.iter().find(|r| r.driver == "drive").map(|r| r.t);
+            let rows = emu.suspend_run_when(
+                &mut child,
+                &case,
+                Duration::from_secs(60),
+                |rows| start(rows).is_some_and(|s| rows.last().unwrap().t > s + offset - 0.1),
+                |rows| start(rows).is_some_and(|s| rows.last().unwrap().t >= s + offset),
+            );
+            let killed_at = rows.last().unwrap().t;
+            unsafe { libc::kill(child.id() as i32, libc::SIGKILL) };
+            let out = child.wait_with_output().unwrap();
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            assert!(
+                stderr.contains("the wiring's sign is unchecked"),
+                "{case}: {stderr}"
+            );
+            let rows = emu.wait_for_rest(REST_RATE, 1.0, Duration::from_secs(60));
+            let last_drive = rows.iter().rev().find(|r| r.driver == "drive").unwrap().t;
+            let last = rows.last().unwrap();
+            println!(
+                "{case}: true max |theta| {:.3} rad, end: theta {:.3} rad, driver {}",
+                max_excursion(&rows),
+                last.theta,
+                last.driver
+            );
+            // Stopped within the 50 ms host timeout and a period, then shorted, never driven
+            // again.
+            assert!(
+                last_drive < killed_at + 0.1,
+                "{case}: driven until {last_drive}, killed at {killed_at}"
+            );
+            assert_eq!(last.driver, "brake", "{case}");
+        }
+    }
+}
