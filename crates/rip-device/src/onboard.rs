@@ -122,6 +122,9 @@ impl<C: Onboard> Device<C> {
             cycles: 0,
             code,
         };
+        if code == ACK_OK && p.flags & PIL_STOP != 0 {
+            return self.pil_stop_step(out, p);
+        }
         if code == ACK_OK {
             let positions = [p.arm_counts, p.pendulum_counts];
             if p.flags & PIL_RESET != 0 {
@@ -284,6 +287,35 @@ impl<C: Onboard> Device<C> {
         } else {
             None
         }
+    }
+
+    /// A processor-in-the-loop step of the device's own stop ([`PIL_STOP`]): begun on
+    /// [`PIL_RESET`], its clock a design period per step, timed as a whole.
+    fn pil_stop_step(&mut self, mut out: PilMove, p: PilStep) -> Frame {
+        let positions = [p.arm_counts, p.pendulum_counts];
+        if p.flags & PIL_RESET != 0 {
+            self.onboard.reset(positions);
+            self.pil_steps = 0;
+            if !self.onboard.begin_stop(true) {
+                out.code = ACK_REFUSED;
+                return self.next_frame(Message::PilMove(out));
+            }
+        }
+        let now_us = self.pil_steps.wrapping_mul(self.onboard.period_us());
+        let t0 = self.cycle_counter.map(|(c, _)| c());
+        let command = self.onboard.stop_step(positions, now_us);
+        if let (Some(t0), Some((c, shift))) = (t0, self.cycle_counter) {
+            out.cycles = c().wrapping_sub(t0) >> shift;
+        }
+        self.pil_steps = self.pil_steps.wrapping_add(1);
+        out.step = self.pil_steps;
+        out.voltage_bits = match command {
+            Some(BrakeCommand::Volts(v)) => v,
+            Some(BrakeCommand::Short) => f64::INFINITY,
+            None => f64::NAN,
+        }
+        .to_bits();
+        self.next_frame(Message::PilMove(out))
     }
 
     /// Ends onboard mode with `state`: 0 V, driver disabled, braking if `brake` (and no fault).

@@ -1,12 +1,15 @@
 //! The device's onboard law (`rip_device::law`) against rip-control's controller run directly:
 //! the image's counts → angles conversion and reference step, and the PIL step's move.
 
+use rip_control::stop::{BrakeCommand, BrakingLaw, HoldLaw, StopDesign};
+use rip_control::swing::ArmModel;
 use rip_control::{Controller, Design, Kind, Measurement};
 use rip_device::law::{write_image, ControlLaw, Sensor};
 use rip_device::{Config, Device, Inputs, Onboard};
 use rip_protocol::{
-    crc32, Event, Frame, Message, PilStep, UploadBegin, UploadChunk, UploadCommit, ACK_NO_DESIGN,
-    ACK_OK, CHUNK_MAX, PIL_PHASE_SHIFT, PIL_RESET,
+    crc32, Event, Frame, Message, OnboardStart, PilStep, UploadBegin, UploadChunk, UploadCommit,
+    ACK_NO_DESIGN, ACK_OK, ACK_REFUSED, CHUNK_MAX, ONBOARD_HOST_SILENT, ONBOARD_WIRING_VERIFIED,
+    PIL_PHASE_SHIFT, PIL_RESET, PIL_STOP,
 };
 
 fn lqr() -> Design {
@@ -189,5 +192,179 @@ fn pil_phase_flags_time_one_part_each_and_leave_the_move_unchanged() {
         assert_eq!(m.code, ACK_OK);
         assert_eq!(m.voltage().to_bits(), want.to_bits(), "step {k}");
         assert_eq!(m.cycles, expected[phase as usize], "step {k}, part {phase}");
+    }
+}
+
+/// A stop's design with the paper preset's lumped constants and gains of its size.
+fn stop_design() -> StopDesign {
+    StopDesign {
+        law: BrakingLaw {
+            voltage: 10.0,
+            linear_below: 1.2,
+        },
+        dead_band: 0.46,
+        hold: HoldLaw {
+            k: [-50.0, -3.0, 25.0, 0.6],
+            voltage: 10.0,
+        },
+        model: ArmModel {
+            j0: 1.0e-3,
+            ja: 8.0e-4,
+            m12: 5.0e-4,
+            grav: 0.033,
+            b: 5.0e-3,
+            c_arm: 2.3e-3,
+            dp: 4.5e-4,
+        },
+        dead_zone: 0.0,
+    }
+}
+
+/// `dev` with `img` uploaded and committed.
+fn upload(dev: &mut Device<ControlLaw<f64, 4096>>, img: &[u8]) -> u8 {
+    let n = img.len();
+    send(
+        dev,
+        Message::UploadBegin(UploadBegin {
+            total_len: n as u32,
+        }),
+    );
+    for (i, c) in img.chunks(CHUNK_MAX).enumerate() {
+        send(
+            dev,
+            Message::UploadChunk(UploadChunk::new((i * CHUNK_MAX) as u32, c)),
+        );
+    }
+    match send(
+        dev,
+        Message::UploadCommit(UploadCommit {
+            len: n as u32,
+            crc32: crc32(img),
+        }),
+    ) {
+        Some(Frame {
+            message: Message::Ack(a),
+            ..
+        }) => a.code,
+        other => panic!("{other:?}"),
+    }
+}
+
+fn pil_stop(dev: &mut Device<ControlLaw<f64, 4096>>, counts: [i32; 2], reset: bool) -> (u8, f64) {
+    match send(
+        dev,
+        Message::PilStep(PilStep {
+            arm_counts: counts[0],
+            pendulum_counts: counts[1],
+            flags: PIL_STOP | if reset { PIL_RESET } else { 0 },
+        }),
+    ) {
+        Some(Frame {
+            message: Message::PilMove(m),
+            ..
+        }) => (m.code, m.voltage()),
+        other => panic!("{other:?}"),
+    }
+}
+
+/// The image's stop, stepped through the PIL, is rip-control's stop sequence on angles
+/// converted here and rates over the design period: the same command each period; an image
+/// without a stop's design refuses it.
+#[test]
+fn the_images_stop_is_rip_controls_sequence_on_independently_converted_angles() {
+    let (mut dev, img) = device_and_lqr_image();
+    assert_eq!(upload(&mut dev, &img), ACK_OK);
+    assert_eq!(pil_stop(&mut dev, [0, -2048], true).0, ACK_REFUSED);
+    let mut img = vec![0u8; 4096];
+    let n = write_image(&sensor(), Some(&stop_design()), &lqr(), &mut img).unwrap();
+    img.truncate(n);
+    assert_eq!(upload(&mut dev, &img), ACK_OK);
+    let mut reference = stop_design().sequence(0.01, true);
+    let mut last: Option<(f64, f64)> = None;
+    let mut kinds = [0usize; 3];
+    for k in 0..400i32 {
+        // The arm slowing from 60 counts a period, the pendulum falling from upright.
+        let arm = (60 * k - k * k / 2).min(3600);
+        let pend = -2048 + k * k / 40;
+        let theta = arm as f64 * std::f64::consts::TAU / 2048.0;
+        let alpha =
+            rip_control::swing::wrap_angle(-(pend + 2048) as f64 * std::f64::consts::TAU / 4096.0);
+        let (rate, alpha_rate) = match last {
+            Some((t, a)) => (
+                (theta - t) / 0.01,
+                rip_control::swing::wrap_angle(alpha - a) / 0.01,
+            ),
+            None => (0.0, 0.0),
+        };
+        last = Some((theta, alpha));
+        let want = reference.step(theta, rate, alpha, alpha_rate);
+        let (code, got) = pil_stop(&mut dev, [arm, pend], k == 0);
+        assert_eq!(code, ACK_OK);
+        match want {
+            Some(BrakeCommand::Volts(v)) => {
+                kinds[0] += 1;
+                assert!((got - v).abs() < 1e-9, "step {k}: {got} vs {v}");
+            }
+            Some(BrakeCommand::Short) => {
+                kinds[1] += 1;
+                assert_eq!(got, f64::INFINITY, "step {k}");
+            }
+            None => {
+                kinds[2] += 1;
+                assert!(got.is_nan(), "step {k}: {got}");
+                break;
+            }
+        }
+        assert!(!dev.enabled());
+    }
+    assert!(kinds[0] > 10, "{kinds:?}");
+}
+
+/// In onboard mode a silent host stops the run; with the wiring verified the device drives
+/// its stop's braking law, without it it shorts the windings at once.
+#[test]
+fn a_silent_host_leaves_the_verified_device_braking_and_the_unverified_one_shorted() {
+    for verified in [true, false] {
+        let (mut dev, _) = device_and_lqr_image();
+        let mut img = vec![0u8; 4096];
+        let n = write_image(&sensor(), Some(&stop_design()), &lqr(), &mut img).unwrap();
+        img.truncate(n);
+        assert_eq!(upload(&mut dev, &img), ACK_OK);
+        let start = OnboardStart {
+            decimation: 1,
+            host_timeout_ms: 50,
+            arm_center: 0,
+            arm_limit: 2000,
+            pendulum_center: -2048,
+            pendulum_limit: 400,
+            flags: if verified { ONBOARD_WIRING_VERIFIED } else { 0 },
+        };
+        // The arm moving at 20 counts a period, the pendulum upright.
+        let at = |t_us: u32| Inputs {
+            now_us: t_us,
+            encoders: [(t_us / 10_000 * 20) as u16, (-2048i32) as u16],
+            driver_fault: false,
+        };
+        let handled = dev.handle(
+            Event::Frame(Frame {
+                seq: 2,
+                message: Message::OnboardStart(start),
+            }),
+            &at(0),
+        );
+        assert!(handled.is_some());
+        let mut drove_after = false;
+        for k in 0..20u32 {
+            let t = k * 10_000;
+            dev.onboard_step(&at(t));
+            if t > 60_000 && dev.enabled() {
+                drove_after = true;
+            }
+        }
+        assert_eq!(dev.onboard_state(), ONBOARD_HOST_SILENT);
+        assert_eq!(drove_after, verified, "verified {verified}");
+        if !verified {
+            assert!(!dev.onboard_running() && dev.braking());
+        }
     }
 }

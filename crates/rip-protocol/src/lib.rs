@@ -125,6 +125,11 @@ pub const PIL_STEP_LEN: usize = 9;
 pub const PIL_MOVE_LEN: usize = 19;
 /// [`PilStep`] flag: reset the controller (a new run) before this step.
 pub const PIL_RESET: u8 = 1 << 0;
+/// [`PilStep`] flag (v3): step the device's own stop instead of the controller (with
+/// [`PIL_RESET`], begin it, the wiring verified), its clock advancing a design period per
+/// step. The [`PilMove`]'s move is the stop's voltage, `+∞` for the short, NaN once the stop is
+/// done; refused (`ACK_REFUSED`) when the image has no stop's design.
+pub const PIL_STOP: u8 = 1 << 4;
 /// [`PilStep`] flags, bits 1–3: which part of the step the answer's `cycles` covers (0, the
 /// default, the whole step; `PIL_PHASE_*`, one part), to find where a step's time goes.
 pub const PIL_PHASE_MASK: u8 = 0b1110;

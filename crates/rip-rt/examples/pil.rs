@@ -42,6 +42,15 @@
 //! disabled at 0 V. The line is `pil: overrun step=0 step_us=X step_instr=Y state=overrun
 //! overruns=1 applied_mv=0 enabled=no`.
 //!
+//! **Stop**: the device's own stop (`rip_control::stop`, which the device runs when its host
+//! dies with the wiring verified), stepped by `PilStep`s with the `PIL_STOP` flag on the
+//! paper's plant from a falling pendulum with the arm moving (0.2 rad, 3 rad/s; the pendulum
+//! 0.3 rad from upright, falling at 1.5 rad/s), the image's move driving the plant (the short
+//! as shorted windings), against the host's `f32` copy of the same image on the same counts:
+//! the agreement (the same command each period, voltages within 1 mV), the stop's cost (the
+//! whole step's SysTick count, as the controllers'), and the arm inside 3 rad. The line is
+//! `pil: stop steps=N max_du=X max_instr=Y max_arm=Z`.
+//!
 //! **Command line**: last, `rip-rt run --onboard` itself (the `rip-rt` binary beside this
 //! example) runs LQR, LQG and MPC against a freshly booted image for a few seconds: it must
 //! upload, verify and start the design, log the telemetry, stop on its duration with exit 0,
@@ -68,7 +77,7 @@ use rip_device::law::ControlLaw;
 use rip_device::Onboard;
 use rip_protocol::{
     Message, OnboardStart, PilStep, Telemetry, ACK_OK, ONBOARD_OVERRUN, ONBOARD_RUNNING,
-    PIL_PHASES, PIL_PHASE_QP, PIL_PHASE_SHIFT, PIL_RESET, STATUS_ENABLED,
+    PIL_PHASES, PIL_PHASE_QP, PIL_PHASE_SHIFT, PIL_RESET, PIL_STOP, STATUS_ENABLED,
 };
 use rip_rt::config::Config;
 use rip_rt::controllers::ControllerKind;
@@ -319,6 +328,15 @@ fn main() {
             if balanced && same { "yes" } else { "no" }
         ));
     }
+    if !only.as_deref().is_some_and(|o| o != "stop") {
+        match stop_check(&mut link) {
+            Ok(line) => lines.push(format!("pil: stop {line}")),
+            Err(e) => {
+                println!("pil: stop failed: {e}");
+                ok = false;
+            }
+        }
+    }
     if !only.as_deref().is_some_and(|o| o != "budget") {
         match budget_check(&mut link) {
             Ok(line) => lines.push(format!("pil: budget {line}")),
@@ -371,6 +389,87 @@ fn main() {
         println!("{l}");
     }
     std::process::exit(if ok { 0 } else { 1 });
+}
+
+/// The device's own stop in the loop (module docs, "Stop").
+fn stop_check(link: &mut Link<'_>) -> Result<String, String> {
+    let cfg = config(10.0);
+    let ts = cfg.period_s();
+    let period_us = (ts * 1e6).round() as u32;
+    let design = onboard::design(ControllerKind::Lqr, &cfg)?;
+    let img = onboard::image(&design, &cfg)?;
+    link.upload(&img)?;
+    let mut host32 = Box::new(ControlLaw::<f32, { onboard::MAX_IMAGE }>::new());
+    host32.buffer()[..img.len()].copy_from_slice(&img);
+    host32
+        .load(img.len())
+        .map_err(|_| "the host's f32 copy refused the image".to_string())?;
+    let mut plant = PlantSim::new(EmulatorConfig::default().model, 0.0, 0.05);
+    plant.set_state([0.2, 3.0, 0.3, 1.5]);
+    let sub = (ts / 1e-3).round().max(1.0) as usize;
+    let (mut max_du, mut max_ticks, mut max_arm) = (0.0f64, 0u32, 0.0f64);
+    let periods = (rip_control::stop::MAX_STOP_S / ts).ceil() as usize;
+    let mut k = 0;
+    while k < periods {
+        let c = counts(plant.state());
+        if k == 0 {
+            host32.reset(c);
+            if !host32.begin_stop(true) {
+                return Err("the host's f32 copy has no stop".into());
+            }
+        }
+        let want = match host32.stop_step(c, k as u32 * period_us) {
+            Some(rip_control::stop::BrakeCommand::Volts(v)) => v,
+            Some(rip_control::stop::BrakeCommand::Short) => f64::INFINITY,
+            None => f64::NAN,
+        };
+        let step = PilStep {
+            arm_counts: c[0],
+            pendulum_counts: c[1],
+            flags: PIL_STOP | if k == 0 { PIL_RESET } else { 0 },
+        };
+        let seq = link
+            .send(Message::PilStep(step))
+            .map_err(|e| e.to_string())?;
+        let got = match link.wait(
+            Duration::from_secs(5),
+            |m| matches!(m, Message::PilMove(p) if p.ack_seq == seq),
+        ) {
+            Ok(Some(Message::PilMove(m))) if m.code == ACK_OK => {
+                max_ticks = max_ticks.max(m.cycles);
+                m.voltage()
+            }
+            other => return Err(format!("step {k}: {other:?}")),
+        };
+        let same = (got.is_nan() && want.is_nan()) || got == want || (got - want).abs() <= 1e-3;
+        if !same {
+            return Err(format!("step {k}: the image {got} V, the host {want} V"));
+        }
+        max_du = max_du.max(if got.is_finite() {
+            (got - want).abs()
+        } else {
+            0.0
+        });
+        if got.is_nan() {
+            break;
+        }
+        for _ in 0..sub {
+            if got.is_finite() {
+                plant.step(got.clamp(-12.0, 12.0), ts / sub as f64);
+            } else {
+                plant.step_windings(rip_rt::plant::Windings::Shorted, ts / sub as f64);
+            }
+            max_arm = max_arm.max(plant.state()[0].abs());
+        }
+        k += 1;
+    }
+    let max_instr = (max_ticks as f64 * INSTR_PER_TICK).round();
+    if max_arm >= 3.0 {
+        return Err(format!("the arm reached {max_arm:.3} rad"));
+    }
+    Ok(format!(
+        "steps={k} max_du={max_du:.3e} max_instr={max_instr} max_arm={max_arm:.3}"
+    ))
 }
 
 /// The device's own step budget (module docs, "Budget"): the 1 kHz MPC with the iteration
