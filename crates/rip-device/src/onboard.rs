@@ -277,12 +277,16 @@ impl<C: Onboard> Device<C> {
         (ACK_OK, ONBOARD_RUNNING as u32)
     }
 
-    /// The limit the positions exceed, if any: arm first.
+    /// The limit the positions exceed, if any, arm first: the position rule
+    /// ([`rip_control::stop::past_limit`], rip-rt's) in counts from each limit's centre, exact
+    /// in `f64` for any `i32` position and `u32` limit.
     pub(crate) fn outside_limits(s: &OnboardStart, [arm, pendulum]: [i32; 2]) -> Option<u8> {
-        let off = |p: i32, c: i32| (p as i64 - c as i64).unsigned_abs();
-        if off(arm, s.arm_center) > s.arm_limit as u64 {
+        let past = |p: i32, c: i32, limit: u32| {
+            rip_control::stop::past_limit(f64::from(p) - f64::from(c), f64::from(limit))
+        };
+        if past(arm, s.arm_center, s.arm_limit) {
             Some(ONBOARD_ARM_LIMIT)
-        } else if off(pendulum, s.pendulum_center) > s.pendulum_limit as u64 {
+        } else if past(pendulum, s.pendulum_center, s.pendulum_limit) {
             Some(ONBOARD_PENDULUM_LIMIT)
         } else {
             None

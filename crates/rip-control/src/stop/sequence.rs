@@ -280,16 +280,8 @@ impl<R: Real> StopSequence<R> {
         match self.stage {
             // The arm at rest, or its momentum braked out (the law at 0 V for REST_S): under a
             // pendulum still swinging the arm swings with it and never rests, and the hold
-            // law is what takes the pendulum's energy out. Not while the pendulum is still in
-            // its upper half, where it is yet to fall: its fall pushes the arm with a torque the
-            // hold law's arm terms give up against (HOLD_GIVE_UP_RAD), and the short that
-            // follows left a heavy pendulum to walk a light arm 3.7 rad (generated rig 1, the
-            // device's stop after its host died while balancing). The braking law on the arm's
-            // momentum takes the fall.
-            Stage::Braking
-                if (arm_rests || self.seconds(self.momentum_still) >= REST_S)
-                    && (self.brake.mode() == BrakeMode::Short || alpha.cos() < R::ZERO) =>
-            {
+            // law is what takes the pendulum's energy out.
+            Stage::Braking if arm_rests || self.seconds(self.momentum_still) >= REST_S => {
                 if self.brake.mode() == BrakeMode::Short {
                     return None;
                 }
