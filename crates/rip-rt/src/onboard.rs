@@ -22,7 +22,7 @@ use rip_device::law::{write_image, Sensor};
 use rip_protocol::{
     crc32, encode, Command, Frame, Measurement, Message, OnboardStart, Parser, Telemetry,
     UploadBegin, UploadChunk, UploadCommit, ACK_OK, ACK_OUT_OF_ORDER, CHUNK_MAX, COMMAND_BRAKE,
-    MAX_FRAME, ONBOARD_RUNNING, STATUS_LOCKSTEP, STATUS_NO_SAMPLE,
+    MAX_FRAME, ONBOARD_RUNNING, STATUS_LOCKSTEP, STATUS_NO_SAMPLE, STATUS_ONBOARD,
 };
 
 use crate::config::Config;
@@ -605,11 +605,13 @@ fn supervise(
     let mut missing = 0;
     let mut next = Instant::now() + period;
     let mut k = 0u64;
+    // The period at which the device began a stop of its own, if it has.
+    let mut device_stop: Option<u64> = None;
     loop {
         if let Some(reason) = crate::stop::requested_stop() {
             return OnboardEnd::Signal(reason);
         }
-        if periods.is_some_and(|n| k >= n) {
+        if device_stop.is_none() && periods.is_some_and(|n| k >= n) {
             return OnboardEnd::Duration;
         }
         if !lockstep {
@@ -635,7 +637,23 @@ fn supervise(
         }
         if let Some(t) = link.telemetry.last() {
             if t.onboard != ONBOARD_RUNNING {
-                return OnboardEnd::Device(t.onboard);
+                // Still in onboard mode after the stop: the device stops the arm itself
+                // (rip_control::stop). The host keeps the link alive and lets it finish, up
+                // to its bound: its stop frames would cut that stop short.
+                let since = *device_stop.get_or_insert_with(|| {
+                    if t.status & STATUS_ONBOARD != 0 {
+                        crate::say!(
+                            "rip-rt: {}; the device is stopping the arm itself (at most {} s)",
+                            OnboardEnd::Device(t.onboard),
+                            rip_control::stop::MAX_STOP_S
+                        );
+                    }
+                    k
+                });
+                let waited = (k - since) as f64 * period.as_secs_f64();
+                if t.status & STATUS_ONBOARD == 0 || waited > rip_control::stop::MAX_STOP_S + 1.0 {
+                    return OnboardEnd::Device(t.onboard);
+                }
             }
         }
         k += 1;

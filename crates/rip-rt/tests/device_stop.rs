@@ -189,3 +189,60 @@ fn an_unverified_device_shorts_the_windings_rather_than_drive() {
         }
     }
 }
+
+#[test]
+fn a_host_that_is_alive_lets_the_devices_own_stop_finish() {
+    let _one = one_at_a_time();
+    // A pendulum limit the reference step's swing passes: the device stops on it with the host
+    // there, and the host waits for the device's stop before its own stop frames.
+    let toml =
+        "[plant]\npreset = \"paper\"\n[safety]\nwait_upright_s = 30.0\npendulum_limit = 0.1\n";
+    let cfg = scratch("device-stop-host-alive.toml");
+    std::fs::write(&cfg, toml).unwrap();
+    let cfg_arg = cfg.to_str().unwrap();
+    let raise = RAISE_AT.to_string();
+    let emu = Emulator::lockstep(
+        "device-stop-host-alive",
+        &["--config", cfg_arg, "--start", "down", "--raise-at", &raise],
+    );
+    let r = run_lockstep(
+        &emu.device,
+        "lqr",
+        &["--onboard", "--config", cfg_arg, "--duration", "6"],
+    );
+    assert_eq!(r.status.code(), Some(5), "{}", r.stderr);
+    assert!(
+        r.stderr.contains("the device is stopping the arm itself"),
+        "{}",
+        r.stderr
+    );
+    let rows = emu.wait_for_rest(REST_RATE, 1.0, Duration::from_secs(60));
+    let pulse = rows.iter().find(|r| r.driver == "drive").unwrap().t;
+    let started = rows
+        .iter()
+        .find(|r| r.t > pulse + RAISE_AT && r.driver == "drive")
+        .unwrap()
+        .t;
+    let tripped = rows
+        .iter()
+        .find(|r| r.t > started && r.alpha.abs() > 0.1)
+        .expect("the pendulum past its limit")
+        .t;
+    let last_drive = rows.iter().rev().find(|r| r.driver == "drive").unwrap().t;
+    let last = rows.last().unwrap();
+    println!(
+        "host alive: the device's stop drove {:.2} s after the limit, max |theta| {:.3} rad, \
+         end {last:?}",
+        last_drive - tripped,
+        max_excursion(&rows)
+    );
+    assert!(
+        last_drive > tripped + 0.5,
+        "the device's stop was cut short"
+    );
+    assert!(max_excursion(&rows) < 3.0);
+    assert!(
+        last.theta_dot.abs() < REST_RATE && last.driver != "drive",
+        "{last:?}"
+    );
+}
