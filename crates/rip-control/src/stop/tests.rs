@@ -1,30 +1,9 @@
 //! Host tests of the stop's rule in `f64` and `f32`, against the physics it models and the
-//! behaviour the module docs promise, on the `paper` preset's lumped constants.
+//! behaviour the module docs promise, on the `paper` preset's lumped constants (the swing's
+//! tests' model).
 
 use super::*;
-
-/// rip-core's `paper` preset, lumped (`FurutaParams::paper().lumped()` and `k_t / R_m`,
-/// `d_r + k_t k_m / R_m`, `d_p`).
-fn model() -> ArmModel<f64> {
-    let (rm, kt, km, mr, lr, jr) = (8.4, 0.042, 0.042, 0.095, 0.149_100_677_558_3, 4.956_5e-4);
-    let (mp, lp, jp, dr, dp, g) = (
-        0.024,
-        0.278_813_714_302_3,
-        3.289_1e-4,
-        1.894_4e-3,
-        4.513e-4,
-        9.81,
-    );
-    ArmModel {
-        j0: jr + mr * lr * lr / 4.0 + mp * lr * lr,
-        ja: jp + mp * lp * lp / 4.0,
-        m12: mp * lr * lp / 2.0,
-        grav: mp * g * lp / 2.0,
-        b: kt / rm,
-        c_arm: dr + kt * km / rm,
-        dp,
-    }
-}
+use crate::swing::tests::{model, model_to};
 
 const TS: f64 = 0.01;
 const U: f64 = 12.0;
@@ -50,17 +29,8 @@ fn simulated() -> SimulatedStop<f64> {
 }
 
 fn to_f32(s: &SimulatedStop<f64>) -> SimulatedStop<f32> {
-    let m = s.model;
     SimulatedStop {
-        model: ArmModel {
-            j0: m.j0 as f32,
-            ja: m.ja as f32,
-            m12: m.m12 as f32,
-            grav: m.grav as f32,
-            b: m.b as f32,
-            c_arm: m.c_arm as f32,
-            dp: m.dp as f32,
-        },
+        model: model_to(&s.model),
         dead_zone: s.dead_zone as f32,
         law: BrakingLaw {
             voltage: s.law.voltage as f32,

@@ -257,4 +257,4 @@ pub use model::*;
 pub use supervisor::*;
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -26,7 +26,7 @@ const TS: f64 = 0.01;
 const ARM_LIMIT: f64 = 1.5;
 const U: f64 = 12.0;
 
-fn model() -> ArmModel<f64> {
+pub(crate) fn model() -> ArmModel<f64> {
     let [rm, kt, km, mr, lr, jr, mp, lp, jp, dr, dp, g] = PAPER;
     ArmModel {
         j0: jr + mr * lr * lr / 4.0 + mp * lr * lr,
@@ -94,7 +94,7 @@ fn params(catch: bool) -> SwingParams<f64> {
     }
 }
 
-fn model_to<R: Real>(m: &ArmModel<f64>) -> ArmModel<R> {
+pub(crate) fn model_to<R: Real>(m: &ArmModel<f64>) -> ArmModel<R> {
     ArmModel {
         j0: c(m.j0),
         ja: c(m.ja),
