@@ -184,6 +184,13 @@ pub const SIMULATED_REST_S: f64 = 0.5;
 /// Arm speed (rad/s) below which [`SimulatedStop`] counts the arm at rest.
 pub const SIMULATED_REST_RATE: f64 = 0.05;
 
+/// The shortest period (s) the stop's sequence runs at: the host loop's default, which its
+/// rest windows, blind rule and dead band were measured at. A device that steps faster runs
+/// it every `⌈STOP_PERIOD_S / T_s⌉` steps and holds its command in between: at 1 kHz the
+/// 64-sample rest ring would span 63 ms, the blind rule 5 ms, and the dead band of 1.5
+/// counts a period 4.6 rad/s on a 2048-count encoder.
+pub const STOP_PERIOD_S: f64 = 0.01;
+
 /// The longest a stop after a fault runs (s): the braking law for up to [`MAX_BRAKE_S`], the
 /// hold law for up to [`MAX_HOLD_S`]; then the driver is disabled whatever the arm does.
 pub const MAX_STOP_S: f64 = MAX_BRAKE_S + MAX_HOLD_S;

@@ -34,10 +34,13 @@
 //! and the start said the wiring was verified, the law runs the stop of the image's stop
 //! design ([`StopDesign::sequence`]: the braking law, then the hold law, then the short, the
 //! rule of `rip_control::stop` that rip-rt runs on the host) on the angles and the rates over
-//! the device's clock ([`rip_control::stop::sample_rates`]); otherwise the device shorts the
+//! the device's clock ([`rip_control::stop::sample_rates`]), at most every [`STOP_PERIOD_S`]
+//! (a faster design holds the stop's command in between); otherwise the device shorts the
 //! windings at once.
 
-use rip_control::stop::{sample_rates, BrakeCommand, StopDesign, StopSequence, STOP_MAGIC};
+use rip_control::stop::{
+    sample_rates, BrakeCommand, StopDesign, StopSequence, STOP_MAGIC, STOP_PERIOD_S,
+};
 use rip_control::{Controller, Design, Measurement, Phase, Real};
 use rip_protocol::{PIL_PHASE_CONVERT, PIL_PHASE_ESTIMATE, PIL_PHASE_LINEAR, PIL_PHASE_QP};
 
@@ -145,12 +148,16 @@ pub fn write_image<R: Real>(
     Some(at + n)
 }
 
-/// The device's own stop in progress (module docs): its sequence, and the last sample's
-/// angles and device clock, for the rates.
+/// The device's own stop in progress (module docs): its sequence, run every `every` steps
+/// (at least [`STOP_PERIOD_S`] apart), the last of those samples' angles and device clock for
+/// the rates, the steps so far, and the command held between the sequence's periods.
 #[derive(Debug, Clone, Copy)]
 struct Stopping<R: Real> {
     sequence: StopSequence<R>,
     last: Option<(R, R, u32)>,
+    every: u32,
+    steps: u32,
+    held: BrakeCommand<R>,
 }
 
 /// rip-control's controller in scalar `R` as the device's [`Onboard`] law, with a design
@@ -296,12 +303,16 @@ impl<R: Real, const N: usize> Onboard for ControlLaw<R, N> {
 
     fn begin_stop(&mut self, verified: bool) -> bool {
         let period_s = f64::from(self.period_us()) * 1e-6;
+        let every = libm::ceil(STOP_PERIOD_S / period_s - 1e-9).clamp(1.0, 1000.0) as u32;
         self.stopping = self
             .stop_design()
             .filter(|_| verified && period_s > 0.0)
             .map(|d| Stopping {
-                sequence: d.sequence(period_s, true),
+                sequence: d.sequence(period_s * f64::from(every), true),
                 last: None,
+                every,
+                steps: 0,
+                held: BrakeCommand::Short,
             });
         self.stopping.is_some()
     }
@@ -310,13 +321,19 @@ impl<R: Real, const N: usize> Onboard for ControlLaw<R, N> {
         let [theta, alpha] = self.sensor.angles(positions);
         let (theta, alpha) = (R::from_f64(theta), R::from_f64(alpha));
         let stopping = self.stopping.as_mut()?;
-        let before = stopping.last.replace((theta, alpha, now_us));
-        let (rate, alpha_rate) = sample_rates(before, theta, alpha, now_us);
-        let command = stopping.sequence.step(theta, rate, alpha, alpha_rate);
-        if command.is_none() {
-            self.stopping = None;
+        if stopping.steps % stopping.every == 0 {
+            let before = stopping.last.replace((theta, alpha, now_us));
+            let (rate, alpha_rate) = sample_rates(before, theta, alpha, now_us);
+            match stopping.sequence.step(theta, rate, alpha, alpha_rate) {
+                Some(command) => stopping.held = command,
+                None => {
+                    self.stopping = None;
+                    return None;
+                }
+            }
         }
-        command.map(|c| match c {
+        stopping.steps = stopping.steps.wrapping_add(1);
+        Some(match stopping.held {
             BrakeCommand::Volts(v) => BrakeCommand::Volts(v.to_f64()),
             BrakeCommand::Short => BrakeCommand::Short,
         })

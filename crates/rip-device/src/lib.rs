@@ -45,7 +45,13 @@
 //! the pendulum are inside their limits, and that the move is finite; it then applies the move
 //! clamped to the device's voltage limit. Any failed check stops onboard mode: 0 V, the driver
 //! disabled, and the brake where the board has one (not on a driver fault, as for v1), and the
-//! stop's reason is sent in a final telemetry record. A command frame from the host also ends
+//! stop's reason is sent in a final telemetry record. When the start said the wiring is
+//! verified (protocol v3) and the law has a stop of its own ([`Onboard::begin_stop`]: the
+//! image's stop's design, [`law`]'s "The device's stop"), a stop on the device's own account
+//! (a limit, a silent host, a non-finite move) first runs that stop, at most
+//! `rip_control::stop::MAX_STOP_S`, telemetry carrying its reason from its first step; a
+//! driver fault during it disables the driver at once, a host command or onboard stop ends it,
+//! and an onboard start meanwhile is refused as busy. A command frame from the host also ends
 //! onboard mode (so v1's stop frame stops it), and so does a frame of another version. A step
 //! that overruns its period ([`Device::record_step_cycles`]) is a fault too. Should the steps
 //! themselves stop (a hung interrupt), the v1 command watchdog stops the motor, since each step

@@ -89,7 +89,7 @@ pub(crate) struct Run {
     pub(crate) last_host_us: u32,
     pub(crate) last_cycles: u32,
     pub(crate) overruns: u16,
-    /// The device's own stop in progress (crate docs, "The device's stop"): the state the run
+    /// The device's own stop in progress (crate docs): the state the run
     /// stopped with, and the periods the stop has run.
     pub(crate) stopping: Option<(u8, u32)>,
 }
@@ -255,7 +255,13 @@ impl<C: Onboard> Device<C> {
         if !self.design_loaded || self.onboard.period_us() == 0 {
             return (ACK_NO_DESIGN, self.onboard_state as u32);
         }
-        if s.decimation == 0 || s.host_timeout_ms == 0 {
+        if self.run.is_some_and(|r| r.stopping.is_some()) {
+            // The device's own stop runs to its end (a start resent on a lost ack would
+            // otherwise cancel it).
+            return (ACK_BUSY, self.onboard_state as u32);
+        }
+        if s.decimation == 0 || s.host_timeout_ms == 0 || s.flags & !ONBOARD_WIRING_VERIFIED != 0 {
+            // A flag this device does not know is refused rather than ignored.
             return (ACK_BAD_SETTINGS, self.onboard_state as u32);
         }
         let positions = self.positions();
@@ -423,7 +429,7 @@ impl<C: Onboard> Device<C> {
         self.last_command_us = now_us;
     }
 
-    /// A period of the device's own stop (crate docs, "The device's stop"): the law's command
+    /// A period of the device's own stop (crate docs): the law's command
     /// for it, at most [`MAX_STOP_S`] of them; the state and brake to end the run with once it
     /// is done, or at once on a driver fault.
     fn stop_period(

@@ -8,8 +8,8 @@ use rip_device::law::{write_image, ControlLaw, Sensor};
 use rip_device::{Config, Device, Inputs, Onboard};
 use rip_protocol::{
     crc32, Event, Frame, Message, OnboardStart, PilStep, UploadBegin, UploadChunk, UploadCommit,
-    ACK_NO_DESIGN, ACK_OK, ACK_REFUSED, CHUNK_MAX, ONBOARD_HOST_SILENT, ONBOARD_WIRING_VERIFIED,
-    PIL_PHASE_SHIFT, PIL_RESET, PIL_STOP,
+    ACK_BUSY, ACK_NO_DESIGN, ACK_OK, ACK_REFUSED, CHUNK_MAX, ONBOARD_HOST_SILENT,
+    ONBOARD_WIRING_VERIFIED, PIL_PHASE_SHIFT, PIL_RESET, PIL_STOP,
 };
 
 fn lqr() -> Design {
@@ -359,11 +359,30 @@ fn a_silent_host_leaves_the_verified_device_braking_and_the_unverified_one_short
             dev.onboard_step(&at(t));
             if t > 60_000 && dev.enabled() {
                 drove_after = true;
+                // The arm moves the positive way: the braking law drives it back, at the bound.
+                assert!(dev.voltage_mv() <= -9_000, "{} mV", dev.voltage_mv());
             }
         }
         assert_eq!(dev.onboard_state(), ONBOARD_HOST_SILENT);
         assert_eq!(drove_after, verified, "verified {verified}");
-        if !verified {
+        if verified {
+            // The device's own stop runs to its end: a start meanwhile is busy.
+            let a = match dev.handle(
+                Event::Frame(Frame {
+                    seq: 3,
+                    message: Message::OnboardStart(start),
+                }),
+                &at(200_000),
+            ) {
+                Some(Frame {
+                    message: Message::Ack(a),
+                    ..
+                }) => a,
+                other => panic!("{other:?}"),
+            };
+            assert_eq!(a.code, ACK_BUSY);
+            assert!(dev.onboard_running());
+        } else {
             assert!(!dev.onboard_running() && dev.braking());
         }
     }

@@ -303,6 +303,11 @@ fn start_settings_are_checked() {
             host_timeout_ms: 0,
             ..start_settings()
         },
+        // A flag the device does not know (v3 defines bit 0 only).
+        OnboardStart {
+            flags: 0b10,
+            ..start_settings()
+        },
     ] {
         let a = ack(&mut dev, 1, Message::OnboardStart(bad), 0);
         assert_eq!(a.code, ACK_BAD_SETTINGS);

@@ -137,6 +137,28 @@ fn a_device_whose_host_dies_brakes_and_holds_the_arm_inside_the_limit() {
 }
 
 #[test]
+fn a_device_stepping_at_1_khz_runs_its_stop_as_at_100_hz() {
+    let _one = one_at_a_time();
+    // The stop's sequence every 10 ms (rip_control::stop::STOP_PERIOD_S), its command held in
+    // between: its rest windows, blind rule and dead band as measured.
+    let toml = "[plant]\npreset = \"paper\"\n[loop]\nperiod_ms = 1.0\n";
+    let (rows, killed_at, limit, stderr) = host_killed("paper at 1 kHz", toml, 0.6);
+    assert!(stderr.contains("sign check passed"), "{stderr}");
+    let max_theta = max_excursion(&rows);
+    let last = rows.last().unwrap();
+    let braked = rows
+        .iter()
+        .any(|r| r.t > killed_at + 0.06 && r.driver == "drive");
+    println!("paper at 1 kHz: true max |theta| {max_theta:.3} rad, end {last:?}");
+    assert!(braked, "the device did not brake the arm itself");
+    assert!(max_theta < limit, "{max_theta}");
+    assert!(
+        last.theta_dot.abs() < REST_RATE && last.driver != "drive",
+        "{last:?}"
+    );
+}
+
+#[test]
 fn an_unverified_device_shorts_the_windings_rather_than_drive() {
     let _one = one_at_a_time();
     // Upright from the start: no sign check, so the device's stop is the short (the stop of
