@@ -340,8 +340,31 @@ impl Lowering {
 }
 
 pub use rip_control::stop::{
-    SimulatedStop, MAX_BRAKE_S, SIMULATED_BRAKE_FRACTION, SIMULATED_REST_RATE, SIMULATED_REST_S,
+    SimulatedStop, StopDesign, MAX_BRAKE_S, SIMULATED_BRAKE_FRACTION, SIMULATED_REST_RATE,
+    SIMULATED_REST_S,
 };
+
+/// What a device needs to run the stop itself ([`StopDesign`]) for plant `p` at the voltage
+/// bound `voltage` (V) and loop period `ts` (s), the braking law applying 0 V below
+/// `dead_band` (rad/s): [`braking_law`], [`hold_law`], the smooth model and the dead zone.
+pub fn stop_design(
+    p: &FurutaParams,
+    voltage: f64,
+    ts: f64,
+    dead_band: f64,
+) -> crate::error::Result<StopDesign> {
+    let design = StopDesign {
+        law: braking_law(p, voltage, ts),
+        dead_band,
+        hold: hold_law(p, voltage, ts)?,
+        model: Plant::new(*p)?.arm_model(),
+        dead_zone: p.vd,
+    };
+    design
+        .validate()
+        .map_err(|e| crate::error::RipError::invalid("stop design", e.to_string()))?;
+    Ok(design)
+}
 
 /// The simulated stop ([`SimulatedStop`]) of plant `p` braked at `voltage` (V), sampled every
 /// `ts` (s), the applied voltage acting for `latency_periods` periods before the braking law:
@@ -508,6 +531,21 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The device's stop design is the laws the host's stop runs, and travels unchanged.
+    #[test]
+    fn the_stop_design_is_the_hosts_laws_and_travels_whole() {
+        for p in [FurutaParams::paper(), FurutaParams::qube_servo2()] {
+            let d = stop_design(&p, 10.0, 0.01, 0.46).unwrap();
+            assert_eq!(d.law, braking_law(&p, 10.0, 0.01));
+            assert_eq!(d.hold, hold_law(&p, 10.0, 0.01).unwrap());
+            assert_eq!(d.model, Plant::new(p).unwrap().arm_model());
+            let mut bytes = [0u8; rip_control::stop::STOP_DESIGN_LEN];
+            d.write(&mut bytes).unwrap();
+            assert_eq!(StopDesign::read(&bytes).unwrap(), d);
+        }
+        assert!(stop_design(&FurutaParams::paper(), 10.0, 0.01, f64::NAN).is_err());
     }
 
     /// (2) against a direct integration of (1), and the limits it must have.

@@ -231,16 +231,7 @@ pub fn brake_for_mode(cfg: &Config, mode: BrakeMode, estimate: Option<State>, he
 /// `None` without a plant or a hold law.
 pub fn stop_design(cfg: &Config) -> Option<StopDesign> {
     let params = cfg.spec.plant.params();
-    let voltage = stop_voltage(cfg);
-    let law = rip_core::envelope::braking_law(&params, voltage, cfg.period_s());
-    let design = StopDesign {
-        law,
-        dead_band: dead_band(cfg),
-        hold: rip_core::envelope::hold_law(&params, voltage, cfg.period_s()).ok()?,
-        model: cfg.spec.plant().ok()?.arm_model(),
-        dead_zone: params.vd,
-    };
-    design.validate().is_ok().then_some(design)
+    rip_core::envelope::stop_design(&params, stop_voltage(cfg), cfg.period_s(), dead_band(cfg)).ok()
 }
 
 /// The stop of `cfg` with `brake` ([`StopSequence`]): the hold law of `[plant]` and its smooth
