@@ -221,12 +221,8 @@ fn main() {
             continue;
         }
         // The host's copies of the same image: f32 as on the chip, f64 for the reference.
-        let mut host32 = Box::new(ControlLaw::<f32, { onboard::MAX_IMAGE }>::new());
-        host32.buffer()[..img.len()].copy_from_slice(&img);
-        host32.load(img.len()).expect("host f32 load");
-        let mut host64 = Box::new(ControlLaw::<f64, { onboard::MAX_IMAGE }>::new());
-        host64.buffer()[..img.len()].copy_from_slice(&img);
-        host64.load(img.len()).expect("host f64 load");
+        let mut host32 = host_copy::<f32>(&img).expect("host f32 load");
+        let mut host64 = host_copy::<f64>(&img).expect("host f64 load");
 
         // At least `min_steps` and at least 10 s, so that the reference step is inside.
         let steps = min_steps.max((10.0 / ts) as usize);
@@ -391,6 +387,17 @@ fn main() {
     std::process::exit(if ok { 0 } else { 1 });
 }
 
+/// The image loaded on the host in rip-control's controller in scalar `R`, as the device
+/// loads it.
+fn host_copy<R: rip_control::Real>(
+    img: &[u8],
+) -> Result<Box<ControlLaw<R, { onboard::MAX_IMAGE }>>, rip_device::DesignRefused> {
+    let mut law = Box::new(ControlLaw::<R, { onboard::MAX_IMAGE }>::new());
+    law.buffer()[..img.len()].copy_from_slice(img);
+    law.load(img.len())?;
+    Ok(law)
+}
+
 /// The device's own stop in the loop (module docs, "Stop").
 fn stop_check(link: &mut Link<'_>) -> Result<String, String> {
     let cfg = config(10.0);
@@ -399,11 +406,8 @@ fn stop_check(link: &mut Link<'_>) -> Result<String, String> {
     let design = onboard::design(ControllerKind::Lqr, &cfg)?;
     let img = onboard::image(&design, &cfg)?;
     link.upload(&img)?;
-    let mut host32 = Box::new(ControlLaw::<f32, { onboard::MAX_IMAGE }>::new());
-    host32.buffer()[..img.len()].copy_from_slice(&img);
-    host32
-        .load(img.len())
-        .map_err(|_| "the host's f32 copy refused the image".to_string())?;
+    let mut host32 =
+        host_copy::<f32>(&img).map_err(|_| "the host's f32 copy refused the image".to_string())?;
     let mut plant = PlantSim::new(EmulatorConfig::default().model, 0.0, 0.05);
     plant.set_state([0.2, 3.0, 0.3, 1.5]);
     let sub = (ts / 1e-3).round().max(1.0) as usize;

@@ -121,16 +121,11 @@ pub fn start_settings(
     decimation: u16,
     verified: bool,
 ) -> OnboardStart {
-    let tau = std::f64::consts::TAU;
-    let d = &cfg.device;
-    let s_arm = tau / d.arm_counts_per_rev as f64;
-    let s_pend = d.pendulum_sign * tau / d.pendulum_counts_per_rev as f64;
-    let offset = match d.pendulum_zero {
-        crate::config::PendulumZero::Down => std::f64::consts::PI,
-        crate::config::PendulumZero::Up => 0.0,
-    };
-    let raw = m.pendulum_counts as f64 * s_pend - offset;
-    let alpha = raw - tau * (raw / tau).round();
+    // The device's own conversion (the image's header): the upright nearest the measurement.
+    let sensor = sensor(cfg);
+    let s_arm = sensor.arm_rad_per_count.abs();
+    let s_pend = sensor.pendulum_rad_per_count;
+    let [_, alpha] = sensor.angles([m.arm_counts, m.pendulum_counts]);
     let center = m.pendulum_counts as f64 - alpha / s_pend;
     OnboardStart {
         decimation: decimation.max(1),
@@ -602,8 +597,7 @@ fn supervise(
         Err(e) => return OnboardEnd::Setup(e),
     }
     let periods = duration_s.map(|d| (d / period.as_secs_f64()).round() as u64);
-    let mut missing = 0;
-    let mut next = Instant::now() + period;
+    let mut pace = Pace::new(period, lockstep);
     let mut k = 0u64;
     // The period at which the device began a stop of its own, if it has.
     let mut device_stop: Option<u64> = None;
@@ -614,23 +608,8 @@ fn supervise(
         if device_stop.is_none() && periods.is_some_and(|n| k >= n) {
             return OnboardEnd::Duration;
         }
-        if !lockstep {
-            let now = Instant::now();
-            if next > now {
-                std::thread::sleep(next - now);
-            }
-            next += period;
-        }
-        let timeout = if lockstep { ACK_TIMEOUT } else { period };
-        match link.sample(timeout) {
-            Ok(Some(_)) => missing = 0,
-            Ok(None) => {
-                missing += 1;
-                if missing >= MISSING_LIMIT {
-                    return OnboardEnd::Silent;
-                }
-            }
-            Err(e) => return OnboardEnd::Io(e.to_string()),
+        if let Err(end) = pace.period(link, None) {
+            return end;
         }
         if let Err(e) = log(link) {
             return OnboardEnd::Log(e);
@@ -657,6 +636,83 @@ fn supervise(
             }
         }
         k += 1;
+    }
+}
+
+/// The host's periods: a command (if any) and a sample request each, on the wall clock or, in
+/// lockstep, one emulated period per sample; [`MISSING_LIMIT`] periods in a row without a
+/// reply end the run as [`OnboardEnd::Silent`].
+pub(crate) struct Pace {
+    period: Duration,
+    lockstep: bool,
+    next: Instant,
+    missing: u32,
+}
+
+impl Pace {
+    pub(crate) fn new(period: Duration, lockstep: bool) -> Self {
+        Self {
+            period,
+            lockstep,
+            next: Instant::now() + period,
+            missing: 0,
+        }
+    }
+
+    /// One period: `command` sent, the wait for the period's time, then its measurement, if
+    /// one came.
+    pub(crate) fn period(
+        &mut self,
+        link: &mut Link<'_>,
+        command: Option<Command>,
+    ) -> Result<Option<Measurement>, OnboardEnd> {
+        if let Some(c) = command {
+            link.send(Message::Command(c))
+                .map_err(|e| OnboardEnd::Io(e.to_string()))?;
+        }
+        if !self.lockstep {
+            let now = Instant::now();
+            if self.next > now {
+                std::thread::sleep(self.next - now);
+            }
+            self.next += self.period;
+        }
+        let timeout = if self.lockstep {
+            ACK_TIMEOUT
+        } else {
+            self.period
+        };
+        match link.sample(timeout) {
+            Ok(Some(m)) => {
+                self.missing = 0;
+                Ok(Some(m))
+            }
+            Ok(None) => {
+                self.missing += 1;
+                if self.missing >= MISSING_LIMIT {
+                    return Err(OnboardEnd::Silent);
+                }
+                Ok(None)
+            }
+            Err(e) => Err(OnboardEnd::Io(e.to_string())),
+        }
+    }
+
+    /// Periods, `command` sent in each, until one brings a measurement (a stop signal ends
+    /// the wait).
+    pub(crate) fn next(
+        &mut self,
+        link: &mut Link<'_>,
+        command: Option<Command>,
+    ) -> Result<Measurement, OnboardEnd> {
+        loop {
+            if let Some(reason) = crate::stop::requested_stop() {
+                return Err(OnboardEnd::Signal(reason));
+            }
+            if let Some(m) = self.period(link, command)? {
+                return Ok(m);
+            }
+        }
     }
 }
 

@@ -42,9 +42,16 @@ fn rigs() -> Vec<(String, String)> {
     out
 }
 
-/// One case: the true state from the onboard start to the end, the time of the kill, and
-/// the rig's `safety.arm_limit`.
-fn host_killed(name: &str, rig_toml: &str, offset: f64) -> (Vec<Truth>, f64, f64, String) {
+/// One case: the host killed `offset` s into the onboard run, the pendulum started hanging
+/// (the wiring checked, then raised by the operator) or, when not `hanging`, upright (the
+/// wiring unchecked); the true state from the onboard start to the end, the time of the
+/// kill, the rig's `safety.arm_limit` and the run's stderr.
+fn host_killed(
+    name: &str,
+    rig_toml: &str,
+    offset: f64,
+    hanging: bool,
+) -> (Vec<Truth>, f64, f64, String) {
     let file = name.replace([' ', ','], "-");
     let cfg = scratch(&format!("device-stop-{file}.toml"));
     // Time for the operator to raise the pendulum after the sign check.
@@ -57,20 +64,24 @@ fn host_killed(name: &str, rig_toml: &str, offset: f64) -> (Vec<Truth>, f64, f64
         .safety
         .arm_limit;
     let raise = RAISE_AT.to_string();
-    let emu = Emulator::lockstep(
-        &format!("device-stop-{file}"),
-        &["--config", cfg_arg, "--start", "down", "--raise-at", &raise],
-    );
+    let mut emulate = vec!["--config", cfg_arg];
+    if hanging {
+        emulate.extend(["--start", "down", "--raise-at", &raise]);
+    }
+    let emu = Emulator::lockstep(&format!("device-stop-{file}"), &emulate);
     let mut child = spawn_run(
         &emu.device,
         "lqr",
         &["--onboard", "--lockstep", "--config", cfg_arg],
     );
-    // The onboard start: the first driven row after the operator raised the pendulum.
+    // The onboard start: the first driven row (after the operator raised the pendulum).
     let start = |rows: &[Truth]| {
-        let pulse = rows.iter().find(|r| r.driver == "drive")?.t;
+        let first = rows.iter().find(|r| r.driver == "drive")?.t;
+        if !hanging {
+            return Some(first);
+        }
         rows.iter()
-            .find(|r| r.t > pulse + RAISE_AT && r.driver == "drive")
+            .find(|r| r.t > first + RAISE_AT && r.driver == "drive")
             .map(|r| r.t)
     };
     let rows = emu.suspend_run_when(
@@ -98,7 +109,7 @@ fn a_device_whose_host_dies_brakes_and_holds_the_arm_inside_the_limit() {
     for (name, toml) in rigs() {
         for (when, offset) in KILLS {
             let case = format!("{name}, host killed {when}");
-            let (rows, killed_at, limit, stderr) = host_killed(&case, &toml, offset);
+            let (rows, killed_at, limit, stderr) = host_killed(&case, &toml, offset, true);
             assert!(
                 stderr.contains("sign check passed"),
                 "{case}: no sign check:\n{stderr}"
@@ -142,7 +153,7 @@ fn a_device_stepping_at_1_khz_runs_its_stop_as_at_100_hz() {
     // The stop's sequence every 10 ms (rip_control::stop::STOP_PERIOD_S), its command held in
     // between: its rest windows, blind rule and dead band as measured.
     let toml = "[plant]\npreset = \"paper\"\n[loop]\nperiod_ms = 1.0\n";
-    let (rows, killed_at, limit, stderr) = host_killed("paper at 1 kHz", toml, 0.6);
+    let (rows, killed_at, limit, stderr) = host_killed("paper at 1 kHz", toml, 0.6, true);
     assert!(stderr.contains("sign check passed"), "{stderr}");
     let max_theta = max_excursion(&rows);
     let last = rows.last().unwrap();
@@ -166,33 +177,11 @@ fn an_unverified_device_shorts_the_windings_rather_than_drive() {
     for (name, toml) in rigs().into_iter().take(2) {
         for (when, offset) in KILLS {
             let case = format!("{name}, unverified, host killed {when}");
-            let file = case.replace([' ', ','], "-");
-            let cfg = scratch(&format!("device-stop-{file}.toml"));
-            std::fs::write(&cfg, &toml).unwrap();
-            let cfg_arg = cfg.to_str().unwrap();
-            let emu = Emulator::lockstep(&format!("device-stop-{file}"), &["--config", cfg_arg]);
-            let mut child = spawn_run(
-                &emu.device,
-                "lqr",
-                &["--onboard", "--lockstep", "--config", cfg_arg],
-            );
-            let start = |rows: &[Truth]| rows.iter().find(|r| r.driver == "drive").map(|r| r.t);
-            let rows = emu.suspend_run_when(
-                &mut child,
-                &case,
-                Duration::from_secs(60),
-                |rows| start(rows).is_some_and(|s| rows.last().unwrap().t > s + offset - 0.1),
-                |rows| start(rows).is_some_and(|s| rows.last().unwrap().t >= s + offset),
-            );
-            let killed_at = rows.last().unwrap().t;
-            unsafe { libc::kill(child.id() as i32, libc::SIGKILL) };
-            let out = child.wait_with_output().unwrap();
-            let stderr = String::from_utf8_lossy(&out.stderr);
+            let (rows, killed_at, _, stderr) = host_killed(&case, &toml, offset, false);
             assert!(
                 stderr.contains("the wiring's sign is unchecked"),
                 "{case}: {stderr}"
             );
-            let rows = emu.wait_for_rest(REST_RATE, 1.0, Duration::from_secs(60));
             let last_drive = rows.iter().rev().find(|r| r.driver == "drive").unwrap().t;
             let last = rows.last().unwrap();
             println!(

@@ -12,11 +12,11 @@
 //! pendulum within `safety.start_tolerance` of upright. One that starts upright is
 //! unverified, and says so.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use rip_protocol::{Command, Measurement, Message, COMMAND_BRAKE, COMMAND_ENABLE};
 
-use super::{sensor, Link, OnboardEnd, ACK_TIMEOUT, MISSING_LIMIT};
+use super::{sensor, Link, OnboardEnd, Pace};
 use crate::config::Config;
 use crate::rest::{RestCheck, RestVerdict};
 use crate::sign_check::{SignCheck, PULSE_VOLTAGE};
@@ -38,7 +38,8 @@ pub fn prepare(
     period: Duration,
     lockstep: bool,
 ) -> Result<(Measurement, bool), OnboardEnd> {
-    let angles = |m: &Measurement| sensor(cfg).angles([m.arm_counts, m.pendulum_counts]);
+    let sensor = sensor(cfg);
+    let angles = |m: &Measurement| sensor.angles([m.arm_counts, m.pendulum_counts]);
     let [_, alpha] = angles(&first);
     if std::f64::consts::PI - alpha.abs() > HANGING_RAD {
         crate::say!(
@@ -125,66 +126,4 @@ fn brake(link: &mut Link<'_>) {
         voltage_mv: 0,
         flags: COMMAND_BRAKE,
     }));
-}
-
-/// The host's periods before the start: a command (if any) and a sample request each, on the
-/// wall clock or, in lockstep, one emulated period per sample.
-struct Pace {
-    period: Duration,
-    lockstep: bool,
-    next: Instant,
-    missing: u32,
-}
-
-impl Pace {
-    fn new(period: Duration, lockstep: bool) -> Self {
-        Self {
-            period,
-            lockstep,
-            next: Instant::now() + period,
-            missing: 0,
-        }
-    }
-
-    /// One period: `command` sent, then the measurement.
-    fn next(
-        &mut self,
-        link: &mut Link<'_>,
-        command: Option<Command>,
-    ) -> Result<Measurement, OnboardEnd> {
-        loop {
-            if let Some(reason) = crate::stop::requested_stop() {
-                return Err(OnboardEnd::Signal(reason));
-            }
-            if let Some(c) = command {
-                link.send(Message::Command(c))
-                    .map_err(|e| OnboardEnd::Io(e.to_string()))?;
-            }
-            if !self.lockstep {
-                let now = Instant::now();
-                if self.next > now {
-                    std::thread::sleep(self.next - now);
-                }
-                self.next += self.period;
-            }
-            let timeout = if self.lockstep {
-                ACK_TIMEOUT
-            } else {
-                self.period
-            };
-            match link.sample(timeout) {
-                Ok(Some(m)) => {
-                    self.missing = 0;
-                    return Ok(m);
-                }
-                Ok(None) => {
-                    self.missing += 1;
-                    if self.missing >= MISSING_LIMIT {
-                        return Err(OnboardEnd::Silent);
-                    }
-                }
-                Err(e) => return Err(OnboardEnd::Io(e.to_string())),
-            }
-        }
-    }
 }
