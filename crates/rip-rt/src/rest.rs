@@ -17,20 +17,25 @@
 //! # When the rig counts as at rest
 //!
 //! Over the last `rest_window_s` of measurements (the last `round(rest_window_s / Ts)` that
-//! arrived), for each joint:
+//! arrived), split from the newest into spans of `n` samples, [`RATE_SPAN_S`] (0.1 s), with
+//! the means `c̄ᵢ` and mean times `t̄ᵢ` of their counts, for each joint:
 //!
 //! ```text
-//! max c − min c ≤ rest_counts                                   (quantisation and noise only)
-//! |c[k] − c[k−n]| · 2π / (N_rev (t[k] − t[k−n])) ≤ rest_<joint>_rate   for every k in the window
+//! max c̄ − min c̄ ≤ rest_counts
+//! |c̄ᵢ − c̄ᵢ₊₁| · 2π / (N_rev (t̄ᵢ − t̄ᵢ₊₁)) ≤ rest_<joint>_rate   for neighbouring spans
 //! ```
 //!
-//! with `n` the samples in [`RATE_SPAN_S`] (0.1 s): a difference over a tenth of a second
-//! resolves a rate of one count per 0.1 s (0.031 rad/s at 2048 counts per revolution), which a
-//! difference over one period (one count per 10 ms: 0.31 rad/s) could not. The first criterion
-//! catches a small swing or a creeping arm, the second a motion that the spread of the window
-//! would only show later. A window that fails is slid on by one sample; the check refuses
-//! ([`RestFault`]) when no window has passed `rest_timeout_s` after it started. The rate
-//! thresholds must exceed two counts per span, or quantisation alone could fail them.
+//! The first criterion catches a small swing or a creeping arm, the second a motion that the
+//! spread of the window would only show later; a difference over a tenth of a second resolves
+//! a rate of one count per 0.1 s (0.031 rad/s at 2048 counts per revolution), which a
+//! difference over one period (one count per 10 ms: 0.31 rad/s) could not. Means over a
+//! span, not single readings: an encoder whose reading jitters by a count or two (noise, a
+//! flickering edge) has a single-reading spread over a 1 s window of about five times that
+//! jitter's standard deviation, which a still rig would fail for good, while the span means
+//! take it down by `√n` and keep a swing (a pendulum's period is ten spans or more) whole.
+//! A window that fails is slid on by one sample; the check refuses ([`RestFault`]) when no
+//! window has passed `rest_timeout_s` after it started. The rate thresholds must exceed two
+//! counts per span, or quantisation alone could fail them.
 //!
 //! This module is the logic without I/O ([`RestCheck`]); [`crate::calibrate`] runs it on the
 //! device with the loop's safety rules.
@@ -52,7 +57,7 @@ pub struct Calibration {
     /// How far (rad) the rest pose was from hanging as `[device]` reads it.
     pub pendulum_offset: f64,
     /// Spread (max − min, counts) of the arm and pendulum counts over the window.
-    pub spread_counts: [i64; 2],
+    pub spread_counts: [f64; 2],
     /// Largest arm and pendulum rates (rad/s) over the window.
     pub max_rates: [f64; 2],
     /// Seconds from the start of the check to the end of the window.
@@ -64,7 +69,7 @@ impl std::fmt::Display for Calibration {
         write!(
             f,
             "arm_zero_counts={:.2} pendulum_hanging_counts={:.2} pendulum_offset_rad={:.4} \
-             spread_counts={}/{} max_rate_rad_s={:.3}/{:.3} after_s={:.2}",
+             spread_counts={:.1}/{:.1} max_rate_rad_s={:.3}/{:.3} after_s={:.2}",
             self.arm_zero_counts,
             self.pendulum_hanging_counts,
             self.pendulum_offset,
@@ -82,16 +87,16 @@ impl std::fmt::Display for Calibration {
 pub enum RestFault {
     /// A joint moved in every window up to the timeout; the figures are the last window's.
     #[error(
-        "the {joint} is moving: over the last {window_s} s it spanned {spread} counts \
-         (calibration.rest_counts = {max_spread}) at up to {rate:.3} rad/s \
+        "the {joint} is moving: over the last {window_s} s its 0.1 s means spanned {spread:.1} \
+         counts (calibration.rest_counts = {max_spread}) at up to {rate:.3} rad/s \
          (calibration.rest_{joint}_rate = {max_rate}); still not at rest after {timeout_s} s \
          ({timeout_key})"
     )]
     Moving {
         /// `"arm"` or `"pendulum"`.
         joint: &'static str,
-        /// Its spread over the window (counts).
-        spread: i64,
+        /// The spread of its span means over the window (counts).
+        spread: f64,
         /// `calibration.rest_counts`.
         max_spread: u32,
         /// Its largest rate over the window (rad/s).
@@ -172,7 +177,7 @@ pub struct RestCheck {
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Stats {
-    spread: [i64; 2],
+    spread: [f64; 2],
     rate: [f64; 2],
     mean: [f64; 2],
 }
@@ -183,7 +188,8 @@ impl RestCheck {
         let c = &cfg.calibration;
         let period_s = cfg.period_s();
         let window = (c.rest_window_s / period_s).round().max(2.0) as usize;
-        let span = ((RATE_SPAN_S / period_s).round() as usize).clamp(1, window - 1);
+        // At least two spans to a window, so that it has a rate.
+        let span = ((RATE_SPAN_S / period_s).round() as usize).clamp(1, window / 2);
         let tau = std::f64::consts::TAU;
         let d = &cfg.device;
         Self {
@@ -216,40 +222,54 @@ impl RestCheck {
 
     fn window_stats(&self) -> Stats {
         let n = self.ring.len();
-        let mut lo = [i32::MAX; 2];
-        let mut hi = [i32::MIN; 2];
+        let span = self.span;
         let mut sum = [0i64; 2];
-        let mut rate = [0.0f64; 2];
         for back in 0..n {
             let s = self.at(back);
-            for j in 0..2 {
-                lo[j] = lo[j].min(s.counts[j]);
-                hi[j] = hi[j].max(s.counts[j]);
-                sum[j] += i64::from(s.counts[j]);
+            for (j, total) in sum.iter_mut().enumerate() {
+                *total += i64::from(s.counts[j]);
             }
-            if back + self.span < n {
-                let earlier = self.at(back + self.span);
-                let dt = s.t - earlier.t;
+        }
+        // The means of consecutive spans, newest first (module docs): their spread and the
+        // rates between neighbours.
+        let mut lo = [f64::INFINITY; 2];
+        let mut hi = [f64::NEG_INFINITY; 2];
+        let mut rate = [0.0f64; 2];
+        let mut newer: Option<([f64; 2], f64)> = None;
+        for block in 0..n / span {
+            let mut counts = [0.0f64; 2];
+            let mut t = 0.0;
+            for back in block * span..(block + 1) * span {
+                let s = self.at(back);
+                counts[0] += f64::from(s.counts[0]);
+                counts[1] += f64::from(s.counts[1]);
+                t += s.t;
+            }
+            let k = span as f64;
+            let (counts, t) = ([counts[0] / k, counts[1] / k], t / k);
+            for j in 0..2 {
+                lo[j] = lo[j].min(counts[j]);
+                hi[j] = hi[j].max(counts[j]);
+            }
+            if let Some((later, t_later)) = newer {
+                let dt = t_later - t;
                 if dt > 0.0 {
                     for (j, r) in rate.iter_mut().enumerate() {
-                        let d = f64::from(s.counts[j]) - f64::from(earlier.counts[j]);
-                        *r = r.max((d * self.rad_per_count[j] / dt).abs());
+                        *r = r.max(((later[j] - counts[j]) * self.rad_per_count[j] / dt).abs());
                     }
                 }
             }
+            newer = Some((counts, t));
         }
         Stats {
-            spread: [
-                i64::from(hi[0]) - i64::from(lo[0]),
-                i64::from(hi[1]) - i64::from(lo[1]),
-            ],
+            spread: [hi[0] - lo[0], hi[1] - lo[1]],
             rate,
             mean: [sum[0] as f64 / n as f64, sum[1] as f64 / n as f64],
         }
     }
 
     fn still(&self, s: &Stats) -> bool {
-        let max_spread = i64::from(self.cfg.rest_counts);
+        let max_spread = f64::from(self.cfg.rest_counts);
         s.spread[0] <= max_spread
             && s.spread[1] <= max_spread
             && s.rate[0] <= self.cfg.rest_arm_rate
@@ -316,7 +336,7 @@ impl RestCheck {
         };
         let max_rate = [c.rest_arm_rate, c.rest_pendulum_rate];
         let excess =
-            |j: usize| (s.spread[j] as f64 / f64::from(c.rest_counts)).max(s.rate[j] / max_rate[j]);
+            |j: usize| (s.spread[j] / f64::from(c.rest_counts)).max(s.rate[j] / max_rate[j]);
         let j = if excess(1) >= excess(0) { 1 } else { 0 };
         RestFault::Moving {
             joint: ["arm", "pendulum"][j],
@@ -346,7 +366,7 @@ mod tests {
     fn feed(
         check: &mut RestCheck,
         secs: f64,
-        f: impl Fn(f64) -> (i32, i32),
+        mut f: impl FnMut(f64) -> (i32, i32),
     ) -> Result<RestVerdict, RestFault> {
         let n = (secs / 0.01).round() as usize;
         for k in 0..n {
@@ -381,7 +401,8 @@ mod tests {
         assert_eq!(cal.arm_zero_counts, 37.5);
         assert_eq!(cal.pendulum_hanging_counts, 5.5);
         assert!((cal.pendulum_offset - 5.5 * TAU / 2048.0).abs() < 1e-12);
-        assert_eq!(cal.spread_counts, [1, 1]);
+        // The dither averages out in every 0.1 s span.
+        assert_eq!(cal.spread_counts, [0.0, 0.0]);
         // The first full window: samples 0 to 99.
         assert!((cal.after_s - 0.99).abs() < 1e-9, "{}", cal.after_s);
         assert!(cal.max_rates[0] <= TAU / 2048.0 / 0.1 + 1e-12);
@@ -408,8 +429,9 @@ mod tests {
             panic!("{fault:?}")
         };
         assert_eq!(joint, "pendulum");
-        // 0.1 rad peak to peak is 32.6 counts; the rate up to 0.3 rad/s.
-        assert!((31..=34).contains(&spread), "{spread}");
+        // 0.1 rad peak to peak is 32.6 counts, 0.985 of it in 0.1 s means; the rate up to
+        // 0.3 rad/s.
+        assert!((29.0..=33.0).contains(&spread), "{spread}");
         assert!(rate > 0.2 && rate < 0.31, "{rate}");
         assert!(
             fault.to_string().contains("calibration.rest_counts"),
@@ -435,8 +457,61 @@ mod tests {
             panic!()
         };
         assert_eq!(joint, "arm");
-        assert!(spread <= 64);
+        assert!(spread <= 64.0);
         assert!((rate - 0.15).abs() < 0.04, "{rate}");
+    }
+
+    /// Gaussian jitter of `sigma` counts, the same sequence every run (an LCG and
+    /// Box–Muller), for sample `k` of joint `j`.
+    fn jitter(sigma: f64, k: usize, j: usize) -> f64 {
+        let uniform = |i: u64| {
+            let x = (i + 1)
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((x >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        let i = 4 * k as u64 + 2 * j as u64;
+        sigma * (-2.0 * uniform(i).ln()).sqrt() * (TAU * uniform(i + 1)).cos()
+    }
+
+    #[test]
+    fn a_still_rig_whose_readings_jitter_rests_and_a_small_swing_through_it_does_not() {
+        // 1.7 counts of jitter (a generated rig's arm: 1.8 mrad on 5 696 counts): a 1 s
+        // window of single readings spans about 8 counts, the 0.1 s means about 1.6.
+        let sigma = 1.7;
+        let mut check = RestCheck::new(&cfg());
+        let mut k = 0;
+        let v = feed(&mut check, 3.0, |_| {
+            k += 1;
+            let n = |j| jitter(sigma, k, j).round() as i32;
+            (40 + n(0), 7 + n(1))
+        })
+        .unwrap();
+        let RestVerdict::AtRest(cal) = v else {
+            panic!("{v:?}, {:?}", check.timeout_fault())
+        };
+        assert!((cal.arm_zero_counts - 40.0).abs() < 0.6, "{cal}");
+        assert!(cal.spread_counts[0] <= 6.0, "{cal}");
+        // A swing of ±5 counts (a tenth of a degree at 2048 counts) through the same jitter.
+        let mut check = RestCheck::new(&cfg());
+        let mut k = 0;
+        let v = feed(&mut check, 3.0, |t| {
+            k += 1;
+            let swing = 5.0 * (6.0 * t).sin();
+            (
+                jitter(sigma, k, 0).round() as i32,
+                (swing + jitter(sigma, k, 1)).round() as i32,
+            )
+        })
+        .unwrap();
+        assert_eq!(v, RestVerdict::Waiting);
+        assert!(matches!(
+            check.timeout_fault(),
+            RestFault::Moving {
+                joint: "pendulum",
+                ..
+            }
+        ));
     }
 
     #[test]
@@ -454,8 +529,10 @@ mod tests {
         let RestVerdict::AtRest(cal) = v else {
             panic!("{v:?}")
         };
-        assert!(cal.after_s >= 2.49 && cal.after_s < 2.6, "{}", cal.after_s);
-        assert_eq!(cal.pendulum_hanging_counts, 3.0);
+        // A window 1 s after the motion, less the share of one reading that a span's mean
+        // dilutes below the spread's bound (one reading 30 counts off moves its mean by 3).
+        assert!(cal.after_s >= 2.45 && cal.after_s < 2.6, "{}", cal.after_s);
+        assert!((cal.pendulum_hanging_counts - 3.0).abs() < 0.5, "{cal}");
     }
 
     #[test]

@@ -236,7 +236,7 @@ pub struct CalibrationConfig {
     /// Largest pendulum rate (rad/s), as [`rest_arm_rate`](Self::rest_arm_rate), with the
     /// same default.
     pub rest_pendulum_rate: f64,
-    /// Largest spread (max − min, counts) of either encoder over the window, in
+    /// Largest spread (max − min, counts) of either encoder's 0.1 s means over the window, in
     /// [`REST_COUNTS`]. Default 6 counts (2048 counts per revolution: 18 mrad).
     pub rest_counts: u32,
     /// Largest distance (rad) of the pendulum's rest pose from hanging as `[device]` reads it

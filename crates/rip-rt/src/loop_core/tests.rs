@@ -229,7 +229,7 @@ fn calibration_moves_both_zeros() {
         arm_zero_counts: 100.0,
         pendulum_hanging_counts: -7.5,
         pendulum_offset: 0.0,
-        spread_counts: [0, 0],
+        spread_counts: [0.0, 0.0],
         max_rates: [0.0, 0.0],
         after_s: 1.0,
     };
