@@ -15,14 +15,17 @@
 //! the motor. SysTick rather than a general-purpose timer, because QEMU models it on its
 //! virtual clock, period after period, so the timer-driven loop runs there (`firmware/pil.sh`
 //! checks its period); QEMU's TIM2 model does not repeat its update interrupt. The telemetry
-//! the step streams is queued for the main loop to send.
+//! the step streams is queued for the main loop to send. The device's own stop on the command
+//! watchdog in host mode (protocol v3's watchdog stop) runs as such an onboard run, so SysTick
+//! steps it too.
 //! Processor-in-the-loop steps (`PilStep`), outside onboard mode, are timed with the DWT
 //! counter on the board and, in the USART builds for QEMU, whose DWT counter reads 0, with
 //! SysTick free-running over its 24 bits.
 //!
 //! Safety: the driver's enable line is low from reset until the PC sends an enabling command
 //! or starts onboard mode; the command watchdog of `rip-device` stops driving when commands
-//! stop for 50 ms (and brakes: the bridge shorts the windings, see `board`), onboard mode
+//! stop for 50 ms (and brakes: the bridge shorts the windings, see `board`, or, armed by the
+//! host with the wiring verified, runs the image's stop: braking, holding, then the short), onboard mode
 //! stops on the host's silence, the angle limits, a driver fault and an overrun; the IWDG
 //! resets the MCU (and so drops it) if the loop hangs; a panic drops it and halts.
 

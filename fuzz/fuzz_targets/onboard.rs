@@ -1,5 +1,6 @@
 //! Onboard mode (protocol v2 and v3) on arbitrary traffic: uploads, commits, starts (with the
-//! wiring verified or not, so that the device's own stop runs too), stops, PIL steps, v1
+//! wiring verified or not, so that the device's own stop runs too), stops, watchdog stops
+//! (host mode's, which the command watchdog then runs), PIL steps, v1
 //! commands and controller steps in any order, with the encoders moving and the fault line
 //! toggling. The device never panics, never drives beyond its limit, drives only
 //! while onboard mode runs or after a host's enabling command, and never while faulted.
@@ -18,7 +19,7 @@ use rip_device::law::{write_image, ControlLaw, Sensor};
 use rip_device::{Config, Device, Inputs};
 use rip_protocol::{
     crc32, Command, Event, Frame, Message, OnboardStart, PilStep, UploadBegin, UploadChunk,
-    UploadCommit, CHUNK_MAX, ONBOARD_OVERRUN,
+    UploadCommit, WatchdogStop, CHUNK_MAX, ONBOARD_OVERRUN,
 };
 
 fn image() -> ([u8; 512], usize) {
@@ -141,6 +142,12 @@ fuzz_target!(|data: &[u8]| {
             7 => Message::Command(Command {
                 voltage_mv: i16::from_le_bytes([p[2], p[3]]),
                 flags: p[4],
+            }),
+            // Host mode's stop on the command watchdog, armed with any flags and zeros.
+            9 => Message::WatchdogStop(WatchdogStop {
+                flags: p[2] & 0x81,
+                arm_zero: i16::from_le_bytes([p[3], p[4]]).into(),
+                pendulum_down: 1024 + i32::from(p[5] as i8),
             }),
             8 => {
                 // No inputs reach the device here: judge it on the fault line it last read.

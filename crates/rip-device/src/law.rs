@@ -118,6 +118,18 @@ impl Sensor {
         ok.then_some(s)
     }
 
+    /// The same conversion with its zeros at the counts `[arm_zero, pendulum_down]`: θ = 0 at
+    /// the first, α = π (hanging) at the second (a host's calibration from a rest hanging
+    /// down, as rip-rt's loop takes it).
+    pub fn zeroed_at(&self, [arm_zero, pendulum_down]: [i32; 2]) -> Sensor {
+        Sensor {
+            arm_offset: f64::from(arm_zero) * self.arm_rad_per_count,
+            pendulum_offset: f64::from(pendulum_down) * self.pendulum_rad_per_count
+                - core::f64::consts::PI,
+            ..*self
+        }
+    }
+
     /// The angles `[θ, α]` of the positions (module docs; [`rip_control::stop::angles`]).
     pub fn angles(&self, positions: [i32; 2]) -> [f64; 2] {
         rip_control::stop::angles(
@@ -149,11 +161,13 @@ pub fn write_image<R: Real>(
 }
 
 /// The device's own stop in progress (module docs): its sequence, run every `every` steps
-/// (at least [`STOP_PERIOD_S`] apart), the last of those samples' angles and device clock for
-/// the rates, the steps so far, and the command held between the sequence's periods.
+/// (at least [`STOP_PERIOD_S`] apart) on the angles of `sensor`, the last of those samples'
+/// angles and device clock for the rates, the steps so far, and the command held between the
+/// sequence's periods.
 #[derive(Debug, Clone, Copy)]
 struct Stopping<R: Real> {
     sequence: StopSequence<R>,
+    sensor: Sensor,
     last: Option<(R, R, u32)>,
     every: u32,
     steps: u32,
@@ -301,14 +315,20 @@ impl<R: Real, const N: usize> Onboard for ControlLaw<R, N> {
         }
     }
 
-    fn begin_stop(&mut self, verified: bool) -> bool {
+    fn has_stop(&self) -> bool {
+        self.stop_design().is_some()
+    }
+
+    fn begin_stop(&mut self, verified: bool, zero: Option<[i32; 2]>) -> bool {
         let period_s = f64::from(self.period_us()) * 1e-6;
         let every = libm::ceil(STOP_PERIOD_S / period_s - 1e-9).clamp(1.0, 1000.0) as u32;
+        let sensor = zero.map_or(self.sensor, |z| self.sensor.zeroed_at(z));
         self.stopping = self
             .stop_design()
             .filter(|_| verified && period_s > 0.0)
             .map(|d| Stopping {
                 sequence: d.sequence(period_s * f64::from(every), true),
+                sensor,
                 last: None,
                 every,
                 steps: 0,
@@ -318,9 +338,9 @@ impl<R: Real, const N: usize> Onboard for ControlLaw<R, N> {
     }
 
     fn stop_step(&mut self, positions: [i32; 2], now_us: u32) -> Option<BrakeCommand<f64>> {
-        let [theta, alpha] = self.sensor.angles(positions);
-        let (theta, alpha) = (R::from_f64(theta), R::from_f64(alpha));
         let stopping = self.stopping.as_mut()?;
+        let [theta, alpha] = stopping.sensor.angles(positions);
+        let (theta, alpha) = (R::from_f64(theta), R::from_f64(alpha));
         if stopping.steps % stopping.every == 0 {
             let before = stopping.last.replace((theta, alpha, now_us));
             let (rate, alpha_rate) = sample_rates(before, theta, alpha, now_us);

@@ -56,6 +56,17 @@
 //! that overruns its period ([`Device::record_step_cycles`]) is a fault too. Should the steps
 //! themselves stop (a hung interrupt), the v1 command watchdog stops the motor, since each step
 //! counts as the command that the watchdog waits for.
+//!
+//! # The watchdog's stop (protocol v3)
+//!
+//! In host mode the command watchdog shorts the windings, unless the host armed the device's
+//! own stop for it with a [`WatchdogStop`]: the wiring verified, a loaded image with a stop's
+//! design, and the encoder zeros of the host's calibration. Then a watchdog trip starts that
+//! stop as an onboard run already stopping on the host's silence (`ONBOARD_HOST_SILENT`), on
+//! angles from those zeros, stepped by [`Device::onboard_step`] like every onboard run (the
+//! firmware's timer runs while [`Device::onboard_running`]) and reported by telemetry every
+//! [`STOP_PERIOD_S`]; a host command ends it (the host takes
+//! over). An upload or an onboard start disarms it.
 
 #![no_std]
 #![forbid(unsafe_code)]
@@ -65,17 +76,18 @@ mod onboard;
 
 pub use onboard::{DesignRefused, NoOnboard, Onboard};
 use onboard::{Run, Upload};
-use rip_control::stop::{BrakeCommand, MAX_STOP_S};
+use rip_control::stop::{BrakeCommand, MAX_STOP_S, STOP_PERIOD_S};
 
 use rip_protocol::{
     crc32, encode, Ack, Command, Event, Frame, Measurement, Message, OnboardStart, Parser, PilMove,
-    PilStep, Rejection, Telemetry, UploadChunk, UploadCommit, ACK_BAD_SETTINGS, ACK_BUSY,
-    ACK_CRC_MISMATCH, ACK_DESIGN_REFUSED, ACK_LENGTH_MISMATCH, ACK_NO_DESIGN, ACK_NO_UPLOAD,
-    ACK_OK, ACK_OUT_OF_ORDER, ACK_REFUSED, ACK_TOO_LARGE, COMMAND_BRAKE, COMMAND_ENABLE, MAX_FRAME,
-    ONBOARD_ARM_LIMIT, ONBOARD_BAD_MOVE, ONBOARD_DRIVER_FAULT, ONBOARD_HOST_SILENT, ONBOARD_IDLE,
-    ONBOARD_OVERRUN, ONBOARD_PENDULUM_LIMIT, ONBOARD_PROTOCOL, ONBOARD_RUNNING, ONBOARD_STOPPED,
-    ONBOARD_WIRING_VERIFIED, PIL_PHASES, PIL_PHASE_MASK, PIL_PHASE_SHIFT, PIL_RESET, PIL_STOP,
-    STATUS_BRAKING, STATUS_ENABLED, STATUS_FAULT, STATUS_ONBOARD, STATUS_RX_ERROR, STATUS_WATCHDOG,
+    PilStep, Rejection, Telemetry, UploadChunk, UploadCommit, WatchdogStop, ACK_BAD_SETTINGS,
+    ACK_BUSY, ACK_CRC_MISMATCH, ACK_DESIGN_REFUSED, ACK_LENGTH_MISMATCH, ACK_NO_DESIGN,
+    ACK_NO_UPLOAD, ACK_OK, ACK_OUT_OF_ORDER, ACK_REFUSED, ACK_TOO_LARGE, COMMAND_BRAKE,
+    COMMAND_ENABLE, MAX_FRAME, ONBOARD_ARM_LIMIT, ONBOARD_BAD_MOVE, ONBOARD_DRIVER_FAULT,
+    ONBOARD_HOST_SILENT, ONBOARD_IDLE, ONBOARD_OVERRUN, ONBOARD_PENDULUM_LIMIT, ONBOARD_PROTOCOL,
+    ONBOARD_RUNNING, ONBOARD_STOPPED, ONBOARD_WIRING_VERIFIED, PIL_PHASES, PIL_PHASE_MASK,
+    PIL_PHASE_SHIFT, PIL_RESET, PIL_STOP, STATUS_BRAKING, STATUS_ENABLED, STATUS_FAULT,
+    STATUS_ONBOARD, STATUS_RX_ERROR, STATUS_WATCHDOG,
 };
 
 /// The device's fixed settings.
@@ -241,6 +253,8 @@ pub struct Device<C = NoOnboard> {
     design_loaded: bool,
     run: Option<Run>,
     onboard_state: u8,
+    // Host mode's stop on the command watchdog (`WatchdogStop`): `None` is the short.
+    watchdog_stop: Option<WatchdogStop>,
     pil_steps: u32,
     // A free-running up-counter and the shift that turns its differences into cycles.
     cycle_counter: Option<(fn() -> u32, u8)>,
@@ -279,6 +293,7 @@ impl<C: Onboard> Device<C> {
             design_loaded: false,
             run: None,
             onboard_state: ONBOARD_IDLE,
+            watchdog_stop: None,
             pil_steps: 0,
             cycle_counter: None,
         }
@@ -305,6 +320,7 @@ impl<C: Onboard> Device<C> {
             design_loaded: false,
             run: None,
             onboard_state: ONBOARD_IDLE,
+            watchdog_stop: None,
             pil_steps: 0,
             cycle_counter: None,
         }
@@ -347,10 +363,12 @@ impl<C: Onboard> Device<C> {
         if self.command.enabled()
             && inputs.now_us.wrapping_sub(self.last_command_us) > self.cfg.command_timeout_us
         {
-            // The host went silent while driving: stop the arm rather than let it coast.
+            // The host went silent while driving: stop the arm rather than let it coast, with
+            // the law's stop where the host armed it.
             self.command = Command::STOP;
             self.watchdog = true;
             self.brake = true;
+            self.begin_watchdog_stop(inputs.now_us);
         }
     }
 

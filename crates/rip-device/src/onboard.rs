@@ -35,12 +35,19 @@ pub trait Onboard {
     fn fallbacks(&self) -> u32 {
         0
     }
+    /// Whether the loaded design has a stop of its own to run ([`begin_stop`](Self::begin_stop)
+    /// with the wiring verified). The default: none.
+    fn has_stop(&self) -> bool {
+        false
+    }
     /// Begins the device's own stop of the run (`rip_control::stop`, the rule rip-rt runs):
-    /// with the wiring `verified`, the braking and hold laws of the law's stop design; whether
-    /// there is such a stop to run (otherwise the device shorts the windings at once). The
-    /// default: none.
-    fn begin_stop(&mut self, verified: bool) -> bool {
-        let _ = verified;
+    /// with the wiring `verified`, the braking and hold laws of the law's stop design, on
+    /// angles zeroed at `zero` (arm count at θ = 0, pendulum count hanging) where given
+    /// (host mode's [`WatchdogStop`](rip_protocol::WatchdogStop)), else the design's own;
+    /// whether there is such a stop to run (otherwise the device shorts the windings at once).
+    /// The default: none.
+    fn begin_stop(&mut self, verified: bool, zero: Option<[i32; 2]>) -> bool {
+        let _ = (verified, zero);
         false
     }
     /// One period of that stop on the positions sampled at the device's clock `now_us`: the
@@ -178,8 +185,10 @@ impl<C: Onboard> Device<C> {
                 (ACK_BUSY, 0)
             }
             Message::UploadBegin(b) => {
-                // A new upload overwrites the buffer: the loaded design is gone.
+                // A new upload overwrites the buffer: the loaded design is gone, and with it
+                // the wiring it was verified for.
                 self.design_loaded = false;
+                self.watchdog_stop = None;
                 self.onboard_state = ONBOARD_IDLE;
                 if b.total_len as usize > self.onboard.buffer().len() || b.total_len == 0 {
                     self.upload = None;
@@ -194,6 +203,7 @@ impl<C: Onboard> Device<C> {
             Message::UploadChunk(c) => self.chunk(&c),
             Message::UploadCommit(c) => self.commit(&c),
             Message::OnboardStart(s) => self.start(s, inputs),
+            Message::WatchdogStop(w) => self.arm_watchdog_stop(w),
             Message::OnboardStop { flags } => {
                 if self.run.is_some() {
                     self.stop_onboard(ONBOARD_STOPPED, flags & COMMAND_BRAKE != 0);
@@ -279,8 +289,67 @@ impl<C: Onboard> Device<C> {
             stopping: None,
         });
         self.watchdog = false;
+        // The start's own flags say how this run stops.
+        self.watchdog_stop = None;
         self.onboard_state = ONBOARD_RUNNING;
         (ACK_OK, ONBOARD_RUNNING as u32)
+    }
+
+    /// Host mode's [`WatchdogStop`] (crate docs, "The watchdog's stop"): the ack's code, and 1
+    /// when the watchdog will run the law's stop, 0 for the short.
+    pub(crate) fn arm_watchdog_stop(&mut self, w: WatchdogStop) -> (u8, u32) {
+        if self.run.is_some() {
+            return (ACK_BUSY, 0);
+        }
+        if w.flags & !ONBOARD_WIRING_VERIFIED != 0 {
+            return (ACK_BAD_SETTINGS, 0);
+        }
+        if !self.design_loaded {
+            return (ACK_NO_DESIGN, 0);
+        }
+        let laws = w.flags & ONBOARD_WIRING_VERIFIED != 0 && self.onboard.has_stop();
+        self.watchdog_stop = laws.then_some(w);
+        (ACK_OK, u32::from(laws))
+    }
+
+    /// The command watchdog tripped in host mode at `now_us`: with a [`WatchdogStop`] in
+    /// force, the law's stop begins as an onboard run already stopping on the host's
+    /// silence, so that it is stepped and reported as in onboard mode; otherwise the short
+    /// the caller set stays.
+    pub(crate) fn begin_watchdog_stop(&mut self, now_us: u32) {
+        let Some(w) = self.watchdog_stop else {
+            return;
+        };
+        let zero = [w.arm_zero, w.pendulum_down];
+        if self.run.is_some()
+            || self.fault
+            || !self.design_loaded
+            || !self.onboard.begin_stop(true, Some(zero))
+        {
+            return;
+        }
+        // Telemetry at the stop's own rate: a record per period of its sequence.
+        let period_s = f64::from(self.onboard.period_us().max(1)) * 1e-6;
+        let decimation =
+            libm::ceil(STOP_PERIOD_S / period_s - 1e-9).clamp(1.0, f64::from(u16::MAX));
+        self.run = Some(Run {
+            settings: OnboardStart {
+                decimation: decimation as u16,
+                host_timeout_ms: u16::MAX,
+                arm_center: 0,
+                arm_limit: u32::MAX,
+                pendulum_center: 0,
+                pendulum_limit: u32::MAX,
+                flags: ONBOARD_WIRING_VERIFIED,
+            },
+            due_us: now_us,
+            step: 0,
+            last_host_us: now_us,
+            last_cycles: 0,
+            overruns: 0,
+            stopping: Some((ONBOARD_HOST_SILENT, 0)),
+        });
+        self.onboard_state = ONBOARD_HOST_SILENT;
     }
 
     /// The limit the positions exceed, if any, arm first: the position rule
@@ -306,7 +375,7 @@ impl<C: Onboard> Device<C> {
         if p.flags & PIL_RESET != 0 {
             self.onboard.reset(positions);
             self.pil_steps = 0;
-            if !self.onboard.begin_stop(true) {
+            if !self.onboard.begin_stop(true, None) {
                 out.code = ACK_REFUSED;
                 return self.next_frame(Message::PilMove(out));
             }
@@ -375,7 +444,7 @@ impl<C: Onboard> Device<C> {
         run.step = run.step.wrapping_add(1);
         if let Some((state, true)) = stop.filter(|_| run.stopping.is_none()) {
             let verified = run.settings.flags & ONBOARD_WIRING_VERIFIED != 0;
-            if stops_itself(state) && self.onboard.begin_stop(verified) {
+            if stops_itself(state) && self.onboard.begin_stop(verified, None) {
                 run.stopping = Some((state, 0));
                 self.onboard_state = state;
                 stop = self.stop_period(&mut run, positions, inputs.now_us);

@@ -7,9 +7,10 @@ use rip_control::{Controller, Design, Kind, Measurement};
 use rip_device::law::{write_image, ControlLaw, Sensor};
 use rip_device::{Config, Device, Inputs, Onboard};
 use rip_protocol::{
-    crc32, Event, Frame, Message, OnboardStart, PilStep, UploadBegin, UploadChunk, UploadCommit,
-    ACK_BUSY, ACK_NO_DESIGN, ACK_OK, ACK_REFUSED, CHUNK_MAX, ONBOARD_HOST_SILENT,
-    ONBOARD_WIRING_VERIFIED, PIL_PHASE_SHIFT, PIL_RESET, PIL_STOP,
+    crc32, Ack, Command, Event, Frame, Message, OnboardStart, PilStep, UploadBegin, UploadChunk,
+    UploadCommit, WatchdogStop, ACK_BAD_SETTINGS, ACK_BUSY, ACK_NO_DESIGN, ACK_OK, ACK_REFUSED,
+    CHUNK_MAX, COMMAND_ENABLE, ONBOARD_HOST_SILENT, ONBOARD_WIRING_VERIFIED, PIL_PHASE_SHIFT,
+    PIL_RESET, PIL_STOP, TYPE_WATCHDOG_STOP,
 };
 
 fn lqr() -> Design {
@@ -386,4 +387,196 @@ fn a_silent_host_leaves_the_verified_device_braking_and_the_unverified_one_short
             assert!(!dev.onboard_running() && dev.braking());
         }
     }
+}
+
+/// The ack of `message` sent at `inputs`.
+fn ack(dev: &mut Device<ControlLaw<f64, 4096>>, message: Message, inputs: &Inputs) -> Ack {
+    match dev.handle(Event::Frame(Frame { seq: 4, message }), inputs) {
+        Some(Frame {
+            message: Message::Ack(a),
+            ..
+        }) => a,
+        other => panic!("{other:?}"),
+    }
+}
+
+/// A device with the LQR's image and its stop's design loaded.
+fn device_with_stop() -> Device<ControlLaw<f64, 4096>> {
+    let (mut dev, _) = device_and_lqr_image();
+    let mut img = vec![0u8; 4096];
+    let n = write_image(&sensor(), Some(&stop_design()), &lqr(), &mut img).unwrap();
+    img.truncate(n);
+    assert_eq!(upload(&mut dev, &img), ACK_OK);
+    dev
+}
+
+const ARMED: WatchdogStop = WatchdogStop {
+    flags: ONBOARD_WIRING_VERIFIED,
+    arm_zero: 500,
+    pendulum_down: 1000,
+};
+
+/// A watchdog stop is refused without a design, with a flag the device does not know and
+/// during an onboard run, each refusal changing nothing: the watchdog then shorts.
+#[test]
+fn a_watchdog_stop_is_refused_where_it_cannot_hold_and_changes_nothing() {
+    let (mut dev, _) = device_and_lqr_image();
+    let w = Message::WatchdogStop(ARMED);
+    assert_eq!(ack(&mut dev, w, &Inputs::default()).code, ACK_NO_DESIGN);
+    let mut dev = device_with_stop();
+    let unknown = Message::WatchdogStop(WatchdogStop {
+        flags: 0x80,
+        ..ARMED
+    });
+    assert_eq!(
+        ack(&mut dev, unknown, &Inputs::default()).code,
+        ACK_BAD_SETTINGS
+    );
+    // An image without a stop's design: accepted, and the short (value 0).
+    let (mut plain, img) = device_and_lqr_image();
+    assert_eq!(upload(&mut plain, &img), ACK_OK);
+    let a = ack(&mut plain, w, &Inputs::default());
+    assert_eq!(
+        (a.code, a.value, a.request),
+        (ACK_OK, 0, TYPE_WATCHDOG_STOP)
+    );
+    // Every refusal above left the watchdog's stop the short.
+    for d in [&mut dev, &mut plain] {
+        send(
+            d,
+            Message::Command(Command {
+                voltage_mv: 1000,
+                flags: COMMAND_ENABLE,
+            }),
+        );
+        d.tick(&Inputs {
+            now_us: 60_000,
+            ..Inputs::default()
+        });
+        assert!(d.braking() && !d.onboard_running());
+    }
+    // During an onboard run: busy.
+    let mut dev = device_with_stop();
+    let start = OnboardStart {
+        decimation: 1,
+        host_timeout_ms: 50,
+        arm_limit: 2000,
+        pendulum_center: -2048,
+        pendulum_limit: 400,
+        ..OnboardStart::default()
+    };
+    let pendulum_up = Inputs {
+        encoders: [0, (-2048i32) as u16],
+        ..Inputs::default()
+    };
+    assert_eq!(
+        ack(&mut dev, Message::OnboardStart(start), &pendulum_up).code,
+        ACK_OK
+    );
+    assert_eq!(ack(&mut dev, w, &pendulum_up).code, ACK_BUSY);
+}
+
+/// Host mode: with the watchdog's stop armed, a host that goes silent while driving leaves
+/// the device running rip-control's stop sequence, every period, on the angles zeroed at the
+/// frame's counts (converted here independently), until a host command takes over; armed
+/// unverified, or after a new upload, the watchdog shorts the windings.
+#[test]
+fn a_silent_host_in_host_mode_leaves_the_armed_device_running_the_stop_on_its_zeros() {
+    let tau = std::f64::consts::TAU;
+    // The arm moving the positive way at 20 counts a period from its zero, the pendulum
+    // hanging at its zero count.
+    let at = |t_us: u32| Inputs {
+        now_us: t_us,
+        encoders: [(500 + t_us / 10_000 * 20) as u16, 1000],
+        driver_fault: false,
+    };
+    let mut dev = device_with_stop();
+    let a = ack(&mut dev, Message::WatchdogStop(ARMED), &at(0));
+    assert_eq!((a.code, a.value), (ACK_OK, 1));
+    let enable = Message::Command(Command {
+        voltage_mv: 2000,
+        flags: COMMAND_ENABLE,
+    });
+    dev.handle(
+        Event::Frame(Frame {
+            seq: 5,
+            message: enable,
+        }),
+        &at(0),
+    );
+    let mut reference = stop_design().sequence(0.01, true);
+    let mut last: Option<(f64, f64)> = None;
+    let mut compared = 0;
+    for k in 0..60u32 {
+        let t = k * 10_000;
+        let inputs = at(t);
+        dev.onboard_step(&inputs);
+        if !dev.onboard_running() {
+            // Before the watchdog's 50 ms: the host's command.
+            assert!(t <= 50_000, "no stop at {t} µs");
+            assert_eq!(dev.voltage_mv(), if t <= 50_000 { 2000 } else { 0 });
+            continue;
+        }
+        assert_eq!(dev.onboard_state(), ONBOARD_HOST_SILENT);
+        let theta = f64::from(inputs.encoders[0] as i32 - 500) * tau / 2048.0;
+        let alpha = rip_control::swing::wrap_angle(
+            f64::from(inputs.encoders[1] as i32 - 1000) * -tau / 4096.0 + std::f64::consts::PI,
+        );
+        let (rate, alpha_rate) = last.map_or((0.0, 0.0), |(t0, a0)| {
+            (
+                (theta - t0) / 0.01,
+                rip_control::swing::wrap_angle(alpha - a0) / 0.01,
+            )
+        });
+        last = Some((theta, alpha));
+        match reference.step(theta, rate, alpha, alpha_rate) {
+            Some(BrakeCommand::Volts(v)) => {
+                assert!(dev.enabled(), "step {k}");
+                assert_eq!(i32::from(dev.voltage_mv()), (v * 1000.0).round() as i32);
+                compared += 1;
+            }
+            Some(BrakeCommand::Short) => assert!(dev.braking(), "step {k}"),
+            None => break,
+        }
+    }
+    assert!(compared > 5, "{compared} driven periods compared");
+    // The host returns: its command takes over.
+    dev.handle(
+        Event::Frame(Frame {
+            seq: 6,
+            message: enable,
+        }),
+        &at(600_000),
+    );
+    assert!(!dev.onboard_running() && dev.voltage_mv() == 2000);
+    // Armed without the flag: the short.
+    let mut dev = device_with_stop();
+    let unverified = WatchdogStop { flags: 0, ..ARMED };
+    let a = ack(&mut dev, Message::WatchdogStop(unverified), &at(0));
+    assert_eq!((a.code, a.value), (ACK_OK, 0));
+    dev.handle(
+        Event::Frame(Frame {
+            seq: 5,
+            message: enable,
+        }),
+        &at(0),
+    );
+    dev.onboard_step(&at(60_000));
+    assert!(dev.braking() && !dev.onboard_running());
+    // A new upload forgets the armed stop (the wiring was verified for the image before).
+    let mut dev = device_with_stop();
+    ack(&mut dev, Message::WatchdogStop(ARMED), &at(0));
+    send(
+        &mut dev,
+        Message::UploadBegin(UploadBegin { total_len: 10 }),
+    );
+    dev.handle(
+        Event::Frame(Frame {
+            seq: 5,
+            message: enable,
+        }),
+        &at(0),
+    );
+    dev.onboard_step(&at(60_000));
+    assert!(dev.braking() && !dev.onboard_running());
 }

@@ -11,12 +11,13 @@
 //! peer interoperate on them; a v2 parser accepts them with version byte 1 or 2. The new frames
 //! carry version byte 2: a v1 device rejects them as another version, which stops its motor.
 //!
-//! Version 3 adds one frame: an onboard start with a flags byte ([`ONBOARD_WIRING_VERIFIED`]:
-//! the wiring's sign was checked, so the device may stop the arm with its own braking and hold
-//! laws, `rip_control::stop`). It carries version byte 3 and is sent only with a flag set; a
-//! start without flags is v2's frame, unchanged. Every other frame keeps its version byte, and
-//! version byte 3 carries nothing else. A v2 device rejects the v3 start as another version,
-//! which stops its motor.
+//! Version 3 adds two frames, both about the device's own stop (`rip_control::stop`: its
+//! braking and hold laws, which a device may drive only once the wiring's sign is checked):
+//! an onboard start with a flags byte ([`ONBOARD_WIRING_VERIFIED`]), sent only with a flag set
+//! (a start without flags is v2's frame, unchanged), and the [`WatchdogStop`] of host mode,
+//! which says what the v1 command watchdog does when the host goes silent. They carry version
+//! byte 3; every other frame keeps its version byte, and version byte 3 carries nothing else.
+//! A v2 device rejects both as another version, which stops its motor.
 //!
 //! The byte-level specification lives in `docs/protocol.md`; this crate is its reference
 //! implementation and `crates/rip-protocol/vectors.toml` holds the conformance vectors that both
@@ -58,8 +59,8 @@
 pub const SYNC0: u8 = 0xA5;
 /// Second sync byte.
 pub const SYNC1: u8 = 0x5A;
-/// The newest protocol version: the version byte of v3's one new frame, an [`OnboardStart`]
-/// with flags ([`ONBOARD_WIRING_VERIFIED`]).
+/// The newest protocol version: the version byte of v3's two new frames, an [`OnboardStart`]
+/// with flags ([`ONBOARD_WIRING_VERIFIED`]) and a [`WatchdogStop`].
 pub const VERSION: u8 = 3;
 /// The version byte of v2's messages (upload, onboard, ack, telemetry), which v3 keeps.
 pub const VERSION_2: u8 = 2;
@@ -96,6 +97,8 @@ pub const TYPE_ONBOARD_START: u8 = 0x13;
 pub const TYPE_ONBOARD_STOP: u8 = 0x14;
 /// Message type of a [`PilStep`] (host → device, v2).
 pub const TYPE_PIL_STEP: u8 = 0x15;
+/// Message type of a [`WatchdogStop`] (host → device, v3).
+pub const TYPE_WATCHDOG_STOP: u8 = 0x16;
 /// Message type of a [`PilMove`] (device → host, v2).
 pub const TYPE_PIL_MOVE: u8 = 0x22;
 /// Message type of an [`Ack`] (device → host, v2).
@@ -117,6 +120,8 @@ pub const UPLOAD_COMMIT_LEN: usize = 8;
 pub const ONBOARD_START_LEN: usize = 20;
 /// Payload length of an onboard start with flags (v3).
 pub const ONBOARD_START_V3_LEN: usize = 21;
+/// Payload length of a [`WatchdogStop`] (v3).
+pub const WATCHDOG_STOP_LEN: usize = 9;
 /// Payload length of an onboard stop.
 pub const ONBOARD_STOP_LEN: usize = 1;
 /// Payload length of a PIL step.
@@ -271,6 +276,8 @@ pub enum Message {
     },
     /// Host → device (v2).
     PilStep(PilStep),
+    /// Host → device (v3).
+    WatchdogStop(WatchdogStop),
     /// Device → host (v2).
     PilMove(PilMove),
     /// Device → host (v2).
@@ -281,11 +288,12 @@ pub enum Message {
 
 impl Message {
     /// The version byte this message is sent with: v1's messages keep 1, v2's 2; an onboard
-    /// start with flags is v3's (module docs).
+    /// start with flags and a watchdog stop are v3's (module docs).
     pub fn version(&self) -> u8 {
         match self {
             Message::Measurement(_) | Message::Command(_) | Message::SampleRequest => VERSION_1,
             Message::OnboardStart(s) if s.flags != 0 => VERSION,
+            Message::WatchdogStop(_) => VERSION,
             _ => VERSION_2,
         }
     }
@@ -302,6 +310,7 @@ impl Message {
             Message::OnboardStart(_) => TYPE_ONBOARD_START,
             Message::OnboardStop { .. } => TYPE_ONBOARD_STOP,
             Message::PilStep(_) => TYPE_PIL_STEP,
+            Message::WatchdogStop(_) => TYPE_WATCHDOG_STOP,
             Message::PilMove(_) => TYPE_PIL_MOVE,
             Message::Ack(_) => TYPE_ACK,
             Message::Telemetry(_) => TYPE_TELEMETRY,
@@ -425,6 +434,13 @@ pub fn encode(frame: &Frame, out: &mut [u8; MAX_FRAME]) -> usize {
             p[8] = s.flags;
             (TYPE_PIL_STEP, PIL_STEP_LEN)
         }
+        Message::WatchdogStop(w) => {
+            let p = &mut out[HEADER_LEN..HEADER_LEN + WATCHDOG_STOP_LEN];
+            p[0] = w.flags;
+            p[1..5].copy_from_slice(&w.arm_zero.to_le_bytes());
+            p[5..9].copy_from_slice(&w.pendulum_down.to_le_bytes());
+            (TYPE_WATCHDOG_STOP, WATCHDOG_STOP_LEN)
+        }
         Message::PilMove(m) => {
             let p = &mut out[HEADER_LEN..HEADER_LEN + PIL_MOVE_LEN];
             p[0..2].copy_from_slice(&m.ack_seq.to_le_bytes());
@@ -471,7 +487,7 @@ pub fn encode(frame: &Frame, out: &mut [u8; MAX_FRAME]) -> usize {
 
 /// Decodes the payload of a CRC-valid frame of version byte `version` (1, 2 or 3); `None` for
 /// an unknown type, a wrong length, a v2 message with version byte 1, or anything but an
-/// onboard start with flags with version byte 3.
+/// onboard start with flags or a watchdog stop with version byte 3.
 fn decode_payload(version: u8, kind: u8, p: &[u8]) -> Option<Message> {
     let u16_at = |i: usize| u16::from_le_bytes([p[i], p[i + 1]]);
     let i16_at = |i: usize| i16::from_le_bytes([p[i], p[i + 1]]);
@@ -488,10 +504,16 @@ fn decode_payload(version: u8, kind: u8, p: &[u8]) -> Option<Message> {
         })
     };
     if version == VERSION {
-        // v3 adds one frame, the onboard start with flags; a start without any is v2's (the
-        // encoder's rule), and every other frame keeps its own version byte.
+        // v3 adds two frames, the onboard start with flags and the watchdog stop; a start
+        // without flags is v2's (the encoder's rule), and every other frame keeps its own
+        // version byte.
         return match (kind, p.len()) {
             (TYPE_ONBOARD_START, ONBOARD_START_V3_LEN) if p[20] != 0 => Some(onboard_start(p[20])),
+            (TYPE_WATCHDOG_STOP, WATCHDOG_STOP_LEN) => Some(Message::WatchdogStop(WatchdogStop {
+                flags: p[0],
+                arm_zero: u32_at(1) as i32,
+                pendulum_down: u32_at(5) as i32,
+            })),
             _ => None,
         };
     }

@@ -76,11 +76,34 @@ pub struct OnboardStart {
     pub flags: u8,
 }
 
-/// [`OnboardStart`] flag (v3): the host's sign check passed on this rig since the device's
-/// power-up, so the wiring's sign is known and the device may stop the arm with the braking
-/// and hold laws of the onboard image's stop design; without it the device's stop is the
-/// passive short.
+/// [`OnboardStart`] and [`WatchdogStop`] flag (v3): the host's sign check passed on this rig
+/// since the device's power-up, so the wiring's sign is known and the device may stop the arm
+/// with the braking and hold laws of the onboard image's stop design; without it the device's
+/// stop is the passive short.
 pub const ONBOARD_WIRING_VERIFIED: u8 = 1 << 0;
+
+/// Host → device (v3): what the device does when its v1 command watchdog trips in host mode
+/// (the host went silent while the motor was enabled).
+///
+/// With [`ONBOARD_WIRING_VERIFIED`] (the host's sign check passed on this rig since the
+/// device's power-up) and a loaded onboard image that has a stop's design, the device stops
+/// the arm itself with that design's braking and hold laws, as it does in onboard mode, on
+/// angles zeroed here: θ = 0 at arm count `arm_zero`, α = π (hanging) at pendulum count
+/// `pendulum_down` (the host's calibration, which replaces the image's offsets for this stop).
+/// Without the flag the watchdog's stop is the passive short (v1's). It holds until the next
+/// watchdog stop, an upload or an onboard start. The device acks it: code [`ACK_OK`] with the
+/// value 1 when its watchdog will run the laws and 0 for the short; [`ACK_NO_DESIGN`] without a
+/// loaded image, [`ACK_BUSY`] while onboard mode runs, [`ACK_BAD_SETTINGS`] for a flag it does
+/// not know (each changing nothing).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct WatchdogStop {
+    /// `ONBOARD_*` flags: [`ONBOARD_WIRING_VERIFIED`].
+    pub flags: u8,
+    /// Arm count at θ = 0.
+    pub arm_zero: i32,
+    /// Pendulum count with the pendulum hanging (α = π).
+    pub pendulum_down: i32,
+}
 
 /// Host → device (v2): processor-in-the-loop. Step the loaded controller once on these
 /// encoder positions (in place of the device's own) and answer with a [`PilMove`]. The motor
@@ -119,7 +142,7 @@ impl PilMove {
     }
 }
 
-/// Device → host (v2): the answer to an upload, commit, start or stop frame.
+/// Device → host (v2): the answer to an upload, commit, start, stop or watchdog stop frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Ack {
     /// Sequence number of the host frame answered.
@@ -130,7 +153,8 @@ pub struct Ack {
     pub code: u8,
     /// For a chunk or a begin: the offset the device expects next. For a commit: the CRC-32
     /// the device computed over what it received. For a start or a stop: the
-    /// `ONBOARD_*` state after it.
+    /// `ONBOARD_*` state after it. For a watchdog stop: 1 when the device's watchdog will run
+    /// the braking and hold laws, 0 for the short.
     pub value: u32,
 }
 
@@ -158,7 +182,8 @@ pub const ACK_BUSY: u8 = 8;
 /// Ack code: onboard start refused because the driver reports a fault, or a limit is already
 /// exceeded.
 pub const ACK_REFUSED: u8 = 9;
-/// Ack code: onboard start with a zero decimation or host timeout.
+/// Ack code: onboard start with a zero decimation or host timeout, or a start or watchdog
+/// stop with a flag the device does not know.
 pub const ACK_BAD_SETTINGS: u8 = 10;
 
 /// Onboard state: no onboard run since power-up or the last upload.

@@ -4,7 +4,7 @@
 use rip_protocol::{
     crc16, crc32, crc32_update, encode, Ack, Command, Event, Frame, Measurement, Message,
     OnboardStart, Parser, PilMove, PilStep, Rejection, Telemetry, UploadBegin, UploadChunk,
-    UploadCommit, MAX_FRAME,
+    UploadCommit, WatchdogStop, MAX_FRAME,
 };
 use toml::Value;
 
@@ -74,6 +74,11 @@ fn frame_of(v: &Value) -> Frame {
         "onboard_stop" => Message::OnboardStop {
             flags: int(v, "flags") as u8,
         },
+        "watchdog_stop" => Message::WatchdogStop(WatchdogStop {
+            flags: int(v, "flags") as u8,
+            arm_zero: int(v, "arm_zero") as i32,
+            pendulum_down: int(v, "pendulum_down") as i32,
+        }),
         "ack" => Message::Ack(Ack {
             ack_seq: int(v, "ack_seq") as u16,
             request: int(v, "request") as u8,
@@ -184,6 +189,7 @@ fn every_message_type_has_a_frame_vector() {
         "upload_commit",
         "onboard_start",
         "onboard_stop",
+        "watchdog_stop",
         "ack",
         "telemetry",
         "pil_step",

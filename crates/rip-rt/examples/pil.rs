@@ -418,7 +418,7 @@ fn stop_check(link: &mut Link<'_>) -> Result<String, String> {
         let c = counts(plant.state());
         if k == 0 {
             host32.reset(c);
-            if !host32.begin_stop(true) {
+            if !host32.begin_stop(true, None) {
                 return Err("the host's f32 copy has no stop".into());
             }
         }

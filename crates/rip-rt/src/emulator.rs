@@ -69,6 +69,8 @@ pub struct Device {
     firmware: Box<rip_device::Device<OnboardLaw>>,
     // Frames the firmware sent on its own (onboard telemetry), waiting to be written.
     outgoing: Vec<Frame>,
+    // The last hardware readings taken (their reading noise drawn).
+    last_inputs: Option<Inputs>,
     released: bool,
     // Whether the operator of `raise_at_s` has raised the pendulum.
     raised: bool,
@@ -125,6 +127,7 @@ impl Device {
             plant,
             firmware: firmware(firmware_cfg, &Inputs::default(), [0, 0]),
             outgoing: Vec::with_capacity(64),
+            last_inputs: None,
             released: !cfg.hold_until_enabled,
             raised: false,
             commands_seen: false,
@@ -286,12 +289,14 @@ impl Device {
     /// The hardware readings now: the microsecond clock and the 16-bit encoder counters.
     fn inputs(&mut self) -> Inputs {
         let [arm, pendulum] = self.counts(true);
-        Inputs {
+        let inputs = Inputs {
             // The firmware's clock is a wrapping 32-bit microsecond counter.
             now_us: (self.time_ns / 1000) as u32,
             encoders: [arm as u16, pendulum as u16],
             driver_fault: false,
-        }
+        };
+        self.last_inputs = Some(inputs);
+        inputs
     }
 
     /// Advances the simulation by `dt_ns` nanoseconds: the firmware's tick (encoders,
@@ -342,7 +347,26 @@ impl Device {
         {
             self.commands_seen = true;
         }
-        let inputs = self.inputs();
+        // A request that does not read the encoders (an upload, the watchdog stop's arming)
+        // takes the last readings at the current clock, so that the reading noise is drawn
+        // per reading the rig's behaviour depends on, not per frame the host happens to send.
+        let reads = !matches!(
+            event,
+            Event::Frame(Frame {
+                message: Message::UploadBegin(_)
+                    | Message::UploadChunk(_)
+                    | Message::UploadCommit(_)
+                    | Message::WatchdogStop(_),
+                ..
+            })
+        );
+        let inputs = match self.last_inputs {
+            Some(last) if !reads => Inputs {
+                now_us: (self.time_ns / 1000) as u32,
+                ..last
+            },
+            _ => self.inputs(),
+        };
         let reply = self.firmware.handle(event, &inputs);
         if self.firmware.enabled() {
             self.released = true;

@@ -13,6 +13,7 @@
 //! `--duration`, a signal, a device stop, a silent device — sends the onboard stop and the v1
 //! stop frame (0 V, disabled).
 
+pub mod watchdog;
 pub mod wiring;
 
 use std::time::{Duration, Instant};
@@ -310,8 +311,8 @@ impl<'a> Link<'a> {
             }
         }
         Err(format!(
-            "the device did not acknowledge a {:#04x} frame after {RETRIES} tries (a v1 firmware \
-             does not know protocol v2's onboard frames)",
+            "the device did not acknowledge a {:#04x} frame after {RETRIES} tries (a firmware of \
+             protocol v1 does not know v2's onboard frames, nor one of v2 v3's)",
             message.kind()
         ))
     }

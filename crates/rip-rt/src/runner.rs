@@ -40,6 +40,7 @@ use crate::config::Config;
 use crate::excite;
 use crate::log::LogWriter;
 use crate::loop_core::{LoopCore, StepOutput};
+use crate::onboard;
 use crate::period::{Act, Law, Logged, Period, Reply};
 use crate::protocol::{ParserStats, MAX_FRAME};
 use crate::serial::Fd;
@@ -495,6 +496,9 @@ fn prepare_swing_up(
     sign_check: &mut Option<SignReport>,
 ) -> Result<(), StopReason> {
     let quiet = driver.quiet();
+    // The image for the device's own stop on a silent host, before the checks' grid starts.
+    let uploaded = onboard::watchdog::upload(driver.io, cfg);
+    driver.clock.restart();
     // Hanging at rest first; the swing starts in the period after the check, on the same grid.
     let cal = calibrate::check_rest(driver.io, driver.core, cfg, &mut driver.clock, quiet)?;
     driver.core.calibrate(&cal);
@@ -508,9 +512,25 @@ fn prepare_swing_up(
     // before the swing starts from it.
     let cal = calibrate::settle(driver.io, driver.core, cfg, &mut driver.clock, quiet)?;
     driver.core.calibrate(&cal);
+    // The wiring is checked and the zeros known: the device may stop the arm itself.
+    let armed = uploaded.and_then(|()| onboard::watchdog::arm(driver.io, &cal));
     *calibration = Some(cal);
     driver.core.reset();
     if !quiet {
+        match armed {
+            Ok(true) => crate::say!(
+                "rip-rt: should this host go silent, the device stops the arm itself (braking \
+                 and holding it, the wiring checked)"
+            ),
+            Ok(false) => crate::say!(
+                "rip-rt: should this host go silent, the device shorts the windings (the rig's \
+                 stop has no hold law for it to run)"
+            ),
+            Err(e) => crate::say!(
+                "rip-rt: should this host go silent, the device shorts the windings: its own \
+                 stop could not be set up ({e})"
+            ),
+        }
         crate::say!("rip-rt: swinging up");
     }
     // One time axis for the log: from the check's start.

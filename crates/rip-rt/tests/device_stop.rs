@@ -257,3 +257,117 @@ fn a_host_that_is_alive_lets_the_devices_own_stop_finish() {
         "{last:?}"
     );
 }
+
+/// When the host dies in host mode: during the swing, and while balancing after the catch.
+const HOST_MODE_KILLS: [(&str, f64); 2] = [("during the swing", 0.5), ("balancing", 1.0)];
+
+/// The rigs of host mode: both presets, and at the full scale the two generated rigs the
+/// swing-up's end-to-end tests swing up (rig 6 with the predicted catch).
+fn swing_rigs() -> Vec<(String, String)> {
+    let mut out = rigs().into_iter().take(2).collect::<Vec<_>>();
+    let generated = [
+        (15, ""),
+        (
+            6,
+            "[swing_up]\nreference_return_rate = 0.5\ncatch_prediction = 1.0\ncatch_margin = 0.25\n",
+        ),
+    ];
+    for (seed, extra) in rip_test_scale::cases(generated, |_| false) {
+        let rig = Rig::random(seed).to_toml();
+        out.push((format!("generated rig {seed}"), format!("{rig}\n{extra}")));
+    }
+    out
+}
+
+/// Host mode, `rip-rt run --swing-up`: the sign check verifies the wiring, the host arms the
+/// device's stop for its command watchdog, and is killed (SIGKILL) `offset` s after the swing's
+/// start or after the catch (`when`); the true state from the swing's start, the kill's time,
+/// the limit and the run's stderr.
+fn host_mode_killed(
+    name: &str,
+    rig_toml: &str,
+    when: &str,
+    offset: f64,
+) -> (Vec<Truth>, f64, f64, String) {
+    let file = name.replace([' ', ','], "-");
+    let cfg = swing_config(&format!("device-stop-host-{file}"), 4.0, rig_toml);
+    let limit = rip_rt::config::Config::load(&cfg).unwrap().safety.arm_limit;
+    let emu = hanging_rig(&format!("device-stop-host-{file}"), &cfg, &[], true);
+    let mut child = spawn_run(
+        &emu.device,
+        "lqr",
+        &["--swing-up", "--config", cfg.to_str().unwrap(), LOCKSTEP],
+    );
+    let from = |rows: &[Truth]| {
+        if when == "balancing" {
+            first_upright(rows)
+        } else {
+            swing_start(rows)
+        }
+    };
+    let rows = emu.suspend_run_when(
+        &mut child,
+        &format!("{name}: the host {offset} s {when}"),
+        Duration::from_secs(60),
+        |rows| from(rows).is_some_and(|s| rows.last().unwrap().t > s + offset - 0.1),
+        |rows| from(rows).is_some_and(|s| rows.last().unwrap().t >= s + offset),
+    );
+    let swing = swing_start(&rows).unwrap();
+    let killed_at = rows.last().unwrap().t;
+    // SIGKILL: no stop frame can be sent.
+    unsafe { libc::kill(child.id() as i32, libc::SIGKILL) };
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+    let rows = emu.wait_for_rest(REST_RATE, 1.0, Duration::from_secs(60));
+    let rows = rows.into_iter().filter(|r| r.t >= swing).collect();
+    (rows, killed_at, limit, stderr)
+}
+
+#[test]
+fn a_host_mode_device_whose_host_dies_brakes_and_holds_the_arm_inside_the_limit() {
+    let _one = one_at_a_time();
+    let mut wrong = Vec::new();
+    for (name, toml) in swing_rigs() {
+        for (when, offset) in HOST_MODE_KILLS {
+            let case = format!("{name}, host mode, host killed {when}");
+            let (rows, killed_at, limit, stderr) = host_mode_killed(&case, &toml, when, offset);
+            assert!(
+                stderr.contains("the device stops the arm itself (braking"),
+                "{case}: the device's stop was not armed:\n{stderr}"
+            );
+            let max_theta = max_excursion(&rows);
+            let after: Vec<Truth> = rows.iter().filter(|r| r.t >= killed_at).cloned().collect();
+            let last = rows.last().unwrap();
+            // The host's last command lasts until the command watchdog (50 ms); a drive after
+            // it is the device's own braking law.
+            let braked = rows
+                .iter()
+                .any(|r| r.t > killed_at + 0.06 && r.driver == "drive");
+            let stopped_driving = rows
+                .iter()
+                .rev()
+                .find(|r| r.driver == "drive")
+                .map_or(killed_at, |r| r.t);
+            println!(
+                "{case}: true max |theta| {max_theta:.3} rad from the swing's start, {:.3} rad \
+                 after the kill (limit {limit}), device's stop drove until {:.2} s after the \
+                 kill, end: theta {:.3} rad, rate {:.4} rad/s, driver {}",
+                max_excursion(&after),
+                stopped_driving - killed_at,
+                last.theta,
+                last.theta_dot,
+                last.driver
+            );
+            if max_theta.is_nan() || max_theta >= limit {
+                wrong.push(format!("{case}: the arm reached {max_theta:.3} rad"));
+            }
+            if !braked {
+                wrong.push(format!("{case}: the device did not brake the arm itself"));
+            }
+            if last.theta_dot.abs() > REST_RATE || last.driver == "drive" {
+                wrong.push(format!("{case}: not at rest with the driver off: {last:?}"));
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+}
