@@ -157,6 +157,13 @@ ONE_HOME: dict[str, tuple[str, str]] = {
         r"\bconst\s+ENVELOPE_MARGIN\b",
         "crates/rip-core/src/preflight/motion.rs",
     ),
+    # The run time takes the stop's design from rip-core in one call, which converts the
+    # configuration: never a part of it on its own.
+    "the stop's design, asked for by the run time": (
+        r"rip_core::envelope::(?:braking_law|hold_law\w*|simulated_stop|stopping_model|design_stop)"
+        r"\s*\(",
+        "crates/rip-rt/src/envelope.rs",
+    ),
 }
 
 

@@ -46,6 +46,7 @@
 
 use crate::excitation::{Excitation, ExcitationSettings};
 use crate::plant::{FurutaParams, Plant, State};
+use rip_control::swing::ArmModel;
 
 /// Share `f` of the braking deceleration (1) that the stops of `rip-rt` count on: half, as the
 /// swing-up's default `brake_fraction` reserves, for the pendulum's reaction, dead zone and
@@ -344,26 +345,63 @@ pub use rip_control::stop::{
     SIMULATED_REST_S,
 };
 
-/// What a device needs to run the stop itself ([`StopDesign`]) for plant `p` at the voltage
-/// bound `voltage` (V) and loop period `ts` (s), the braking law applying 0 V below
-/// `dead_band` (rad/s): [`braking_law`], [`hold_law`], the smooth model and the dead zone.
-pub fn stop_design(
+/// The arm's stop of a plant, designed at once by [`design_stop`]: what rip-rt's stop runs on
+/// the host (the braking law with its dead band, the hold law, the arm's model for its
+/// momentum, the simulated stop of the envelope and the modelled brake) and, from the same
+/// parts, what a device runs ([`StopParts::device`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StopParts {
+    /// The braking law ([`braking_law`]).
+    pub law: BrakingLaw,
+    /// Below this arm rate (rad/s) the braking law applies 0 V.
+    pub dead_band: f64,
+    /// The hold law ([`hold_law`]), where the plant's LQR about hanging exists.
+    pub hold: Option<HoldLaw>,
+    /// The plant's arm model (the arm's momentum in the stop's sequence).
+    pub model: ArmModel,
+    /// The stop simulated from the whole state ([`simulated_stop`]).
+    pub simulated: SimulatedStop,
+    /// The plant's dead zone (V).
+    pub dead_zone: f64,
+}
+
+impl StopParts {
+    /// What a device needs to run the stop itself ([`StopDesign`]); `None` without a hold law
+    /// or where the parts do not make a valid design (a non-finite dead band).
+    pub fn device(&self) -> Option<StopDesign> {
+        let design = StopDesign {
+            law: self.law,
+            dead_band: self.dead_band,
+            hold: self.hold?,
+            model: self.model,
+            dead_zone: self.dead_zone,
+        };
+        design.validate().ok().map(|()| design)
+    }
+}
+
+/// The stop of plant `p` braked at the voltage bound `voltage` (V) every loop period `ts`
+/// (s), its braking law applying 0 V below `dead_band` (rad/s), the applied voltage acting for
+/// `latency_periods` periods before the stop's first command: [`braking_law`], [`hold_law`],
+/// the plant's arm model, [`simulated_stop`] and the dead zone ([`StopParts`]).
+///
+/// # Errors
+/// A plant the model refuses.
+pub fn design_stop(
     p: &FurutaParams,
     voltage: f64,
     ts: f64,
     dead_band: f64,
-) -> crate::error::Result<StopDesign> {
-    let design = StopDesign {
+    latency_periods: usize,
+) -> crate::error::Result<StopParts> {
+    Ok(StopParts {
         law: braking_law(p, voltage, ts),
         dead_band,
-        hold: hold_law(p, voltage, ts)?,
+        hold: hold_law(p, voltage, ts).ok(),
         model: Plant::new(*p)?.arm_model(),
+        simulated: simulated_stop(p, voltage, ts, latency_periods)?,
         dead_zone: p.vd,
-    };
-    design
-        .validate()
-        .map_err(|e| crate::error::RipError::invalid("stop design", e.to_string()))?;
-    Ok(design)
+    })
 }
 
 /// The simulated stop ([`SimulatedStop`]) of plant `p` braked at `voltage` (V), sampled every
@@ -537,7 +575,9 @@ mod tests {
     #[test]
     fn the_stop_design_is_the_hosts_laws_and_travels_whole() {
         for p in [FurutaParams::paper(), FurutaParams::qube_servo2()] {
-            let d = stop_design(&p, 10.0, 0.01, 0.46).unwrap();
+            let parts = design_stop(&p, 10.0, 0.01, 0.46, 2).unwrap();
+            assert_eq!(parts.simulated, simulated_stop(&p, 10.0, 0.01, 2).unwrap());
+            let d = parts.device().unwrap();
             assert_eq!(d.law, braking_law(&p, 10.0, 0.01));
             assert_eq!(d.hold, hold_law(&p, 10.0, 0.01).unwrap());
             assert_eq!(d.model, Plant::new(p).unwrap().arm_model());
@@ -545,7 +585,13 @@ mod tests {
             d.write(&mut bytes).unwrap();
             assert_eq!(StopDesign::read(&bytes).unwrap(), d);
         }
-        assert!(stop_design(&FurutaParams::paper(), 10.0, 0.01, f64::NAN).is_err());
+        let parts = design_stop(&FurutaParams::paper(), 10.0, 0.01, f64::NAN, 2).unwrap();
+        assert!(parts.device().is_none());
+        let no_hold = StopParts {
+            hold: None,
+            ..design_stop(&FurutaParams::paper(), 10.0, 0.01, 0.46, 2).unwrap()
+        };
+        assert!(no_hold.device().is_none());
     }
 
     /// (2) against a direct integration of (1), and the limits it must have.

@@ -50,6 +50,7 @@ pub use rip_control::stop::{
     MOMENTUM_ENERGY_GAIN, PENDULUM_REST_RAD, PROGRESS_PERIODS, REST_S, REST_TRAVEL,
     WRONG_SIGN_PERIODS,
 };
+pub use rip_core::envelope::StopParts;
 pub use rip_core::preflight::motion::{ENVELOPE_MARGIN, LATENCY_PERIODS, PREFLIGHT_HEADROOM};
 
 /// The stopping model of a configuration: its `[plant]`, `safety.voltage_limit`, two loop
@@ -85,17 +86,24 @@ fn stop_voltage(cfg: &Config) -> f64 {
     cfg.safety.voltage_limit.clamp(0.0, MAX_VOLTAGE_LIMIT)
 }
 
-/// The stop of `cfg` simulated from the whole state ([`SimulatedStop`]): `[plant]` braked at
-/// `safety.voltage_limit`, [`LATENCY_PERIODS`] of latency at the loop's period; `None` without a
-/// plant.
-pub fn simulated_stop(cfg: &Config) -> Option<SimulatedStop> {
-    rip_core::envelope::simulated_stop(
+/// The stop of `cfg`, designed by rip-core in one ([`rip_core::envelope::design_stop`]):
+/// `[plant]` braked at `safety.voltage_limit` every loop period, the braking law's dead band
+/// of `[device]`'s arm encoder, [`LATENCY_PERIODS`] of latency; `None` for a plant the model
+/// refuses. Every part of the stop below comes from it.
+pub fn stop_parts(cfg: &Config) -> Option<StopParts> {
+    rip_core::envelope::design_stop(
         &cfg.spec.plant.params(),
         stop_voltage(cfg),
         cfg.period_s(),
+        dead_band(cfg),
         LATENCY_PERIODS as usize,
     )
     .ok()
+}
+
+/// The stop of `cfg` simulated from the whole state ([`SimulatedStop`], [`stop_parts`]).
+pub fn simulated_stop(cfg: &Config) -> Option<SimulatedStop> {
+    stop_parts(cfg).map(|s| s.simulated)
 }
 
 /// The braking envelope of `safety.arm_limit` in the loop (module docs): the stopping model
@@ -201,15 +209,22 @@ fn dead_band(cfg: &Config) -> f64 {
     1.5 * std::f64::consts::TAU / cfg.device.arm_counts_per_rev.max(1) as f64 / cfg.period_s()
 }
 
-/// The stop of `cfg` braking in `mode` ([`Brake`]): the braking law of `[plant]` at
-/// `safety.voltage_limit` and the loop's period.
+/// The stop of `cfg` braking in `mode` ([`Brake`]): the braking law of [`stop_parts`], or
+/// the short for a plant the model refuses.
 pub fn brake(cfg: &Config, mode: BrakeMode) -> Brake {
-    let law = rip_core::envelope::braking_law(
-        &cfg.spec.plant.params(),
-        stop_voltage(cfg),
-        cfg.period_s(),
-    );
-    Brake::new(law, dead_band(cfg), mode)
+    match stop_parts(cfg) {
+        Some(parts) => Brake::new(parts.law, parts.dead_band, mode),
+        None => short(cfg),
+    }
+}
+
+/// The short alone, for a plant without a stop's design.
+fn short(cfg: &Config) -> Brake {
+    let law = rip_control::stop::BrakingLaw {
+        voltage: stop_voltage(cfg),
+        linear_below: 1.0,
+    };
+    Brake::new(law, dead_band(cfg), BrakeMode::Short)
 }
 
 /// The stop of `cfg` braking in `mode`: in [`BrakeMode::Modelled`] the law on the simulated
@@ -217,35 +232,34 @@ pub fn brake(cfg: &Config, mode: BrakeMode) -> Brake {
 /// until the stop's first command (the short without an estimate or a plant), else
 /// [`brake`].
 pub fn brake_for_mode(cfg: &Config, mode: BrakeMode, estimate: Option<State>, held: f64) -> Brake {
-    match (mode, simulated_stop(cfg)) {
-        (BrakeMode::Modelled, Some(stop)) => {
-            Brake::modelled(&stop, dead_band(cfg), estimate.map(Into::into), held)
-        }
-        (BrakeMode::Modelled, None) => brake(cfg, BrakeMode::Short),
+    match (mode, stop_parts(cfg)) {
+        (BrakeMode::Modelled, Some(parts)) => Brake::modelled(
+            &parts.simulated,
+            parts.dead_band,
+            estimate.map(Into::into),
+            held,
+        ),
+        (BrakeMode::Modelled, None) => short(cfg),
         (mode, _) => brake(cfg, mode),
     }
 }
 
-/// What the device needs to run the stop of `cfg` itself ([`StopDesign`]): the braking law and
-/// dead band of [`brake`], the hold law and the smooth model of `[plant]`, its dead zone.
-/// `None` without a plant or a hold law.
+/// What the device needs to run the stop of `cfg` itself ([`StopDesign`]): the parts of
+/// [`stop_parts`]; `None` without a plant or a hold law.
 pub fn stop_design(cfg: &Config) -> Option<StopDesign> {
-    let params = cfg.spec.plant.params();
-    rip_core::envelope::stop_design(&params, stop_voltage(cfg), cfg.period_s(), dead_band(cfg)).ok()
+    stop_parts(cfg)?.device()
 }
 
-/// The stop of `cfg` with `brake` ([`StopSequence`]): the hold law of `[plant]` and its smooth
-/// model for the arm's momentum.
+/// The stop of `cfg` with `brake` ([`StopSequence`]): the hold law and the arm's model of
+/// [`stop_parts`].
 pub fn stop_sequence(cfg: &Config, brake: Brake) -> StopSequence {
-    let period_s = cfg.period_s();
-    let voltage = stop_voltage(cfg);
-    let params = cfg.spec.plant.params();
+    let parts = stop_parts(cfg);
     StopSequence::new(
         brake,
-        rip_core::envelope::hold_law(&params, voltage, period_s).ok(),
-        cfg.spec.plant().ok().map(|p| p.arm_model()),
-        period_s,
-        voltage,
+        parts.and_then(|p| p.hold),
+        parts.map(|p| p.model),
+        cfg.period_s(),
+        stop_voltage(cfg),
     )
 }
 
