@@ -3,7 +3,9 @@
 //! hanging, the operator raises it (`emulate --raise-at`), the device balances it, and the
 //! host dies (SIGKILL: no stop frame) while it balances and during the reference step. The
 //! device, its wiring verified, brakes the arm to rest and holds it inside
-//! `safety.arm_limit`, then disables the driver.
+//! `safety.arm_limit`, then disables the driver. In host mode the same: `rip-rt run
+//! --swing-up` arms the device's stop for its command watchdog once its sign check has
+//! passed, and dies during the swing or after the catch.
 
 mod common;
 
