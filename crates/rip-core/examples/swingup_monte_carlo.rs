@@ -5,7 +5,8 @@
 //! The runs are [`rip_core::spec::study`]'s experiment (the arm steps 0 → 1 rad
 //! `reference.step_time`, by default 1 s, after the catch); success and time to upright are [`rip_core::sim::swing_up_succeeded`] and the
 //! catch time, and [`rip_core::spec::study::arrivals`] counts the arrivals near upright
-//! and the passes over the top of each run from its true state.
+//! and the passes over the top of each run from its true state. The success rate is printed
+//! with its Wilson 95 % interval ([`rip_core::stats::wilson`]).
 //!
 //! ```text
 //! cargo run --release -p rip-core --example swingup_monte_carlo -- [N] [preset] [swing_up settings]
@@ -58,7 +59,7 @@ fn main() {
     let catch_angle = spec.swing_up.catch_angle;
     println!("preset {preset}, {n} runs per controller, ±10 % on every physical parameter");
     println!(
-        "controller  success  no catch  fell  first arrival  max over-tops  upright median    p95   max|θ|  after fall"
+        "controller  success (Wilson 95 %)  no catch  fell  first arrival  max over-tops  upright median    p95   max|θ|  after fall"
     );
     for kind in ControllerKind::ALL {
         // One supervisor per thread, designed once (a planned swing-up takes seconds to
@@ -103,10 +104,14 @@ fn main() {
         let after_fall = runs
             .iter()
             .fold(0.0f64, |a, r| a.max(r.arrivals.peak_arm_after_fall));
+        let (low, high) = rip_core::stats::wilson(ok as u64, n, rip_core::stats::Z_95)
+            .unwrap_or((f64::NAN, f64::NAN));
         println!(
-            "{:<10} {:>6.1} % {no_catch:>8} {fell:>5} {:>12.1} % {over:>14} {:>11.2} s {:>6.2} s {max_arm:>7.3} {after_fall:>11.3}",
+            "{:<10} {:>6.1} % [{:>5.1}, {:>5.1}] {no_catch:>8} {fell:>5} {:>12.1} % {over:>14} {:>11.2} s {:>6.2} s {max_arm:>7.3} {after_fall:>11.3}",
             kind.name(),
             100.0 * ok as f64 / n as f64,
+            100.0 * low,
+            100.0 * high,
             100.0 * first as f64 / n as f64,
             percentile(&times, 0.5),
             percentile(&times, 0.95),

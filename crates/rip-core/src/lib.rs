@@ -62,6 +62,7 @@ pub mod regulators;
 pub mod rig;
 pub mod sim;
 pub mod spec;
+pub mod stats;
 pub mod swing_report;
 pub mod swingup;
 pub mod trig;
