@@ -7,7 +7,7 @@ use criterion::{black_box, criterion_main, Criterion};
 use rip_control::stop::{ArmEnvelope, SimulatedStop, StoppingModel};
 use rip_control::swing::ArmModel;
 use rip_rt::config::Config;
-use rip_rt::envelope::{arm_envelope, brake, stop_sequence, BrakeMode};
+use rip_rt::envelope::{arm_envelope, brake, stop_parts, stop_sequence, BrakeMode};
 
 fn envelope_f32(e: &ArmEnvelope) -> ArmEnvelope<f32> {
     let m = e.model();
@@ -19,7 +19,9 @@ fn envelope_f32(e: &ArmEnvelope) -> ArmEnvelope<f32> {
         voltage: m.voltage as f32,
     };
     let cfg = Config::default();
-    let s = rip_rt::envelope::simulated_stop(&cfg).expect("the default rig has a plant");
+    let s = stop_parts(&cfg)
+        .expect("the default rig has a plant")
+        .simulated;
     let a = s.model;
     let to = |v: f64| v as f32;
     let sim = SimulatedStop {
@@ -46,7 +48,8 @@ fn envelope_f32(e: &ArmEnvelope) -> ArmEnvelope<f32> {
 
 fn stop(c: &mut Criterion) {
     let cfg = Config::default();
-    let env = arm_envelope(&cfg);
+    let parts = stop_parts(&cfg);
+    let env = arm_envelope(&cfg, parts.as_ref());
     // 2 rad out at 8 rad/s, the pendulum just past upright and falling: past the analytic
     // bound, so the whole-state simulation decides.
     let (theta, rate, alpha, alpha_rate) = (2.0, 8.0, 0.3, 2.0);
@@ -58,7 +61,11 @@ fn stop(c: &mut Criterion) {
     c.bench_function("stop_envelope_simulated_f32", |b| {
         b.iter(|| black_box(&env32).check_state(black_box(theta as f32), 8.0, 0.3, 2.0, 12.0))
     });
-    let mut seq = stop_sequence(&cfg, brake(&cfg, BrakeMode::Active));
+    let mut seq = stop_sequence(
+        &cfg,
+        parts.as_ref(),
+        brake(parts.as_ref(), BrakeMode::Active),
+    );
     let mut k = 0u32;
     c.bench_function("stop_sequence_period_f64", |b| {
         b.iter(|| {

@@ -59,6 +59,7 @@ const CFG: Config = Config {
     voltage_limit_mv: board::VOLTAGE_LIMIT_MV,
     supply_mv: board::SUPPLY_MV,
     can_brake: board::CAN_BRAKE,
+    onboard_period_us: [*PERIOD_RANGE_US.start(), *PERIOD_RANGE_US.end()],
     ..Config::DEFAULT
 };
 

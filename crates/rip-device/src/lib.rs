@@ -61,12 +61,15 @@
 //!
 //! In host mode the command watchdog shorts the windings, unless the host armed the device's
 //! own stop for it with a [`WatchdogStop`]: the wiring verified, a loaded image with a stop's
-//! design, and the encoder zeros of the host's calibration. Then a watchdog trip starts that
+//! design whose period the board's timer runs ([`Config::onboard_period_us`]), and the
+//! encoder zeros of the host's calibration. Then a watchdog trip starts that
 //! stop as an onboard run already stopping on the host's silence (`ONBOARD_HOST_SILENT`), on
 //! angles from those zeros, stepped by [`Device::onboard_step`] like every onboard run (the
 //! firmware's timer runs while [`Device::onboard_running`]) and reported by telemetry every
 //! [`STOP_PERIOD_S`]; a host command ends it (the host takes
-//! over). An upload or an onboard start disarms it.
+//! over). An upload, an onboard start or the plain stop frame (the end of the host's run)
+//! disarms it. A driver fault read between two steps of an onboard run, even one that has
+//! cleared by the next step, stops the run as a fault.
 
 #![no_std]
 #![forbid(unsafe_code)]
@@ -103,10 +106,14 @@ pub struct Config {
     pub supply_mv: u16,
     /// The bridge can brake (short the motor's windings) while not driving it (module docs).
     pub can_brake: bool,
+    /// The shortest and longest onboard step period (µs) the board's timer runs: outside it
+    /// the device's own stop on the command watchdog is the short (crate docs, "The
+    /// watchdog's stop").
+    pub onboard_period_us: [u32; 2],
 }
 
 impl Config {
-    /// 50 ms watchdog, a bridge that brakes, and the motor's rated voltage
+    /// 50 ms watchdog, a bridge that brakes, any onboard period, and the motor's rated voltage
     /// ([`rip_control::INPUT_LIMIT_MV`], 12 V) as both the limit and the supply: the reference
     /// rig feeds its bridge at the motor's rating, so full duty is the rated voltage.
     pub const DEFAULT: Config = Config {
@@ -114,6 +121,7 @@ impl Config {
         voltage_limit_mv: rip_control::INPUT_LIMIT_MV,
         supply_mv: rip_control::INPUT_LIMIT_MV,
         can_brake: true,
+        onboard_period_us: [1, u32::MAX],
     };
 
     /// The same settings with the limit reduced to the supply where it exceeds it, and a zero
@@ -132,6 +140,7 @@ impl Config {
             },
             supply_mv: self.supply_mv,
             can_brake: self.can_brake,
+            onboard_period_us: self.onboard_period_us,
         }
     }
 }
@@ -359,6 +368,9 @@ impl<C: Onboard> Device<C> {
             // A faulted bridge is not trusted to switch: open.
             self.command = Command::STOP;
             self.brake = false;
+            if let Some(run) = self.run.as_mut() {
+                run.faulted = true;
+            }
         }
         if self.command.enabled()
             && inputs.now_us.wrapping_sub(self.last_command_us) > self.cfg.command_timeout_us
@@ -395,6 +407,11 @@ impl<C: Onboard> Device<C> {
                 self.watchdog = false;
                 self.command = if self.fault { Command::STOP } else { c };
                 self.brake = c.brake() && !self.fault;
+                if !c.enabled() && !c.brake() {
+                    // The plain stop frame ends the host's run: the watchdog's stop it armed
+                    // (and the wiring it checked) ends with it.
+                    self.watchdog_stop = None;
+                }
                 None
             }
             Event::Frame(Frame {

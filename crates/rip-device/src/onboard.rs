@@ -99,6 +99,9 @@ pub(crate) struct Run {
     /// The device's own stop in progress (crate docs): the state the run
     /// stopped with, and the periods the stop has run.
     pub(crate) stopping: Option<(u8, u32)>,
+    /// A driver fault was read since the run's last step, even if it has cleared since (a
+    /// bridge's auto-retry pulse between two steps stops the run as a fault that lasted).
+    pub(crate) faulted: bool,
 }
 
 /// The states whose stop the device makes itself with the law's stop (crate docs): the run's
@@ -287,6 +290,7 @@ impl<C: Onboard> Device<C> {
             last_cycles: 0,
             overruns: 0,
             stopping: None,
+            faulted: false,
         });
         self.watchdog = false;
         // The start's own flags say how this run stops.
@@ -307,7 +311,10 @@ impl<C: Onboard> Device<C> {
         if !self.design_loaded {
             return (ACK_NO_DESIGN, 0);
         }
-        let laws = w.flags & ONBOARD_WIRING_VERIFIED != 0 && self.onboard.has_stop();
+        // A stop the device would not step (a period outside its timer's range) is the short.
+        let [shortest, longest] = self.cfg.onboard_period_us;
+        let steps = (shortest..=longest).contains(&self.onboard.period_us());
+        let laws = w.flags & ONBOARD_WIRING_VERIFIED != 0 && self.onboard.has_stop() && steps;
         self.watchdog_stop = laws.then_some(w);
         (ACK_OK, u32::from(laws))
     }
@@ -348,6 +355,7 @@ impl<C: Onboard> Device<C> {
             last_cycles: 0,
             overruns: 0,
             stopping: Some((ONBOARD_HOST_SILENT, 0)),
+            faulted: false,
         });
         self.onboard_state = ONBOARD_HOST_SILENT;
     }
@@ -468,7 +476,7 @@ impl<C: Onboard> Device<C> {
     ) -> Option<(u8, bool)> {
         let silent =
             now_us.wrapping_sub(run.last_host_us) > run.settings.host_timeout_ms as u32 * 1000;
-        let stop = if self.fault {
+        let stop = if self.fault || run.faulted {
             Some((ONBOARD_DRIVER_FAULT, false))
         } else if silent {
             Some((ONBOARD_HOST_SILENT, true))
@@ -508,7 +516,7 @@ impl<C: Onboard> Device<C> {
         now_us: u32,
     ) -> Option<(u8, bool)> {
         let (state, periods) = run.stopping?;
-        if self.fault {
+        if self.fault || run.faulted {
             return Some((ONBOARD_DRIVER_FAULT, false));
         }
         run.stopping = Some((state, periods.saturating_add(1)));

@@ -9,8 +9,8 @@ use rip_device::{Config, Device, Inputs, Onboard};
 use rip_protocol::{
     crc32, Ack, Command, Event, Frame, Message, OnboardStart, PilStep, UploadBegin, UploadChunk,
     UploadCommit, WatchdogStop, ACK_BAD_SETTINGS, ACK_BUSY, ACK_NO_DESIGN, ACK_OK, ACK_REFUSED,
-    CHUNK_MAX, COMMAND_ENABLE, ONBOARD_HOST_SILENT, ONBOARD_WIRING_VERIFIED, PIL_PHASE_SHIFT,
-    PIL_RESET, PIL_STOP, TYPE_WATCHDOG_STOP,
+    CHUNK_MAX, COMMAND_BRAKE, COMMAND_ENABLE, ONBOARD_DRIVER_FAULT, ONBOARD_HOST_SILENT,
+    ONBOARD_WIRING_VERIFIED, PIL_PHASE_SHIFT, PIL_RESET, PIL_STOP, TYPE_WATCHDOG_STOP,
 };
 
 fn lqr() -> Design {
@@ -579,4 +579,80 @@ fn a_silent_host_in_host_mode_leaves_the_armed_device_running_the_stop_on_its_ze
     );
     dev.onboard_step(&at(60_000));
     assert!(dev.braking() && !dev.onboard_running());
+}
+
+/// What ends the armed watchdog stop or refuses it: a driver fault that comes and goes
+/// between two steps stops the device's stop for good, the plain stop frame (the end of the
+/// host's run) disarms it while a brake command does not, and a design whose period the
+/// board's timer does not run gets the short.
+#[test]
+fn the_watchdog_stop_ends_on_a_passing_fault_the_stop_frame_and_an_unrunnable_period() {
+    let at = |t_us: u32, fault: bool| Inputs {
+        now_us: t_us,
+        encoders: [(500 + t_us / 10_000 * 20) as u16, 1000],
+        driver_fault: fault,
+    };
+    let enable = |dev: &mut Device<ControlLaw<f64, 4096>>, t_us: u32| {
+        let command = Message::Command(Command {
+            voltage_mv: 2000,
+            flags: COMMAND_ENABLE,
+        });
+        dev.handle(
+            Event::Frame(Frame {
+                seq: 5,
+                message: command,
+            }),
+            &at(t_us, false),
+        );
+    };
+    // A fault read by the main loop's tick between two steps, cleared by the next step.
+    let mut dev = device_with_stop();
+    ack(&mut dev, Message::WatchdogStop(ARMED), &at(0, false));
+    enable(&mut dev, 0);
+    dev.onboard_step(&at(60_000, false));
+    dev.onboard_step(&at(70_000, false));
+    assert!(dev.onboard_running() && dev.enabled());
+    dev.tick(&at(75_000, true));
+    dev.onboard_step(&at(80_000, false));
+    assert!(!dev.onboard_running() && !dev.enabled() && !dev.braking());
+    assert_eq!(dev.onboard_state(), ONBOARD_DRIVER_FAULT);
+    // The plain stop frame disarms; a brake command keeps it armed.
+    for (flags, armed) in [(COMMAND_BRAKE, true), (0, false)] {
+        let mut dev = device_with_stop();
+        ack(&mut dev, Message::WatchdogStop(ARMED), &at(0, false));
+        let stop = Message::Command(Command {
+            voltage_mv: 0,
+            flags,
+        });
+        dev.handle(
+            Event::Frame(Frame {
+                seq: 6,
+                message: stop,
+            }),
+            &at(0, false),
+        );
+        enable(&mut dev, 10_000);
+        dev.onboard_step(&at(70_000, false));
+        assert_eq!(dev.onboard_running(), armed, "flags {flags:#x}");
+    }
+    // A board whose timer runs 1–5 ms periods, a 10 ms design: the short.
+    let (mut dev, _) = device_and_lqr_image();
+    let mut dev2 = Device::with_onboard(
+        Config {
+            onboard_period_us: [1_000, 5_000],
+            ..Config::DEFAULT
+        },
+        &Inputs::default(),
+        [0, 0],
+        ControlLaw::<f64, 4096>::new(),
+    );
+    let mut img = vec![0u8; 4096];
+    let n = write_image(&sensor(), Some(&stop_design()), &lqr(), &mut img).unwrap();
+    for d in [&mut dev, &mut dev2] {
+        assert_eq!(upload(d, &img[..n]), ACK_OK);
+    }
+    let a = ack(&mut dev2, Message::WatchdogStop(ARMED), &at(0, false));
+    assert_eq!((a.code, a.value), (ACK_OK, 0));
+    let a = ack(&mut dev, Message::WatchdogStop(ARMED), &at(0, false));
+    assert_eq!((a.code, a.value), (ACK_OK, 1));
 }

@@ -91,7 +91,8 @@ pub const ONBOARD_WIRING_VERIFIED: u8 = 1 << 0;
 /// angles zeroed here: θ = 0 at arm count `arm_zero`, α = π (hanging) at pendulum count
 /// `pendulum_down` (the host's calibration, which replaces the image's offsets for this stop).
 /// Without the flag the watchdog's stop is the passive short (v1's). It holds until the next
-/// watchdog stop, an upload or an onboard start. The device acks it: code [`ACK_OK`] with the
+/// watchdog stop, the plain stop command (the end of the host's run), an upload or an onboard
+/// start. The device acks it: code [`ACK_OK`] with the
 /// value 1 when its watchdog will run the laws and 0 for the short; [`ACK_NO_DESIGN`] without a
 /// loaded image, [`ACK_BUSY`] while onboard mode runs, [`ACK_BAD_SETTINGS`] for a flag it does
 /// not know (each changing nothing).

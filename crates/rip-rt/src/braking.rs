@@ -5,8 +5,8 @@
 
 use crate::config::Config;
 use crate::envelope::{
-    arm_envelope, brake_for_mode, sample_rates, stop_mode, stop_sequence, BrakeCommand, BrakeMode,
-    BrakeReport, StopSequence,
+    arm_envelope, brake_for_mode, sample_rates, stop_mode, stop_parts, stop_sequence, BrakeCommand,
+    BrakeMode, BrakeReport, StopParts, StopSequence,
 };
 use crate::exchange::exchange;
 use crate::loop_core::LoopCore;
@@ -76,7 +76,7 @@ pub fn stop_announcement(
 /// brake, and is returned.
 fn witness_lowering(
     core: &mut LoopCore,
-    cfg: &Config,
+    parts: Option<&StopParts>,
     stop: &mut StopSequence,
     m: &crate::protocol::Measurement,
 ) -> Option<crate::witness::WitnessFault> {
@@ -88,7 +88,7 @@ fn witness_lowering(
     };
     let mode = crate::envelope::brake_mode(&StopReason::Witness(fault));
     stop.lowering_faulted(brake_for_mode(
-        cfg,
+        parts,
         mode,
         core.witness_estimate(),
         commanded,
@@ -167,11 +167,14 @@ pub fn bring_to_rest(
         return report;
     }
     let watch = StopWatch::for_stop(reason);
-    let brake = brake_for_mode(cfg, mode, core.witness_estimate(), core.held_voltage());
+    // The stop's design, once: every part of this stop takes it.
+    let parts = stop_parts(cfg);
+    let parts = parts.as_ref();
+    let brake = brake_for_mode(parts, mode, core.witness_estimate(), core.held_voltage());
     let lowering = lowering_for(core, reason, mode).copied();
-    let mut stop = stop_sequence(cfg, brake);
+    let mut stop = stop_sequence(cfg, parts, brake);
     if let Some(lowering) = &lowering {
-        stop = stop.lowering(lowering.law, arm_envelope(cfg), core.held_voltage());
+        stop = stop.lowering(lowering.law, arm_envelope(cfg, parts), core.held_voltage());
     }
     let reply_timeout_ns = (cfg.loop_.reply_timeout_ms * 1e6).round() as u64;
     let mut last: Option<(f64, f64, u32)> = None;
@@ -254,7 +257,7 @@ pub fn bring_to_rest(
         let (rate, alpha_rate) = sample_rates(before, theta, alpha, now_us);
         report.max_rate = report.max_rate.max(rate.abs());
         if stop.is_lowering() {
-            if let Some(fault) = witness_lowering(core, cfg, &mut stop, &reply.m) {
+            if let Some(fault) = witness_lowering(core, parts, &mut stop, &reply.m) {
                 report.witness = Some(fault);
             }
         }

@@ -121,6 +121,7 @@ impl Device {
             voltage_limit_mv: (cfg.voltage_limit * 1000.0).round() as u16,
             supply_mv: (cfg.supply * 1000.0).round() as u16,
             can_brake: cfg.can_brake,
+            ..rip_device::Config::DEFAULT
         };
         let mut dev = Self {
             rng: StdRng::seed_from_u64(cfg.seed),

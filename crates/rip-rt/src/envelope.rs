@@ -34,7 +34,7 @@
 //! that cannot brake (protocol.md rule 9) leaves the windings open on it; the active law does
 //! not depend on it.
 
-use rip_core::envelope::{Lowering, SimulatedStop, StoppingModel};
+use rip_core::envelope::{Lowering, StoppingModel};
 use rip_core::excitation::ExcitationSettings;
 use rip_core::plant::State;
 
@@ -101,17 +101,13 @@ pub fn stop_parts(cfg: &Config) -> Option<StopParts> {
     .ok()
 }
 
-/// The stop of `cfg` simulated from the whole state ([`SimulatedStop`], [`stop_parts`]).
-pub fn simulated_stop(cfg: &Config) -> Option<SimulatedStop> {
-    stop_parts(cfg).map(|s| s.simulated)
-}
-
 /// The braking envelope of `safety.arm_limit` in the loop (module docs): the stopping model
-/// and the simulated stop of `cfg` on [`envelope_limit`].
-pub fn arm_envelope(cfg: &Config) -> ArmEnvelope {
+/// of `cfg` and the simulated stop of its stop's `parts` ([`stop_parts`]) on
+/// [`envelope_limit`].
+pub fn arm_envelope(cfg: &Config, parts: Option<&StopParts>) -> ArmEnvelope {
     ArmEnvelope::new(
         stopping_model(cfg),
-        simulated_stop(cfg),
+        parts.map(|p| p.simulated),
         envelope_limit(cfg),
     )
 }
@@ -209,38 +205,39 @@ fn dead_band(cfg: &Config) -> f64 {
     1.5 * std::f64::consts::TAU / cfg.device.arm_counts_per_rev.max(1) as f64 / cfg.period_s()
 }
 
-/// The stop of `cfg` braking in `mode` ([`Brake`]): the braking law of [`stop_parts`], or
-/// the short for a plant the model refuses.
-pub fn brake(cfg: &Config, mode: BrakeMode) -> Brake {
-    match stop_parts(cfg) {
-        Some(parts) => Brake::new(parts.law, parts.dead_band, mode),
-        None => short(cfg),
+/// The stop braking in `mode` ([`Brake`]) with the braking law of its `parts`
+/// ([`stop_parts`]); the short alone without them (a plant the model refuses).
+pub fn brake(parts: Option<&StopParts>, mode: BrakeMode) -> Brake {
+    match parts {
+        Some(p) => Brake::new(p.law, p.dead_band, mode),
+        None => short(),
     }
 }
 
-/// The short alone, for a plant without a stop's design.
-fn short(cfg: &Config) -> Brake {
+/// The short alone: [`BrakeMode::Short`] never applies its law.
+fn short() -> Brake {
     let law = rip_control::stop::BrakingLaw {
-        voltage: stop_voltage(cfg),
+        voltage: 0.0,
         linear_below: 1.0,
     };
-    Brake::new(law, dead_band(cfg), BrakeMode::Short)
+    Brake::new(law, 0.0, BrakeMode::Short)
 }
 
-/// The stop of `cfg` braking in `mode`: in [`BrakeMode::Modelled`] the law on the simulated
-/// stop's model from the witness's `estimate` with `held` (V) still applied for the period
-/// until the stop's first command (the short without an estimate or a plant), else
-/// [`brake`].
-pub fn brake_for_mode(cfg: &Config, mode: BrakeMode, estimate: Option<State>, held: f64) -> Brake {
-    match (mode, stop_parts(cfg)) {
-        (BrakeMode::Modelled, Some(parts)) => Brake::modelled(
-            &parts.simulated,
-            parts.dead_band,
-            estimate.map(Into::into),
-            held,
-        ),
-        (BrakeMode::Modelled, None) => short(cfg),
-        (mode, _) => brake(cfg, mode),
+/// The stop braking in `mode` with its `parts`: in [`BrakeMode::Modelled`] the law on the
+/// simulated stop's model from the witness's `estimate` with `held` (V) still applied for
+/// the period until the stop's first command (the short without parts), else [`brake`].
+pub fn brake_for_mode(
+    parts: Option<&StopParts>,
+    mode: BrakeMode,
+    estimate: Option<State>,
+    held: f64,
+) -> Brake {
+    match (mode, parts) {
+        (BrakeMode::Modelled, Some(p)) => {
+            Brake::modelled(&p.simulated, p.dead_band, estimate.map(Into::into), held)
+        }
+        (BrakeMode::Modelled, None) => short(),
+        (mode, parts) => brake(parts, mode),
     }
 }
 
@@ -250,10 +247,9 @@ pub fn stop_design(cfg: &Config) -> Option<StopDesign> {
     stop_parts(cfg)?.device()
 }
 
-/// The stop of `cfg` with `brake` ([`StopSequence`]): the hold law and the arm's model of
-/// [`stop_parts`].
-pub fn stop_sequence(cfg: &Config, brake: Brake) -> StopSequence {
-    let parts = stop_parts(cfg);
+/// The stop of `cfg` with `brake` ([`StopSequence`]): the hold law and the arm's model of its
+/// `parts` ([`stop_parts`]).
+pub fn stop_sequence(cfg: &Config, parts: Option<&StopParts>, brake: Brake) -> StopSequence {
     StopSequence::new(
         brake,
         parts.and_then(|p| p.hold),
@@ -364,8 +360,16 @@ mod tests {
         let cfg = Config::from_toml("").unwrap();
         // The law as it stands drives a reversed rig away; reversed, it brakes it, as far as
         // the trusted law brakes a rig wired right.
-        let (right, v_right) = braked(brake(&cfg, BrakeMode::Active), false, 10.0);
-        let (rev, v_rev) = braked(brake(&cfg, BrakeMode::Reversed), true, 10.0);
+        let (right, v_right) = braked(
+            brake(stop_parts(&cfg).as_ref(), BrakeMode::Active),
+            false,
+            10.0,
+        );
+        let (rev, v_rev) = braked(
+            brake(stop_parts(&cfg).as_ref(), BrakeMode::Reversed),
+            true,
+            10.0,
+        );
         assert!(
             v_right.abs() < 0.1 && v_rev.abs() < 0.1,
             "{v_right} {v_rev}"
@@ -374,8 +378,16 @@ mod tests {
         // The reversed law on a rig wired right speeds the arm up: the stop shorts instead
         // after a few periods (here 9.2 rad of travel from 10 rad/s, against 6.9 rad for the
         // short alone and 1.4 rad for the law with the right sign).
-        let (short, _) = braked(brake(&cfg, BrakeMode::Short), false, 10.0);
-        let (travel, v) = braked(brake(&cfg, BrakeMode::Reversed), false, 10.0);
+        let (short, _) = braked(
+            brake(stop_parts(&cfg).as_ref(), BrakeMode::Short),
+            false,
+            10.0,
+        );
+        let (travel, v) = braked(
+            brake(stop_parts(&cfg).as_ref(), BrakeMode::Reversed),
+            false,
+            10.0,
+        );
         assert!(v.abs() < 1.0, "{v}");
         assert!(travel < 1.4 * short, "{travel} vs {short}");
         assert!(short > 2.0 * right, "{short} {right}");
@@ -395,9 +407,21 @@ mod tests {
         );
         // On a rig with its motor leads swapped, the trusted law drives the arm away; the
         // checked law flips and stops it, within a few times the travel of a right rig.
-        let (right, _) = braked(brake(&cfg, BrakeMode::Active), false, 10.0);
-        let (away, _) = braked(brake(&cfg, BrakeMode::Active), true, 10.0);
-        let (checked, v) = braked(brake(&cfg, BrakeMode::Checked), true, 10.0);
+        let (right, _) = braked(
+            brake(stop_parts(&cfg).as_ref(), BrakeMode::Active),
+            false,
+            10.0,
+        );
+        let (away, _) = braked(
+            brake(stop_parts(&cfg).as_ref(), BrakeMode::Active),
+            true,
+            10.0,
+        );
+        let (checked, v) = braked(
+            brake(stop_parts(&cfg).as_ref(), BrakeMode::Checked),
+            true,
+            10.0,
+        );
         assert!(v.abs() < 1.0, "{v}");
         assert!(away > 5.0 * right, "{away} vs {right}");
         assert!(checked < 0.5 * away, "{checked} vs {away}");
@@ -407,9 +431,14 @@ mod tests {
     fn a_modelled_stop_brakes_as_the_trusted_law_and_a_moving_reading_ends_it() {
         let cfg = Config::from_toml("").unwrap();
         let x = State::new(0.0, 10.0, std::f64::consts::PI, 0.0);
-        let (right, _) = braked(brake(&cfg, BrakeMode::Active), false, 10.0);
+        let (right, _) = braked(
+            brake(stop_parts(&cfg).as_ref(), BrakeMode::Active),
+            false,
+            10.0,
+        );
         // The reading is frozen: the model's rate is all the stop has.
-        let mut brake = brake_for_mode(&cfg, BrakeMode::Modelled, Some(x), 0.0);
+        let mut brake =
+            brake_for_mode(stop_parts(&cfg).as_ref(), BrakeMode::Modelled, Some(x), 0.0);
         assert_eq!(brake.mode(), BrakeMode::Modelled);
         let mut sim = crate::plant::PlantSim::new(crate::plant::Model::Paper, 0.0, 0.0);
         sim.set_state([0.0, 10.0, std::f64::consts::PI, 0.0]);
@@ -432,11 +461,12 @@ mod tests {
         // against 1.07 rad from 10 rad/s; the short alone: 6.9 rad).
         assert!(travel < right + 0.5, "{travel} vs {right}");
         // A reading that moves: the model is not the arm.
-        let mut brake = brake_for_mode(&cfg, BrakeMode::Modelled, Some(x), 0.0);
+        let mut brake =
+            brake_for_mode(stop_parts(&cfg).as_ref(), BrakeMode::Modelled, Some(x), 0.0);
         assert_eq!(brake.command(Some(3.0)), BrakeCommand::Short);
         assert_eq!(brake.mode(), BrakeMode::Short);
         assert_eq!(
-            brake_for_mode(&cfg, BrakeMode::Modelled, None, 0.0).mode(),
+            brake_for_mode(None, BrakeMode::Modelled, None, 0.0).mode(),
             BrakeMode::Short
         );
     }
@@ -444,7 +474,7 @@ mod tests {
     #[test]
     fn the_envelope_stops_a_fast_arm_before_its_limit_and_lets_a_slow_one_run() {
         let cfg = Config::from_toml("").unwrap();
-        let mut env = arm_envelope(&cfg);
+        let mut env = arm_envelope(&cfg, stop_parts(&cfg).as_ref());
         let model = *env.model();
         let hanging = std::f64::consts::PI;
         // At 2 rad from the 3 rad limit, the fastest speed it may still move outwards: by the

@@ -156,7 +156,7 @@ impl LoopCore {
             last_request_ns: None,
             host_interval_s: None,
             lockstep: false,
-            envelope: crate::envelope::arm_envelope(cfg),
+            envelope: crate::envelope::arm_envelope(cfg, crate::envelope::stop_parts(cfg).as_ref()),
             lowering,
             witness_gap: false,
         })

@@ -17,7 +17,8 @@
 //! # When the rig counts as at rest
 //!
 //! Over the last `rest_window_s` of measurements (the last `round(rest_window_s / Ts)` that
-//! arrived), split from the newest into spans of `n` samples, [`RATE_SPAN_S`] (0.1 s), with
+//! arrived, rounded to whole spans), split from the newest into spans of `n` samples,
+//! [`RATE_SPAN_S`] (0.1 s), with
 //! the means `c̄ᵢ` and mean times `t̄ᵢ` of their counts, for each joint:
 //!
 //! ```text
@@ -190,6 +191,8 @@ impl RestCheck {
         let window = (c.rest_window_s / period_s).round().max(2.0) as usize;
         // At least two spans to a window, so that it has a rate.
         let span = ((RATE_SPAN_S / period_s).round() as usize).clamp(1, window / 2);
+        // Whole spans, so that every sample of the calibration's mean is judged.
+        let window = ((window as f64 / span as f64).round() as usize).max(2) * span;
         let tau = std::f64::consts::TAU;
         let d = &cfg.device;
         Self {

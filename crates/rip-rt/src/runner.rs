@@ -512,8 +512,10 @@ fn prepare_swing_up(
     // before the swing starts from it.
     let cal = calibrate::settle(driver.io, driver.core, cfg, &mut driver.clock, quiet)?;
     driver.core.calibrate(&cal);
-    // The wiring is checked and the zeros known: the device may stop the arm itself.
+    // The wiring is checked and the zeros known: the device may stop the arm itself. The
+    // round trip (or a lost ack's repeats) is not a missed period: the grid starts afresh.
     let armed = uploaded.and_then(|()| onboard::watchdog::arm(driver.io, &cal));
+    driver.clock.restart();
     *calibration = Some(cal);
     driver.core.reset();
     if !quiet {

@@ -17,7 +17,9 @@ use rip_core::Phase;
 use rip_rt::braking::{MAX_GENTLE_STOP_S, MAX_STOP_S};
 use rip_rt::config::Config;
 use rip_rt::controllers::{self, ControllerKind};
-use rip_rt::envelope::{brake_for_mode, brake_mode, stop_sequence, BrakeCommand, BrakeMode};
+use rip_rt::envelope::{
+    brake_for_mode, brake_mode, stop_parts, stop_sequence, BrakeCommand, BrakeMode,
+};
 use rip_rt::plant::{Model, PlantSim, Windings};
 use rip_rt::stop::StopReason;
 use rip_rt::witness::{Witness, WitnessFault, WitnessLimits};
@@ -265,7 +267,9 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
         None => StopReason::Finished,
     };
     let mode = brake_mode(&reason);
-    let brake = brake_for_mode(cfg, mode, witness.estimate(), u_prev);
+    let parts = stop_parts(cfg);
+    let parts = parts.as_ref();
+    let brake = brake_for_mode(parts, mode, witness.estimate(), u_prev);
     let mut sim = PlantSim::new(Model::Params(cfg.spec.plant.params()), 0.0, 0.0);
     sim.set_state([x[0], x[1], x[2], x[3]]);
     sim.step_windings(Windings::Driven(applied_last), ts);
@@ -276,7 +280,7 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
         }
         *max_abs = max_abs.max(x[0].abs());
     };
-    let mut stop = stop_sequence(cfg, brake);
+    let mut stop = stop_sequence(cfg, parts, brake);
     // An orderly end of a balancing run lowers the pendulum first, as rip-rt's does
     // (`braking::lowering_for`).
     let lowering = match (&reason, controller.phase()) {
@@ -284,7 +288,11 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
         _ => None,
     };
     let budget = if let Some(lowering) = &lowering {
-        stop = stop.lowering(lowering.law, rip_rt::envelope::arm_envelope(cfg), u_prev);
+        stop = stop.lowering(
+            lowering.law,
+            rip_rt::envelope::arm_envelope(cfg, parts),
+            u_prev,
+        );
         MAX_GENTLE_STOP_S
     } else {
         MAX_STOP_S
@@ -314,7 +322,7 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
             if let Err(f) = witness.observe(theta, alpha, (before_v, interval_v), dt_v, 0.0) {
                 let reason = StopReason::Witness(f);
                 let brake =
-                    brake_for_mode(cfg, brake_mode(&reason), witness.estimate(), interval_v);
+                    brake_for_mode(parts, brake_mode(&reason), witness.estimate(), interval_v);
                 stop.lowering_faulted(brake);
                 ended = "witness_in_lowering";
             }
