@@ -10,7 +10,7 @@
 //! ([`rip_core::envelope::STOP_BRAKE_FRACTION`]), two periods of latency at full drive, and the largest inertia
 //! of the arm, all on the configuration's `[plant]` (a preset until the rig is identified).
 //! Where that point is past `safety.arm_limit − ENVELOPE_MARGIN`, the stop is simulated from
-//! the whole measured state ([`SimulatedStop`]: the pendulum's reaction on the arm from the
+//! the whole measured state ([`SimulatedStop`](rip_control::stop::SimulatedStop): the pendulum's reaction on the arm from the
 //! model, not a share of the torque reserved for it), and the run stops
 //! ([`StopReason::ArmEnvelope`], exit 5) in the period the simulated stopping point is past
 //! it too, so that the stop that follows ends inside the limit. A controlled catch, whose
