@@ -549,36 +549,27 @@ fn a_silent_host_in_host_mode_leaves_the_armed_device_running_the_stop_on_its_ze
         &at(600_000),
     );
     assert!(!dev.onboard_running() && dev.voltage_mv() == 2000);
-    // Armed without the flag: the short.
-    let mut dev = device_with_stop();
+    // Armed without the flag, or armed and then a new upload (the wiring was verified for
+    // the image before): the short.
     let unverified = WatchdogStop { flags: 0, ..ARMED };
-    let a = ack(&mut dev, Message::WatchdogStop(unverified), &at(0));
-    assert_eq!((a.code, a.value), (ACK_OK, 0));
-    dev.handle(
-        Event::Frame(Frame {
-            seq: 5,
-            message: enable,
-        }),
-        &at(0),
-    );
-    dev.onboard_step(&at(60_000));
-    assert!(dev.braking() && !dev.onboard_running());
-    // A new upload forgets the armed stop (the wiring was verified for the image before).
-    let mut dev = device_with_stop();
-    ack(&mut dev, Message::WatchdogStop(ARMED), &at(0));
-    send(
-        &mut dev,
-        Message::UploadBegin(UploadBegin { total_len: 10 }),
-    );
-    dev.handle(
-        Event::Frame(Frame {
-            seq: 5,
-            message: enable,
-        }),
-        &at(0),
-    );
-    dev.onboard_step(&at(60_000));
-    assert!(dev.braking() && !dev.onboard_running());
+    let upload = Message::UploadBegin(UploadBegin { total_len: 10 });
+    for (armed, then) in [(unverified, None), (ARMED, Some(upload))] {
+        let mut dev = device_with_stop();
+        let a = ack(&mut dev, Message::WatchdogStop(armed), &at(0));
+        assert_eq!((a.code, a.value), (ACK_OK, u32::from(then.is_some())));
+        if let Some(message) = then {
+            send(&mut dev, message);
+        }
+        dev.handle(
+            Event::Frame(Frame {
+                seq: 5,
+                message: enable,
+            }),
+            &at(0),
+        );
+        dev.onboard_step(&at(60_000));
+        assert!(dev.braking() && !dev.onboard_running());
+    }
 }
 
 /// What ends the armed watchdog stop or refuses it: a driver fault that comes and goes

@@ -71,7 +71,7 @@ fn host_killed(
         emulate.extend(["--start", "down", "--raise-at", &raise]);
     }
     let emu = Emulator::lockstep(&format!("device-stop-{file}"), &emulate);
-    let mut child = spawn_run(
+    let child = spawn_run(
         &emu.device,
         "lqr",
         &["--onboard", "--lockstep", "--config", cfg_arg],
@@ -86,22 +86,80 @@ fn host_killed(
             .find(|r| r.t > first + RAISE_AT && r.driver == "drive")
             .map(|r| r.t)
     };
+    let what = format!("{name}: the host {offset} s into the onboard run");
+    let (rows, killed_at, stderr) = kill_after(&emu, child, &what, start, offset, start);
+    (rows, killed_at, limit, stderr)
+}
+
+/// SIGKILLs the run `child` of `emu` `offset` s after the time `at` finds in the true state
+/// (no stop frame can be sent), and waits for the plant's rest: the true state from the time
+/// `from` finds, the kill's time and the run's stderr.
+fn kill_after(
+    emu: &Emulator,
+    mut child: std::process::Child,
+    what: &str,
+    at: impl Fn(&[Truth]) -> Option<f64>,
+    offset: f64,
+    from: impl Fn(&[Truth]) -> Option<f64>,
+) -> (Vec<Truth>, f64, String) {
     let rows = emu.suspend_run_when(
         &mut child,
-        &format!("{name}: the host {offset} s into the onboard run"),
+        what,
         Duration::from_secs(60),
-        |rows| start(rows).is_some_and(|s| rows.last().unwrap().t > s + offset - 0.1),
-        |rows| start(rows).is_some_and(|s| rows.last().unwrap().t >= s + offset),
+        |rows| at(rows).is_some_and(|s| rows.last().unwrap().t > s + offset - 0.1),
+        |rows| at(rows).is_some_and(|s| rows.last().unwrap().t >= s + offset),
     );
-    let started = start(&rows).unwrap();
+    let started = from(&rows).unwrap();
     let killed_at = rows.last().unwrap().t;
-    // SIGKILL: no stop frame can be sent.
     unsafe { libc::kill(child.id() as i32, libc::SIGKILL) };
     let out = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr).to_string();
     let rows = emu.wait_for_rest(REST_RATE, 1.0, Duration::from_secs(60));
     let rows = rows.into_iter().filter(|r| r.t >= started).collect();
-    (rows, killed_at, limit, stderr)
+    (rows, killed_at, stderr)
+}
+
+/// Judges a run whose host was killed at `killed_at` on the true state `rows`: inside `limit`
+/// throughout, the device's own braking law driving after the command watchdog's 50 ms (the
+/// host's last command lasts until then), at rest with the driver off at the end; a failure
+/// goes to `wrong`. Returns the figures' line.
+fn judge(
+    case: &str,
+    rows: &[Truth],
+    killed_at: f64,
+    limit: f64,
+    wrong: &mut Vec<String>,
+) -> String {
+    let max_theta = max_excursion(rows);
+    let after: Vec<Truth> = rows.iter().filter(|r| r.t >= killed_at).cloned().collect();
+    let last = rows.last().unwrap();
+    let braked = rows
+        .iter()
+        .any(|r| r.t > killed_at + 0.06 && r.driver == "drive");
+    let stopped_driving = rows
+        .iter()
+        .rev()
+        .find(|r| r.driver == "drive")
+        .map_or(killed_at, |r| r.t);
+    if max_theta.is_nan() || max_theta >= limit {
+        wrong.push(format!("{case}: the arm reached {max_theta:.3} rad"));
+    }
+    if !braked {
+        wrong.push(format!("{case}: the device did not brake the arm itself"));
+    }
+    if last.theta_dot.abs() > REST_RATE || last.driver == "drive" {
+        wrong.push(format!("{case}: not at rest with the driver off: {last:?}"));
+    }
+    format!(
+        "{case}: true max |theta| {max_theta:.3} rad, {:.3} rad after the kill (limit {limit}), \
+         device's stop drove until {:.2} s after the kill, end: theta {:.3} rad, rate {:.4} \
+         rad/s, driver {}",
+        max_excursion(&after),
+        stopped_driving - killed_at,
+        last.theta,
+        last.theta_dot,
+        last.driver
+    )
 }
 
 #[test]
@@ -116,34 +174,7 @@ fn a_device_whose_host_dies_brakes_and_holds_the_arm_inside_the_limit() {
                 stderr.contains("sign check passed"),
                 "{case}: no sign check:\n{stderr}"
             );
-            let max_theta = max_excursion(&rows);
-            let last = rows.last().unwrap();
-            // The device's own stop drives the arm (the braking law) after the host timeout.
-            let braked = rows
-                .iter()
-                .any(|r| r.t > killed_at + 0.06 && r.driver == "drive");
-            let stopped_driving = rows
-                .iter()
-                .rev()
-                .find(|r| r.driver == "drive")
-                .map_or(killed_at, |r| r.t);
-            println!(
-                "{case}: true max |theta| {max_theta:.3} rad (limit {limit}), device's stop drove \
-                 until {:.2} s after the kill, end: theta {:.3} rad, rate {:.4} rad/s, driver {}",
-                stopped_driving - killed_at,
-                last.theta,
-                last.theta_dot,
-                last.driver
-            );
-            if max_theta.is_nan() || max_theta >= limit {
-                wrong.push(format!("{case}: the arm reached {max_theta:.3} rad"));
-            }
-            if !braked {
-                wrong.push(format!("{case}: the device did not brake the arm itself"));
-            }
-            if last.theta_dot.abs() > REST_RATE || last.driver == "drive" {
-                wrong.push(format!("{case}: not at rest with the driver off: {last:?}"));
-            }
+            println!("{}", judge(&case, &rows, killed_at, limit, &mut wrong));
         }
     }
     assert!(wrong.is_empty(), "{}", wrong.join("\n"));
@@ -295,7 +326,7 @@ fn host_mode_killed(
     let cfg = swing_config(&format!("device-stop-host-{file}"), 4.0, rig_toml);
     let limit = rip_rt::config::Config::load(&cfg).unwrap().safety.arm_limit;
     let emu = hanging_rig(&format!("device-stop-host-{file}"), &cfg, &[], true);
-    let mut child = spawn_run(
+    let child = spawn_run(
         &emu.device,
         "lqr",
         &["--swing-up", "--config", cfg.to_str().unwrap(), LOCKSTEP],
@@ -307,21 +338,8 @@ fn host_mode_killed(
             swing_start(rows)
         }
     };
-    let rows = emu.suspend_run_when(
-        &mut child,
-        &format!("{name}: the host {offset} s {when}"),
-        Duration::from_secs(60),
-        |rows| from(rows).is_some_and(|s| rows.last().unwrap().t > s + offset - 0.1),
-        |rows| from(rows).is_some_and(|s| rows.last().unwrap().t >= s + offset),
-    );
-    let swing = swing_start(&rows).unwrap();
-    let killed_at = rows.last().unwrap().t;
-    // SIGKILL: no stop frame can be sent.
-    unsafe { libc::kill(child.id() as i32, libc::SIGKILL) };
-    let out = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
-    let rows = emu.wait_for_rest(REST_RATE, 1.0, Duration::from_secs(60));
-    let rows = rows.into_iter().filter(|r| r.t >= swing).collect();
+    let what = format!("{name}: the host {offset} s {when}");
+    let (rows, killed_at, stderr) = kill_after(&emu, child, &what, from, offset, swing_start);
     (rows, killed_at, limit, stderr)
 }
 
@@ -337,38 +355,7 @@ fn a_host_mode_device_whose_host_dies_brakes_and_holds_the_arm_inside_the_limit(
                 stderr.contains("the device stops the arm itself (braking"),
                 "{case}: the device's stop was not armed:\n{stderr}"
             );
-            let max_theta = max_excursion(&rows);
-            let after: Vec<Truth> = rows.iter().filter(|r| r.t >= killed_at).cloned().collect();
-            let last = rows.last().unwrap();
-            // The host's last command lasts until the command watchdog (50 ms); a drive after
-            // it is the device's own braking law.
-            let braked = rows
-                .iter()
-                .any(|r| r.t > killed_at + 0.06 && r.driver == "drive");
-            let stopped_driving = rows
-                .iter()
-                .rev()
-                .find(|r| r.driver == "drive")
-                .map_or(killed_at, |r| r.t);
-            println!(
-                "{case}: true max |theta| {max_theta:.3} rad from the swing's start, {:.3} rad \
-                 after the kill (limit {limit}), device's stop drove until {:.2} s after the \
-                 kill, end: theta {:.3} rad, rate {:.4} rad/s, driver {}",
-                max_excursion(&after),
-                stopped_driving - killed_at,
-                last.theta,
-                last.theta_dot,
-                last.driver
-            );
-            if max_theta.is_nan() || max_theta >= limit {
-                wrong.push(format!("{case}: the arm reached {max_theta:.3} rad"));
-            }
-            if !braked {
-                wrong.push(format!("{case}: the device did not brake the arm itself"));
-            }
-            if last.theta_dot.abs() > REST_RATE || last.driver == "drive" {
-                wrong.push(format!("{case}: not at rest with the driver off: {last:?}"));
-            }
+            println!("{}", judge(&case, &rows, killed_at, limit, &mut wrong));
         }
     }
     assert!(wrong.is_empty(), "{}", wrong.join("\n"));
