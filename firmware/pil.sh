@@ -6,6 +6,7 @@
 # slowed core. Ends with one line per controller and check:
 #   pil: <controller> steps=N max_du=X max_instr=Y balanced=yes|no
 #   pil: stop steps=N max_du=X max_instr=Y max_arm=Z
+#   pil: watchdog records=N first_ms=X period_us=Y end_s=Z applied_mv=0
 #   pil: timer-<rate> periods=N mean_us=X min_us=Y max_us=Z max_step_instr=W overruns=0
 #   pil: budget accepted=... refused=...
 #   pil: cli-<controller> exit=0 rows=N max_step_cycles=C

@@ -51,6 +51,14 @@
 //! whole step's SysTick count, as the controllers'), and the arm inside 3 rad. The line is
 //! `pil: stop steps=N max_du=X max_instr=Y max_arm=Z`.
 //!
+//! **Watchdog**: host mode's stop on the command watchdog (protocol v3's watchdog stop): the
+//! image with the stop's design is uploaded, the stop armed with the wiring verified (the
+//! `qemu` build's encoders read 0: the zeros there, the pendulum hanging still), then one
+//! enabling command and silence. The device's watchdog must trip about 50 ms later and the
+//! main loop start the SysTick on the stop: telemetry with the host-silent state at the stop's
+//! period, then the stop's end, the driver disabled at 0 V within the stop's longest time.
+//! The line is `pil: watchdog records=N first_ms=X period_us=Y end_s=Z applied_mv=0`.
+//!
 //! **Command line**: last, `rip-rt run --onboard` itself (the `rip-rt` binary beside this
 //! example) runs LQR, LQG and MPC against a freshly booted image for a few seconds: it must
 //! upload, verify and start the design, log the telemetry, stop on its duration with exit 0,
@@ -76,8 +84,9 @@ use std::time::Duration;
 use rip_device::law::ControlLaw;
 use rip_device::Onboard;
 use rip_protocol::{
-    Message, OnboardStart, PilStep, Telemetry, ACK_OK, ONBOARD_OVERRUN, ONBOARD_RUNNING,
-    PIL_PHASES, PIL_PHASE_QP, PIL_PHASE_SHIFT, PIL_RESET, PIL_STOP, STATUS_ENABLED,
+    Message, OnboardStart, PilStep, Telemetry, WatchdogStop, ACK_OK, COMMAND_ENABLE,
+    ONBOARD_HOST_SILENT, ONBOARD_OVERRUN, ONBOARD_RUNNING, ONBOARD_WIRING_VERIFIED, PIL_PHASES,
+    PIL_PHASE_QP, PIL_PHASE_SHIFT, PIL_RESET, PIL_STOP, STATUS_ENABLED, STATUS_ONBOARD,
 };
 use rip_rt::config::Config;
 use rip_rt::controllers::ControllerKind;
@@ -333,6 +342,15 @@ fn main() {
             }
         }
     }
+    if !only.as_deref().is_some_and(|o| o != "watchdog") {
+        match watchdog_check(&mut link) {
+            Ok(line) => lines.push(format!("pil: watchdog {line}")),
+            Err(e) => {
+                println!("pil: watchdog failed: {e}");
+                ok = false;
+            }
+        }
+    }
     if !only.as_deref().is_some_and(|o| o != "budget") {
         match budget_check(&mut link) {
             Ok(line) => lines.push(format!("pil: budget {line}")),
@@ -396,6 +414,80 @@ fn host_copy<R: rip_control::Real>(
     law.buffer()[..img.len()].copy_from_slice(img);
     law.load(img.len())?;
     Ok(law)
+}
+
+/// Host mode's watchdog stop on the chip (module docs, "Watchdog"): the line's fields, or
+/// what failed.
+fn watchdog_check(link: &mut Link<'_>) -> Result<String, String> {
+    let cfg = config(10.0);
+    let design = onboard::design(ControllerKind::Lqr, &cfg)?;
+    let img = onboard::image(&design, &cfg)?;
+    link.upload(&img)?;
+    let armed = WatchdogStop {
+        flags: ONBOARD_WIRING_VERIFIED,
+        arm_zero: 0,
+        pendulum_down: 0,
+    };
+    match link.request(Message::WatchdogStop(armed))? {
+        (ACK_OK, 1) => {}
+        other => return Err(format!("the watchdog stop was not armed: {other:?}")),
+    }
+    let enable = rip_protocol::Command {
+        voltage_mv: 300,
+        flags: COMMAND_ENABLE,
+    };
+    let m = link
+        .sample(Duration::from_secs(1))
+        .map_err(|e| e.to_string())?
+        .ok_or("no measurement before the command")?;
+    link.telemetry.clear();
+    link.send(Message::Command(enable))
+        .map_err(|e| e.to_string())?;
+    // Silence: only reading, until the stop's final record (the run over) or its bound.
+    let bound = Duration::from_secs_f64(rip_control::stop::MAX_STOP_S + 10.0);
+    let start = std::time::Instant::now();
+    let ended = |t: &[Telemetry]| t.last().is_some_and(|r| r.status & STATUS_ONBOARD == 0);
+    while !ended(&link.telemetry) && start.elapsed() < bound {
+        link.wait(Duration::from_millis(50), |_| false)
+            .map_err(|e| e.to_string())?;
+    }
+    let t = link.telemetry.clone();
+    let (Some(first), Some(last)) = (t.first(), t.last()) else {
+        return Err("no telemetry: the device did not start its stop".into());
+    };
+    if !ended(&t) || t.iter().any(|r| r.onboard != ONBOARD_HOST_SILENT) {
+        return Err(format!("{} records, the last {last:?}", t.len()));
+    }
+    if last.applied_mv != 0 || last.status & STATUS_ENABLED != 0 {
+        return Err(format!("the stop ended driving: {last:?}"));
+    }
+    let us = |r: &Telemetry| f64::from(r.device_time_us.wrapping_sub(m.device_time_us));
+    let first_ms = us(first) * 1e-3;
+    if !(40.0..=80.0).contains(&first_ms) {
+        return Err(format!("the stop began {first_ms} ms after the command"));
+    }
+    let stop_period_us = rip_control::stop::STOP_PERIOD_S * 1e6;
+    let steps: Vec<&Telemetry> = t
+        .iter()
+        .filter(|r| r.status & STATUS_ONBOARD != 0)
+        .collect();
+    let mut period_us = 0.0f64;
+    for w in steps.windows(2) {
+        let dt = f64::from(w[1].device_time_us.wrapping_sub(w[0].device_time_us));
+        if (dt - stop_period_us).abs() > PERIOD_TOLERANCE * stop_period_us {
+            return Err(format!("records {dt} µs apart: {:?} then {:?}", w[0], w[1]));
+        }
+        period_us = period_us.max(dt);
+    }
+    let end_s = (us(last) - us(first)) * 1e-6;
+    if end_s > rip_control::stop::MAX_STOP_S + 0.05 {
+        return Err(format!("the stop took {end_s} s"));
+    }
+    Ok(format!(
+        "records={} first_ms={first_ms:.1} period_us={period_us} end_s={end_s:.2} applied_mv={}",
+        t.len(),
+        last.applied_mv
+    ))
 }
 
 /// The device's own stop in the loop (module docs, "Stop").
