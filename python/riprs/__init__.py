@@ -4,7 +4,7 @@ A Rust core (``rip-core``) with numpy in and out. The design functions follow py
 names, argument and return orders; :func:`kalman` follows MATLAB and returns both gains.
 """
 
-from riprs import paper
+from riprs import paper, stats
 from riprs._riprs import (
     DivergedError,
     InvalidParameterError,
@@ -84,5 +84,6 @@ __all__ = [
     "simulate",
     "simulate_batch",
     "simulate_metrics",
+    "stats",
     "tune",
 ]

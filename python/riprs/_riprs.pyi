@@ -629,6 +629,13 @@ class NamedRig:
 def named_rig(name: str) -> NamedRig: ...
 def named_rigs() -> list[str]: ...
 
+# riprs.stats (rip_core::stats)
+def wilson(successes: int, runs: int, z: float) -> tuple[float, float]:
+    """Wilson score interval of ``successes`` in ``runs`` at the normal quantile ``z``."""
+
+def guaranteed_successes(runs: int, p: float, confidence: float) -> int:
+    """The largest ``k`` with ``P(Binomial(runs, p) >= k) >= confidence``."""
+
 # riprs.envs (rip_core::sim::vec_env)
 ENV_OBS_DIM: int
 ENV_MAX_DELAY: int

@@ -22,6 +22,7 @@ mod rip_rt_cli;
 mod shared;
 mod sim;
 mod spec;
+mod stats;
 mod swingup;
 mod tune;
 
@@ -37,6 +38,7 @@ fn _riprs(m: &Bound<'_, PyModule>) -> PyResult<()> {
     mpc::register(m)?;
     spec::register(m)?;
     swingup::register(m)?;
+    stats::register(m)?;
     excitation::register(m)?;
     identify::register(m)?;
     rip_rt_cli::register(m)?;
