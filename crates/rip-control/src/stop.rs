@@ -191,6 +191,18 @@ pub const SIMULATED_REST_RATE: f64 = 0.05;
 /// counts a period 4.6 rad/s on a 2048-count encoder.
 pub const STOP_PERIOD_S: f64 = 0.01;
 
+/// The steps of period `step_s` (s) between two periods of the stop's sequence on a device:
+/// `⌈STOP_PERIOD_S / step_s⌉`, within 1 to 1000 (a design steps at 0.1 ms at the fastest);
+/// 1 for a period that is not positive and finite.
+pub fn steps_per_stop_period(step_s: f64) -> u32 {
+    let steps = libm::ceil(STOP_PERIOD_S / step_s - 1e-9);
+    if steps.is_finite() {
+        steps.clamp(1.0, 1000.0) as u32
+    } else {
+        1
+    }
+}
+
 /// The longest a stop after a fault runs (s): the braking law for up to [`MAX_BRAKE_S`], the
 /// hold law for up to [`MAX_HOLD_S`]; then the driver is disabled whatever the arm does.
 pub const MAX_STOP_S: f64 = MAX_BRAKE_S + MAX_HOLD_S;

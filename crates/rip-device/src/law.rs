@@ -34,12 +34,13 @@
 //! and the start said the wiring was verified, the law runs the stop of the image's stop
 //! design ([`StopDesign::sequence`]: the braking law, then the hold law, then the short, the
 //! rule of `rip_control::stop` that rip-rt runs on the host) on the angles and the rates over
-//! the device's clock ([`rip_control::stop::sample_rates`]), at most every [`STOP_PERIOD_S`]
+//! the device's clock ([`rip_control::stop::sample_rates`]), at most every
+//! [`STOP_PERIOD_S`](rip_control::stop::STOP_PERIOD_S)
 //! (a faster design holds the stop's command in between); otherwise the device shorts the
 //! windings at once.
 
 use rip_control::stop::{
-    sample_rates, BrakeCommand, StopDesign, StopSequence, STOP_MAGIC, STOP_PERIOD_S,
+    sample_rates, steps_per_stop_period, BrakeCommand, StopDesign, StopSequence, STOP_MAGIC,
 };
 use rip_control::{Controller, Design, Measurement, Phase, Real};
 use rip_protocol::{PIL_PHASE_CONVERT, PIL_PHASE_ESTIMATE, PIL_PHASE_LINEAR, PIL_PHASE_QP};
@@ -161,7 +162,7 @@ pub fn write_image<R: Real>(
 }
 
 /// The device's own stop in progress (module docs): its sequence, run every `every` steps
-/// (at least [`STOP_PERIOD_S`] apart) on the angles of `sensor`, the last of those samples'
+/// (at least [`STOP_PERIOD_S`](rip_control::stop::STOP_PERIOD_S) apart) on the angles of `sensor`, the last of those samples'
 /// angles and device clock for the rates, the steps so far, and the command held between the
 /// sequence's periods.
 #[derive(Debug, Clone, Copy)]
@@ -321,7 +322,7 @@ impl<R: Real, const N: usize> Onboard for ControlLaw<R, N> {
 
     fn begin_stop(&mut self, verified: bool, zero: Option<[i32; 2]>) -> bool {
         let period_s = f64::from(self.period_us()) * 1e-6;
-        let every = libm::ceil(STOP_PERIOD_S / period_s - 1e-9).clamp(1.0, 1000.0) as u32;
+        let every = steps_per_stop_period(period_s);
         let sensor = zero.map_or(self.sensor, |z| self.sensor.zeroed_at(z));
         self.stopping = self
             .stop_design()

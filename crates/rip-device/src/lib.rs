@@ -66,7 +66,7 @@
 //! stop as an onboard run already stopping on the host's silence (`ONBOARD_HOST_SILENT`), on
 //! angles from those zeros, stepped by [`Device::onboard_step`] like every onboard run (the
 //! firmware's timer runs while [`Device::onboard_running`]) and reported by telemetry every
-//! [`STOP_PERIOD_S`]; a host command ends it (the host takes
+//! [`STOP_PERIOD_S`](rip_control::stop::STOP_PERIOD_S); a host command ends it (the host takes
 //! over). An upload, an onboard start or the plain stop frame (the end of the host's run)
 //! disarms it. A driver fault read between two steps of an onboard run, even one that has
 //! cleared by the next step, stops the run as a fault.
@@ -79,7 +79,7 @@ mod onboard;
 
 pub use onboard::{DesignRefused, NoOnboard, Onboard};
 use onboard::{Run, Upload};
-use rip_control::stop::{BrakeCommand, MAX_STOP_S, STOP_PERIOD_S};
+use rip_control::stop::{BrakeCommand, MAX_STOP_S};
 
 use rip_protocol::{
     crc32, encode, Ack, Command, Event, Frame, Measurement, Message, OnboardStart, Parser, PilMove,

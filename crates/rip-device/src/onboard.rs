@@ -337,11 +337,10 @@ impl<C: Onboard> Device<C> {
         }
         // Telemetry at the stop's own rate: a record per period of its sequence.
         let period_s = f64::from(self.onboard.period_us().max(1)) * 1e-6;
-        let decimation =
-            libm::ceil(STOP_PERIOD_S / period_s - 1e-9).clamp(1.0, f64::from(u16::MAX));
+        let decimation = rip_control::stop::steps_per_stop_period(period_s);
         self.run = Some(Run {
             settings: OnboardStart {
-                decimation: decimation as u16,
+                decimation: u16::try_from(decimation).unwrap_or(u16::MAX),
                 host_timeout_ms: u16::MAX,
                 arm_center: 0,
                 arm_limit: u32::MAX,

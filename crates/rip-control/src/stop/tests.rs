@@ -220,3 +220,23 @@ fn counts_become_angles_and_the_position_rule_takes_nan_as_past() {
     assert!(!past_limit(3.0, 3.0) && past_limit(-3.01, 3.0));
     assert!(past_limit(f64::NAN, 3.0) && past_limit(f32::INFINITY, 3.0));
 }
+
+/// A device faster than the stop's period runs its sequence every ⌈10 ms / T_s⌉ steps; a
+/// slower one every step; a period that is not positive and finite, every step.
+#[test]
+fn a_fast_device_runs_the_stop_every_ten_milliseconds() {
+    for (step_s, steps) in [
+        (1e-3, 10),
+        (3e-3, 4),
+        (2.5e-3, 4),
+        (1e-2, 1),
+        (2e-2, 1),
+        (1e-4, 100),
+        (1e-6, 1000),
+        (0.0, 1),
+        (f64::NAN, 1),
+        (-1e-3, 1),
+    ] {
+        assert_eq!(steps_per_stop_period(step_s), steps, "{step_s} s");
+    }
+}
