@@ -10,8 +10,9 @@
 //! ([`rip_core::envelope::STOP_BRAKE_FRACTION`]), two periods of latency at full drive, and the largest inertia
 //! of the arm, all on the configuration's `[plant]` (a preset until the rig is identified).
 //! Where that point is past `safety.arm_limit − ENVELOPE_MARGIN`, the stop is simulated from
-//! the whole measured state ([`SimulatedStop`](rip_control::stop::SimulatedStop): the pendulum's reaction on the arm from the
-//! model, not a share of the torque reserved for it), and the run stops
+//! the whole measured state ([`SimulatedStop`](rip_control::stop::SimulatedStop): the
+//! pendulum's reaction on the arm from the model, not a share of the torque reserved for it),
+//! and the run stops
 //! ([`StopReason::ArmEnvelope`], exit 5) in the period the simulated stopping point is past
 //! it too, so that the stop that follows ends inside the limit. A controlled catch, whose
 //! arm moves fast with the pendulum near upright, is not stopped by the analytic distance's
@@ -327,6 +328,11 @@ mod tests {
     use super::*;
     use rip_core::excitation::Signal;
 
+    /// The default rig's stop braking in `mode`: [`brake`] with its [`stop_parts`].
+    fn brake_in(mode: BrakeMode) -> Brake {
+        brake(stop_parts(&Config::from_toml("").unwrap()).as_ref(), mode)
+    }
+
     /// Spins the paper rig's arm to `speed` (rad/s), then runs `brake` on it for 2 s, the
     /// motor's leads swapped if `reversed`, the reading that of a 2048-count encoder; the
     /// arm's travel from the stop's start and its final speed.
@@ -357,19 +363,10 @@ mod tests {
     #[test]
     fn a_reversed_rig_is_braked_by_the_reversed_law_and_a_wrong_diagnosis_falls_back_to_the_short()
     {
-        let cfg = Config::from_toml("").unwrap();
         // The law as it stands drives a reversed rig away; reversed, it brakes it, as far as
         // the trusted law brakes a rig wired right.
-        let (right, v_right) = braked(
-            brake(stop_parts(&cfg).as_ref(), BrakeMode::Active),
-            false,
-            10.0,
-        );
-        let (rev, v_rev) = braked(
-            brake(stop_parts(&cfg).as_ref(), BrakeMode::Reversed),
-            true,
-            10.0,
-        );
+        let (right, v_right) = braked(brake_in(BrakeMode::Active), false, 10.0);
+        let (rev, v_rev) = braked(brake_in(BrakeMode::Reversed), true, 10.0);
         assert!(
             v_right.abs() < 0.1 && v_rev.abs() < 0.1,
             "{v_right} {v_rev}"
@@ -378,16 +375,8 @@ mod tests {
         // The reversed law on a rig wired right speeds the arm up: the stop shorts instead
         // after a few periods (here 9.2 rad of travel from 10 rad/s, against 6.9 rad for the
         // short alone and 1.4 rad for the law with the right sign).
-        let (short, _) = braked(
-            brake(stop_parts(&cfg).as_ref(), BrakeMode::Short),
-            false,
-            10.0,
-        );
-        let (travel, v) = braked(
-            brake(stop_parts(&cfg).as_ref(), BrakeMode::Reversed),
-            false,
-            10.0,
-        );
+        let (short, _) = braked(brake_in(BrakeMode::Short), false, 10.0);
+        let (travel, v) = braked(brake_in(BrakeMode::Reversed), false, 10.0);
         assert!(v.abs() < 1.0, "{v}");
         assert!(travel < 1.4 * short, "{travel} vs {short}");
         assert!(short > 2.0 * right, "{short} {right}");
@@ -395,7 +384,6 @@ mod tests {
 
     #[test]
     fn a_stop_before_the_sign_check_passed_checks_the_sign_and_stops_a_reversed_rig() {
-        let cfg = Config::from_toml("").unwrap();
         // A watchdog stop during the sign-check pulse: the trusted law would be used.
         let reason = StopReason::Watchdog(3);
         assert_eq!(stop_mode(&reason, true, true), BrakeMode::Active);
@@ -407,21 +395,9 @@ mod tests {
         );
         // On a rig with its motor leads swapped, the trusted law drives the arm away; the
         // checked law flips and stops it, within a few times the travel of a right rig.
-        let (right, _) = braked(
-            brake(stop_parts(&cfg).as_ref(), BrakeMode::Active),
-            false,
-            10.0,
-        );
-        let (away, _) = braked(
-            brake(stop_parts(&cfg).as_ref(), BrakeMode::Active),
-            true,
-            10.0,
-        );
-        let (checked, v) = braked(
-            brake(stop_parts(&cfg).as_ref(), BrakeMode::Checked),
-            true,
-            10.0,
-        );
+        let (right, _) = braked(brake_in(BrakeMode::Active), false, 10.0);
+        let (away, _) = braked(brake_in(BrakeMode::Active), true, 10.0);
+        let (checked, v) = braked(brake_in(BrakeMode::Checked), true, 10.0);
         assert!(v.abs() < 1.0, "{v}");
         assert!(away > 5.0 * right, "{away} vs {right}");
         assert!(checked < 0.5 * away, "{checked} vs {away}");
@@ -430,15 +406,11 @@ mod tests {
     #[test]
     fn a_modelled_stop_brakes_as_the_trusted_law_and_a_moving_reading_ends_it() {
         let cfg = Config::from_toml("").unwrap();
+        let parts = stop_parts(&cfg);
         let x = State::new(0.0, 10.0, std::f64::consts::PI, 0.0);
-        let (right, _) = braked(
-            brake(stop_parts(&cfg).as_ref(), BrakeMode::Active),
-            false,
-            10.0,
-        );
+        let (right, _) = braked(brake_in(BrakeMode::Active), false, 10.0);
         // The reading is frozen: the model's rate is all the stop has.
-        let mut brake =
-            brake_for_mode(stop_parts(&cfg).as_ref(), BrakeMode::Modelled, Some(x), 0.0);
+        let mut brake = brake_for_mode(parts.as_ref(), BrakeMode::Modelled, Some(x), 0.0);
         assert_eq!(brake.mode(), BrakeMode::Modelled);
         let mut sim = crate::plant::PlantSim::new(crate::plant::Model::Paper, 0.0, 0.0);
         sim.set_state([0.0, 10.0, std::f64::consts::PI, 0.0]);
@@ -461,8 +433,7 @@ mod tests {
         // against 1.07 rad from 10 rad/s; the short alone: 6.9 rad).
         assert!(travel < right + 0.5, "{travel} vs {right}");
         // A reading that moves: the model is not the arm.
-        let mut brake =
-            brake_for_mode(stop_parts(&cfg).as_ref(), BrakeMode::Modelled, Some(x), 0.0);
+        let mut brake = brake_for_mode(parts.as_ref(), BrakeMode::Modelled, Some(x), 0.0);
         assert_eq!(brake.command(Some(3.0)), BrakeCommand::Short);
         assert_eq!(brake.mode(), BrakeMode::Short);
         assert_eq!(
