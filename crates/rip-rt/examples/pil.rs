@@ -333,71 +333,35 @@ fn main() {
             if balanced && same { "yes" } else { "no" }
         ));
     }
-    if !only.as_deref().is_some_and(|o| o != "stop") {
-        match stop_check(&mut link) {
-            Ok(line) => lines.push(format!("pil: stop {line}")),
+    // Each named check: its line, or what failed (and the run fails).
+    let mut check = |name: &str, result: &mut dyn FnMut() -> Result<String, String>| {
+        if only.as_deref().is_some_and(|o| o != name) {
+            return;
+        }
+        match result() {
+            Ok(line) => lines.push(format!("pil: {name} {line}")),
             Err(e) => {
-                println!("pil: stop failed: {e}");
+                println!("pil: {name} failed: {e}");
                 ok = false;
             }
         }
-    }
-    if !only.as_deref().is_some_and(|o| o != "watchdog") {
-        match watchdog_check(&mut link) {
-            Ok(line) => lines.push(format!("pil: watchdog {line}")),
-            Err(e) => {
-                println!("pil: watchdog failed: {e}");
-                ok = false;
-            }
-        }
-    }
-    if !only.as_deref().is_some_and(|o| o != "budget") {
-        match budget_check(&mut link) {
-            Ok(line) => lines.push(format!("pil: budget {line}")),
-            Err(e) => {
-                println!("pil: budget failed: {e}");
-                ok = false;
-            }
-        }
-    }
+    };
+    check("stop", &mut || stop_check(&mut link));
+    check("watchdog", &mut || watchdog_check(&mut link));
+    check("budget", &mut || budget_check(&mut link));
     for (name, period_ms, periods) in [
         ("timer-1khz", 1.0, TIMER_PERIODS),
         ("timer-100hz", 10.0, TIMER_PERIODS / 5),
     ] {
-        if only.as_deref().is_some_and(|o| o != name) {
-            continue;
-        }
-        match timer_check(&mut link, period_ms, periods) {
-            Ok(line) => lines.push(format!("pil: {name} {line}")),
-            Err(e) => {
-                println!("pil: {name} failed: {e}");
-                ok = false;
-            }
-        }
+        check(name, &mut || timer_check(&mut link, period_ms, periods));
     }
     // QEMU is stopped first: the overrun check boots its own.
     drop(qemu);
-    if !only.as_deref().is_some_and(|o| o != "overrun") {
-        match overrun_check(&image) {
-            Ok(line) => lines.push(format!("pil: overrun {line}")),
-            Err(e) => {
-                println!("pil: overrun failed: {e}");
-                ok = false;
-            }
-        }
-    }
+    check("overrun", &mut || overrun_check(&image));
     for controller in ["lqr", "lqg", "mpc"] {
-        let name = format!("cli-{controller}");
-        if only.as_deref().is_some_and(|o| o != name) {
-            continue;
-        }
-        match cli_check(&image, controller) {
-            Ok(line) => lines.push(format!("pil: {name} {line}")),
-            Err(e) => {
-                println!("pil: {name} failed: {e}");
-                ok = false;
-            }
-        }
+        check(&format!("cli-{controller}"), &mut || {
+            cli_check(&image, controller)
+        });
     }
     for l in &lines {
         println!("{l}");
