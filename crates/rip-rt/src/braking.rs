@@ -5,8 +5,8 @@
 
 use crate::config::Config;
 use crate::envelope::{
-    arm_envelope, brake_for_mode, sample_rates, stop_mode, stop_parts, stop_sequence, BrakeCommand,
-    BrakeMode, BrakeReport, StopParts, StopSequence,
+    arm_envelope, brake_for_mode, sample_rates, stop_mode, stop_sequence, BrakeCommand, BrakeMode,
+    BrakeReport, StopParts, StopSequence,
 };
 use crate::exchange::exchange;
 use crate::loop_core::LoopCore;
@@ -167,8 +167,8 @@ pub fn bring_to_rest(
         return report;
     }
     let watch = StopWatch::for_stop(reason);
-    // The stop's design, once: every part of this stop takes it.
-    let parts = stop_parts(cfg);
+    // The run's stop, designed when the loop was built: every part of this stop takes it.
+    let parts = core.stop_parts().copied();
     let parts = parts.as_ref();
     let brake = brake_for_mode(parts, mode, core.witness_estimate(), core.held_voltage());
     let lowering = lowering_for(core, reason, mode).copied();

@@ -71,6 +71,9 @@ pub struct LoopCore {
     // The gentle end's law for this rig, designed before the motor is enabled (the search
     // takes tens of milliseconds, too long for the period the run ends in).
     lowering: Option<rip_core::envelope::Lowering>,
+    // The stop's parts, designed once for the run (the envelope's simulated stop, and the
+    // stop at its end, which would otherwise design them before its first command).
+    stop_parts: Option<crate::envelope::StopParts>,
     // The witness's next measurement follows a gap (`witness_restart`).
     witness_gap: bool,
 }
@@ -120,6 +123,7 @@ impl LoopCore {
         // Only a controller that itself starts in the swing-up (rip-core's supervisor) is
         // trusted with the pendulum's fall rule.
         let supervised = controller.phase() == Phase::SwingUp;
+        let stop_parts = crate::envelope::stop_parts(cfg);
         Ok(Self {
             controller,
             parser: Parser::new(),
@@ -156,8 +160,9 @@ impl LoopCore {
             last_request_ns: None,
             host_interval_s: None,
             lockstep: false,
-            envelope: crate::envelope::arm_envelope(cfg, crate::envelope::stop_parts(cfg).as_ref()),
+            envelope: crate::envelope::arm_envelope(cfg, stop_parts.as_ref()),
             lowering,
+            stop_parts,
             witness_gap: false,
         })
     }
@@ -171,6 +176,11 @@ impl LoopCore {
     /// on its model.
     pub fn lowering(&self) -> Option<&rip_core::envelope::Lowering> {
         self.lowering.as_ref()
+    }
+
+    /// The run's stop, designed once ([`crate::envelope::stop_parts`]).
+    pub fn stop_parts(&self) -> Option<&crate::envelope::StopParts> {
+        self.stop_parts.as_ref()
     }
 
     /// The parser's counters.
