@@ -55,10 +55,12 @@ use crate::real::Real;
 use crate::swing::{wrap_angle, ArmModel};
 
 mod brake;
+mod coupling;
 mod design;
 mod sequence;
 
 pub use brake::{Brake, BrakeCommand, BrakeMode, PROGRESS_PERIODS, WRONG_SIGN_PERIODS};
+pub use coupling::{CouplingTest, COUPLING_THRESHOLD};
 pub use design::{StopDesign, StopDesignError, STOP_DESIGN_LEN, STOP_LAYOUT_VERSION, STOP_MAGIC};
 pub use sequence::{
     momentum_rate, StopSequence, HOLD_BLIND_PERIODS, HOLD_GIVE_UP_RAD, LOWERED_HANGING_RAD,

@@ -107,6 +107,19 @@ impl Config {
     pub fn period_s(&self) -> f64 {
         self.loop_.period_ms * 1e-3
     }
+
+    /// One reading's standard deviation (rad) of the arm and the pendulum: a count's
+    /// quantisation (`q/√12`) and `[sensor] noise_std` together.
+    pub fn reading_sigma(&self) -> [f64; 2] {
+        let tau = std::f64::consts::TAU;
+        let d = &self.device;
+        let q = [
+            tau / f64::from(d.arm_counts_per_rev.max(1)),
+            tau / f64::from(d.pendulum_counts_per_rev.max(1)),
+        ];
+        let s = self.spec.sensor.noise_std;
+        std::array::from_fn(|j| (q[j] * q[j] / 12.0 + s[j] * s[j]).sqrt())
+    }
 }
 
 #[cfg(test)]

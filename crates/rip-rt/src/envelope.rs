@@ -45,8 +45,8 @@ use crate::witness::WitnessFault;
 
 /// The stop's rule, defined once in the `no_std` run-time layer ([`rip_control::stop`]).
 pub use rip_control::stop::{
-    momentum_rate, sample_rates, ArmEnvelope, Brake, BrakeCommand, BrakeMode, Breach, RestTest,
-    StopDesign, StopSequence, HOLD_BLIND_PERIODS, HOLD_GIVE_UP_RAD, LOWERED_HANGING_RAD,
+    momentum_rate, sample_rates, ArmEnvelope, Brake, BrakeCommand, BrakeMode, Breach, CouplingTest,
+    RestTest, StopDesign, StopSequence, HOLD_BLIND_PERIODS, HOLD_GIVE_UP_RAD, LOWERED_HANGING_RAD,
     LOWER_FROM_RAD, LOWER_SIDE_FROM_RAD, MAX_BRAKE_S, MAX_HOLD_S, MAX_LOWER_S,
     MOMENTUM_ENERGY_GAIN, PENDULUM_REST_RAD, PROGRESS_PERIODS, REST_S, REST_TRAVEL,
     WRONG_SIGN_PERIODS,
@@ -164,7 +164,7 @@ pub fn brake_mode(reason: &StopReason) -> BrakeMode {
         | StopReason::Panic => BrakeMode::Active,
         // The arm's response to the voltage has the wrong sign, and its encoder counts: brake
         // with the sign the rig showed ([`Brake`] falls back to the short if that is wrong).
-        StopReason::Witness(WitnessFault::ArmWrongWay { .. }) => BrakeMode::Reversed,
+        StopReason::Witness(fault) if fault.reversed() => BrakeMode::Reversed,
         // The arm encoder stopped counting: brake on the model's arm.
         StopReason::Witness(WitnessFault::ArmFrozen { .. }) => BrakeMode::Modelled,
         // The arm encoder counts, but its motion disagrees with the model's: brake with the
@@ -251,13 +251,21 @@ pub fn stop_design(cfg: &Config) -> Option<StopDesign> {
 /// The stop of `cfg` with `brake` ([`StopSequence`]): the hold law and the arm's model of its
 /// `parts` ([`stop_parts`]).
 pub fn stop_sequence(cfg: &Config, parts: Option<&StopParts>, brake: Brake) -> StopSequence {
-    StopSequence::new(
+    let stop = StopSequence::new(
         brake,
         parts.and_then(|p| p.hold),
         parts.map(|p| p.model),
         cfg.period_s(),
         stop_voltage(cfg),
-    )
+    );
+    match parts {
+        Some(p) => stop.coupling_test(CouplingTest::new(
+            p.model,
+            cfg.period_s(),
+            cfg.reading_sigma(),
+        )),
+        None => stop,
+    }
 }
 
 /// What an active stop did.

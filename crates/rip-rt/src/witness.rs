@@ -184,6 +184,9 @@ pub const FROZEN_PERIODS: u32 = 2;
 /// Threshold of the sign statistic (a log-likelihood ratio, module docs): the run stops as
 /// a reversed motor or arm encoder when it exceeds this.
 pub const SIGN_THRESHOLD: f64 = 25.0;
+/// The evidence of a reversal ([`Witness::reversal_evidence`], a log-likelihood ratio: odds
+/// of about 150 to 1) from which a trip on another statistic is stopped as a reversal.
+pub const REVERSAL_EVIDENCE: f64 = 5.0;
 
 /// The witness of one run (module docs).
 #[derive(Debug, Clone)]
@@ -249,29 +252,21 @@ impl Witness {
         let plant = cfg.spec.plant().map_err(|e| e.to_string())?;
         let ts = cfg.period_s();
         let substeps = (ts / plant.max_rk4_substep()).ceil().clamp(1.0, 1000.0) as usize;
-        let tau = std::f64::consts::TAU;
-        let d = &cfg.device;
-        let q = [
-            tau / f64::from(d.arm_counts_per_rev),
-            tau / f64::from(d.pendulum_counts_per_rev),
-        ];
+        let arm_count = std::f64::consts::TAU / f64::from(cfg.device.arm_counts_per_rev);
         let s = cfg.spec.sensor.noise_std;
         let p = cfg.spec.plant.params();
         let j_min = p.lumped().arm_min();
         let breakaway = cfg.spec.plant.arm_breakaway.unwrap_or(0.0).max(p.cr);
-        let sigma = [
-            (q[0] * q[0] / 12.0 + s[0] * s[0]).sqrt(),
-            (q[1] * q[1] / 12.0 + s[1] * s[1]).sqrt(),
-        ];
+        let sigma = cfg.reading_sigma();
         Ok(Self {
             plant,
             substeps,
             ts,
             limits,
             sigma,
-            arm_count: q[0],
+            arm_count,
             friction_swing: 2.0 * breakaway / j_min,
-            rate_uncertainty: GAIN_RATE * (q[0] + 2.0 * s[0]) / ts,
+            rate_uncertainty: GAIN_RATE * (arm_count + 2.0 * s[0]) / ts,
             x: None,
             acquiring: false,
             cusum: [[0.0; 2]; 2],
@@ -282,7 +277,7 @@ impl Witness {
             unchanged: 0,
             predicted_unchanged: 0.0,
             free: State::zeros(),
-            frozen_rad: FROZEN_RAD.max(FROZEN_COUNTS * q[0]),
+            frozen_rad: FROZEN_RAD.max(FROZEN_COUNTS * arm_count),
             sign: 0.0,
             sign_expected: [0.0; 2],
             sign_response: [0.0; 2],
@@ -691,6 +686,7 @@ impl Witness {
             return Err(WitnessFault::PendulumDisagrees {
                 stat: pendulum,
                 limit: self.limits.pendulum,
+                reversal: self.reversal_evidence(),
             });
         }
         Ok(())
@@ -797,7 +793,24 @@ impl Witness {
                 window_s,
                 stat,
                 limit,
+                reversal: self.reversal_evidence(),
             }
+        }
+    }
+
+    /// The evidence (a log-likelihood ratio, as the sign statistic) that the voltage moves
+    /// the arm reversed: the sign statistic where the arm's response since it left 0 has the
+    /// wrong sign too, else 0. A trip on another statistic while this stands at
+    /// [`REVERSAL_EVIDENCE`] or more is stopped as a reversal is ([`WitnessFault::reversed`]):
+    /// a swapped motor lead under a hard-driving balance can spin the pendulum past its own
+    /// threshold before the sign statistic reaches its own, and a stop with the model's sign
+    /// then drove the arm 2.6 rad before it learnt the sign (generated rig 54, statistic
+    /// 7.5–13 at the trip).
+    pub fn reversal_evidence(&self) -> f64 {
+        if self.response_gain().is_some_and(|g| g < 0.0) {
+            self.sign
+        } else {
+            0.0
         }
     }
 }

@@ -141,6 +141,17 @@ impl<R: Real> Brake<R> {
         speed > self.law.linear_below
     }
 
+    /// Starts the judging of the sign's progress afresh: the speed it is judged on changed
+    /// its meaning (the law moved from the arm's rate to its angular momentum, or back), and
+    /// the last speed of the one is no yardstick for the other.
+    pub fn restart_judging(&mut self) {
+        self.rising = 0;
+        self.window = 0;
+        self.last_speed = c(f64::INFINITY);
+        self.window_speed = c(f64::INFINITY);
+        self.peak_speed = R::ZERO;
+    }
+
     /// Gives up the law for the short from now on.
     pub fn short(&mut self) {
         if self.mode != BrakeMode::None {
@@ -151,6 +162,14 @@ impl<R: Real> Brake<R> {
     /// The command for the measured arm rate `rate` (rad/s; `None` without a fresh
     /// measurement, which shorts the windings for that period).
     pub fn command(&mut self, rate: Option<R>) -> BrakeCommand<R> {
+        self.command_judged(rate, None)
+    }
+
+    /// [`command`](Self::command), the sign's progress judged on `judged` (rad/s) rather than
+    /// on `|rate|`: for a law on the arm's angular momentum, the momentum in units of the
+    /// arm's largest inertia, which the saturated law takes down every period, where `ω_H`
+    /// itself rises and falls with the pendulum's swing (the inertia it is divided by does).
+    pub fn command_judged(&mut self, rate: Option<R>, judged: Option<R>) -> BrakeCommand<R> {
         let sign = match self.mode {
             BrakeMode::Active | BrakeMode::Checked => R::ONE,
             BrakeMode::Reversed => -R::ONE,
@@ -165,7 +184,7 @@ impl<R: Real> Brake<R> {
         let Some(rate) = rate.filter(|r| r.is_finite()) else {
             return BrakeCommand::Short;
         };
-        let speed = rate.abs();
+        let speed = judged.filter(|j| j.is_finite()).unwrap_or(rate).abs();
         let mut sign = sign;
         if matches!(self.mode, BrakeMode::Reversed | BrakeMode::Checked) && self.wrong_sign(speed) {
             if !self.may_flip {
@@ -190,7 +209,7 @@ impl<R: Real> Brake<R> {
         } else if self.peak_speed > R::ZERO && speed < c::<R>(0.5) * self.peak_speed {
             self.verified = true;
         }
-        if speed <= self.dead_band {
+        if rate.abs() <= self.dead_band {
             BrakeCommand::Volts(R::ZERO)
         } else {
             BrakeCommand::Volts(sign * self.law.voltage(rate))

@@ -118,8 +118,10 @@ pub struct StopSequence<R: Real = f64> {
     momentum_rising: Option<u32>,
     momentum_speed: R,
     momentum_energy: Option<R>,
-    // Periods in a row the law on it has had `ω_H` within its dead band.
+    // Periods in a row the law on it has had `ω_H` within its dead band; whether the law ran
+    // on it last period.
     momentum_still: u32,
+    on_momentum: bool,
     // The last command's voltage (0 for the short).
     last_volts: R,
     // The gentle end's law while it may still run, the loop's braking envelope that watches
@@ -129,6 +131,9 @@ pub struct StopSequence<R: Real = f64> {
     lower_side: R,
     // Whether the gentle end brought the pendulum down.
     lowered: bool,
+    // Which way the arm reading turns relative to the arm the pendulum feels, where the
+    // wiring's sign was learnt rather than trusted.
+    coupling: Option<CouplingTest<R>>,
 }
 
 impl<R: Real> StopSequence<R> {
@@ -148,6 +153,7 @@ impl<R: Real> StopSequence<R> {
             momentum_speed: c(f64::INFINITY),
             momentum_energy: None,
             momentum_still: 0,
+            on_momentum: false,
             brake,
             hold,
             arm_rest: RestTest::new(period_s),
@@ -160,6 +166,33 @@ impl<R: Real> StopSequence<R> {
             lower_envelope: None,
             lower_side: R::ZERO,
             lowered: false,
+            coupling: None,
+        }
+    }
+
+    /// The same stop with `test` run on its readings ([`CouplingTest`], perhaps carrying the
+    /// evidence of the periods before the stop): once it knows the arm encoder's sign, a stop
+    /// that learnt its sign on the arm's response ([`BrakeMode::Reversed`]) brakes the arm's
+    /// angular momentum and holds with the pendulum's terms, as a stop whose wiring is
+    /// trusted does.
+    pub fn coupling_test(mut self, test: CouplingTest<R>) -> Self {
+        self.coupling = Some(test);
+        self
+    }
+
+    /// The coupling test's statistic `Λ` ([`CouplingTest::statistic`]), where it runs.
+    pub fn coupling_statistic(&self) -> Option<R> {
+        self.coupling.as_ref().map(CouplingTest::statistic)
+    }
+
+    /// The arm encoder's sign `s_e` relative to the pendulum (±1) where the stop may use the
+    /// pendulum's terms: trusted with the wiring, else the coupling test's verdict for a
+    /// sign learnt as a reversal.
+    fn encoder_sign(&self) -> Option<R> {
+        match self.brake.mode() {
+            BrakeMode::Active => Some(R::ONE),
+            BrakeMode::Reversed => self.coupling.as_ref().and_then(CouplingTest::sign),
+            _ => None,
         }
     }
 
@@ -213,6 +246,9 @@ impl<R: Real> StopSequence<R> {
     /// A period without a measurement, which the stop shorted: 0 V across the motor.
     pub fn note_short(&mut self) {
         self.last_volts = R::ZERO;
+        if let Some(test) = self.coupling.as_mut() {
+            test.gap();
+        }
     }
 
     /// Ends the gentle end for the stop of a fault found during it: `brake` from this period
@@ -268,6 +304,9 @@ impl<R: Real> StopSequence<R> {
     /// short its only brake).
     pub fn step(&mut self, theta: R, rate: R, alpha: R, alpha_rate: R) -> Option<BrakeCommand<R>> {
         // The model's arm while the stop runs on it: the reading is not the arm's.
+        if let Some(test) = self.coupling.as_mut() {
+            test.observe(theta, alpha);
+        }
         let arm_rests = self
             .arm_rest
             .observe(self.brake.model_arm().unwrap_or(theta));
@@ -344,16 +383,23 @@ impl<R: Real> StopSequence<R> {
         }
         let command = match (self.stage, self.hold, self.hold_sign()) {
             (Stage::Braking, ..) => {
-                let rate = self.braked_rate(rate, alpha, alpha_rate);
-                self.brake.command(Some(rate))
+                let (rate, judged) = self.braked_rate(rate, alpha, alpha_rate);
+                if judged.is_some() != self.on_momentum {
+                    self.on_momentum = judged.is_some();
+                    self.brake.restart_judging();
+                }
+                self.brake.command_judged(Some(rate), judged)
             }
-            (Stage::Holding { at, .. }, Some(law), Some((sign, full))) => {
+            (Stage::Holding { at, .. }, Some(law), Some((sign, encoder))) => {
                 // The pendulum's terms are the linearisation's about hanging: in the upper
                 // half (a pendulum still falling from upright) they would drive the arm hard
                 // on a state they do not describe.
                 let lower = alpha.cos() < R::ZERO;
-                let v = if full && lower {
-                    law.voltage(theta - at, rate, alpha, alpha_rate)
+                let v = if let Some(s_e) = encoder.filter(|_| lower) {
+                    // In the reading's frame the pendulum's terms carry the encoder's sign
+                    // (coupling module docs).
+                    let phi = wrap_angle(alpha - c(core::f64::consts::PI));
+                    law.voltage_from_hanging(theta - at, rate, s_e * phi, s_e * alpha_rate)
                 } else {
                     law.arm_voltage(theta - at, rate)
                 };
@@ -452,8 +498,11 @@ impl<R: Real> StopSequence<R> {
         Some(Some(BrakeCommand::Volts(v)))
     }
 
-    /// The rate the braking law takes: [`momentum_rate`] while the wiring is trusted and the
-    /// law on it makes progress, else the measured arm rate. A law on `ω_H` mixes the two
+    /// The rate the braking law takes, and the speed its sign's progress is judged on (none:
+    /// the rate's): [`momentum_rate`] in the reading's frame while the arm encoder's sign
+    /// against the pendulum is known (the wiring trusted, or [`CouplingTest`] after a
+    /// reversal) and the law on it makes progress, judged on the momentum over the largest
+    /// inertia; else the measured arm rate. A law on `ω_H` mixes the two
     /// readings, and a wrong `arm_counts_per_rev` (the arm's rate read at a quarter) turns it
     /// into one that drives the arm on: once its saturated speed has risen for
     /// [`WRONG_SIGN_PERIODS`] periods in a row it gives way to the arm rate for the rest of
@@ -462,17 +511,16 @@ impl<R: Real> StopSequence<R> {
     /// [`MOMENTUM_ENERGY_GAIN`] of the pendulum's swing energy (`2 G`) since it began is
     /// pumping the pendulum (that wrong scale spun one to 115 rad/s, generated rig 71) and
     /// gives way too.
-    fn braked_rate(&mut self, rate: R, alpha: R, alpha_rate: R) -> R {
-        let Some(model) = self
-            .model
-            .filter(|_| self.brake.mode() == BrakeMode::Active)
-        else {
-            return rate;
+    fn braked_rate(&mut self, rate: R, alpha: R, alpha_rate: R) -> (R, Option<R>) {
+        let (Some(model), Some(s_e)) = (self.model, self.encoder_sign()) else {
+            return (rate, None);
         };
         let Some(rising) = self.momentum_rising.as_mut() else {
-            return rate;
+            return (rate, None);
         };
-        let omega = momentum_rate(&model, rate, alpha, alpha_rate);
+        // In the reading's frame the coupling carries the encoder's sign (coupling module
+        // docs): `ω_H` of the reading, which the brake's sign maps onto the true one.
+        let omega = momentum_rate(&model, rate, alpha, s_e * alpha_rate);
         let speed = omega.abs();
         *rising = if self.brake.saturates(speed) && speed > self.momentum_speed {
             *rising + 1
@@ -480,7 +528,7 @@ impl<R: Real> StopSequence<R> {
             0
         };
         self.momentum_speed = speed;
-        let energy = energy(&model, rate, alpha, alpha_rate);
+        let energy = energy(&model, s_e * rate, alpha, alpha_rate);
         let start = *self.momentum_energy.get_or_insert(energy);
         let swing_energy = c::<R>(2.0) * model.grav;
         if *rising >= WRONG_SIGN_PERIODS
@@ -488,28 +536,32 @@ impl<R: Real> StopSequence<R> {
         {
             self.momentum_rising = None;
             self.momentum_still = 0;
-            return rate;
+            return (rate, None);
         }
         self.momentum_still = if self.brake.below_dead_band(speed) {
             self.momentum_still + 1
         } else {
             0
         };
-        omega
+        let s = alpha.sin();
+        let judged = speed * (model.j0 + model.ja * s * s) / (model.j0 + model.ja);
+        (omega, Some(judged))
     }
 
-    /// The hold law's sign and whether it may use the pendulum's terms, by the brake's mode:
-    /// the model's sign with both angles when the wiring is trusted; the sign the arm showed,
-    /// arm terms alone, once the braking law proved it on the arm's response; none otherwise
-    /// (an unproven sign could drive the arm off its hold point).
-    fn hold_sign(&self) -> Option<(R, bool)> {
+    /// The hold law's sign and, where it may use the pendulum's terms, the arm encoder's sign
+    /// they take ([`CouplingTest`]), by the brake's mode: the model's sign with both angles
+    /// when the wiring is trusted; the sign the arm showed once the braking law proved it on
+    /// the arm's response, with the pendulum's terms where the coupling test knows the
+    /// encoder's sign; none otherwise (an unproven sign could drive the arm off its hold
+    /// point).
+    fn hold_sign(&self) -> Option<(R, Option<R>)> {
         if !self.brake.sign_known() {
             return None;
         }
         match self.brake.mode() {
-            BrakeMode::Active => Some((R::ONE, true)),
-            BrakeMode::Checked => Some((R::ONE, false)),
-            BrakeMode::Reversed => Some((-R::ONE, false)),
+            BrakeMode::Active => Some((R::ONE, Some(R::ONE))),
+            BrakeMode::Checked => Some((R::ONE, None)),
+            BrakeMode::Reversed => Some((-R::ONE, self.encoder_sign())),
             _ => None,
         }
     }

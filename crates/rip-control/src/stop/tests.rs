@@ -240,3 +240,48 @@ fn a_fast_device_runs_the_stop_every_ten_milliseconds() {
         assert_eq!(steps_per_stop_period(step_s), steps, "{step_s} s");
     }
 }
+
+/// The paper preset's arm and pendulum driven by a voltage that reverses every 0.15 s, read
+/// through 2048-count encoders (the arm's with sign `s_e`) every period by a
+/// [`CouplingTest`] on the same model with no noise: the RK4 of the model's own equations at
+/// a tenth of the period, independent of the test's second differences.
+fn coupling_verdict<R: Real>(s_e: f64, arm_frozen: bool) -> (Option<R>, R) {
+    let m = model();
+    let q = core::f64::consts::TAU / 2048.0;
+    let sigma = q / libm::sqrt(12.0);
+    let mut test = CouplingTest::new(model_to::<R>(&m), c(TS), [c(sigma), c(sigma)]);
+    let mut x = [0.0, 0.0, core::f64::consts::PI - 0.2, 0.0];
+    let h = TS / 10.0;
+    for k in 0..100 {
+        let u = if (k / 15) % 2 == 0 { 6.0 } else { -6.0 };
+        let theta = if arm_frozen { 0.0 } else { s_e * x[0] };
+        let quant = |v: f64| libm::round(v / q) * q;
+        test.observe(c(quant(theta)), c(wrap_angle(quant(x[2]))));
+        for _ in 0..10 {
+            let d = |x: &[f64; 4]| m.derivative(x, u);
+            let add =
+                |x: &[f64; 4], k: &[f64; 4], a: f64| core::array::from_fn(|i| x[i] + a * k[i]);
+            let k1 = d(&x);
+            let k2 = d(&add(&x, &k1, h / 2.0));
+            let k3 = d(&add(&x, &k2, h / 2.0));
+            let k4 = d(&add(&x, &k3, h));
+            x = core::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]));
+        }
+    }
+    (test.sign(), test.statistic())
+}
+
+/// The coupling test names the arm encoder's sign from the pendulum's equation, in `f64` and
+/// `f32`, whichever way the encoder counts; an arm reading that never changes gives no
+/// verdict (it carries no evidence either way).
+#[test]
+fn the_coupling_test_tells_a_reversed_arm_encoder_from_the_pendulum() {
+    for s_e in [1.0, -1.0] {
+        let (sign, stat) = coupling_verdict::<f64>(s_e, false);
+        assert_eq!(sign, Some(s_e), "s_e {s_e}: statistic {stat}");
+        let (sign, stat) = coupling_verdict::<f32>(s_e, false);
+        assert_eq!(sign, Some(s_e as f32), "f32, s_e {s_e}: statistic {stat}");
+    }
+    let (sign, stat) = coupling_verdict::<f64>(1.0, true);
+    assert_eq!(sign, None, "a frozen arm reading: statistic {stat}");
+}

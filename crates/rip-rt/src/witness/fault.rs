@@ -56,6 +56,8 @@ pub enum WitnessFault {
         stat: f64,
         /// Its threshold.
         limit: f64,
+        /// The evidence of a reversal at the trip ([`super::Witness::reversal_evidence`]).
+        reversal: f64,
     },
     /// The pendulum's motion disagrees with the model.
     #[error(
@@ -68,5 +70,22 @@ pub enum WitnessFault {
         stat: f64,
         /// Its threshold.
         limit: f64,
+        /// The evidence of a reversal at the trip ([`super::Witness::reversal_evidence`]).
+        reversal: f64,
     },
+}
+
+impl WitnessFault {
+    /// Whether the stop takes the fault for a reversed motor lead or arm encoder: named so,
+    /// or found on another statistic with the evidence of a reversal at
+    /// [`super::REVERSAL_EVIDENCE`] or more.
+    pub fn reversed(&self) -> bool {
+        match *self {
+            Self::ArmWrongWay { .. } => true,
+            Self::ArmDisagrees { reversal, .. } | Self::PendulumDisagrees { reversal, .. } => {
+                reversal >= super::REVERSAL_EVIDENCE
+            }
+            Self::ArmFrozen { .. } => false,
+        }
+    }
 }
