@@ -53,6 +53,35 @@ struct Case {
     reference: bool,
 }
 
+impl Case {
+    /// `fault` with its phase and onset (as [`fault_cases`] lists them) under `kind` at noise
+    /// `seed`: every command on time, no reference step.
+    fn on_time(
+        kind: ControllerKind,
+        (fault, swing_up, fault_at): (Fault, bool, Option<f64>),
+        seed: u64,
+    ) -> Self {
+        Self {
+            kind,
+            swing_up,
+            fault,
+            fault_at,
+            seed,
+            late: ON_TIME,
+            reference: false,
+        }
+    }
+}
+
+/// How long the stop sweeps run a case: a swing-up 15 s, a balance 8 s.
+fn sweep_duration(swing_up: bool) -> f64 {
+    if swing_up {
+        15.0
+    } else {
+        8.0
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Late {
     share: f64,
@@ -391,15 +420,7 @@ fn rigs(n_generated: usize) -> Vec<(String, Rigged)> {
         let r = rigged(seed);
         let ok = simulate(
             &r,
-            Case {
-                kind: ControllerKind::Lqr,
-                swing_up: true,
-                fault: Fault::None,
-                fault_at: None,
-                seed,
-                late: ON_TIME,
-                reference: false,
-            },
+            Case::on_time(ControllerKind::Lqr, (Fault::None, true, None), seed),
             15.0,
         );
         if ok.caught && ok.ended == "finished" {
@@ -429,15 +450,7 @@ fn normal_runs_never_trip_the_witness() {
     for (name, r) in rigs(2) {
         for kind in KINDS {
             for swing_up in [false, true] {
-                let case = Case {
-                    kind,
-                    swing_up,
-                    fault: Fault::None,
-                    fault_at: None,
-                    seed: 1,
-                    late: ON_TIME,
-                    reference: false,
-                };
+                let case = Case::on_time(kind, (Fault::None, swing_up, None), 1);
                 let o = simulate(&r, case, if swing_up { 15.0 } else { 5.0 });
                 let id = format!("{name} {kind} swing_up={swing_up}");
                 assert!(o.trip.is_none() || known_false_stop(&id), "{id}: {o:?}");
@@ -452,15 +465,7 @@ fn each_normal_run(r: &Rigged, mut each: impl FnMut(Case, Outcome)) {
     for kind in KINDS {
         for swing_up in [false, true] {
             for seed in 0..2 {
-                let case = Case {
-                    kind,
-                    swing_up,
-                    fault: Fault::None,
-                    fault_at: None,
-                    seed,
-                    late: ON_TIME,
-                    reference: false,
-                };
+                let case = Case::on_time(kind, (Fault::None, swing_up, None), seed);
                 each(case, simulate(r, case, if swing_up { 15.0 } else { 5.0 }));
             }
         }
@@ -512,16 +517,11 @@ fn late_commands_are_no_evidence_of_a_fault() {
             for swing_up in [false, true] {
                 for told in [true, false] {
                     let case = Case {
-                        kind,
-                        swing_up,
-                        fault: Fault::None,
-                        fault_at: None,
-                        seed: 1,
                         late: Late {
                             share: LOADED,
                             told,
                         },
-                        reference: false,
+                        ..Case::on_time(kind, (Fault::None, swing_up, None), 1)
                     };
                     let o = simulate(&r, case, if swing_up { 15.0 } else { 5.0 });
                     if told {
@@ -645,17 +645,13 @@ fn wiring_faults_are_stopped_in(n_generated: usize, inside: bool, late: Late) {
     for (name, r) in rigs {
         for kind in KINDS {
             for &(fault, swing_up, fault_at) in &cases {
+                let seed = std::env::var("SEED")
+                    .ok()
+                    .and_then(|s| s.parse().ok())
+                    .unwrap_or(2);
                 let case = Case {
-                    kind,
-                    swing_up,
-                    fault,
-                    fault_at,
-                    seed: std::env::var("SEED")
-                        .ok()
-                        .and_then(|s| s.parse().ok())
-                        .unwrap_or(2),
                     late,
-                    reference: false,
+                    ..Case::on_time(kind, (fault, swing_up, fault_at), seed)
                 };
                 if let Some(only) = &only {
                     if !format!("{name} {kind} {fault:?} {swing_up}").contains(only.as_str()) {
@@ -745,19 +741,7 @@ fn measure() {
     for (name, r) in &rigs {
         for kind in KINDS {
             for (fault, swing_up, fault_at) in fault_cases().into_iter().chain(scale_cases()) {
-                let o = simulate(
-                    r,
-                    Case {
-                        kind,
-                        swing_up,
-                        fault,
-                        fault_at,
-                        seed: 3,
-                        late: ON_TIME,
-                        reference: false,
-                    },
-                    10.0,
-                );
+                let o = simulate(r, Case::on_time(kind, (fault, swing_up, fault_at), 3), 10.0);
                 let delay = o.trip.map(|(t, _)| t - fault_at.unwrap_or(0.0));
                 println!(
                     "fault {name:12} {kind} {fault:?} swing_up={swing_up:5} delay {:?} excursion {:.3} after stop {:.3} at {:.2} max|arm| {:.2} braked {:.2} end {:.2}/{:.3} {:?} peak {:.0}/{:.0}/{:.2}/{:.0} {}",
@@ -865,15 +849,10 @@ fn every_stop_on_generated_rigs_ends_inside_the_limit() {
                     }
                     for seed in 0..seeds {
                         let case = Case {
-                            kind,
-                            swing_up,
-                            fault,
-                            fault_at,
-                            seed,
-                            late: ON_TIME,
                             reference,
+                            ..Case::on_time(kind, (fault, swing_up, fault_at), seed)
                         };
-                        let o = simulate(&r, case, if swing_up { 15.0 } else { 8.0 });
+                        let o = simulate(&r, case, sweep_duration(swing_up));
                         cases += 1;
                         let id = format!(
                             "{name} {kind} {fault:?} swing_up={swing_up} reference={reference} \
@@ -917,15 +896,7 @@ fn a_wiring_fault_moves_the_arm_at_most_four_tenths_of_a_radian_from_the_run_wit
         for kind in KINDS {
             for (fault, swing_up, fault_at) in fault_cases() {
                 for &seed in &seeds {
-                    let case = Case {
-                        kind,
-                        swing_up,
-                        fault,
-                        fault_at,
-                        seed,
-                        late: ON_TIME,
-                        reference: false,
-                    };
+                    let case = Case::on_time(kind, (fault, swing_up, fault_at), seed);
                     let faulty = simulate(&r, case, 10.0);
                     if !faulty.faulted {
                         continue;
@@ -985,16 +956,8 @@ fn the_stop_after_a_reversal_holds_a_light_arm_under_a_heavy_pendulum() {
                     continue;
                 }
                 for seed in 0..seeds {
-                    let case = Case {
-                        kind,
-                        swing_up,
-                        fault,
-                        fault_at,
-                        seed,
-                        late: ON_TIME,
-                        reference: false,
-                    };
-                    let o = simulate(&r, case, if swing_up { 15.0 } else { 8.0 });
+                    let case = Case::on_time(kind, (fault, swing_up, fault_at), seed);
+                    let o = simulate(&r, case, sweep_duration(swing_up));
                     cases += 1;
                     let id = format!(
                         "rig{rig} {kind} {fault:?} swing_up={swing_up} seed {seed}: ended {}, \

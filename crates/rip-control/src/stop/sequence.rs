@@ -170,19 +170,13 @@ impl<R: Real> StopSequence<R> {
         }
     }
 
-    /// The same stop with `test` run on its readings ([`CouplingTest`], perhaps carrying the
-    /// evidence of the periods before the stop): once it knows the arm encoder's sign, a stop
-    /// that learnt its sign on the arm's response ([`BrakeMode::Reversed`]) brakes the arm's
-    /// angular momentum and holds with the pendulum's terms, as a stop whose wiring is
-    /// trusted does.
+    /// The same stop with `test` run on its readings ([`CouplingTest`]): once it knows the arm
+    /// encoder's sign, a stop that learnt its sign on the arm's response
+    /// ([`BrakeMode::Reversed`]) brakes the arm's angular momentum and holds with the
+    /// pendulum's terms, as a stop whose wiring is trusted does.
     pub fn coupling_test(mut self, test: CouplingTest<R>) -> Self {
         self.coupling = Some(test);
         self
-    }
-
-    /// The coupling test's statistic `Λ` ([`CouplingTest::statistic`]), where it runs.
-    pub fn coupling_statistic(&self) -> Option<R> {
-        self.coupling.as_ref().map(CouplingTest::statistic)
     }
 
     /// The arm encoder's sign `s_e` relative to the pendulum (±1) where the stop may use the
@@ -303,10 +297,10 @@ impl<R: Real> StopSequence<R> {
     /// `None` once the stop is done (the arm at rest with the windings shorted, or with the
     /// short its only brake).
     pub fn step(&mut self, theta: R, rate: R, alpha: R, alpha_rate: R) -> Option<BrakeCommand<R>> {
-        // The model's arm while the stop runs on it: the reading is not the arm's.
         if let Some(test) = self.coupling.as_mut() {
             test.observe(theta, alpha);
         }
+        // The model's arm while the stop runs on it: the reading is not the arm's.
         let arm_rests = self
             .arm_rest
             .observe(self.brake.model_arm().unwrap_or(theta));
@@ -558,11 +552,11 @@ impl<R: Real> StopSequence<R> {
         if !self.brake.sign_known() {
             return None;
         }
-        match self.brake.mode() {
-            BrakeMode::Active => Some((R::ONE, Some(R::ONE))),
-            BrakeMode::Checked => Some((R::ONE, None)),
-            BrakeMode::Reversed => Some((-R::ONE, self.encoder_sign())),
-            _ => None,
-        }
+        let sign = match self.brake.mode() {
+            BrakeMode::Active | BrakeMode::Checked => R::ONE,
+            BrakeMode::Reversed => -R::ONE,
+            _ => return None,
+        };
+        Some((sign, self.encoder_sign()))
     }
 }
