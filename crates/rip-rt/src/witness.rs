@@ -667,7 +667,7 @@ impl Witness {
             }
             // Reversed only when the response itself has the wrong sign: a wrong scale or a
             // weak motor also leaves the arm short of the model's motion.
-            if !self.response_gain().is_some_and(|g| g < 0.0) {
+            if !self.response_reversed() {
                 return Err(self.classify(theta, self.sign, self.limits.sign));
             }
             return Err(WitnessFault::ArmWrongWay {
@@ -807,11 +807,17 @@ impl Witness {
     /// then drove the arm 2.6 rad before it learnt the sign (generated rig 54, statistic
     /// 7.5–13 at the trip).
     pub fn reversal_evidence(&self) -> f64 {
-        if self.response_gain().is_some_and(|g| g < 0.0) {
+        if self.response_reversed() {
             self.sign
         } else {
             0.0
         }
+    }
+
+    /// Whether the arm's response since the sign statistic left 0 has the wrong sign
+    /// ([`Witness::response_gain`] negative).
+    fn response_reversed(&self) -> bool {
+        self.response_gain().is_some_and(|g| g < 0.0)
     }
 }
 
