@@ -57,15 +57,17 @@ use crate::swing::{wrap_angle, ArmModel};
 mod brake;
 mod coupling;
 mod design;
+mod momentum;
 mod sequence;
 
 pub use brake::{Brake, BrakeCommand, BrakeMode, PROGRESS_PERIODS, WRONG_SIGN_PERIODS};
-pub use coupling::{CouplingTest, COUPLING_THRESHOLD};
+pub use coupling::{CouplingTest, COUPLING_THRESHOLD, DRIVE_MODEL_ERROR};
 pub use design::{StopDesign, StopDesignError, STOP_DESIGN_LEN, STOP_LAYOUT_VERSION, STOP_MAGIC};
+pub use momentum::momentum_rate;
+use momentum::{energy, MomentumBlock};
 pub use sequence::{
-    momentum_rate, StopSequence, HOLD_BLIND_PERIODS, HOLD_GIVE_UP_RAD, LOWERED_HANGING_RAD,
-    LOWER_FROM_RAD, LOWER_SIDE_FROM_RAD, MAX_HOLD_S, MAX_LOWER_S, MOMENTUM_ENERGY_GAIN,
-    PENDULUM_REST_RAD,
+    StopSequence, HOLD_BLIND_PERIODS, HOLD_GIVE_UP_RAD, LOWERED_HANGING_RAD, LOWER_FROM_RAD,
+    LOWER_SIDE_FROM_RAD, MAX_HOLD_S, MAX_LOWER_S, MOMENTUM_ENERGY_GAIN, PENDULUM_REST_RAD,
 };
 
 #[inline]

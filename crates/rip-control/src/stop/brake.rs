@@ -187,32 +187,63 @@ impl<R: Real> Brake<R> {
         let speed = judged.filter(|j| j.is_finite()).unwrap_or(rate).abs();
         let mut sign = sign;
         if matches!(self.mode, BrakeMode::Reversed | BrakeMode::Checked) && self.wrong_sign(speed) {
-            if !self.may_flip {
-                self.mode = BrakeMode::Short;
+            if !self.flip() {
                 return BrakeCommand::Short;
             }
-            // The sign the diagnosis suggested drove the arm on: the other one brakes it.
-            self.may_flip = false;
-            self.mode = if self.mode == BrakeMode::Reversed {
-                BrakeMode::Checked
-            } else {
-                BrakeMode::Reversed
-            };
-            self.rising = 0;
-            self.window = 0;
-            self.last_speed = c(f64::INFINITY);
-            self.peak_speed = R::ZERO;
             sign = -sign;
         }
+        // Halved from its saturated peak, saturated still or not: the sign is shown right. A
+        // law whose sign was shown only while still saturated and that then moved onto the
+        // arm's momentum (which restarts the judging) was left unverified, and its stop
+        // shorted a heavy pendulum's arm rather than hold it (generated rig 90).
         if speed > self.law.linear_below {
             self.peak_speed = self.peak_speed.max(speed);
-        } else if self.peak_speed > R::ZERO && speed < c::<R>(0.5) * self.peak_speed {
+        }
+        if self.peak_speed > R::ZERO && speed < c::<R>(0.5) * self.peak_speed {
             self.verified = true;
         }
         if rate.abs() <= self.dead_band {
             BrakeCommand::Volts(R::ZERO)
         } else {
             BrakeCommand::Volts(sign * self.law.voltage(rate))
+        }
+    }
+
+    /// The sign under test proved wrong: the law flips to the other one once (the sign the
+    /// diagnosis suggested drove the arm on, so the other one brakes it), then gives way to
+    /// the short. Whether it still brakes.
+    fn flip(&mut self) -> bool {
+        if !self.may_flip {
+            self.mode = BrakeMode::Short;
+            return false;
+        }
+        self.may_flip = false;
+        self.mode = if self.mode == BrakeMode::Reversed {
+            BrakeMode::Checked
+        } else {
+            BrakeMode::Reversed
+        };
+        self.rising = 0;
+        self.window = 0;
+        self.last_speed = c(f64::INFINITY);
+        self.peak_speed = R::ZERO;
+        true
+    }
+
+    /// The drive's sign `s_d` as the arm's equation named it ([`CouplingTest::drive_sign`]:
+    /// `+1` when a positive voltage moves the arm reading positive): a sign under test that
+    /// agrees is shown right; one that disagrees flips as a rising speed would flip it,
+    /// periods sooner. A trusted sign, or a stop that does not drive, is left as it is.
+    pub fn drive_sign_found(&mut self, s_d: R) {
+        let under_test = match self.mode {
+            BrakeMode::Checked => R::ONE,
+            BrakeMode::Reversed => -R::ONE,
+            _ => return,
+        };
+        if s_d == under_test {
+            self.verified = true;
+        } else {
+            self.flip();
         }
     }
 

@@ -9,10 +9,12 @@ pub const MAX_HOLD_S: f64 = 5.0;
 /// taken out what it needs to.
 pub const PENDULUM_REST_RAD: f64 = 0.05;
 /// Distance (rad) from its hold point past which a hold law whose sign was learnt on the arm's
-/// response is given up for the short (a sign learnt wrong, a reading that is not the arm's).
-/// A trusted sign holds on: the arm swings with a pendulum still falling past its hold point
-/// by more than this (0.56 rad on generated rig 1), and the short in its place let the
-/// pendulum walk the arm 3.7 rad.
+/// response alone is given up for the short (a sign learnt wrong, a reading that is not the
+/// arm's). A trusted sign holds on, and so does one whose arm reading the coupling test has
+/// matched to the pendulum ([`CouplingTest`]): the arm swings with a pendulum still falling
+/// past its hold point by more than this (0.56 rad on generated rig 1, 0.5 rad within 0.1 s
+/// of a heavy pendulum's swing on generated rig 90), and the short in its place let the
+/// pendulum walk the arm 3.7 rad (7.7 rad on rig 90).
 pub const HOLD_GIVE_UP_RAD: f64 = 0.5;
 
 /// Periods in a row in which the hold law drives with at least a quarter of the voltage bound
@@ -41,34 +43,6 @@ pub const LOWER_SIDE_FROM_RAD: f64 = 0.05;
 /// Share of the pendulum's swing energy (`2 G`) that the rig may gain under the braking law on
 /// [`momentum_rate`] before that law gives way to the arm's rate.
 pub const MOMENTUM_ENERGY_GAIN: f64 = 1.0;
-
-/// The arm rate that the braking law takes when the wiring is trusted: the arm's angular
-/// momentum about its axis in units of its inertia,
-///
-/// ```text
-/// ω_H = H / (J₀ + J_α sin²α),   H = (J₀ + J_α sin²α) θ̇ − m₁₂ cos α α̇
-/// ```
-///
-/// from the measured rates. Only the motor's torque changes `H`, so a law on `ω_H` leaves
-/// nothing to walk the arm once the windings open; a law on `θ̇` under a pendulum still
-/// swinging from its fall held the arm near still for 8 s and left `H` to the pendulum, and
-/// the arm walked on to 10.2 rad with the windings open (generated rig 79, a healthy rig, at
-/// the end of an MPC balance). `ω_H = θ̇` when the pendulum rests.
-pub fn momentum_rate<R: Real>(model: &ArmModel<R>, rate: R, alpha: R, alpha_rate: R) -> R {
-    let (s, co) = (alpha.sin(), alpha.cos());
-    let inertia = model.j0 + model.ja * s * s;
-    (inertia * rate - model.m12 * co * alpha_rate) / inertia
-}
-
-/// The mechanical energy `T + V` (J) of the arm at rate `rate` and the pendulum at `alpha`,
-/// `alpha_rate`, with `V = G cos α` (rip-core's `Plant::energy`).
-fn energy<R: Real>(model: &ArmModel<R>, rate: R, alpha: R, alpha_rate: R) -> R {
-    let (s, co) = (alpha.sin(), alpha.cos());
-    let half: R = c(0.5);
-    half * (model.j0 + model.ja * s * s) * rate * rate - model.m12 * co * rate * alpha_rate
-        + half * model.ja * alpha_rate * alpha_rate
-        + model.grav * co
-}
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Stage<R: Real> {
@@ -118,10 +92,13 @@ pub struct StopSequence<R: Real = f64> {
     momentum_rising: Option<u32>,
     momentum_speed: R,
     momentum_energy: Option<R>,
-    // Periods in a row the law on it has had `ω_H` within its dead band; whether the law ran
-    // on it last period.
-    momentum_still: u32,
+    // The momentum's mean over blocks (which tells it braked out); whether the law ran on it
+    // last period.
+    momentum_block: MomentumBlock<R>,
     on_momentum: bool,
+    // Whether the hold law has run (it runs once); whether the stop has commanded a period.
+    held: bool,
+    commanded: bool,
     // The last command's voltage (0 for the short).
     last_volts: R,
     // The gentle end's law while it may still run, the loop's braking envelope that watches
@@ -152,7 +129,9 @@ impl<R: Real> StopSequence<R> {
             momentum_rising: Some(0),
             momentum_speed: c(f64::INFINITY),
             momentum_energy: None,
-            momentum_still: 0,
+            momentum_block: MomentumBlock::new(period_s),
+            held: false,
+            commanded: false,
             on_momentum: false,
             brake,
             hold,
@@ -177,6 +156,11 @@ impl<R: Real> StopSequence<R> {
     pub fn coupling_test(mut self, test: CouplingTest<R>) -> Self {
         self.coupling = Some(test);
         self
+    }
+
+    /// The coupling test the stop runs, if any (for its statistic in a log).
+    pub fn coupling(&self) -> Option<&CouplingTest<R>> {
+        self.coupling.as_ref()
     }
 
     /// The arm encoder's sign `s_e` relative to the pendulum (±1) where the stop may use the
@@ -240,6 +224,7 @@ impl<R: Real> StopSequence<R> {
     /// A period without a measurement, which the stop shorted: 0 V across the motor.
     pub fn note_short(&mut self) {
         self.last_volts = R::ZERO;
+        self.momentum_block.restart();
         if let Some(test) = self.coupling.as_mut() {
             test.gap();
         }
@@ -297,8 +282,14 @@ impl<R: Real> StopSequence<R> {
     /// `None` once the stop is done (the arm at rest with the windings shorted, or with the
     /// short its only brake).
     pub fn step(&mut self, theta: R, rate: R, alpha: R, alpha_rate: R) -> Option<BrakeCommand<R>> {
+        // The voltage over the period that ended with these readings: the stop's last
+        // command, from its second period on (its first follows the run's).
+        let volts = core::mem::replace(&mut self.commanded, true).then_some(self.last_volts);
         if let Some(test) = self.coupling.as_mut() {
-            test.observe(theta, alpha);
+            test.observe(theta, alpha, volts);
+            if let Some(s_d) = test.drive_sign() {
+                self.brake.drive_sign_found(s_d);
+            }
         }
         // The model's arm while the stop runs on it: the reading is not the arm's.
         let arm_rests = self
@@ -311,14 +302,14 @@ impl<R: Real> StopSequence<R> {
         let pi: R = c(core::f64::consts::PI);
         let pendulum_rest: R = c(PENDULUM_REST_RAD);
         match self.stage {
-            // The arm at rest, or its momentum braked out (the law at 0 V for REST_S): under a
-            // pendulum still swinging the arm swings with it and never rests, and the hold
-            // law is what takes the pendulum's energy out.
-            Stage::Braking if arm_rests || self.seconds(self.momentum_still) >= REST_S => {
+            // The arm at rest, or its momentum braked out (its mean over a block within the
+            // law's dead band): under a pendulum still swinging the arm swings with it and
+            // never rests, and the hold law is what takes the pendulum's energy out.
+            Stage::Braking if arm_rests || self.momentum_braked_out() => {
                 if self.brake.mode() == BrakeMode::Short {
                     return None;
                 }
-                if hold_ready {
+                if hold_ready && !self.held {
                     self.stage = Stage::Holding {
                         at: theta,
                         periods: 0,
@@ -341,13 +332,22 @@ impl<R: Real> StopSequence<R> {
                 let unmoved = self.unmoved_while_driven(theta, last, unmoved);
                 let phi = wrap_angle(alpha - pi);
                 let pendulum_rests = self.pendulum_rest.observe_within(phi, pendulum_rest);
+                let expired = self.seconds(periods + 1) >= MAX_HOLD_S;
                 let done = (arm_rests && pendulum_rests)
-                    || self.seconds(periods + 1) >= MAX_HOLD_S
-                    || ((theta - at).abs() > c(HOLD_GIVE_UP_RAD)
-                        && self.brake.mode() != BrakeMode::Active)
+                    || expired
+                    || ((theta - at).abs() > c(HOLD_GIVE_UP_RAD) && self.encoder_sign().is_none())
                     || unmoved >= HOLD_BLIND_PERIODS
                     || !theta.is_finite();
-                if done {
+                if expired && !(arm_rests && pendulum_rests) && self.may_brake_momentum() {
+                    // The hold ran out with the pendulum still swinging: the arm's momentum
+                    // braked out once more, so that the swing cannot walk the arm once the
+                    // windings open.
+                    self.held = true;
+                    self.stage = Stage::Braking;
+                    self.brake.restart_judging();
+                    self.momentum_block.restart();
+                    self.arm_rest = RestTest::new(self.period_s);
+                } else if done {
                     self.brake.short();
                     self.stage = Stage::Shorted {
                         blind: unmoved >= HOLD_BLIND_PERIODS,
@@ -377,10 +377,11 @@ impl<R: Real> StopSequence<R> {
         }
         let command = match (self.stage, self.hold, self.hold_sign()) {
             (Stage::Braking, ..) => {
-                let (rate, judged) = self.braked_rate(rate, alpha, alpha_rate);
+                let (rate, judged) = self.braked_rate(theta, rate, alpha, alpha_rate);
                 if judged.is_some() != self.on_momentum {
                     self.on_momentum = judged.is_some();
                     self.brake.restart_judging();
+                    self.momentum_block.restart();
                 }
                 self.brake.command_judged(Some(rate), judged)
             }
@@ -505,7 +506,7 @@ impl<R: Real> StopSequence<R> {
     /// [`MOMENTUM_ENERGY_GAIN`] of the pendulum's swing energy (`2 G`) since it began is
     /// pumping the pendulum (that wrong scale spun one to 115 rad/s, generated rig 71) and
     /// gives way too.
-    fn braked_rate(&mut self, rate: R, alpha: R, alpha_rate: R) -> (R, Option<R>) {
+    fn braked_rate(&mut self, theta: R, rate: R, alpha: R, alpha_rate: R) -> (R, Option<R>) {
         let (Some(model), Some(s_e)) = (self.model, self.encoder_sign()) else {
             return (rate, None);
         };
@@ -529,17 +530,28 @@ impl<R: Real> StopSequence<R> {
             || energy > start + c::<R>(MOMENTUM_ENERGY_GAIN) * swing_energy
         {
             self.momentum_rising = None;
-            self.momentum_still = 0;
             return (rate, None);
         }
-        self.momentum_still = if self.brake.below_dead_band(speed) {
-            self.momentum_still + 1
-        } else {
-            0
-        };
+        self.momentum_block.observe(&model, theta, alpha, s_e);
         let s = alpha.sin();
         let judged = speed * (model.j0 + model.ja * s * s) / (model.j0 + model.ja);
         (omega, Some(judged))
+    }
+
+    /// Whether the braking law may run on the arm's momentum: the model known, the arm
+    /// encoder's sign against the pendulum known, and the law not given up.
+    fn may_brake_momentum(&self) -> bool {
+        self.model.is_some() && self.encoder_sign().is_some() && self.momentum_rising.is_some()
+    }
+
+    /// Whether the braking law on the arm's momentum runs and has braked it out: its mean over
+    /// the last block ([`MomentumBlock`]) within the law's dead band.
+    fn momentum_braked_out(&self) -> bool {
+        self.on_momentum
+            && self
+                .momentum_block
+                .mean()
+                .is_some_and(|mean| self.brake.below_dead_band(mean.abs()))
     }
 
     /// The hold law's sign and, where it may use the pendulum's terms, the arm encoder's sign
