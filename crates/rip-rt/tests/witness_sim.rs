@@ -901,9 +901,9 @@ const SWEEP_SEEDS: u64 = 6;
 /// `safety.arm_limit` through the run, its stop and 3 s with the windings open, in every case.
 ///
 /// Not met yet, so not run by the tiers (`cargo nextest run --run-ignored all` runs it): at
-/// the full scale 32 of 9 828 cases end past the limit (docs/rip-rt.md, "During the gentle
-/// end, and what the stop still loses": 15 on generated rig 54, 10 on rig 79, 4 on rig 46,
-/// the rest on rigs 23 and 7).
+/// the full scale 30 of 9 828 cases end past the limit (docs/rip-rt.md, "During the gentle
+/// end, and what the stop still loses": 15 on generated rig 54, 10 on rig 79, the rest on
+/// rigs 23, 46 and 7; a wrong arm scale, a stopped arm encoder, or no fault).
 #[test]
 #[ignore = "a bar not met yet: the stop after a witness trip ends past the limit on some generated rigs"]
 fn every_stop_on_generated_rigs_ends_inside_the_limit() {
@@ -1010,18 +1010,19 @@ fn a_wiring_fault_moves_the_arm_at_most_four_tenths_of_a_radian_from_the_run_wit
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
-/// The stop after a reversal seen on the arm, on generated rigs 46, 79 and 90: light arms under
-/// heavy pendulums, where braking the arm's rate alone left the pendulum swinging from its
-/// fall to walk the arm (21.4 rad on rig 79, LQG, arm encoder reversed while balancing); rig
-/// 90's coarse pendulum encoder, where each period's momentum never stayed within the dead
-/// band and the hold began too late (5.4 rad); rig 71's strong motor, which a wrong sign
-/// drove 1.9 rad before a rising speed named it. The stop learns the arm encoder's sign from
-/// the pendulum's equation and the drive's from the arm's ([`CouplingTest`]), brakes the
-/// arm's angular momentum (its mean over a block telling when it is braked out) and holds with
-/// the pendulum's terms: every reversal case
-/// (a swapped motor lead or a reversed arm encoder mid-swing and after the catch, the arm's
-/// sign configured wrong), each controller, noise seeds 0–1 (0–5 at the full scale), ends
-/// inside `safety.arm_limit`, judged on the true arm.
+/// The stop after a reversal seen on the arm, on generated rigs whose stops once lost such
+/// cases: 46 and 79, light arms under heavy pendulums, where braking the arm's rate alone left
+/// the pendulum swinging from its fall to walk the arm (21.4 rad on rig 79, LQG, arm encoder
+/// reversed while balancing); 90, a coarse pendulum encoder, where each period's momentum
+/// never stayed within the dead band and the hold began too late (5.4 rad); 71, a strong
+/// motor, which a wrong sign drove 1.9 rad before a rising speed named it; 17, a 616-count
+/// arm encoder, whose count a period once passed for the law's sign shown right (15 rad). The
+/// stop learns the arm encoder's sign from the pendulum's equation and the drive's from the
+/// arm's ([`CouplingTest`]), brakes the arm's angular momentum (its mean over a block telling
+/// when it is braked out) and holds with the pendulum's terms: every reversal case (a swapped
+/// motor lead or a reversed arm encoder mid-swing and after the catch, the arm's sign
+/// configured wrong), each controller, noise seeds 0–1 (0–5 at the full scale), ends inside
+/// `safety.arm_limit`, judged on the true arm.
 ///
 /// [`CouplingTest`]: rip_rt::envelope::CouplingTest
 #[test]
@@ -1029,7 +1030,7 @@ fn the_stop_after_a_reversal_holds_a_light_arm_under_a_heavy_pendulum() {
     let seeds = rip_test_scale::size(2, 6);
     let mut failures = Vec::new();
     let mut cases = 0;
-    for rig in [46, 71, 79, 90] {
+    for rig in [17, 46, 71, 79, 90] {
         let r = rigged(rig);
         for kind in KINDS {
             for (fault, swing_up, fault_at) in fault_cases() {

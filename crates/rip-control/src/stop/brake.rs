@@ -192,14 +192,17 @@ impl<R: Real> Brake<R> {
             }
             sign = -sign;
         }
-        // Halved from its saturated peak, saturated still or not: the sign is shown right. A
-        // law whose sign was shown only while still saturated and that then moved onto the
-        // arm's momentum (which restarts the judging) was left unverified, and its stop
-        // shorted a heavy pendulum's arm rather than hold it (generated rig 90).
+        // Halved from its saturated peak by more than the encoder's quantisation, saturated
+        // still or not: the sign is shown right. A law whose sign was shown only while still
+        // saturated and that then moved onto the arm's momentum (which restarts the judging)
+        // was left unverified, and its stop shorted a heavy pendulum's arm rather than hold
+        // it (generated rig 90); a halving within a count or two per period is no evidence (a
+        // 616-count encoder read 2 counts a period, then 1, under a wrong sign: generated rig
+        // 17, held with that sign and driven to 15 rad).
         if speed > self.law.linear_below {
             self.peak_speed = self.peak_speed.max(speed);
         }
-        if self.peak_speed > R::ZERO && speed < c::<R>(0.5) * self.peak_speed {
+        if self.peak_speed > R::ZERO && speed < c::<R>(0.5) * self.peak_speed - self.dead_band {
             self.verified = true;
         }
         if rate.abs() <= self.dead_band {

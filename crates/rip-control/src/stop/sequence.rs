@@ -302,10 +302,10 @@ impl<R: Real> StopSequence<R> {
         let pi: R = c(core::f64::consts::PI);
         let pendulum_rest: R = c(PENDULUM_REST_RAD);
         match self.stage {
-            // The arm at rest, or its momentum braked out (its mean over a block within the
-            // law's dead band): under a pendulum still swinging the arm swings with it and
+            // The arm at rest, or what the law brakes braked out (its mean over a block within
+            // the law's dead band): under a pendulum still swinging the arm swings with it and
             // never rests, and the hold law is what takes the pendulum's energy out.
-            Stage::Braking if arm_rests || self.momentum_braked_out() => {
+            Stage::Braking if arm_rests || self.braked_out(hold_ready) => {
                 if self.brake.mode() == BrakeMode::Short {
                     return None;
                 }
@@ -507,11 +507,20 @@ impl<R: Real> StopSequence<R> {
     /// pumping the pendulum (that wrong scale spun one to 115 rad/s, generated rig 71) and
     /// gives way too.
     fn braked_rate(&mut self, theta: R, rate: R, alpha: R, alpha_rate: R) -> (R, Option<R>) {
-        let (Some(model), Some(s_e)) = (self.model, self.encoder_sign()) else {
+        let Some(model) = self.model else {
             return (rate, None);
         };
+        let on_rate = |stop: &mut Self| {
+            // The law on the arm's rate: the block's mean is the arm's (`s_e` = 0 drops the
+            // coupling's term).
+            stop.momentum_block.observe(&model, theta, alpha, R::ZERO);
+            (rate, None)
+        };
+        let Some(s_e) = self.encoder_sign() else {
+            return on_rate(self);
+        };
         let Some(rising) = self.momentum_rising.as_mut() else {
-            return (rate, None);
+            return on_rate(self);
         };
         // In the reading's frame the coupling carries the encoder's sign (coupling module
         // docs): `ω_H` of the reading, which the brake's sign maps onto the true one.
@@ -530,7 +539,7 @@ impl<R: Real> StopSequence<R> {
             || energy > start + c::<R>(MOMENTUM_ENERGY_GAIN) * swing_energy
         {
             self.momentum_rising = None;
-            return (rate, None);
+            return on_rate(self);
         }
         self.momentum_block.observe(&model, theta, alpha, s_e);
         let s = alpha.sin();
@@ -544,10 +553,20 @@ impl<R: Real> StopSequence<R> {
         self.model.is_some() && self.encoder_sign().is_some() && self.momentum_rising.is_some()
     }
 
-    /// Whether the braking law on the arm's momentum runs and has braked it out: its mean over
-    /// the last block ([`MomentumBlock`]) within the law's dead band.
-    fn momentum_braked_out(&self) -> bool {
-        self.on_momentum
+    /// Whether the braking law has braked out what it brakes: its mean over the last block
+    /// ([`MomentumBlock`]) within the law's dead band. On the arm's momentum that ends the
+    /// braking; on the arm's rate, only where the hold is `hold_ready` to take over with the
+    /// pendulum's terms (the arm encoder's sign known): under a pendulum still swinging the
+    /// law on the rate keeps the arm near still but never at rest, and the hold is what takes
+    /// the pendulum's energy out (generated rig 46, a heavy pendulum, `m₁₂/J₀` = 1.14, arm
+    /// encoder reversed mid-swing: held 1.2 s on the rate while the coupling test gathered its
+    /// evidence, the arm then swung out with the pendulum 1.2 rad under the law on the
+    /// momentum, which a hold begun there avoids). A hold with the arm's terms alone keeps the
+    /// arm still and leaves the pendulum swinging (generated rig 6: the coupling test, with no
+    /// arm motion to read, never decided, and the short after the hold let the pendulum walk
+    /// the arm past the limit); the short in its place would leave the arm to the pendulum.
+    fn braked_out(&self, hold_ready: bool) -> bool {
+        (self.on_momentum || (hold_ready && self.encoder_sign().is_some()))
             && self
                 .momentum_block
                 .mean()
