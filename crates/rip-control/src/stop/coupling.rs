@@ -193,14 +193,7 @@ impl<R: Real> CouplingTest<R> {
     /// `s_d`, once the evidence is decisive: `1` when a positive voltage moves the arm reading
     /// positive, `−1` when it moves it negative; `None` before.
     pub fn drive_sign(&self) -> Option<R> {
-        let threshold: R = c(COUPLING_THRESHOLD);
-        if self.drive_llr > threshold {
-            Some(R::ONE)
-        } else if self.drive_llr < -threshold {
-            Some(-R::ONE)
-        } else {
-            None
-        }
+        decided(self.drive_llr)
     }
 
     /// `Λ` so far (module docs): positive for the arm encoder's sign as configured.
@@ -210,13 +203,19 @@ impl<R: Real> CouplingTest<R> {
 
     /// `s_e`, once the evidence is decisive: `1` as configured, `−1` reversed; `None` before.
     pub fn sign(&self) -> Option<R> {
-        let threshold: R = c(COUPLING_THRESHOLD);
-        if self.llr > threshold {
-            Some(R::ONE)
-        } else if self.llr < -threshold {
-            Some(-R::ONE)
-        } else {
-            None
-        }
+        decided(self.llr)
+    }
+}
+
+/// The sign a log-likelihood ratio `llr` of `+1` against `−1` decides past
+/// [`COUPLING_THRESHOLD`]; `None` short of it.
+fn decided<R: Real>(llr: R) -> Option<R> {
+    let threshold: R = c(COUPLING_THRESHOLD);
+    if llr > threshold {
+        Some(R::ONE)
+    } else if llr < -threshold {
+        Some(-R::ONE)
+    } else {
+        None
     }
 }

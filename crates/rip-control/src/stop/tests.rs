@@ -241,6 +241,18 @@ fn a_fast_device_runs_the_stop_every_ten_milliseconds() {
     }
 }
 
+/// One classical RK4 step of `h` (s) of the model's own equations under `u` (V): the
+/// reference the stop's estimates are checked against.
+fn rk4(m: &ArmModel, x: [f64; 4], u: f64, h: f64) -> [f64; 4] {
+    let d = |x: &[f64; 4]| m.derivative(x, u);
+    let add = |x: &[f64; 4], k: &[f64; 4], a: f64| core::array::from_fn(|i| x[i] + a * k[i]);
+    let k1 = d(&x);
+    let k2 = d(&add(&x, &k1, h / 2.0));
+    let k3 = d(&add(&x, &k2, h / 2.0));
+    let k4 = d(&add(&x, &k3, h));
+    core::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]))
+}
+
 /// The paper preset's arm and pendulum driven by a voltage that reverses every 0.15 s, the
 /// motor's lead sign `s_m`, read through 2048-count encoders (the arm's with sign `s_e`) every
 /// period by a [`CouplingTest`] on the same model with no noise, told the voltage commanded
@@ -266,14 +278,7 @@ fn coupling_verdict<R: Real>(s_e: f64, s_m: f64, arm_frozen: bool) -> [(Option<R
         );
         commanded = Some(u);
         for _ in 0..10 {
-            let d = |x: &[f64; 4]| m.derivative(x, s_m * u);
-            let add =
-                |x: &[f64; 4], k: &[f64; 4], a: f64| core::array::from_fn(|i| x[i] + a * k[i]);
-            let k1 = d(&x);
-            let k2 = d(&add(&x, &k1, h / 2.0));
-            let k3 = d(&add(&x, &k2, h / 2.0));
-            let k4 = d(&add(&x, &k3, h));
-            x = core::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]));
+            x = rk4(&m, x, s_m * u, h);
         }
     }
     [
@@ -353,14 +358,7 @@ fn momentum_errors(s_e: f64) -> (f64, f64) {
             let inertia = m.j0 + m.ja * s * s;
             true_h += momentum_rate(&m, x[1], x[2], x[3]) * inertia * h;
             true_i += inertia * h;
-            let d = |x: &[f64; 4]| m.derivative(x, 0.0);
-            let add =
-                |x: &[f64; 4], k: &[f64; 4], a: f64| core::array::from_fn(|i| x[i] + a * k[i]);
-            let k1 = d(&x);
-            let k2 = d(&add(&x, &k1, h / 2.0));
-            let k3 = d(&add(&x, &k2, h / 2.0));
-            let k4 = d(&add(&x, &k3, h));
-            x = core::array::from_fn(|i| x[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]));
+            x = rk4(&m, x, 0.0, h);
         }
     }
     assert!(blocks >= 8, "{blocks} blocks");
@@ -384,4 +382,47 @@ fn the_momentum_block_sees_through_the_encoders_quantisation() {
             "s_e {s_e}: per-period ω_H off by only {period} rad/s: the case does not test the block"
         );
     }
+}
+
+/// A sign under test is shown right on the arm's response only when the saturated law has
+/// halved the speed by more than the dead band (the encoder's quantisation): on a coarse
+/// encoder a reading of two counts a period and then one is no evidence. The drive's sign
+/// from the arm's equation shows it right when it agrees and flips it once when it does not;
+/// a trusted sign is left as it is.
+#[test]
+fn a_sign_is_shown_right_by_more_than_a_count_or_by_the_drives_sign() {
+    let law = law();
+    let count = 1.02;
+    let dead_band = 1.5 * count;
+    let mut brake = Brake::new(law, dead_band, BrakeMode::Checked);
+    let saturated = (2.0 * law.linear_below).max(10.0 * dead_band);
+    for speed in [saturated, saturated, 0.5 * saturated - 0.5 * dead_band] {
+        brake.command(Some(-speed));
+    }
+    assert!(
+        !brake.sign_known(),
+        "a halving within the dead band shows nothing"
+    );
+    let mut brake = Brake::new(law, dead_band, BrakeMode::Checked);
+    for speed in [saturated, 0.5 * saturated - 1.5 * dead_band] {
+        brake.command(Some(-speed));
+    }
+    assert!(brake.sign_known(), "halved by more than the dead band");
+
+    let mut agrees = Brake::new(law, dead_band, BrakeMode::Reversed);
+    agrees.drive_sign_found(-1.0);
+    assert!(agrees.sign_known());
+    assert_eq!(agrees.mode(), BrakeMode::Reversed);
+    let mut contradicted = Brake::new(law, dead_band, BrakeMode::Checked);
+    contradicted.drive_sign_found(-1.0);
+    assert_eq!(contradicted.mode(), BrakeMode::Reversed, "flipped once");
+    contradicted.drive_sign_found(1.0);
+    assert_eq!(
+        contradicted.mode(),
+        BrakeMode::Short,
+        "a second contradiction shorts"
+    );
+    let mut trusted = Brake::new(law, dead_band, BrakeMode::Active);
+    trusted.drive_sign_found(-1.0);
+    assert_eq!(trusted.mode(), BrakeMode::Active);
 }
