@@ -165,7 +165,7 @@ pub fn brake_mode(reason: &StopReason) -> BrakeMode {
         // The arm's response to the voltage has the wrong sign, and its encoder counts: brake
         // with the sign the rig showed ([`Brake`] falls back to the short if that is wrong).
         StopReason::Witness(fault) if fault.reversed() => BrakeMode::Reversed,
-        // The arm encoder stopped counting: brake on the model's arm.
+        // The arm encoder stopped counting: brake the arm's momentum carried by the torque.
         StopReason::Witness(WitnessFault::ArmFrozen { .. }) => BrakeMode::Modelled,
         // The arm encoder counts, but its motion disagrees with the model's: brake with the
         // model's sign and check it on the response (the short alone cannot stop a light arm
@@ -225,8 +225,9 @@ fn short() -> Brake {
 }
 
 /// The stop braking in `mode` with its `parts`: in [`BrakeMode::Modelled`] the law on the
-/// simulated stop's model from the witness's `estimate` with `held` (V) still applied for
-/// the period until the stop's first command (the short without parts), else [`brake`].
+/// arm's momentum from the witness's `estimate` with `held` (V) still applied for the period
+/// until the stop's first command, carried by the simulated stop's model (the short without
+/// parts), else [`brake`].
 pub fn brake_for_mode(
     parts: Option<&StopParts>,
     mode: BrakeMode,
@@ -296,7 +297,10 @@ impl std::fmt::Display for BrakeReport {
             BrakeMode::Checked => {
                 "braked at the voltage bound, the sign checked on the arm's response"
             }
-            BrakeMode::Modelled => "braked at the voltage bound on the model's arm",
+            BrakeMode::Modelled => {
+                "braked at the voltage bound on the arm's momentum from the torque (the arm \
+                 encoder not counting)"
+            }
             BrakeMode::Short => "braked with the windings shorted",
             BrakeMode::None => return write!(f, "no braking (motor not driven)"),
         };

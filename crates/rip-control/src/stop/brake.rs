@@ -17,9 +17,11 @@ pub enum BrakeMode {
     /// that disagrees), so the sign is not known for sure. Wrong, the law flips once to
     /// [`BrakeMode::Reversed`]; a law that fails both ways gives way to the short.
     Checked,
-    /// The braking law on the model's arm rate, run open loop from an estimate of the state at
-    /// the stop (the arm encoder stopped counting; the motor is trusted), until the model's
-    /// arm is at rest; then the short.
+    /// The arm encoder stopped counting; the motor is trusted. From an estimate of the state
+    /// at the stop, the braking law on the arm's angular momentum carried by the torque alone
+    /// and read against the pendulum ([`Brake::observe_pendulum`]), or without pendulum
+    /// readings on the model's arm run open loop, until it is braked out; then the short
+    /// (the stop's sequence keeps it until the pendulum rests).
     Modelled,
     /// The brake command only: windings shorted, whatever the wiring's sign.
     Short,
@@ -44,13 +46,16 @@ pub enum BrakeCommand<R: Real = f64> {
     Short,
 }
 
-/// The model braked open loop ([`BrakeMode::Modelled`]): its stop, its state, and how long
-/// its arm has been at rest (periods).
+/// The model braked open loop ([`BrakeMode::Modelled`]): its stop, its state, how long its
+/// arm has been at rest (periods), and, once the pendulum's readings come in, the arm's
+/// angular momentum `H` with the pendulum's last reading (angle, rate).
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Modelled<R: Real> {
     stop: SimulatedStop<R>,
     x: [R; 4],
     still: u32,
+    momentum: Option<R>,
+    pendulum: Option<[R; 2]>,
 }
 
 /// The stop's command, period by period (module docs): one definition for `rip-rt`'s stops,
@@ -105,10 +110,36 @@ impl<R: Real> Brake<R> {
                 stop: *stop,
                 x,
                 still: 0,
+                momentum: None,
+                pendulum: None,
             });
             brake.mode = BrakeMode::Modelled;
         }
         brake
+    }
+
+    /// The pendulum as read this period (`alpha`, rad, 0 upright; `alpha_rate`, rad/s), for
+    /// [`BrakeMode::Modelled`]: the model's own pendulum soon parts from the rig's (it fell,
+    /// swung, and the law drove the arm blind at the voltage bound for a whole 8 s stop on
+    /// generated rig 79), so the stop brakes the arm's angular momentum instead, carried from
+    /// the estimate at the stop by the torque alone and read against the pendulum as it is
+    /// (momentum module docs); braked out, the short. Other modes ignore it.
+    pub fn observe_pendulum(&mut self, alpha: R, alpha_rate: R) {
+        if self.mode != BrakeMode::Modelled || !(alpha.is_finite() && alpha_rate.is_finite()) {
+            return;
+        }
+        if let Some(m) = self.model.as_mut() {
+            if m.momentum.is_none() {
+                // From the estimate's own state: the stop's first rates are no rates (there is
+                // no reading before its first), and a pendulum rate of 0 in `H` tripled a heavy
+                // pendulum's arm momentum and braked it through zero (generated rig 79).
+                let model = &m.stop.model;
+                let (s, co) = (m.x[2].sin(), m.x[2].cos());
+                let inertia = model.j0 + model.ja * s * s;
+                m.momentum = Some(inertia * m.x[1] - model.m12 * co * m.x[3]);
+            }
+            m.pendulum = Some([alpha, alpha_rate]);
+        }
     }
 
     /// The model's arm angle (rad) in [`BrakeMode::Modelled`].
@@ -250,7 +281,9 @@ impl<R: Real> Brake<R> {
         }
     }
 
-    /// The law on the model's arm rate; the model then advances a period under it.
+    /// The law on the arm's momentum read against the pendulum (the torque then carries it a
+    /// period on), or without a pendulum reading on the model's arm rate (the model then
+    /// advances a period under it).
     fn modelled_command(&mut self) -> BrakeCommand<R> {
         let dead_band = self.dead_band;
         let Some(m) = self.model.as_mut() else {
@@ -258,16 +291,42 @@ impl<R: Real> Brake<R> {
             return BrakeCommand::Short;
         };
         let rest_periods = periods_in(REST_S, m.stop.ts.to_f64());
-        let rate = m.x[1];
-        let v = if rate.abs() <= dead_band {
-            m.still += 1;
-            R::ZERO
-        } else {
-            m.still = 0;
-            m.stop.law.voltage(rate)
-        };
         let stop = m.stop;
-        stop.advance(&mut m.x, v);
+        let v = match (m.momentum, m.pendulum.take()) {
+            (Some(h), Some([alpha, alpha_rate])) => {
+                let model = &stop.model;
+                let (s, co) = (alpha.sin(), alpha.cos());
+                let inertia = model.j0 + model.ja * s * s;
+                let omega = h / inertia;
+                let v = if omega.abs() <= dead_band {
+                    m.still += 1;
+                    R::ZERO
+                } else {
+                    m.still = 0;
+                    stop.law.voltage(omega)
+                };
+                // Only the motor's torque and the arm's friction change `H` (momentum module
+                // docs): `Ḣ = b u − c θ̇`, with `θ̇` from `H` and the pendulum as read.
+                let rate = (h + model.m12 * co * alpha_rate) / inertia;
+                let applied = v - v.clamp(-stop.dead_zone, stop.dead_zone);
+                m.momentum = Some(h + stop.ts * (model.b * applied - model.c_arm * rate));
+                m.x[0] += rate * stop.ts;
+                m.x[1] = rate;
+                v
+            }
+            _ => {
+                let rate = m.x[1];
+                let v = if rate.abs() <= dead_band {
+                    m.still += 1;
+                    R::ZERO
+                } else {
+                    m.still = 0;
+                    stop.law.voltage(rate)
+                };
+                stop.advance(&mut m.x, v);
+                v
+            }
+        };
         if m.still >= rest_periods {
             self.mode = BrakeMode::Short;
             return BrakeCommand::Short;

@@ -285,6 +285,7 @@ impl<R: Real> StopSequence<R> {
         // The voltage over the period that ended with these readings: the stop's last
         // command, from its second period on (its first follows the run's).
         let volts = core::mem::replace(&mut self.commanded, true).then_some(self.last_volts);
+        self.brake.observe_pendulum(alpha, alpha_rate);
         if let Some(test) = self.coupling.as_mut() {
             test.observe(theta, alpha, volts);
             if let Some(s_d) = test.drive_sign() {
@@ -306,6 +307,17 @@ impl<R: Real> StopSequence<R> {
             // the law's dead band): under a pendulum still swinging the arm swings with it and
             // never rests, and the hold law is what takes the pendulum's energy out.
             Stage::Braking if arm_rests || self.braked_out(hold_ready) => {
+                if self.brake.mode() == BrakeMode::Short && self.brake.model_arm().is_some() {
+                    // The model's arm rests, the arm encoder stopped: the reading is not the
+                    // arm's, and a pendulum still swinging drives the arm through the coupling
+                    // (the hold's blind rule). The windings open at once walked an arm whose
+                    // momentum was braked out to 4.5 rad under a heavy pendulum's swing
+                    // (generated rig 79, arm encoder stopped mid-swing).
+                    self.stage = Stage::Shorted { blind: true };
+                    self.pendulum_rest = RestTest::new(self.period_s);
+                    self.last_volts = R::ZERO;
+                    return Some(BrakeCommand::Short);
+                }
                 if self.brake.mode() == BrakeMode::Short {
                     return None;
                 }

@@ -426,3 +426,45 @@ fn a_sign_is_shown_right_by_more_than_a_count_or_by_the_drives_sign() {
     trusted.drive_sign_found(-1.0);
     assert_eq!(trusted.mode(), BrakeMode::Active);
 }
+
+/// With the arm encoder stopped ([`BrakeMode::Modelled`]) and the pendulum read each period,
+/// the stop brakes the arm's angular momentum carried by the torque alone: on a rig whose
+/// pendulum bearing drags five times the model's (the model's own pendulum would part from
+/// it), an arm at 8 rad/s under a pendulum swinging 1.2 rad from hanging is braked to a true
+/// momentum within twice the dead band before the law gives way to the short, within a
+/// second.
+#[test]
+fn a_modelled_stop_brakes_the_momentum_read_against_the_pendulum() {
+    let m = model();
+    let rig = ArmModel {
+        dp: 5.0 * m.dp.max(1e-5),
+        ..m
+    };
+    let dead_band = 1.5 * core::f64::consts::TAU / 2048.0 / TS;
+    let x0 = [0.0, 8.0, core::f64::consts::PI - 1.2, 0.0];
+    let mut brake = Brake::modelled(&simulated(), dead_band, Some(x0), 0.0);
+    let mut x = rk4(&rig, x0, 0.0, TS);
+    let mut last_alpha = None;
+    let mut shorted_at = None;
+    for k in 0..100 {
+        let alpha = wrap_angle(x[2]);
+        let alpha_rate = last_alpha.map_or(0.0, |a| wrap_angle(alpha - a) / TS);
+        last_alpha = Some(alpha);
+        brake.observe_pendulum(alpha, alpha_rate);
+        let u = match brake.command(Some(0.0)) {
+            BrakeCommand::Volts(v) => v - v.clamp(-0.3, 0.3),
+            BrakeCommand::Short => {
+                shorted_at = Some((k, momentum_rate(&rig, x[1], x[2], x[3])));
+                break;
+            }
+        };
+        for _ in 0..10 {
+            x = rk4(&rig, x, u, TS / 10.0);
+        }
+    }
+    let (k, omega) = shorted_at.expect("the law gave way to the short within a second");
+    assert!(
+        omega.abs() < 2.0 * dead_band,
+        "true ω_H {omega} rad/s at the short (period {k}), dead band {dead_band}"
+    );
+}
