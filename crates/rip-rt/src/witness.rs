@@ -65,7 +65,8 @@
 //! exceeds [`SIGN_THRESHOLD`]. What stopped it is named from the response itself: over the
 //! periods since `S` left 0, the regression of the measured change of the arm's mean rate
 //! (beyond the model's at 0 V) on the voltage's share of it ([`Witness::response_gain`]); a
-//! negative gain is a reversed motor or arm encoder ([`WitnessFault::ArmWrongWay`], which
+//! gain nearer −1 than 0, or below 0 by more than [`REVERSED_SIGMAS`] standard errors, is a
+//! reversed motor or arm encoder ([`WitnessFault::ArmWrongWay`], which
 //! the stop brakes with the opposite sign), anything else is named as by the CUSUM; a reading
 //! that stopped changing when the disagreement began is a dead encoder.
 //!
@@ -181,6 +182,11 @@ pub const FROZEN_RAD: f64 = 0.05;
 pub const FROZEN_COUNTS: f64 = 8.0;
 /// Periods the arm reading must stay constant before a trip is named a frozen encoder.
 pub const FROZEN_PERIODS: u32 = 2;
+/// Standard errors by which the arm's response gain must lie below 0 for a trip to be named
+/// a reversal ([`WitnessFault::ArmWrongWay`]); nearer 0 it is a disagreement, which the stop
+/// brakes with the model's sign, checked on the arm's response.
+pub const REVERSED_SIGMAS: f64 = 2.0;
+
 /// Threshold of the sign statistic (a log-likelihood ratio, module docs): the run stops as
 /// a reversed motor or arm encoder when it exceeds this.
 pub const SIGN_THRESHOLD: f64 = 25.0;
@@ -814,10 +820,26 @@ impl Witness {
         }
     }
 
-    /// Whether the arm's response since the sign statistic left 0 has the wrong sign
-    /// ([`Witness::response_gain`] negative).
+    /// The standard error of [`Witness::response_gain`] (the weighted regression's); `None`
+    /// without a response.
+    pub fn response_gain_error(&self) -> Option<f64> {
+        (self.response[1] > 0.0).then(|| 1.0 / self.response[1].sqrt())
+    }
+
+    /// Whether the arm's response since the sign statistic left 0 has the wrong sign: the
+    /// gain ([`Witness::response_gain`]) nearer a reversal's −1 than 0, or below 0 by more
+    /// than [`REVERSED_SIGMAS`] of its standard error. A gain of −0.09 from three periods of
+    /// a coarse reading at a quarter of the arm's motion, a count from 0, once named a wrong
+    /// arm scale a reversal 0.03 s into a swing-up, and the stop braked with the sign that
+    /// drove the arm on (generated rig 54, 524 counts set as 2096: 6.6 rad); a swapped lead's
+    /// −0.55, within its noise of 0 a tenth of a second into a heavy pendulum's swing, is a
+    /// reversal still (generated rig 90: named a disagreement, the model's sign drove the arm
+    /// 0.9 rad before the arm's equation turned it).
     fn response_reversed(&self) -> bool {
-        self.response_gain().is_some_and(|g| g < 0.0)
+        match (self.response_gain(), self.response_gain_error()) {
+            (Some(g), Some(se)) => g < -0.5 || g + REVERSED_SIGMAS * se < 0.0,
+            _ => false,
+        }
     }
 }
 

@@ -76,6 +76,8 @@ pub struct Brake<R: Real = f64> {
     may_flip: bool,
     peak_speed: R,
     verified: bool,
+    // Whether the arm's equation confirmed the sign under test ([`Brake::drive_sign_found`]).
+    drive_confirmed: bool,
     model: Option<Modelled<R>>,
 }
 
@@ -95,6 +97,7 @@ impl<R: Real> Brake<R> {
             may_flip: matches!(mode, BrakeMode::Reversed | BrakeMode::Checked),
             peak_speed: R::ZERO,
             verified: false,
+            drive_confirmed: false,
             model: None,
         }
     }
@@ -217,7 +220,8 @@ impl<R: Real> Brake<R> {
         };
         let speed = judged.filter(|j| j.is_finite()).unwrap_or(rate).abs();
         let mut sign = sign;
-        if matches!(self.mode, BrakeMode::Reversed | BrakeMode::Checked) && self.wrong_sign(speed) {
+        let under_test = matches!(self.mode, BrakeMode::Reversed | BrakeMode::Checked);
+        if under_test && !self.drive_confirmed && self.wrong_sign(speed) {
             if !self.flip() {
                 return BrakeCommand::Short;
             }
@@ -275,8 +279,14 @@ impl<R: Real> Brake<R> {
             _ => return,
         };
         if s_d == under_test {
+            // The arm's equation outweighs the rising-speed rule, which a heavy pendulum's
+            // push on the arm can fool: with the sign confirmed, a speed still rising under
+            // that push once shorted a law that was braking (generated rig 90, a swapped lead
+            // mid-swing: 17 rad).
             self.verified = true;
+            self.drive_confirmed = true;
         } else {
+            self.drive_confirmed = false;
             self.flip();
         }
     }
