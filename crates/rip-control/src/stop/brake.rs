@@ -58,6 +58,20 @@ struct Modelled<R: Real> {
     pendulum: Option<[R; 2]>,
 }
 
+impl<R: Real> Modelled<R> {
+    /// The braking law on `rate` (rad/s), 0 V within `dead_band`; counts the periods in a
+    /// row within it.
+    fn law_beyond_dead_band(&mut self, rate: R, dead_band: R) -> R {
+        if rate.abs() <= dead_band {
+            self.still += 1;
+            R::ZERO
+        } else {
+            self.still = 0;
+            self.stop.law.voltage(rate)
+        }
+    }
+}
+
 /// The stop's command, period by period (module docs): one definition for `rip-rt`'s stops,
 /// the device's and the simulations that test them. Allocation-free, `Copy`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -307,14 +321,7 @@ impl<R: Real> Brake<R> {
                 let model = &stop.model;
                 let (s, co) = (alpha.sin(), alpha.cos());
                 let inertia = model.j0 + model.ja * s * s;
-                let omega = h / inertia;
-                let v = if omega.abs() <= dead_band {
-                    m.still += 1;
-                    R::ZERO
-                } else {
-                    m.still = 0;
-                    stop.law.voltage(omega)
-                };
+                let v = m.law_beyond_dead_band(h / inertia, dead_band);
                 // Only the motor's torque and the arm's friction change `H` (momentum module
                 // docs): `Ḣ = b u − c θ̇`, with `θ̇` from `H` and the pendulum as read.
                 let rate = (h + model.m12 * co * alpha_rate) / inertia;
@@ -325,14 +332,7 @@ impl<R: Real> Brake<R> {
                 v
             }
             _ => {
-                let rate = m.x[1];
-                let v = if rate.abs() <= dead_band {
-                    m.still += 1;
-                    R::ZERO
-                } else {
-                    m.still = 0;
-                    stop.law.voltage(rate)
-                };
+                let v = m.law_beyond_dead_band(m.x[1], dead_band);
                 stop.advance(&mut m.x, v);
                 v
             }
