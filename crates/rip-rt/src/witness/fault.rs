@@ -1,6 +1,8 @@
 //! The witness's verdicts: what each stop names as the likely fault (the parent module's
 //! "What the stop says").
 
+use super::{Witness, FROZEN_PERIODS, REVERSED_SIGMAS};
+
 /// Why the witness stopped the run: the likely fault.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum WitnessFault {
@@ -86,6 +88,87 @@ impl WitnessFault {
                 reversal >= super::REVERSAL_EVIDENCE
             }
             Self::ArmFrozen { .. } => false,
+        }
+    }
+}
+
+/// Naming the fault from the response ([`Witness::response_gain`]) and the CUSUMs.
+impl Witness {
+    /// The voltage's gain on the arm that the measurements since the sign statistic left 0
+    /// show, relative to the model's (1 as modelled, −1 reversed); `None` without a response.
+    pub fn response_gain(&self) -> Option<f64> {
+        (self.response[1] > 0.0).then(|| self.response[0] / self.response[1])
+    }
+
+    pub(super) fn classify(&self, theta: f64, stat: f64, limit: f64) -> WitnessFault {
+        let (predicted, measured) = (self.predicted, self.measured);
+        let window_s = f64::from(self.disagreeing) * self.ts;
+        // No motion at all since the disagreement began, against the model's.
+        if self.unchanged >= self.disagreeing.min(FROZEN_PERIODS)
+            && self.unchanged > 0
+            && measured.abs() < 0.5 * self.arm_count
+            && predicted.abs() > 2.0 * self.arm_count
+        {
+            WitnessFault::ArmFrozen {
+                theta,
+                predicted,
+                still_s: f64::from(self.unchanged) * self.ts,
+            }
+        } else if predicted * measured < 0.0 {
+            WitnessFault::ArmWrongWay {
+                measured,
+                predicted,
+                window_s,
+                stat,
+                limit,
+            }
+        } else {
+            WitnessFault::ArmDisagrees {
+                measured,
+                predicted,
+                window_s,
+                stat,
+                limit,
+                reversal: self.reversal_evidence(),
+            }
+        }
+    }
+
+    /// The evidence (a log-likelihood ratio, as the sign statistic) that the voltage moves
+    /// the arm reversed: the sign statistic where the arm's response since it left 0 has the
+    /// wrong sign too, else 0. A trip on another statistic while this stands at
+    /// [`REVERSAL_EVIDENCE`](super::REVERSAL_EVIDENCE) or more is stopped as a reversal is ([`WitnessFault::reversed`]):
+    /// a swapped motor lead under a hard-driving balance can spin the pendulum past its own
+    /// threshold before the sign statistic reaches its own, and a stop with the model's sign
+    /// then drove the arm 2.6 rad before it learnt the sign (generated rig 54, statistic
+    /// 7.5–13 at the trip).
+    pub fn reversal_evidence(&self) -> f64 {
+        if self.response_reversed() {
+            self.sign
+        } else {
+            0.0
+        }
+    }
+
+    /// The standard error of [`Witness::response_gain`] (the weighted regression's); `None`
+    /// without a response.
+    pub fn response_gain_error(&self) -> Option<f64> {
+        (self.response[1] > 0.0).then(|| 1.0 / self.response[1].sqrt())
+    }
+
+    /// Whether the arm's response since the sign statistic left 0 has the wrong sign: the
+    /// gain ([`Witness::response_gain`]) nearer a reversal's −1 than 0, or below 0 by more
+    /// than [`REVERSED_SIGMAS`] of its standard error. A gain of −0.09 from three periods of
+    /// a coarse reading at a quarter of the arm's motion, a count from 0, once named a wrong
+    /// arm scale a reversal 0.03 s into a swing-up, and the stop braked with the sign that
+    /// drove the arm on (generated rig 54, 524 counts set as 2096: 6.6 rad); a swapped lead's
+    /// −0.55, within its noise of 0 a tenth of a second into a heavy pendulum's swing, is a
+    /// reversal still (generated rig 90: named a disagreement, the model's sign drove the arm
+    /// 0.9 rad before the arm's equation turned it).
+    pub(super) fn response_reversed(&self) -> bool {
+        match (self.response_gain(), self.response_gain_error()) {
+            (Some(g), Some(se)) => g < -0.5 || g + REVERSED_SIGMAS * se < 0.0,
+            _ => false,
         }
     }
 }
