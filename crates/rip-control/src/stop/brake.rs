@@ -150,10 +150,7 @@ impl<R: Real> Brake<R> {
                 // From the estimate's own state: the stop's first rates are no rates (there is
                 // no reading before its first), and a pendulum rate of 0 in `H` tripled a heavy
                 // pendulum's arm momentum and braked it through zero (generated rig 79).
-                let model = &m.stop.model;
-                let (s, co) = (m.x[2].sin(), m.x[2].cos());
-                let inertia = model.j0 + model.ja * s * s;
-                m.momentum = Some(inertia * m.x[1] - model.m12 * co * m.x[3]);
+                m.momentum = Some(m.stop.model.arm_momentum(m.x[1], m.x[2], m.x[3]));
             }
             m.pendulum = Some([alpha, alpha_rate]);
         }
@@ -218,16 +215,16 @@ impl<R: Real> Brake<R> {
     /// arm's largest inertia, which the saturated law takes down every period, where `ω_H`
     /// itself rises and falls with the pendulum's swing (the inertia it is divided by does).
     pub fn command_judged(&mut self, rate: Option<R>, judged: Option<R>) -> BrakeCommand<R> {
-        let sign = match self.mode {
-            BrakeMode::Active | BrakeMode::Checked => R::ONE,
-            BrakeMode::Reversed => -R::ONE,
-            // A reading that moves after all: the model's arm is not the arm.
-            BrakeMode::Modelled if rate.is_some_and(|r| r.abs() > self.dead_band) => {
-                self.mode = BrakeMode::Short;
-                return BrakeCommand::Short;
-            }
-            BrakeMode::Modelled => return self.modelled_command(),
-            BrakeMode::Short | BrakeMode::None => return BrakeCommand::Short,
+        let Some(sign) = self.law_sign() else {
+            return match self.mode {
+                // A reading that moves after all: the model's arm is not the arm.
+                BrakeMode::Modelled if rate.is_some_and(|r| r.abs() > self.dead_band) => {
+                    self.mode = BrakeMode::Short;
+                    BrakeCommand::Short
+                }
+                BrakeMode::Modelled => self.modelled_command(),
+                _ => BrakeCommand::Short,
+            };
         };
         let Some(rate) = rate.filter(|r| r.is_finite()) else {
             return BrakeCommand::Short;
@@ -275,11 +272,18 @@ impl<R: Real> Brake<R> {
         } else {
             BrakeMode::Reversed
         };
-        self.rising = 0;
-        self.window = 0;
-        self.last_speed = c(f64::INFINITY);
-        self.peak_speed = R::ZERO;
+        self.restart_judging();
         true
+    }
+
+    /// The sign the law takes against the measured arm rate: `+1` with the model's (trusted,
+    /// or under test), `−1` reversed; `None` where it does not run on the measured rate.
+    pub fn law_sign(&self) -> Option<R> {
+        match self.mode {
+            BrakeMode::Active | BrakeMode::Checked => Some(R::ONE),
+            BrakeMode::Reversed => Some(-R::ONE),
+            _ => None,
+        }
     }
 
     /// The drive's sign `s_d` as the arm's equation named it ([`CouplingTest::drive_sign`]:
@@ -287,10 +291,8 @@ impl<R: Real> Brake<R> {
     /// agrees is shown right; one that disagrees flips as a rising speed would flip it,
     /// periods sooner. A trusted sign, or a stop that does not drive, is left as it is.
     pub fn drive_sign_found(&mut self, s_d: R) {
-        let under_test = match self.mode {
-            BrakeMode::Checked => R::ONE,
-            BrakeMode::Reversed => -R::ONE,
-            _ => return,
+        let Some(under_test) = self.law_sign().filter(|_| self.mode != BrakeMode::Active) else {
+            return;
         };
         if s_d == under_test {
             // The arm's equation outweighs the rising-speed rule, which a heavy pendulum's
@@ -319,12 +321,11 @@ impl<R: Real> Brake<R> {
         let v = match (m.momentum, m.pendulum.take()) {
             (Some(h), Some([alpha, alpha_rate])) => {
                 let model = &stop.model;
-                let (s, co) = (alpha.sin(), alpha.cos());
-                let inertia = model.j0 + model.ja * s * s;
+                let inertia = model.arm_inertia(alpha);
                 let v = m.law_beyond_dead_band(h / inertia, dead_band);
                 // Only the motor's torque and the arm's friction change `H` (momentum module
                 // docs): `Ḣ = b u − c θ̇`, with `θ̇` from `H` and the pendulum as read.
-                let rate = (h + model.m12 * co * alpha_rate) / inertia;
+                let rate = (h + model.m12 * alpha.cos() * alpha_rate) / inertia;
                 let applied = v - v.clamp(-stop.dead_zone, stop.dead_zone);
                 m.momentum = Some(h + stop.ts * (model.b * applied - model.c_arm * rate));
                 m.x[0] += rate * stop.ts;

@@ -162,7 +162,7 @@ impl<R: Real> CouplingTest<R> {
         let (s, co) = (alpha.sin(), alpha.cos());
         let two: R = c(2.0);
         let [arm_rate, pend_rate] = rates;
-        let inertia = m.j0 + m.ja * s * s - (m.m12 * co).powu(2) / m.ja;
+        let inertia = m.arm_inertia(alpha) - (m.m12 * co).powu(2) / m.ja;
         let y = inertia * arm_acc + m.c_arm * arm_rate + two * m.ja * s * co * arm_rate * pend_rate;
         let pendulum =
             m.m12 * co * (m.ja * s * co * arm_rate * arm_rate + m.grav * s - m.dp * pend_rate)

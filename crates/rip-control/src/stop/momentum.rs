@@ -17,17 +17,15 @@ use super::*;
 /// the arm walked on to 10.2 rad with the windings open (generated rig 79, a healthy rig, at
 /// the end of an MPC balance). `ω_H = θ̇` when the pendulum rests.
 pub fn momentum_rate<R: Real>(model: &ArmModel<R>, rate: R, alpha: R, alpha_rate: R) -> R {
-    let (s, co) = (alpha.sin(), alpha.cos());
-    let inertia = model.j0 + model.ja * s * s;
-    (inertia * rate - model.m12 * co * alpha_rate) / inertia
+    model.arm_momentum(rate, alpha, alpha_rate) / model.arm_inertia(alpha)
 }
 
 /// The mechanical energy `T + V` (J) of the arm at rate `rate` and the pendulum at `alpha`,
 /// `alpha_rate`, with `V = G cos α` (rip-core's `Plant::energy`).
 pub(super) fn energy<R: Real>(model: &ArmModel<R>, rate: R, alpha: R, alpha_rate: R) -> R {
-    let (s, co) = (alpha.sin(), alpha.cos());
+    let co = alpha.cos();
     let half: R = c(0.5);
-    half * (model.j0 + model.ja * s * s) * rate * rate - model.m12 * co * rate * alpha_rate
+    half * model.arm_inertia(alpha) * rate * rate - model.m12 * co * rate * alpha_rate
         + half * model.ja * alpha_rate * alpha_rate
         + model.grav * co
 }
@@ -95,9 +93,7 @@ impl<R: Real> MomentumBlock<R> {
             return;
         };
         let half: R = c(0.5);
-        let mid = alpha0 + half * wrap_angle(alpha - alpha0);
-        let s = mid.sin();
-        let inertia = model.j0 + model.ja * s * s;
+        let inertia = model.arm_inertia(alpha0 + half * wrap_angle(alpha - alpha0));
         self.sum_h += inertia * (theta - theta0);
         self.sum_inertia += inertia;
         self.periods += 1;

@@ -356,8 +356,7 @@ impl<R: Real> StopSequence<R> {
                     // windings open.
                     self.held = true;
                     self.stage = Stage::Braking;
-                    self.brake.restart_judging();
-                    self.momentum_block.restart();
+                    self.judge_afresh();
                     self.arm_rest = RestTest::new(self.period_s);
                 } else if done {
                     self.brake.short();
@@ -392,8 +391,7 @@ impl<R: Real> StopSequence<R> {
                 let (rate, judged) = self.braked_rate(theta, rate, alpha, alpha_rate);
                 if judged.is_some() != self.on_momentum {
                     self.on_momentum = judged.is_some();
-                    self.brake.restart_judging();
-                    self.momentum_block.restart();
+                    self.judge_afresh();
                 }
                 self.brake.command_judged(Some(rate), judged)
             }
@@ -554,9 +552,16 @@ impl<R: Real> StopSequence<R> {
             return on_rate(self);
         }
         self.momentum_block.observe(&model, theta, alpha, s_e);
-        let s = alpha.sin();
-        let judged = speed * (model.j0 + model.ja * s * s) / (model.j0 + model.ja);
+        let judged = speed * model.arm_inertia(alpha) / (model.j0 + model.ja);
         (omega, Some(judged))
+    }
+
+    /// Starts the braking law's judging afresh, its sign's progress and its block mean: the
+    /// speed it brakes changed its meaning (it moved between the arm's rate and momentum, or
+    /// came back after the hold).
+    fn judge_afresh(&mut self) {
+        self.brake.restart_judging();
+        self.momentum_block.restart();
     }
 
     /// Whether the braking law may run on the arm's momentum: the model known, the arm
@@ -595,11 +600,6 @@ impl<R: Real> StopSequence<R> {
         if !self.brake.sign_known() {
             return None;
         }
-        let sign = match self.brake.mode() {
-            BrakeMode::Active | BrakeMode::Checked => R::ONE,
-            BrakeMode::Reversed => -R::ONE,
-            _ => return None,
-        };
-        Some((sign, self.encoder_sign()))
+        Some((self.brake.law_sign()?, self.encoder_sign()))
     }
 }

@@ -33,6 +33,22 @@ pub struct ArmModel<R: Real = f64> {
 }
 
 impl<R: Real> ArmModel<R> {
+    /// `M₁₁ = J₀ + J_α sin²α` (kg·m²): the arm's inertia about its axis with the pendulum at
+    /// `alpha` (rad).
+    #[inline]
+    pub fn arm_inertia(&self, alpha: R) -> R {
+        let s = alpha.sin();
+        self.j0 + self.ja * s * s
+    }
+
+    /// `H = M₁₁ θ̇ − m₁₂ cos α α̇` (N·m·s): the arm's angular momentum about its axis at arm
+    /// rate `rate`, pendulum angle `alpha` and rate `alpha_rate`, which only the motor's
+    /// torque and the arm's friction change (rip-core's `Plant::arm_momentum`).
+    #[inline]
+    pub fn arm_momentum(&self, rate: R, alpha: R, alpha_rate: R) -> R {
+        self.arm_inertia(alpha) * rate - self.m12 * alpha.cos() * alpha_rate
+    }
+
     /// `(θ̈, α̈)` at `x` with `u` (V).
     #[inline]
     pub fn accelerations(&self, x: &[R; 4], u: R) -> [R; 2] {
@@ -40,7 +56,7 @@ impl<R: Real> ArmModel<R> {
         let (td, ad) = (x[1], x[3]);
         let ja = self.ja;
         let two: R = c(2.0);
-        let m11 = self.j0 + ja * s * s;
+        let m11 = self.arm_inertia(x[2]);
         let m12 = -self.m12 * co;
         let m22 = ja;
         let f1 =
