@@ -24,23 +24,33 @@ pub use rip_control::stop::MAX_STOP_S;
 /// down, the fault's stop for up to [`MAX_STOP_S`].
 pub const MAX_GENTLE_STOP_S: f64 = rip_core::envelope::MAX_LOWER_S + MAX_STOP_S;
 
-/// The gentle end's law for the stop after `reason` in `mode` on `core`'s rig: an orderly end
-/// (the duration, a first stop signal) of a balancing run whose wiring's sign is trusted
-/// ([`BrakeMode::Active`]) and whose pendulum was last measured within
-/// [`LOWER_FROM_RAD`](crate::envelope::LOWER_FROM_RAD) of upright. Faults, a second signal, a
-/// swing-up still swinging and open-loop runs (no lowering designed) keep the fault's stop.
+/// Whether the stop after `reason` in `mode` begins by lowering the pendulum: an orderly end
+/// (the duration, a first stop signal) of a run in `phase` [`Balance`](rip_core::Phase::Balance)
+/// whose wiring's sign is trusted ([`BrakeMode::Active`]) and whose pendulum was last measured
+/// at `last_alpha` within [`LOWER_FROM_RAD`](crate::envelope::LOWER_FROM_RAD) of upright.
+/// Faults, a second signal, a fall, a swing-up still swinging and open-loop runs keep the
+/// fault's stop. One rule for `rip-rt` and its simulations.
+pub fn begins_lowered(
+    reason: &StopReason,
+    mode: BrakeMode,
+    phase: rip_core::Phase,
+    last_alpha: Option<f64>,
+) -> bool {
+    let upright = last_alpha.is_some_and(|alpha| {
+        rip_core::swingup::wrap_angle(alpha).abs() <= crate::envelope::LOWER_FROM_RAD
+    });
+    reason.is_orderly() && mode == BrakeMode::Active && phase == rip_core::Phase::Balance && upright
+}
+
+/// The gentle end's law for the stop after `reason` in `mode` on `core`'s rig, when it
+/// [`begins_lowered`] and the rig has a lowering designed.
 pub fn lowering_for<'a>(
     core: &'a LoopCore,
     reason: &StopReason,
     mode: BrakeMode,
 ) -> Option<&'a rip_core::envelope::Lowering> {
-    let upright = core.last_angles().is_some_and(|(_, alpha)| {
-        rip_core::swingup::wrap_angle(alpha).abs() <= crate::envelope::LOWER_FROM_RAD
-    });
-    (reason.is_orderly()
-        && mode == BrakeMode::Active
-        && core.phase() == rip_core::Phase::Balance
-        && upright)
+    let last_alpha = core.last_angles().map(|(_, alpha)| alpha);
+    begins_lowered(reason, mode, core.phase(), last_alpha)
         .then(|| core.lowering())
         .flatten()
 }
