@@ -70,6 +70,12 @@
 //! the stop brakes with the opposite sign), anything else is named as by the CUSUM; a reading
 //! that stopped changing when the disagreement began is a dead encoder.
 //!
+//! # The reversed observers
+//!
+//! The observer runs twice more, each on the model of one wiring that reverses the arm's
+//! response, and the run stops as a reversal when either follows the readings better than
+//! the observer as wired by [`REVERSAL_THRESHOLD`] ([`Reversal`] has the statistic).
+//!
 //! # Friction
 //!
 //! Near rest the arm's Coulomb friction (and its breakaway torque, `plant.arm_breakaway`)
@@ -146,8 +152,11 @@ use crate::config::Config;
 
 mod fault;
 mod limits;
+mod reversal;
 pub use fault::WitnessFault;
 pub use limits::{WitnessLimits, LOWERING_THRESHOLD_FACTOR};
+use reversal::Reversals;
+pub use reversal::{Reversal, REVERSAL_MODEL_ERROR};
 
 /// Position gain ℓ_p of the observer's correction (module docs).
 pub const GAIN_POSITION: f64 = 0.5;
@@ -190,6 +199,10 @@ pub const REVERSED_SIGMAS: f64 = 2.0;
 /// Threshold of the sign statistic (a log-likelihood ratio, module docs): the run stops as
 /// a reversed motor or arm encoder when it exceeds this.
 pub const SIGN_THRESHOLD: f64 = 25.0;
+/// Threshold of the reversed observers' statistic (a log-likelihood ratio, module docs, "The
+/// reversed observers"): the run stops as a reversed motor or arm encoder when either
+/// exceeds this.
+pub const REVERSAL_THRESHOLD: f64 = 25.0;
 /// The evidence of a reversal ([`Witness::reversal_evidence`], a log-likelihood ratio: odds
 /// of about 150 to 1) from which a trip on another statistic is stopped as a reversal.
 pub const REVERSAL_EVIDENCE: f64 = 5.0;
@@ -249,6 +262,8 @@ pub struct Witness {
     last_switch: f64,
     history: u32,
     peak: [f64; 4],
+    // The reversed observers (module docs, "The reversed observers").
+    reversals: Reversals,
 }
 
 impl Witness {
@@ -299,6 +314,7 @@ impl Witness {
             last_switch: 0.0,
             history: 0,
             peak: [0.0; 4],
+            reversals: Reversals::default(),
         })
     }
 
@@ -332,6 +348,7 @@ impl Witness {
         self.unknown_next = false;
         self.unknown_left = 0;
         self.carried = [[0.0; 2]; 2];
+        self.reversals.reset();
     }
 
     /// The largest statistics since construction: the arm's and the pendulum's CUSUM (σ), and
@@ -357,6 +374,17 @@ impl Witness {
     /// The current sign statistic (a log-likelihood ratio, module docs).
     pub fn sign_statistic(&self) -> f64 {
         self.sign
+    }
+
+    /// The reversed observers' larger statistic (a log-likelihood ratio, module docs, "The
+    /// reversed observers") and the wiring it favours.
+    pub fn reversal_statistic(&self) -> (f64, Reversal) {
+        self.reversals.statistic()
+    }
+
+    /// The largest of the reversed observers' statistics since construction.
+    pub fn reversal_peak(&self) -> f64 {
+        self.reversals.peak()
     }
 
     /// The current arm and pendulum statistics (σ).
@@ -504,25 +532,39 @@ impl Witness {
         // docs/rip-rt.md); the pendulum's, which a chattering catch with a late command in
         // it drove past its threshold, take it in.
         self.accumulate(e, rate, switch, [friction, carried[1]], on_time);
+        // The arm's variance for the sign statistic and the reversed observers: the noise,
+        // the sampling instant, the command's arrival and the friction's sign.
+        let sign_var = {
+            let timing = TIMING_S * rate[0];
+            let switch = switch[0].max(anywhere);
+            self.sigma[0] * self.sigma[0] + timing * timing + switch * switch + friction * friction
+        };
+        // Held (not updated) for a period whose command's arrival is unknown (a slow
+        // exchange, a skipped period) and for the one after it: a command that arrived late,
+        // even after the interval, leaves the arm on the old voltage's side.
+        let counted = on_time && !(arrival_unknown || self.arrival_unknown);
         if on_time {
             // The log-likelihood ratio of "the voltage acts reversed" (the arm measured at
             // the 0 V motion less the voltage's part) against "as modelled".
-            let timing = TIMING_S * rate[0];
-            let switch = switch[0].max(anywhere);
-            let var = self.sigma[0] * self.sigma[0]
-                + timing * timing
-                + switch * switch
-                + friction * friction;
             let e_reversed = theta - reversed[0];
-            let llr = (e[0] * e[0] - e_reversed * e_reversed) / (2.0 * var);
-            // Held (not updated) for a period whose command's arrival is unknown (a slow
-            // exchange, a skipped period) and for the one after it: a command that arrived
-            // late, even after the interval, leaves the arm on the old voltage's side.
-            if !(arrival_unknown || self.arrival_unknown) {
+            let llr = (e[0] * e[0] - e_reversed * e_reversed) / (2.0 * sign_var);
+            if counted {
                 self.sign = (self.sign + llr).max(0.0);
             }
             self.peak[3] = self.peak[3].max(self.sign);
         }
+        let mut reversals = self.reversals;
+        reversals.observe(
+            &prior,
+            (theta, alpha),
+            volts,
+            |x, v| self.predict(x, v, dt, delay),
+            (e[0], sign_var),
+            (moved, step),
+            self.ts,
+            counted,
+        );
+        self.reversals = reversals;
         self.arrival_unknown = arrival_unknown;
         self.response_test(theta, dt, rate_change, switch[0], on_time);
         if self.cusum[0] == [0.0, 0.0] {
@@ -563,6 +605,7 @@ impl Witness {
             mean[1] + 0.5 * (ahead[3] - mean[1]),
         );
         self.x = Some(x);
+        self.reversals.restart();
         self.free = x;
         self.last_theta = theta;
         self.unchanged = 0;
@@ -655,22 +698,22 @@ impl Witness {
         };
         self.peak[2] = self.peak[2].max(frozen);
         if frozen > 1.0 {
-            return Err(WitnessFault::ArmFrozen {
-                theta,
-                predicted: self.free[0] - theta,
-                still_s: f64::from(self.unchanged) * self.ts,
-            });
+            return Err(self.frozen_fault(theta));
+        }
+        // A reading that stopped changing when the disagreement began: a dead encoder (its
+        // constant reading against a moving model looks like any wrong response). The
+        // reversed observers need no such rule: a constant reading fits a reversed wiring no
+        // better than the wired one, and the frozen rule above names it.
+        if self.sign > self.limits.sign
+            && self.unchanged >= FROZEN_PERIODS.max(self.sign_periods.min(2 * FROZEN_PERIODS))
+        {
+            return Err(self.frozen_fault(theta));
+        }
+        let (reversal, _) = self.reversals.statistic();
+        if reversal > self.limits.reversal {
+            return Err(self.reversal_fault(reversal));
         }
         if self.sign > self.limits.sign {
-            // A reading that stopped changing when the disagreement began: a dead encoder
-            // (its constant reading against a moving model looks like any wrong response).
-            if self.unchanged >= FROZEN_PERIODS.max(self.sign_periods.min(2 * FROZEN_PERIODS)) {
-                return Err(WitnessFault::ArmFrozen {
-                    theta,
-                    predicted: self.free[0] - theta,
-                    still_s: f64::from(self.unchanged) * self.ts,
-                });
-            }
             // Reversed only when the response itself has the wrong sign: a wrong scale or a
             // weak motor also leaves the arm short of the model's motion.
             if !self.response_reversed() {
