@@ -349,6 +349,11 @@ struct EmulateArgs {
     /// run that checked the wiring with the pendulum hanging, then waits for it upright).
     #[arg(long, allow_negative_numbers = true, value_name = "S", value_parser = nonnegative)]
     raise_at: Option<f64>,
+    /// A breakpoint, with --lockstep: the first time a sample request finds the true arm past
+    /// ±RAD and moving outwards, the emulator stops itself (SIGSTOP) before answering, its
+    /// true-state record ending on that state; `kill -CONT` resumes it.
+    #[arg(long, allow_negative_numbers = true, value_name = "RAD")]
+    pause_at_arm: Option<f64>,
     /// Answer nothing for --silent-for seconds starting this many seconds after the first
     /// enabling command (every measurement in the window lost; commands still arrive).
     #[arg(long, allow_negative_numbers = true, value_name = "S", value_parser = nonnegative, requires = "silent_for")]
@@ -709,6 +714,7 @@ fn cmd_emulate(args: EmulateArgs) -> ExitCode {
         },
         fault_at_s: args.fault_at,
         raise_at_s: args.raise_at,
+        pause_at_arm: args.pause_at_arm,
         silence: args.silent_at.zip(args.silent_for),
         lockstep_period_s: args.lockstep.then_some(period_s),
         live: Some(args.live.unwrap_or(live_cfg.loop_.live_port))

@@ -540,6 +540,7 @@ fn serve(
         lockstep_steps: cfg
             .lockstep_period_s
             .map(|p| ((p * 1e9 / dt_ns as f64).round() as u64).max(1)),
+        pause_at_arm: cfg.pause_at_arm,
         parser: Parser::new(),
         record,
         out: [0u8; MAX_FRAME],
@@ -629,6 +630,8 @@ struct Server<'a> {
     truth: &'a mut Option<TrueState>,
     clock: SimClock,
     lockstep_steps: Option<u64>,
+    // The breakpoint's arm angle until it fires (`EmulatorConfig::pause_at_arm`).
+    pause_at_arm: Option<f64>,
     parser: Parser,
     record: Option<BufWriter<File>>,
     out: [u8; MAX_FRAME],
@@ -639,6 +642,25 @@ impl Server<'_> {
     /// One simulation step; `Some` when the emulator must end.
     fn step(&mut self) -> io::Result<Option<EmulatorExit>> {
         self.clock.step(self.device, self.truth)
+    }
+
+    /// Stops the process (SIGSTOP) the first time the true arm is past the breakpoint's angle
+    /// and moving outwards, after a true-state row of that state (`EmulatorConfig::
+    /// pause_at_arm`); it goes on when resumed (SIGCONT).
+    fn pause_at_breakpoint(&mut self) -> io::Result<()> {
+        let Some(angle) = self.pause_at_arm else {
+            return Ok(());
+        };
+        let [theta, rate, _, _] = self.device.state();
+        if theta.abs() > angle && theta * rate > 0.0 {
+            self.pause_at_arm = None;
+            if let Some(truth) = self.truth.as_mut() {
+                truth.row(self.device)?;
+            }
+            // SAFETY: raise only sends a signal to this process.
+            unsafe { libc::raise(libc::SIGSTOP) };
+        }
+        Ok(())
     }
 
     /// Writes the frames the firmware sent on its own, through the configured faults.
@@ -700,6 +722,7 @@ impl Server<'_> {
                                 return Ok(Some(exit));
                             }
                         }
+                        self.pause_at_breakpoint()?;
                         if let Err(e) = self.send_outgoing(io) {
                             error.get_or_insert(e);
                         }

@@ -526,6 +526,22 @@ fn bad_configuration_and_arguments_exit_2_naming_the_key() {
         assert!(r.stderr.contains(flag), "{flag}: {}", r.stderr);
         assert!(!r.stderr.contains("unexpected argument"), "{}", r.stderr);
     }
+    // A breakpoint needs an angle and lockstep (in real time the plant would run on while the
+    // emulator is stopped).
+    for args in [
+        &["--pause-at-arm", "-1", "--lockstep"][..],
+        &["--pause-at-arm", "nan", "--lockstep"][..],
+        &["--pause-at-arm", "1.2"][..],
+    ] {
+        let out = Command::new(BIN)
+            .arg("emulate")
+            .args(args)
+            .output()
+            .expect("spawn emulate");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains("--pause-at-arm"), "{args:?}: {stderr}");
+    }
     for (flag, value) in [("--noise", "-1"), ("--drop-rate", "-0.5"), ("--seed", "-3")] {
         let out = Command::new(BIN)
             .args(["emulate", flag, value])

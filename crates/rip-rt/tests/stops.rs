@@ -141,9 +141,20 @@ fn start_swing(
     extra_cfg: &str,
     clock: Clock,
 ) -> (Emulator, std::process::Child) {
+    start_swing_with(name, controller, extra_cfg, clock, &[])
+}
+
+/// [`start_swing`] with the emulator's `extra` options.
+fn start_swing_with(
+    name: &str,
+    controller: &str,
+    extra_cfg: &str,
+    clock: Clock,
+    extra: &[&str],
+) -> (Emulator, std::process::Child) {
     let cfg = swing_config(name, 4.0, extra_cfg);
     let lockstep = clock == Clock::Lockstep;
-    let emu = hanging_rig(name, &cfg, &[], lockstep);
+    let emu = hanging_rig(name, &cfg, extra, lockstep);
     // Some of these runs are meant to fall (the stops are the subject): past the pre-flight's
     // refusal.
     let mut args = vec!["--swing-up", "--force", "--config", cfg.to_str().unwrap()];
@@ -152,30 +163,6 @@ fn start_swing(
     }
     let child = spawn_run(&emu.device, controller, &args);
     (emu, child)
-}
-
-/// Waits until the device has received its first enabling command (the swing's start); a
-/// run that ended before it fails the test with its message.
-fn wait_for_enable(emu: &Emulator, child: &mut std::process::Child) {
-    let start = std::time::Instant::now();
-    while !emu.commands_so_far().iter().any(|&(_, f)| f & 1 != 0) {
-        if let Some(status) = child.try_wait().unwrap() {
-            let mut stderr = String::new();
-            use std::io::Read;
-            child
-                .stderr
-                .take()
-                .unwrap()
-                .read_to_string(&mut stderr)
-                .unwrap();
-            panic!("the run ended ({status}) before enabling the motor: {stderr}");
-        }
-        assert!(
-            start.elapsed().as_secs() < 15,
-            "the motor was never enabled"
-        );
-        std::thread::sleep(Duration::from_millis(10));
-    }
 }
 
 /// Waits until the swing has started ([`swing_start`]) and returns its simulated time; a run
@@ -480,27 +467,29 @@ fn a_fall_right_after_the_catch_brakes_the_arm_inside_its_limit() {
 fn ctrl_c_at_the_swings_arm_envelope_leaves_the_arm_inside_its_limit() {
     let _serial = one_at_a_time();
     // The widest swing the refusal accepts, stopped when the arm is near its swing limit
-    // and moving outwards: the hardest stop the swing lets the arm into.
-    let (emu, mut child) = start_swing(
+    // and moving outwards: the hardest stop the swing lets the arm into. The emulator's
+    // breakpoint holds the lockstep run there while the signal is sent, so that a loaded
+    // machine cannot let the swing pass the moment by.
+    let (emu, mut child) = start_swing_with(
         "stop-envelope",
         "lqr",
         "[swing_up]\narm_limit = 2.2\n",
         Clock::Lockstep,
+        &["--pause-at-arm", "1.2"],
     );
-    wait_for_enable(&emu, &mut child);
-    let rows = emu.suspend_run_when(
+    let rows = emu.wait_for_breakpoint(
         &mut child,
         "the arm swinging out past 1.2 rad",
         Duration::from_secs(60),
-        |rows| rows.last().is_some_and(|r| r.theta.abs() > 0.8),
-        |rows| {
-            rows.last()
-                .is_some_and(|r| r.theta.abs() > 1.2 && r.theta * r.theta_dot > 0.0)
-        },
     );
-    println!("SIGINT at {:?}", rows.last());
+    let at = rows.last().expect("a true-state row at the breakpoint");
+    assert!(
+        at.theta.abs() > 1.2 && at.theta * at.theta_dot > 0.0,
+        "{at:?}"
+    );
+    println!("SIGINT at {at:?}");
     unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
-    unsafe { libc::kill(child.id() as i32, libc::SIGCONT) };
+    emu.resume();
     let out = settle(emu, child);
     assert_eq!(out.code, Some(130), "{}", out.stderr);
     out.assert_safe("SIGINT at the swing's arm envelope", ARM_LIMIT);

@@ -83,6 +83,13 @@ pub struct EmulatorConfig {
     /// there until the next enabling command (a run that checked the wiring with the pendulum
     /// hanging, then waits for it upright).
     pub raise_at_s: Option<f64>,
+    /// A breakpoint (`--pause-at-arm`, lockstep only): the first time a sample request finds
+    /// the true arm past ±this angle (rad) and moving outwards, the emulator stops itself
+    /// (SIGSTOP) before it answers, with a true-state row of that state written; `kill -CONT`
+    /// resumes it. The lockstep host waits for the answer, so the rig stands still at a
+    /// state chosen in advance while something is done to the host (a signal at the arm's
+    /// widest swing), however loaded the machine.
+    pub pause_at_arm: Option<f64>,
 }
 
 /// How the emulated rig is wired: the motor's leads and each encoder's direction, and
@@ -128,6 +135,7 @@ impl Default for EmulatorConfig {
             lockstep_period_s: None,
             silence: None,
             raise_at_s: None,
+            pause_at_arm: None,
         }
     }
 }
@@ -271,6 +279,20 @@ impl EmulatorConfig {
                 return Err(EmulatorConfigError::new(
                     "--raise-at",
                     format!("must be a non-negative number of seconds, got {t}"),
+                ));
+            }
+        }
+        if let Some(angle) = self.pause_at_arm {
+            if !(angle.is_finite() && angle > 0.0) {
+                return Err(EmulatorConfigError::new(
+                    "--pause-at-arm",
+                    format!("must be a positive angle (rad), got {angle}"),
+                ));
+            }
+            if self.lockstep_period_s.is_none() {
+                return Err(EmulatorConfigError::new(
+                    "--pause-at-arm",
+                    "needs --lockstep (in real time the plant would run on while paused)",
                 ));
             }
         }

@@ -99,6 +99,42 @@ impl Emulator {
         }
     }
 
+    /// Waits until the emulator has stopped itself at its breakpoint (`--pause-at-arm`) and
+    /// returns the true-state rows, which end on the state it paused at; fails the test,
+    /// naming `what`, if the run `child` ended first or after `timeout` of wall time.
+    pub fn wait_for_breakpoint(
+        &self,
+        child: &mut Child,
+        what: &str,
+        timeout: Duration,
+    ) -> Vec<Truth> {
+        let start = Instant::now();
+        let stat = format!("/proc/{}/stat", self.child.id());
+        loop {
+            // The state follows the command's name in parentheses: `T` is stopped.
+            let text = std::fs::read_to_string(&stat).unwrap_or_default();
+            if text
+                .rsplit_once(") ")
+                .is_some_and(|(_, rest)| rest.starts_with('T'))
+            {
+                return self.truth_so_far();
+            }
+            if let Some(status) = child.try_wait().unwrap() {
+                panic!("{what}: the run ended ({status}) first");
+            }
+            assert!(
+                start.elapsed() < timeout,
+                "{what}: not seen within {timeout:?}"
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// Resumes an emulator stopped at its breakpoint.
+    pub fn resume(&self) {
+        unsafe { libc::kill(self.child.id() as i32, libc::SIGCONT) };
+    }
+
     /// The true-state rows written so far.
     pub fn truth_so_far(&self) -> Vec<Truth> {
         parse_truth(&std::fs::read_to_string(&self.truth).unwrap_or_default())
