@@ -812,6 +812,7 @@ fn measure() {
     );
     let mut worst = [0.0f64; 3];
     let mut worst_sign = 0.0f64;
+    let mut worst_reversal = 0.0f64;
     let mut runs = 0;
     let mut trips = 0;
     for (name, r) in &rigs {
@@ -822,15 +823,16 @@ fn measure() {
                 *w = w.max(p);
             }
             worst_sign = worst_sign.max(o.sign_peak);
+            worst_reversal = worst_reversal.max(o.reversal_peak);
             println!(
-                "normal {name:12} {} swing_up={:5} peak arm {:7.1} pendulum {:7.1} frozen {:5.2} sign {:6.2} ended {} caught {} stop {:.2} s max|arm| {:.2}",
-                case.kind, case.swing_up, o.peak[0], o.peak[1], o.peak[2], o.sign_peak, o.ended, o.caught, o.stop_s, o.max_abs_arm
+                "normal {name:12} {} swing_up={:5} peak arm {:7.1} pendulum {:7.1} frozen {:5.2} sign {:6.2} reversal {:6.2} ended {} caught {} stop {:.2} s max|arm| {:.2}",
+                case.kind, case.swing_up, o.peak[0], o.peak[1], o.peak[2], o.sign_peak, o.reversal_peak, o.ended, o.caught, o.stop_s, o.max_abs_arm
             );
         });
     }
     println!(
-        "normal runs {runs}, witness trips {trips}, worst arm {:.1} pendulum {:.1} frozen {:.2} sign {:.2}",
-        worst[0], worst[1], worst[2], worst_sign
+        "normal runs {runs}, witness trips {trips}, worst arm {:.1} pendulum {:.1} frozen {:.2} sign {:.2} reversal {:.2}",
+        worst[0], worst[1], worst[2], worst_sign, worst_reversal
     );
     for (name, r) in &rigs {
         for kind in KINDS {
