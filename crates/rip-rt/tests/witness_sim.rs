@@ -262,21 +262,26 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
             );
         }
         // The checks of rip-rt's control step, in its order (`LoopCore::control`).
-        if !case.swing_up && past_limit(alpha, cfg.safety.pendulum_limit) {
-            ended = "fell";
+        // (The pendulum's limit is the supervisor's during a swing-up.)
+        let limits = [
+            (
+                "pendulum",
+                "fell",
+                alpha,
+                cfg.safety.pendulum_limit,
+                !case.swing_up,
+            ),
+            ("arm", "arm_limit", theta, cfg.safety.arm_limit, true),
+        ];
+        let past = limits
+            .into_iter()
+            .find(|&(_, _, angle, limit, checked)| checked && past_limit(angle, limit));
+        if let Some((which, end, angle, limit, _)) = past {
+            ended = end;
             stop_reason = Some(StopReason::AngleLimit {
-                which: "pendulum",
-                angle: alpha,
-                limit: cfg.safety.pendulum_limit,
-            });
-            break;
-        }
-        if past_limit(theta, cfg.safety.arm_limit) {
-            ended = "arm_limit";
-            stop_reason = Some(StopReason::AngleLimit {
-                which: "arm",
-                angle: theta,
-                limit: cfg.safety.arm_limit,
+                which,
+                angle,
+                limit,
             });
             break;
         }
@@ -1048,24 +1053,9 @@ fn a_wiring_fault_moves_the_arm_at_most_four_tenths_of_a_radian_from_the_run_wit
             for (fault, swing_up, fault_at) in fault_cases() {
                 for &seed in &seeds {
                     let case = Case::on_time(kind, (fault, swing_up, fault_at), seed);
-                    let faulty = simulate(&r, case, 10.0);
-                    if !faulty.faulted {
+                    let Some((_, deviation)) = fault_effect(&r, case) else {
                         continue;
-                    }
-                    let healthy = simulate(
-                        &r,
-                        Case {
-                            fault: Fault::None,
-                            ..case
-                        },
-                        10.0,
-                    );
-                    let from = faulty.onset_period.unwrap_or(0);
-                    let deviation = faulty.arm[from..]
-                        .iter()
-                        .zip(healthy.arm.get(from..).unwrap_or(&[]))
-                        .map(|(a, b)| (a - b).abs())
-                        .fold(0.0, f64::max);
+                    };
                     let id = format!(
                     "{name} {kind} {fault:?} swing_up={swing_up} seed {seed}: {deviation:.3} rad"
                 );
@@ -1082,6 +1072,32 @@ fn a_wiring_fault_moves_the_arm_at_most_four_tenths_of_a_radian_from_the_run_wit
     }
     println!("largest: {}", worst.1);
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// A wiring fault's own effect on the arm in `case` on `r`, run for 10 s: the faulty run and
+/// the true arm's largest distance from the same run without the fault (same rig,
+/// controller and noise) from the fault's onset until the run stopped driving with its
+/// controller; `None` when the run ended before the fault began.
+fn fault_effect(r: &Rigged, case: Case) -> Option<(Outcome, f64)> {
+    let faulty = simulate(r, case, 10.0);
+    if !faulty.faulted {
+        return None;
+    }
+    let healthy = simulate(
+        r,
+        Case {
+            fault: Fault::None,
+            ..case
+        },
+        10.0,
+    );
+    let from = faulty.onset_period.unwrap_or(0);
+    let deviation = faulty.arm[from..]
+        .iter()
+        .zip(healthy.arm.get(from..).unwrap_or(&[]))
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    Some((faulty, deviation))
 }
 
 /// The stop after a reversal seen on the arm, on generated rigs whose stops once lost such
@@ -1180,21 +1196,7 @@ fn an_arm_reversed_while_balancing_is_stopped_by_the_reversed_observers() {
         let fault_at = (fault == Fault::ReverseArmEncoder).then_some(1.0);
         for seed in 0..6 {
             let case = Case::on_time(ControllerKind::Lqr, (fault, false, fault_at), seed);
-            let faulty = simulate(&r, case, 10.0);
-            let healthy = simulate(
-                &r,
-                Case {
-                    fault: Fault::None,
-                    ..case
-                },
-                10.0,
-            );
-            let from = faulty.onset_period.unwrap_or(0);
-            let deviation = faulty.arm[from..]
-                .iter()
-                .zip(&healthy.arm[from..])
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max);
+            let (faulty, deviation) = fault_effect(&r, case).expect("the fault began");
             let what = format!(
                 "{fault:?} seed {seed}: trip {:?}, {deviation:.3} rad",
                 faulty.trip
