@@ -152,9 +152,11 @@ use crate::config::Config;
 
 mod fault;
 mod limits;
+mod response;
 mod reversal;
 pub use fault::WitnessFault;
 pub use limits::{WitnessLimits, LOWERING_THRESHOLD_FACTOR};
+use response::Response;
 use reversal::Reversals;
 pub use reversal::{Reversal, REVERSAL_MODEL_ERROR};
 
@@ -560,10 +562,14 @@ impl Witness {
             volts,
             |x, v| self.predict(x, v, dt, delay),
             (e[0], sign_var),
-            (moved, step),
             self.ts,
             counted,
         );
+        // The observer as wired took the arrival the readings showed (`fit_arrival`); the
+        // reversed ones start again from it rather than carry the nominal arrival's error.
+        if unknown {
+            reversals.restart();
+        }
         self.reversals = reversals;
         self.arrival_unknown = arrival_unknown;
         self.response_test(theta, dt, rate_change, switch[0], on_time);
@@ -711,7 +717,7 @@ impl Witness {
         }
         let (reversal, _) = self.reversals.statistic();
         if reversal > self.limits.reversal {
-            return Err(self.reversal_fault(reversal));
+            return Err(self.reversal_fault(theta, reversal));
         }
         if self.sign > self.limits.sign {
             // Reversed only when the response itself has the wrong sign: a wrong scale or a
@@ -774,7 +780,7 @@ impl Witness {
             self.response = [0.0; 2];
             self.sign_periods = 0;
         }
-        if self.history >= 2 && self.sign > 0.0 {
+        if self.history >= 2 {
             let h1 = self.interval;
             let [t1, t2] = self.readings;
             // The measured change of the mean rate between the last two intervals, and the
@@ -790,15 +796,18 @@ impl Witness {
             // What the measured change beyond the model's at 0 V says of the voltage's gain:
             // the weighted regression of the one on the other.
             let beyond = measured - (model - push);
-            self.response[0] += push * beyond / var;
-            self.response[1] += push * push / var;
-            // Rate and displacement the voltage must have added to the model's motion at
-            // 0 V, and what was measured beyond that motion.
-            self.sign_expected[0] += push;
-            self.sign_expected[1] += self.sign_expected[0] * dt;
-            self.sign_response[0] += beyond;
-            self.sign_response[1] += self.sign_response[0] * dt;
-            self.sign_periods += 1;
+            let sample = Response {
+                push,
+                beyond,
+                var,
+                dt,
+            };
+            self.reversals.respond(&sample);
+            if self.sign > 0.0 {
+                sample.regress(&mut self.response);
+                sample.displace(&mut self.sign_expected, &mut self.sign_response);
+                self.sign_periods += 1;
+            }
         }
         self.readings = [theta, self.readings[0]];
         self.interval = dt;

@@ -926,6 +926,7 @@ fn replay() {
             arm: f64::INFINITY,
             pendulum: f64::INFINITY,
             sign: f64::INFINITY,
+            reversal: f64::INFINITY,
             ..WitnessLimits::default()
         },
     )
@@ -1138,9 +1139,10 @@ fn the_stop_after_a_stopped_arm_encoder_brakes_the_momentum_the_pendulum_reads()
 /// A wrong `arm_counts_per_rev` (the arm read at a quarter of its motion) on generated rig 54,
 /// through the swing-up and while balancing: three periods of a coarse quarter-scale reading
 /// gave a response gain of −0.09, once named a reversal, and the stop braked with the sign
-/// that drove the arm on (6.6 rad). The witness names a reversal only on a gain nearer −1
-/// than 0 or below 0 beyond its noise; each controller, noise seeds 0–1 (0–5 at the full
-/// scale), ends inside `safety.arm_limit`.
+/// that drove the arm on (6.6 rad). The sign statistic names a reversal only on a gain nearer
+/// −1 than 0 or below 0 beyond its noise (the reversed observers, on a gain not above 0
+/// beyond it); each controller, noise seeds 0–1 (0–5 at the full scale), ends inside
+/// `safety.arm_limit`.
 #[test]
 fn a_wrong_arm_scale_is_not_braked_as_a_reversal() {
     stops_end_inside_the_limit(&[54], |fault| fault == Fault::ArmScale);
@@ -1187,7 +1189,8 @@ fn stops_end_inside_the_limit(rigs: &[u64], faults: impl Fn(Fault) -> bool) {
 /// period's motion is a fraction of the noise, and the observer's correction followed the
 /// reversed arm, so the sign statistic saw it only 2.2 s and 0.41 rad later (noise seed 0).
 /// The reversed observers ([`rip_rt::witness::Reversal`]) stop it, on every noise seed 0–5,
-/// within a quarter of a radian of the same run without the fault, judged on the true arm.
+/// named a reversal, within a quarter of a radian of the same run without the fault, judged
+/// on the true arm.
 #[test]
 fn an_arm_reversed_while_balancing_is_stopped_by_the_reversed_observers() {
     let r = preset("paper");
@@ -1202,11 +1205,13 @@ fn an_arm_reversed_while_balancing_is_stopped_by_the_reversed_observers() {
                 faulty.trip
             );
             println!("{what}");
+            // Named a reversal, by the reversed observers or (from the start) the sign
+            // statistic: braked with the reversed law, not the model's.
             let reversed = matches!(
                 faulty.trip,
                 Some((
                     _,
-                    WitnessFault::ArmWrongWay { .. } | WitnessFault::ArmDisagrees { .. }
+                    WitnessFault::ArmFollowsReversed { .. } | WitnessFault::ArmWrongWay { .. }
                 ))
             );
             if !reversed || deviation > 0.25 {

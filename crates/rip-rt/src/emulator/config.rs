@@ -86,9 +86,11 @@ pub struct EmulatorConfig {
     /// A breakpoint (`--pause-at-arm`, lockstep only): the first time a sample request finds
     /// the true arm past ±this angle (rad) and moving outwards, the emulator stops itself
     /// (SIGSTOP) before it answers, with a true-state row of that state written; `kill -CONT`
-    /// resumes it. The lockstep host waits for the answer, so the rig stands still at a
-    /// state chosen in advance while something is done to the host (a signal at the arm's
-    /// widest swing), however loaded the machine.
+    /// resumes it (a SIGINT or SIGTERM sent meanwhile ends it only then). The lockstep host
+    /// waits for the answer, so the rig stands still at a state chosen in advance while
+    /// something is done to the host (a signal at the arm's widest swing), however loaded the
+    /// machine, for up to the host's lockstep wait (5 s, `timing::LOCKSTEP_REPLY_WAIT_NS`),
+    /// after which it counts the period as one without a measurement.
     pub pause_at_arm: Option<f64>,
 }
 

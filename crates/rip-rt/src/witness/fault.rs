@@ -1,7 +1,7 @@
 //! The witness's verdicts: what each stop names as the likely fault (the parent module's
 //! "What the stop says").
 
-use super::{Witness, FROZEN_PERIODS, REVERSED_SIGMAS};
+use super::{Reversal, Witness, FROZEN_PERIODS, REVERSED_SIGMAS};
 
 /// Why the witness stopped the run: the likely fault.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
@@ -61,6 +61,24 @@ pub enum WitnessFault {
         /// The evidence of a reversal at the trip ([`super::Witness::reversal_evidence`]).
         reversal: f64,
     },
+    /// The model of a reversed wiring followed the arm's readings better than the model as
+    /// wired ([`Reversal`]).
+    #[error(
+        "the arm's readings over the last {window_s:.2} s follow [plant] with {wiring} better \
+         than as wired (statistic {stat:.0} > {limit}): the motor leads are swapped, the arm \
+         encoder counts backwards, or device.arm_sign is wrong (rip-rt excite's sign check \
+         tells which)"
+    )]
+    ArmFollowsReversed {
+        /// The wiring whose model fitted best.
+        wiring: Reversal,
+        /// How long ago the statistic last left 0 (s).
+        window_s: f64,
+        /// The statistic at the trip.
+        stat: f64,
+        /// Its threshold.
+        limit: f64,
+    },
     /// The pendulum's motion disagrees with the model.
     #[error(
         "the pendulum's motion disagrees with what the arm's motion must produce (statistic \
@@ -83,7 +101,7 @@ impl WitnessFault {
     /// [`super::REVERSAL_EVIDENCE`] or more.
     pub fn reversed(&self) -> bool {
         match *self {
-            Self::ArmWrongWay { .. } => true,
+            Self::ArmWrongWay { .. } | Self::ArmFollowsReversed { .. } => true,
             Self::ArmDisagrees { reversal, .. } | Self::PendulumDisagrees { reversal, .. } => {
                 reversal >= super::REVERSAL_EVIDENCE
             }
@@ -164,7 +182,9 @@ impl Witness {
     /// drove the arm on (generated rig 54, 524 counts set as 2096: 6.6 rad); a swapped lead's
     /// −0.55, within its noise of 0 a tenth of a second into a heavy pendulum's swing, is a
     /// reversal still (generated rig 90: named a disagreement, the model's sign drove the arm
-    /// 0.9 rad before the arm's equation turned it).
+    /// 0.9 rad before the arm's equation turned it). A trip of the reversed observers is
+    /// named by their own response ([`Reversal`](super::Reversal)): a reversal unless it is
+    /// forward beyond its noise.
     pub(super) fn response_reversed(&self) -> bool {
         match (self.response_gain(), self.response_gain_error()) {
             (Some(g), Some(se)) => g < -0.5 || g + REVERSED_SIGMAS * se < 0.0,

@@ -5,7 +5,7 @@
 use rip_core::plant::State;
 use rip_core::swingup::wrap_angle;
 
-use super::{Witness, WitnessFault, GAIN_POSITION, GAIN_RATE};
+use super::{Response, Witness, WitnessFault, FROZEN_PERIODS, GAIN_POSITION, GAIN_RATE};
 
 /// A wiring that reverses the arm's response to the voltage, and the reversed observers'
 /// statistic.
@@ -26,14 +26,17 @@ use super::{Witness, WitnessFault, GAIN_POSITION, GAIN_RATE};
 /// ```
 ///
 /// (`σ_s²` the sign statistic's variance, ε = [`REVERSAL_MODEL_ERROR`]), and the run stops as
-/// a reversal ([`ArmWrongWay`](super::WitnessFault::ArmWrongWay)) when either `S_w` exceeds
+/// a reversal ([`ArmFollowsReversed`](super::WitnessFault::ArmFollowsReversed)) when either `S_w` exceeds
 /// [`REVERSAL_THRESHOLD`](super::REVERSAL_THRESHOLD). The observer whose model is the rig's
 /// has white innovations while the others carry the model's error every period, so the evidence grows at the rate of the
 /// difference of their innovations' energies, which no correction hides. ε bounds one
 /// period's evidence at `1/(2ε²)` ≈ 5.6 where the innovations are far larger than the noise
 /// and neither model need fit (an encoder that stopped counting mid-swing). A wrong scale
 /// or a weak motor moves the arm the modelled way, nearer the wired prediction than the
-/// reversed one: negative evidence.
+/// reversed one: negative evidence. The observers start again from the wired one after a
+/// period of unknown timing (whose arrival it fitted to the readings), and a trip is named
+/// by the arm's response to the voltage since the statistic left 0
+/// ([`Witness`]'s `reversal_fault`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Reversal {
     /// The voltage acts reversed (swapped motor leads): the arm as read follows the model
@@ -43,6 +46,15 @@ pub enum Reversal {
     /// `device.arm_sign`): the true arm, `−θ` as read, follows the model driven by `u`, the
     /// pendulum's coupling included.
     Reading,
+}
+
+impl core::fmt::Display for Reversal {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Reversal::Drive => "the motor leads swapped",
+            Reversal::Reading => "the arm encoder reversed",
+        })
+    }
 }
 
 const WIRINGS: [Reversal; 2] = [Reversal::Drive, Reversal::Reading];
@@ -60,9 +72,9 @@ pub(super) struct Reversals {
     observers: [Option<State>; 2],
     // Each wiring's CUSUM of its log-likelihood ratio against the observer as wired.
     statistic: [f64; 2],
-    // Since the larger statistic last left 0: the arm's motion as read and as the wired
-    // observer predicted it, and the periods.
-    motion: [f64; 2],
+    // Since the larger statistic last left 0: the regression of the arm's response on the
+    // voltage's share of its motion (as the sign statistic's), and the periods.
+    response: [f64; 2],
     periods: u32,
     peak: f64,
 }
@@ -72,12 +84,16 @@ impl Reversals {
     pub(super) fn reset(&mut self) {
         self.observers = [None; 2];
         self.statistic = [0.0; 2];
-        self.motion = [0.0; 2];
+        self.forget_response();
+    }
+
+    fn forget_response(&mut self) {
+        self.response = [0.0; 2];
         self.periods = 0;
     }
 
-    /// Starts the observers afresh from the wired observer's next state (its rates were
-    /// acquired anew); the statistics are kept.
+    /// Starts the observers afresh from the wired observer's next state (its rates acquired
+    /// anew, or a period's arrival fitted to the readings); their statistics stand.
     pub(super) fn restart(&mut self) {
         self.observers = [None; 2];
     }
@@ -87,8 +103,7 @@ impl Reversals {
     /// corrected by its innovation as the wired observer is, and, when `counted`, its
     /// log-likelihood ratio `(e² − e_w²) / (2 var)` against the wired observer's arm
     /// innovation `(e, var)` enters its CUSUM. `prior` is the wired observer's state before
-    /// the period, from which a new observer starts; `(moved, predicted)` the arm's motion
-    /// over the period as read and as the wired observer predicted it.
+    /// the period, from which a new observer starts.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn observe(
         &mut self,
@@ -97,7 +112,6 @@ impl Reversals {
         volts: (f64, f64),
         predict: impl Fn(&mut State, (f64, f64)),
         (e, var): (f64, f64),
-        (moved, predicted): (f64, f64),
         ts: f64,
         counted: bool,
     ) {
@@ -131,26 +145,19 @@ impl Reversals {
             }
         }
         let (statistic, _) = self.statistic();
-        if statistic > 0.0 {
-            self.motion[0] += moved;
-            self.motion[1] += predicted;
-            self.periods += 1;
-        } else {
-            self.motion = [0.0; 2];
-            self.periods = 0;
+        if statistic == 0.0 {
+            self.forget_response();
         }
         self.peak = self.peak.max(statistic);
     }
 
-    /// The arm's motion since the larger statistic last left 0: as read, and as the wired
-    /// observer predicted it (rad).
-    pub(super) fn motion(&self) -> [f64; 2] {
-        self.motion
-    }
-
-    /// Periods since the larger statistic last left 0.
-    pub(super) fn periods(&self) -> u32 {
-        self.periods
+    /// One period's response of the arm to the voltage (the witness's response test), taken
+    /// while the larger statistic stands above 0.
+    pub(super) fn respond(&mut self, sample: &Response) {
+        if self.statistic().0 > 0.0 {
+            sample.regress(&mut self.response);
+            self.periods += 1;
+        }
     }
 
     /// The larger statistic and its wiring.
@@ -181,14 +188,27 @@ impl Reversal {
 }
 
 impl Witness {
-    /// The fault a trip of the reversed observers' statistic `stat` names: a reversal, with
-    /// the arm's motion since the statistic last left 0.
-    pub(super) fn reversal_fault(&self, stat: f64) -> WitnessFault {
-        let [measured, predicted] = self.reversals.motion();
-        WitnessFault::ArmWrongWay {
-            measured,
-            predicted,
-            window_s: f64::from(self.reversals.periods()) * self.ts,
+    /// The fault a trip of the reversed observers' statistic `stat` names at the arm reading
+    /// `theta`, with the sign statistic's guards: a reading that stood still while the model
+    /// moved the arm by half of what the frozen rule needs is a dead encoder; a response to
+    /// the voltage in the modelled direction beyond its noise is no reversal (a reading at a
+    /// quarter of the arm's motion fits a reversed voltage better where the pendulum's pull
+    /// and the voltage push the arm the same way) and is named as the CUSUM names it; any
+    /// other is a reversal, named with the wiring that fitted best.
+    pub(super) fn reversal_fault(&self, theta: f64, stat: f64) -> WitnessFault {
+        let r = &self.reversals;
+        let still = self.unchanged >= FROZEN_PERIODS.max(r.periods.min(2 * FROZEN_PERIODS));
+        if still && (self.free[0] - theta).abs() > 0.5 * self.frozen_rad {
+            return self.frozen_fault(theta);
+        }
+        let forward = r.response[1] > 0.0
+            && r.response[0] / r.response[1] - super::REVERSED_SIGMAS / r.response[1].sqrt() > 0.0;
+        if forward {
+            return self.classify(theta, stat, self.limits.reversal);
+        }
+        WitnessFault::ArmFollowsReversed {
+            wiring: r.statistic().1,
+            window_s: f64::from(r.periods) * self.ts,
             stat,
             limit: self.limits.reversal,
         }

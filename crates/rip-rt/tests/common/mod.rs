@@ -144,6 +144,7 @@ impl Emulator {
     /// the state at exit.
     pub fn finish(&mut self) -> Vec<Truth> {
         unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
+        unsafe { libc::kill(self.child.id() as i32, libc::SIGCONT) };
         let _ = self.child.wait();
         parse_truth(&std::fs::read_to_string(&self.truth).unwrap())
     }
@@ -300,7 +301,10 @@ fn parse_record(text: &str) -> Vec<(i32, u8)> {
 
 impl Drop for Emulator {
     fn drop(&mut self) {
+        // SIGCONT too: an emulator a failing test left stopped at its breakpoint would hold
+        // the SIGTERM pending, and the wait would never return.
         unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
+        unsafe { libc::kill(self.child.id() as i32, libc::SIGCONT) };
         let _ = self.child.wait();
     }
 }
