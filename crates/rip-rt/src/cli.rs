@@ -592,8 +592,11 @@ fn cmd_run(args: RunArgs) -> ExitCode {
     let mut reason = report.reason.to_string();
     let witness_line = report.witness_peak.map_or_else(
         || "off".to_string(),
-        |[arm, pendulum, frozen]| {
-            format!("peak arm={arm:.1} pendulum={pendulum:.1} frozen={frozen:.2}")
+        |[arm, pendulum, frozen, sign, reversal]| {
+            format!(
+                "peak arm={arm:.1} pendulum={pendulum:.1} frozen={frozen:.2} sign={sign:.1} \
+                 reversal={reversal:.1}"
+            )
         },
     );
     if let Some(log) = log.as_mut() {

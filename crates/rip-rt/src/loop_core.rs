@@ -251,7 +251,7 @@ impl LoopCore {
     }
 
     /// The witness's largest statistics so far ([`Witness::peak`]).
-    pub fn witness_peak(&self) -> Option<[f64; 3]> {
+    pub fn witness_peak(&self) -> Option<[f64; 5]> {
         self.witness.as_ref().map(Witness::peak)
     }
 

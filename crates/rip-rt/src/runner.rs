@@ -86,7 +86,7 @@ pub struct RunReport {
     /// Catches (more than one after falls with `swing_up.on_fall = "retry"`).
     pub catches: u32,
     /// The witness's largest statistics ([`crate::witness::Witness::peak`]), if it ran.
-    pub witness_peak: Option<[f64; 3]>,
+    pub witness_peak: Option<[f64; 5]>,
 }
 
 /// Controller steps timed before enabling the motor ([`probe`]).

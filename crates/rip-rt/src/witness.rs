@@ -353,11 +353,12 @@ impl Witness {
         self.reversals.reset();
     }
 
-    /// The largest statistics since construction: the arm's and the pendulum's CUSUM (σ), and
-    /// the free arm's distance from a constant arm reading (in units of the frozen rule's
-    /// limit: 1 trips).
-    pub fn peak(&self) -> [f64; 3] {
-        [self.peak[0], self.peak[1], self.peak[2]]
+    /// The largest statistics since construction: the arm's and the pendulum's CUSUM (σ), the
+    /// free arm's distance from a constant arm reading (in units of the frozen rule's limit:
+    /// 1 trips), the sign statistic and the reversed observers' (log-likelihood ratios).
+    pub fn peak(&self) -> [f64; 5] {
+        let [arm, pendulum, frozen, sign] = self.peak;
+        [arm, pendulum, frozen, sign, self.reversals.peak()]
     }
 
     /// The model's estimate of the rig's state now: the free-running arm's while the arm

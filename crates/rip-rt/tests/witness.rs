@@ -213,6 +213,25 @@ fn wiring_faults_mid_swing_and_after_the_catch_are_stopped_by_the_witness() {
     );
 }
 
+/// An arm encoder reversed while the LQR balances after the catch: the reversed feedback runs
+/// the arm away slowly, with voltages whose share of a period's motion is a fraction of the
+/// noise, which the sign statistic alone saw only after 0.4 rad in simulation
+/// (`witness_sim`). Through `rip-rt run` and the emulator, judged on its true state: the
+/// reversed observers stop the run within a tenth of a radian of the fault's onset and name a
+/// reversal.
+#[test]
+fn an_arm_encoder_reversed_while_balancing_is_stopped_within_a_tenth_of_a_radian() {
+    let _serial = one_at_a_time();
+    for at in [AFTER_CATCH_S, AFTER_CATCH_S + 1.5] {
+        let (code, stderr, e) = case("lqr", "--reverse-arm-encoder", Some(at));
+        println!("at {at} s: exit {code}, {e:?}");
+        assert_eq!(e.phase, "after the catch", "{stderr}");
+        assert_eq!(code, 15, "{stderr}");
+        assert!(stderr.contains("counts backwards"), "{stderr}");
+        assert!(e.until_decision < 0.1, "at {at} s: {e:?}: {stderr}");
+    }
+}
+
 /// In lockstep, so that the verdict is the witness's on the rig's motion: in real time one
 /// normal LQG swing-up on a machine whose loop missed two deadlines (jitter up to 9.5 ms) was
 /// stopped with the arm statistic at 54 against 40, a false stop still open.
@@ -244,14 +263,20 @@ fn every_fault_timing_and_controller() {
 }
 
 /// The witness's largest statistics a run printed (`witness: peak arm=… pendulum=…
-/// frozen=…`).
-fn printed_peaks(stderr: &str) -> Option<[f64; 3]> {
+/// frozen=… sign=… reversal=…`).
+fn printed_peaks(stderr: &str) -> Option<[f64; 5]> {
     let line = stderr.lines().find(|l| l.contains("witness: peak"))?;
     let value = |key: &str| -> Option<f64> {
         let rest = &line[line.find(key)? + key.len()..];
         rest.split_whitespace().next()?.parse().ok()
     };
-    Some([value("arm=")?, value("pendulum=")?, value("frozen=")?])
+    Some([
+        value("arm=")?,
+        value("pendulum=")?,
+        value("frozen=")?,
+        value("sign=")?,
+        value("reversal=")?,
+    ])
 }
 
 /// Normal runs for the record: both presets × LQR/LQG/MPC × balance and swing-up × 5 noise
@@ -262,7 +287,7 @@ fn printed_peaks(stderr: &str) -> Option<[f64; 3]> {
 #[ignore]
 fn sixty_normal_runs_measured() {
     let _serial = one_at_a_time();
-    let mut worst = [0.0f64; 4];
+    let mut worst = [0.0f64; 6];
     let mut stops = Vec::new();
     for (preset, model) in [("paper", "paper"), ("qube_servo2", "qube_servo2")] {
         for controller in ["lqr", "lqg", "mpc"] {
@@ -290,13 +315,15 @@ fn sixty_normal_runs_measured() {
                     emu.wait_for_rest(0.05, 1.0, std::time::Duration::from_secs(20));
                     let rows = emu.finish();
                     let arm = max_excursion(&rows);
-                    let peaks = printed_peaks(&r.stderr).unwrap_or([f64::NAN; 3]);
+                    let peaks = printed_peaks(&r.stderr).unwrap_or([f64::NAN; 5]);
                     println!(
-                        "{name:40} exit {:?} peaks arm {:.1} pendulum {:.1} frozen {:.2} true max|theta| {arm:.3}",
+                        "{name:40} exit {:?} peaks arm {:.1} pendulum {:.1} frozen {:.2} sign {:.1} reversal {:.1} true max|theta| {arm:.3}",
                         r.status.code(),
                         peaks[0],
                         peaks[1],
-                        peaks[2]
+                        peaks[2],
+                        peaks[3],
+                        peaks[4]
                     );
                     for (w, p) in worst.iter_mut().zip(peaks.iter().chain([arm].iter())) {
                         *w = w.max(*p);
@@ -309,11 +336,13 @@ fn sixty_normal_runs_measured() {
         }
     }
     println!(
-        "worst: arm {:.1} / 40, pendulum {:.1} / 30, frozen {:.2} / 1, true max|theta| {:.3} rad; {} stopped",
+        "worst: arm {:.1} / 40, pendulum {:.1} / 30, frozen {:.2} / 1, sign {:.1} / 25, reversal {:.1} / 25, true max|theta| {:.3} rad; {} stopped",
         worst[0],
         worst[1],
         worst[2],
         worst[3],
+        worst[4],
+        worst[5],
         stops.len()
     );
     assert!(stops.is_empty(), "{}", stops.join("\n"));

@@ -102,7 +102,7 @@ struct Outcome {
     /// The reversed observers' largest statistic over the run and its stop.
     reversal_peak: f64,
     trip: Option<(f64, WitnessFault)>,
-    peak: [f64; 3],
+    peak: [f64; 5],
     /// The sign statistic's peak.
     sign_peak: f64,
     caught: bool,

@@ -121,7 +121,7 @@ fn a_gap_of_lost_replies_is_no_evidence_of_a_fault() {
             }
             plant.advance(&mut x, command, 0.0, ts, 10);
         }
-        let [arm, pendulum, _] = w.peak();
+        let [arm, pendulum, ..] = w.peak();
         assert!(
             arm < 0.5 * ARM_THRESHOLD && pendulum < 0.5 * PENDULUM_THRESHOLD,
             "gap of {gap} periods: peaks {arm:.1} / {pendulum:.1}"
