@@ -535,13 +535,7 @@ impl Witness {
         // docs/rip-rt.md); the pendulum's, which a chattering catch with a late command in
         // it drove past its threshold, take it in.
         self.accumulate(e, rate, switch, [friction, carried[1]], on_time);
-        // The arm's variance for the sign statistic and the reversed observers: the noise,
-        // the sampling instant, the command's arrival and the friction's sign.
-        let sign_var = {
-            let timing = TIMING_S * rate[0];
-            let switch = switch[0].max(anywhere);
-            self.sigma[0] * self.sigma[0] + timing * timing + switch * switch + friction * friction
-        };
+        let sign_var = self.sign_variance(rate[0], switch[0].max(anywhere), friction);
         // Held (not updated) for a period whose command's arrival is unknown (a slow
         // exchange, a skipped period) and for the one after it: a command that arrived late,
         // even after the interval, leaves the arm on the old voltage's side.
@@ -556,22 +550,14 @@ impl Witness {
             }
             self.peak[3] = self.peak[3].max(self.sign);
         }
-        let mut reversals = self.reversals;
-        reversals.observe(
+        self.observe_reversals(
             &prior,
             (theta, alpha),
             volts,
-            |x, v| self.predict(x, v, dt, delay),
+            (dt, delay),
             (e[0], sign_var),
-            self.ts,
-            counted,
+            (counted, unknown),
         );
-        // The observer as wired took the arrival the readings showed (`fit_arrival`); the
-        // reversed ones start again from it rather than carry the nominal arrival's error.
-        if unknown {
-            reversals.restart();
-        }
-        self.reversals = reversals;
         self.arrival_unknown = arrival_unknown;
         self.response_test(theta, dt, rate_change, switch[0], on_time);
         if self.cusum[0] == [0.0, 0.0] {

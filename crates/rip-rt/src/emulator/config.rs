@@ -178,6 +178,27 @@ impl EmulatorConfig {
         }
     }
 
+    /// The breakpoint's angle (`--pause-at-arm`): positive, and only in lockstep (in real time
+    /// the plant would run on while the emulator is stopped).
+    fn validate_breakpoint(&self) -> Result<(), EmulatorConfigError> {
+        let Some(angle) = self.pause_at_arm else {
+            return Ok(());
+        };
+        if !(angle.is_finite() && angle > 0.0) {
+            return Err(EmulatorConfigError::new(
+                "--pause-at-arm",
+                format!("must be a positive angle (rad), got {angle}"),
+            ));
+        }
+        if self.lockstep_period_s.is_none() {
+            return Err(EmulatorConfigError::new(
+                "--pause-at-arm",
+                "needs --lockstep (in real time the plant would run on while paused)",
+            ));
+        }
+        Ok(())
+    }
+
     /// Checks the values; the error names the command-line flag.
     pub fn validate(&self) -> Result<(), EmulatorConfigError> {
         let prob = |name: &str, p: f64| {
@@ -284,20 +305,7 @@ impl EmulatorConfig {
                 ));
             }
         }
-        if let Some(angle) = self.pause_at_arm {
-            if !(angle.is_finite() && angle > 0.0) {
-                return Err(EmulatorConfigError::new(
-                    "--pause-at-arm",
-                    format!("must be a positive angle (rad), got {angle}"),
-                ));
-            }
-            if self.lockstep_period_s.is_none() {
-                return Err(EmulatorConfigError::new(
-                    "--pause-at-arm",
-                    "needs --lockstep (in real time the plant would run on while paused)",
-                ));
-            }
-        }
+        self.validate_breakpoint()?;
         if let Some(t) = self.fault_at_s {
             if !(t.is_finite() && t >= 0.0) {
                 return Err(EmulatorConfigError::new(

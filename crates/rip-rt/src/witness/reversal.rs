@@ -188,6 +188,39 @@ impl Reversal {
 }
 
 impl Witness {
+    /// The arm reading's variance for the sign statistic and the reversed observers: the
+    /// noise, the sampling instant at the arm's `rate`, the command's arrival (`switch`, rad)
+    /// and the friction's sign (`friction`, rad).
+    pub(super) fn sign_variance(&self, rate: f64, switch: f64, friction: f64) -> f64 {
+        let timing = super::TIMING_S * rate;
+        self.sigma[0] * self.sigma[0] + timing * timing + switch * switch + friction * friction
+    }
+
+    /// The reversed observers' period (the wired observer's state `prior` before it, the
+    /// readings, the voltages, the interval and the command's delay, the wired arm
+    /// innovation and its variance), `counted` into their statistics or not; after a period
+    /// of `unknown` timing they start again from the wired observer, which took the arrival
+    /// the readings showed (`fit_arrival`), rather than carry the nominal arrival's error.
+    pub(super) fn observe_reversals(
+        &mut self,
+        prior: &State,
+        readings: (f64, f64),
+        volts: (f64, f64),
+        (dt, delay): (f64, f64),
+        innovation: (f64, f64),
+        (counted, unknown): (bool, bool),
+    ) {
+        let mut reversals = self.reversals;
+        let predict = |x: &mut State, v: (f64, f64)| self.predict(x, v, dt, delay);
+        reversals.observe(
+            prior, readings, volts, predict, innovation, self.ts, counted,
+        );
+        if unknown {
+            reversals.restart();
+        }
+        self.reversals = reversals;
+    }
+
     /// The fault a trip of the reversed observers' statistic `stat` names at the arm reading
     /// `theta`, with the sign statistic's guards: a reading that stood still while the model
     /// moved the arm by half of what the frozen rule needs is a dead encoder; a response to
