@@ -120,7 +120,14 @@ class Reference:
             k = len(active)
             Ga, ha = Gu[active], hu[active]
             kkt = np.block([[H, Ga.T], [Ga, np.zeros((k, k))]])
-            sol = np.linalg.solve(kkt, np.concatenate([-f, ha]))
+            rhs = np.concatenate([-f, ha])
+            try:
+                sol = np.linalg.solve(kkt, rhs)
+            except np.linalg.LinAlgError:
+                # Active rows that depend on each other (the nearly parallel output bounds late
+                # in a horizon, which the interior-point solver can report active together)
+                # leave the multipliers undetermined: the least-norm ones, z still unique.
+                sol = np.linalg.lstsq(kkt, rhs, rcond=None)[0]
             z_kkt, lam = sol[: self.nz], sol[self.nz:]
             viol = Gu @ z_kkt - hu
             if k and lam.min() < -1e-9:
