@@ -369,11 +369,6 @@ impl Witness {
         Some(if self.unchanged > 0 { self.free } else { x })
     }
 
-    /// The largest sign statistic since construction (a log-likelihood ratio, module docs).
-    pub fn sign_peak(&self) -> f64 {
-        self.peak[3]
-    }
-
     /// The current sign statistic (a log-likelihood ratio, module docs).
     pub fn sign_statistic(&self) -> f64 {
         self.sign
@@ -383,11 +378,6 @@ impl Witness {
     /// reversed observers") and the wiring it favours.
     pub fn reversal_statistic(&self) -> (f64, Reversal) {
         self.reversals.statistic()
-    }
-
-    /// The largest of the reversed observers' statistics since construction.
-    pub fn reversal_peak(&self) -> f64 {
-        self.reversals.peak()
     }
 
     /// The current arm and pendulum statistics (σ).

@@ -99,12 +99,9 @@ const ON_TIME: Late = Late {
 
 #[derive(Debug)]
 struct Outcome {
-    /// The reversed observers' largest statistic over the run and its stop.
-    reversal_peak: f64,
     trip: Option<(f64, WitnessFault)>,
+    /// The witness's largest statistics over the run and its stop ([`Witness::peak`]).
     peak: [f64; 5],
-    /// The sign statistic's peak.
-    sign_peak: f64,
     caught: bool,
     /// True arm angle when the fault began.
     arm_at_fault: f64,
@@ -212,7 +209,10 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
     // Why the run stopped (`None`: it ran its duration), and the pendulum's last reading.
     let mut stop_reason: Option<StopReason> = None;
     let mut last_alpha: Option<f64> = None;
-    let mut envelope = rip_rt::envelope::arm_envelope(cfg, stop_parts(cfg).as_ref());
+    // The run's stop, designed once, as rip-rt's `LoopCore` does.
+    let parts = stop_parts(cfg);
+    let parts = parts.as_ref();
+    let mut envelope = rip_rt::envelope::arm_envelope(cfg, parts);
     // What the arm encoder reports for the true arm angle `theta` (the fault, if active).
     let measure_arm = |theta: f64, onset: Option<f64>, rng: &mut StdRng| -> f64 {
         let true_theta = theta + noise[0].sample(rng);
@@ -356,8 +356,6 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
     // until the arm rests, the short until it rests there, then the windings open.
     let reason = stop_reason.unwrap_or(StopReason::Finished);
     let mode = brake_mode(&reason);
-    let parts = stop_parts(cfg);
-    let parts = parts.as_ref();
     let brake = brake_for_mode(parts, mode, witness.estimate(), u_prev);
     let mut sim = PlantSim::new(Model::Params(cfg.spec.plant.params()), 0.0, 0.0);
     sim.set_state([x[0], x[1], x[2], x[3]]);
@@ -481,9 +479,7 @@ fn simulate(r: &Rigged, case: Case, duration: f64) -> Outcome {
     }
     let end = sim.state();
     Outcome {
-        reversal_peak: witness.reversal_peak(),
         trip,
-        sign_peak: witness.sign_peak(),
         max_abs_arm: max_abs,
         max_abs_braked: max_braked,
         stop_s,
@@ -827,11 +823,11 @@ fn measure() {
             for (w, p) in worst.iter_mut().zip(o.peak) {
                 *w = w.max(p);
             }
-            worst_sign = worst_sign.max(o.sign_peak);
-            worst_reversal = worst_reversal.max(o.reversal_peak);
+            worst_sign = worst_sign.max(o.peak[3]);
+            worst_reversal = worst_reversal.max(o.peak[4]);
             println!(
                 "normal {name:12} {} swing_up={:5} peak arm {:7.1} pendulum {:7.1} frozen {:5.2} sign {:6.2} reversal {:6.2} ended {} caught {} stop {:.2} s max|arm| {:.2}",
-                case.kind, case.swing_up, o.peak[0], o.peak[1], o.peak[2], o.sign_peak, o.reversal_peak, o.ended, o.caught, o.stop_s, o.max_abs_arm
+                case.kind, case.swing_up, o.peak[0], o.peak[1], o.peak[2], o.peak[3], o.peak[4], o.ended, o.caught, o.stop_s, o.max_abs_arm
             );
         });
     }
@@ -858,7 +854,7 @@ fn measure() {
                     o.peak[0],
                     o.peak[1],
                     o.peak[2],
-                    o.sign_peak,
+                    o.peak[3],
                     o.trip.map_or("NOT STOPPED".to_string(), |(_, f)| format!("{f:?}")),
                 );
             }
@@ -1016,8 +1012,8 @@ fn every_stop_on_generated_rigs_ends_inside_the_limit() {
                             if o.trip.is_some() {
                                 println!("false stop: {id}: {:?}", o.trip);
                             }
-                            if o.reversal_peak > normal_reversal.0 {
-                                normal_reversal = (o.reversal_peak, id.clone());
+                            if o.peak[4] > normal_reversal.0 {
+                                normal_reversal = (o.peak[4], id.clone());
                             }
                         }
                     }

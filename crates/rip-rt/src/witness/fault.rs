@@ -115,7 +115,7 @@ impl Witness {
     /// The voltage's gain on the arm that the measurements since the sign statistic left 0
     /// show, relative to the model's (1 as modelled, −1 reversed); `None` without a response.
     pub fn response_gain(&self) -> Option<f64> {
-        (self.response[1] > 0.0).then(|| self.response[0] / self.response[1])
+        super::response::gain(&self.response).map(|(g, _)| g)
     }
 
     pub(super) fn classify(&self, theta: f64, stat: f64, limit: f64) -> WitnessFault {
@@ -171,7 +171,7 @@ impl Witness {
     /// The standard error of [`Witness::response_gain`] (the weighted regression's); `None`
     /// without a response.
     pub fn response_gain_error(&self) -> Option<f64> {
-        (self.response[1] > 0.0).then(|| 1.0 / self.response[1].sqrt())
+        super::response::gain(&self.response).map(|(_, se)| se)
     }
 
     /// Whether the arm's response since the sign statistic left 0 has the wrong sign: the
@@ -186,9 +186,17 @@ impl Witness {
     /// named by their own response ([`Reversal`](super::Reversal)): a reversal unless it is
     /// forward beyond its noise.
     pub(super) fn response_reversed(&self) -> bool {
-        match (self.response_gain(), self.response_gain_error()) {
-            (Some(g), Some(se)) => g < -0.5 || g + REVERSED_SIGMAS * se < 0.0,
-            _ => false,
+        super::response::gain(&self.response)
+            .is_some_and(|(g, se)| g < -0.5 || g + REVERSED_SIGMAS * se < 0.0)
+    }
+
+    /// The fault of an arm encoder that stopped counting at `theta` (rad): the free-running
+    /// arm's motion from it, and how long the reading has been constant.
+    pub(super) fn frozen_fault(&self, theta: f64) -> WitnessFault {
+        WitnessFault::ArmFrozen {
+            theta,
+            predicted: self.free[0] - theta,
+            still_s: f64::from(self.unchanged) * self.ts,
         }
     }
 }

@@ -12,6 +12,14 @@ pub(super) struct Response {
     pub(super) dt: f64,
 }
 
+/// The voltage's gain relative to the model's that a weighted regression's sums
+/// `[Σ push·beyond/var, Σ push²/var]` show, and its standard error; `None` without a
+/// response.
+pub(super) fn gain(regression: &[f64; 2]) -> Option<(f64, f64)> {
+    let [cross, weight] = *regression;
+    (weight > 0.0).then(|| (cross / weight, 1.0 / weight.sqrt()))
+}
+
 impl Response {
     /// Adds the sample to the weighted regression of `beyond` on `push` (`regression`: the
     /// sums `Σ push·beyond/var` and `Σ push²/var`, whose ratio is the voltage's gain relative

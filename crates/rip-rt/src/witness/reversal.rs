@@ -122,11 +122,10 @@ impl Reversals {
                 Reversal::Reading => volts,
             };
             predict(&mut x, drive);
-            let read = wiring.frame(x)[0];
-            let e_wiring = theta - read;
+            let e_wiring = theta - wiring.arm_sign() * x[0];
             let e_alpha = wrap_angle(alpha - x[2]);
             // The correction in the observer's own frame.
-            let e_own = wiring.frame(State::new(e_wiring, 0.0, 0.0, 0.0))[0];
+            let e_own = wiring.arm_sign() * e_wiring;
             x[0] += GAIN_POSITION * e_own;
             x[1] += GAIN_RATE * e_own / ts;
             x[2] = wrap_angle(x[2] + GAIN_POSITION * e_alpha);
@@ -176,13 +175,20 @@ impl Reversals {
 }
 
 impl Reversal {
-    /// A state of the arm as read in this wiring's observer's frame, and back (the map is its
-    /// own inverse): the arm's angle and rate negated for a reversed reading.
-    fn frame(self, mut x: State) -> State {
-        if self == Reversal::Reading {
-            x[0] = -x[0];
-            x[1] = -x[1];
+    /// The sign of the arm as read against the arm in this wiring's observer's frame: −1 for
+    /// a reversed reading.
+    fn arm_sign(self) -> f64 {
+        match self {
+            Reversal::Drive => 1.0,
+            Reversal::Reading => -1.0,
         }
+    }
+
+    /// A state of the arm as read in this wiring's observer's frame, and back (the map is its
+    /// own inverse).
+    fn frame(self, mut x: State) -> State {
+        x[0] *= self.arm_sign();
+        x[1] *= self.arm_sign();
         x
     }
 }
@@ -234,8 +240,8 @@ impl Witness {
         if still && (self.free[0] - theta).abs() > 0.5 * self.frozen_rad {
             return self.frozen_fault(theta);
         }
-        let forward = r.response[1] > 0.0
-            && r.response[0] / r.response[1] - super::REVERSED_SIGMAS / r.response[1].sqrt() > 0.0;
+        let forward = super::response::gain(&r.response)
+            .is_some_and(|(g, se)| g - super::REVERSED_SIGMAS * se > 0.0);
         if forward {
             return self.classify(theta, stat, self.limits.reversal);
         }
@@ -244,16 +250,6 @@ impl Witness {
             window_s: f64::from(r.periods) * self.ts,
             stat,
             limit: self.limits.reversal,
-        }
-    }
-
-    /// The fault of an arm encoder that stopped counting at `theta` (rad): the free-running
-    /// arm's motion from it, and how long the reading has been constant.
-    pub(super) fn frozen_fault(&self, theta: f64) -> WitnessFault {
-        WitnessFault::ArmFrozen {
-            theta,
-            predicted: self.free[0] - theta,
-            still_s: f64::from(self.unchanged) * self.ts,
         }
     }
 }
