@@ -51,6 +51,7 @@ mod bar;
 pub mod own;
 mod robustness;
 mod settings;
+pub mod swing;
 pub use assess::{assess, steady_state, Assessment, OffCompensation};
 pub(crate) use assess::{assess_kinds, screen_then_confirm};
 pub use bar::{

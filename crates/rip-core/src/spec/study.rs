@@ -7,6 +7,7 @@
 use super::{ControllerKind, Design, Spec, SpecError, Start};
 use crate::controller::Controller;
 use crate::error::RipError;
+use crate::plant::{FurutaParams, Param};
 use crate::sim::SimConfig;
 use crate::swingup::{wrap_angle, SwingUp};
 
@@ -90,4 +91,286 @@ pub fn arrivals(res: &crate::SimResult, catch_angle: f64) -> Arrivals {
         }
     }
     out
+}
+
+/// How long after the catch the pendulum must still be balanced for a swing-up to count as a
+/// success (s): the arm's step comes after it and is reported apart ([`SwingRun`]).
+pub const HELD_AFTER_CATCH: f64 = 3.0;
+
+/// The largest dead zone (V) drawn for a rig whose file has none: what an unknown drive may
+/// hide ([`SwingStudy::draw`]).
+pub const DRAWN_DEAD_ZONE: f64 = 0.3;
+
+/// The largest arm Coulomb friction (N·m) drawn for a rig whose file has none
+/// ([`SwingStudy::draw`]).
+pub const DRAWN_ARM_FRICTION: f64 = 0.002;
+
+/// The swing-up Monte Carlo's draws: `runs` rigs around the file's, drawn from `seed`
+/// (docs/swing-up.md, "Statistics").
+///
+/// Each draw multiplies every physical parameter independently by a factor uniform in
+/// `[1 − spread, 1 + spread]`; a dead zone `V_d` and an arm Coulomb friction `C_r` that the
+/// file sets to 0 are drawn uniformly from `[0, `[`DRAWN_DEAD_ZONE`]`]` and
+/// `[0, `[`DRAWN_ARM_FRICTION`]`]` instead, and stay unknown to the controllers (their
+/// compensation is the file's). A draw whose swing-up the energy bound proves impossible
+/// ([`crate::swingup::feasibility()`]) is excluded, not counted as a failure.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SwingStudy {
+    /// Runs per controller.
+    pub runs: u64,
+    /// Seed of the draws and of each run's noise.
+    pub seed: u64,
+    /// The relative half-width of each parameter's factor.
+    pub spread: f64,
+    /// Where each run ends (s from the start), when shorter than the whole experiment
+    /// ([`swing_study_config`]): a search that only compares successes needs no step after
+    /// them, and a swing-up still going at `horizon − HELD_AFTER_CATCH` counts as failed.
+    pub horizon: Option<f64>,
+}
+
+impl Default for SwingStudy {
+    fn default() -> Self {
+        Self {
+            runs: 200,
+            seed: 2024,
+            spread: 0.1,
+            horizon: None,
+        }
+    }
+}
+
+/// Most runs one study may ask for.
+pub const MAX_SWING_RUNS: u64 = 100_000;
+
+impl SwingStudy {
+    /// Checks the settings; the error names the bad one (`runs`, `spread`).
+    pub fn validate(&self) -> Result<(), SpecError> {
+        if !(1..=MAX_SWING_RUNS).contains(&self.runs) {
+            return Err(SpecError::new(
+                "runs",
+                format!("must be in 1..={MAX_SWING_RUNS}, got {}", self.runs),
+            ));
+        }
+        if !(self.spread.is_finite() && (0.0..1.0).contains(&self.spread)) {
+            return Err(SpecError::new(
+                "spread",
+                format!("must be in [0, 1), got {}", self.spread),
+            ));
+        }
+        if let Some(h) = self
+            .horizon
+            .filter(|h| !(h.is_finite() && *h > HELD_AFTER_CATCH))
+        {
+            return Err(SpecError::new(
+                "horizon",
+                format!("must be finite and above {HELD_AFTER_CATCH} s, got {h}"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The parameters of draw `i` around `base` (type docs), and its noise seed.
+    pub fn draw(&self, base: &FurutaParams, i: u64) -> (FurutaParams, u64) {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(
+            self.seed
+                .wrapping_mul(0x9e37_79b9_7f4a_7c15)
+                .wrapping_add(i.wrapping_mul(0xbf58_476d_1ce4_e5b9))
+                ^ 0x5357_494e_4755_5021,
+        );
+        let mut p = *base;
+        let s = self.spread;
+        for param in Param::ALL {
+            let factor = if s > 0.0 {
+                rng.gen_range(1.0 - s..=1.0 + s)
+            } else {
+                1.0
+            };
+            let drawn = match param {
+                Param::Vd if base.vd == 0.0 => rng.gen_range(0.0..=DRAWN_DEAD_ZONE),
+                Param::Cr if base.cr == 0.0 => rng.gen_range(0.0..=DRAWN_ARM_FRICTION),
+                _ => *param.field(&mut p) * factor,
+            };
+            *param.field(&mut p) = drawn;
+        }
+        (p, self.seed.wrapping_add(i))
+    }
+}
+
+/// One run of a [`SwingStudy`], judged on the simulated plant's true state.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SwingRun {
+    /// The energy bound proves this draw's swing-up impossible: not simulated, not judged.
+    pub excluded: bool,
+    /// The time of the catch (s), if there was one.
+    pub catch_time: Option<f64>,
+    /// Caught, and still balanced [`HELD_AFTER_CATCH`] seconds later: the success.
+    pub held: bool,
+    /// Held, and the arm's step after it tracked to the end of the run without a fall.
+    pub step_tracked: bool,
+    /// Caught on the pendulum's first arrival near upright ([`Arrivals::caught_on_first`]).
+    pub caught_on_first: bool,
+    /// Passes over the top before the catch ([`Arrivals::over_tops`]).
+    pub over_tops: u32,
+}
+
+/// One controller's [`SwingStudy`]: counts over its runs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SwingMonteCarlo {
+    /// The balance controller.
+    pub controller: ControllerKind,
+    /// Runs drawn.
+    pub runs: u64,
+    /// Draws excluded by the energy bound.
+    pub excluded: u64,
+    /// Runs caught.
+    pub caught: u64,
+    /// Successes: caught and balanced [`HELD_AFTER_CATCH`] s later.
+    pub held: u64,
+    /// Successes whose arm step was tracked to the end without a fall.
+    pub step_tracked: u64,
+    /// Runs caught on the first arrival.
+    pub caught_on_first: u64,
+    /// Runs with at most two passes over the top before the catch (or its end).
+    pub at_most_two_over_tops: u64,
+    /// The most passes over the top of any run.
+    pub most_over_tops: u32,
+}
+
+impl SwingMonteCarlo {
+    /// Runs judged: those drawn less those excluded.
+    pub fn judged(&self) -> u64 {
+        self.runs - self.excluded
+    }
+
+    /// The share of judged runs that succeeded (`NaN` with none judged).
+    pub fn success_rate(&self) -> f64 {
+        self.held as f64 / self.judged() as f64
+    }
+
+    /// The Wilson 95 % interval of the success rate ([`crate::stats::wilson`]); `None` with
+    /// no run judged.
+    pub fn success_interval(&self) -> Option<(f64, f64)> {
+        crate::stats::wilson(self.held, self.judged(), crate::stats::Z_95).ok()
+    }
+
+    fn add(&mut self, run: &SwingRun) {
+        if run.excluded {
+            self.excluded += 1;
+            return;
+        }
+        self.caught += u64::from(run.catch_time.is_some());
+        self.held += u64::from(run.held);
+        self.step_tracked += u64::from(run.step_tracked);
+        self.caught_on_first += u64::from(run.caught_on_first);
+        self.at_most_two_over_tops += u64::from(run.over_tops <= 2);
+        self.most_over_tops = self.most_over_tops.max(run.over_tops);
+    }
+}
+
+/// The simulation of one study run of `spec`: hanging at rest, the arm's step
+/// [`HELD_AFTER_CATCH`] seconds after the catch, long enough for the longest swing-up, the
+/// hold and the step's `reference.duration`.
+pub fn swing_study_config(spec: &Spec, ts: f64, seed: u64) -> SimConfig {
+    let mut s = spec.clone();
+    s.reference.step_time = HELD_AFTER_CATCH;
+    let mut config = hanging_config(&s, ts, seed);
+    config.duration = spec.swing_up.max_time + HELD_AFTER_CATCH + spec.reference.duration;
+    config
+}
+
+/// Judges the run `res` of a supervisor (type docs of [`SwingRun`]).
+pub fn judge_swing_run(res: &crate::SimResult, catch_angle: f64) -> SwingRun {
+    let a = arrivals(res, catch_angle);
+    let whole = !res.diverged && res.stop_cause.is_none();
+    let held = res.catch_time.is_some_and(|catch| {
+        let end = res.t.last().copied().unwrap_or(f64::NEG_INFINITY);
+        whole
+            && end >= catch + HELD_AFTER_CATCH
+            && res
+                .fall_time
+                .map_or(true, |fall| fall > catch + HELD_AFTER_CATCH)
+    });
+    SwingRun {
+        excluded: false,
+        catch_time: res.catch_time,
+        held,
+        step_tracked: held && !res.fell,
+        caught_on_first: a.caught_on_first,
+        over_tops: a.over_tops,
+    }
+}
+
+/// Runs `study` on `spec`'s rig with its balance controller `kind` at sample time `ts`, on two
+/// threads, each with one supervisor designed once; `cancel` stops it between runs with an
+/// error. The controllers and the swing-up are the file's, designed on its nominal plant;
+/// each run's plant is a draw ([`SwingStudy::draw`]).
+pub fn swing_monte_carlo(
+    spec: &Spec,
+    kind: ControllerKind,
+    ts: f64,
+    study: &SwingStudy,
+    cancel: &std::sync::atomic::AtomicBool,
+) -> Result<SwingMonteCarlo, SpecError> {
+    study.validate()?;
+    let design = spec.design(ts)?;
+    let base = spec.plant.params();
+    let catch_angle = spec.swing_up.catch_angle;
+    let one = |sup: &mut Box<dyn Controller>, i: u64| -> Result<SwingRun, SpecError> {
+        let (params, seed) = study.draw(&base, i);
+        let plant = crate::plant::Plant::new(params)
+            .map_err(|e| SpecError::new("plant", format!("draw {i}: {e}")))?;
+        let bound = crate::swingup::feasibility(&plant, &spec.swing_up);
+        if bound.verdict == crate::swingup::Verdict::Impossible {
+            return Ok(SwingRun {
+                excluded: true,
+                ..SwingRun::default()
+            });
+        }
+        let mut config = swing_study_config(spec, ts, seed);
+        if let Some(h) = study.horizon {
+            config.duration = config.duration.min(h);
+        }
+        let res = crate::sim::simulate(&plant, sup, &config)
+            .map_err(|e| SpecError::new("plant", format!("draw {i}: {e}")))?;
+        Ok(judge_swing_run(&res, catch_angle))
+    };
+    let half = study.runs / 2;
+    let chunk = |range: std::ops::Range<u64>| -> Result<Vec<SwingRun>, SpecError> {
+        let mut sup = supervised(spec, &design, kind)?;
+        let mut out = Vec::with_capacity(range.clone().count());
+        for i in range {
+            if cancel.load(std::sync::atomic::Ordering::Relaxed) {
+                return Err(SpecError::new("", "cancelled"));
+            }
+            out.push(one(&mut sup, i)?);
+        }
+        Ok(out)
+    };
+    let runs = std::thread::scope(|s| {
+        let first = s.spawn(|| chunk(0..half));
+        let second = chunk(half..study.runs);
+        let first = first
+            .join()
+            .unwrap_or_else(|_| Err(SpecError::new("", "a Monte Carlo thread panicked")));
+        first.and_then(|mut a| {
+            a.extend(second?);
+            Ok(a)
+        })
+    })?;
+    let mut mc = SwingMonteCarlo {
+        controller: kind,
+        runs: study.runs,
+        excluded: 0,
+        caught: 0,
+        held: 0,
+        step_tracked: 0,
+        caught_on_first: 0,
+        at_most_two_over_tops: 0,
+        most_over_tops: 0,
+    };
+    for run in &runs {
+        mc.add(run);
+    }
+    Ok(mc)
 }

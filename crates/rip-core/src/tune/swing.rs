@@ -1,0 +1,301 @@
+//! The swing-up's settings, searched by Monte Carlo for the rig `riprs tune` tunes.
+//!
+//! Under ±10 % model error (and a dead zone and arm friction the file may not know) the
+//! swing-up fails mostly at its catch and in the seconds after it: a catch region too wide for
+//! the perturbed plant, an estimator handed over too soon, an arm still turning as the pendulum
+//! arrives. The settings that govern those (`swing_up.catch_margin` of the predicted catch,
+//! `rise_damping`, `handover_time`) have no value that suits every rig: the last-rise brake
+//! that lifts the `paper` preset from 85 to 96 % sinks `qube_servo2` (docs/swing-up.md), so
+//! they are chosen per rig, on the rig's own statistics.
+//!
+//! **The study.** Each candidate is judged by [`swing_monte_carlo`] on the controllers the
+//! tuning chose, [`SEARCH_RUNS`] draws per controller, the same draws for every candidate
+//! (common random numbers: the comparison is not drowned in the draws' own spread). A
+//! candidate's score is its number of successes summed over the three controllers, ties to the
+//! one whose worst controller does best.
+//!
+//! **The search.** From the file's settings with the predicted catch on
+//! (`catch_prediction = 1` s where it is off, `reference_return_rate = 0.5` rad/s where it is
+//! 0: the catch of an arm off centre needs both), every combination of the values of
+//! [`CANDIDATES`] is judged on [`SEARCH_RUNS`] draws ending [`SEARCH_HORIZON`] after the start
+//! (what is compared is the success, not the step after it); the [`FINALISTS`] best are judged
+//! again on [`FINAL_RUNS`] more, and the best of all their draws is kept. The energy method
+//! only: a planned swing-up keeps its settings (its plan takes seconds to design per
+//! candidate).
+//!
+//! **The verdict** ([`SwingVerdict`]), on [`CONFIRM_RUNS`] fresh draws per controller of the
+//! settings kept: *found* when every controller's Wilson 95 % lower bound is at least
+//! [`FOUND_LOWER_BOUND`]; *not found* otherwise; *impossible* when the energy bound forbids any
+//! swing-up of the nominal rig (nothing is searched). `rip-rt run --swing-up`'s pre-flight
+//! refuses a rig whose verdict is not *found* (`crate::preflight::swing`).
+
+use std::sync::atomic::AtomicBool;
+
+use serde::{Deserialize, Serialize};
+
+use crate::spec::study::{swing_monte_carlo, SwingMonteCarlo, SwingStudy};
+use crate::spec::{ControllerKind, Spec, SpecError};
+use crate::swingup::{feasibility, SwingUpMethod, SwingUpSettings, Verdict};
+
+use super::settings::{check_cancel, Progress};
+
+/// Draws per controller with which each candidate is judged.
+pub const SEARCH_RUNS: u64 = 100;
+
+/// Where the search's runs end (s): a swing-up not caught by 9 s counts as failed there.
+pub const SEARCH_HORIZON: f64 = 12.0;
+
+/// Candidates judged again, on [`FINAL_RUNS`] more draws.
+pub const FINALISTS: usize = 3;
+
+/// Further draws per controller for each finalist.
+pub const FINAL_RUNS: u64 = 300;
+
+/// Fresh draws per controller on which the settings kept are confirmed.
+pub const CONFIRM_RUNS: u64 = 400;
+
+/// The smallest Wilson 95 % lower bound of the success rate, for every controller, with which
+/// a swing-up is *found*.
+pub const FOUND_LOWER_BOUND: f64 = 0.93;
+
+/// The seed of the search's draws; the confirmation draws from the next ones.
+const SEARCH_SEED: u64 = 2024;
+
+/// One setting the search moves, with the values it tries.
+pub struct Candidate {
+    /// The `[swing_up]` key.
+    pub key: &'static str,
+    /// The values tried, in order.
+    pub values: &'static [f64],
+    /// Sets the value on settings.
+    pub set: fn(&mut SwingUpSettings, f64),
+}
+
+/// The settings searched and their values (module docs).
+pub const CANDIDATES: [Candidate; 3] = [
+    Candidate {
+        key: "catch_margin",
+        values: &[0.2, 0.25, 0.35, 0.45],
+        set: |s, v| s.catch_margin = v,
+    },
+    Candidate {
+        key: "rise_damping",
+        values: &[0.0, 15.0, 25.0],
+        set: |s, v| s.rise_damping = v,
+    },
+    Candidate {
+        key: "handover_time",
+        values: &[1.0, 2.0],
+        set: |s, v| s.handover_time = v,
+    },
+];
+
+/// What the search found (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SwingVerdict {
+    /// Every controller's lower bound at least [`FOUND_LOWER_BOUND`].
+    Found,
+    /// The best settings tried leave a controller short of it.
+    NotFound,
+    /// The energy bound forbids a swing-up of the nominal rig.
+    Impossible,
+}
+
+impl SwingVerdict {
+    /// `"found"`, `"not_found"` or `"impossible"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Found => "found",
+            Self::NotFound => "not_found",
+            Self::Impossible => "impossible",
+        }
+    }
+}
+
+/// The swing-up settings a search kept, with their confirmation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SwingSearch {
+    /// The verdict.
+    pub verdict: SwingVerdict,
+    /// The settings kept (the file's when nothing was searched).
+    pub settings: SwingUpSettings,
+    /// Each controller's confirmation on [`CONFIRM_RUNS`] fresh draws (empty when
+    /// impossible).
+    pub confirmed: Vec<SwingMonteCarlo>,
+    /// Candidates judged.
+    pub tried: usize,
+}
+
+impl SwingSearch {
+    /// One line per controller: its successes, interval and the other figures of the study.
+    pub fn summary(&self) -> String {
+        if self.verdict == SwingVerdict::Impossible {
+            return "impossible: the energy bound forbids a swing-up of this rig".to_string();
+        }
+        self.confirmed
+            .iter()
+            .map(|m| {
+                let (lo, hi) = m.success_interval().unwrap_or((f64::NAN, f64::NAN));
+                format!(
+                    "{}: {} of {} held {:.0} s after the catch ({:.1} %, Wilson 95 % [{:.1}, \
+                     {:.1}] %), {} excluded by the energy bound, {} caught on the first \
+                     arrival, at most {} passes over the top",
+                    m.controller.name(),
+                    m.held,
+                    m.judged(),
+                    crate::spec::study::HELD_AFTER_CATCH,
+                    100.0 * m.success_rate(),
+                    100.0 * lo,
+                    100.0 * hi,
+                    m.excluded,
+                    m.caught_on_first,
+                    m.most_over_tops,
+                )
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+}
+
+/// The settings the search starts from (module docs).
+fn start(settings: &SwingUpSettings) -> SwingUpSettings {
+    let mut s = settings.clone();
+    if s.catch_prediction <= 0.0 {
+        s.catch_prediction = 1.0;
+    }
+    if s.reference_return_rate <= 0.0 {
+        s.reference_return_rate = 0.5;
+    }
+    s
+}
+
+/// The study of `spec` with `settings` for every controller: `runs` draws from `seed`.
+fn study(
+    spec: &Spec,
+    settings: &SwingUpSettings,
+    ts: f64,
+    (runs, seed, horizon): (u64, u64, Option<f64>),
+    cancel: &AtomicBool,
+) -> Result<Vec<SwingMonteCarlo>, SpecError> {
+    let mut s = spec.clone();
+    s.swing_up = settings.clone();
+    let study = SwingStudy {
+        runs,
+        seed,
+        horizon,
+        ..SwingStudy::default()
+    };
+    ControllerKind::ALL
+        .iter()
+        .map(|&kind| {
+            check_cancel(cancel)?;
+            swing_monte_carlo(&s, kind, ts, &study, cancel)
+        })
+        .collect()
+}
+
+/// The score of a study (module docs): successes in all, then the worst controller's.
+fn score(results: &[SwingMonteCarlo]) -> (u64, u64) {
+    let total = results.iter().map(|m| m.held).sum();
+    let worst = results.iter().map(|m| m.held).min().unwrap_or(0);
+    (total, worst)
+}
+
+/// Every combination of the values of [`CANDIDATES`] on `base`, in order.
+fn grid(base: &SwingUpSettings) -> Vec<SwingUpSettings> {
+    let mut out = vec![base.clone()];
+    for candidate in &CANDIDATES {
+        out = out
+            .iter()
+            .flat_map(|s| {
+                candidate.values.iter().map(move |&v| {
+                    let mut next = s.clone();
+                    (candidate.set)(&mut next, v);
+                    next
+                })
+            })
+            .collect();
+    }
+    out
+}
+
+/// The number of steps [`search`] counts, for a progress count.
+pub fn search_steps() -> usize {
+    CANDIDATES.iter().map(|c| c.values.len()).product::<usize>() + FINALISTS + 1
+}
+
+/// Searches the swing-up settings of `spec` (its controllers as tuned) at sample time `ts`
+/// (module docs), counting its steps in `progress` and stopping with an error once `cancel`
+/// is set.
+pub fn search(
+    spec: &Spec,
+    ts: f64,
+    progress: &Progress,
+    cancel: &AtomicBool,
+) -> Result<SwingSearch, SpecError> {
+    let plant = spec.plant()?;
+    if feasibility(&plant, &spec.swing_up).verdict == Verdict::Impossible {
+        return Ok(SwingSearch {
+            verdict: SwingVerdict::Impossible,
+            settings: spec.swing_up.clone(),
+            confirmed: Vec::new(),
+            tried: 0,
+        });
+    }
+    progress.add(search_steps());
+    let start = start(&spec.swing_up);
+    let mut best = start.clone();
+    let mut tried = 0;
+    if start.method == SwingUpMethod::Energy {
+        let search = (SEARCH_RUNS, SEARCH_SEED, Some(SEARCH_HORIZON));
+        let mut scored: Vec<((u64, u64), SwingUpSettings, Vec<SwingMonteCarlo>)> = Vec::new();
+        for s in grid(&start) {
+            progress.step();
+            if s.validate().is_err() {
+                continue;
+            }
+            let results = study(spec, &s, ts, search, cancel)?;
+            tried += 1;
+            scored.push((score(&results), s, results));
+        }
+        // Best first; the sort is stable, so a tie keeps the grid's order.
+        scored.sort_by_key(|s| std::cmp::Reverse(s.0));
+        let more = (FINAL_RUNS, SEARCH_SEED + SEARCH_RUNS, Some(SEARCH_HORIZON));
+        let mut best_score = None;
+        for (_, s, first) in scored.into_iter().take(FINALISTS) {
+            progress.step();
+            let second = study(spec, &s, ts, more, cancel)?;
+            let both: Vec<SwingMonteCarlo> = first
+                .iter()
+                .zip(&second)
+                .map(|(a, b)| SwingMonteCarlo {
+                    held: a.held + b.held,
+                    ..*b
+                })
+                .collect();
+            let total = score(&both);
+            if best_score.map_or(true, |b| total > b) {
+                best_score = Some(total);
+                best = s;
+            }
+        }
+    }
+    let confirm = (CONFIRM_RUNS, SEARCH_SEED + SEARCH_RUNS + FINAL_RUNS, None);
+    let confirmed = study(spec, &best, ts, confirm, cancel)?;
+    progress.step();
+    let found = confirmed.iter().all(|m| {
+        m.success_interval()
+            .is_some_and(|(lo, _)| lo >= FOUND_LOWER_BOUND)
+    });
+    Ok(SwingSearch {
+        verdict: if found {
+            SwingVerdict::Found
+        } else {
+            SwingVerdict::NotFound
+        },
+        settings: best,
+        confirmed,
+        tried,
+    })
+}

@@ -1,0 +1,251 @@
+//! The swing-up's Monte Carlo (`rip_core::spec::study::swing_monte_carlo`) and the search of
+//! its settings (`rip_core::tune::swing`): the draws, the exclusion by the energy bound, the
+//! success judged again from the true trajectory, and the bars of the searched swing-up.
+
+use std::sync::atomic::AtomicBool;
+
+use rip_core::plant::{Param, Plant};
+use rip_core::sim::simulate;
+use rip_core::spec::study::{
+    supervised, swing_monte_carlo, swing_study_config, SwingStudy, DRAWN_ARM_FRICTION,
+    DRAWN_DEAD_ZONE, HELD_AFTER_CATCH,
+};
+use rip_core::spec::ControllerKind;
+use rip_core::swingup::wrap_angle;
+use rip_core::tune::swing::{search, SwingVerdict, CONFIRM_RUNS};
+use rip_core::Spec;
+
+fn preset(name: &str) -> Spec {
+    Spec::parse(&format!("[plant]\npreset = \"{name}\"\n")).unwrap()
+}
+
+#[test]
+fn each_draw_moves_every_parameter_within_its_spread_and_draws_an_unknown_drive() {
+    let base = preset("paper").plant.params();
+    let study = SwingStudy::default();
+    let (mut vd, mut cr) = (Vec::new(), Vec::new());
+    for i in 0..2000 {
+        let (p, seed) = study.draw(&base, i);
+        assert_eq!(
+            study.draw(&base, i),
+            (p, seed),
+            "draw {i} is not reproducible"
+        );
+        assert_eq!(p.g, base.g, "gravity is the place's, not the rig's");
+        for param in Param::ALL {
+            let (mut a, mut b) = (p, base);
+            let (drawn, nominal) = (*param.field(&mut a), *param.field(&mut b));
+            if nominal != 0.0 {
+                let factor = drawn / nominal;
+                assert!((0.9..=1.1).contains(&factor), "{param:?}: {factor}");
+            }
+        }
+        vd.push(p.vd);
+        cr.push(p.cr);
+    }
+    // The presets have neither: each is drawn across its whole range.
+    let span = |v: &[f64]| {
+        v.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| {
+            (lo.min(x), hi.max(x))
+        })
+    };
+    let (lo, hi) = span(&vd);
+    assert!(
+        (0.0..0.01 * DRAWN_DEAD_ZONE).contains(&lo)
+            && hi <= DRAWN_DEAD_ZONE
+            && hi > 0.99 * DRAWN_DEAD_ZONE,
+        "{lo} {hi}"
+    );
+    let (lo, hi) = span(&cr);
+    assert!(
+        (0.0..0.01 * DRAWN_ARM_FRICTION).contains(&lo)
+            && hi <= DRAWN_ARM_FRICTION
+            && hi > 0.99 * DRAWN_ARM_FRICTION,
+        "{lo} {hi}"
+    );
+    // A rig that has them keeps them within the spread.
+    let mut dz = base;
+    dz.vd = 0.5;
+    dz.cr = 0.004;
+    for i in 0..200 {
+        let (p, _) = study.draw(&dz, i);
+        assert!(
+            (0.45..=0.55).contains(&p.vd) && (0.0036..=0.0044).contains(&p.cr),
+            "{p:?}"
+        );
+    }
+}
+
+#[test]
+fn a_draw_the_energy_bound_forbids_is_excluded_not_counted_as_a_failure() {
+    let mut spec = preset("qube_servo2");
+    spec.swing_up.max_voltage = 0.05;
+    let study = SwingStudy {
+        runs: 12,
+        ..SwingStudy::default()
+    };
+    let mc = swing_monte_carlo(
+        &spec,
+        ControllerKind::Lqr,
+        0.01,
+        &study,
+        &AtomicBool::new(false),
+    )
+    .unwrap();
+    assert_eq!((mc.excluded, mc.judged(), mc.held), (12, 0, 0), "{mc:?}");
+    assert!(mc.success_interval().is_none());
+}
+
+#[test]
+fn bad_study_settings_are_refused_by_name() {
+    let spec = preset("qube_servo2");
+    let cancel = AtomicBool::new(false);
+    for (study, key) in [
+        (
+            SwingStudy {
+                runs: 0,
+                ..SwingStudy::default()
+            },
+            "runs",
+        ),
+        (
+            SwingStudy {
+                spread: 1.0,
+                ..SwingStudy::default()
+            },
+            "spread",
+        ),
+        (
+            SwingStudy {
+                spread: f64::NAN,
+                ..SwingStudy::default()
+            },
+            "spread",
+        ),
+        (
+            SwingStudy {
+                horizon: Some(2.0),
+                ..SwingStudy::default()
+            },
+            "horizon",
+        ),
+    ] {
+        let e = swing_monte_carlo(&spec, ControllerKind::Lqr, 0.01, &study, &cancel).unwrap_err();
+        assert_eq!(e.key, key, "{e}");
+    }
+}
+
+/// The success judged again here from each run's true trajectory, apart from the study's
+/// judgement (which reads the simulation's fall time): the pendulum within the fall limit
+/// from the catch until `HELD_AFTER_CATCH` seconds later.
+#[test]
+fn the_success_is_the_true_pendulum_held_three_seconds_after_the_catch() {
+    let mut spec = preset("paper");
+    spec.swing_up.catch_prediction = 1.0;
+    spec.swing_up.reference_return_rate = 0.5;
+    let study = SwingStudy {
+        runs: 24,
+        ..SwingStudy::default()
+    };
+    let kind = ControllerKind::Lqg;
+    let mc = swing_monte_carlo(&spec, kind, 0.01, &study, &AtomicBool::new(false)).unwrap();
+    let design = spec.design(0.01).unwrap();
+    let mut sup = supervised(&spec, &design, kind).unwrap();
+    let limit = spec.plant.fall_limit;
+    let (mut held, mut caught) = (0, 0);
+    for i in 0..study.runs {
+        let (params, seed) = study.draw(&spec.plant.params(), i);
+        let plant = Plant::new(params).unwrap();
+        let res = simulate(&plant, &mut sup, &swing_study_config(&spec, 0.01, seed)).unwrap();
+        let Some(catch) = res.catch_time else {
+            continue;
+        };
+        caught += 1;
+        let upright = (0..res.len())
+            .filter(|&k| res.t[k] >= catch && res.t[k] <= catch + HELD_AFTER_CATCH)
+            .all(|k| wrap_angle(res.x[k][2]).abs() <= limit);
+        held += u64::from(upright);
+    }
+    assert_eq!((mc.caught, mc.held), (caught, held), "{mc:?}");
+    assert!(
+        held > 0 && held < study.runs,
+        "the case should hold some and lose some: {mc:?}"
+    );
+}
+
+/// The fewest successes in `runs` that a controller succeeding with probability `p` reaches
+/// with probability at least 99.9 % (the largest `k` with `P(X ≥ k) ≥ 0.999`,
+/// `X ~ Binomial(runs, p)`, summed exactly in logs).
+fn guard(runs: u64, p: f64) -> u64 {
+    let ln_pmf = |k: u64| {
+        let ln_choose: f64 = (0..k)
+            .map(|j| ((runs - j) as f64).ln() - ((j + 1) as f64).ln())
+            .sum();
+        ln_choose + k as f64 * p.ln() + (runs - k) as f64 * (1.0 - p).ln()
+    };
+    let mut below = 0.0;
+    for k in 0..=runs {
+        let next = below + ln_pmf(k).exp();
+        if next > 0.001 {
+            return k;
+        }
+        below = next;
+    }
+    runs
+}
+
+#[test]
+fn the_guard_is_the_binomial_tail() {
+    // Against the normal approximation with continuity correction, and a case by hand:
+    // 10 runs at p = 0.5 reach at least 1 success with probability 1 − 2⁻¹⁰ ≥ 0.999, and 2
+    // with 1 − 11/1024 < 0.999.
+    assert_eq!(guard(10, 0.5), 1);
+    let (n, p) = (400u64, 0.985);
+    let sd = (n as f64 * p * (1.0 - p)).sqrt();
+    let normal = n as f64 * p - 3.090_232 * sd + 0.5;
+    assert!(
+        (guard(n, p) as f64 - normal).abs() <= 2.0,
+        "{} {normal}",
+        guard(n, p)
+    );
+}
+
+/// The searched swing-up of `name`, judged on its confirmation draws against the pull-request
+/// tier's regression guard: at least the successes a 98.5 % controller reaches with 99.9 %
+/// probability, for every controller.
+fn searched_swing_up_meets_the_guard(name: &str) {
+    let spec = preset(name);
+    let tuned = rip_core::tune::tune(&spec, 0.01).unwrap();
+    let found = search(
+        &tuned.spec,
+        0.01,
+        &Default::default(),
+        &AtomicBool::new(false),
+    )
+    .unwrap();
+    println!("{name}: {:?}\n{}", found.verdict, found.summary());
+    let least = guard(CONFIRM_RUNS, 0.985);
+    assert_eq!(found.verdict, SwingVerdict::Found, "{}", found.summary());
+    for m in &found.confirmed {
+        assert!(
+            m.held >= least,
+            "{name} {:?}: {} of {} below {least}",
+            m.controller,
+            m.held,
+            m.runs
+        );
+    }
+}
+
+#[test]
+fn the_searched_swing_up_of_qube_servo2_holds_its_catches() {
+    searched_swing_up_meets_the_guard("qube_servo2");
+}
+
+/// Not met yet (docs/swing-up.md, "The searched swing-up"): on `paper` the best settings
+/// searched hold 96.8 / 95.5 / 100 % of 400 catches (LQR / LQG / MPC).
+#[test]
+#[ignore = "a bar not met yet: the paper preset's LQR and LQG lose 3-5 % of their catches"]
+fn the_searched_swing_up_of_the_paper_preset_holds_its_catches() {
+    searched_swing_up_meets_the_guard("paper");
+}
