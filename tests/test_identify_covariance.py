@@ -60,14 +60,13 @@ def test_tune_draws_its_robustness_runs_from_the_identified_covariance(tmp_path)
     values = np.array([QUBE.Dp, QUBE.kt])
     np.testing.assert_allclose(log_cov, MATRIX / np.outer(values, values), rtol=1e-12)
     assert names == NAMES
-    got = tune_module.tune(rig, runs=2, progress=False)
+    got = tune_module.tune(rig, runs=2, progress=False, swing_up=False)
     assert got.perturbation == "identification covariance"
     alone = tmp_path / "alone"
     alone.mkdir()
     (alone / "rig.toml").write_text('[plant]\npreset = "qube_servo2"\n')
-    assert tune_module.tune(alone / "rig.toml", runs=2, progress=False).perturbation == (
-        "+-10% per parameter"
-    )
+    alone_tuned = tune_module.tune(alone / "rig.toml", runs=2, progress=False, swing_up=False)
+    assert alone_tuned.perturbation == "+-10% per parameter"
 
 
 def test_tune_robustness_follows_the_covariance_it_is_given(tmp_path) -> None:

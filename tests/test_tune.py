@@ -20,6 +20,9 @@ from riprs import paper
 from riprs.cli import main
 from riprs.tune import loop_response, margins, tune
 
+# `riprs tune` without its swing-up search (tests/test_swing_tuning.py has it).
+TUNE = ["tune", "--no-swing-up"]
+
 QUBE_DEAD_ZONE = (
     "# A QUBE-like rig with a dead zone and arm friction (the issue's third row).\n"
     + riprs.named_rig("qube_like_dead_zone").to_toml()
@@ -167,7 +170,7 @@ def test_tune_writes_a_file_every_front_end_reads(tmp_path, rip_rt, capsys) -> N
     rig = tmp_path / "rig.toml"
     rig.write_text(QUBE_SERVO3)
     out = tmp_path / "tuned.toml"
-    assert main(["tune", str(rig), "--out", str(out), "--runs", "5", "--quiet"]) == 0
+    assert main([*TUNE, str(rig), "--out", str(out), "--runs", "5", "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "\nevery controller meets the bar" in printed, printed
     for name in ("LQR", "LQG", "MPC"):
@@ -198,12 +201,12 @@ def test_tune_writes_a_file_every_front_end_reads(tmp_path, rip_rt, capsys) -> N
     conf = subprocess.run([rip_rt, "config", str(out)], capture_output=True, text=True)
     assert conf.returncode == 0, conf.stderr
     # Tuning the tuned file keeps its weights: they work.
-    again = tune(out, runs=0, progress=False)
+    again = tune(out, runs=0, progress=False, swing_up=False)
     assert again.kept_file_weights and again.works
 
 
 def test_tune_result_is_typed() -> None:
-    res = tune(riprs.Spec.from_toml(QUBE_SERVO3), runs=2, progress=False)
+    res = tune(riprs.Spec.from_toml(QUBE_SERVO3), runs=2, progress=False, swing_up=False)
     assert isinstance(res, riprs.TuneResult)
     assert set(res.controllers) == {"LQR", "LQG", "MPC"}
     for c in res.controllers.values():
@@ -226,7 +229,7 @@ def test_the_preflight_reads_the_tuning_record_while_it_is_current(tmp_path) -> 
     rig = tmp_path / "rig.toml"
     rig.write_text(QUBE_SERVO3)
     out = tmp_path / "tuned.toml"
-    res = tune(rig, runs=0, progress=False)
+    res = tune(rig, runs=0, progress=False, swing_up=False)
     side = res.write(out)
     assert side == record_path(out) == tmp_path / "tuned.tune.toml"
     record = tomllib.loads(side.read_text())
@@ -271,7 +274,7 @@ def test_the_tuned_lqg_holds_the_pendulum_after_the_swing_ups_catch() -> None:
     # the catch in most noise seeds; its loop had a 1.5-2 dB gain-reduction margin. With the
     # tuned (loop-transfer-recovered) estimator it holds the pendulum in every seed.
     spec = riprs.Spec.from_toml(QUBE_LIKE)
-    tuned = tune(spec, runs=0, progress=False)
+    tuned = tune(spec, runs=0, progress=False, swing_up=False)
     assert margins(spec, "LQG").disk_margin < 0.3 < margins(tuned.spec, "LQG").disk_margin
     seeds = range(1, 11)
     before = _lqg_catches(spec, seeds)
@@ -318,7 +321,7 @@ def test_tuned_rigs_balance_end_to_end_on_the_emulator(tmp_path, rip_rt) -> None
         rig = tmp_path / f"{name}.toml"
         rig.write_text(text)
         tuned = tmp_path / f"{name}.tuned.toml"
-        result = tune(rig, runs=0, progress=False)
+        result = tune(rig, runs=0, progress=False, swing_up=False)
         result.write(tuned)
         for controller in ("lqr", "lqg", "mpc"):
             truth = tmp_path / f"{name}.{controller}.truth.csv"

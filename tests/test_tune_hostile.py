@@ -18,6 +18,9 @@ import riprs
 from riprs.cli import main
 from riprs.tune import preflight, tune
 
+# `riprs tune` without its swing-up search (tests/test_swing_tuning.py has it).
+TUNE = ["tune", "--no-swing-up"]
+
 # `riprs.tune` is the function; the module is reached by its name.
 tune_module = importlib.import_module("riprs.tune")
 
@@ -57,7 +60,7 @@ def test_a_rig_beyond_the_voltage_bound_is_refused_before_the_search(
     rig = tmp_path / "rig.toml"
     rig.write_text(text)
     before = _files(tmp_path)
-    code = main(["tune", str(rig), "--out", str(tmp_path / "tuned.toml"), "--quiet"])
+    code = main([*TUNE, str(rig), "--out", str(tmp_path / "tuned.toml"), "--quiet"])
     err = capsys.readouterr().err
     assert code == 1, err
     assert "no controller can balance this rig" in err and "would need" in err, err
@@ -67,7 +70,7 @@ def test_a_rig_beyond_the_voltage_bound_is_refused_before_the_search(
 
 def test_the_python_api_refuses_it_too(no_search) -> None:
     with pytest.raises(riprs.ConfigError, match="no controller can balance this rig"):
-        tune(riprs.Spec.from_toml(WEAK_MOTOR), runs=0, progress=False)
+        tune(riprs.Spec.from_toml(WEAK_MOTOR), runs=0, progress=False, swing_up=False)
 
 
 @pytest.mark.slow
@@ -75,7 +78,7 @@ def test_a_rig_every_controller_falls_on_exits_non_zero_saying_so(tmp_path, caps
     rig = tmp_path / "rig.toml"
     rig.write_text(NOISY_SENSOR)
     before = _files(tmp_path)
-    code = main(["tune", str(rig), "--out", str(tmp_path / "tuned.toml"), "--runs", "2"])
+    code = main([*TUNE, str(rig), "--out", str(tmp_path / "tuned.toml"), "--runs", "2"])
     out, err = capsys.readouterr()
     assert code == 1, err
     for name in ("LQR", "LQG", "MPC"):
@@ -124,7 +127,7 @@ def test_the_progress_bar_moves_with_the_search_and_ctrl_c_ends_it(monkeypatch) 
     bars = _fake_bars(monkeypatch, stop_after=6)
     start = time.monotonic()
     with pytest.raises(KeyboardInterrupt):
-        tune(riprs.Spec.from_toml(NOISY_SENSOR), runs=3)
+        tune(riprs.Spec.from_toml(NOISY_SENSOR), runs=3, swing_up=False)
     assert time.monotonic() - start < 15.0
     (bar,) = bars
     done = [n for n, _ in bar.seen]
@@ -154,7 +157,7 @@ def test_a_directory_in_the_way_is_refused_before_the_search(
     rig.write_text(PAPER)
     (tmp_path / in_the_way).mkdir()
     before = _files(tmp_path)
-    code = main(["tune", str(rig), "--out", str(tmp_path / out), "--quiet"])
+    code = main([*TUNE, str(rig), "--out", str(tmp_path / out), "--quiet"])
     err = capsys.readouterr().err
     assert code == 1 and err.startswith("riprs: error: --out: "), err
     assert named in err and "is a directory" in err, err
@@ -167,7 +170,7 @@ def test_the_input_is_not_overwritten_unless_forced(tmp_path, capsys, no_search,
     rig.write_text(PAPER)
     (tmp_path / "link.toml").symlink_to(rig)
     before = _files(tmp_path)
-    code = main(["tune", str(rig), "--out", str(tmp_path / out), "--quiet"])
+    code = main([*TUNE, str(rig), "--out", str(tmp_path / out), "--quiet"])
     err = capsys.readouterr().err
     assert code == 1 and err.startswith("riprs: error: --out: "), err
     assert "--force" in err and "rig.toml" in err, err
@@ -178,7 +181,7 @@ def test_the_record_does_not_overwrite_the_input_either(tmp_path, capsys, no_sea
     rig = tmp_path / "tuned.tune.toml"
     rig.write_text(PAPER)
     before = _files(tmp_path)
-    code = main(["tune", str(rig), "--out", str(tmp_path / "tuned.toml"), "--quiet"])
+    code = main([*TUNE, str(rig), "--out", str(tmp_path / "tuned.toml"), "--quiet"])
     err = capsys.readouterr().err
     assert code == 1 and "--force" in err, err
     assert _files(tmp_path) == before
@@ -187,13 +190,13 @@ def test_the_record_does_not_overwrite_the_input_either(tmp_path, capsys, no_sea
 def test_force_overwrites_the_input(tmp_path, capsys) -> None:
     rig = tmp_path / "rig.toml"
     rig.write_text(PAPER)
-    assert main(["tune", str(rig), "--out", str(rig), "--runs", "0", "--quiet", "--force"]) == 0
+    assert main([*TUNE, str(rig), "--out", str(rig), "--runs", "0", "--quiet", "--force"]) == 0
     assert "Tuned by riprs tune" in rig.read_text()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.toml", "rig.tune.toml"]
 
 
 def test_write_refuses_a_directory_and_leaves_nothing(tmp_path) -> None:
-    res = tune(riprs.Spec(), runs=0, progress=False)
+    res = tune(riprs.Spec(), runs=0, progress=False, swing_up=False)
     (tmp_path / "dir").mkdir()
     with pytest.raises(riprs.RiprsError, match=r"^out: .* is a directory"):
         res.write(tmp_path / "dir")
@@ -203,7 +206,7 @@ def test_write_refuses_a_directory_and_leaves_nothing(tmp_path) -> None:
 def test_write_refuses_to_overwrite_its_input_unless_asked(tmp_path) -> None:
     rig = tmp_path / "rig.toml"
     rig.write_text(PAPER)
-    res = tune(rig, runs=0, progress=False)
+    res = tune(rig, runs=0, progress=False, swing_up=False)
     with pytest.raises(riprs.RiprsError, match="overwrite=True"):
         res.write(rig)
     assert rig.read_text() == PAPER
@@ -218,7 +221,7 @@ def test_a_write_that_fails_on_the_second_file_leaves_the_files_as_they_were(
 ) -> None:
     # The disk fills as the second file moves into place: an old pair is put back byte for
     # byte, a new one leaves nothing.
-    res = tune(riprs.Spec(), runs=0, progress=False)
+    res = tune(riprs.Spec(), runs=0, progress=False, swing_up=False)
     out = tmp_path / "tuned.toml"
     if existing:
         out.write_text("old tuned file")
@@ -295,7 +298,7 @@ def test_cli_arguments_out_of_range_are_refused_up_front(
     rig = tmp_path / "rig.toml"
     rig.write_text(PAPER)
     before = _files(tmp_path)
-    code = main(["tune", str(rig), "--out", str(tmp_path / "tuned.toml"), "--quiet", *args])
+    code = main([*TUNE, str(rig), "--out", str(tmp_path / "tuned.toml"), "--quiet", *args])
     err = capsys.readouterr().err
     assert code == 1, err
     assert err.startswith(f"riprs: error: {flag}: "), err
@@ -307,7 +310,7 @@ def test_a_seed_that_is_no_integer_is_a_usage_error(tmp_path, capsys, no_search)
     rig = tmp_path / "rig.toml"
     rig.write_text(PAPER)
     with pytest.raises(SystemExit) as exc:
-        main(["tune", str(rig), "--out", str(tmp_path / "tuned.toml"), "--seed", "1e23"])
+        main([*TUNE, str(rig), "--out", str(tmp_path / "tuned.toml"), "--seed", "1e23"])
     assert exc.value.code == 2
     assert "--seed" in capsys.readouterr().err
 
@@ -339,7 +342,9 @@ def test_python_arguments_out_of_range_are_refused_up_front(no_search, kwargs, n
 def test_numpy_integers_are_integers() -> None:
     import numpy as np
 
-    res = tune(riprs.Spec(), runs=np.int64(1), seed=np.uint64(2**64 - 1), progress=False)
+    res = tune(
+        riprs.Spec(), runs=np.int64(1), seed=np.uint64(2**64 - 1), progress=False, swing_up=False
+    )
     assert res.runs == 1 and all(c.balanced_fraction == 1.0 for c in res.controllers.values())
 
 
@@ -356,7 +361,7 @@ def test_an_untrusted_identification_is_warned_of_and_recorded(tmp_path, capsys)
     rig.write_text(PAPER)
     (tmp_path / "rig.identification.toml").write_text(UNTRUSTED)
     out = tmp_path / "tuned.toml"
-    assert main(["tune", str(rig), "--out", str(out), "--runs", "0", "--quiet"]) == 0
+    assert main([*TUNE, str(rig), "--out", str(out), "--runs", "0", "--quiet"]) == 0
     printed, err = capsys.readouterr()
     assert printed.startswith("WARNING: ") and "not trusted" in printed, printed
     assert "riprs: warning:" in err and "not trusted" in err, err
@@ -375,7 +380,7 @@ def test_an_untrusted_identification_is_warned_of_and_recorded(tmp_path, capsys)
 def test_a_trusted_rig_records_no_mark(tmp_path) -> None:
     rig = tmp_path / "rig.toml"
     rig.write_text(PAPER)
-    res = tune(rig, runs=0, progress=False)
+    res = tune(rig, runs=0, progress=False, swing_up=False)
     assert res.untrusted is None
     side = res.write(tmp_path / "tuned.toml")
     assert "untrusted" not in side.read_text()
@@ -396,7 +401,7 @@ def test_ctrl_c_ends_riprs_tune_within_seconds(tmp_path) -> None:
     (tmp_path / "rig.identification.toml").write_text(UNTRUSTED)
     before = _files(tmp_path)
     proc = subprocess.Popen(
-        [sys.executable, "-m", "riprs.cli", "tune", str(rig), "--out", str(tmp_path / "t.toml")],
+        [sys.executable, "-m", "riprs.cli", *TUNE, str(rig), "--out", str(tmp_path / "t.toml")],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
     )

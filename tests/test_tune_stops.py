@@ -36,7 +36,7 @@ def test_the_tuned_file_runs_the_swing_up_as_written(tmp_path: Path, rip_rt: Pat
     assert "swing_up.arm_limit: 1.45 rad" in refused.stderr
     named = float(refused.stderr.split("at most ")[1].split(" rad")[0])
 
-    result = tune(rig, runs=0, progress=False)
+    result = tune(rig, runs=0, progress=False, swing_up=False)
     assert result.spec.swing_up["arm_limit"] == pytest.approx(named, abs=1e-12)
     assert any("swing_up.arm_limit" in note for note in result.notes), result.notes
     out = tmp_path / "tuned.toml"
@@ -55,5 +55,5 @@ def test_a_swing_up_no_arm_limit_can_stop_is_refused_by_tune(tmp_path: Path) -> 
     rig.write_text('[plant]\npreset = "qube_servo2"\n[safety]\narm_limit = 1.3\n'
                    "[swing_up]\narm_limit = 1.2\n")  # fmt: skip
     with pytest.raises(riprs.ConfigError, match=r"raise safety\.arm_limit"):
-        tune(rig, runs=0, progress=False)
+        tune(rig, runs=0, progress=False, swing_up=False)
     assert not (tmp_path / "rig.tuned.toml").exists()

@@ -30,6 +30,7 @@ from riprs.plant import FurutaParams, Plant
 from riprs.rig import NamedRig, Rig, named_rig, named_rigs, random_rig
 from riprs.sim import BatchMetrics, SimResult, simulate, simulate_batch, simulate_metrics
 from riprs.statespace import StateSpace
+from riprs.swing_tuning import SwingUpStudy, SwingUpTuning, swing_up_monte_carlo
 from riprs.tune import TuneResult, tune
 
 __all__ = [
@@ -65,6 +66,8 @@ __all__ = [
     "Spec",
     "StateSpace",
     "SwingUp",
+    "SwingUpStudy",
+    "SwingUpTuning",
     "TuneResult",
     "__version__",
     "c2d",
@@ -85,5 +88,6 @@ __all__ = [
     "simulate_batch",
     "simulate_metrics",
     "stats",
+    "swing_up_monte_carlo",
     "tune",
 ]

@@ -708,6 +708,7 @@ def tune_weights(
     Ts: float = ...,
     untrusted: str | None = ...,
     progress: Callable[[int, int], object] | None = ...,
+    swing_up: bool = ...,
 ) -> tuple[
     Spec,
     dict[str, float],
@@ -718,7 +719,16 @@ def tune_weights(
     str | None,
     dict[str, str],
     dict[str, Any],
+    dict[str, Any] | None,
 ]: ...
+def swing_up_monte_carlo(
+    spec: Spec,
+    controller: _ControllerName,
+    runs: int = ...,
+    seed: int = ...,
+    spread: float = ...,
+    Ts: float = ...,
+) -> dict[str, Any]: ...
 def tune_robustness(
     spec: Spec,
     runs: int,

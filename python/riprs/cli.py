@@ -315,7 +315,12 @@ def cmd_tune(args: argparse.Namespace) -> int:
         print(f"riprs: warning: {untrusted}", file=sys.stderr)
     result = _renamed(
         lambda: tune(
-            args.rig, runs=args.runs, seed=args.seed, spread=args.spread, progress=not args.quiet
+            args.rig,
+            runs=args.runs,
+            seed=args.seed,
+            spread=args.spread,
+            progress=not args.quiet,
+            swing_up=not args.no_swing_up,
         ),
         {"runs": "--runs", "seed": "--seed", "spread": "--spread"},
     )
@@ -553,6 +558,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--runs", type=int, default=20, metavar="N", help="robustness runs per controller"
     )
     tun.add_argument("--seed", type=int, default=0, metavar="N", help="their seed")
+    tun.add_argument(
+        "--no-swing-up",
+        action="store_true",
+        help="skip the search of the swing-up's catch settings (about 20 s; the file's "
+        "[swing_up] is kept and rip-rt run --swing-up judges it by the energy bound alone)",
+    )
     tun.add_argument(
         "--spread",
         type=float,

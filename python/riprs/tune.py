@@ -31,6 +31,7 @@ from riprs._riprs import (
     tune_weights,
 )
 from riprs.identify import IdentifyError, identification_path, read_plant_covariance
+from riprs.swing_tuning import SwingUpTuning
 
 __all__ = [
     "Bar",
@@ -247,6 +248,9 @@ class TuneResult:
         Settings other than the weights that the tuning changed so that ``rip-rt`` runs the
         file as written, each with why (``swing_up.arm_limit`` lowered to the largest a stop
         during the swing can brake from inside ``safety.arm_limit``).
+    swing_up : SwingUpTuning or None
+        The swing-up settings searched on the tuned controllers and written into ``spec``'s
+        ``[swing_up]``, with their verdict and statistics; None when not searched.
     """
 
     spec: Spec
@@ -264,6 +268,7 @@ class TuneResult:
     untrusted: str | None = None
     refusal: str | None = None
     notes: List[str] = field(default_factory=list)
+    swing_up: SwingUpTuning | None = None
 
     def write(self, out: PathLike, *, overwrite: bool = False) -> Path:
         """Write the tuned file to ``out`` and its record beside it (``OUT.tune.toml``, the
@@ -357,6 +362,15 @@ class TuneResult:
             f"with the compensation {self.bar.off_compensation:.0%} off and stiction: "
             + ", ".join(off)
         )
+        if self.swing_up is not None:
+            sw = self.swing_up
+            lines.append("")
+            lines.append(
+                f"swing-up: {sw.verdict.replace('_', ' ')} ("
+                + ", ".join(f"{k} = {v:g}" for k, v in sw.settings.items())
+                + f"; {sw.tried} settings tried)"
+            )
+            lines += [f"  {line}" for line in sw.summary.splitlines()]
         lines.append("")
         lines.append(f"the rig's bar: {self.bar.summary}")
         short = {n: c for n, c in self.controllers.items() if c.misses is not None}
@@ -607,6 +621,7 @@ def tune(
     seed: int = 0,
     spread: float = 0.1,
     progress: bool = True,
+    swing_up: bool = True,
 ) -> TuneResult:
     """Chooses shared weights for LQR, LQG and MPC on this rig (``riprs tune``).
 
@@ -631,6 +646,10 @@ def tune(
         Relative spread of each parameter where there is no covariance.
     progress : bool
         Show a progress bar on a terminal.
+    swing_up : bool
+        Also search the swing-up's catch settings on the tuned controllers
+        (``rip_core::tune::swing``: about 20 s) and write them into the file's
+        ``[swing_up]``, their verdict into the record (``TuneResult.swing_up``).
 
     Returns
     -------
@@ -688,7 +707,10 @@ def tune(
             refusal,
             shortfalls,
             rig_bar,
-        ) = tune_weights(spec, Ts, untrusted, None if bar is None else advance)
+            searched,
+        ) = tune_weights(
+            spec, Ts, untrusted, None if bar is None else advance, swing_up=bool(swing_up)
+        )
         if bar is not None:
             bar.n = bar.total - runs
             bar.refresh()
@@ -770,4 +792,5 @@ def tune(
         untrusted=untrusted,
         refusal=refusal,
         notes=notes,
+        swing_up=None if searched is None else SwingUpTuning._from(searched),
     )

@@ -249,3 +249,55 @@ fn the_searched_swing_up_of_qube_servo2_holds_its_catches() {
 fn the_searched_swing_up_of_the_paper_preset_holds_its_catches() {
     searched_swing_up_meets_the_guard("paper");
 }
+
+/// `rip-rt run --swing-up`'s pre-flight reads the search stored beside the tuned file: a
+/// search that found nothing refuses (and names what the controller held), one that found
+/// passes, and one made on another design is not used.
+#[test]
+fn the_preflight_refuses_a_swing_up_whose_search_found_nothing() {
+    use rip_core::preflight::{self, design_checksum, Input, Verdict};
+    use rip_core::tune::swing::{StoredStudy, StoredSwingSearch};
+    let spec = preset("qube_servo2");
+    let design = spec.design(0.01).unwrap();
+    let dir = std::env::temp_dir().join(format!("riprs-swing-search-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("tuned.toml");
+    std::fs::write(&file, spec.to_toml()).unwrap();
+    let run = |verdict: &str, inputs: String| {
+        let mut confirmed = std::collections::BTreeMap::new();
+        let study = StoredStudy {
+            runs: 400,
+            excluded: 0,
+            held: 361,
+            lower_bound: 0.87,
+        };
+        confirmed.insert("LQG".to_string(), study);
+        let stored = StoredSwingSearch {
+            inputs,
+            verdict: verdict.to_string(),
+            confirmed,
+        };
+        std::fs::write(preflight::tune_record_path(&file), stored.to_section()).unwrap();
+        preflight::run(&Input {
+            design: &design,
+            controller: ControllerKind::Lqg,
+            rig_file: Some(&file),
+            arm_limit: Some(2.0),
+            swing_up: true,
+        })
+        .finding("swing_up")
+        .unwrap()
+        .clone()
+    };
+    let refused = run("not_found", design_checksum(&design));
+    assert_eq!(refused.verdict, Verdict::Refuse, "{refused}");
+    assert!(refused.message.contains("held 361 of 400"), "{refused}");
+    assert!(refused.message.ends_with("or pass --force"), "{refused}");
+    let found = run("found", design_checksum(&design));
+    assert_eq!(found.verdict, Verdict::Pass, "{found}");
+    assert!(found.message.contains("held 361 of 400"), "{found}");
+    let stale = run("not_found", "0000000000000000".to_string());
+    assert_eq!(stale.verdict, Verdict::Pass, "{stale}");
+    assert!(!stale.message.contains("held"), "{stale}");
+    std::fs::remove_dir_all(&dir).ok();
+}

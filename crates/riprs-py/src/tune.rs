@@ -215,7 +215,7 @@ fn identification_untrusted(rig_file: PathBuf) -> Option<String> {
 /// ``progress(done, total)`` is called as the search advances; Ctrl-C (or an exception from
 /// ``progress``) stops it.
 #[pyfunction]
-#[pyo3(signature = (spec, Ts = rip_core::paper::TS, untrusted = None, progress = None))]
+#[pyo3(signature = (spec, Ts = rip_core::paper::TS, untrusted = None, progress = None, swing_up = false))]
 #[allow(non_snake_case)]
 #[allow(clippy::type_complexity)]
 fn tune_weights<'py>(
@@ -224,6 +224,7 @@ fn tune_weights<'py>(
     Ts: f64,
     untrusted: Option<String>,
     progress: Option<Bound<'py, PyAny>>,
+    swing_up: bool,
 ) -> PyResult<(
     PySpec,
     Bound<'py, PyDict>,
@@ -234,25 +235,39 @@ fn tune_weights<'py>(
     Option<String>,
     Bound<'py, PyDict>,
     Bound<'py, PyDict>,
+    Option<Bound<'py, PyDict>>,
 )> {
     tune::check_ts(Ts).map_err(config_err)?;
     let s = spec.inner.clone();
     let steps = Progress::default();
     let mut reported = (0, 0);
-    let (t, record) = interruptible(
+    let (t, record, searched) = interruptible(
         py,
         |cancel| {
-            let t = tune::tune_with(&s, Ts, &steps, cancel)?;
+            let mut t = tune::tune_with(&s, Ts, &steps, cancel)?;
+            // The swing-up searched on the controllers just tuned, its settings kept in the
+            // file (rip_core::tune::swing), before the record's checksums are taken.
+            let searched = if swing_up && t.refusal().is_none() {
+                let found = tune::swing::search(&t.spec, Ts, &steps, cancel)?;
+                t.spec.swing_up = found.settings.clone();
+                Some(found)
+            } else {
+                None
+            };
             let record = tune::record(&t, Ts)?;
             // The swing-up verdict beside the predictions, so that `rip-rt run --swing-up`
             // reads it instead of computing it (rip_core::swingup::stored).
             let verdict =
                 rip_core::swingup::StoredFeasibility::compute(&t.spec.plant()?, &t.spec.swing_up);
             let mut text = format!("{}{}", record.to_toml(), verdict.to_section());
+            if let Some(found) = &searched {
+                let design = t.spec.design(Ts)?;
+                text.push_str(&tune::swing::StoredSwingSearch::new(found, &design).to_section());
+            }
             if let Some(reason) = &untrusted {
                 text.push_str(&preflight::untrusted_section(reason));
             }
-            Ok::<_, rip_core::spec::SpecError>((t, text))
+            Ok::<_, rip_core::spec::SpecError>((t, text, searched))
         },
         |_| {
             let now = (
@@ -312,7 +327,89 @@ fn tune_weights<'py>(
         refusal,
         shortfalls,
         bar_dict(py, &t)?,
+        searched.map(|f| swing_search_dict(py, &f)).transpose()?,
     ))
+}
+
+/// A swing-up search as the Python package reads it (``riprs.SwingUpTuning``).
+fn swing_search_dict<'py>(
+    py: Python<'py>,
+    found: &tune::swing::SwingSearch,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("verdict", found.verdict.name())?;
+    d.set_item("tried", found.tried)?;
+    d.set_item("summary", found.summary())?;
+    let s = &found.settings;
+    let settings = PyDict::new(py);
+    settings.set_item("catch_prediction", s.catch_prediction)?;
+    settings.set_item("catch_margin", s.catch_margin)?;
+    settings.set_item("rise_damping", s.rise_damping)?;
+    settings.set_item("handover_time", s.handover_time)?;
+    settings.set_item("reference_return_rate", s.reference_return_rate)?;
+    d.set_item("settings", settings)?;
+    let studies = found
+        .confirmed
+        .iter()
+        .map(|m| swing_study_dict(py, m))
+        .collect::<PyResult<Vec<_>>>()?;
+    d.set_item("confirmed", studies)?;
+    Ok(d)
+}
+
+/// The swing-up Monte Carlo of ``controller`` on the spec's rig
+/// (``rip_core::spec::study::swing_monte_carlo``): ``runs`` draws from ``seed``, each
+/// physical parameter within ``1 ± spread``. Ctrl-C stops it.
+#[pyfunction]
+#[pyo3(signature = (spec, controller, runs = 200, seed = 2024, spread = 0.1, Ts = rip_core::paper::TS))]
+#[allow(non_snake_case)]
+fn swing_up_monte_carlo<'py>(
+    py: Python<'py>,
+    spec: PyRef<'py, PySpec>,
+    controller: &str,
+    runs: u64,
+    seed: u64,
+    spread: f64,
+    Ts: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_ts(Ts)?;
+    let kind = kind(controller)?;
+    let study = rip_core::spec::study::SwingStudy {
+        runs,
+        seed,
+        spread,
+        horizon: None,
+    };
+    study.validate().map_err(config_err)?;
+    let s = spec.inner.clone();
+    let m = interruptible(
+        py,
+        |cancel| rip_core::spec::study::swing_monte_carlo(&s, kind, Ts, &study, cancel),
+        |_| Ok(()),
+    )?
+    .map_err(config_err)?;
+    swing_study_dict(py, &m)
+}
+
+/// One controller's swing-up Monte Carlo as the Python package reads it
+/// (``riprs.SwingUpStudy``).
+fn swing_study_dict<'py>(
+    py: Python<'py>,
+    m: &rip_core::spec::study::SwingMonteCarlo,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let (lo, hi) = m.success_interval().unwrap_or((f64::NAN, f64::NAN));
+    d.set_item("controller", m.controller.name())?;
+    d.set_item("runs", m.runs)?;
+    d.set_item("excluded", m.excluded)?;
+    d.set_item("caught", m.caught)?;
+    d.set_item("held", m.held)?;
+    d.set_item("step_tracked", m.step_tracked)?;
+    d.set_item("caught_on_first", m.caught_on_first)?;
+    d.set_item("at_most_two_over_tops", m.at_most_two_over_tops)?;
+    d.set_item("most_over_tops", m.most_over_tops)?;
+    d.set_item("interval", (lo, hi))?;
+    Ok(d)
 }
 
 /// For each controller, the fraction of ``runs`` rigs drawn around the spec's on which it
@@ -417,6 +514,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(loop_margins, m)?)?;
     m.add_function(wrap_pyfunction!(loop_response, m)?)?;
     m.add_function(wrap_pyfunction!(tune_weights, m)?)?;
+    m.add_function(wrap_pyfunction!(swing_up_monte_carlo, m)?)?;
     m.add_function(wrap_pyfunction!(tune_robustness, m)?)?;
     m.add_function(wrap_pyfunction!(preflight_check, m)?)?;
     m.add_function(wrap_pyfunction!(tune_record_path, m)?)?;

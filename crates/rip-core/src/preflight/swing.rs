@@ -7,9 +7,13 @@
 //! swing-up's bounds, otherwise computed now ([`crate::swingup::stored_or_computed`]). A rig
 //! the balance declares impossible refuses, naming the key whose bound is short and what it
 //! would need; a rig it does not exclude passes, saying where the verdict came from. The
-//! balance is a necessary condition: a rig that passes may still not swing up.
+//! balance is a necessary condition: a rig that passes may still not swing up. Where the
+//! record also holds the swing-up search of `riprs tune` ([`crate::tune::swing`]) made on this
+//! design, a search that did not find settings holding the catches refuses, naming what the
+//! controller held.
 
 use crate::swingup::{stored_or_computed, Feasibility, Verdict as Balance};
+use crate::tune::swing::{StoredSwingSearch, SwingVerdict};
 
 use super::{tune_record_path, Finding, Input, Verdict};
 
@@ -45,10 +49,36 @@ pub fn swing_up(input: &Input<'_>) -> Option<Finding> {
                 short_key(&f)
             ),
         ),
-        Balance::NotExcluded => {
-            Finding::new("swing_up", Verdict::Pass, format!("{f} (verdict {source})"))
-        }
+        Balance::NotExcluded => match stored_search(input, record.as_deref()) {
+            Some(search) if search.verdict != SwingVerdict::Found.name() => Finding::new(
+                "swing_up",
+                Verdict::Refuse,
+                format!(
+                    "swing_up: {} with the settings riprs tune searched (verdict {}); change \
+                     the rig or its [swing_up] settings and tune again, or pass --force",
+                    search.describe(input.controller),
+                    search.verdict
+                ),
+            ),
+            Some(search) => Finding::new(
+                "swing_up",
+                Verdict::Pass,
+                format!(
+                    "{f}; {} (verdict {source})",
+                    search.describe(input.controller)
+                ),
+            ),
+            None => Finding::new("swing_up", Verdict::Pass, format!("{f} (verdict {source})")),
+        },
     })
+}
+
+/// The swing-up search `riprs tune` stored in the record at `record`, when it was made on
+/// this design (its `[swing_up]` included); a stale or unreadable one is not used.
+fn stored_search(input: &Input<'_>, record: Option<&std::path::Path>) -> Option<StoredSwingSearch> {
+    let text = crate::spec::read_text(record?).ok()?;
+    StoredSwingSearch::from_record(&text)
+        .filter(|s| s.inputs == super::design_checksum(input.design))
 }
 
 #[cfg(test)]

@@ -299,3 +299,95 @@ pub fn search(
         tried,
     })
 }
+
+/// One controller's confirmation as the tuning record stores it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StoredStudy {
+    /// Draws.
+    pub runs: u64,
+    /// Draws excluded by the energy bound.
+    pub excluded: u64,
+    /// Successes (caught and held 3 s).
+    pub held: u64,
+    /// The Wilson 95 % lower bound of the success rate.
+    pub lower_bound: f64,
+}
+
+/// A [`SwingSearch`] as the tuning record's `[swing_up_search]` table stores it, for
+/// `rip-rt run --swing-up`'s pre-flight (`crate::preflight::swing`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StoredSwingSearch {
+    /// [`crate::preflight::design_checksum`] of the tuned design, its `[swing_up]` the
+    /// settings kept.
+    pub inputs: String,
+    /// [`SwingVerdict::name`].
+    pub verdict: String,
+    /// Per controller (`"LQR"`, `"LQG"`, `"MPC"`), its confirmation.
+    #[serde(default)]
+    pub confirmed: std::collections::BTreeMap<String, StoredStudy>,
+}
+
+impl StoredSwingSearch {
+    /// `search` of the tuned `design` (whose `[swing_up]` holds the settings kept), ready to
+    /// store.
+    pub fn new(search: &SwingSearch, design: &crate::spec::Design) -> Self {
+        Self {
+            inputs: crate::preflight::design_checksum(design),
+            verdict: search.verdict.name().to_string(),
+            confirmed: search
+                .confirmed
+                .iter()
+                .map(|m| {
+                    let lower_bound = m.success_interval().map_or(0.0, |(lo, _)| lo);
+                    let s = StoredStudy {
+                        runs: m.judged(),
+                        excluded: m.excluded,
+                        held: m.held,
+                        lower_bound,
+                    };
+                    (m.controller.name().to_string(), s)
+                })
+                .collect(),
+        }
+    }
+
+    /// The record's `[swing_up_search]` table, with a comment saying what it is.
+    pub fn to_section(&self) -> String {
+        #[derive(Serialize)]
+        struct Section<'a> {
+            swing_up_search: &'a StoredSwingSearch,
+        }
+        format!(
+            "\n# The swing-up's settings searched by Monte Carlo (rip_core::tune::swing), read by\n\
+             # rip-rt run --swing-up while `inputs` is the checksum of its design.\n{}",
+            toml::to_string(&Section {
+                swing_up_search: self
+            })
+            .expect("every value has a TOML form")
+        )
+    }
+
+    /// The `[swing_up_search]` table of the TOML `text`, if it has one that parses.
+    pub fn from_record(text: &str) -> Option<Self> {
+        let mut table: toml::Table = toml::from_str(text).ok()?;
+        table.remove("swing_up_search")?.try_into().ok()
+    }
+
+    /// What the stored search says of `controller`, in one phrase.
+    pub fn describe(&self, controller: ControllerKind) -> String {
+        match self.confirmed.get(controller.name()) {
+            Some(s) => format!(
+                "the searched swing-up held {} of {} catches 3 s with the {} (Wilson 95 % lower \
+                 bound {:.1} %, {:.0} % needed)",
+                s.held,
+                s.runs,
+                controller.name(),
+                100.0 * s.lower_bound,
+                100.0 * FOUND_LOWER_BOUND
+            ),
+            None => format!("the swing-up search was {}", self.verdict),
+        }
+    }
+}
