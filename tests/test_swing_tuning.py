@@ -86,8 +86,8 @@ def test_riprs_tune_writes_the_searched_swing_up_and_its_verdict(tmp_path) -> No
         assert tuned["swing_up"][key] == pytest.approx(value), key
     assert tuned["swing_up"]["catch_prediction"] > 0
     for s in result.swing_up.confirmed:
-        assert s.judged == 400
-        assert s.interval[0] >= 0.93, s
+        assert s.judged == 1000
+        assert s.interval[0] >= 0.95, s
         assert search["confirmed"][s.controller]["held"] == s.held
     # Read back, the tuned file is the design the record's checksum is of.
     again = riprs.load_config(out)

@@ -561,7 +561,7 @@ def build_parser() -> argparse.ArgumentParser:
     tun.add_argument(
         "--no-swing-up",
         action="store_true",
-        help="skip the search of the swing-up's catch settings (about 20 s; the file's "
+        help="skip the search of the swing-up's catch settings (up to a minute; the file's "
         "[swing_up] is kept and rip-rt run --swing-up judges it by the energy bound alone)",
     )
     tun.add_argument(

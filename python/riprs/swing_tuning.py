@@ -101,14 +101,14 @@ class SwingUpTuning:
     ----------
     verdict : {"found", "not_found", "impossible"}
         ``"found"`` when every controller's Wilson lower bound on the confirmation runs is at
-        least 93 %; ``"impossible"`` when the energy bound forbids a swing-up (nothing is
-        searched). ``rip-rt run --swing-up`` refuses a rig whose verdict is not ``"found"``
-        (exit 16, ``--force`` overrides).
+        least 95 %; ``"impossible"`` when the energy bound forbids a swing-up (nothing is
+        searched). ``rip-rt run --swing-up`` refuses a controller whose own lower bound is
+        below 95 % (exit 16, ``--force`` overrides).
     settings : dict
         The ``[swing_up]`` keys the search set: ``catch_prediction``, ``catch_margin``,
         ``rise_damping``, ``handover_time``, ``reference_return_rate``.
     confirmed : list of SwingUpStudy
-        Each controller's study on 400 fresh draws with those settings.
+        Each controller's study on 1000 fresh draws with those settings.
     tried : int
         Candidates judged.
     summary : str

@@ -648,7 +648,7 @@ def tune(
         Show a progress bar on a terminal.
     swing_up : bool
         Also search the swing-up's catch settings on the tuned controllers
-        (``rip_core::tune::swing``: about 20 s) and write them into the file's
+        (``rip_core::tune::swing``: 25 s to a minute) and write them into the file's
         ``[swing_up]``, their verdict into the record (``TuneResult.swing_up``).
 
     Returns

@@ -262,7 +262,7 @@ fn tune_weights<'py>(
             let mut text = format!("{}{}", record.to_toml(), verdict.to_section());
             if let Some(found) = &searched {
                 let design = t.spec.design(Ts)?;
-                text.push_str(&tune::swing::StoredSwingSearch::new(found, &design).to_section());
+                text.push_str(&tune::swing::stored(found, &design).to_section());
             }
             if let Some(reason) = &untrusted {
                 text.push_str(&preflight::untrusted_section(reason));

@@ -9,11 +9,13 @@
 //! would need; a rig it does not exclude passes, saying where the verdict came from. The
 //! balance is a necessary condition: a rig that passes may still not swing up. Where the
 //! record also holds the swing-up search of `riprs tune` ([`crate::tune::swing`]) made on this
-//! design, a search that did not find settings holding the catches refuses, naming what the
-//! controller held.
+//! design, a controller whose catches that search did not find held (its Wilson lower bound
+//! below the one the search needed) refuses, naming what it held.
 
 use crate::swingup::{stored_or_computed, Feasibility, Verdict as Balance};
-use crate::tune::swing::{StoredSwingSearch, SwingVerdict};
+use serde::{Deserialize, Serialize};
+
+use crate::spec::ControllerKind;
 
 use super::{tune_record_path, Finding, Input, Verdict};
 
@@ -50,7 +52,7 @@ pub fn swing_up(input: &Input<'_>) -> Option<Finding> {
             ),
         ),
         Balance::NotExcluded => match stored_search(input, record.as_deref()) {
-            Some(search) if search.verdict != SwingVerdict::Found.name() => Finding::new(
+            Some(search) if !search.holds(input.controller) => Finding::new(
                 "swing_up",
                 Verdict::Refuse,
                 format!(
@@ -79,6 +81,86 @@ fn stored_search(input: &Input<'_>, record: Option<&std::path::Path>) -> Option<
     let text = crate::spec::read_text(record?).ok()?;
     StoredSwingSearch::from_record(&text)
         .filter(|s| s.inputs == super::design_checksum(input.design))
+}
+
+/// One controller's confirmation as the tuning record stores it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StoredStudy {
+    /// Draws.
+    pub runs: u64,
+    /// Draws excluded by the energy bound.
+    pub excluded: u64,
+    /// Successes (caught and held 3 s).
+    pub held: u64,
+    /// The Wilson 95 % lower bound of the success rate.
+    pub lower_bound: f64,
+}
+
+/// A swing-up search (`crate::tune::swing::SwingSearch`) as the tuning record's
+/// `[swing_up_search]` table stores it, for `rip-rt run --swing-up`'s pre-flight.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StoredSwingSearch {
+    /// [`crate::preflight::design_checksum`] of the tuned design, its `[swing_up]` the
+    /// settings kept.
+    pub inputs: String,
+    /// The search's verdict: `found`, `not_found` or `impossible`.
+    pub verdict: String,
+    /// The Wilson lower bound a controller needed to hold its catches.
+    pub needed: f64,
+    /// Per controller (`"LQR"`, `"LQG"`, `"MPC"`), its confirmation.
+    #[serde(default)]
+    pub confirmed: std::collections::BTreeMap<String, StoredStudy>,
+}
+
+impl StoredSwingSearch {
+    /// The record's `[swing_up_search]` table, with a comment saying what it is.
+    pub fn to_section(&self) -> String {
+        #[derive(Serialize)]
+        struct Section<'a> {
+            swing_up_search: &'a StoredSwingSearch,
+        }
+        format!(
+            "\n# The swing-up's settings searched by Monte Carlo (rip_core::tune::swing), read by\n\
+             # rip-rt run --swing-up while `inputs` is the checksum of its design.\n{}",
+            toml::to_string(&Section {
+                swing_up_search: self
+            })
+            .expect("every value has a TOML form")
+        )
+    }
+
+    /// The `[swing_up_search]` table of the TOML `text`, if it has one that parses.
+    pub fn from_record(text: &str) -> Option<Self> {
+        let mut table: toml::Table = toml::from_str(text).ok()?;
+        table.remove("swing_up_search")?.try_into().ok()
+    }
+
+    /// Whether the search found a swing-up that `controller` holds: its own confirmation's
+    /// lower bound at least the one `needed` (the rig's verdict is *found* when every
+    /// controller's is).
+    pub fn holds(&self, controller: ControllerKind) -> bool {
+        self.confirmed
+            .get(controller.name())
+            .is_some_and(|s| s.lower_bound >= self.needed)
+    }
+
+    /// What the stored search says of `controller`, in one phrase.
+    pub fn describe(&self, controller: ControllerKind) -> String {
+        match self.confirmed.get(controller.name()) {
+            Some(s) => format!(
+                "the searched swing-up held {} of {} catches 3 s with the {} (Wilson 95 % lower \
+                 bound {:.1} %, {:.0} % needed)",
+                s.held,
+                s.runs,
+                controller.name(),
+                100.0 * s.lower_bound,
+                100.0 * self.needed
+            ),
+            None => format!("the swing-up search was {}", self.verdict),
+        }
+    }
 }
 
 #[cfg(test)]
