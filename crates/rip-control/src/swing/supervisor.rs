@@ -448,6 +448,19 @@ impl<R: Real> SwingSupervisor<R> {
                 self.hold_reference = Some((next, at_catch));
                 next
             }
+            // The external reference changed while the held one was still on its way back
+            // (an arm caught off centre): the way back goes on at the same rate, now towards
+            // the new reference. Passed through at once, a step would come on top of the arm's
+            // offset (a 1 rad step 1 s after a catch at −0.37 rad threw an LQG's pendulum
+            // out of the balance region on generated rig 5).
+            Some((held, at_catch))
+                if held != at_catch && self.params.reference_return_rate > R::ZERO =>
+            {
+                let step = self.params.reference_return_rate * ts;
+                let next = held + (r[0] - held).clamp(-step, step);
+                self.hold_reference = Some((next, r[0]));
+                next
+            }
             Some(_) => {
                 self.hold_reference = None;
                 r[0]

@@ -719,3 +719,47 @@ fn a_held_period_advances_the_plan_and_an_unusable_one_applies_its_voltage_alone
     let (u, _) = sup.step_planned(&mut probe, &plan, [0.0, pi], [0.0; 2]);
     assert!(sup.planning() && u == 0.0);
 }
+
+/// With a return rate, an external step that comes while the arm reference is still on its
+/// way back from the catch joins that way back at the same rate (the reference never moves
+/// more than `rate · T_s` a period, and reaches the step); once back, a later change is passed
+/// through as given.
+#[test]
+fn a_step_during_the_way_back_from_the_catch_joins_it_at_the_return_rate() {
+    let rate = 0.5;
+    let p = SwingParams {
+        reference_return_rate: rate,
+        ..params(true)
+    };
+    let mut sup = SwingSupervisor::new(p);
+    let mut probe = Probe::default();
+    let upright = [-0.4, 0.05];
+    sup.step(&mut probe, upright, [0.0, 0.0]);
+    assert_eq!(sup.phase(), SwingPhase::Balance);
+    // The way back starts at the catch's own period.
+    assert!((probe.steps[0].1[0] - (-0.4 + rate * TS)).abs() < 1e-12);
+    // 0.2 s more of the way back, then the 0 → 1 rad step.
+    for _ in 0..20 {
+        sup.step(&mut probe, upright, [0.0, 0.0]);
+    }
+    let before = probe.steps.last().unwrap().1[0];
+    assert!(
+        (before - (-0.4 + 21.0 * rate * TS)).abs() < 1e-9,
+        "{before}"
+    );
+    let mut last = before;
+    let mut periods = 0;
+    while last < 1.0 - 1e-12 {
+        sup.step(&mut probe, upright, [1.0, 0.0]);
+        let r = probe.steps.last().unwrap().1[0];
+        assert!(r - last <= rate * TS + 1e-12 && r >= last, "{last} -> {r}");
+        last = r;
+        periods += 1;
+        assert!(periods < 1000, "never reached the step");
+    }
+    assert!((last - 1.0).abs() < 1e-12);
+    assert_eq!(periods, ((1.0 - before) / (rate * TS)).ceil() as usize);
+    // Back: the next change is a step as given.
+    sup.step(&mut probe, upright, [0.5, 0.0]);
+    assert_eq!(probe.steps.last().unwrap().1[0], 0.5);
+}
