@@ -51,8 +51,8 @@ BAR_ARM_PP = 0.05
 BAR_ALPHA = 0.02
 BAR_OFFSET = 0.02
 
-#: A bound on each command's wall time: `riprs tune` is the longest, under a minute on two
-#: shared cores.
+#: A bound on each command's wall time: `riprs tune` is the longest, with its swing-up search
+#: about a minute and a half on two shared cores.
 TIMEOUT_S = 600
 
 

@@ -169,9 +169,10 @@ def test_compare_down_catches_then_tracks_the_step_with_every_controller(preset:
     assert "upright" in down.table()
 
 
-def test_swing_up_monte_carlo_success_rate_floor() -> None:
-    # 30 perturbed plants per controller ([monte_carlo] of the spec); measured 87 % (LQR),
-    # 77 % (LQG), 93 % (MPC) with these seeds (200 runs: 91 %, 80.5 %, 92 %): floors below.
+def test_swing_up_monte_carlo_of_compare_reports_what_its_runs_did() -> None:
+    # `riprs compare --start down --monte-carlo`'s summary against its own runs. How often a
+    # swing-up succeeds is judged on the study `riprs tune` searches with, against the
+    # issue's bar (crates/rip-core/tests/swing_study.rs), not on the file's defaults here.
     spec = _spec("paper")
     result = compare(
         spec, seed=5, start="down", monte_carlo=30, plots=False, progress=False
@@ -179,12 +180,11 @@ def test_swing_up_monte_carlo_success_rate_floor() -> None:
     mc = result.monte_carlo
     assert mc is not None
     limit = spec.swing_up["arm_limit"]
-    floors = {"LQR": 0.7, "LQG": 0.6, "MPC": 0.75}
     for name, s in mc.swing_up_summary().items():
-        assert s["success_rate"] >= floors[name], (name, s)
-        assert s["peak_voltage"] <= spec.swing_up["max_voltage"], name
         m = mc.runs[name]
         ok = m.swing_up_succeeded
+        assert s["success_rate"] == pytest.approx(np.mean(ok)), name
+        assert s["peak_voltage"] <= spec.swing_up["max_voltage"], name
         # A successful run never left the arm limit; success and time to upright agree.
         assert np.all(m.peak_arm[ok] <= limit), name
         assert np.all(np.isfinite(m.time_to_upright[ok])), name
