@@ -449,15 +449,17 @@ impl<R: Real> SwingSupervisor<R> {
                 next
             }
             // The external reference changed while the held one was still on its way back
-            // (an arm caught off centre): the way back goes on at the same rate, now towards
-            // the new reference. Passed through at once, a step would come on top of the arm's
-            // offset (a 1 rad step 1 s after a catch at −0.37 rad threw an LQG's pendulum
-            // out of the balance region on generated rig 5).
+            // (an arm caught off centre): the change is made as given, from where the way
+            // back is, and what is left of the way back goes on at its rate. Passed through at
+            // once, the change would carry the arm's remaining offset with it (a 1 rad step
+            // 1 s after a catch at −0.37 rad became a 1.37 rad step and threw an LQG's
+            // pendulum out of the balance region on generated rig 5).
             Some((held, at_catch))
                 if held != at_catch && self.params.reference_return_rate > R::ZERO =>
             {
                 let step = self.params.reference_return_rate * ts;
-                let next = held + (r[0] - held).clamp(-step, step);
+                let shifted = held + (r[0] - at_catch);
+                let next = shifted + (r[0] - shifted).clamp(-step, step);
                 self.hold_reference = Some((next, r[0]));
                 next
             }

@@ -721,11 +721,11 @@ fn a_held_period_advances_the_plan_and_an_unusable_one_applies_its_voltage_alone
 }
 
 /// With a return rate, an external step that comes while the arm reference is still on its
-/// way back from the catch joins that way back at the same rate (the reference never moves
-/// more than `rate · T_s` a period, and reaches the step); once back, a later change is passed
-/// through as given.
+/// way back from the catch is made as given from where the way back is, and the rest of the
+/// way back goes on at the return rate (the reference never moves more than `rate · T_s` a
+/// period besides the step); once back, a later change is passed through as given.
 #[test]
-fn a_step_during_the_way_back_from_the_catch_joins_it_at_the_return_rate() {
+fn a_step_during_the_way_back_from_the_catch_is_made_from_where_the_way_back_is() {
     let rate = 0.5;
     let p = SwingParams {
         reference_return_rate: rate,
@@ -747,7 +747,14 @@ fn a_step_during_the_way_back_from_the_catch_joins_it_at_the_return_rate() {
         (before - (-0.4 + 21.0 * rate * TS)).abs() < 1e-9,
         "{before}"
     );
-    let mut last = before;
+    sup.step(&mut probe, upright, [1.0, 0.0]);
+    let at_step = probe.steps.last().unwrap().1[0];
+    // The step as given (1 rad), not 1 rad plus the 0.295 rad left of the way back.
+    assert!(
+        (at_step - (before + 1.0 + rate * TS)).abs() < 1e-12,
+        "{at_step}"
+    );
+    let mut last = at_step;
     let mut periods = 0;
     while last < 1.0 - 1e-12 {
         sup.step(&mut probe, upright, [1.0, 0.0]);
@@ -758,7 +765,10 @@ fn a_step_during_the_way_back_from_the_catch_joins_it_at_the_return_rate() {
         assert!(periods < 1000, "never reached the step");
     }
     assert!((last - 1.0).abs() < 1e-12);
-    assert_eq!(periods, ((1.0 - before) / (rate * TS)).ceil() as usize);
+    assert_eq!(
+        periods,
+        ((1.0 - at_step) / (rate * TS) - 1e-9).ceil() as usize
+    );
     // Back: the next change is a step as given.
     sup.step(&mut probe, upright, [0.5, 0.0]);
     assert_eq!(probe.steps.last().unwrap().1[0], 0.5);
