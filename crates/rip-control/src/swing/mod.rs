@@ -148,12 +148,12 @@
 //!   and moves back to the external reference at [`SwingParams::reference_return_rate`] (0 by
 //!   default: held there) until the external reference changes from the value it had at the
 //!   catch. A change that comes while the way back is still going (a return rate above 0)
-//!   is made as given from where the way back is, and what is left of the way back goes on
-//!   at its rate: passed through at once, the change would carry the arm's remaining offset
-//!   with it (a 1 rad step 1 s after a catch at −0.37 rad became a 1.37 rad step and threw an
-//!   LQG's pendulum out of the balance region). Once back, or with the reference held (rate
-//!   0), the external reference is passed through from that change on (so a later
-//!   0 → 1 rad step is tracked as given).
+//!   moves the reference towards the new value by at most the change itself, and what is
+//!   left goes on at the return rate: passed through at once, the change would carry the
+//!   arm's remaining offset with it (a 1 rad step 1 s after a catch at −0.37 rad became a
+//!   1.37 rad step and threw an LQG's pendulum out of the balance region). Once back, or with
+//!   the reference held (rate 0), the external reference is passed through from that change
+//!   on (so a later 0 → 1 rad step is tracked as given).
 //! - **Predicted catch** (opt-in, [`SwingParams::prediction`]): the fixed arm windows
 //!   (`catch_arm_rate`, `catch_arm_angle`) are replaced by a prediction. From the swing-up's
 //!   estimate `x`, the nominal model without dead zone and Coulomb friction is simulated (RK4)

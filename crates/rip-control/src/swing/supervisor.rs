@@ -449,16 +449,19 @@ impl<R: Real> SwingSupervisor<R> {
                 next
             }
             // The external reference changed while the held one was still on its way back
-            // (an arm caught off centre): the change is made as given, from where the way
-            // back is, and what is left of the way back goes on at its rate. Passed through at
-            // once, the change would carry the arm's remaining offset with it (a 1 rad step
-            // 1 s after a catch at −0.37 rad became a 1.37 rad step and threw an LQG's
-            // pendulum out of the balance region on generated rig 5).
+            // (an arm caught off centre): the reference moves towards the new value by at
+            // most the change itself, and what is left goes on at the return rate. Passed
+            // through at once, the change would carry the arm's remaining offset with it (a
+            // 1 rad step 1 s after a catch at −0.37 rad became a 1.37 rad step and threw an
+            // LQG's pendulum out of the balance region on generated rig 5); added to where
+            // the way back is, it would overshoot the new value when the offset lies on the
+            // side of the change.
             Some((held, at_catch))
                 if held != at_catch && self.params.reference_return_rate > R::ZERO =>
             {
                 let step = self.params.reference_return_rate * ts;
-                let shifted = held + (r[0] - at_catch);
+                let change = (r[0] - at_catch).abs();
+                let shifted = held + (r[0] - held).clamp(-change, change);
                 let next = shifted + (r[0] - shifted).clamp(-step, step);
                 self.hold_reference = Some((next, r[0]));
                 next

@@ -721,9 +721,10 @@ fn a_held_period_advances_the_plan_and_an_unusable_one_applies_its_voltage_alone
 }
 
 /// With a return rate, an external step that comes while the arm reference is still on its
-/// way back from the catch is made as given from where the way back is, and the rest of the
-/// way back goes on at the return rate (the reference never moves more than `rate · T_s` a
-/// period besides the step); once back, a later change is passed through as given.
+/// way back from the catch moves the reference towards it by at most the step, and the rest
+/// of the way goes on at the return rate (the reference never moves more than `rate · T_s` a
+/// period besides the step, nor past the new value); once back, a later change is passed
+/// through as given.
 #[test]
 fn a_step_during_the_way_back_from_the_catch_is_made_from_where_the_way_back_is() {
     let rate = 0.5;
@@ -772,4 +773,12 @@ fn a_step_during_the_way_back_from_the_catch_is_made_from_where_the_way_back_is(
     // Back: the next change is a step as given.
     sup.step(&mut probe, upright, [0.5, 0.0]);
     assert_eq!(probe.steps.last().unwrap().1[0], 0.5);
+    // Caught on the side the step goes to: the reference reaches the step at once and does
+    // not overshoot it (the step added to where the way back is would be 1.395 rad).
+    let mut sup = SwingSupervisor::new(p);
+    let mut probe = Probe::default();
+    let caught = [0.4, 0.05];
+    sup.step(&mut probe, caught, [0.0, 0.0]);
+    sup.step(&mut probe, caught, [1.0, 0.0]);
+    assert_eq!(probe.steps.last().unwrap().1[0], 1.0);
 }
