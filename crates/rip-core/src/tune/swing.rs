@@ -26,10 +26,12 @@
 //! candidate).
 //!
 //! **The verdict** ([`SwingVerdict`]), on [`CONFIRM_RUNS`] fresh draws per controller of the
-//! settings kept (ending as the search's do): *found* when every controller's Wilson 95 % lower bound is at least
-//! [`FOUND_LOWER_BOUND`]; *not found* otherwise; *impossible* when the energy bound forbids any
-//! swing-up of the nominal rig (nothing is searched). `rip-rt run --swing-up`'s pre-flight
-//! refuses a rig whose verdict is not *found* (`crate::preflight::swing`).
+//! settings kept, each the whole experiment (the arm's step after the hold included, so that
+//! its tracking is counted too): *found* when every controller's Wilson 95 % lower bound is at
+//! least [`FOUND_LOWER_BOUND`]; *not found* otherwise; *impossible* when the energy bound
+//! forbids any swing-up of the nominal rig (nothing is searched). `rip-rt run --swing-up`'s
+//! pre-flight refuses each controller whose own lower bound is below it
+//! (`crate::preflight::swing`).
 
 use std::sync::atomic::AtomicBool;
 
