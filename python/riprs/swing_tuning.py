@@ -106,7 +106,7 @@ class SwingUpTuning:
         below 95 % (exit 16, ``--force`` overrides).
     settings : dict
         The ``[swing_up]`` keys the search set: ``catch_prediction``, ``catch_margin``,
-        ``rise_damping``, ``handover_time``, ``reference_return_rate``.
+        ``rise_damping``, ``reference_return_rate``.
     confirmed : list of SwingUpStudy
         Each controller's study on 1000 fresh draws with those settings.
     tried : int

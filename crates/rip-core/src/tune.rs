@@ -550,6 +550,63 @@ fn recover(spec: &Spec, w: Weights, ts: f64, bar: &Bar) -> (Weights, bool) {
     (w.with_recovery(best.map_or(1.0, |(_, q)| q)), false)
 }
 
+/// What `riprs tune` writes: the tuned controllers (their spec the tuned file), the record
+/// beside it ([`crate::preflight::tune_record_path`]) as TOML text, and the swing-up search
+/// when one ran.
+#[derive(Debug, Clone)]
+pub struct TunedFile {
+    /// The tuned controllers; `tuned.spec` is the tuned file's spec, its `[swing_up]` the
+    /// searched settings when the search ran.
+    pub tuned: Tuned,
+    /// The record's text: each controller's prediction ([`record`]), the swing-up's energy
+    /// verdict ([`crate::swingup::StoredFeasibility`]), the search's result
+    /// ([`swing::stored`]) and, for a rig whose identification is not trusted, why
+    /// ([`crate::preflight::untrusted_section`]).
+    pub record: String,
+    /// The swing-up search, when it ran.
+    pub swing_up: Option<swing::SwingSearch>,
+}
+
+/// Tunes the rig of `spec` at sample time `ts` ([`tune_with`]) and, with `swing_up` and a
+/// tuning that did not fail outright, searches its swing-up on the controllers just tuned
+/// ([`swing::search`]) before the record's checksums are taken; `untrusted` says why the
+/// rig's identification is not trusted, for the record. One definition of the tuned file
+/// and its record for every caller (`riprs tune`, the end-to-end tests).
+pub fn tune_file(
+    spec: &Spec,
+    ts: f64,
+    swing_up: bool,
+    untrusted: Option<&str>,
+    progress: &Progress,
+    cancel: &AtomicBool,
+) -> Result<TunedFile, SpecError> {
+    let mut tuned = tune_with(spec, ts, progress, cancel)?;
+    let searched = if swing_up && tuned.refusal().is_none() {
+        let found = swing::search(&tuned.spec, ts, progress, cancel)?;
+        tuned.spec.swing_up = found.settings.clone();
+        Some(found)
+    } else {
+        None
+    };
+    // The swing-up's energy verdict beside the predictions, so that `rip-rt run --swing-up`
+    // reads it instead of computing it (crate::swingup::stored).
+    let verdict =
+        crate::swingup::StoredFeasibility::compute(&tuned.spec.plant()?, &tuned.spec.swing_up);
+    let mut text = format!("{}{}", record(&tuned, ts)?.to_toml(), verdict.to_section());
+    if let Some(found) = &searched {
+        let design = tuned.spec.design(ts)?;
+        text.push_str(&swing::stored(found, &design).to_section());
+    }
+    if let Some(reason) = untrusted {
+        text.push_str(&crate::preflight::untrusted_section(reason));
+    }
+    Ok(TunedFile {
+        tuned,
+        record: text,
+        swing_up: searched,
+    })
+}
+
 /// The record `riprs tune` writes beside the tuned file (crate::preflight::TuneRecord):
 /// the checksum of the tuned design at sample time `ts` and each controller's prediction,
 /// with what of the rig's bar it misses ([`Tuned::shortfalls`]).

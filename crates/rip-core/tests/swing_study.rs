@@ -12,7 +12,7 @@ use rip_core::spec::study::{
 };
 use rip_core::spec::ControllerKind;
 use rip_core::swingup::wrap_angle;
-use rip_core::tune::swing::{search, SwingVerdict};
+use rip_core::tune::swing::SwingVerdict;
 use rip_core::Spec;
 
 fn preset(name: &str) -> Spec {
@@ -210,20 +210,26 @@ fn the_guard_is_the_binomial_tail() {
     );
 }
 
-/// The searched swing-up of the preset `name` (its controllers tuned first).
-fn searched(name: &str) -> (Spec, rip_core::tune::swing::SwingSearch) {
-    let tuned = rip_core::tune::tune(&preset(name), 0.01).unwrap();
-    let found = search(
-        &tuned.spec,
+/// The tuned file of `spec` as `riprs tune` writes it: its controllers tuned, then its
+/// swing-up searched (`rip_core::tune::tune_file`).
+fn tuned_file(spec: &Spec) -> rip_core::tune::TunedFile {
+    rip_core::tune::tune_file(
+        spec,
         0.01,
+        true,
+        None,
         &Default::default(),
         &AtomicBool::new(false),
     )
-    .unwrap();
+    .unwrap()
+}
+
+/// The searched swing-up of the preset `name` (its controllers tuned first).
+fn searched(name: &str) -> (Spec, rip_core::tune::swing::SwingSearch) {
+    let file = tuned_file(&preset(name));
+    let found = file.swing_up.unwrap();
     println!("{name}: {:?}\n{}", found.verdict, found.summary());
-    let mut spec = tuned.spec;
-    spec.swing_up = found.settings.clone();
-    (spec, found)
+    (file.tuned.spec, found)
 }
 
 /// The pull-request tier's draws per controller for the regression guard.
@@ -411,20 +417,12 @@ fn searched_swing_ups_hold_their_catches(rigs: Vec<(String, Spec)>) {
     let (mut pooled, mut pooled_runs) = (0u64, 0u64);
     let mut wrong = Vec::new();
     for (name, spec) in rigs {
-        let tuned = rip_core::tune::tune(&spec, 0.01).unwrap();
-        if tuned.refusal().is_some() {
+        let file = tuned_file(&spec);
+        let Some(found) = file.swing_up else {
             println!("{name}: the tuning refuses it");
             continue;
-        }
-        let found = search(
-            &tuned.spec,
-            0.01,
-            &Default::default(),
-            &AtomicBool::new(false),
-        )
-        .unwrap();
-        let mut spec = tuned.spec.clone();
-        spec.swing_up = found.settings.clone();
+        };
+        let spec = file.tuned.spec;
         let design = spec.design(0.01).unwrap();
         let stored = rip_core::tune::swing::stored(&found, &design);
         println!(
@@ -434,9 +432,9 @@ fn searched_swing_ups_hold_their_catches(rigs: Vec<(String, Spec)>) {
             found.settings.rise_damping,
             found.summary()
         );
-        let file = dir.join("tuned.toml");
-        std::fs::write(&file, spec.to_toml()).unwrap();
-        std::fs::write(preflight::tune_record_path(&file), stored.to_section()).unwrap();
+        let path = dir.join("tuned.toml");
+        std::fs::write(&path, spec.to_toml()).unwrap();
+        std::fs::write(preflight::tune_record_path(&path), &file.record).unwrap();
         let study = SwingStudy {
             runs: 200,
             seed: 70_000,
@@ -446,7 +444,7 @@ fn searched_swing_ups_hold_their_catches(rigs: Vec<(String, Spec)>) {
             let verdict = preflight::run(&Input {
                 design: &design,
                 controller: kind,
-                rig_file: Some(&file),
+                rig_file: Some(&path),
                 arm_limit: Some(3.0),
                 swing_up: true,
             })

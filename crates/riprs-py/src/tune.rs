@@ -244,30 +244,8 @@ fn tune_weights<'py>(
     let (t, record, searched) = interruptible(
         py,
         |cancel| {
-            let mut t = tune::tune_with(&s, Ts, &steps, cancel)?;
-            // The swing-up searched on the controllers just tuned, its settings kept in the
-            // file (rip_core::tune::swing), before the record's checksums are taken.
-            let searched = if swing_up && t.refusal().is_none() {
-                let found = tune::swing::search(&t.spec, Ts, &steps, cancel)?;
-                t.spec.swing_up = found.settings.clone();
-                Some(found)
-            } else {
-                None
-            };
-            let record = tune::record(&t, Ts)?;
-            // The swing-up verdict beside the predictions, so that `rip-rt run --swing-up`
-            // reads it instead of computing it (rip_core::swingup::stored).
-            let verdict =
-                rip_core::swingup::StoredFeasibility::compute(&t.spec.plant()?, &t.spec.swing_up);
-            let mut text = format!("{}{}", record.to_toml(), verdict.to_section());
-            if let Some(found) = &searched {
-                let design = t.spec.design(Ts)?;
-                text.push_str(&tune::swing::stored(found, &design).to_section());
-            }
-            if let Some(reason) = &untrusted {
-                text.push_str(&preflight::untrusted_section(reason));
-            }
-            Ok::<_, rip_core::spec::SpecError>((t, text, searched))
+            let f = tune::tune_file(&s, Ts, swing_up, untrusted.as_deref(), &steps, cancel)?;
+            Ok::<_, rip_core::spec::SpecError>((f.tuned, f.record, f.swing_up))
         },
         |_| {
             let now = (
@@ -345,7 +323,6 @@ fn swing_search_dict<'py>(
     settings.set_item("catch_prediction", s.catch_prediction)?;
     settings.set_item("catch_margin", s.catch_margin)?;
     settings.set_item("rise_damping", s.rise_damping)?;
-    settings.set_item("handover_time", s.handover_time)?;
     settings.set_item("reference_return_rate", s.reference_return_rate)?;
     d.set_item("settings", settings)?;
     let studies = found
