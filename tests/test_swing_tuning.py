@@ -85,6 +85,7 @@ def test_riprs_tune_writes_the_searched_swing_up_and_its_verdict(tmp_path) -> No
     for key, value in result.swing_up.settings.items():
         assert tuned["swing_up"][key] == pytest.approx(value), key
     assert tuned["swing_up"]["catch_prediction"] > 0
+    assert tuned["swing_up"].get("method", "energy") == result.swing_up.method
     for s in result.swing_up.confirmed:
         assert s.judged == 1000
         assert s.interval[0] >= 0.95, s

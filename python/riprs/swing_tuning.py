@@ -104,9 +104,12 @@ class SwingUpTuning:
         least 95 %; ``"impossible"`` when the energy bound forbids a swing-up (nothing is
         searched). ``rip-rt run --swing-up`` refuses a controller whose own lower bound is
         below 95 % (exit 16, ``--force`` overrides).
+    method : {"energy", "trajectory"}
+        The ``swing_up.method`` kept: the planned swing-up where it catches on the first
+        arrival more often and holds as many catches, else the energy law.
     settings : dict
-        The ``[swing_up]`` keys the search set: ``catch_prediction``, ``catch_margin``,
-        ``rise_damping``, ``reference_return_rate``.
+        The numeric ``[swing_up]`` keys the search set: ``catch_prediction``,
+        ``catch_margin``, ``rise_damping``, ``reference_return_rate``.
     confirmed : list of SwingUpStudy
         Each controller's study on 1000 fresh draws with those settings.
     tried : int
@@ -116,6 +119,7 @@ class SwingUpTuning:
     """
 
     verdict: Literal["found", "not_found", "impossible"]
+    method: Literal["energy", "trajectory"]
     settings: Dict[str, float]
     confirmed: List[SwingUpStudy]
     tried: int
@@ -125,6 +129,7 @@ class SwingUpTuning:
     def _from(cls, d: Dict) -> SwingUpTuning:
         return cls(
             verdict=d["verdict"],
+            method=d["method"],
             settings={k: float(v) for k, v in d["settings"].items()},
             confirmed=[SwingUpStudy._from(m) for m in d["confirmed"]],
             tried=int(d["tried"]),

@@ -366,7 +366,7 @@ class TuneResult:
             sw = self.swing_up
             lines.append("")
             lines.append(
-                f"swing-up: {sw.verdict.replace('_', ' ')} ("
+                f"swing-up: {sw.verdict.replace('_', ' ')} (method = {sw.method}, "
                 + ", ".join(f"{k} = {v:g}" for k, v in sw.settings.items())
                 + f"; {sw.tried} settings tried)"
             )

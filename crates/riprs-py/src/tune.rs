@@ -319,6 +319,7 @@ fn swing_search_dict<'py>(
     d.set_item("tried", found.tried)?;
     d.set_item("summary", found.summary())?;
     let s = &found.settings;
+    d.set_item("method", s.method.name())?;
     let settings = PyDict::new(py);
     settings.set_item("catch_prediction", s.catch_prediction)?;
     settings.set_item("catch_margin", s.catch_margin)?;

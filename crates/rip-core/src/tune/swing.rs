@@ -21,9 +21,18 @@
 //! after the longest swing-up (what is compared is the success, not the step after it; the
 //! handover's length, tried too, changed no success on either preset); the [`FINALISTS`] best
 //! are judged
-//! again on [`FINAL_RUNS`] more, and the best of all their draws is kept. The energy method
-//! only: a planned swing-up keeps its settings (its plan takes seconds to design per
-//! candidate).
+//! again on [`FINAL_RUNS`] more, and the best of all their draws is kept.
+//!
+//! **The method.** The settings kept are then judged with the planned swing-up
+//! (`method = "trajectory"`: a plan from hanging to upright tracked by time-varying LQR) on
+//! the same draws. The plan is kept when it catches on the first arrival more often and holds
+//! as many catches within one standard deviation of the difference (the square root of both
+//! methods' failures); else, or where no plan can be designed, the energy law. The plan
+//! arrives where it was planned to, where the energy law arrives where its last swing takes
+//! it: on `qube_servo2` it catches on the first arrival in 89 % of 400 draws against 38 %,
+//! on generated rig 15 in 92 % against 2.5 %, holding as many. Only the method is judged
+//! so, not the grid: a plan takes seconds to design per candidate. A file that asks for the
+//! plan keeps it, and its catch settings are searched no further.
 //!
 //! **The verdict** ([`SwingVerdict`]), on [`CONFIRM_RUNS`] fresh draws per controller of the
 //! settings kept, each the whole experiment (the arm's step after the hold included, so that
@@ -203,6 +212,38 @@ fn score(results: &[SwingMonteCarlo]) -> (u64, u64) {
     (total, worst)
 }
 
+/// Each controller's study over two sets of draws together.
+fn summed(first: &[SwingMonteCarlo], second: &[SwingMonteCarlo]) -> Vec<SwingMonteCarlo> {
+    first
+        .iter()
+        .zip(second)
+        .map(|(a, b)| SwingMonteCarlo {
+            controller: b.controller,
+            runs: a.runs + b.runs,
+            excluded: a.excluded + b.excluded,
+            caught: a.caught + b.caught,
+            held: a.held + b.held,
+            step_tracked: a.step_tracked + b.step_tracked,
+            caught_on_first: a.caught_on_first + b.caught_on_first,
+            at_most_two_over_tops: a.at_most_two_over_tops + b.at_most_two_over_tops,
+            most_over_tops: a.most_over_tops.max(b.most_over_tops),
+        })
+        .collect()
+}
+
+/// Whether the planned swing-up (`plan`) is kept over the energy law (`energy`), both judged
+/// on the same draws (module docs, "The method"): it catches on the first arrival more often,
+/// and holds as many catches within one standard deviation of the difference, the square
+/// root of both their failures (two success counts on common draws differ by about that
+/// much by chance alone).
+fn plan_kept(energy: &[SwingMonteCarlo], plan: &[SwingMonteCarlo]) -> bool {
+    let held = |r: &[SwingMonteCarlo]| r.iter().map(|m| m.held).sum::<u64>() as f64;
+    let judged = |r: &[SwingMonteCarlo]| r.iter().map(|m| m.judged()).sum::<u64>() as f64;
+    let first = |r: &[SwingMonteCarlo]| r.iter().map(|m| m.caught_on_first).sum::<u64>();
+    let failures = (judged(energy) - held(energy)) + (judged(plan) - held(plan));
+    first(plan) > first(energy) && held(energy) - held(plan) <= failures.sqrt()
+}
+
 /// Every combination of the values of [`CANDIDATES`] on `base`, in order.
 fn grid(base: &SwingUpSettings) -> Vec<SwingUpSettings> {
     let mut out = vec![base.clone()];
@@ -223,7 +264,7 @@ fn grid(base: &SwingUpSettings) -> Vec<SwingUpSettings> {
 
 /// The number of steps [`search`] counts, for a progress count.
 pub fn search_steps() -> usize {
-    CANDIDATES.iter().map(|c| c.values.len()).product::<usize>() + FINALISTS + 1
+    CANDIDATES.iter().map(|c| c.values.len()).product::<usize>() + FINALISTS + 2
 }
 
 /// Searches the swing-up settings of `spec` (its controllers as tuned) at sample time `ts`
@@ -265,22 +306,30 @@ pub fn search(
         scored.sort_by_key(|s| std::cmp::Reverse(s.0));
         let more = (FINAL_RUNS, SEARCH_SEED + SEARCH_RUNS, horizon);
         let mut best_score = None;
+        let mut best_results = Vec::new();
         for (_, s, first) in scored.into_iter().take(FINALISTS) {
             progress.step();
             let second = study(spec, &s, ts, more, cancel)?;
-            let both: Vec<SwingMonteCarlo> = first
-                .iter()
-                .zip(&second)
-                .map(|(a, b)| SwingMonteCarlo {
-                    held: a.held + b.held,
-                    ..*b
-                })
-                .collect();
+            let both = summed(&first, &second);
             let total = score(&both);
             if best_score.map_or(true, |b| total > b) {
                 best_score = Some(total);
                 best = s;
+                best_results = both;
             }
+        }
+        // The plan with the settings kept, on the same draws.
+        progress.step();
+        let mut planned = best.clone();
+        planned.method = SwingUpMethod::Trajectory;
+        check_cancel(cancel)?;
+        let plan_results = study(spec, &planned, ts, search, cancel)
+            .and_then(|first| Ok(summed(&first, &study(spec, &planned, ts, more, cancel)?)));
+        match plan_results {
+            Ok(plan) if plan_kept(&best_results, &plan) => best = planned,
+            Err(e) if cancel.load(std::sync::atomic::Ordering::Relaxed) => return Err(e),
+            // A plan that holds fewer, catches no sooner, or cannot be designed: the energy law.
+            _ => {}
         }
     }
     let confirm = (CONFIRM_RUNS, SEARCH_SEED + SEARCH_RUNS + FINAL_RUNS, None);
