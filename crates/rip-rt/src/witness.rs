@@ -65,7 +65,9 @@
 //! exceeds [`SIGN_THRESHOLD`]. What stopped it is named from the response itself: over the
 //! periods since `S` left 0, the regression of the measured change of the arm's mean rate
 //! (beyond the model's at 0 V) on the voltage's share of it ([`Witness::response_gain`]); a
-//! gain nearer −1 than 0, or below 0 by more than [`REVERSED_SIGMAS`] standard errors, is a
+//! gain nearer −1 than 0, or below 0 by more than [`REVERSED_SIGMAS`] standard errors, over
+//! those periods or over those after the first (whose change of the mean rate reaches back
+//! into the interval before `S` left 0, which may or may not lie in the fault), is a
 //! reversed motor or arm encoder ([`WitnessFault::ArmWrongWay`], which
 //! the stop brakes with the opposite sign), anything else is named as by the CUSUM; a reading
 //! that stopped changing when the disagreement began is a dead encoder.
@@ -253,8 +255,13 @@ pub struct Witness {
     // Per joint, how far off (position rad, rate rad/s) the observer may still be from a
     // period of unknown timing (module docs, "Timing").
     carried: [[f64; 2]; 2],
-    // The weighted sums of the regression of the response on the voltage's part.
+    // The weighted sums of the regression of the response on the voltage's part: over the
+    // samples since the sign statistic left 0, and over those of them whose earlier interval
+    // lies inside that window too (the statistic above 0 after the period before); whether
+    // it stood above 0 after the last period.
     response: [f64; 2],
+    response_inside: [f64; 2],
+    sign_was_open: bool,
     // The last two arm readings (newest first), the interval between them, and the model's
     // change of the arm rate over the last period: in all, and the voltage's part of it.
     // `history` counts the consecutive on-time samples behind them.
@@ -306,6 +313,8 @@ impl Witness {
             sign_response: [0.0; 2],
             sign_periods: 0,
             response: [0.0; 2],
+            response_inside: [0.0; 2],
+            sign_was_open: false,
             arrival_unknown: false,
             unknown_next: false,
             unknown_left: 0,
@@ -346,6 +355,8 @@ impl Witness {
         self.sign_response = [0.0; 2];
         self.sign_periods = 0;
         self.response = [0.0; 2];
+        self.response_inside = [0.0; 2];
+        self.sign_was_open = false;
         self.history = 0;
         self.unknown_next = false;
         self.unknown_left = 0;
@@ -755,6 +766,7 @@ impl Witness {
             self.sign_expected = [0.0; 2];
             self.sign_response = [0.0; 2];
             self.response = [0.0; 2];
+            self.response_inside = [0.0; 2];
             self.sign_periods = 0;
         }
         if self.history >= 2 {
@@ -782,10 +794,16 @@ impl Witness {
             self.reversals.respond(&sample);
             if self.sign > 0.0 {
                 sample.regress(&mut self.response);
+                // The sample spans this interval and the one before: inside the window only
+                // where the statistic already stood above 0 after the period before.
+                if self.sign_was_open {
+                    sample.regress(&mut self.response_inside);
+                }
                 sample.displace(&mut self.sign_expected, &mut self.sign_response);
                 self.sign_periods += 1;
             }
         }
+        self.sign_was_open = self.sign > 0.0;
         self.readings = [theta, self.readings[0]];
         self.interval = dt;
         self.rate_change = rate_change;

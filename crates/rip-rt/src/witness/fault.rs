@@ -176,18 +176,42 @@ impl Witness {
 
     /// Whether the arm's response since the sign statistic left 0 has the wrong sign: the
     /// gain ([`Witness::response_gain`]) nearer a reversal's −1 than 0, or below 0 by more
-    /// than [`REVERSED_SIGMAS`] of its standard error. A gain of −0.09 from three periods of
-    /// a coarse reading at a quarter of the arm's motion, a count from 0, once named a wrong
-    /// arm scale a reversal 0.03 s into a swing-up, and the stop braked with the sign that
-    /// drove the arm on (generated rig 54, 524 counts set as 2096: 6.6 rad); a swapped lead's
-    /// −0.55, within its noise of 0 a tenth of a second into a heavy pendulum's swing, is a
-    /// reversal still (generated rig 90: named a disagreement, the model's sign drove the arm
-    /// 0.9 rad before the arm's equation turned it). A trip of the reversed observers is
-    /// named by their own response ([`Reversal`](super::Reversal)): a reversal unless it is
-    /// forward beyond its noise.
+    /// than [`REVERSED_SIGMAS`] of its standard error, over the whole window or over its
+    /// periods after the first (below). A gain of −0.09 from three periods of a coarse
+    /// reading at a quarter of the arm's motion, a count from 0, once named a wrong arm scale
+    /// a reversal 0.03 s into a swing-up, and the stop braked with the sign that drove the arm
+    /// on (generated rig 54, 524 counts set as 2096: 6.6 rad); a swapped lead's −0.55, within
+    /// its noise of 0 a tenth of a second into a heavy pendulum's swing, is a reversal still
+    /// (generated rig 90: named a disagreement, the model's sign drove the arm 0.9 rad before
+    /// the arm's equation turned it). A trip of the reversed observers is named by their own
+    /// response ([`Reversal`](super::Reversal)): a reversal unless it is forward beyond its
+    /// noise.
+    ///
+    /// Each period's response is the change of the arm's mean rate between its interval and
+    /// the one before, so the period the statistic left 0 in reaches back into an interval
+    /// before it, which may lie in the fault or not: the statistic's clamp at 0 hides where
+    /// the fault began (one that leaps from 0 past its threshold in one period has only that
+    /// sample to name it by), and noise lifts it off 0 by a hair before the fault as well.
+    /// So the response is judged with that period and without it, and a reversal either way
+    /// is a reversal. With it alone, a healthy interval outweighed a swapped lead's:
+    /// generated rig 54, MPC, the lead swapped 1 s into the swing-up (noise seed 5), whose
+    /// statistic left 0 by a hair in the last healthy period (a gain of +0.93 there) and
+    /// tripped two periods later at 20 rad/s with a gain of −0.13; braked as a disagreement,
+    /// with the model's sign for 6 periods before the arm's equation turned it, the arm went
+    /// on to 3.74 rad against a limit of 3. After that period the gain is −0.59 (standard
+    /// error 0.17), and the stop with the reversed sign keeps the arm within 1.63 rad.
+    /// Without it alone, a reversal whose window began in the fault lost that period's
+    /// evidence and was braked as a disagreement (generated rig 79, a swapped lead mid-swing:
+    /// 1.54 → 2.75 rad). Over the every-stop sweep of `witness_sim` the second judgement
+    /// turns 50 stops of a swapped lead into a reversal's (45 trips named
+    /// [`WitnessFault::ArmWrongWay`], 5 pendulum trips given its evidence) and no stop of any
+    /// other fault, a wrong arm scale's included.
     pub(super) fn response_reversed(&self) -> bool {
-        super::response::gain(&self.response)
-            .is_some_and(|(g, se)| g < -0.5 || g + REVERSED_SIGMAS * se < 0.0)
+        let reversed = |regression: &[f64; 2]| {
+            super::response::gain(regression)
+                .is_some_and(|(g, se)| g < -0.5 || g + REVERSED_SIGMAS * se < 0.0)
+        };
+        reversed(&self.response) || reversed(&self.response_inside)
     }
 
     /// The fault of an arm encoder that stopped counting at `theta` (rad): the free-running
