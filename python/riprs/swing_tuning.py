@@ -107,6 +107,11 @@ class SwingUpTuning:
     method : {"energy", "trajectory"}
         The ``swing_up.method`` kept: the planned swing-up where it catches on the first
         arrival more often and holds as many catches, else the energy law.
+    plan : dict or None
+        With the plan kept, its length and margins on the nominal model: ``duration_s``
+        (from hanging to upright), ``voltage_left`` (V, the swing-up's bound after the
+        compensation's share less the plan's largest voltage) and ``arm_left`` (rad,
+        ``swing_up.arm_limit`` less the plan's largest arm angle); None for the energy law.
     settings : dict
         The numeric ``[swing_up]`` keys the search set: ``catch_prediction``,
         ``catch_margin``, ``rise_damping``, ``reference_return_rate``.
@@ -120,6 +125,7 @@ class SwingUpTuning:
 
     verdict: Literal["found", "not_found", "impossible"]
     method: Literal["energy", "trajectory"]
+    plan: Dict[str, float] | None
     settings: Dict[str, float]
     confirmed: List[SwingUpStudy]
     tried: int
@@ -130,6 +136,7 @@ class SwingUpTuning:
         return cls(
             verdict=d["verdict"],
             method=d["method"],
+            plan=None if d["plan"] is None else {k: float(v) for k, v in d["plan"].items()},
             settings={k: float(v) for k, v in d["settings"].items()},
             confirmed=[SwingUpStudy._from(m) for m in d["confirmed"]],
             tried=int(d["tried"]),

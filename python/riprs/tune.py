@@ -370,6 +370,12 @@ class TuneResult:
                 + ", ".join(f"{k} = {v:g}" for k, v in sw.settings.items())
                 + f"; {sw.tried} settings tried)"
             )
+            if sw.plan is not None:
+                lines.append(
+                    f"  the plan: {sw.plan['duration_s']:.2f} s from hanging to upright, "
+                    f"{sw.plan['voltage_left']:.2f} V and {sw.plan['arm_left']:.2f} rad of arm "
+                    "travel left on the nominal model"
+                )
             lines += [f"  {line}" for line in sw.summary.splitlines()]
         lines.append("")
         lines.append(f"the rig's bar: {self.bar.summary}")

@@ -173,6 +173,74 @@ fn the_success_is_the_true_pendulum_held_three_seconds_after_the_catch() {
     );
 }
 
+/// A study with a horizon ends each run [`HELD_AFTER_CATCH`] after its catch: each such run is
+/// the beginning of the whole one, sample for sample, ending where the hold is judged, and
+/// the study judges every draw as the whole experiment's study does.
+#[test]
+fn a_run_ended_after_its_hold_is_the_whole_runs_beginning_and_judged_alike() {
+    let mut spec = preset("paper");
+    spec.swing_up.catch_prediction = 1.0;
+    spec.swing_up.reference_return_rate = 0.5;
+    let design = spec.design(0.01).unwrap();
+    let kind = ControllerKind::Lqr;
+    let mut sup = supervised(&spec, &design, kind).unwrap();
+    let study = SwingStudy {
+        runs: 24,
+        ..SwingStudy::default()
+    };
+    let mut checked = 0;
+    for i in 0..study.runs {
+        let (params, seed) = study.draw(&spec.plant.params(), i);
+        let plant = Plant::new(params).unwrap();
+        let whole_config = swing_study_config(&spec, 0.01, seed);
+        let whole = simulate(&plant, &mut sup, &whole_config).unwrap();
+        let mut config = whole_config.clone();
+        config.end_after_catch = Some(HELD_AFTER_CATCH);
+        let short = simulate(&plant, &mut sup, &config).unwrap();
+        let Some(catch) = whole.catch_time else {
+            assert_eq!(short.len(), whole.len());
+            continue;
+        };
+        if whole
+            .fall_time
+            .is_some_and(|t| t <= catch + HELD_AFTER_CATCH)
+        {
+            continue;
+        }
+        checked += 1;
+        let end = *short.t.last().unwrap();
+        assert!(
+            (end - catch - HELD_AFTER_CATCH).abs() < 1e-6,
+            "{end} {catch}"
+        );
+        assert!(short.len() < whole.len());
+        for k in 0..short.len() {
+            assert_eq!(short.x[k], whole.x[k], "draw {i}, sample {k}");
+        }
+    }
+    assert!(checked > 0);
+    let whole = swing_monte_carlo(&spec, kind, 0.01, &study, &AtomicBool::new(false)).unwrap();
+    let horizon = SwingStudy {
+        horizon: Some(spec.swing_up.max_time + HELD_AFTER_CATCH),
+        ..study
+    };
+    let ended = swing_monte_carlo(&spec, kind, 0.01, &horizon, &AtomicBool::new(false)).unwrap();
+    assert_eq!(
+        (
+            ended.caught,
+            ended.held,
+            ended.caught_on_first,
+            ended.at_most_two_over_tops
+        ),
+        (
+            whole.caught,
+            whole.held,
+            whole.caught_on_first,
+            whole.at_most_two_over_tops
+        )
+    );
+}
+
 /// The fewest successes in `runs` that a controller succeeding with probability `p` reaches
 /// with probability at least 99.9 % (the largest `k` with `P(X ≥ k) ≥ 0.999`,
 /// `X ~ Binomial(runs, p)`, summed exactly in logs).
@@ -341,6 +409,8 @@ fn the_preflight_refuses_a_swing_up_whose_search_found_nothing() {
             inputs,
             verdict: verdict.to_string(),
             needed: 0.95,
+            method: "energy".to_string(),
+            plan: None,
             confirmed,
         };
         std::fs::write(preflight::tune_record_path(&file), stored.to_section()).unwrap();

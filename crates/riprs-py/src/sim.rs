@@ -117,6 +117,7 @@ fn config_from_dict(d: &Bound<'_, PyDict>) -> PyResult<SimConfig> {
         u_limit: real(d, "u_limit")?,
         fall_limit: real(d, "fall_limit")?,
         seed: count(d, "seed")?,
+        end_after_catch: None,
     })
 }
 

@@ -320,6 +320,16 @@ fn swing_search_dict<'py>(
     d.set_item("summary", found.summary())?;
     let s = &found.settings;
     d.set_item("method", s.method.name())?;
+    match &found.plan {
+        Some(plan) => {
+            let p = PyDict::new(py);
+            p.set_item("duration_s", plan.duration_s)?;
+            p.set_item("voltage_left", plan.voltage_left)?;
+            p.set_item("arm_left", plan.arm_left)?;
+            d.set_item("plan", p)?;
+        }
+        None => d.set_item("plan", py.None())?,
+    }
     let settings = PyDict::new(py);
     settings.set_item("catch_prediction", s.catch_prediction)?;
     settings.set_item("catch_margin", s.catch_margin)?;

@@ -97,6 +97,20 @@ pub struct StoredStudy {
     pub lower_bound: f64,
 }
 
+/// The planned swing-up a search kept (`swing_up.method = "trajectory"`), as the record
+/// stores it: how long it takes and what it leaves of the bounds on the nominal model.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StoredPlan {
+    /// From hanging at rest to upright (s).
+    pub duration_s: f64,
+    /// The swing-up's voltage bound (after the compensation's share) less the plan's
+    /// largest `|u|` (V).
+    pub voltage_left: f64,
+    /// `swing_up.arm_limit` less the plan's largest `|θ|` (rad).
+    pub arm_left: f64,
+}
+
 /// A swing-up search (`crate::tune::swing::SwingSearch`) as the tuning record's
 /// `[swing_up_search]` table stores it, for `rip-rt run --swing-up`'s pre-flight.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -109,9 +123,20 @@ pub struct StoredSwingSearch {
     pub verdict: String,
     /// The Wilson lower bound a controller needed to hold its catches.
     pub needed: f64,
+    /// The method kept: `energy` or `trajectory` (`swing_up.method`).
+    #[serde(default = "energy")]
+    pub method: String,
+    /// The plan's margins, when the method kept is the plan.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plan: Option<StoredPlan>,
     /// Per controller (`"LQR"`, `"LQG"`, `"MPC"`), its confirmation.
     #[serde(default)]
     pub confirmed: std::collections::BTreeMap<String, StoredStudy>,
+}
+
+/// The method of a record written before the method was searched.
+fn energy() -> String {
+    "energy".to_string()
 }
 
 impl StoredSwingSearch {

@@ -189,6 +189,10 @@ pub struct SimConfig {
     pub fall_limit: f64,
     /// Seed of the measurement noise.
     pub seed: u64,
+    /// Where a swing-up's run ends once caught: this long (s) after the catch, however long
+    /// `duration` would have run on (`None`: `duration` alone). A study that only judges the
+    /// catch and the hold after it (`crate::spec::study`) simulates no further.
+    pub end_after_catch: Option<f64>,
 }
 
 impl Default for SimConfig {
@@ -205,6 +209,7 @@ impl Default for SimConfig {
             u_limit: crate::paper::INPUT_LIMIT,
             fall_limit: DEFAULT_FALL_LIMIT,
             seed: 0,
+            end_after_catch: None,
         }
     }
 }
@@ -258,6 +263,9 @@ impl SimConfig {
         }
         positive("fall_limit", self.fall_limit)?;
         positive("u_limit", self.u_limit)?;
+        if let Some(end) = self.end_after_catch {
+            positive("end_after_catch", end)?;
+        }
         match &self.reference {
             Reference::Step { time, value } => {
                 finite("reference time", *time)?;
@@ -628,6 +636,13 @@ pub(crate) fn run_loop(
         }
         if out.fell || out.stop_cause.is_some() {
             break;
+        }
+        // The sample at `t_c + end` is the run's last: a judge of the hold that far after
+        // the catch sees it (`t − t_c` is a multiple of `Ts`, within a rounding).
+        if let (Some(end), Some(tc)) = (config.end_after_catch, out.catch_time) {
+            if t - tc >= end - 1e-9 * ts {
+                break;
+            }
         }
         was = phase;
 

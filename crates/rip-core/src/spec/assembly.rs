@@ -304,6 +304,7 @@ impl Spec {
             u_limit: lo.abs().max(hi.abs()),
             fall_limit: self.plant.fall_limit,
             seed,
+            end_after_catch: None,
         }
     }
 

@@ -28,17 +28,26 @@ pub fn supervised(
     design: &Design,
     kind: ControllerKind,
 ) -> Result<Box<dyn Controller>, SpecError> {
+    Ok(design.compensate(Box::new(swing_up(spec, design, kind)?)))
+}
+
+/// The swing-up of [`supervised`] before the compensation is put around it: its plan, its
+/// parameters.
+pub fn swing_up(
+    spec: &Spec,
+    design: &Design,
+    kind: ControllerKind,
+) -> Result<SwingUp<Box<dyn Controller>>, SpecError> {
     let plant = spec.plant()?;
     let balance = design.balance(kind)?;
     let mut settings = spec.swing_up.clone();
     if let Some(c) = design.compensation() {
         settings.max_voltage = c.planned_limit(settings.max_voltage);
     }
-    let sup = SwingUp::new(balance, &plant, settings).map_err(|e| match e {
+    SwingUp::new(balance, &plant, settings).map_err(|e| match e {
         RipError::InvalidParameter { name, reason } => SpecError::new(name, reason),
         e => SpecError::new("swing_up", e.to_string()),
-    })?;
-    Ok(design.compensate(Box::new(sup)))
+    })
 }
 
 /// How a swing-up run approached upright, from its true state (not the supervisor's
@@ -125,6 +134,8 @@ pub struct SwingStudy {
     /// Where each run ends (s from the start), when shorter than the whole experiment
     /// ([`swing_study_config`]): a search that only compares successes needs no step after
     /// them, and a swing-up still going at `horizon − HELD_AFTER_CATCH` counts as failed.
+    /// With a horizon each run also ends [`HELD_AFTER_CATCH`] after its catch (the success
+    /// is judged then), so the step's tracking is not counted.
     pub horizon: Option<f64>,
 }
 
@@ -286,7 +297,9 @@ pub fn judge_swing_run(res: &crate::SimResult, catch_angle: f64) -> SwingRun {
     let held = res.catch_time.is_some_and(|catch| {
         let end = res.t.last().copied().unwrap_or(f64::NEG_INFINITY);
         whole
-            && end >= catch + HELD_AFTER_CATCH
+            // Within a rounding of the sample grid: a run ended at the hold's last sample
+            // (`SimConfig::end_after_catch`) reaches it.
+            && end >= catch + HELD_AFTER_CATCH - 1e-6
             && res
                 .fall_time
                 .map_or(true, |fall| fall > catch + HELD_AFTER_CATCH)
@@ -329,7 +342,9 @@ pub fn swing_monte_carlo(
         }
         let mut config = swing_study_config(spec, ts, seed);
         if let Some(h) = study.horizon {
+            // Only the catch and the hold are judged: nothing after them is simulated.
             config.duration = config.duration.min(h);
+            config.end_after_catch = Some(HELD_AFTER_CATCH);
         }
         let res = crate::sim::simulate(&plant, sup, &config)
             .map_err(|e| SpecError::new("plant", format!("draw {i}: {e}")))?;

@@ -46,7 +46,7 @@ use std::sync::atomic::AtomicBool;
 
 use serde::{Deserialize, Serialize};
 
-pub use crate::preflight::swing::{StoredStudy, StoredSwingSearch};
+pub use crate::preflight::swing::{StoredPlan, StoredStudy, StoredSwingSearch};
 
 use crate::spec::study::{swing_monte_carlo, SwingMonteCarlo, SwingStudy, HELD_AFTER_CATCH};
 use crate::spec::{ControllerKind, Spec, SpecError};
@@ -135,6 +135,8 @@ pub struct SwingSearch {
     pub confirmed: Vec<SwingMonteCarlo>,
     /// Candidates judged.
     pub tried: usize,
+    /// The plan's length and margins on the nominal model, when the method kept is the plan.
+    pub plan: Option<StoredPlan>,
 }
 
 impl SwingSearch {
@@ -283,6 +285,7 @@ pub fn search(
             settings: spec.swing_up.clone(),
             confirmed: Vec::new(),
             tried: 0,
+            plan: None,
         });
     }
     progress.add(search_steps());
@@ -339,6 +342,8 @@ pub fn search(
         m.success_interval()
             .is_some_and(|(lo, _)| lo >= FOUND_LOWER_BOUND)
     });
+    let mut kept = spec.clone();
+    kept.swing_up = best.clone();
     Ok(SwingSearch {
         verdict: if found {
             SwingVerdict::Found
@@ -348,7 +353,32 @@ pub fn search(
         settings: best,
         confirmed,
         tried,
+        plan: plan_margins(&kept, ts)?,
     })
+}
+
+/// The plan of `spec`'s swing-up on its nominal model, as the record stores it (`None` for
+/// the energy law, or where no plan was found): its length and what it leaves of the
+/// voltage the swing-up may use (after the compensation's share) and of
+/// `swing_up.arm_limit`. The plan does not depend on the balance controller.
+fn plan_margins(spec: &Spec, ts: f64) -> Result<Option<StoredPlan>, SpecError> {
+    if spec.swing_up.method != SwingUpMethod::Trajectory {
+        return Ok(None);
+    }
+    let design = spec.design(ts)?;
+    let swing = crate::spec::study::swing_up(spec, &design, ControllerKind::Lqr)?;
+    let plan = swing.plan();
+    if plan.is_empty() {
+        return Ok(None);
+    }
+    let largest = |f: &dyn Fn(&crate::swingup::PlanPoint) -> f64| {
+        plan.iter().map(|p| f(p).abs()).fold(0.0, f64::max)
+    };
+    Ok(Some(StoredPlan {
+        duration_s: plan.len() as f64 * ts,
+        voltage_left: swing.settings().max_voltage - largest(&|p| p.u),
+        arm_left: spec.swing_up.arm_limit - largest(&|p| p.x[0]),
+    }))
 }
 
 /// `search` of the tuned `design` (whose `[swing_up]` holds the settings kept), as the tuning
@@ -358,6 +388,8 @@ pub fn stored(search: &SwingSearch, design: &crate::spec::Design) -> StoredSwing
         inputs: crate::preflight::design_checksum(design),
         verdict: search.verdict.name().to_string(),
         needed: FOUND_LOWER_BOUND,
+        method: search.settings.method.name().to_string(),
+        plan: search.plan,
         confirmed: search
             .confirmed
             .iter()
