@@ -154,21 +154,7 @@ fn swing_up_and_balance_on(
     spec: &str,
 ) -> (Vec<f64>, f64) {
     let cfg = config(name, spec);
-    let emu = hanging_rig(name, &cfg, &["--seed", seed], true);
-    let log_path = scratch(&format!("{name}.csv"));
-    let r = run_lockstep(
-        &emu.device,
-        controller,
-        &[
-            "--swing-up",
-            "--duration",
-            "3",
-            "--config",
-            cfg.to_str().unwrap(),
-            "--log",
-            log_path.to_str().unwrap(),
-        ],
-    );
+    let (emu, log_path, r) = swing_up_lockstep(name, &cfg, controller, seed, "3");
     println!("{controller}: {}", r.stderr);
     assert_eq!(r.status.code(), Some(0), "{}", r.stderr);
     let log = Log::read(&log_path);

@@ -66,22 +66,7 @@ fn caught_and_balanced(cfg: &std::path::Path, controller: &str, seed: u64) -> (b
     let spec = rip_rt::config::Config::load(cfg).unwrap();
     let fall_limit = spec.spec.plant.fall_limit;
     let arm_limit = spec.safety.arm_limit;
-    let seed_arg = seed.to_string();
-    let mut emu = hanging_rig(&name, cfg, &["--seed", &seed_arg], true);
-    let log_path = scratch(&format!("{name}.csv"));
-    let r = run_lockstep(
-        &emu.device,
-        controller,
-        &[
-            "--swing-up",
-            "--duration",
-            "4",
-            "--config",
-            cfg.to_str().unwrap(),
-            "--log",
-            log_path.to_str().unwrap(),
-        ],
-    );
+    let (mut emu, log_path, r) = swing_up_lockstep(&name, cfg, controller, &seed.to_string(), "4");
     let truth = emu.finish();
     let Some(log) = log_path.exists().then(|| Log::read(&log_path)) else {
         return (false, format!("seed {seed}: no log: {}", r.stderr));

@@ -415,6 +415,34 @@ pub fn hanging_rig(name: &str, cfg: &Path, extra: &[&str], lockstep: bool) -> Em
     }
 }
 
+/// `rip-rt run --swing-up` of `controller` for `duration` (s, of the experiment after the
+/// catch) with the configuration `cfg` and a log, from hanging at rest on a [`hanging_rig`]
+/// in lockstep with noise seed `seed`: the emulator, the log's path and the run.
+pub fn swing_up_lockstep(
+    name: &str,
+    cfg: &Path,
+    controller: &str,
+    seed: &str,
+    duration: &str,
+) -> (Emulator, PathBuf, RunResult) {
+    let emu = hanging_rig(name, cfg, &["--seed", seed], true);
+    let log_path = scratch(&format!("{name}.csv"));
+    let r = run_lockstep(
+        &emu.device,
+        controller,
+        &[
+            "--swing-up",
+            "--duration",
+            duration,
+            "--config",
+            cfg.to_str().unwrap(),
+            "--log",
+            log_path.to_str().unwrap(),
+        ],
+    );
+    (emu, log_path, r)
+}
+
 /// `rip-rt run` in lockstep with an [`Emulator::lockstep`].
 pub fn run_lockstep(device: &Path, controller: &str, extra: &[&str]) -> RunResult {
     run(device, controller, &with_lockstep(extra))
