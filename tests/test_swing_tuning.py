@@ -86,17 +86,9 @@ def test_riprs_tune_writes_the_searched_swing_up_and_its_verdict(tmp_path) -> No
         assert tuned["swing_up"][key] == pytest.approx(value), key
     assert tuned["swing_up"]["catch_prediction"] > 0
     assert tuned["swing_up"].get("method", "energy") == result.swing_up.method
-    assert search["method"] == result.swing_up.method
-    if result.swing_up.method == "trajectory":
-        # The plan's margins are what is left of the bounds the file sets.
-        plan = search["plan"]
-        assert plan == pytest.approx(result.swing_up.plan)
-        assert 0 < plan["duration_s"] <= tuned["swing_up"]["max_time"]
-        assert 0 < plan["voltage_left"] < tuned["swing_up"]["max_voltage"]
-        assert 0 < plan["arm_left"] < tuned["swing_up"]["arm_limit"]
-        assert "the plan:" in result.report()
-    else:
-        assert "plan" not in search and result.swing_up.plan is None
+    # The energy law, the file's method: no plan in the record.
+    assert search["method"] == result.swing_up.method == "energy"
+    assert "plan" not in search and result.swing_up.plan is None
     for s in result.swing_up.confirmed:
         assert s.judged == 1000
         assert s.interval[0] >= 0.95, s

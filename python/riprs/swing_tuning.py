@@ -105,8 +105,7 @@ class SwingUpTuning:
         searched). ``rip-rt run --swing-up`` refuses a controller whose own lower bound is
         below 95 % (exit 16, ``--force`` overrides).
     method : {"energy", "trajectory"}
-        The ``swing_up.method`` kept: the planned swing-up where it catches on the first
-        arrival more often and holds as many catches, else the energy law.
+        The ``swing_up.method`` searched with: the file's.
     plan : dict or None
         With the plan kept, its length and margins on the nominal model: ``duration_s``
         (from hanging to upright), ``voltage_left`` (V, the swing-up's bound after the

@@ -241,6 +241,48 @@ fn a_run_ended_after_its_hold_is_the_whole_runs_beginning_and_judged_alike() {
     );
 }
 
+/// A file that asks for the planned swing-up keeps it through the search, and the record
+/// stores the plan: its length and what it leaves of the voltage and of the arm limit,
+/// checked here against a plan designed anew and replayed on the nominal model.
+#[test]
+fn a_planned_swing_up_keeps_its_method_and_the_record_stores_the_plans_margins() {
+    use rip_core::preflight::swing::StoredSwingSearch;
+    let mut spec = preset("qube_servo2");
+    spec.swing_up.method = rip_core::swingup::SwingUpMethod::Trajectory;
+    let file = tuned_file(&spec);
+    let found = file.swing_up.as_ref().unwrap();
+    assert_eq!(found.settings.method, spec.swing_up.method);
+    assert_eq!(found.tried, 0, "a plan's catch settings are not searched");
+    let plan = found.plan.expect("the plan's margins");
+    let design = file.tuned.spec.design(0.01).unwrap();
+    let swing =
+        rip_core::spec::study::swing_up(&file.tuned.spec, &design, ControllerKind::Mpc).unwrap();
+    let points = swing.plan();
+    assert!((plan.duration_s - points.len() as f64 * 0.01).abs() < 1e-9);
+    // The plan's own states: the nominal model driven by its voltages from hanging.
+    let plant = file.tuned.spec.plant().unwrap();
+    let mut x = rip_core::plant::State::from(points[0].x);
+    let mut widest = 0.0f64;
+    for p in &points[..points.len() - 1] {
+        for _ in 0..10 {
+            plant.rk4_step(&mut x, p.u, 0.0, 0.001);
+        }
+        widest = widest.max(x[0].abs());
+    }
+    let arm_left = file.tuned.spec.swing_up.arm_limit - widest;
+    assert!(
+        (plan.arm_left - arm_left).abs() < 0.05,
+        "{plan:?}: replayed {arm_left}"
+    );
+    assert!(plan.arm_left > 0.0 && plan.voltage_left > 0.0, "{plan:?}");
+    assert!(plan.voltage_left < file.tuned.spec.swing_up.max_voltage);
+    let record = file.record.clone();
+    let table: toml::Value = toml::from_str(&record).unwrap();
+    let stored: StoredSwingSearch = table["swing_up_search"].clone().try_into().unwrap();
+    assert_eq!(stored.method, "trajectory");
+    assert_eq!(stored.plan, Some(plan));
+}
+
 /// The fewest successes in `runs` that a controller succeeding with probability `p` reaches
 /// with probability at least 99.9 % (the largest `k` with `P(X ≥ k) ≥ 0.999`,
 /// `X ~ Binomial(runs, p)`, summed exactly in logs).
