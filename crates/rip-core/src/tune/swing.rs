@@ -28,8 +28,9 @@
 //! seconds to design per candidate), and the record stores the plan's length and margins.
 //!
 //! **The verdict** ([`SwingVerdict`]), on [`CONFIRM_RUNS`] fresh draws per controller of the
-//! settings kept, each the whole experiment (the arm's step after the hold included, so that
-//! its tracking is counted too): *found* when every controller's Wilson 95 % lower bound is at
+//! settings kept, each run ending as the search's do, [`HELD_AFTER_CATCH`] after its catch
+//! (the verdict is on the hold; `riprs.swing_up_monte_carlo` runs the whole experiment and
+//! reports the step's tracking): *found* when every controller's Wilson 95 % lower bound is at
 //! least [`FOUND_LOWER_BOUND`]; *not found* otherwise; *impossible* when the energy bound
 //! forbids any swing-up of the nominal rig (nothing is searched). `rip-rt run --swing-up`'s
 //! pre-flight refuses each controller whose own lower bound is below it
@@ -300,7 +301,7 @@ pub fn search(
             }
         }
     }
-    let confirm = (CONFIRM_RUNS, SEARCH_SEED + SEARCH_RUNS + FINAL_RUNS, None);
+    let confirm = (CONFIRM_RUNS, SEARCH_SEED + SEARCH_RUNS + FINAL_RUNS, horizon);
     let confirmed = study(spec, &best, ts, confirm, cancel)?;
     progress.step();
     let found = confirmed.iter().all(|m| {
