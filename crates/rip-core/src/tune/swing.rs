@@ -301,7 +301,11 @@ pub fn search(
             }
         }
     }
-    let confirm = (CONFIRM_RUNS, SEARCH_SEED + SEARCH_RUNS + FINAL_RUNS, horizon);
+    let confirm = (
+        CONFIRM_RUNS,
+        SEARCH_SEED + SEARCH_RUNS + FINAL_RUNS,
+        horizon,
+    );
     let confirmed = study(spec, &best, ts, confirm, cancel)?;
     progress.step();
     let found = confirmed.iter().all(|m| {
