@@ -279,7 +279,7 @@ fn a_planned_swing_up_keeps_its_method_and_the_record_stores_the_plans_margins()
     let record = file.record.clone();
     let table: toml::Value = toml::from_str(&record).unwrap();
     let stored: StoredSwingSearch = table["swing_up_search"].clone().try_into().unwrap();
-    assert_eq!(stored.method, "trajectory");
+    assert_eq!(stored.method, rip_core::swingup::SwingUpMethod::Trajectory);
     assert_eq!(stored.plan, Some(plan));
 }
 
@@ -451,7 +451,7 @@ fn the_preflight_refuses_a_swing_up_whose_search_found_nothing() {
             inputs,
             verdict: verdict.to_string(),
             needed: 0.95,
-            method: "energy".to_string(),
+            method: rip_core::swingup::SwingUpMethod::Energy,
             plan: None,
             confirmed,
         };

@@ -12,7 +12,7 @@
 //! design, a controller whose catches that search did not find held (its Wilson lower bound
 //! below the one the search needed) refuses, naming what it held.
 
-use crate::swingup::{stored_or_computed, Feasibility, Verdict as Balance};
+use crate::swingup::{stored_or_computed, Feasibility, SwingUpMethod, Verdict as Balance};
 use serde::{Deserialize, Serialize};
 
 use crate::spec::ControllerKind;
@@ -123,20 +123,16 @@ pub struct StoredSwingSearch {
     pub verdict: String,
     /// The Wilson lower bound a controller needed to hold its catches.
     pub needed: f64,
-    /// The method kept: `energy` or `trajectory` (`swing_up.method`).
-    #[serde(default = "energy")]
-    pub method: String,
+    /// The method kept (`swing_up.method`); a record written before the method was stored
+    /// reads as the energy law, the only one searched then.
+    #[serde(default)]
+    pub method: SwingUpMethod,
     /// The plan's margins, when the method kept is the plan.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plan: Option<StoredPlan>,
     /// Per controller (`"LQR"`, `"LQG"`, `"MPC"`), its confirmation.
     #[serde(default)]
     pub confirmed: std::collections::BTreeMap<String, StoredStudy>,
-}
-
-/// The method of a record written before the method was searched.
-fn energy() -> String {
-    "energy".to_string()
 }
 
 impl StoredSwingSearch {

@@ -358,7 +358,7 @@ pub fn stored(search: &SwingSearch, design: &crate::spec::Design) -> StoredSwing
         inputs: crate::preflight::design_checksum(design),
         verdict: search.verdict.name().to_string(),
         needed: FOUND_LOWER_BOUND,
-        method: search.settings.method.name().to_string(),
+        method: search.settings.method,
         plan: search.plan,
         confirmed: search
             .confirmed
