@@ -1,6 +1,9 @@
-//! Design-time routines on the paper's plant: DARE, dlqr and the 5-state Kalman design.
+//! Design-time routines on the paper's plant: DARE, dlqr, the 5-state Kalman design, and the
+//! loop margins that `tune` computes for every candidate (the paper's LQG, whose impulse
+//! response is short, and generated rig 2's, whose slow integral action makes it long).
 
 use criterion::{black_box, criterion_main, Criterion};
+use rip_core::spec::{ControllerKind, Spec};
 use rip_core::{dare, dlqr, kalman, paper, Mat};
 
 fn design(c: &mut Criterion) {
@@ -29,6 +32,18 @@ fn design(c: &mut Criterion) {
             .unwrap()
         })
     });
+    for (name, text) in [
+        ("paper", String::new()),
+        ("rig2", rip_core::rig::Rig::random(2).to_toml()),
+    ] {
+        let design = Spec::parse(&text).unwrap().design(paper::TS).unwrap();
+        for kind in [ControllerKind::Lqg, ControllerKind::Mpc] {
+            let id = format!("margins_{name}_{}", kind.name().to_lowercase());
+            c.bench_function(&id, |bench| {
+                bench.iter(|| design.margins(black_box(kind)).unwrap())
+            });
+        }
+    }
 }
 
 // criterion_group! expands to an undocumented `pub fn`; inside a private module it is not

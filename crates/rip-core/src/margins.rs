@@ -162,29 +162,80 @@ fn impulse_responses(
     Ok((last < 1e-4 * peak).then_some((ua, uc)))
 }
 
-fn transform(h: &[f64], w: f64) -> Complex<f64> {
-    // Σ h[k] z^{-k} by Horner in z^{-1} = e^{-jω}.
-    let zinv = Complex::from_polar(1.0, -w);
-    h.iter()
-        .rev()
-        .fold(Complex::new(0.0, 0.0), |acc, &v| acc * zinv + v)
+/// Frequencies evaluated in one pass over the responses. Horner's recursion is a chain of
+/// dependent multiplications, so one frequency at a time waits on each; this many independent
+/// chains side by side keep the vector units busy instead.
+const LANES: usize = 8;
+
+/// `L(e^{jω})` (module docs) at each `ω` of `w` (rad/sample), [`LANES`] at a time:
+/// `U(ω) = Σ_k u[k] z^{−k}` by Horner in `z^{−1} = e^{−jω}` for both responses at once,
+/// `L = −U_c / U_a`.
+fn loop_at(ua: &[f64], uc: &[f64], w: &[f64]) -> Vec<Complex<f64>> {
+    use rayon::prelude::*;
+    if w.len() <= LANES {
+        return loop_at_lanes(ua, uc, w);
+    }
+    w.par_chunks(LANES)
+        .flat_map_iter(|chunk| loop_at_lanes(ua, uc, chunk))
+        .collect()
 }
 
-/// `L(e^{jω})` of the loop whose responses are `(ua, uc)`.
-fn loop_at(ua: &[f64], uc: &[f64], w: f64) -> Complex<f64> {
-    -transform(uc, w) / transform(ua, w)
-}
-
-/// Refines a sign change of `f` on `[lo, hi]` by bisection.
-fn bisect(f: &dyn Fn(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
-    let flo = f(lo);
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if (f(mid) > 0.0) == (flo > 0.0) {
-            lo = mid;
-        } else {
-            hi = mid;
+/// [`loop_at`] at up to [`LANES`] frequencies, in one pass.
+fn loop_at_lanes(ua: &[f64], uc: &[f64], w: &[f64]) -> Vec<Complex<f64>> {
+    debug_assert!(w.len() <= LANES);
+    let (mut zr, mut zi) = ([0.0; LANES], [0.0; LANES]);
+    for (j, &wj) in w.iter().enumerate() {
+        let z = Complex::from_polar(1.0, -wj);
+        (zr[j], zi[j]) = (z.re, z.im);
+    }
+    let (mut ar, mut ai) = ([0.0; LANES], [0.0; LANES]);
+    let (mut cr, mut ci) = ([0.0; LANES], [0.0; LANES]);
+    for (&va, &vc) in ua.iter().rev().zip(uc.iter().rev()) {
+        for j in 0..LANES {
+            // `acc · z⁻¹ + v`, written out as the complex product is.
+            let (r, i) = (
+                ar[j] * zr[j] - ai[j] * zi[j] + va,
+                ar[j] * zi[j] + ai[j] * zr[j],
+            );
+            (ar[j], ai[j]) = (r, i);
+            let (r, i) = (
+                cr[j] * zr[j] - ci[j] * zi[j] + vc,
+                cr[j] * zi[j] + ci[j] * zr[j],
+            );
+            (cr[j], ci[j]) = (r, i);
         }
+    }
+    (0..w.len())
+        .map(|j| -Complex::new(cr[j], ci[j]) / Complex::new(ar[j], ai[j]))
+        .collect()
+}
+
+/// Refines a sign change of `f(L(ω))` on `[lo, hi]`: [`LANES`] − 1 inner points per pass
+/// narrow the bracket [`LANES`]-fold, until it is within rounding of `ω`.
+fn bisect(
+    l: &(dyn Fn(&[f64]) -> Vec<Complex<f64>> + Sync),
+    f: fn(Complex<f64>) -> f64,
+    mut lo: f64,
+    mut hi: f64,
+) -> f64 {
+    let positive = f(l(&[lo])[0]) > 0.0;
+    while hi - lo > 4.0 * f64::EPSILON * hi {
+        let step = (hi - lo) / LANES as f64;
+        let inner: Vec<f64> = (1..LANES).map(|i| lo + step * i as f64).collect();
+        let values = l(&inner);
+        // The first inner point past the sign change closes the bracket; none: it is in the last.
+        let (mut new_lo, mut new_hi) = (inner[LANES - 2], hi);
+        for (i, v) in values.iter().enumerate() {
+            if (f(*v) > 0.0) != positive {
+                new_hi = inner[i];
+                new_lo = if i == 0 { lo } else { inner[i - 1] };
+                break;
+            }
+        }
+        if new_hi - new_lo >= hi - lo {
+            break;
+        }
+        (lo, hi) = (new_lo, new_hi);
     }
     0.5 * (lo + hi)
 }
@@ -199,8 +250,48 @@ pub fn loop_response(
     ts: f64,
     w: &[f64],
 ) -> Result<Option<Vec<Complex<f64>>>> {
-    Ok(impulse_responses(controller, a, b, c)?
-        .map(|(ua, uc)| w.iter().map(|&wi| loop_at(&ua, &uc, wi * ts)).collect()))
+    Ok(impulse_responses(controller, a, b, c)?.map(|(ua, uc)| {
+        let w: Vec<f64> = w.iter().map(|wi| wi * ts).collect();
+        loop_at(&ua, &uc, &w)
+    }))
+}
+
+/// `max_ω |S − 1/2|`, `S = 1/(1 + L)`, of the disk margin: the grid's largest, refined
+/// between its neighbours by [`LANES`] points per pass, each pass keeping the two intervals
+/// around the largest (the peak is taken as unimodal there, as a golden section would).
+fn sensitivity_peak(
+    l: &(dyn Fn(&[f64]) -> Vec<Complex<f64>> + Sync),
+    grid: &[f64],
+    values: &[Complex<f64>],
+) -> f64 {
+    let dist = |v: Complex<f64>| (Complex::new(1.0, 0.0) / (v + 1.0) - 0.5).norm();
+    let (i_peak, mut peak) =
+        values
+            .iter()
+            .map(|&v| dist(v))
+            .enumerate()
+            .fold((0, f64::NEG_INFINITY), |best, (i, v)| {
+                if v > best.1 {
+                    (i, v)
+                } else {
+                    best
+                }
+            });
+    let (mut lo, mut hi) = (
+        grid[i_peak.saturating_sub(1)],
+        grid[(i_peak + 1).min(grid.len() - 1)],
+    );
+    while hi - lo > 1e-12 * hi {
+        let step = (hi - lo) / (LANES + 1) as f64;
+        let points: Vec<f64> = (1..=LANES).map(|i| lo + step * i as f64).collect();
+        let (best, value) = l(&points).into_iter().map(dist).enumerate().fold(
+            (0, f64::NEG_INFINITY),
+            |b, (i, v)| if v > b.1 { (i, v) } else { b },
+        );
+        peak = peak.max(value);
+        (lo, hi) = (points[best] - step, points[best] + step);
+    }
+    peak
 }
 
 /// The margins of `controller`'s loop at the plant input with the discrete model
@@ -215,76 +306,64 @@ pub fn margins(
     let Some((ua, uc)) = impulse_responses(controller, a, b, c)? else {
         return Ok(Margins::unstable());
     };
-    let l = |w: f64| loop_at(&ua, &uc, w);
+    let l = |w: &[f64]| loop_at(&ua, &uc, w);
     let (w_lo, w_hi) = (1e-4f64, std::f64::consts::PI * (1.0 - 1e-9));
     let grid: Vec<f64> = (0..GRID)
         .map(|i| w_lo * (w_hi / w_lo).powf(i as f64 / (GRID - 1) as f64))
         .collect();
-    let values: Vec<Complex<f64>> = grid.iter().map(|&w| l(w)).collect();
+    let values = l(&grid);
 
+    // The grid's sign changes, refined side by side, each independent of the others.
+    let phase_crossings: Vec<usize> = (1..GRID)
+        .filter(|&i| (values[i - 1].im > 0.0) != (values[i].im > 0.0))
+        .collect();
+    let gain_crossings: Vec<usize> = (1..GRID)
+        .filter(|&i| (values[i - 1].norm() > 1.0) != (values[i].norm() > 1.0))
+        .collect();
+    let refine = |crossings: &[usize], f: fn(Complex<f64>) -> f64| -> Vec<(f64, Complex<f64>)> {
+        use rayon::prelude::*;
+        crossings
+            .par_iter()
+            .map(|&i| {
+                let w = bisect(&l, f, grid[i - 1], grid[i]);
+                (w, l(&[w])[0])
+            })
+            .collect()
+    };
+    let ((phase, gain), peak) = rayon::join(
+        || {
+            rayon::join(
+                || refine(&phase_crossings, |v| v.im),
+                || refine(&gain_crossings, |v| v.norm() - 1.0),
+            )
+        },
+        || sensitivity_peak(&l, &grid, &values),
+    );
     let mut gm = f64::INFINITY;
     let mut gr = f64::NEG_INFINITY;
+    // At a phase crossover L is real; where it is negative, 1/|L| is a gain margin.
+    for (_, lw) in phase.into_iter().filter(|(_, lw)| lw.re < 0.0) {
+        let g = -20.0 * lw.norm().log10();
+        if g > 0.0 {
+            gm = gm.min(g);
+        } else {
+            gr = gr.max(g);
+        }
+    }
     let mut pm = f64::INFINITY;
     let mut wc = f64::NAN;
-    let im = |w: f64| l(w).im;
-    let mag = |w: f64| l(w).norm() - 1.0;
-    for i in 1..GRID {
-        let (p, q) = (values[i - 1], values[i]);
-        // A phase crossover: Im L changes sign where Re L < 0.
-        if (p.im > 0.0) != (q.im > 0.0) {
-            let w = bisect(&im, grid[i - 1], grid[i]);
-            let lw = l(w);
-            if lw.re < 0.0 {
-                let g = -20.0 * lw.norm().log10();
-                if g > 0.0 {
-                    gm = gm.min(g);
-                } else {
-                    gr = gr.max(g);
-                }
-            }
+    for (w, lw) in gain {
+        // The angle between L and −1: |180° + ∠L| wrapped into [0°, 180°].
+        let mut m = 180.0 + lw.arg().to_degrees();
+        if m > 180.0 {
+            m -= 360.0;
         }
-        if (p.norm() > 1.0) != (q.norm() > 1.0) {
-            let w = bisect(&mag, grid[i - 1], grid[i]);
-            let phase = l(w).arg().to_degrees();
-            // The angle between L and −1: |180° + ∠L| wrapped into [0°, 180°].
-            let mut m = 180.0 + phase;
-            if m > 180.0 {
-                m -= 360.0;
-            }
-            let m = m.abs();
-            if m < pm {
-                pm = m;
-                wc = w / ts;
-            }
+        let m = m.abs();
+        if m < pm {
+            pm = m;
+            wc = w / ts;
         }
     }
-    // The disk margin: the peak of |S − 1/2| on the grid, refined by golden section.
-    let dist = |w: f64| (Complex::new(1.0, 0.0) / (l(w) + 1.0) - 0.5).norm();
-    let (i_peak, _) = values
-        .iter()
-        .map(|v| (Complex::new(1.0, 0.0) / (v + 1.0) - 0.5).norm())
-        .enumerate()
-        .fold((0, f64::NEG_INFINITY), |best, (i, v)| {
-            if v > best.1 {
-                (i, v)
-            } else {
-                best
-            }
-        });
-    let (mut lo, mut hi) = (
-        grid[i_peak.saturating_sub(1)],
-        grid[(i_peak + 1).min(GRID - 1)],
-    );
-    let g = 0.5 * (5f64.sqrt() - 1.0);
-    for _ in 0..80 {
-        let (m1, m2) = (hi - g * (hi - lo), lo + g * (hi - lo));
-        if dist(m1) > dist(m2) {
-            hi = m2;
-        } else {
-            lo = m1;
-        }
-    }
-    let peak = dist(0.5 * (lo + hi)).max(dist(grid[i_peak]));
     let alpha: f64 = 1.0 / peak;
     let disk_gain_margin_db = if alpha >= 2.0 {
         f64::INFINITY
