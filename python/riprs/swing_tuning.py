@@ -102,8 +102,9 @@ class SwingUpTuning:
     verdict : {"found", "not_found", "impossible"}
         ``"found"`` when every controller's Wilson lower bound on the confirmation runs is at
         least 95 %; ``"impossible"`` when the energy bound forbids a swing-up (nothing is
-        searched). ``rip-rt run --swing-up`` refuses a controller whose own lower bound is
-        below 95 % (exit 16, ``--force`` overrides).
+        searched). ``rip-rt run --swing-up`` refuses every controller of a rig whose
+        verdict is not ``"found"``, naming those short of 95 % (exit 16, ``--force``
+        overrides).
     method : {"energy", "trajectory"}
         The ``swing_up.method`` searched with: the file's.
     plan : dict or None
@@ -115,7 +116,8 @@ class SwingUpTuning:
         The numeric ``[swing_up]`` keys the search set: ``catch_prediction``,
         ``catch_margin``, ``rise_damping``, ``reference_return_rate``.
     confirmed : list of SwingUpStudy
-        Each controller's study on 1000 fresh draws with those settings.
+        Each controller's study on 1000 fresh draws with those settings, taken 100 at a
+        time: a study that can no longer reach 95 % ends there (its ``runs`` say where).
     tried : int
         Candidates judged.
     summary : str

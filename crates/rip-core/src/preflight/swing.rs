@@ -9,8 +9,11 @@
 //! would need; a rig it does not exclude passes, saying where the verdict came from. The
 //! balance is a necessary condition: a rig that passes may still not swing up. Where the
 //! record also holds the swing-up search of `riprs tune` ([`crate::tune::swing`]) made on this
-//! design, a controller whose catches that search did not find held (its Wilson lower bound
-//! below the one the search needed) refuses, naming what it held.
+//! design, a rig whose search did not find a swing-up that every controller holds (each
+//! one's Wilson lower bound at least the one the search needed) refuses for every
+//! controller, naming those that fell short: the swing is the same whichever controller
+//! catches, and a rig whose catches one controller cannot hold is a rig whose swing-up was
+//! not found, however its other controllers did on that sample.
 
 use crate::swingup::{stored_or_computed, Feasibility, SwingUpMethod, Verdict as Balance};
 use serde::{Deserialize, Serialize};
@@ -52,14 +55,15 @@ pub fn swing_up(input: &Input<'_>) -> Option<Finding> {
             ),
         ),
         Balance::NotExcluded => match stored_search(input, record.as_deref()) {
-            Some(search) if !search.holds(input.controller) => Finding::new(
+            Some(search) if search.verdict != SwingVerdict::Found => Finding::new(
                 "swing_up",
                 Verdict::Refuse,
                 format!(
-                    "swing_up: {} with the settings riprs tune searched (verdict {}); change \
-                     the rig or its [swing_up] settings and tune again, or pass --force",
-                    search.describe(input.controller),
-                    search.verdict
+                    "swing_up: riprs tune found no swing-up that every controller holds \
+                     (verdict {}): {}; change the rig or its [swing_up] settings and tune \
+                     again, or pass --force",
+                    search.verdict.name(),
+                    search.shortfalls()
                 ),
             ),
             Some(search) => Finding::new(
@@ -81,6 +85,30 @@ fn stored_search(input: &Input<'_>, record: Option<&std::path::Path>) -> Option<
     let text = crate::spec::read_text(record?).ok()?;
     StoredSwingSearch::from_record(&text)
         .filter(|s| s.inputs == super::design_checksum(input.design))
+}
+
+/// What the swing-up search of `riprs tune` found (`crate::tune::swing`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SwingVerdict {
+    /// Every controller's lower bound at least the one needed
+    /// (`crate::tune::swing::FOUND_LOWER_BOUND`).
+    Found,
+    /// The best settings tried leave a controller short of it.
+    NotFound,
+    /// The energy bound forbids a swing-up of the nominal rig.
+    Impossible,
+}
+
+impl SwingVerdict {
+    /// `"found"`, `"not_found"` or `"impossible"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Found => "found",
+            Self::NotFound => "not_found",
+            Self::Impossible => "impossible",
+        }
+    }
 }
 
 /// One controller's confirmation as the tuning record stores it.
@@ -119,8 +147,8 @@ pub struct StoredSwingSearch {
     /// [`crate::preflight::design_checksum`] of the tuned design, its `[swing_up]` the
     /// settings kept.
     pub inputs: String,
-    /// The search's verdict: `found`, `not_found` or `impossible`.
-    pub verdict: String,
+    /// The search's verdict.
+    pub verdict: SwingVerdict,
     /// The Wilson lower bound a controller needed to hold its catches.
     pub needed: f64,
     /// The method kept (`swing_up.method`); a record written before the method was stored
@@ -167,6 +195,21 @@ impl StoredSwingSearch {
             .is_some_and(|s| s.lower_bound >= self.needed)
     }
 
+    /// The controllers that do not hold their catches ([`Self::holds`]), each in one phrase;
+    /// the verdict alone when no controller was confirmed.
+    pub fn shortfalls(&self) -> String {
+        let short: Vec<String> = ControllerKind::ALL
+            .into_iter()
+            .filter(|&k| self.confirmed.contains_key(k.name()) && !self.holds(k))
+            .map(|k| self.describe(k))
+            .collect();
+        if short.is_empty() {
+            format!("the swing-up search was {}", self.verdict.name())
+        } else {
+            short.join("; ")
+        }
+    }
+
     /// What the stored search says of `controller`, in one phrase.
     pub fn describe(&self, controller: ControllerKind) -> String {
         match self.confirmed.get(controller.name()) {
@@ -179,7 +222,7 @@ impl StoredSwingSearch {
                 100.0 * s.lower_bound,
                 100.0 * self.needed
             ),
-            None => format!("the swing-up search was {}", self.verdict),
+            None => format!("the swing-up search was {}", self.verdict.name()),
         }
     }
 }

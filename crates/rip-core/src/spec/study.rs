@@ -265,6 +265,21 @@ impl SwingMonteCarlo {
         crate::stats::wilson(self.held, self.judged(), crate::stats::Z_95).ok()
     }
 
+    /// This study and `other`, made on other draws of the same controller, as one.
+    pub fn combined(&self, other: &Self) -> Self {
+        Self {
+            controller: self.controller,
+            runs: self.runs + other.runs,
+            excluded: self.excluded + other.excluded,
+            caught: self.caught + other.caught,
+            held: self.held + other.held,
+            step_tracked: self.step_tracked + other.step_tracked,
+            caught_on_first: self.caught_on_first + other.caught_on_first,
+            at_most_two_over_tops: self.at_most_two_over_tops + other.at_most_two_over_tops,
+            most_over_tops: self.most_over_tops.max(other.most_over_tops),
+        }
+    }
+
     fn add(&mut self, run: &SwingRun) {
         if run.excluded {
             self.excluded += 1;
@@ -325,6 +340,19 @@ pub fn swing_monte_carlo(
     study: &SwingStudy,
     cancel: &std::sync::atomic::AtomicBool,
 ) -> Result<SwingMonteCarlo, SpecError> {
+    swing_monte_carlo_draws(spec, kind, ts, study, 0..study.runs, cancel)
+}
+
+/// [`swing_monte_carlo`] on the draws `draws` of `study` alone (`runs` counts them): a study
+/// taken in parts whose sum is the whole one's.
+pub(crate) fn swing_monte_carlo_draws(
+    spec: &Spec,
+    kind: ControllerKind,
+    ts: f64,
+    study: &SwingStudy,
+    draws: std::ops::Range<u64>,
+    cancel: &std::sync::atomic::AtomicBool,
+) -> Result<SwingMonteCarlo, SpecError> {
     study.validate()?;
     let design = spec.design(ts)?;
     let base = spec.plant.params();
@@ -350,7 +378,7 @@ pub fn swing_monte_carlo(
             .map_err(|e| SpecError::new("plant", format!("draw {i}: {e}")))?;
         Ok(judge_swing_run(&res, catch_angle))
     };
-    let half = study.runs / 2;
+    let half = draws.start + (draws.end - draws.start) / 2;
     let chunk = |range: std::ops::Range<u64>| -> Result<Vec<SwingRun>, SpecError> {
         let mut sup = supervised(spec, &design, kind)?;
         let mut out = Vec::with_capacity(range.clone().count());
@@ -363,8 +391,8 @@ pub fn swing_monte_carlo(
         Ok(out)
     };
     let runs = std::thread::scope(|s| {
-        let first = s.spawn(|| chunk(0..half));
-        let second = chunk(half..study.runs);
+        let first = s.spawn(|| chunk(draws.start..half));
+        let second = chunk(half..draws.end);
         let first = first
             .join()
             .unwrap_or_else(|_| Err(SpecError::new("", "a Monte Carlo thread panicked")));
@@ -375,7 +403,7 @@ pub fn swing_monte_carlo(
     })?;
     let mut mc = SwingMonteCarlo {
         controller: kind,
-        runs: study.runs,
+        runs: draws.end - draws.start,
         excluded: 0,
         caught: 0,
         held: 0,

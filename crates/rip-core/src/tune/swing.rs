@@ -20,29 +20,34 @@
 //! [`CANDIDATES`] is judged on [`SEARCH_RUNS`] draws, each run ending [`HELD_AFTER_CATCH`]
 //! after the longest swing-up (what is compared is the success, not the step after it; the
 //! handover's length, tried too, changed no success on either preset); the [`FINALISTS`] best
-//! are judged
-//! again on [`FINAL_RUNS`] more, and the best of all their draws is kept.
+//! are judged again on [`FINAL_RUNS`] more, and the best of all their draws is kept. Where
+//! no finalist's every controller has a Wilson 95 % upper bound of at least
+//! [`FOUND_LOWER_BOUND`] (a controller holding 90 of 100 has one of 94.5 %), no candidate can
+//! be confirmed and the best is kept without that second look.
 //!
 //! **The method** is the file's: a file that asks for the planned swing-up
 //! (`method = "trajectory"`) keeps it, its catch settings searched no further (a plan takes
 //! seconds to design per candidate), and the record stores the plan's length and margins.
 //!
 //! **The verdict** ([`SwingVerdict`]), on [`CONFIRM_RUNS`] fresh draws per controller of the
-//! settings kept, each run ending as the search's do, [`HELD_AFTER_CATCH`] after its catch
-//! (the verdict is on the hold; `riprs.swing_up_monte_carlo` runs the whole experiment and
-//! reports the step's tracking): *found* when every controller's Wilson 95 % lower bound is at
+//! settings kept (taken [`CONFIRM_BLOCK`] at a time, and ended once even a success on every
+//! draw left would not reach the bound: the verdict is then decided), each run ending as the
+//! search's do, [`HELD_AFTER_CATCH`] after its catch (the verdict is on the hold;
+//! `riprs.swing_up_monte_carlo` runs the whole experiment and reports the step's tracking):
+//! *found* when every controller's Wilson 95 % lower bound is at
 //! least [`FOUND_LOWER_BOUND`]; *not found* otherwise; *impossible* when the energy bound
 //! forbids any swing-up of the nominal rig (nothing is searched). `rip-rt run --swing-up`'s
-//! pre-flight refuses each controller whose own lower bound is below it
-//! (`crate::preflight::swing`).
+//! pre-flight refuses every controller of a rig whose swing-up was not found
+//! (`crate::preflight::swing`): the swing is the same for all three, and a rig is swung up
+//! when its search says so, not controller by controller.
 
 use std::sync::atomic::AtomicBool;
 
-use serde::{Deserialize, Serialize};
+pub use crate::preflight::swing::{StoredPlan, StoredStudy, StoredSwingSearch, SwingVerdict};
 
-pub use crate::preflight::swing::{StoredPlan, StoredStudy, StoredSwingSearch};
-
-use crate::spec::study::{swing_monte_carlo, SwingMonteCarlo, SwingStudy, HELD_AFTER_CATCH};
+use crate::spec::study::{
+    swing_monte_carlo, swing_monte_carlo_draws, SwingMonteCarlo, SwingStudy, HELD_AFTER_CATCH,
+};
 use crate::spec::{ControllerKind, Spec, SpecError};
 use crate::swingup::{feasibility, SwingUpMethod, SwingUpSettings, Verdict};
 
@@ -59,6 +64,10 @@ pub const FINAL_RUNS: u64 = 300;
 
 /// Fresh draws per controller on which the settings kept are confirmed.
 pub const CONFIRM_RUNS: u64 = 1000;
+
+/// Draws of the confirmation taken between two looks at whether it can still pass
+/// ([`confirm`]): the same draws whatever the machine, so the same verdict and record.
+pub const CONFIRM_BLOCK: u64 = 100;
 
 /// The smallest Wilson 95 % lower bound of the success rate over [`CONFIRM_RUNS`] with which a
 /// controller holds its catches (a swing-up is *found* when every controller does). Set so
@@ -93,29 +102,6 @@ pub const CANDIDATES: [Candidate; 2] = [
         set: |s, v| s.rise_damping = v,
     },
 ];
-
-/// What the search found (module docs).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum SwingVerdict {
-    /// Every controller's lower bound at least [`FOUND_LOWER_BOUND`].
-    Found,
-    /// The best settings tried leave a controller short of it.
-    NotFound,
-    /// The energy bound forbids a swing-up of the nominal rig.
-    Impossible,
-}
-
-impl SwingVerdict {
-    /// `"found"`, `"not_found"` or `"impossible"`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Found => "found",
-            Self::NotFound => "not_found",
-            Self::Impossible => "impossible",
-        }
-    }
-}
 
 /// The swing-up settings a search kept, with their confirmation.
 #[derive(Debug, Clone, PartialEq)]
@@ -213,18 +199,53 @@ fn summed(first: &[SwingMonteCarlo], second: &[SwingMonteCarlo]) -> Vec<SwingMon
     first
         .iter()
         .zip(second)
-        .map(|(a, b)| SwingMonteCarlo {
-            controller: b.controller,
-            runs: a.runs + b.runs,
-            excluded: a.excluded + b.excluded,
-            caught: a.caught + b.caught,
-            held: a.held + b.held,
-            step_tracked: a.step_tracked + b.step_tracked,
-            caught_on_first: a.caught_on_first + b.caught_on_first,
-            at_most_two_over_tops: a.at_most_two_over_tops + b.at_most_two_over_tops,
-            most_over_tops: a.most_over_tops.max(b.most_over_tops),
-        })
+        .map(|(a, b)| a.combined(b))
         .collect()
+}
+
+/// Whether the Wilson 95 % lower bound of `held` successes in `judged` runs reaches `bound`.
+fn reaches(held: u64, judged: u64, bound: f64) -> bool {
+    crate::stats::wilson(held, judged, crate::stats::Z_95).is_ok_and(|(lo, _)| lo >= bound)
+}
+
+/// The confirmation (module docs) of `settings` on `spec`: [`CONFIRM_RUNS`] draws from `seed`
+/// per controller, taken [`CONFIRM_BLOCK`] at a time. A controller's confirmation ends after
+/// the block from which even a success on every draw left would not reach
+/// [`FOUND_LOWER_BOUND`]: the verdict is then *not found* whatever the rest would hold, and
+/// the controller's study says how many draws it took.
+fn confirm(
+    spec: &Spec,
+    settings: &SwingUpSettings,
+    ts: f64,
+    (seed, horizon): (u64, Option<f64>),
+    cancel: &AtomicBool,
+) -> Result<Vec<SwingMonteCarlo>, SpecError> {
+    let mut s = spec.clone();
+    s.swing_up = settings.clone();
+    let study = SwingStudy {
+        runs: CONFIRM_RUNS,
+        seed,
+        horizon,
+        ..SwingStudy::default()
+    };
+    let mut out = Vec::with_capacity(ControllerKind::ALL.len());
+    for kind in ControllerKind::ALL {
+        let mut total: Option<SwingMonteCarlo> = None;
+        for start in (0..CONFIRM_RUNS).step_by(CONFIRM_BLOCK as usize) {
+            check_cancel(cancel)?;
+            let end = (start + CONFIRM_BLOCK).min(CONFIRM_RUNS);
+            let part = swing_monte_carlo_draws(&s, kind, ts, &study, start..end, cancel)?;
+            let sum = total.map_or(part, |t| t.combined(&part));
+            let left = CONFIRM_RUNS - end;
+            let hopeless = !reaches(sum.held + left, sum.judged() + left, FOUND_LOWER_BOUND);
+            total = Some(sum);
+            if hopeless {
+                break;
+            }
+        }
+        out.extend(total);
+    }
+    Ok(out)
 }
 
 /// Every combination of the values of [`CANDIDATES`] on `base`, in order.
@@ -288,9 +309,25 @@ pub fn search(
         }
         // Best first; the sort is stable, so a tie keeps the grid's order.
         scored.sort_by_key(|s| std::cmp::Reverse(s.0));
+        scored.truncate(FINALISTS);
+        // Where no finalist's every controller has a Wilson upper bound reaching the bound,
+        // none can be confirmed: more draws would not change the verdict, only its cost.
+        let promising = scored.iter().any(|(_, _, results)| {
+            results.iter().all(|m| {
+                m.success_interval()
+                    .is_some_and(|(_, hi)| hi >= FOUND_LOWER_BOUND)
+            })
+        });
+        if !promising {
+            if let Some((_, s, _)) = scored.first() {
+                best = s.clone();
+            }
+            // The finalists' steps of the progress count, done by not taking them.
+            scored.drain(..).for_each(|_| progress.step());
+        }
         let more = (FINAL_RUNS, SEARCH_SEED + SEARCH_RUNS, horizon);
         let mut best_score = None;
-        for (_, s, first) in scored.into_iter().take(FINALISTS) {
+        for (_, s, first) in scored {
             progress.step();
             let second = study(spec, &s, ts, more, cancel)?;
             let both = summed(&first, &second);
@@ -301,12 +338,8 @@ pub fn search(
             }
         }
     }
-    let confirm = (
-        CONFIRM_RUNS,
-        SEARCH_SEED + SEARCH_RUNS + FINAL_RUNS,
-        horizon,
-    );
-    let confirmed = study(spec, &best, ts, confirm, cancel)?;
+    let seed = SEARCH_SEED + SEARCH_RUNS + FINAL_RUNS;
+    let confirmed = confirm(spec, &best, ts, (seed, horizon), cancel)?;
     progress.step();
     let found = confirmed.iter().all(|m| {
         m.success_interval()
@@ -356,7 +389,7 @@ fn plan_margins(spec: &Spec, ts: f64) -> Result<Option<StoredPlan>, SpecError> {
 pub fn stored(search: &SwingSearch, design: &crate::spec::Design) -> StoredSwingSearch {
     StoredSwingSearch {
         inputs: crate::preflight::design_checksum(design),
-        verdict: search.verdict.name().to_string(),
+        verdict: search.verdict,
         needed: FOUND_LOWER_BOUND,
         method: search.settings.method,
         plan: search.plan,
