@@ -592,9 +592,13 @@ pub fn tune_file(
     // reads it instead of computing it (crate::swingup::stored).
     let verdict =
         crate::swingup::StoredFeasibility::compute(&tuned.spec.plant()?, &tuned.spec.swing_up);
-    let mut text = format!("{}{}", record(&tuned, ts)?.to_toml(), verdict.to_section());
+    let design = tuned.spec.design(ts)?;
+    let mut text = format!(
+        "{}{}",
+        record_of(&tuned, &design).to_toml(),
+        verdict.to_section()
+    );
     if let Some(found) = &searched {
-        let design = tuned.spec.design(ts)?;
         text.push_str(&swing::stored(found, &design).to_section());
     }
     if let Some(reason) = untrusted {
@@ -611,11 +615,15 @@ pub fn tune_file(
 /// the checksum of the tuned design at sample time `ts` and each controller's prediction,
 /// with what of the rig's bar it misses ([`Tuned::shortfalls`]).
 pub fn record(tuned: &Tuned, ts: f64) -> Result<TuneRecord, SpecError> {
+    Ok(record_of(tuned, &tuned.spec.design(ts)?))
+}
+
+/// [`record`] with the tuned spec's `design` made already.
+fn record_of(tuned: &Tuned, design: &crate::spec::Design) -> TuneRecord {
     let bar = &tuned.bar.guarded();
     let shortfalls = tuned.shortfalls();
-    let design = tuned.spec.design(ts)?;
-    Ok(TuneRecord {
-        inputs: design_checksum(&design),
+    TuneRecord {
+        inputs: design_checksum(design),
         runs: format!(
             "noise seeds {SEEDS:?}, {} s each",
             tuned.spec.reference.duration
@@ -639,7 +647,7 @@ pub fn record(tuned: &Tuned, ts: f64) -> Result<TuneRecord, SpecError> {
                 (a.kind.name().to_string(), p)
             })
             .collect(),
-    })
+    }
 }
 
 #[cfg(test)]

@@ -65,8 +65,8 @@ pub const FINAL_RUNS: u64 = 300;
 /// Fresh draws per controller on which the settings kept are confirmed.
 pub const CONFIRM_RUNS: u64 = 1000;
 
-/// Draws of the confirmation taken between two looks at whether it can still pass
-/// ([`confirm`]): the same draws whatever the machine, so the same verdict and record.
+/// Draws of the confirmation taken between two looks at whether it can still pass (module
+/// docs, "The verdict"): the same draws whatever the machine, so the same verdict and record.
 pub const CONFIRM_BLOCK: u64 = 100;
 
 /// The smallest Wilson 95 % lower bound of the success rate over [`CONFIRM_RUNS`] with which a
