@@ -114,7 +114,7 @@ class SwingUpTuning:
         ``swing_up.arm_limit`` less the plan's largest arm angle); None for the energy law.
     settings : dict
         The numeric ``[swing_up]`` keys the search set: ``catch_prediction``,
-        ``catch_margin``, ``rise_damping``, ``reference_return_rate``.
+        ``catch_margin``, ``energy_margin``, ``rise_damping``, ``reference_return_rate``.
     confirmed : list of SwingUpStudy
         Each controller's study on 1000 fresh draws with those settings, taken 100 at a
         time: a study that can no longer reach 95 % ends there (its ``runs`` say where).

@@ -366,7 +366,10 @@ fn studies(spec: &Spec, runs: u64, seed: u64) -> Vec<rip_core::spec::study::Swin
 /// - the bar, over 1000 draws per controller: the Wilson 95 % lower bound of the
 ///   success at least 97 % for LQR and the MPC and 95 % for LQG. The bar is a lower bound over
 ///   1000 runs, so it is judged on 1000 at every scale.
-fn searched_swing_up_meets_the_guard_and_the_bar(name: &str) {
+///
+/// With `over_tops`, also the bar on the passes over the top: at most two before the
+/// catch in at least 99 % of those 1000 runs, for every controller.
+fn searched_swing_up_meets_the_guard_and_the_bar(name: &str, over_tops: bool) {
     let (spec, found) = searched(name);
     assert_eq!(found.verdict, SwingVerdict::Found, "{}", found.summary());
     let mut short = Vec::new();
@@ -407,18 +410,28 @@ fn searched_swing_up_meets_the_guard_and_the_bar(name: &str) {
                 m.controller
             ));
         }
+        if over_tops && m.at_most_two_over_tops * 100 < m.judged() * 99 {
+            short.push(format!(
+                "{:?}: {} of {} runs within two passes over the top, below 99 %",
+                m.controller,
+                m.at_most_two_over_tops,
+                m.judged()
+            ));
+        }
     }
     assert!(short.is_empty(), "{name}: {}", short.join("; "));
 }
 
 #[test]
 fn the_searched_swing_up_of_qube_servo2_holds_its_catches() {
-    searched_swing_up_meets_the_guard_and_the_bar("qube_servo2");
+    searched_swing_up_meets_the_guard_and_the_bar("qube_servo2", true);
 }
 
 #[test]
 fn the_searched_swing_up_of_the_paper_preset_holds_its_catches() {
-    searched_swing_up_meets_the_guard_and_the_bar("paper");
+    // Not the passes over the top: on `paper` the slower arrival that keeps them within two
+    // loses catches, and the search keeps the catches (tune::swing, "The arrival").
+    searched_swing_up_meets_the_guard_and_the_bar("paper", false);
 }
 
 /// `rip-rt run --swing-up`'s pre-flight reads the search `riprs tune` stored in the record: a

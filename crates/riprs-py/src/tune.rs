@@ -333,6 +333,7 @@ fn swing_search_dict<'py>(
     let settings = PyDict::new(py);
     settings.set_item("catch_prediction", s.catch_prediction)?;
     settings.set_item("catch_margin", s.catch_margin)?;
+    settings.set_item("energy_margin", s.energy_margin)?;
     settings.set_item("rise_damping", s.rise_damping)?;
     settings.set_item("reference_return_rate", s.reference_return_rate)?;
     d.set_item("settings", settings)?;

@@ -25,6 +25,17 @@
 //! [`FOUND_LOWER_BOUND`] (a controller holding 90 of 100 has one of 94.5 %), no candidate can
 //! be confirmed and the best is kept without that second look.
 //!
+//! **The arrival.** The energy law aims a margin `δ G` above upright (`energy_margin`,
+//! default 0.05), so that the pendulum reaches upright in finite time; it arrives still
+//! moving, and one that is not caught goes over the top and round again with that energy.
+//! With the catch settings kept, [`SLOW_ARRIVAL_MARGIN`] is tried in place of `δ` on the
+//! finalists' same draws and kept when it holds as many catches (one fewer per controller
+//! at most) and more runs pass over the top at most twice. On `qube_servo2`, whose pendulum
+//! rises in one swing, it is kept: 99.5 % of 1000 runs pass over the top at most twice,
+//! against 92.2 % at 0.05, every catch still held. On `paper` it is not: there the slower
+//! arrival lost about 2 % of the catches (96.2 % against 98.2 %) for 99.7 % of runs within
+//! two passes.
+//!
 //! **The method** is the file's: a file that asks for the planned swing-up
 //! (`method = "trajectory"`) keeps it, its catch settings searched no further (a plan takes
 //! seconds to design per candidate), and the record stores the plan's length and margins.
@@ -162,12 +173,15 @@ fn start(settings: &SwingUpSettings) -> SwingUpSettings {
     s
 }
 
+/// Which draws a study takes: how many, from which seed, and where each run ends.
+type Draws = (u64, u64, Option<f64>);
+
 /// The study of `spec` with `settings` for every controller: `runs` draws from `seed`.
 fn study(
     spec: &Spec,
     settings: &SwingUpSettings,
     ts: f64,
-    (runs, seed, horizon): (u64, u64, Option<f64>),
+    (runs, seed, horizon): Draws,
     cancel: &AtomicBool,
 ) -> Result<Vec<SwingMonteCarlo>, SpecError> {
     let mut s = spec.clone();
@@ -268,7 +282,45 @@ fn grid(base: &SwingUpSettings) -> Vec<SwingUpSettings> {
 
 /// The number of steps [`search`] counts, for a progress count.
 pub fn search_steps() -> usize {
-    CANDIDATES.iter().map(|c| c.values.len()).product::<usize>() + FINALISTS + 1
+    CANDIDATES.iter().map(|c| c.values.len()).product::<usize>() + FINALISTS + 2
+}
+
+/// The energy margin `δ` (`swing_up.energy_margin`) tried below the file's once the catch
+/// settings are kept (module docs, "The arrival").
+pub const SLOW_ARRIVAL_MARGIN: f64 = 0.005;
+
+/// `best` with [`SLOW_ARRIVAL_MARGIN`] in place of its energy margin when, on the same draws
+/// as `results` (the finalists' two looks, `draws`), that holds as many catches (one fewer per
+/// controller at most) and passes over the top at most twice in more runs (module docs, "The
+/// arrival").
+fn slower_arrival(
+    spec: &Spec,
+    best: SwingUpSettings,
+    results: &[SwingMonteCarlo],
+    ts: f64,
+    draws: (Draws, Draws),
+    cancel: &AtomicBool,
+) -> Result<SwingUpSettings, SpecError> {
+    if best.energy_margin <= SLOW_ARRIVAL_MARGIN {
+        return Ok(best);
+    }
+    let mut slower = best.clone();
+    slower.energy_margin = SLOW_ARRIVAL_MARGIN;
+    if slower.validate().is_err() {
+        return Ok(best);
+    }
+    let tried = summed(
+        &study(spec, &slower, ts, draws.0, cancel)?,
+        &study(spec, &slower, ts, draws.1, cancel)?,
+    );
+    let total =
+        |r: &[SwingMonteCarlo], f: fn(&SwingMonteCarlo) -> u64| -> u64 { r.iter().map(f).sum() };
+    // One catch per controller is the draws' own grain, not a difference between the two.
+    let grain = results.len() as u64;
+    let holds = total(&tried, |m| m.held) + grain >= total(results, |m| m.held);
+    let fewer_over =
+        total(&tried, |m| m.at_most_two_over_tops) > total(results, |m| m.at_most_two_over_tops);
+    Ok(if holds && fewer_over { slower } else { best })
 }
 
 /// Searches the swing-up settings of `spec` (its controllers as tuned) at sample time `ts`
@@ -327,6 +379,7 @@ pub fn search(
         }
         let more = (FINAL_RUNS, SEARCH_SEED + SEARCH_RUNS, horizon);
         let mut best_score = None;
+        let mut best_results = None;
         for (_, s, first) in scored {
             progress.step();
             let second = study(spec, &s, ts, more, cancel)?;
@@ -335,7 +388,12 @@ pub fn search(
             if best_score.map_or(true, |b| total > b) {
                 best_score = Some(total);
                 best = s;
+                best_results = Some(both);
             }
+        }
+        progress.step();
+        if let Some(results) = best_results {
+            best = slower_arrival(spec, best, &results, ts, (search, more), cancel)?;
         }
     }
     let seed = SEARCH_SEED + SEARCH_RUNS + FINAL_RUNS;
