@@ -210,15 +210,16 @@ fn loop_at_lanes(ua: &[f64], uc: &[f64], w: &[f64]) -> Vec<Complex<f64>> {
         .collect()
 }
 
-/// Refines a sign change of `f(L(ω))` on `[lo, hi]`: [`LANES`] − 1 inner points per pass
-/// narrow the bracket [`LANES`]-fold, until it is within rounding of `ω`.
+/// Refines a sign change of `f(L(ω))` on `[lo, hi]`, where `f(L(lo)) > 0` is `positive`:
+/// [`LANES`] − 1 inner points per pass narrow the bracket [`LANES`]-fold, until it is within
+/// rounding of `ω`.
 fn bisect(
     l: &(dyn Fn(&[f64]) -> Vec<Complex<f64>> + Sync),
     f: fn(Complex<f64>) -> f64,
+    positive: bool,
     mut lo: f64,
     mut hi: f64,
 ) -> f64 {
-    let positive = f(l(&[lo])[0]) > 0.0;
     while hi - lo > 4.0 * f64::EPSILON * hi {
         let step = (hi - lo) / LANES as f64;
         let inner: Vec<f64> = (1..LANES).map(|i| lo + step * i as f64).collect();
@@ -325,7 +326,9 @@ pub fn margins(
         crossings
             .par_iter()
             .map(|&i| {
-                let w = bisect(&l, f, grid[i - 1], grid[i]);
+                // The grid's value at the bracket's low end gives its sign.
+                let positive = f(values[i - 1]) > 0.0;
+                let w = bisect(&l, f, positive, grid[i - 1], grid[i]);
                 (w, l(&[w])[0])
             })
             .collect()

@@ -134,7 +134,6 @@ enum Clock {
     Lockstep,
 }
 
-/// Starts `rip-rt run --swing-up` from hanging at rest.
 /// The paper preset's catch settings as `riprs tune` searches them (docs/swing-up.md, "The
 /// searched swing-up": 98 % of perturbed rigs caught and held, against 85 % with the file's):
 /// for the real-time tests whose subject is a stop after the catch, so that the catch they
@@ -142,6 +141,7 @@ enum Clock {
 const CATCHING: &str = "[swing_up]\ncatch_prediction = 1.0\nreference_return_rate = 0.5\n\
                         catch_margin = 0.35\nrise_damping = 15.0\n";
 
+/// Starts `rip-rt run --swing-up` from hanging at rest.
 fn start_swing(
     name: &str,
     controller: &str,

@@ -399,10 +399,9 @@ pub fn search(
     let seed = SEARCH_SEED + SEARCH_RUNS + FINAL_RUNS;
     let confirmed = confirm(spec, &best, ts, (seed, horizon), cancel)?;
     progress.step();
-    let found = confirmed.iter().all(|m| {
-        m.success_interval()
-            .is_some_and(|(lo, _)| lo >= FOUND_LOWER_BOUND)
-    });
+    let found = confirmed
+        .iter()
+        .all(|m| reaches(m.held, m.judged(), FOUND_LOWER_BOUND));
     let mut kept = spec.clone();
     kept.swing_up = best.clone();
     Ok(SwingSearch {
