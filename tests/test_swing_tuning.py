@@ -86,9 +86,12 @@ def test_riprs_tune_writes_the_searched_swing_up_and_its_verdict(tmp_path) -> No
         assert tuned["swing_up"][key] == pytest.approx(value), key
     assert tuned["swing_up"]["catch_prediction"] > 0
     assert tuned["swing_up"].get("method", "energy") == result.swing_up.method
-    # The energy law, the file's method: no plan in the record.
-    assert search["method"] == result.swing_up.method == "energy"
-    assert "plan" not in search and result.swing_up.plan is None
+    # The plan, kept by the search: its margins and rises in the record as in the result.
+    assert search["method"] == result.swing_up.method == "trajectory"
+    plan = result.swing_up.plan
+    assert plan is not None and search["plan"] == pytest.approx(plan)
+    assert plan["rises"] == 1 and plan["arm_left"] > 0 and plan["voltage_left"] > 0
+    assert "1 rise(s) into the upper half" in result.report()
     for s in result.swing_up.confirmed:
         assert s.judged == 1000
         assert s.interval[0] >= 0.95, s

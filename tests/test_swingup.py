@@ -270,3 +270,39 @@ def test_a_planned_swing_up_replays_under_scipy_and_catches_on_its_first_arrival
     assert x.shape == (0, 4) and u.shape == (0,) and gain.shape == (0, 4)
     with pytest.raises(riprs.InvalidParameterError, match=r"swing_up\.method"):
         riprs.SwingUp(lqr, plant, method="rocket")
+
+
+def test_a_rig_whose_energy_law_never_arrives_gets_a_plan_that_scipy_replays_to_upright() -> None:
+    """Generated rig 0: the energy law's swing on its nominal model never reaches upright, so
+    the plan starts from a resonant guess; scipy integrates its voltages on the rig's smooth
+    equations (the compensation clears the dead zone and friction) to upright at rest."""
+    from scipy.integrate import solve_ivp
+
+    from riprs.compare import build_controllers
+
+    spec = riprs.Spec.from_toml(riprs.random_rig(0).to_toml())
+    plant = spec.build_plant()
+    smooth = riprs.Plant(plant.params.replace(Vd=0.0, Cr=0.0, Cp=0.0))
+    lqr = build_controllers(spec)["LQR"]
+    energy = riprs.simulate(plant, riprs.SwingUp(lqr, plant), 10.0, x0=HANGING)
+    assert energy.catch_time is None, "the energy law arrives: not the case under test"
+    sup = riprs.SwingUp(lqr, plant, method="trajectory")
+    x, u, _gain = sup.plan
+    assert len(u) > 20
+    end = int(np.argmax((x[:, 2] == x[-1, 2]) & (u == 0.0)))
+    state = np.array(HANGING)
+    for k in range(end):
+        assert np.allclose(state[[0, 2]], x[k, [0, 2]], atol=5e-3), (k, state, x[k])
+        sol = solve_ivp(
+            lambda _t, s, v=u[k]: smooth.derivative(s, v),
+            (0.0, sup.Ts),
+            state,
+            method="DOP853",
+            rtol=1e-10,
+            atol=1e-12,
+        )
+        state = sol.y[:, -1]
+    upright = 2 * math.pi * round(state[2] / (2 * math.pi))
+    assert abs(upright) == pytest.approx(2 * math.pi)
+    assert abs(state[2] - upright) < 0.05 and abs(state[1]) < 0.5 and abs(state[3]) < 0.5
+    assert np.max(np.abs(x[:, 0])) < sup.settings["arm_limit"]

@@ -106,12 +106,15 @@ class SwingUpTuning:
         verdict is not ``"found"``, naming those short of 95 % (exit 16, ``--force``
         overrides).
     method : {"energy", "trajectory"}
-        The ``swing_up.method`` searched with: the file's.
+        The ``swing_up.method`` kept: the plan where the search found it better than the
+        energy law (or the file asks for it), the energy law otherwise.
     plan : dict or None
         With the plan kept, its length and margins on the nominal model: ``duration_s``
         (from hanging to upright), ``voltage_left`` (V, the swing-up's bound after the
-        compensation's share less the plan's largest voltage) and ``arm_left`` (rad,
-        ``swing_up.arm_limit`` less the plan's largest arm angle); None for the energy law.
+        compensation's share less the plan's largest voltage), ``arm_left`` (rad,
+        ``swing_up.arm_limit`` less the plan's largest arm angle) and ``rises`` (how many
+        times the plan's pendulum rises into the upper half, the last time to upright: 1
+        where it reaches upright on its first rise); None for the energy law.
     settings : dict
         The numeric ``[swing_up]`` keys the search set: ``catch_prediction``,
         ``catch_margin``, ``energy_margin``, ``rise_damping``, ``reference_return_rate``.
@@ -126,7 +129,7 @@ class SwingUpTuning:
 
     verdict: Literal["found", "not_found", "impossible"]
     method: Literal["energy", "trajectory"]
-    plan: Dict[str, float] | None
+    plan: Dict[str, float | int] | None
     settings: Dict[str, float]
     confirmed: List[SwingUpStudy]
     tried: int
@@ -137,7 +140,9 @@ class SwingUpTuning:
         return cls(
             verdict=d["verdict"],
             method=d["method"],
-            plan=None if d["plan"] is None else {k: float(v) for k, v in d["plan"].items()},
+            plan=None
+            if d["plan"] is None
+            else {k: v if k == "rises" else float(v) for k, v in d["plan"].items()},
             settings={k: float(v) for k, v in d["settings"].items()},
             confirmed=[SwingUpStudy._from(m) for m in d["confirmed"]],
             tried=int(d["tried"]),

@@ -374,7 +374,8 @@ class TuneResult:
                 lines.append(
                     f"  the plan: {sw.plan['duration_s']:.2f} s from hanging to upright, "
                     f"{sw.plan['voltage_left']:.2f} V and {sw.plan['arm_left']:.2f} rad of arm "
-                    "travel left on the nominal model"
+                    f"travel left on the nominal model, {sw.plan['rises']} rise(s) into the "
+                    "upper half"
                 )
             lines += [f"  {line}" for line in sw.summary.splitlines()]
         lines.append("")

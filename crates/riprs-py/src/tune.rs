@@ -326,6 +326,7 @@ fn swing_search_dict<'py>(
             p.set_item("duration_s", plan.duration_s)?;
             p.set_item("voltage_left", plan.voltage_left)?;
             p.set_item("arm_left", plan.arm_left)?;
+            p.set_item("rises", plan.rises)?;
             d.set_item("plan", p)?;
         }
         None => d.set_item("plan", py.None())?,

@@ -75,6 +75,11 @@ pub const PLAN_START_RATE: f64 = 2.0;
 /// estimate has no rate at its first sample, two differences by the third).
 pub const PLAN_SETTLE_SAMPLES: u32 = 3;
 
+/// How many samples the plan's point may move from its clock each period (module docs,
+/// "Planned swing-up"): with 1, the plan runs at 0, 1 or 2 of its samples per period,
+/// whichever point is nearest the pendulum's measured phase.
+pub const PLAN_RETIME_SAMPLES: u32 = 1;
+
 /// Largest distance (rad) of the arm or the pendulum from the plan (and of the arm's
 /// stopping point from the plan's, once it is past the envelope's limit) before the plan is
 /// left for the energy law.
@@ -385,6 +390,9 @@ impl<R: Real> SwingSupervisor<R> {
             self.plan_step = hanging.then_some(0);
         }
         let p = &self.params;
+        if usable {
+            self.plan_step = self.plan_step.map(|k| retimed(plan, k, &x, p));
+        }
         let planned = self.plan_step.and_then(|k| {
             let point = plan.get(k as usize)?;
             if !usable {
@@ -431,6 +439,11 @@ impl<R: Real> SwingSupervisor<R> {
             balance.seed(x, u);
         }
         (u, SwingStatus::Nominal)
+    }
+
+    /// The index of the plan's point the supervisor follows, while it follows one.
+    pub fn plan_index(&self) -> Option<u32> {
+        self.plan_step
     }
 
     fn balance_step<B: Balance<R>>(
@@ -482,4 +495,38 @@ impl<R: Real> SwingSupervisor<R> {
         }
         (u, SwingStatus::Balance(status))
     }
+}
+
+/// The plan's point to follow at this period, `k` the plan's clock (module docs, "Planned
+/// swing-up"): of the points within [`PLAN_RETIME_SAMPLES`] of `k`, the one nearest `x` in
+/// the pendulum's phase plane, `(α − α_j)² + (J_α/G)(α̇ − α̇_j)²` (the rate's error scaled by
+/// the pendulum's own time constant `√(J_α/G)`), the clock's own where none is nearer. Not
+/// before the plan's
+/// rates are checked ([`PLAN_SETTLE_SAMPLES`]), nor at or past its end.
+fn retimed<R: Real>(plan: &[PlanPoint<R>], k: u32, x: &[R; 4], p: &SwingParams<R>) -> u32 {
+    let last = plan.len().saturating_sub(1) as u32;
+    if k < PLAN_SETTLE_SAMPLES || k >= last {
+        return k;
+    }
+    let scale = p.model.ja / p.model.grav;
+    let distance = |j: u32| {
+        let e = plan[j as usize].error(x);
+        e[2] * e[2] + scale * e[3] * e[3]
+    };
+    let lo = k
+        .saturating_sub(PLAN_RETIME_SAMPLES)
+        .max(PLAN_SETTLE_SAMPLES.min(k));
+    let hi = (k + PLAN_RETIME_SAMPLES).min(last);
+    let mut best = k;
+    let mut nearest = distance(k);
+    for j in lo..=hi {
+        let d = distance(j);
+        // Strictly nearer only: the clock's point stands against an equal one (a plan that
+        // holds still is followed by the clock), and against a NaN distance.
+        if d < nearest {
+            best = j;
+            nearest = d;
+        }
+    }
+    best
 }

@@ -22,7 +22,7 @@ const PAPER: [f64; 12] = [
     4.512_959_398_114e-4,
     9.81,
 ];
-const TS: f64 = 0.01;
+pub(crate) const TS: f64 = 0.01;
 const ARM_LIMIT: f64 = 1.5;
 const U: f64 = 12.0;
 
@@ -41,7 +41,7 @@ pub(crate) fn model() -> ArmModel<f64> {
 
 /// The derived constants of rip-core's defaults (`SwingUpSettings::default()`), the catch
 /// region opened or closed by `catch`.
-fn params(catch: bool) -> SwingParams<f64> {
+pub(crate) fn params(catch: bool) -> SwingParams<f64> {
     let m = model();
     let stall = m.b * U / (m.j0 + m.ja);
     let brake = 0.5 * stall;
@@ -163,7 +163,7 @@ fn params_to<R: Real>(p: &SwingParams<f64>) -> SwingParams<R> {
 
 /// A balance controller that writes a fixed voltage and counts what it is asked.
 #[derive(Default)]
-struct Probe {
+pub(crate) struct Probe {
     steps: Vec<([f64; 2], [f64; 2])>,
     observed: usize,
     seeded: usize,

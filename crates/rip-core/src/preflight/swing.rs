@@ -123,6 +123,17 @@ pub struct StoredStudy {
     pub held: u64,
     /// The Wilson 95 % lower bound of the success rate.
     pub lower_bound: f64,
+    /// Runs that passed over the top at most twice before the catch (0 in a record written
+    /// before it was stored).
+    #[serde(default)]
+    pub within_two: u64,
+}
+
+impl StoredStudy {
+    /// The share of the runs that passed over the top at most twice before the catch.
+    pub fn within_two_share(&self) -> f64 {
+        self.within_two as f64 / self.runs as f64
+    }
 }
 
 /// The planned swing-up a search kept (`swing_up.method = "trajectory"`), as the record
@@ -137,6 +148,11 @@ pub struct StoredPlan {
     pub voltage_left: f64,
     /// `swing_up.arm_limit` less the plan's largest `|θ|` (rad).
     pub arm_left: f64,
+    /// How many times the plan's pendulum rises into the upper half (`|α| < π/2`), the last
+    /// time to upright: 1 where the plan reaches upright on its first rise
+    /// (`crate::swingup::plan::rises`); 0 in a record written before it was stored.
+    #[serde(default)]
+    pub rises: u32,
 }
 
 /// A swing-up search (`crate::tune::swing::SwingSearch`) as the tuning record's
@@ -151,6 +167,10 @@ pub struct StoredSwingSearch {
     pub verdict: SwingVerdict,
     /// The Wilson lower bound a controller needed to hold its catches.
     pub needed: f64,
+    /// The share of runs within two passes over the top a controller needed (0 in a record
+    /// written before it was asked for).
+    #[serde(default)]
+    pub needed_within_two: f64,
     /// The method kept (`swing_up.method`); a record written before the method was stored
     /// reads as the energy law, the only one searched then.
     #[serde(default)]
@@ -187,12 +207,13 @@ impl StoredSwingSearch {
     }
 
     /// Whether the search found a swing-up that `controller` holds: its own confirmation's
-    /// lower bound at least the one `needed` (the rig's verdict is *found* when every
-    /// controller's is).
+    /// lower bound of the catches held at least the one `needed`, and its share of runs
+    /// within two passes over the top at least the one needed (the rig's verdict is *found*
+    /// when every controller's are).
     pub fn holds(&self, controller: ControllerKind) -> bool {
-        self.confirmed
-            .get(controller.name())
-            .is_some_and(|s| s.lower_bound >= self.needed)
+        self.confirmed.get(controller.name()).is_some_and(|s| {
+            s.lower_bound >= self.needed && s.within_two_share() >= self.needed_within_two
+        })
     }
 
     /// The controllers that do not hold their catches ([`Self::holds`]), each in one phrase;
@@ -213,15 +234,27 @@ impl StoredSwingSearch {
     /// What the stored search says of `controller`, in one phrase.
     pub fn describe(&self, controller: ControllerKind) -> String {
         match self.confirmed.get(controller.name()) {
-            Some(s) => format!(
-                "the searched swing-up held {} of {} catches 3 s with the {} (Wilson 95 % lower \
-                 bound {:.1} %, {:.0} % needed)",
-                s.held,
-                s.runs,
-                controller.name(),
-                100.0 * s.lower_bound,
-                100.0 * self.needed
-            ),
+            Some(s) => {
+                let mut said = format!(
+                    "the searched swing-up held {} of {} catches 3 s with the {} (Wilson 95 % \
+                     lower bound {:.1} %, {:.0} % needed)",
+                    s.held,
+                    s.runs,
+                    controller.name(),
+                    100.0 * s.lower_bound,
+                    100.0 * self.needed
+                );
+                if s.within_two_share() < self.needed_within_two {
+                    said += &format!(
+                        " and passed over the top at most twice before the catch in {} of {} \
+                         runs ({:.0} % needed)",
+                        s.within_two,
+                        s.runs,
+                        100.0 * self.needed_within_two
+                    );
+                }
+                said
+            }
             None => format!("the swing-up search was {}", self.verdict.name()),
         }
     }

@@ -28,7 +28,17 @@ pub fn supervised(
     design: &Design,
     kind: ControllerKind,
 ) -> Result<Box<dyn Controller>, SpecError> {
-    Ok(design.compensate(Box::new(swing_up(spec, design, kind)?)))
+    supervised_planned(spec, design, kind, None)
+}
+
+/// [`supervised`] with its plan given ([`swing_plan`]) or, with `None`, designed.
+pub(crate) fn supervised_planned(
+    spec: &Spec,
+    design: &Design,
+    kind: ControllerKind,
+    plan: Option<Plan>,
+) -> Result<Box<dyn Controller>, SpecError> {
+    Ok(design.compensate(Box::new(swing_up_planned(spec, design, kind, plan)?)))
 }
 
 /// The swing-up of [`supervised`] before the compensation is put around it: its plan, its
@@ -38,16 +48,49 @@ pub fn swing_up(
     design: &Design,
     kind: ControllerKind,
 ) -> Result<SwingUp<Box<dyn Controller>>, SpecError> {
-    let plant = spec.plant()?;
-    let balance = design.balance(kind)?;
+    swing_up_planned(spec, design, kind, None)
+}
+
+/// A planned swing-up's points, shared by the supervisors that run it.
+pub(crate) type Plan = std::sync::Arc<[crate::swingup::PlanPoint]>;
+
+/// The swing-up settings of [`supervised`]: `spec`'s, the voltage bound within what `design`'s
+/// compensation leaves.
+pub(crate) fn supervised_settings(spec: &Spec, design: &Design) -> crate::swingup::SwingUpSettings {
     let mut settings = spec.swing_up.clone();
     if let Some(c) = design.compensation() {
         settings.max_voltage = c.planned_limit(settings.max_voltage);
     }
-    SwingUp::new(balance, &plant, settings).map_err(|e| match e {
-        RipError::InvalidParameter { name, reason } => SpecError::new(name, reason),
-        e => SpecError::new("swing_up", e.to_string()),
-    })
+    settings
+}
+
+/// The plan [`supervised`] designs for `spec` under `design` (empty with the energy method or
+/// where none is found), designed once for the many supervisors of a study: a plan of
+/// several swings takes seconds.
+pub(crate) fn swing_plan(spec: &Spec, design: &Design) -> Result<Plan, SpecError> {
+    let plant = spec.plant()?;
+    let ts = design.ts();
+    Ok(crate::swingup::designed_plan(
+        &plant,
+        &supervised_settings(spec, design),
+        ts,
+    ))
+}
+
+fn swing_up_planned(
+    spec: &Spec,
+    design: &Design,
+    kind: ControllerKind,
+    plan: Option<Plan>,
+) -> Result<SwingUp<Box<dyn Controller>>, SpecError> {
+    let plant = spec.plant()?;
+    let balance = design.balance(kind)?;
+    SwingUp::planned(balance, &plant, supervised_settings(spec, design), plan).map_err(
+        |e| match e {
+            RipError::InvalidParameter { name, reason } => SpecError::new(name, reason),
+            e => SpecError::new("swing_up", e.to_string()),
+        },
+    )
 }
 
 /// How a swing-up run approached upright, from its true state (not the supervisor's
@@ -280,6 +323,25 @@ impl SwingMonteCarlo {
         }
     }
 
+    /// The figures of `runs`, each a run of the controller `kind`.
+    pub(crate) fn of(kind: ControllerKind, runs: &[SwingRun]) -> Self {
+        let mut mc = Self {
+            controller: kind,
+            runs: runs.len() as u64,
+            excluded: 0,
+            caught: 0,
+            held: 0,
+            step_tracked: 0,
+            caught_on_first: 0,
+            at_most_two_over_tops: 0,
+            most_over_tops: 0,
+        };
+        for run in runs {
+            mc.add(run);
+        }
+        mc
+    }
+
     fn add(&mut self, run: &SwingRun) {
         if run.excluded {
             self.excluded += 1;
@@ -340,21 +402,41 @@ pub fn swing_monte_carlo(
     study: &SwingStudy,
     cancel: &std::sync::atomic::AtomicBool,
 ) -> Result<SwingMonteCarlo, SpecError> {
-    swing_monte_carlo_draws(spec, kind, ts, study, 0..study.runs, cancel)
+    swing_monte_carlo_draws(spec, kind, ts, study, 0..study.runs, None, cancel)
 }
 
 /// [`swing_monte_carlo`] on the draws `draws` of `study` alone (`runs` counts them): a study
-/// taken in parts whose sum is the whole one's.
+/// taken in parts whose sum is the whole one's. `plan` is the swing-up's plan where it is
+/// designed already ([`swing_plan`]).
 pub(crate) fn swing_monte_carlo_draws(
     spec: &Spec,
     kind: ControllerKind,
     ts: f64,
     study: &SwingStudy,
     draws: std::ops::Range<u64>,
+    plan: Option<Plan>,
     cancel: &std::sync::atomic::AtomicBool,
 ) -> Result<SwingMonteCarlo, SpecError> {
+    let runs = swing_runs(spec, kind, ts, study, draws, plan, cancel)?;
+    Ok(SwingMonteCarlo::of(kind, &runs))
+}
+
+/// The runs of [`swing_monte_carlo_draws`], draw by draw, in the draws' order.
+pub(crate) fn swing_runs(
+    spec: &Spec,
+    kind: ControllerKind,
+    ts: f64,
+    study: &SwingStudy,
+    draws: std::ops::Range<u64>,
+    plan: Option<Plan>,
+    cancel: &std::sync::atomic::AtomicBool,
+) -> Result<Vec<SwingRun>, SpecError> {
     study.validate()?;
     let design = spec.design(ts)?;
+    let plan = match plan {
+        Some(plan) => plan,
+        None => swing_plan(spec, &design)?,
+    };
     let base = spec.plant.params();
     let catch_angle = spec.swing_up.catch_angle;
     let one = |sup: &mut Box<dyn Controller>, i: u64| -> Result<SwingRun, SpecError> {
@@ -380,7 +462,7 @@ pub(crate) fn swing_monte_carlo_draws(
     };
     let half = draws.start + (draws.end - draws.start) / 2;
     let chunk = |range: std::ops::Range<u64>| -> Result<Vec<SwingRun>, SpecError> {
-        let mut sup = supervised(spec, &design, kind)?;
+        let mut sup = supervised_planned(spec, &design, kind, Some(plan.clone()))?;
         let mut out = Vec::with_capacity(range.clone().count());
         for i in range {
             if cancel.load(std::sync::atomic::Ordering::Relaxed) {
@@ -390,7 +472,7 @@ pub(crate) fn swing_monte_carlo_draws(
         }
         Ok(out)
     };
-    let runs = std::thread::scope(|s| {
+    std::thread::scope(|s| {
         let first = s.spawn(|| chunk(draws.start..half));
         let second = chunk(half..draws.end);
         let first = first
@@ -400,20 +482,5 @@ pub(crate) fn swing_monte_carlo_draws(
             a.extend(second?);
             Ok(a)
         })
-    })?;
-    let mut mc = SwingMonteCarlo {
-        controller: kind,
-        runs: draws.end - draws.start,
-        excluded: 0,
-        caught: 0,
-        held: 0,
-        step_tracked: 0,
-        caught_on_first: 0,
-        at_most_two_over_tops: 0,
-        most_over_tops: 0,
-    };
-    for run in &runs {
-        mc.add(run);
-    }
-    Ok(mc)
+    })
 }

@@ -45,9 +45,26 @@ pub struct SwingUp<C> {
     settings: SwingUpSettings,
     supervisor: SwingSupervisor,
     /// The planned swing-up ([`plan`]); empty with the energy method or when none was found.
-    plan: Vec<PlanPoint>,
+    /// Shared: the studies run many supervisors on one plan.
+    plan: std::sync::Arc<[PlanPoint]>,
     /// What the current swing-up has done so far.
     report: SwingUpReport,
+}
+
+/// The plan [`SwingUp::new`] designs for `settings` on `plant` at sample time `ts`: empty with
+/// the energy method, where none is found, or where the swing-up cannot be designed.
+pub(crate) fn designed_plan(
+    plant: &Plant,
+    settings: &SwingUpSettings,
+    ts: f64,
+) -> std::sync::Arc<[PlanPoint]> {
+    if settings.method != SwingUpMethod::Trajectory || settings.validate().is_err() {
+        return std::sync::Arc::from([]);
+    }
+    design::params(plant, settings, ts)
+        .and_then(|params| plan::plan(plant, settings, &params, ts))
+        .unwrap_or_default()
+        .into()
 }
 
 /// A balance controller of this crate as the `no_std` supervisor drives it.
@@ -84,6 +101,18 @@ impl<C: Controller> SwingUp<C> {
     /// model of the rig; the simulated or real plant may differ). `balance` must have 2
     /// outputs, 1 input and a sample time.
     pub fn new(balance: C, plant: &Plant, settings: SwingUpSettings) -> Result<Self> {
+        Self::planned(balance, plant, settings, None)
+    }
+
+    /// [`new`](Self::new) with the plan given, where one designed on the same `plant` and
+    /// `settings` at the balance controller's sample time is at hand
+    /// ([`designed_plan`]); `None` designs it.
+    pub(crate) fn planned(
+        balance: C,
+        plant: &Plant,
+        settings: SwingUpSettings,
+        plan: Option<std::sync::Arc<[PlanPoint]>>,
+    ) -> Result<Self> {
         settings.validate()?;
         if balance.n_outputs() != 2 || balance.n_inputs() != 1 {
             return Err(RipError::invalid(
@@ -104,11 +133,12 @@ impl<C: Controller> SwingUp<C> {
                 "the nominal model has no real unstable mode about upright to catch",
             )
         })?;
-        let plan = match settings.method {
-            SwingUpMethod::Energy => Vec::new(),
-            SwingUpMethod::Trajectory => {
-                plan::plan(plant, &settings, &params, ts).unwrap_or_default()
-            }
+        let plan = match (settings.method, plan) {
+            (SwingUpMethod::Energy, _) => std::sync::Arc::from([]),
+            (SwingUpMethod::Trajectory, Some(plan)) => plan,
+            (SwingUpMethod::Trajectory, None) => plan::plan(plant, &settings, &params, ts)
+                .unwrap_or_default()
+                .into(),
         };
         let mut out = Self {
             balance,
