@@ -101,9 +101,10 @@ class SwingUpTuning:
     ----------
     verdict : {"found", "not_found", "impossible"}
         ``"found"`` when every controller's Wilson lower bound on the confirmation runs is at
-        least 95 %; ``"impossible"`` when the energy bound forbids a swing-up (nothing is
+        least 95 % and at least 99 % of its runs pass over the top at most twice before the
+        catch; ``"impossible"`` when the energy bound forbids a swing-up (nothing is
         searched). ``rip-rt run --swing-up`` refuses every controller of a rig whose
-        verdict is not ``"found"``, naming those short of 95 % (exit 16, ``--force``
+        verdict is not ``"found"``, naming those short of either (exit 16, ``--force``
         overrides).
     method : {"energy", "trajectory"}
         The ``swing_up.method`` kept: the plan where the search found it better than the

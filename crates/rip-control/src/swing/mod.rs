@@ -219,7 +219,8 @@
 //! first arrival in 83.5 % of runs (74.4 % by the clock) and passes over the top at most
 //! twice in 99.5 % (96.8 %); `qube_servo2`'s one-swing plan goes from 89.5 to 90.7 % on the
 //! first arrival. It is not retimed over its first [`PLAN_SETTLE_SAMPLES`], where its rates
-//! are checked, nor at its last point. The catch is tested only once the plan's pendulum is within `catch_angle` of
+//! are checked, nor at its last point, and it is left for the energy law once it is more than
+//! [`PLAN_MAX_LAG_SHARE`] of its length behind its clock. The catch is tested only once the plan's pendulum is within `catch_angle` of
 //! upright (the plan carries it there; a catch tested earlier would take an arrival the plan
 //! is not yet braking for). The plan is left for the energy law when the estimate strays from
 //! it (pendulum or arm more than [`PLAN_ABORT_ANGLE`] off), when the arm passes the envelope's

@@ -71,13 +71,49 @@ fn a_pendulum_slower_or_faster_than_its_plan_is_followed_at_its_own_pace() {
 
 #[test]
 fn the_plan_runs_by_its_clock_over_its_settling_samples() {
-    // A pendulum at rest against a swinging plan: over the settling samples the index is the
-    // clock's (the rates are checked there, not the phase).
-    let plan = swinging_plan(50, 0.01, 6.0);
+    // A pendulum one sample ahead of its plan: over the settling samples the index is the
+    // clock's all the same (the rates are checked there, not the phase); after them it moves
+    // to the pendulum's.
+    let plan = swinging_plan(50, 0.3, 6.0);
     let mut sup = SwingSupervisor::new(params(false));
     let mut probe = Probe::default();
-    for n in 0..PLAN_SETTLE_SAMPLES {
-        sup.step_planned(&mut probe, &plan, [0.0, core::f64::consts::PI], [0.0; 2]);
-        assert_eq!(sup.plan_index(), Some(n + 1));
+    for n in 0..PLAN_SETTLE_SAMPLES + 3 {
+        let ahead = plan[n as usize + 1].x[2];
+        sup.step_planned(&mut probe, &plan, [0.0, ahead], [0.0; 2]);
+        if n < PLAN_SETTLE_SAMPLES {
+            assert_eq!(sup.plan_index(), Some(n + 1), "settling sample {n}");
+        }
     }
+    assert_eq!(
+        sup.plan_index(),
+        Some(PLAN_SETTLE_SAMPLES + 4),
+        "retimed to the pendulum"
+    );
+}
+
+#[test]
+fn a_plan_that_waits_for_a_pendulum_that_stays_is_left_once_it_lags_too_far() {
+    // The pendulum follows the plan to its first turning point, then stays there: the plan
+    // waits at that point, whose angle and rate the pendulum's match, until it lags its clock
+    // by a quarter of its length.
+    let omega = 6.0;
+    let plan = swinging_plan(400, 0.3, omega);
+    let turn = (core::f64::consts::FRAC_PI_2 / (omega * TS)).round() as usize;
+    let mut sup = SwingSupervisor::new(params(false));
+    let mut probe = Probe::default();
+    let mut left = None;
+    for n in 0..300usize {
+        let alpha = plan[n.min(turn)].x[2];
+        sup.step_planned(&mut probe, &plan, [0.0, alpha], [0.0; 2]);
+        if !sup.planning() {
+            left = Some(n);
+            break;
+        }
+    }
+    let left = left.expect("the plan is left");
+    let bound = turn + (PLAN_MAX_LAG_SHARE * plan.len() as f64) as usize;
+    assert!(
+        (bound - 15..=bound + 2).contains(&left),
+        "left at period {left}, bound {bound}"
+    );
 }

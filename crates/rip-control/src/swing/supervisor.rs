@@ -80,6 +80,13 @@ pub const PLAN_SETTLE_SAMPLES: u32 = 3;
 /// whichever point is nearest the pendulum's measured phase.
 pub const PLAN_RETIME_SAMPLES: u32 = 1;
 
+/// How far the retimed plan may fall behind its clock before it is left for the energy law,
+/// as a share of its length: a pendulum that lags by more than a quarter of the swing-up is
+/// not one swinging a little slower than the nominal model, and a plan point it does not
+/// leave (a pendulum held still where the plan turns) would otherwise be followed until
+/// `max_time`.
+pub const PLAN_MAX_LAG_SHARE: f64 = 0.25;
+
 /// Largest distance (rad) of the arm or the pendulum from the plan (and of the arm's
 /// stopping point from the plan's, once it is past the envelope's limit) before the plan is
 /// left for the energy law.
@@ -404,11 +411,14 @@ impl<R: Real> SwingSupervisor<R> {
             let abort: R = c(PLAN_ABORT_ANGLE);
             let start: R = c(PLAN_START_RATE);
             let settled = k >= PLAN_SETTLE_SAMPLES || (e[1].abs() <= start && e[3].abs() <= start);
+            // Retimed, the plan may wait for a pendulum behind it, not for one that stays.
+            let behind = self.swing_samples.saturating_sub(1).saturating_sub(k);
+            let on_time = f64::from(behind) <= PLAN_MAX_LAG_SHARE * plan.len() as f64;
             let arm_stop = p.braked_stop(x[0], x[1]);
             let plan_stop = p.braked_stop(point.x[0], point.x[1]);
             let arm_inside = x[0].abs() <= p.envelope_limit
                 && (arm_stop.abs() <= p.envelope_limit || (arm_stop - plan_stop).abs() <= abort);
-            (settled && e[0].abs() <= abort && e[2].abs() <= abort && arm_inside)
+            (settled && on_time && e[0].abs() <= abort && e[2].abs() <= abort && arm_inside)
                 .then(|| point.voltage(&x, p.max_voltage))
         });
         self.left_plan |= planned.is_none() && self.plan_step.is_some();
@@ -513,9 +523,7 @@ fn retimed<R: Real>(plan: &[PlanPoint<R>], k: u32, x: &[R; 4], p: &SwingParams<R
         let e = plan[j as usize].error(x);
         e[2] * e[2] + scale * e[3] * e[3]
     };
-    let lo = k
-        .saturating_sub(PLAN_RETIME_SAMPLES)
-        .max(PLAN_SETTLE_SAMPLES.min(k));
+    let lo = k.saturating_sub(PLAN_RETIME_SAMPLES);
     let hi = (k + PLAN_RETIME_SAMPLES).min(last);
     let mut best = k;
     let mut nearest = distance(k);

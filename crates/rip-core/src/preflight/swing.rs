@@ -10,7 +10,8 @@
 //! balance is a necessary condition: a rig that passes may still not swing up. Where the
 //! record also holds the swing-up search of `riprs tune` ([`crate::tune::swing`]) made on this
 //! design, a rig whose search did not find a swing-up that every controller holds (each
-//! one's Wilson lower bound at least the one the search needed) refuses for every
+//! one's Wilson lower bound of the catches held at least the one the search needed, and its
+//! share of runs within two passes over the top too) refuses for every
 //! controller, naming those that fell short: the swing is the same whichever controller
 //! catches, and a rig whose catches one controller cannot hold is a rig whose swing-up was
 //! not found, however its other controllers did on that sample.
@@ -92,9 +93,10 @@ fn stored_search(input: &Input<'_>, record: Option<&std::path::Path>) -> Option<
 #[serde(rename_all = "snake_case")]
 pub enum SwingVerdict {
     /// Every controller's lower bound at least the one needed
-    /// (`crate::tune::swing::FOUND_LOWER_BOUND`).
+    /// (`crate::tune::swing::FOUND_LOWER_BOUND`), and its share of runs within two passes
+    /// over the top too (`crate::tune::swing::FOUND_WITHIN_TWO`).
     Found,
-    /// The best settings tried leave a controller short of it.
+    /// The best settings tried leave a controller short of either.
     NotFound,
     /// The energy bound forbids a swing-up of the nominal rig.
     Impossible,
@@ -115,7 +117,7 @@ impl SwingVerdict {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct StoredStudy {
-    /// Draws.
+    /// Runs judged: the draws less those excluded by the energy bound.
     pub runs: u64,
     /// Draws excluded by the energy bound.
     pub excluded: u64,

@@ -268,6 +268,14 @@ pub struct SwingRun {
     pub over_tops: u32,
 }
 
+impl SwingRun {
+    /// Whether the pendulum passed over the top at most twice before the catch: the issue's
+    /// bar counts the runs that do.
+    pub fn within_two_over_tops(&self) -> bool {
+        self.over_tops <= 2
+    }
+}
+
 /// One controller's [`SwingStudy`]: counts over its runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SwingMonteCarlo {
@@ -351,7 +359,7 @@ impl SwingMonteCarlo {
         self.held += u64::from(run.held);
         self.step_tracked += u64::from(run.step_tracked);
         self.caught_on_first += u64::from(run.caught_on_first);
-        self.at_most_two_over_tops += u64::from(run.over_tops <= 2);
+        self.at_most_two_over_tops += u64::from(run.within_two_over_tops());
         self.most_over_tops = self.most_over_tops.max(run.over_tops);
     }
 }

@@ -115,12 +115,13 @@ const ITERATION_BUDGET: usize = 1_000_000;
 /// Horizons tried, as multiples of the energy law's time to its first arrival.
 pub const HORIZON_FACTORS: [f64; 4] = [1.0, 0.8, 1.3, 1.7];
 
-/// The resonant first guesses' lengths, in half periods of the pendulum's small swing (module
-/// docs); each is tried half a period longer, so that it ends on a rise.
-const RESONANT_HALF_SWINGS: std::ops::RangeInclusive<u32> = 2..=10;
+/// The resonant first guesses' lengths, in half periods `h` of the pendulum's small swing
+/// (module docs); each horizon is `h + ½` of them, a quarter period more, so that the guess
+/// ends on a rise.
+pub const RESONANT_HALF_SWINGS: std::ops::RangeInclusive<u32> = 2..=10;
 
 /// The resonant first guesses' amplitude, a share of the plan's voltage bound.
-const RESONANT_SHARE: f64 = 0.5;
+pub const RESONANT_SHARE: f64 = 0.5;
 
 /// Longest first guess and plan (s), before the upright tail; a plan is also no longer than
 /// `swing_up.max_time` less the tail.
@@ -410,7 +411,8 @@ pub(crate) fn plan(
     // The resonant guesses (module docs): the arm driven at the pendulum's own frequency.
     let omega = (law.model.grav / law.model.ja).sqrt();
     RESONANT_HALF_SWINGS.clone().find_map(|halves| {
-        let n = ((halves as f64 + 0.5) * std::f64::consts::PI / (omega * ts)).round() as usize;
+        let n = (((halves as f64 + 0.5) * std::f64::consts::PI / (omega * ts)).round() as usize)
+            .max(10);
         let mut us = (0..).map(|k| RESONANT_SHARE * u_max * (omega * k as f64 * ts).sin());
         attempt(&mut us, n, tau)
     })
