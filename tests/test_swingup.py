@@ -226,9 +226,29 @@ def test_a_reference_after_catch_without_a_catch_stays_zero() -> None:
         )
 
 
-def test_a_planned_swing_up_replays_under_scipy_and_catches_on_its_first_arrival() -> None:
+def _replayed(plant: riprs.Plant, x: np.ndarray, u: np.ndarray, ts: float) -> np.ndarray:
+    """The plan's voltages `u`, held over each period `ts` up to where it rests upright,
+    integrated by scipy on `plant`'s equations from hanging: the state there, each period's
+    angles checked against the plan's `x` on the way."""
     from scipy.integrate import solve_ivp
 
+    end = int(np.argmax((x[:, 2] == x[-1, 2]) & (u == 0.0)))
+    state = np.array(HANGING)
+    for k in range(end):
+        assert np.allclose(state[[0, 2]], x[k, [0, 2]], atol=5e-3), (k, state, x[k])
+        sol = solve_ivp(
+            lambda _t, s, v=u[k]: plant.derivative(s, v),
+            (0.0, ts),
+            state,
+            method="DOP853",
+            rtol=1e-10,
+            atol=1e-12,
+        )
+        state = sol.y[:, -1]
+    return state
+
+
+def test_a_planned_swing_up_replays_under_scipy_and_catches_on_its_first_arrival() -> None:
     from riprs.compare import build_controllers
 
     spec = _spec("qube_servo2")
@@ -243,19 +263,7 @@ def test_a_planned_swing_up_replays_under_scipy_and_catches_on_its_first_arrival
     assert np.max(np.abs(x[:, 0])) < sup.settings["arm_limit"]
     # The planned voltages, held over each period, integrated by scipy on the plant's
     # equations: the angles follow the plan up to where it holds upright at rest.
-    end = int(np.argmax((x[:, 2] == x[-1, 2]) & (u == 0.0)))
-    state = np.array(HANGING)
-    for k in range(end):
-        assert np.allclose(state[[0, 2]], x[k, [0, 2]], atol=5e-3), (k, state, x[k])
-        sol = solve_ivp(
-            lambda _t, s, v=u[k]: plant.derivative(s, v),
-            (0.0, sup.Ts),
-            state,
-            method="DOP853",
-            rtol=1e-10,
-            atol=1e-12,
-        )
-        state = sol.y[:, -1]
+    state = _replayed(plant, x, u, sup.Ts)
     assert abs(state[2] - x[-1, 2]) < 0.05 and abs(state[1]) < 0.5 and abs(state[3]) < 0.5
     # Closed loop from hanging: caught within the plan's length, never over the top.
     run = riprs.simulate(plant, sup, 5.0, x0=HANGING, encoder_counts=2048, noise_std=1e-3)
@@ -276,8 +284,6 @@ def test_a_rig_whose_energy_law_never_arrives_gets_a_plan_that_scipy_replays_to_
     """Generated rig 0: the energy law's swing on its nominal model never reaches upright, so
     the plan starts from a resonant guess; scipy integrates its voltages on the rig's smooth
     equations (the compensation clears the dead zone and friction) to upright at rest."""
-    from scipy.integrate import solve_ivp
-
     from riprs.compare import build_controllers
 
     spec = riprs.Spec.from_toml(riprs.random_rig(0).to_toml())
@@ -289,19 +295,7 @@ def test_a_rig_whose_energy_law_never_arrives_gets_a_plan_that_scipy_replays_to_
     sup = riprs.SwingUp(lqr, plant, method="trajectory")
     x, u, _gain = sup.plan
     assert len(u) > 20
-    end = int(np.argmax((x[:, 2] == x[-1, 2]) & (u == 0.0)))
-    state = np.array(HANGING)
-    for k in range(end):
-        assert np.allclose(state[[0, 2]], x[k, [0, 2]], atol=5e-3), (k, state, x[k])
-        sol = solve_ivp(
-            lambda _t, s, v=u[k]: smooth.derivative(s, v),
-            (0.0, sup.Ts),
-            state,
-            method="DOP853",
-            rtol=1e-10,
-            atol=1e-12,
-        )
-        state = sol.y[:, -1]
+    state = _replayed(smooth, x, u, sup.Ts)
     upright = 2 * math.pi * round(state[2] / (2 * math.pi))
     assert abs(upright) == pytest.approx(2 * math.pi)
     assert abs(state[2] - upright) < 0.05 and abs(state[1]) < 0.5 and abs(state[3]) < 0.5
