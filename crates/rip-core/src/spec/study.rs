@@ -410,26 +410,14 @@ pub fn swing_monte_carlo(
     study: &SwingStudy,
     cancel: &std::sync::atomic::AtomicBool,
 ) -> Result<SwingMonteCarlo, SpecError> {
-    swing_monte_carlo_draws(spec, kind, ts, study, 0..study.runs, None, cancel)
-}
-
-/// [`swing_monte_carlo`] on the draws `draws` of `study` alone (`runs` counts them): a study
-/// taken in parts whose sum is the whole one's. `plan` is the swing-up's plan where it is
-/// designed already ([`swing_plan`]).
-pub(crate) fn swing_monte_carlo_draws(
-    spec: &Spec,
-    kind: ControllerKind,
-    ts: f64,
-    study: &SwingStudy,
-    draws: std::ops::Range<u64>,
-    plan: Option<Plan>,
-    cancel: &std::sync::atomic::AtomicBool,
-) -> Result<SwingMonteCarlo, SpecError> {
-    let runs = swing_runs(spec, kind, ts, study, draws, plan, cancel)?;
+    let runs = swing_runs(spec, kind, ts, study, 0..study.runs, None, cancel)?;
     Ok(SwingMonteCarlo::of(kind, &runs))
 }
 
-/// The runs of [`swing_monte_carlo_draws`], draw by draw, in the draws' order.
+/// The runs of [`swing_monte_carlo`] on the draws `draws` of `study` alone, draw by draw, in
+/// the draws' order: a study taken in parts whose sum is the whole one's
+/// ([`SwingMonteCarlo::of`] counts them). `plan` is the swing-up's plan where it is designed
+/// already ([`swing_plan`]).
 pub(crate) fn swing_runs(
     spec: &Spec,
     kind: ControllerKind,

@@ -136,9 +136,7 @@ impl<C: Controller> SwingUp<C> {
         let plan = match (settings.method, plan) {
             (SwingUpMethod::Energy, _) => std::sync::Arc::from([]),
             (SwingUpMethod::Trajectory, Some(plan)) => plan,
-            (SwingUpMethod::Trajectory, None) => plan::plan(plant, &settings, &params, ts)
-                .unwrap_or_default()
-                .into(),
+            (SwingUpMethod::Trajectory, None) => designed_plan(plant, &settings, ts),
         };
         let mut out = Self {
             balance,

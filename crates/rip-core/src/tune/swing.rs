@@ -83,8 +83,8 @@ use std::sync::atomic::AtomicBool;
 pub use crate::preflight::swing::{StoredPlan, StoredStudy, StoredSwingSearch, SwingVerdict};
 
 use crate::spec::study::{
-    supervised_settings, swing_monte_carlo_draws, swing_plan, swing_runs, Plan, SwingMonteCarlo,
-    SwingRun, SwingStudy, HELD_AFTER_CATCH,
+    supervised_settings, swing_plan, swing_runs, Plan, SwingMonteCarlo, SwingRun, SwingStudy,
+    HELD_AFTER_CATCH,
 };
 use crate::spec::{ControllerKind, Spec, SpecError};
 use crate::swingup::{feasibility, SwingUpMethod, SwingUpSettings, Verdict};
@@ -304,8 +304,8 @@ fn confirm(
         for start in (0..CONFIRM_RUNS).step_by(CONFIRM_BLOCK as usize) {
             check_cancel(cancel)?;
             let end = (start + CONFIRM_BLOCK).min(CONFIRM_RUNS);
-            let part =
-                swing_monte_carlo_draws(&s, kind, ts, &study, start..end, plan.cloned(), cancel)?;
+            let runs = swing_runs(&s, kind, ts, &study, start..end, plan.cloned(), cancel)?;
+            let part = SwingMonteCarlo::of(kind, &runs);
             let sum = total.map_or(part, |t| t.combined(&part));
             let left = CONFIRM_RUNS - end;
             let hopeless = !reaches(sum.held + left, sum.judged() + left, FOUND_LOWER_BOUND)
@@ -435,9 +435,7 @@ fn planned_method(
 ) -> Result<(SwingUpSettings, Option<Plan>), SpecError> {
     let mut planned = best.clone();
     planned.method = SwingUpMethod::Trajectory;
-    let mut kept = spec.clone();
-    kept.swing_up = planned.clone();
-    let plan = swing_plan(&kept, &kept.design(ts)?)?;
+    let plan = plan_of(spec, &planned, ts)?;
     if plan.is_empty() {
         return Ok((best, None));
     }
@@ -554,9 +552,7 @@ pub fn search(
         progress.step();
     }
     if best.method == SwingUpMethod::Trajectory && plan.is_none() {
-        let mut kept = spec.clone();
-        kept.swing_up = best.clone();
-        plan = Some(swing_plan(&kept, &kept.design(ts)?)?);
+        plan = Some(plan_of(spec, &best, ts)?);
     }
     let seed = SEARCH_SEED + SEARCH_RUNS + FINAL_RUNS;
     let confirmed = confirm(spec, &best, ts, (seed, horizon), plan.as_ref(), cancel)?;
@@ -578,6 +574,14 @@ pub fn search(
         tried,
         plan: plan_margins(&kept, ts, plan.as_deref().unwrap_or_default())?,
     })
+}
+
+/// The plan of the swing-up `settings` on `spec`'s rig ([`swing_plan`]), designed once for
+/// every study that runs it.
+fn plan_of(spec: &Spec, settings: &SwingUpSettings, ts: f64) -> Result<Plan, SpecError> {
+    let mut kept = spec.clone();
+    kept.swing_up = settings.clone();
+    swing_plan(&kept, &kept.design(ts)?)
 }
 
 /// The plan of `spec`'s swing-up on its nominal model, as the record stores it (`None` for
