@@ -48,6 +48,8 @@ CHANGES: dict[str, tuple[str, str]] = {
     "compensation.velocity_scale": ("0.1", "[plant]\nCr = 0.002\n"),
     "compensation.dead_zone": ("0.2", "[plant]\nVd = 0.3\n"),
     "compensation.arm_friction": ("0.001", "[plant]\nCr = 0.002\n"),
+    "compensation.dead_zone_gain": ("1.2", "[plant]\nVd = 0.3\n"),
+    "compensation.friction_gain": ("1.5", "[plant]\nCr = 0.002\n"),
     "monte_carlo.parameters": ('["mr"]', ""),
     "monte_carlo.runs": ("3", ""),
     "swing_up.on_fall": ('"stop"', ""),

@@ -398,13 +398,16 @@ riprs reads keeps the ones it sets: `riprs config FILE`, `Spec.to_toml` and the 
   every controller and of the swing-up (dead-zone inverse and friction feed-forward,
   [design.md](design.md#dead-zone-and-friction-compensation)): `dead_zone` (V) and
   `arm_friction` (N m) default to the `[plant]`'s `Vd` and `Cr`, `voltage_scale` (V) and
-  `velocity_scale` (rad/s) are the widths of the ramps that replace their signs; the
+  `velocity_scale` (rad/s) are the widths of the ramps that replace their signs;
+  `dead_zone_gain` and `friction_gain` (default 1) are the multiples of the dead zone and the
+  friction the correction applies, which `riprs tune` raises where an identification 30 % off
+  would leave the arm in a limit cycle ([tuning.md](tuning.md#the-compensations-gains)); the
   controllers then plan within `input_bounds` shrunk by the correction, so the voltage written
   stays inside them. `enabled = false` runs the controllers uncompensated; a rig with neither
   (every preset) has none. A dead zone and friction voltage (`Cr Rm / kt`) that together
   leave no room inside `input_bounds` are refused through the key written for the larger of
   the two (`compensation.dead_zone` or `plant.Vd`, `compensation.arm_friction` or
-  `plant.Cr`), with the largest value of it that fits.
+  `plant.Cr`, or its gain where that is not 1), with the largest value of it that fits.
 - `[monte_carlo]`: runs over noise seeds and uniform perturbations of the named parameters.
 
 ```toml

@@ -34,8 +34,10 @@
 //! raised, without it (a recovered estimator trusts the sensor more, which a coarse or noisy
 //! one may not bear), and keeps the one that misses the bar by least: one that balances
 //! within the bar and the voltage bound beats any that does not, and among equals the one
-//! nearer the margins wins; the MPC's own weights are then searched where the shared ones leave
-//! it short ([`own`]). Each controller that still misses the bar is said to, with what it
+//! nearer the margins wins. Where a controller is still short, the compensation's gains
+//! (how much of the identified dead zone and friction it applies) are chosen with the
+//! identification's error in view ([`gains`]); the MPC's own weights are then searched where
+//! the shared ones leave it short ([`own`]). Each controller that still misses the bar is said to, with what it
 //! misses ([`Tuned::shortfalls`]), and `rip-rt run`'s pre-flight says so through the record
 //! ([`record`]).
 //! [`robustness`] then draws rigs around the file's (each parameter within ±10 %, or from
@@ -48,6 +50,7 @@ use crate::spec::{ControllerKind, Spec, SpecError};
 
 mod assess;
 mod bar;
+pub mod gains;
 pub mod own;
 mod robustness;
 mod settings;
@@ -322,6 +325,7 @@ pub fn tune_with(
     progress.add(candidates.len() + 2);
     let held = bar.guarded();
     let mut tuned = search(spec, candidates, ts, &held, progress, cancel)?;
+    gains::choose(&mut tuned, ts, &held, cancel)?;
     own_keys(&mut tuned, ts, &held, cancel)?;
     tuned.bar = bar;
     progress.finish();

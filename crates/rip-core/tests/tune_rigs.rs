@@ -396,3 +396,34 @@ fn seed_9s_limit_cycle_is_its_arm_friction_read_through_the_sensor() {
     exact.sensor.noise_std = [0.0; 2];
     assert!(cycle(&exact) <= bar, "{}", cycle(&exact));
 }
+
+#[test]
+fn the_compensations_gains_are_kept_where_the_bar_needs_them() {
+    // Generated rig 2: with the compensation's gains at 1, no shared weights tried bring LQG
+    // within the bar (an identified dead zone and friction 30 % low leave it in a limit
+    // cycle). The tuning compensates more than identified, and every controller meets the
+    // bar simulated here, the identification's error applied by hand to the identified
+    // values (the gains stay: they are what the file does with what it identified); the same
+    // file with the gains at 1 misses the share of the bar the tuning holds its simulations
+    // to (`Bar::guarded`).
+    let spec = Spec::parse(&Rig::random(2).to_toml()).unwrap();
+    let t = tune(&spec, 0.01).unwrap();
+    let gains = tune::gains::gains(&t.spec);
+    assert!(t.works, "{:?}", t.shortfalls());
+    assert!(gains.0 > 1.0 || gains.1 > 1.0, "{gains:?}");
+    for kind in ControllerKind::ALL {
+        if let Err(e) = meets_bar(&t.spec, kind, &t.bar, &tune::SEEDS) {
+            panic!("{kind:?} with the gains {gains:?}: {e}");
+        }
+    }
+    let plain = tune::gains::with_gains(&t.spec, (1.0, 1.0));
+    let guarded = t.bar.guarded();
+    let short: Vec<_> = ControllerKind::ALL
+        .into_iter()
+        .filter_map(|k| meets_bar(&plain, k, &guarded, &tune::SEEDS).err())
+        .collect();
+    assert!(
+        !short.is_empty(),
+        "every controller meets the bar without the gains {gains:?}"
+    );
+}

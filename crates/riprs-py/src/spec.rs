@@ -162,7 +162,8 @@ pub struct PyKalmanSpec {
 }
 
 /// `[compensation]` (read-only): ``dead_zone`` and ``arm_friction`` are ``None`` when they
-/// follow the ``[plant]``'s ``Vd`` and ``Cr``.
+/// follow the ``[plant]``'s ``Vd`` and ``Cr``; ``dead_zone_gain`` and ``friction_gain`` are
+/// the multiples of them the compensation applies (``riprs tune`` chooses them).
 #[pyclass(name = "CompensationSpec", module = "riprs._riprs", frozen, get_all)]
 pub struct PyCompensationSpec {
     enabled: bool,
@@ -170,6 +171,8 @@ pub struct PyCompensationSpec {
     arm_friction: Option<f64>,
     voltage_scale: f64,
     velocity_scale: f64,
+    dead_zone_gain: f64,
+    friction_gain: f64,
 }
 
 /// `[mpc]` (read-only): the core's ``MpcSettings`` in its serde form, one attribute per key of
@@ -538,6 +541,8 @@ impl PySpec {
             arm_friction: c.arm_friction,
             voltage_scale: c.voltage_scale,
             velocity_scale: c.velocity_scale,
+            dead_zone_gain: c.dead_zone_gain,
+            friction_gain: c.friction_gain,
         }
     }
 

@@ -164,8 +164,8 @@ impl Spec {
             return Ok(None);
         }
         let p = self.plant.params();
-        let vd = c.dead_zone.unwrap_or(p.vd);
-        let cr = c.arm_friction.unwrap_or(p.cr);
+        let vd = c.dead_zone_gain * c.dead_zone.unwrap_or(p.vd);
+        let cr = c.friction_gain * c.arm_friction.unwrap_or(p.cr);
         if vd == 0.0 && cr == 0.0 {
             return Ok(None);
         }
@@ -202,18 +202,27 @@ impl Spec {
                 ),
             );
         }
-        let vd_key = match c.dead_zone {
-            Some(_) => "compensation.dead_zone",
-            None => "plant.Vd",
+        // A gain other than 1 is what made the value larger than the one written.
+        let vd_key = match (c.dead_zone_gain != 1.0, c.dead_zone) {
+            (true, _) => "compensation.dead_zone_gain",
+            (false, Some(_)) => "compensation.dead_zone",
+            (false, None) => "plant.Vd",
         };
-        let cr_key = match c.arm_friction {
-            Some(_) => "compensation.arm_friction",
-            None => "plant.Cr",
+        let cr_key = match (c.friction_gain != 1.0, c.arm_friction) {
+            (true, _) => "compensation.friction_gain",
+            (false, Some(_)) => "compensation.arm_friction",
+            (false, None) => "plant.Cr",
         };
         let alternatives = "widen mpc.input_bounds, or set compensation.enabled = false";
         let (key, reason) = if vf > vd {
             let cr = vf * p.kt / p.rm;
-            let fits = if vd < room {
+            let fits = if vd < room && c.friction_gain != 1.0 {
+                format!(
+                    "{cr_key} must be below {} here (the friction voltage below {} V)",
+                    Floor4((room - vd) / (vf / c.friction_gain)),
+                    Floor4(room - vd)
+                )
+            } else if vd < room {
                 format!(
                     "{cr_key} must be below {} N·m here (the friction voltage below {} V)",
                     Floor4(((room - vd) * p.kt / p.rm).max(0.0)),
@@ -231,7 +240,13 @@ impl Spec {
                 ),
             )
         } else {
-            let fits = if vf < room {
+            let fits = if vf < room && c.dead_zone_gain != 1.0 {
+                format!(
+                    "{vd_key} must be below {} here (the dead zone compensated below {} V)",
+                    Floor4((room - vf) / (vd / c.dead_zone_gain)),
+                    Floor4(room - vf)
+                )
+            } else if vf < room {
                 format!("{vd_key} must be below {} V here", Floor4(room - vf))
             } else {
                 format!("and {cr_key}'s friction voltage {vf:.2} V alone leaves none either")

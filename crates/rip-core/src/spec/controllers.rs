@@ -159,6 +159,13 @@ pub struct CompensationSpec {
     /// Width (rad/s) of the ramp that replaces the sign of the arm rate in the friction
     /// feed-forward.
     pub velocity_scale: f64,
+    /// The multiple of the dead zone (`dead_zone`, else the plant's `Vd`) the inverse
+    /// applies: `riprs tune` raises it above 1 where an identified dead zone 30 % off would
+    /// leave a limit cycle ([`crate::tune`], "The compensation's gains").
+    pub dead_zone_gain: f64,
+    /// The multiple of the arm friction (`arm_friction`, else the plant's `Cr`) the
+    /// feed-forward applies, chosen by `riprs tune` as [`dead_zone_gain`](Self::dead_zone_gain).
+    pub friction_gain: f64,
 }
 
 impl Default for CompensationSpec {
@@ -169,6 +176,8 @@ impl Default for CompensationSpec {
             arm_friction: None,
             voltage_scale: 0.05,
             velocity_scale: 0.05,
+            dead_zone_gain: 1.0,
+            friction_gain: 1.0,
         }
     }
 }
@@ -182,6 +191,8 @@ impl CompensationSpec {
             non_negative("compensation.arm_friction", v)?;
         }
         positive("compensation.voltage_scale", self.voltage_scale)?;
-        positive("compensation.velocity_scale", self.velocity_scale)
+        positive("compensation.velocity_scale", self.velocity_scale)?;
+        non_negative("compensation.dead_zone_gain", self.dead_zone_gain)?;
+        non_negative("compensation.friction_gain", self.friction_gain)
     }
 }

@@ -422,6 +422,60 @@ fn the_compensation_follows_the_plant_and_shrinks_the_planned_bounds() {
 }
 
 #[test]
+fn the_compensations_gains_multiply_what_it_compensates() {
+    let text = "[plant]\npreset = 'qube_servo2'\nCr = 0.003\nVd = 0.4\n";
+    let p = Spec::parse(text).unwrap().plant.params();
+    let vf = 0.003 * p.rm / p.kt;
+    let law = |extra: &str| {
+        *Spec::parse(&format!("{text}[compensation]\n{extra}"))
+            .unwrap()
+            .design(paper::TS)
+            .unwrap()
+            .compensation()
+            .unwrap()
+    };
+    let hedged = law("dead_zone_gain = 1.5\nfriction_gain = 2.0\n");
+    assert_eq!(hedged.dead_zone(), 1.5 * 0.4);
+    assert_eq!(hedged.friction_voltage(), 2.0 * 0.003 * p.rm / p.kt);
+    // On the file's own values too, and the planned bounds shrink by what is applied.
+    let own = law("dead_zone = 0.2\narm_friction = 0.001\ndead_zone_gain = 1.25\n");
+    assert_eq!(own.dead_zone(), 1.25 * 0.2);
+    assert_eq!(own.friction_voltage(), 0.001 * p.rm / p.kt);
+    let design = Spec::parse(&format!("{text}[compensation]\nfriction_gain = 2.0\n"))
+        .unwrap()
+        .design(paper::TS)
+        .unwrap();
+    assert!((design.bounds().1 - (12.0 - 0.4 - 2.0 * vf)).abs() < 1e-12);
+    // A gain that leaves no room is refused through it, with the bound it must stay below:
+    // just below it is accepted, a little above it is not.
+    let e = Spec::parse(&format!("{text}[compensation]\ndead_zone_gain = 40\n"))
+        .unwrap()
+        .design(paper::TS)
+        .unwrap_err();
+    assert_eq!(e.key, "compensation.dead_zone_gain", "{e}");
+    let fits: f64 = e
+        .to_string()
+        .split("must be below ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no largest gain in: {e}"));
+    assert!((fits - (12.0 - vf) / 0.4).abs() < 1e-3, "{fits}: {e}");
+    let at = |g: f64| {
+        Spec::parse(&format!("{text}[compensation]\ndead_zone_gain = {g}\n"))
+            .unwrap()
+            .design(paper::TS)
+    };
+    assert!(at(fits * (1.0 - 1e-6)).is_ok());
+    assert!(at(fits + 0.01).is_err());
+    let e = Spec::parse(&format!("{text}[compensation]\nfriction_gain = 1e6\n"))
+        .unwrap()
+        .design(paper::TS)
+        .unwrap_err();
+    assert_eq!(e.key, "compensation.friction_gain", "{e}");
+}
+
+#[test]
 fn bad_compensation_values_name_the_key() {
     assert_eq!(
         key_of("[compensation]\nvoltage_scale = 0\n"),
@@ -442,6 +496,14 @@ fn bad_compensation_values_name_the_key() {
     assert_eq!(
         key_of("[compensation]\nenabled = 1\n"),
         "compensation.enabled"
+    );
+    assert_eq!(
+        key_of("[compensation]\ndead_zone_gain = -0.5\n"),
+        "compensation.dead_zone_gain"
+    );
+    assert_eq!(
+        key_of("[compensation]\nfriction_gain = inf\n"),
+        "compensation.friction_gain"
     );
     let e = Spec::parse("[compensation]\ndead_zone = 12.5\n")
         .unwrap()

@@ -18,7 +18,10 @@
 //! balanced disk margin at least [`Bar::disk_margin`] (0.5, about 4.4 dB and 28°).
 //!
 //! **Compensation off** by [`OFF_COMPENSATION`] either way (the dead zone and the arm's
-//! Coulomb friction the compensation assumes, 0.7 and 1.3 times the plant's), with the arm's
+//! Coulomb friction the compensation assumes, 0.7 and 1.3 times the plant's: an
+//! identification that far off; the file's `compensation.dead_zone_gain` and
+//! `friction_gain` still multiply them, as they multiply what a rig's identification found,
+//! [`super::gains`]), with the arm's
 //! stiction on ([`STICTION_RATIO`] times its Coulomb level where the file gives no breakaway
 //! torque): no fall, and an arm peak-to-peak of at most [`Bar::off_peak_to_peak`]
 //! ([`Bar::off_peak_to_peak_mpc`] for the MPC) — never below the rig's own balance bar, which
@@ -198,8 +201,9 @@ pub fn sensor_floor(spec: &Spec, ts: f64) -> Result<f64, SpecError> {
     Ok(worst)
 }
 
-/// `spec` with its compensation `1 + error` times the plant's dead zone and arm Coulomb
-/// friction and the arm's stiction on (module docs); `None` when the file compensates nothing
+/// `spec` with its compensation assuming `1 + error` times the plant's dead zone and arm
+/// Coulomb friction (each times the file's gains) and the arm's stiction on (module docs);
+/// `None` when the file compensates nothing
 /// (compensation disabled, or a rig with neither), where the error has nothing to act on.
 pub fn off_compensation(spec: &Spec, error: f64) -> Option<Spec> {
     let p = spec.plant.params();
