@@ -161,7 +161,7 @@ pub struct CompensationSpec {
     pub velocity_scale: f64,
     /// The multiple of the dead zone (`dead_zone`, else the plant's `Vd`) the inverse
     /// applies: `riprs tune` raises it above 1 where an identified dead zone 30 % off would
-    /// leave a limit cycle ([`crate::tune`], "The compensation's gains").
+    /// leave a limit cycle ([`crate::tune::gains`]).
     pub dead_zone_gain: f64,
     /// The multiple of the arm friction (`arm_friction`, else the plant's `Cr`) the
     /// feed-forward applies, chosen by `riprs tune` as [`dead_zone_gain`](Self::dead_zone_gain).
