@@ -24,13 +24,14 @@
 //! chose leave a controller short of the bar, the tuning assesses every pair of
 //! [`DEAD_ZONE_GAINS`] × [`FRICTION_GAINS`] whole (the exact compensation, `0.7 ×` and
 //! `1.3 ×` the identified values, each times the gains, with the stiction on) and keeps the
-//! pair with which most controllers work, the nearest the shortfall summed on a tie. The
+//! pair with which most controllers work, the nearest the shortfall summed on a tie, among
+//! the pairs with which every controller that worked still works. The
 //! bar's "exact" compensation is then the identified values times the gains, as on the rig.
 
 use std::sync::atomic::AtomicBool;
 
 use super::settings::check_cancel;
-use super::{assess, off_compensation, Bar, Tuned};
+use super::{assess, off_compensation, Assessment, Bar, Tuned};
 use crate::spec::{Spec, SpecError};
 
 /// The dead-zone gains the tuning tries.
@@ -57,10 +58,20 @@ pub fn gains(spec: &Spec) -> (f64, f64) {
 
 /// `(failing controllers, summed shortfall)` of `tuned`'s assessments against `bar`: the
 /// order the search ranks candidates in.
-fn rank(assessments: &[super::Assessment], bar: &Bar) -> (usize, f64) {
+fn rank(assessments: &[Assessment], bar: &Bar) -> (usize, f64) {
     let failing = assessments.iter().filter(|a| !a.works(bar)).count();
     let shortfall = assessments.iter().map(|a| a.shortfall(bar)).sum();
     (failing, shortfall)
+}
+
+/// Whether every controller that works in `before` still works in `after`: gains that fix one
+/// controller by breaking another trade a warning for another, and the one broken may be the
+/// one a lab runs (an over-compensated dead zone shakes the pendulum).
+fn keeps_every_working(before: &[Assessment], after: &[Assessment], bar: &Bar) -> bool {
+    before
+        .iter()
+        .filter(|a| a.works(bar))
+        .all(|a| after.iter().any(|b| b.kind == a.kind && b.works(bar)))
 }
 
 /// Keeps in `tuned` the compensation's gains with which most controllers work (module docs),
@@ -88,7 +99,7 @@ pub(crate) fn choose(
                 continue;
             };
             let key = rank(&assessments, bar);
-            if key < best.0 {
+            if key < best.0 && keeps_every_working(&tuned.assessments, &assessments, bar) {
                 best = (key, (gd, gf), Some((candidate, assessments)));
             }
         }
