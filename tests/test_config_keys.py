@@ -50,6 +50,7 @@ CHANGES: dict[str, tuple[str, str]] = {
     "compensation.arm_friction": ("0.001", "[plant]\nCr = 0.002\n"),
     "compensation.dead_zone_gain": ("1.2", "[plant]\nVd = 0.3\n"),
     "compensation.friction_gain": ("1.5", "[plant]\nCr = 0.002\n"),
+    "kalman.input_disturbance": ("0.1", ""),
     "monte_carlo.parameters": ('["mr"]', ""),
     "monte_carlo.runs": ("3", ""),
     "swing_up.on_fall": ('"stop"', ""),

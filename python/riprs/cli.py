@@ -378,7 +378,12 @@ riprs reads keeps the ones it sets: `riprs config FILE`, `Spec.to_toml` and the 
   LQR's and LQG's integral action (MATLAB's `lqi`, [design.md](design.md#integral-action);
   0, the paper's setting, for none).
 - `[kalman]`: the one Kalman filter LQG and MPC share: the output-disturbance gain of eq. (1)
-  and the measurement-noise diagonal of eq. (2).
+  and the measurement-noise diagonal of eq. (2). `input_disturbance` (V² per period, default
+  0) gives LQG a filter of its own instead, on the model with a random-walk disturbance at
+  the plant input whose estimate its law cancels, `u = −K (x̂ − x_ref) − d̂`: what the
+  compensation leaves of a dead zone, friction or breakaway torque
+  ([tuning.md](tuning.md#lqg-cancelling-an-input-disturbance)); `riprs tune` sets it where
+  LQG needs it.
 - `[mpc]`: section 3's MPC; the section is the MPC's own settings (`MpcSettings`, the keywords
   of Python's `riprs.Mpc`), each missing key taking the paper profile (`riprs.Mpc.paper()`,
   which is this section's default exactly, solver included; `riprs.Mpc(...)`'s own keyword

@@ -210,7 +210,9 @@ class TuneResult:
         controllers' own keys changed on top of these where the shared cost left them short
         of the bar (``rip_core::tune::own``): LQG's filter, ``lqg_measurement_noise`` and
         ``lqg_disturbance`` (factors on ``kalman.measurement_noise`` and
-        ``kalman.disturbance_gain``, which the MPC shares), and the MPC's weights,
+        ``kalman.disturbance_gain``, which the MPC shares) or ``lqg_input_disturbance``
+        (``kalman.input_disturbance`` set: LQG's own filter with an input disturbance its law
+        cancels; 0 for none), and the MPC's weights,
         ``mpc_arm``, ``mpc_pendulum``, ``mpc_rate`` (factors on its output and input-rate
         weights, by their square roots) and ``mpc_input`` (an input weight, relative to the
         input-rate weight).
@@ -318,6 +320,12 @@ class TuneResult:
                 f"kalman.measurement_noise x{w['measurement_noise']:g}, "
                 f"lqr.integral_weight {w['integral_weight']:g}, "
                 f"loop transfer recovery q = {w['recovery']:g}"
+                + (
+                    f"; LQG's own filter cancelling an input disturbance: "
+                    f"kalman.input_disturbance = {w['lqg_input_disturbance']:g} V^2"
+                    if w["lqg_input_disturbance"] > 0.0
+                    else ""
+                )
                 + (
                     f"; LQG's own filter: kalman.measurement_noise "
                     f"x{w['lqg_measurement_noise']:g}, kalman.disturbance_gain "
@@ -785,6 +793,7 @@ def tune(
         "recovery": 1.0,
         "lqg_measurement_noise": 1.0,
         "lqg_disturbance": 1.0,
+        "lqg_input_disturbance": 0.0,
         "mpc_arm": 1.0,
         "mpc_pendulum": 1.0,
         "mpc_rate": 1.0,

@@ -584,8 +584,9 @@ impl<R: Real> Controller<R> {
         true
     }
 
-    /// `sat(−K (x − x_ref) − k_i x_i)`, then the integrator's update with the arm error
-    /// (conditional integration) when `integrate`; a non-finite value becomes 0 (clamped).
+    /// `sat(−K (x − x_ref) − k_i x_i)` (and `− d̂` where the design cancels an input
+    /// disturbance), then the integrator's update with the arm error (conditional
+    /// integration) when `integrate`; a non-finite value becomes 0 (clamped).
     fn feedback(&mut self, r: &[R; MAX_NY], arm: R, integrate: bool) -> (R, bool) {
         let x = self.x_hat;
         let k = self.design.k;
@@ -595,6 +596,9 @@ impl<R: Real> Controller<R> {
             acc += k[j] * err[j];
         }
         let mut v = -acc;
+        if self.design.cancels_input_disturbance {
+            v -= self.est.posterior[self.design.nx - 1];
+        }
         let ki = self.design.integral_gain;
         if ki != R::ZERO {
             v -= ki * self.integral;

@@ -34,7 +34,7 @@ const REGULATOR_STEP_INSTRUCTIONS: u64 = 3_000;
 pub const NX_PLANT: usize = 4;
 
 /// The version of the byte layout written by [`Design::to_bytes`].
-pub const LAYOUT_VERSION: u16 = 1;
+pub const LAYOUT_VERSION: u16 = 2;
 /// The first four bytes of every encoded design.
 pub const MAGIC: [u8; 4] = *b"RIPD";
 /// Bytes before the body: magic, version, kind, flags, total length.
@@ -215,7 +215,14 @@ pub struct Design<R: Real = f64> {
     pub integral_gain: R,
     /// LQR rate-filter cut-off (Hz, > 0; `+∞` for the plain difference).
     pub rate_cutoff_hz: R,
-    /// Estimator states `n` (LQG: ≥ 4; MPC: the augmented model's).
+    /// LQG only: the estimator's last state is a disturbance at the plant input
+    /// (`x[k+1] = A x + B (u + d)`), which the law cancels: `u = −K (x̂ − x_ref) − d̂`
+    /// (crate docs, "LQG"). Byte-layout flag bit 0.
+    pub cancels_input_disturbance: bool,
+    /// Estimator states `n` (LQG: ≥ 4, ≥ 5 with [`cancels_input_disturbance`]; MPC: the
+    /// augmented model's).
+    ///
+    /// [`cancels_input_disturbance`]: Self::cancels_input_disturbance
     pub nx: usize,
     /// Outputs `ny` (2 for the rig).
     pub ny: usize,
@@ -286,6 +293,7 @@ impl<R: Real> Design<R> {
             k: [z; NX_PLANT],
             integral_gain: z,
             rate_cutoff_hz: z,
+            cancels_input_disturbance: false,
             nx: 0,
             ny: 0,
             a: [z; MAX_NX * MAX_NX],
@@ -331,6 +339,7 @@ impl<R: Real> Design<R> {
         self.k = [z; NX_PLANT];
         self.integral_gain = z;
         self.rate_cutoff_hz = R::from_f64(20.0);
+        self.cancels_input_disturbance = false;
         self.nx = 0;
         self.ny = 0;
         self.output_scales = [R::ONE; MAX_NY];
@@ -397,6 +406,9 @@ impl<R: Real> Design<R> {
         }
         if c.is_active() && !(c.voltage_scale > R::ZERO && c.velocity_scale > R::ZERO) {
             return Err(BadValue("compensation.scales"));
+        }
+        if self.cancels_input_disturbance && (self.kind != Kind::Lqg || self.nx <= NX_PLANT) {
+            return Err(BadValue("cancels_input_disturbance"));
         }
         match self.kind {
             Kind::Lqr => {
@@ -569,7 +581,7 @@ impl<R: Real> Design<R> {
         buf[..4].copy_from_slice(&MAGIC);
         buf[4..6].copy_from_slice(&LAYOUT_VERSION.to_le_bytes());
         buf[6] = self.kind.code();
-        buf[7] = 0;
+        buf[7] = u8::from(self.cancels_input_disturbance);
         let total = u32::try_from(needed).map_err(|_| DesignError::BadSize("length"))?;
         buf[8..12].copy_from_slice(&total.to_le_bytes());
         let mut w = Writer {
@@ -625,7 +637,12 @@ impl<R: Real> Design<R> {
             return Err(DesignError::BadChecksum);
         }
         let kind = Kind::from_code(bytes[6]).ok_or(DesignError::UnknownKind(bytes[6]))?;
+        let flags = bytes[7];
+        if flags & !1 != 0 {
+            return Err(DesignError::BadValue("flags"));
+        }
         self.clear(kind);
+        self.cancels_input_disturbance = flags & 1 != 0;
         let mut r = Reader {
             buf: &bytes[HEADER_LEN..total - 4],
             pos: 0,

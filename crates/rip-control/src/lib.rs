@@ -55,7 +55,11 @@
 //! x̂[k+1|k] = A x̂[k|k−1] + B_u u[k] + L e[k]
 //! ```
 //!
-//! The LQG applies the LQR law to the first four states of `x̂[k|k]`.
+//! The LQG applies the LQR law to the first four states of `x̂[k|k]`. With
+//! [`Design::cancels_input_disturbance`] its estimator's last state is a disturbance `d` at
+//! the plant input (`x[k+1] = A x + B (u + d)`, a random walk: what the compensation leaves of
+//! a dead zone, friction or breakaway torque), and the law cancels its estimate:
+//! `u = −K (x̂ − x_ref) − d̂`.
 //!
 //! # MPC
 //!
@@ -82,7 +86,7 @@
 //! `w = v + V_f σ(θ̇̂/ω_s)`, `u = clamp(w + V_d σ(w/v_s), u_min, u_max)`, `σ = clamp(·, −1, 1)`;
 //! the law plans within `[u_min + V_d + V_f, u_max − V_d − V_f]` and the estimator is fed `v`.
 //!
-//! # Byte layout (version 1)
+//! # Byte layout (version 2)
 //!
 //! Little-endian throughout; every real is an IEEE-754 `f64` (8 bytes); matrices row-major,
 //! only their used `rows × cols` entries.
@@ -90,9 +94,9 @@
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `"RIPD"` |
-//! | 4 | 2 | layout version `u16` = 1 |
+//! | 4 | 2 | layout version `u16` = 2 |
 //! | 6 | 1 | kind: 1 LQR, 2 LQG, 3 MPC |
-//! | 7 | 1 | flags, 0 |
+//! | 7 | 1 | flags: bit 0 [`Design::cancels_input_disturbance`] (LQG); the others 0 |
 //! | 8 | 4 | total length `u32`, CRC included |
 //! | 12 | 8 | `ts` |
 //! | 20 | 16 | `input_bounds` `[u_min, u_max]` |

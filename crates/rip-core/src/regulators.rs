@@ -362,6 +362,19 @@ impl Lqg {
         (g != 0.0).then_some(g)
     }
 
+    /// Makes the estimator's last state a disturbance at the plant input that the law cancels,
+    /// `u = −K (x̂ − x_ref) − d̂` (rip-control's `Design::cancels_input_disturbance`); the
+    /// estimator given to [`new`](Self::new) must model it (`x[k+1] = A x + B (u + d)`, at
+    /// least 5 states).
+    pub fn with_input_disturbance_cancelled(self) -> Result<Self> {
+        self.rebuilt(|d| d.cancels_input_disturbance = true)
+    }
+
+    /// Whether the law cancels an estimated input disturbance.
+    pub fn cancels_input_disturbance(&self) -> bool {
+        self.inner.design().cancels_input_disturbance
+    }
+
     /// The gain `K` (1×4).
     pub fn gain(&self) -> Mat {
         Mat::from_row_slice(1, NX, &self.inner.design().k)

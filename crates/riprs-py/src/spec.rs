@@ -154,11 +154,12 @@ pub struct PyLqrSpec {
     integral_weight: f64,
 }
 
-/// `[kalman]` (read-only).
+/// `[kalman]` (read-only): ``input_disturbance`` is LQG's own (0: LQG on the shared filter).
 #[pyclass(name = "KalmanSpec", module = "riprs._riprs", frozen, get_all)]
 pub struct PyKalmanSpec {
     disturbance_gain: f64,
     measurement_noise: Vec<f64>,
+    input_disturbance: f64,
 }
 
 /// `[compensation]` (read-only): ``dead_zone`` and ``arm_friction`` are ``None`` when they
@@ -528,6 +529,7 @@ impl PySpec {
         PyKalmanSpec {
             disturbance_gain: k.disturbance_gain,
             measurement_noise: k.measurement_noise.to_vec(),
+            input_disturbance: k.input_disturbance,
         }
     }
 

@@ -53,6 +53,11 @@ pub enum Start {
 /// percentile of the time to upright over ±10 % parameter errors.
 pub const SWING_UP_ALLOWANCE: f64 = 10.0;
 
+/// The variance `q_u` (V² per period) of the white noise at the plant input in LQG's own
+/// filter with an input disturbance (`kalman.input_disturbance`): the model's own error,
+/// small against the disturbance it leaves to `d`.
+pub const LQG_INPUT_NOISE: f64 = 0.01;
+
 /// A built controller and its kind.
 pub type Built = (ControllerKind, Box<dyn Controller>);
 
@@ -472,6 +477,9 @@ impl Design {
     /// `M' = M S_y⁻¹`, whose innovation `y − C' x̂ = S_y (y/s_y − C_aug x̂)` gives the same
     /// corrections.
     pub fn lqg(&self) -> Result<Lqg, SpecError> {
+        if self.spec.kalman.input_disturbance > 0.0 {
+            return self.lqg_cancelling_input_disturbance();
+        }
         let (lo, hi) = self.bounds();
         let model = self.estimator.model();
         let kf = self.estimator.kalman();
@@ -488,6 +496,59 @@ impl Design {
             .and_then(|g| g.with_input_bounds(lo, hi))
             .and_then(|g| g.with_integral_action(self.integral_gain.unwrap_or(0.0)))
             .map_err(|e| SpecError::new("kalman", format!("the LQG estimator: {e}")))
+    }
+
+    /// LQG with its own filter, on the design model augmented by a random-walk disturbance
+    /// `d` at the plant input, whose estimate the law cancels (`kalman.input_disturbance`):
+    ///
+    /// ```text
+    /// [x; d][k+1] = [A_d B_d; 0 1] [x; d] + [B_d; 0] u + [B_d 0; 0 1] w,   y = [C 0] [x; d] + v
+    /// cov(w) = diag(q_u, q_d),   cov(v) = diag(σ_θ² + δ_θ²/12, σ_α² + δ_α²/12)
+    /// u = −K (x̂ − x_ref) − d̂
+    /// ```
+    ///
+    /// with `q_u` = [`LQG_INPUT_NOISE`], `q_d` the key, `σ` the `[sensor]`'s noise and `δ` one
+    /// count of its encoders (their quantisation's variance). What the compensation leaves of
+    /// a dead zone, friction or breakaway torque acts as such a disturbance, and is cancelled
+    /// within a few periods instead of holding the arm in a limit cycle.
+    fn lqg_cancelling_input_disturbance(&self) -> Result<Lqg, SpecError> {
+        let key = |e: RipError| SpecError::new("kalman.input_disturbance", e.to_string());
+        let (a, b, c) = (&self.a, &self.b, &self.c);
+        let n = a.nrows();
+        let mut aa = Mat::zeros(n + 1, n + 1);
+        aa.view_mut((0, 0), (n, n)).copy_from(a);
+        aa.view_mut((0, n), (n, 1)).copy_from(b);
+        aa[(n, n)] = 1.0;
+        let mut ba = Mat::zeros(n + 1, 1);
+        ba.view_mut((0, 0), (n, 1)).copy_from(b);
+        let mut ca = Mat::zeros(c.nrows(), n + 1);
+        ca.view_mut((0, 0), (c.nrows(), n)).copy_from(c);
+        let mut g = Mat::zeros(n + 1, 2);
+        g.view_mut((0, 0), (n, 1)).copy_from(b);
+        g[(n, 1)] = 1.0;
+        let qn = Mat::from_row_slice(
+            2,
+            2,
+            &[
+                LQG_INPUT_NOISE,
+                0.0,
+                0.0,
+                self.spec.kalman.input_disturbance,
+            ],
+        );
+        let sensor = &self.spec.sensor;
+        let variance = |i: usize| {
+            let count = 2.0 * std::f64::consts::PI / f64::from(sensor.encoder_counts[i]);
+            sensor.noise_std[i].powi(2) + count * count / 12.0
+        };
+        let rn = Mat::from_row_slice(2, 2, &[variance(0), 0.0, 0.0, variance(1)]);
+        let kf = crate::kalman::kalman(&aa, &g, &ca, &qn, &rn, None, None).map_err(key)?;
+        let (lo, hi) = self.bounds();
+        Lqg::new(&self.k, &aa, &ba, &ca, &kf.l, &kf.m, self.ts)
+            .and_then(|g| g.with_input_bounds(lo, hi))
+            .and_then(|g| g.with_integral_action(self.integral_gain.unwrap_or(0.0)))
+            .and_then(Lqg::with_input_disturbance_cancelled)
+            .map_err(key)
     }
 
     /// The MPC of `[mpc]` on the shared Kalman filter, planning within

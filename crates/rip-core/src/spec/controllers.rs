@@ -73,6 +73,10 @@ pub struct KalmanSpec {
     pub disturbance_gain: f64,
     /// Diagonal of the measurement-noise model `D_n` (scaled output units), eq. (2).
     pub measurement_noise: [f64; 2],
+    /// LQG only: the variance `q_d` (V² per period) of a random-walk disturbance at the plant
+    /// input that LQG's own filter estimates and its law cancels (`Design::lqg`); 0, the
+    /// default, for the paper's LQG on the shared filter.
+    pub input_disturbance: f64,
 }
 
 impl Default for KalmanSpec {
@@ -80,6 +84,7 @@ impl Default for KalmanSpec {
         Self {
             disturbance_gain: crate::mpc::paper::DISTURBANCE_GAIN,
             measurement_noise: [1.0, 1.0],
+            input_disturbance: 0.0,
         }
     }
 }
@@ -91,7 +96,8 @@ impl KalmanSpec {
             "kalman.measurement_noise",
             &self.measurement_noise,
             positive,
-        )
+        )?;
+        non_negative("kalman.input_disturbance", self.input_disturbance)
     }
 }
 

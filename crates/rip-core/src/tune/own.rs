@@ -4,9 +4,12 @@
 //! leaves a controller short, what that controller uses alone is changed on top of it, in an
 //! order that leaves every controller already judged as it was:
 //!
-//! 1. LQG: the Kalman filter's noise model (`kalman.measurement_noise`,
-//!    `kalman.disturbance_gain`; [`KalmanWeights`], [`search_lqg`]). LQR does not use the
-//!    filter; the MPC does, and is judged again on the filter chosen.
+//! 1. LQG: its filter. First a filter of its own with a disturbance at the plant input that
+//!    its law cancels (`kalman.input_disturbance`: what the compensation leaves of a dead
+//!    zone, friction or breakaway torque), then the shared filter's noise model
+//!    (`kalman.measurement_noise`, `kalman.disturbance_gain`; [`KalmanWeights`],
+//!    [`search_lqg`]). LQR does not use the filter; the MPC uses the shared one, and is judged
+//!    again on the filter chosen.
 //! 2. The MPC: its weights (`mpc.output_weights`, `mpc.input_rate_weights`,
 //!    `mpc.input_weights`; [`MpcWeights`], [`search`]). Its loop differs from LQR's: it
 //!    weights the input's rate, not the input, which adds an integrator's phase lag at the
@@ -98,15 +101,18 @@ pub fn search(
     )
 }
 
-/// A change to the shared Kalman filter's noise model on top of the shared weights, for LQG
-/// ([`search_lqg`]): `kalman.measurement_noise` times `measurement_noise`,
-/// `kalman.disturbance_gain` times `disturbance`.
+/// A change to LQG's filter on top of the shared weights ([`search_lqg`]): its own filter with
+/// an input disturbance it cancels, `kalman.input_disturbance` = `input_disturbance` (when
+/// positive; `Design::lqg`), or the shared filter's noise model, `kalman.measurement_noise`
+/// times `measurement_noise` and `kalman.disturbance_gain` times `disturbance`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct KalmanWeights {
     /// Factor on `kalman.measurement_noise`.
     pub measurement_noise: f64,
     /// Factor on `kalman.disturbance_gain`.
     pub disturbance: f64,
+    /// `kalman.input_disturbance` set (0: LQG on the shared filter).
+    pub input_disturbance: f64,
 }
 
 impl KalmanWeights {
@@ -114,6 +120,7 @@ impl KalmanWeights {
     pub const SHARED: KalmanWeights = KalmanWeights {
         measurement_noise: 1.0,
         disturbance: 1.0,
+        input_disturbance: 0.0,
     };
 
     /// `spec` with this change to its `[kalman]` noise model.
@@ -123,18 +130,32 @@ impl KalmanWeights {
             *v *= self.measurement_noise;
         }
         s.kalman.disturbance_gain *= self.disturbance;
+        s.kalman.input_disturbance = self.input_disturbance;
         s
     }
 }
 
-/// The filters [`search_lqg`] tries, nearest the shared one first.
+/// The input-disturbance variances (V² per period) [`search_lqg`] tries first: LQG's own
+/// filter cancelling what the compensation leaves, whose gain grows with the variance.
+pub const INPUT_DISTURBANCES: [f64; 3] = [0.1, 0.01, 1.0];
+
+/// The filters [`search_lqg`] tries: an input disturbance cancelled
+/// ([`INPUT_DISTURBANCES`]), then the shared filter's noise model changed, nearest the
+/// shared one first.
 pub fn kalman_candidates() -> Vec<KalmanWeights> {
-    let mut out = Vec::new();
+    let mut out: Vec<KalmanWeights> = INPUT_DISTURBANCES
+        .into_iter()
+        .map(|input_disturbance| KalmanWeights {
+            input_disturbance,
+            ..KalmanWeights::SHARED
+        })
+        .collect();
     for disturbance in [1.0, 0.3, 3.0, 0.1, 10.0, 0.01, 100.0] {
         for measurement_noise in [1.0, 0.3, 3.0, 0.1, 10.0, 0.03, 0.01, 0.001] {
             let w = KalmanWeights {
                 measurement_noise,
                 disturbance,
+                input_disturbance: 0.0,
             };
             if w != KalmanWeights::SHARED {
                 out.push(w);
