@@ -120,7 +120,7 @@ def test_tuned_controllers_hold_the_bar_with_the_compensation_30_percent_off(rig
     # breakaway torque is twice its Coulomb level (stiction no model knows), the tuning's
     # noise seeds (rip_core::tune::SEEDS). Every controller riprs tune says works balances
     # with at most 0.1 rad arm peak-to-peak (0.05 for the MPC; never below the rig's own bar);
-    # of one short of the bar, rip-rt run's pre-flight warns through the record with the same
+    # one short of the bar, rip-rt run's pre-flight refuses through the record, with the same
     # words.
     p = RIGS[rig]
     result = tune(_spec(p), runs=0, progress=False, swing_up=False)
@@ -145,7 +145,7 @@ def test_tuned_controllers_hold_the_bar_with_the_compensation_30_percent_off(rig
             misses = result.controllers[name].misses
             if misses is not None:
                 found = {f.check: f for f in preflight(out, name)}["prediction"]
-                assert found.verdict == "warn" and misses in found.message, (name, found)
+                assert found.verdict == "refuse" and misses in found.message, (name, found)
                 continue
             for seed in TUNE_SEEDS:
                 r = riprs.simulate(spec.build_plant(), c, seed=seed, **options)

@@ -43,6 +43,7 @@ CHANGES: dict[str, tuple[str, str]] = {
     "mpc.max_iterations": ("1", ""),
     "mpc.control_horizon": ("2", ""),
     "lqr.integral_weight": ("1.0", ""),
+    "lqr.disturbance_bandwidth": ("5.0", "[plant]\nVd = 0.3\n"),
     "compensation.enabled": ("false", "[plant]\nVd = 0.3\n"),
     "compensation.voltage_scale": ("0.1", "[plant]\nVd = 0.3\n"),
     "compensation.velocity_scale": ("0.1", "[plant]\nCr = 0.002\n"),

@@ -20,6 +20,9 @@ from riprs import paper
 from riprs.cli import main
 from riprs.tune import loop_response, margins, tune
 
+# rip-rt's exit code for a run the pre-flight refuses (docs/rip-rt.md, "Exit codes").
+PREFLIGHT_EXIT = 16
+
 # `riprs tune` without its swing-up search (tests/test_swing_tuning.py has it).
 TUNE = ["tune", "--no-swing-up"]
 
@@ -325,7 +328,14 @@ def test_tuned_rigs_balance_end_to_end_on_the_emulator(tmp_path, rip_rt) -> None
         result.write(tuned)
         for controller in ("lqr", "lqg", "mpc"):
             truth = tmp_path / f"{name}.{controller}.truth.csv"
+            misses = result.controllers[controller.upper()].misses
             done = run_once(tuned, controller, truth)
+            if misses is not None:
+                # A controller the tuning says is short of the bar is refused before the
+                # motor moves, with the tuning's reason.
+                assert done.returncode == PREFLIGHT_EXIT, (name, controller, done.stderr)
+                assert misses in done.stderr, (name, controller, done.stderr)
+                continue
             if done.returncode in (4, 10):  # a CPU stall of the loaded machine: once more
                 truth.unlink(missing_ok=True)
                 done = run_once(tuned, controller, truth)
@@ -339,10 +349,7 @@ def test_tuned_rigs_balance_end_to_end_on_the_emulator(tmp_path, rip_rt) -> None
             theta, alpha = x["theta"][last], x["alpha"][last]
             pp, peak = float(np.ptp(theta)), float(np.abs(alpha).max())
             offset = abs(float(np.mean(theta)) - 1.0)
-            # A controller the tuning says is short of the bar runs (the pre-flight warns) but
-            # is not held to it.
-            if result.controllers[controller.upper()].misses is None:
-                results.append((name, controller, pp, peak, offset))
+            results.append((name, controller, pp, peak, offset))
             print(f"{name} {controller}: p-p {pp:.3f} |alpha| {peak:.3f} offset {offset:.3f}")
     for name, controller, pp, peak, offset in results:
         assert pp <= 0.05, (name, controller, pp)

@@ -444,6 +444,9 @@ class LqrSpec:
     def rate_cutoff(self) -> float: ...
     @property
     def integral_weight(self) -> float: ...
+    @property
+    def disturbance_bandwidth(self) -> float:
+        """LQR's input-disturbance observer bandwidth (Hz); 0 for none."""
 
 @final
 class KalmanSpec:

@@ -376,7 +376,10 @@ riprs reads keeps the ones it sets: `riprs config FILE`, `Spec.to_toml` and the 
 - `[lqr]`: `Q` (diagonal) and `R` of eq. (13), shared by LQR and LQG; LQR's rate-filter
   cut-off (Hz, `inf` for none); `integral_weight`, the weight of the integrated arm error in
   LQR's and LQG's integral action (MATLAB's `lqi`, [design.md](design.md#integral-action);
-  0, the paper's setting, for none).
+  0, the paper's setting, for none); `disturbance_bandwidth` (Hz, default 0 for none), LQR's
+  own: an observer of a disturbance at the plant input whose estimate its law cancels
+  ([tuning.md](tuning.md#lqr-cancelling-an-input-disturbance)); `riprs tune` sets it where
+  LQR needs it.
 - `[kalman]`: the one Kalman filter LQG and MPC share: the output-disturbance gain of eq. (1)
   and the measurement-noise diagonal of eq. (2). `input_disturbance` (V² per period, default
   0) gives LQG a filter of its own instead, on the model with a random-walk disturbance at

@@ -208,7 +208,9 @@ class TuneResult:
         loop-transfer-recovery parameter ``q`` (``kalman.disturbance_gain`` and
         ``kalman.measurement_noise`` divided by it: ``rip_core::tune::RECOVERY``); and the
         controllers' own keys changed on top of these where the shared cost left them short
-        of the bar (``rip_core::tune::own``): LQG's filter, ``lqg_measurement_noise`` and
+        of the bar (``rip_core::tune::own``): LQR's input-disturbance observer,
+        ``lqr_disturbance_bandwidth`` (``lqr.disturbance_bandwidth``, Hz; 0 for none); LQG's
+        filter, ``lqg_measurement_noise`` and
         ``lqg_disturbance`` (factors on ``kalman.measurement_noise`` and
         ``kalman.disturbance_gain``, which the MPC shares) or ``lqg_input_disturbance``
         (``kalman.input_disturbance`` set: LQG's own filter with an input disturbance its law
@@ -320,6 +322,12 @@ class TuneResult:
                 f"kalman.measurement_noise x{w['measurement_noise']:g}, "
                 f"lqr.integral_weight {w['integral_weight']:g}, "
                 f"loop transfer recovery q = {w['recovery']:g}"
+                + (
+                    f"; LQR cancelling an input disturbance: "
+                    f"lqr.disturbance_bandwidth = {w['lqr_disturbance_bandwidth']:g} Hz"
+                    if w["lqr_disturbance_bandwidth"] > 0.0
+                    else ""
+                )
                 + (
                     f"; LQG's own filter cancelling an input disturbance: "
                     f"kalman.input_disturbance = {w['lqg_input_disturbance']:g} V^2"
@@ -791,6 +799,7 @@ def tune(
         "integral_weight": 0.0,
         "measurement_noise": 1.0,
         "recovery": 1.0,
+        "lqr_disturbance_bandwidth": 0.0,
         "lqg_measurement_noise": 1.0,
         "lqg_disturbance": 1.0,
         "lqg_input_disturbance": 0.0,

@@ -241,6 +241,10 @@ pub struct Controller<R: Real = f64> {
     x_hat: [R; NX_PLANT],
     integral: R,
     est: Estimator<R>,
+    /// LQR cancelling an input disturbance: its estimate `d̂` and, once there is one, the
+    /// model's prediction `x̂⁻` of the next `x̂` (crate docs, "LQR").
+    disturbance: R,
+    x_predicted: Option<[R; NX_PLANT]>,
     /// The last applied (planned, uncompensated) input `u(k−1)`.
     u_prev: R,
     plan: [R; MAX_NZ],
@@ -283,6 +287,8 @@ impl<R: Real> Controller<R> {
             },
             x_hat: [z; NX_PLANT],
             integral: z,
+            disturbance: z,
+            x_predicted: None,
             est: Estimator {
                 prior: [z; MAX_NX],
                 posterior: [z; MAX_NX],
@@ -371,6 +377,15 @@ impl<R: Real> Controller<R> {
         }
     }
 
+    /// The input disturbance `d̂` the law cancels (V; zero for a design that cancels none).
+    pub fn input_disturbance(&self) -> R {
+        match self.design.kind {
+            _ if !self.design.cancels_input_disturbance => R::ZERO,
+            Kind::Lqr => self.disturbance,
+            Kind::Lqg | Kind::Mpc => self.est.posterior[self.design.nx - 1],
+        }
+    }
+
     /// The estimator's prior `x̂[k+1|k]` (LQG and MPC; empty for the LQR).
     pub fn prior(&self) -> &[R] {
         match self.design.kind {
@@ -405,6 +420,8 @@ impl<R: Real> Controller<R> {
         self.filter.reset();
         self.x_hat = [R::ZERO; NX_PLANT];
         self.integral = R::ZERO;
+        self.disturbance = R::ZERO;
+        self.x_predicted = None;
         self.est.prior = [R::ZERO; MAX_NX];
         self.est.posterior = [R::ZERO; MAX_NX];
         self.est.innovation = [R::ZERO; MAX_NY];
@@ -492,7 +509,10 @@ impl<R: Real> Controller<R> {
     pub fn hold(&mut self, u: R) {
         let v = self.planned_for(u, self.arm_rate());
         match self.design.kind {
-            Kind::Lqr => self.filter.hold(),
+            Kind::Lqr => {
+                self.filter.hold();
+                self.predict_lqr_over_held(v);
+            }
             Kind::Lqg | Kind::Mpc => {
                 if v.is_finite() {
                     self.u_prev = v;
@@ -514,8 +534,13 @@ impl<R: Real> Controller<R> {
         self.integral = R::ZERO;
         match self.design.kind {
             Kind::Lqr => {
-                if !self.update_lqr_estimate(&angles) {
+                // Bumpless, as the integrator: the swing-up's moves are no disturbance.
+                self.disturbance = R::ZERO;
+                if self.update_lqr_estimate(&angles) {
+                    self.predict_lqr(v);
+                } else {
                     self.filter.hold();
+                    self.predict_lqr_over_held(v);
                 }
             }
             Kind::Lqg | Kind::Mpc => {
@@ -552,6 +577,8 @@ impl<R: Real> Controller<R> {
             Kind::Lqr => {
                 self.filter.seed([x[0], x[2]], [x[1], x[3]]);
                 self.sync_lqr_estimate();
+                self.disturbance = R::ZERO;
+                self.predict_lqr(v);
             }
             Kind::Lqg | Kind::Mpc => {
                 self.est.prior = [R::ZERO; MAX_NX];
@@ -595,10 +622,7 @@ impl<R: Real> Controller<R> {
         for j in 1..NX_PLANT {
             acc += k[j] * err[j];
         }
-        let mut v = -acc;
-        if self.design.cancels_input_disturbance {
-            v -= self.est.posterior[self.design.nx - 1];
-        }
+        let mut v = -acc - self.input_disturbance();
         let ki = self.design.integral_gain;
         if ki != R::ZERO {
             v -= ki * self.integral;
@@ -623,16 +647,63 @@ impl<R: Real> Controller<R> {
         (u, true)
     }
 
+    /// With [`Design::cancels_input_disturbance`], after a fresh `x̂`:
+    /// `d̂ ← d̂ + g (x̂ − x̂⁻)` (crate docs, "LQR"); a non-finite update is not kept.
+    fn observe_disturbance(&mut self) {
+        if let Some(predicted) = self.x_predicted {
+            let g = self.design.disturbance_gain;
+            let mut next = self.disturbance;
+            for i in 0..NX_PLANT {
+                next += g[i] * (self.x_hat[i] - predicted[i]);
+            }
+            if next.is_finite() {
+                self.disturbance = next;
+            }
+        }
+    }
+
+    /// `x̂⁻ = A x + B (v + d̂)` from `x`, the planned `v` applied over the period.
+    fn lqr_prediction(&self, x: &[R; NX_PLANT], v: R) -> Option<[R; NX_PLANT]> {
+        let d = &self.design;
+        let w = v + self.disturbance;
+        let mut next = [R::ZERO; NX_PLANT];
+        for i in 0..NX_PLANT {
+            next[i] = d.b[i] * w;
+        }
+        gemv_acc(&mut next, &d.a, x, NX_PLANT, NX_PLANT, R::ONE);
+        next.iter().all(|x| x.is_finite()).then_some(next)
+    }
+
+    /// The prediction from the fresh `x̂` and the planned `v` (LQR cancelling an input
+    /// disturbance; nothing otherwise).
+    fn predict_lqr(&mut self, v: R) {
+        if self.design.cancels_input_disturbance {
+            self.x_predicted = self.lqr_prediction(&self.x_hat, v);
+        }
+    }
+
+    /// The prediction carried over a period without a fresh `x̂`.
+    fn predict_lqr_over_held(&mut self, v: R) {
+        if let Some(x) = self.x_predicted {
+            self.x_predicted = self.lqr_prediction(&x, v);
+        }
+    }
+
     fn step_lqr(&mut self, m: &Measurement<R>, probe: &mut impl FnMut(Phase)) -> (R, Status, u32) {
         let fresh = self.update_lqr_estimate(&m.angles);
+        if fresh && self.design.cancels_input_disturbance {
+            self.observe_disturbance();
+        }
         probe(Phase::Estimate);
         if !fresh {
             self.filter.hold();
             let (u, _) = self.feedback(&m.reference, self.x_hat[0], false);
+            self.predict_lqr_over_held(u);
             return (u, Status::InvalidMeasurement, 0);
         }
         let arm = self.x_hat[0];
         let (u, ok) = self.feedback(&m.reference, arm, true);
+        self.predict_lqr(u);
         (
             u,
             if ok {

@@ -34,7 +34,7 @@ const REGULATOR_STEP_INSTRUCTIONS: u64 = 3_000;
 pub const NX_PLANT: usize = 4;
 
 /// The version of the byte layout written by [`Design::to_bytes`].
-pub const LAYOUT_VERSION: u16 = 2;
+pub const LAYOUT_VERSION: u16 = 3;
 /// The first four bytes of every encoded design.
 pub const MAGIC: [u8; 4] = *b"RIPD";
 /// Bytes before the body: magic, version, kind, flags, total length.
@@ -215,10 +215,16 @@ pub struct Design<R: Real = f64> {
     pub integral_gain: R,
     /// LQR rate-filter cut-off (Hz, > 0; `+∞` for the plain difference).
     pub rate_cutoff_hz: R,
-    /// LQG only: the estimator's last state is a disturbance at the plant input
-    /// (`x[k+1] = A x + B (u + d)`), which the law cancels: `u = −K (x̂ − x_ref) − d̂`
-    /// (crate docs, "LQG"). Byte-layout flag bit 0.
+    /// The law cancels an estimated disturbance `d` at the plant input
+    /// (`x[k+1] = A x + B (u + d)`): `u = −K (x̂ − x_ref) − d̂` (crate docs, "LQR" and "LQG").
+    /// LQG: the estimator's last state is `d`. LQR: `d̂` comes from the observer of
+    /// [`disturbance_gain`](Self::disturbance_gain) on the 4-state model `a`, `b`.
+    /// Byte-layout flag bit 0.
     pub cancels_input_disturbance: bool,
+    /// LQR's input-disturbance observer gain `g` (1×4), used with
+    /// [`cancels_input_disturbance`](Self::cancels_input_disturbance):
+    /// `d̂ ← d̂ + g (x̂ − x̂⁻)`, `x̂⁻` the model's prediction of `x̂` (crate docs, "LQR").
+    pub disturbance_gain: [R; NX_PLANT],
     /// Estimator states `n` (LQG: ≥ 4, ≥ 5 with [`cancels_input_disturbance`]; MPC: the
     /// augmented model's).
     ///
@@ -294,6 +300,7 @@ impl<R: Real> Design<R> {
             integral_gain: z,
             rate_cutoff_hz: z,
             cancels_input_disturbance: false,
+            disturbance_gain: [z; NX_PLANT],
             nx: 0,
             ny: 0,
             a: [z; MAX_NX * MAX_NX],
@@ -340,6 +347,7 @@ impl<R: Real> Design<R> {
         self.integral_gain = z;
         self.rate_cutoff_hz = R::from_f64(20.0);
         self.cancels_input_disturbance = false;
+        self.disturbance_gain = [z; NX_PLANT];
         self.nx = 0;
         self.ny = 0;
         self.output_scales = [R::ONE; MAX_NY];
@@ -407,7 +415,14 @@ impl<R: Real> Design<R> {
         if c.is_active() && !(c.voltage_scale > R::ZERO && c.velocity_scale > R::ZERO) {
             return Err(BadValue("compensation.scales"));
         }
-        if self.cancels_input_disturbance && (self.kind != Kind::Lqg || self.nx <= NX_PLANT) {
+        let cancels = self.cancels_input_disturbance;
+        if cancels
+            && match self.kind {
+                Kind::Lqr => self.nx != NX_PLANT,
+                Kind::Lqg => self.nx <= NX_PLANT,
+                Kind::Mpc => true,
+            }
+        {
             return Err(BadValue("cancels_input_disturbance"));
         }
         match self.kind {
@@ -415,6 +430,11 @@ impl<R: Real> Design<R> {
                 // NaN fails the comparison; +∞ is the plain difference.
                 if self.rate_cutoff_hz.partial_cmp(&R::ZERO) != Some(core::cmp::Ordering::Greater) {
                     return Err(BadValue("rate_cutoff_hz"));
+                }
+                if cancels {
+                    finite("a", &self.a[..NX_PLANT * NX_PLANT])?;
+                    finite("b", &self.b[..NX_PLANT])?;
+                    finite("disturbance_gain", &self.disturbance_gain)?;
                 }
                 return Ok(());
             }
@@ -668,6 +688,11 @@ impl<R: Real> Design<R> {
         w.real(self.integral_gain);
         if self.kind == Kind::Lqr {
             w.real(self.rate_cutoff_hz);
+            if self.cancels_input_disturbance {
+                w.reals(&self.a[..NX_PLANT * NX_PLANT]);
+                w.reals(&self.b[..NX_PLANT]);
+                w.reals(&self.disturbance_gain);
+            }
             return;
         }
         let (n, ny) = (self.nx, self.ny);
@@ -715,6 +740,12 @@ impl<R: Real> Design<R> {
         self.integral_gain = r.real()?;
         if self.kind == Kind::Lqr {
             self.rate_cutoff_hz = r.real()?;
+            if self.cancels_input_disturbance {
+                self.nx = NX_PLANT;
+                r.reals(&mut self.a[..NX_PLANT * NX_PLANT])?;
+                r.reals(&mut self.b[..NX_PLANT])?;
+                r.reals(&mut self.disturbance_gain)?;
+            }
             return Ok(());
         }
         let n = usize::from(r.u16()?);

@@ -47,6 +47,17 @@
 //! x_i[k+1] = x_i[k] + Ts (θ_ref − θ[k])   unless that deepens a saturation
 //! ```
 //!
+//! With [`Design::cancels_input_disturbance`] the LQR also estimates a disturbance `d` at the
+//! plant input (`x[k+1] = A x + B (u + d)`) from how `x̂` departs from the 4-state model's
+//! prediction, and cancels it (rip-core's `Lqr` docs give the observer's bandwidth):
+//!
+//! ```text
+//! d̂[k] = d̂[k−1] + g (x̂[k] − x̂⁻[k]),   u[k] = sat(… − d̂[k]),   x̂⁻[k+1] = A x̂[k] + B (u[k] + d̂[k])
+//! ```
+//!
+//! `d̂` is zero after a reset, a seed or an observed sample (bumpless, as the integrator); a
+//! held period carries `x̂⁻` over with the model.
+//!
 //! # Estimator (LQG and MPC)
 //!
 //! ```text
@@ -86,7 +97,7 @@
 //! `w = v + V_f σ(θ̇̂/ω_s)`, `u = clamp(w + V_d σ(w/v_s), u_min, u_max)`, `σ = clamp(·, −1, 1)`;
 //! the law plans within `[u_min + V_d + V_f, u_max − V_d − V_f]` and the estimator is fed `v`.
 //!
-//! # Byte layout (version 2)
+//! # Byte layout (version 3)
 //!
 //! Little-endian throughout; every real is an IEEE-754 `f64` (8 bytes); matrices row-major,
 //! only their used `rows × cols` entries.
@@ -94,9 +105,9 @@
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `"RIPD"` |
-//! | 4 | 2 | layout version `u16` = 2 |
+//! | 4 | 2 | layout version `u16` = 3 |
 //! | 6 | 1 | kind: 1 LQR, 2 LQG, 3 MPC |
-//! | 7 | 1 | flags: bit 0 [`Design::cancels_input_disturbance`] (LQG); the others 0 |
+//! | 7 | 1 | flags: bit 0 [`Design::cancels_input_disturbance`] (LQR, LQG); the others 0 |
 //! | 8 | 4 | total length `u32`, CRC included |
 //! | 12 | 8 | `ts` |
 //! | 20 | 16 | `input_bounds` `[u_min, u_max]` |
@@ -104,6 +115,7 @@
 //! | 68 | 32 | `k` (4) |
 //! | 100 | 8 | `integral_gain` |
 //! | LQR: 108 | 8 | `rate_cutoff_hz` (`+∞` allowed) |
+//! | LQR with flag bit 0: 116 | 8·16 + 8·4 + 8·4 | `a` (4×4), `b` (4), `disturbance_gain` (4) |
 //! | LQG/MPC: 108 | 2 + 2 | `nx` = n, `ny` (`u16`) |
 //! | | 8·n² | `a` |
 //! | | 8·n | `b` |

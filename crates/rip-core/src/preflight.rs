@@ -535,12 +535,14 @@ fn stored_prediction(input: &Input<'_>) -> Result<Finding, String> {
             ));
         }
     }
+    // A controller the tuning found short of the rig's bar is refused: it balances the model,
+    // but not as well as the bar asks of every controller on this rig.
     Ok(Finding::new(
         "prediction",
         if p.works {
             Verdict::Pass
         } else {
-            Verdict::Warn
+            Verdict::Refuse
         },
         format!(
             "{} balances the rig's model: {from}: arm within {:.2} rad, steady-state arm \
@@ -552,8 +554,12 @@ fn stored_prediction(input: &Input<'_>) -> Result<Finding, String> {
             p.disk_margin,
             match (&p.misses, p.works) {
                 (_, true) => String::new(),
-                (Some(why), false) => format!("; but {why}"),
-                (None, false) => "; it misses the tuning's bar".to_string(),
+                (Some(why), false) =>
+                    format!("; but {why}; choose another controller or pass --force"),
+                (None, false) => {
+                    "; but it misses the tuning's bar; choose another controller or pass --force"
+                        .to_string()
+                }
             }
         ),
     ))

@@ -114,6 +114,25 @@ fn gain_row(k: &Mat) -> Result<SMatrix<f64, 1, NX>> {
 /// rates computed from them, are not finite is treated the same way: discarded, the period
 /// counted as held, the move computed on the kept `x̂` and reported as
 /// [`StepStatus::Fallback`].
+///
+/// # Input disturbance (optional)
+///
+/// What the compensation leaves of a dead zone, friction or breakaway torque acts as a slowly
+/// varying voltage `d` at the plant input, `x[k+1] = A_d x + B_d (u + d)`. With
+/// [`with_input_disturbance_cancelled`](Lqr::with_input_disturbance_cancelled) the regulator
+/// estimates it from how `x̂` departs from the model's prediction, and cancels it:
+///
+/// ```text
+/// d̂[k]    = d̂[k−1] + g (x̂[k] − x̂⁻[k]),        g = γ B_dᵀ / (B_dᵀ B_d)
+/// u[k]     = sat(−K (x̂[k] − x_ref) − k_i x_i[k] − d̂[k])
+/// x̂⁻[k+1] = A_d x̂[k] + B_d (u[k] + d̂[k])
+/// ```
+///
+/// On the model (with the exact state) `x̂ − x̂⁻ = B_d (d − d̂)`, so the estimate's error
+/// shrinks by `1 − γ` per period: a first-order observer of bandwidth
+/// `f_d = −ln(1 − γ) / (2π Ts)`. A held period carries `x̂⁻` over with the model; `d̂` is
+/// zero after construction, [`reset`](Controller::reset), [`seed`](Controller::seed) and
+/// every [`observe`](Controller::observe) (bumpless, as the integrator).
 #[derive(Debug, Clone)]
 pub struct Lqr {
     inner: OnboardController,
@@ -181,6 +200,56 @@ impl Lqr {
     pub fn integral_gain(&self) -> Option<f64> {
         let g = self.inner.design().integral_gain;
         (g != 0.0).then_some(g)
+    }
+
+    /// Adds an observer of a disturbance `d` at the plant input, on the design model
+    /// `x[k+1] = A_d x + B_d (u + d)` (`ad` 4×4, `bd` 4×1), whose estimate the law cancels
+    /// (type docs, "Input disturbance"). `bandwidth_hz` (positive, finite) sets the observer's
+    /// pole `1 − γ`, `γ = 1 − e^{−2π f_d Ts}`.
+    pub fn with_input_disturbance_cancelled(
+        self,
+        ad: &Mat,
+        bd: &Mat,
+        bandwidth_hz: f64,
+    ) -> Result<Self> {
+        check_shape("A", ad, NX, NX)?;
+        check_shape("B", bd, NX, 1)?;
+        check_finite("A", ad)?;
+        check_finite("B", bd)?;
+        if !(bandwidth_hz.is_finite() && bandwidth_hz > 0.0) {
+            return Err(RipError::invalid(
+                "disturbance_bandwidth",
+                format!("must be positive and finite (Hz), got {bandwidth_hz}"),
+            ));
+        }
+        let norm = bd.norm_squared();
+        if !(norm.is_finite() && norm > 0.0) {
+            return Err(RipError::invalid(
+                "B",
+                "the input must move the state for a disturbance at it to be observed",
+            ));
+        }
+        let gamma = -(-2.0 * std::f64::consts::PI * bandwidth_hz * self.ts()).exp_m1();
+        self.rebuilt(|d| {
+            d.cancels_input_disturbance = true;
+            d.nx = NX;
+            d.a[..NX * NX].copy_from_slice(ad.transpose().as_slice());
+            d.b[..NX].copy_from_slice(bd.as_slice());
+            for (g, &bi) in d.disturbance_gain.iter_mut().zip(bd.as_slice()) {
+                *g = gamma * bi / norm;
+            }
+        })
+    }
+
+    /// Whether the law cancels an estimated input disturbance
+    /// ([`with_input_disturbance_cancelled`](Self::with_input_disturbance_cancelled)).
+    pub fn cancels_input_disturbance(&self) -> bool {
+        self.inner.design().cancels_input_disturbance
+    }
+
+    /// The input disturbance `d̂` (V) the law cancels now (zero without the observer).
+    pub fn input_disturbance(&self) -> f64 {
+        self.inner.control().input_disturbance()
     }
 
     /// The gain `K` (1×4).

@@ -203,6 +203,8 @@ pub const PENDULUM: [f64; 2] = [1.0, 0.25];
 /// The controllers' own keys [`tune`] changed on top of the shared weights ([`own`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OwnWeights {
+    /// LQR's input-disturbance observer.
+    pub lqr: own::LqrWeights,
     /// LQG's filter (which the MPC shares).
     pub kalman: own::KalmanWeights,
     /// The MPC's weights.
@@ -212,6 +214,7 @@ pub struct OwnWeights {
 impl OwnWeights {
     /// Nothing changed: the shared weights throughout.
     pub const SHARED: OwnWeights = OwnWeights {
+        lqr: own::LqrWeights::SHARED,
         kalman: own::KalmanWeights::SHARED,
         mpc: own::MpcWeights::SHARED,
     };
@@ -350,6 +353,14 @@ fn replace(tuned: &mut Tuned, a: Assessment) {
 /// The controllers' own keys searched where the shared weights leave them short
 /// ([`own`] module docs: LQG's filter first, then the MPC's weights).
 fn own_keys(tuned: &mut Tuned, ts: f64, bar: &Bar, cancel: &AtomicBool) -> Result<(), SpecError> {
+    if short(tuned, ControllerKind::Lqr, bar) {
+        check_cancel(cancel)?;
+        if let Some((w, spec, a)) = own::search_lqr(&tuned.spec, ts, bar)? {
+            tuned.spec = spec;
+            tuned.own.lqr = w;
+            replace(tuned, a);
+        }
+    }
     if short(tuned, ControllerKind::Lqg, bar) {
         check_cancel(cancel)?;
         if let Some((w, spec, a)) = own::search_lqg(&tuned.spec, ts, bar)? {

@@ -198,13 +198,9 @@ fn judge(name: &str, text: &str) -> Judged {
             }
             Some((_, why)) => {
                 out.short = true;
+                // Refused by the pre-flight, with the reason the tuning stored.
                 let p = preflight_with_record(&t, a.kind, &dir);
-                let expected = if a.fell {
-                    Verdict::Refuse
-                } else {
-                    Verdict::Warn
-                };
-                if p.verdict != expected || (!a.fell && !p.message.contains(why.as_str())) {
+                if p.verdict != Verdict::Refuse || (!a.fell && !p.message.contains(why.as_str())) {
                     out.wrong.push(format!(
                         "{name}: {:?} short of the bar ({why}) but the pre-flight says: {} {}",
                         a.kind,
@@ -304,6 +300,16 @@ fn tuned_controllers_meet_the_bar_or_say_what_they_miss_on_generated_rigs() {
     );
     print_unseen(&judged);
     assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+    // The issue's bar on the whole set: at most 3 of the 16 rigs refused a controller. The
+    // pull-request tier's two rigs are the two known hard ones, so only the whole set counts.
+    if rip_test_scale::full() {
+        assert!(
+            short <= 3,
+            "{short} of {} generated rigs have a controller refused, more than the 3 the bar \
+             allows",
+            rigs.len()
+        );
+    }
 }
 
 #[test]
@@ -449,4 +455,28 @@ fn lqg_cancelling_an_input_disturbance_meets_the_bar_where_the_shared_filter_doe
     let mut shared = t.spec.clone();
     shared.kalman.input_disturbance = 0.0;
     assert!(meets_bar(&shared, ControllerKind::Lqg, &t.bar.guarded(), &tune::SEEDS).is_err());
+}
+
+#[test]
+fn lqr_cancelling_an_input_disturbance_meets_the_bar_where_the_paper_lqr_does_not() {
+    // Generated rig 4: no shared weights tried bring the paper's LQR within the bar (a
+    // stick-slip cycle of 0.18 rad with the compensation 30 % low). With an observer of the
+    // disturbance at the plant input, whose estimate its law cancels, it holds the arm: the
+    // tuning keeps it, and simulated here (errors and stiction applied by hand) it meets the
+    // whole bar, its margins (measured with the observer in the loop) included; the same
+    // file without the observer does not.
+    let spec = Spec::parse(&Rig::random(4).to_toml()).unwrap();
+    let t = tune(&spec, 0.01).unwrap();
+    let bandwidth = t.spec.lqr.disturbance_bandwidth;
+    assert!(bandwidth > 0.0, "{:?}", t.shortfalls());
+    assert!(t
+        .shortfalls()
+        .iter()
+        .all(|(k, _)| *k != ControllerKind::Lqr));
+    if let Err(e) = meets_bar(&t.spec, ControllerKind::Lqr, &t.bar, &tune::SEEDS) {
+        panic!("LQR with lqr.disturbance_bandwidth = {bandwidth}: {e}");
+    }
+    let mut paper = t.spec.clone();
+    paper.lqr.disturbance_bandwidth = 0.0;
+    assert!(meets_bar(&paper, ControllerKind::Lqr, &t.bar.guarded(), &tune::SEEDS).is_err());
 }

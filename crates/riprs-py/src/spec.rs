@@ -144,7 +144,8 @@ pub struct PyReferenceSpec {
     duration: f64,
 }
 
-/// `[lqr]` (read-only).
+/// `[lqr]` (read-only): ``disturbance_bandwidth`` is LQR's own (Hz; 0: no input-disturbance
+/// observer).
 #[pyclass(name = "LqrSpec", module = "riprs._riprs", frozen, get_all)]
 #[allow(non_snake_case)]
 pub struct PyLqrSpec {
@@ -152,6 +153,7 @@ pub struct PyLqrSpec {
     R: f64,
     rate_cutoff: f64,
     integral_weight: f64,
+    disturbance_bandwidth: f64,
 }
 
 /// `[kalman]` (read-only): ``input_disturbance`` is LQG's own (0: LQG on the shared filter).
@@ -519,6 +521,7 @@ impl PySpec {
             R: l.R,
             rate_cutoff: l.rate_cutoff,
             integral_weight: l.integral_weight,
+            disturbance_bandwidth: l.disturbance_bandwidth,
         }
     }
 

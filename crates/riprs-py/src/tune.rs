@@ -277,6 +277,7 @@ fn tune_weights<'py>(
     w.set_item("measurement_noise", measurement_noise)?;
     w.set_item("recovery", recovery)?;
     let m = t.own.mpc;
+    w.set_item("lqr_disturbance_bandwidth", t.own.lqr.disturbance_bandwidth)?;
     w.set_item("lqg_measurement_noise", t.own.kalman.measurement_noise)?;
     w.set_item("lqg_disturbance", t.own.kalman.disturbance)?;
     w.set_item("lqg_input_disturbance", t.own.kalman.input_disturbance)?;

@@ -461,13 +461,21 @@ impl Design {
     }
 
     /// LQR: `K` on measured angles and filtered-difference rates (and `k_i` on the integrated
-    /// arm error, when there is integral action), clamped to the input bounds.
+    /// arm error, when there is integral action), clamped to the input bounds; with
+    /// `lqr.disturbance_bandwidth` > 0, cancelling the estimate of a disturbance at the plant
+    /// input ([`Lqr::with_input_disturbance_cancelled`] on the design model).
     pub fn lqr(&self) -> Result<Lqr, SpecError> {
         let (lo, hi) = self.bounds();
-        Lqr::new(&self.k, self.ts, self.spec.lqr.rate_cutoff)
+        let lqr = Lqr::new(&self.k, self.ts, self.spec.lqr.rate_cutoff)
             .and_then(|c| c.with_input_bounds(lo, hi))
             .and_then(|c| c.with_integral_action(self.integral_gain.unwrap_or(0.0)))
-            .map_err(|e| SpecError::new("lqr.rate_cutoff", e.to_string()))
+            .map_err(|e| SpecError::new("lqr.rate_cutoff", e.to_string()))?;
+        let bandwidth = self.spec.lqr.disturbance_bandwidth;
+        if bandwidth == 0.0 {
+            return Ok(lqr);
+        }
+        lqr.with_input_disturbance_cancelled(&self.a, &self.b, bandwidth)
+            .map_err(|e| SpecError::new("lqr.disturbance_bandwidth", e.to_string()))
     }
 
     /// LQG: `K` on the shared Kalman filter's estimate.

@@ -24,6 +24,10 @@ pub struct LqrSpec {
     /// Weight `q_i` of the integrated arm error in LQR's and LQG's integral action
     /// (`crate::regulators`, MATLAB's `lqi`); 0 (the paper's setting) for none.
     pub integral_weight: f64,
+    /// LQR only: the bandwidth `f_d` (Hz) of an observer of a disturbance at the plant input
+    /// whose estimate the law cancels (`Lqr::with_input_disturbance_cancelled`); 0, the
+    /// default, for the paper's LQR without one.
+    pub disturbance_bandwidth: f64,
 }
 
 impl Default for LqrSpec {
@@ -33,6 +37,7 @@ impl Default for LqrSpec {
             R: crate::paper::LQR_R,
             rate_cutoff: DEFAULT_RATE_CUTOFF_HZ,
             integral_weight: 0.0,
+            disturbance_bandwidth: 0.0,
         }
     }
 }
@@ -50,6 +55,15 @@ impl LqrSpec {
         }
         positive("lqr.R", self.R)?;
         non_negative("lqr.integral_weight", self.integral_weight)?;
+        if !(self.disturbance_bandwidth.is_finite() && self.disturbance_bandwidth >= 0.0) {
+            return Err(bad(
+                "lqr.disturbance_bandwidth",
+                format!(
+                    "must be finite and >= 0 (Hz; 0 for none), got {}",
+                    self.disturbance_bandwidth
+                ),
+            ));
+        }
         if self.rate_cutoff.is_nan() || self.rate_cutoff <= 0.0 {
             return Err(bad(
                 "lqr.rate_cutoff",
