@@ -211,6 +211,10 @@ class Lqr:
     def u_max(self) -> float: ...
     @property
     def x_hat(self) -> _F | None: ...
+    @property
+    def input_disturbance(self) -> float | None:
+        """The input disturbance (V) the law cancels now (``lqr.disturbance_bandwidth``), or
+        ``None`` without the observer."""
 
 @final
 class Lqg:

@@ -337,6 +337,14 @@ impl PyLqr {
         estimate_py(py, &self.inner)
     }
 
+    /// The input disturbance (V) the law cancels now (``lqr.disturbance_bandwidth``), or
+    /// ``None`` without the observer.
+    #[getter]
+    fn input_disturbance(&self, py: Python<'_>) -> Option<f64> {
+        let c = self.inner.lock(py);
+        c.cancels_input_disturbance().then(|| c.input_disturbance())
+    }
+
     fn __repr__(&self, py: Python<'_>) -> String {
         let c = self.inner.lock(py);
         let k = c.gain();

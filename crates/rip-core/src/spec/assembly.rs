@@ -82,6 +82,73 @@ pub struct Design {
     pub estimator: EstimatorDesign,
     /// The compensation every controller's voltage passes through, if any.
     compensation: Option<Compensation>,
+    /// LQG's own filter, when it cancels an input disturbance (`kalman.input_disturbance`).
+    lqg_filter: Option<InputDisturbanceFilter>,
+}
+
+/// LQG's own filter on the design model augmented by a random-walk disturbance `d` at the
+/// plant input ([`input_disturbance_filter`]): `x̂⁺ = A x̂ + B u + L e`, `y = C x̂`.
+#[derive(Debug, Clone)]
+struct InputDisturbanceFilter {
+    a: Mat,
+    b: Mat,
+    c: Mat,
+    l: Mat,
+    m: Mat,
+}
+
+/// LQG's own filter, on the design model `(a, b, c)` augmented by a random-walk disturbance
+/// `d` at the plant input, whose estimate the law cancels (`kalman.input_disturbance` = `q_d`
+/// of `spec`):
+///
+/// ```text
+/// [x; d][k+1] = [A_d B_d; 0 1] [x; d] + [B_d; 0] u + [B_d 0; 0 1] w,   y = [C 0] [x; d] + v
+/// cov(w) = diag(q_u, q_d),   cov(v) = diag(σ_θ² + δ_θ²/12, σ_α² + δ_α²/12)
+/// u = −K (x̂ − x_ref) − d̂
+/// ```
+///
+/// with `q_u` = [`LQG_INPUT_NOISE`], `σ` the `[sensor]`'s noise and `δ` one count of its
+/// encoders (their quantisation's variance). What the compensation leaves of a dead zone,
+/// friction or breakaway torque acts as such a disturbance, and is cancelled within a few
+/// periods instead of holding the arm in a limit cycle.
+fn input_disturbance_filter(
+    spec: &Spec,
+    a: &Mat,
+    b: &Mat,
+    c: &Mat,
+) -> Result<InputDisturbanceFilter, SpecError> {
+    let n = a.nrows();
+    let mut aa = Mat::zeros(n + 1, n + 1);
+    aa.view_mut((0, 0), (n, n)).copy_from(a);
+    aa.view_mut((0, n), (n, 1)).copy_from(b);
+    aa[(n, n)] = 1.0;
+    let mut ba = Mat::zeros(n + 1, 1);
+    ba.view_mut((0, 0), (n, 1)).copy_from(b);
+    let mut ca = Mat::zeros(c.nrows(), n + 1);
+    ca.view_mut((0, 0), (c.nrows(), n)).copy_from(c);
+    let mut g = Mat::zeros(n + 1, 2);
+    g.view_mut((0, 0), (n, 1)).copy_from(b);
+    g[(n, 1)] = 1.0;
+    let qn = Mat::from_row_slice(
+        2,
+        2,
+        &[LQG_INPUT_NOISE, 0.0, 0.0, spec.kalman.input_disturbance],
+    );
+    let [vt, va] = spec.sensor.angle_variance();
+    let rn = Mat::from_row_slice(2, 2, &[vt, 0.0, 0.0, va]);
+    let kf = crate::kalman::kalman(&aa, &g, &ca, &qn, &rn, None, None).map_err(|e| {
+        SpecError::new(
+            "kalman.input_disturbance",
+            format!("LQG's own filter fails: {e}"),
+        )
+    })?;
+    Ok(InputDisturbanceFilter {
+        a: aa,
+        b: ba,
+        c: ca,
+        l: kf.l,
+        m: kf.m,
+    })
 }
 
 /// The weight an LQR design failure is blamed on: `R` when the error's argument is `dlqr`'s
@@ -381,6 +448,9 @@ impl Spec {
             };
             SpecError::new(key, format!("the Kalman design fails: {e}"))
         })?;
+        let lqg_filter = (self.kalman.input_disturbance > 0.0)
+            .then(|| input_disturbance_filter(self, &a, &b, &c))
+            .transpose()?;
         Ok(Design {
             spec: self.clone(),
             ts,
@@ -391,6 +461,7 @@ impl Spec {
             integral_gain,
             estimator,
             compensation,
+            lqg_filter,
         })
     }
 }
@@ -474,8 +545,13 @@ impl Design {
         if bandwidth == 0.0 {
             return Ok(lqr);
         }
-        lqr.with_input_disturbance_cancelled(&self.a, &self.b, bandwidth)
-            .map_err(|e| SpecError::new("lqr.disturbance_bandwidth", e.to_string()))
+        lqr.with_input_disturbance_cancelled(
+            &self.a,
+            &self.b,
+            bandwidth,
+            self.spec.sensor.angle_variance(),
+        )
+        .map_err(|e| SpecError::new("lqr.disturbance_bandwidth", e.to_string()))
     }
 
     /// LQG: `K` on the shared Kalman filter's estimate.
@@ -484,11 +560,20 @@ impl Design {
     /// units, so it runs the same filter with `C' = S_y C_aug`, `L' = L S_y⁻¹`,
     /// `M' = M S_y⁻¹`, whose innovation `y − C' x̂ = S_y (y/s_y − C_aug x̂)` gives the same
     /// corrections.
+    ///
+    /// With `kalman.input_disturbance` > 0, LQG runs its own filter instead, with a
+    /// disturbance at the plant input whose estimate its law cancels
+    /// ([`Lqg::with_input_disturbance_cancelled`]; designed with the spec, the model and the
+    /// noise in the docs of `input_disturbance_filter`).
     pub fn lqg(&self) -> Result<Lqg, SpecError> {
-        if self.spec.kalman.input_disturbance > 0.0 {
-            return self.lqg_cancelling_input_disturbance();
-        }
         let (lo, hi) = self.bounds();
+        if let Some(f) = &self.lqg_filter {
+            return Lqg::new(&self.k, &f.a, &f.b, &f.c, &f.l, &f.m, self.ts)
+                .and_then(|g| g.with_input_bounds(lo, hi))
+                .and_then(|g| g.with_integral_action(self.integral_gain.unwrap_or(0.0)))
+                .and_then(Lqg::with_input_disturbance_cancelled)
+                .map_err(|e| SpecError::new("kalman.input_disturbance", e.to_string()));
+        }
         let model = self.estimator.model();
         let kf = self.estimator.kalman();
         let sy = &self.spec.mpc.output_scales;
@@ -504,59 +589,6 @@ impl Design {
             .and_then(|g| g.with_input_bounds(lo, hi))
             .and_then(|g| g.with_integral_action(self.integral_gain.unwrap_or(0.0)))
             .map_err(|e| SpecError::new("kalman", format!("the LQG estimator: {e}")))
-    }
-
-    /// LQG with its own filter, on the design model augmented by a random-walk disturbance
-    /// `d` at the plant input, whose estimate the law cancels (`kalman.input_disturbance`):
-    ///
-    /// ```text
-    /// [x; d][k+1] = [A_d B_d; 0 1] [x; d] + [B_d; 0] u + [B_d 0; 0 1] w,   y = [C 0] [x; d] + v
-    /// cov(w) = diag(q_u, q_d),   cov(v) = diag(σ_θ² + δ_θ²/12, σ_α² + δ_α²/12)
-    /// u = −K (x̂ − x_ref) − d̂
-    /// ```
-    ///
-    /// with `q_u` = [`LQG_INPUT_NOISE`], `q_d` the key, `σ` the `[sensor]`'s noise and `δ` one
-    /// count of its encoders (their quantisation's variance). What the compensation leaves of
-    /// a dead zone, friction or breakaway torque acts as such a disturbance, and is cancelled
-    /// within a few periods instead of holding the arm in a limit cycle.
-    fn lqg_cancelling_input_disturbance(&self) -> Result<Lqg, SpecError> {
-        let key = |e: RipError| SpecError::new("kalman.input_disturbance", e.to_string());
-        let (a, b, c) = (&self.a, &self.b, &self.c);
-        let n = a.nrows();
-        let mut aa = Mat::zeros(n + 1, n + 1);
-        aa.view_mut((0, 0), (n, n)).copy_from(a);
-        aa.view_mut((0, n), (n, 1)).copy_from(b);
-        aa[(n, n)] = 1.0;
-        let mut ba = Mat::zeros(n + 1, 1);
-        ba.view_mut((0, 0), (n, 1)).copy_from(b);
-        let mut ca = Mat::zeros(c.nrows(), n + 1);
-        ca.view_mut((0, 0), (c.nrows(), n)).copy_from(c);
-        let mut g = Mat::zeros(n + 1, 2);
-        g.view_mut((0, 0), (n, 1)).copy_from(b);
-        g[(n, 1)] = 1.0;
-        let qn = Mat::from_row_slice(
-            2,
-            2,
-            &[
-                LQG_INPUT_NOISE,
-                0.0,
-                0.0,
-                self.spec.kalman.input_disturbance,
-            ],
-        );
-        let sensor = &self.spec.sensor;
-        let variance = |i: usize| {
-            let count = 2.0 * std::f64::consts::PI / f64::from(sensor.encoder_counts[i]);
-            sensor.noise_std[i].powi(2) + count * count / 12.0
-        };
-        let rn = Mat::from_row_slice(2, 2, &[variance(0), 0.0, 0.0, variance(1)]);
-        let kf = crate::kalman::kalman(&aa, &g, &ca, &qn, &rn, None, None).map_err(key)?;
-        let (lo, hi) = self.bounds();
-        Lqg::new(&self.k, &aa, &ba, &ca, &kf.l, &kf.m, self.ts)
-            .and_then(|g| g.with_input_bounds(lo, hi))
-            .and_then(|g| g.with_integral_action(self.integral_gain.unwrap_or(0.0)))
-            .and_then(Lqg::with_input_disturbance_cancelled)
-            .map_err(key)
     }
 
     /// The MPC of `[mpc]` on the shared Kalman filter, planning within

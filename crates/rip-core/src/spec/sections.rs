@@ -391,6 +391,15 @@ impl Default for SensorSpec {
 }
 
 impl SensorSpec {
+    /// Each measured angle's noise variance (rad²): `σ² + δ²/12`, the white noise and the
+    /// quantisation of one encoder count `δ = 2π / counts`.
+    pub fn angle_variance(&self) -> [f64; 2] {
+        std::array::from_fn(|i| {
+            let count = 2.0 * PI / f64::from(self.encoder_counts[i]);
+            self.noise_std[i].powi(2) + count * count / 12.0
+        })
+    }
+
     fn validate(&self) -> Result<(), SpecError> {
         for (i, &c) in self.encoder_counts.iter().enumerate() {
             if !COUNTS_PER_REV.contains(&c) {
