@@ -23,12 +23,24 @@ use rip_protocol::{
 };
 
 fn image() -> ([u8; 512], usize) {
-    let design = Design {
+    // An LQR with its input-disturbance observer, so the device's observer runs on the
+    // traffic too: a 4-state model (θ += Ts θ̇, α += Ts α̇) and a gain with g·b = 0.05.
+    let mut design = Design {
         kind: Kind::Lqr,
         ts: 0.001,
         k: [-3.0, -2.0, 40.0, 4.0],
+        cancels_input_disturbance: true,
+        nx: 4,
+        disturbance_gain: [0.0, 0.5, 0.0, -0.5],
         ..Design::default()
     };
+    for i in 0..4 {
+        design.a[i * 4 + i] = 1.0;
+    }
+    design.a[1] = 0.001;
+    design.a[2 * 4 + 3] = 0.001;
+    design.b[1] = 0.05;
+    design.b[3] = -0.05;
     let sensor = Sensor {
         arm_rad_per_count: 0.003,
         pendulum_rad_per_count: 0.003,

@@ -170,7 +170,7 @@ class ControllerTuning:
         Whether a run with the compensation off fell.
     misses : str or None
         What of :class:`Bar` it misses on this rig, or None when it works; ``rip-rt run``'s
-        pre-flight warns with the same words.
+        pre-flight refuses it with the same words (``--force`` runs it anyway).
     balanced_fraction : float
         Fraction of the robustness runs (rigs drawn around this one) it balanced; NaN when
         none were run.
@@ -413,7 +413,7 @@ class TuneResult:
         else:
             lines.append(
                 "NOT every controller meets the bar with any candidate tried: these weights miss "
-                "it by least (rip-rt run's pre-flight warns with the same words):"
+                "it by least (rip-rt run's pre-flight refuses these with the same words):"
             )
             lines += [f"  SHORT {n}: {c.misses}" for n, c in short.items()]
         return "\n".join(lines)

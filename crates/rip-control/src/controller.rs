@@ -563,23 +563,20 @@ impl<R: Real> Controller<R> {
     }
 
     /// Restarts the estimate at the plant state `x = [θ, θ̇, α, α̇]` with `u` the input just
-    /// written (the handover from another controller); clears the integrator. A non-finite
-    /// `x` is a held period instead.
+    /// written (the handover from another controller); clears the integrator and LQR's
+    /// input-disturbance estimate. A non-finite `x` is a held period instead.
     pub fn seed(&mut self, x: [R; NX_PLANT], u: R) {
         let v = self.planned_for(u, x[1]);
         self.integral = R::ZERO;
+        self.disturbance = R::ZERO;
         if !x.iter().all(|v| v.is_finite()) {
-            match self.design.kind {
-                Kind::Lqr => self.filter.hold(),
-                _ => self.hold(u),
-            }
+            self.hold(u);
             return;
         }
         match self.design.kind {
             Kind::Lqr => {
                 self.filter.seed([x[0], x[2]], [x[1], x[3]]);
                 self.sync_lqr_estimate();
-                self.disturbance = R::ZERO;
                 self.predict_lqr(v);
             }
             Kind::Lqg | Kind::Mpc => {

@@ -227,7 +227,8 @@ pub struct Design<R: Real = f64> {
     /// `d̂ ← d̂ + g (x̂ − x̂⁻)`, `x̂⁻` the model's prediction of `x̂` (crate docs, "LQR").
     pub disturbance_gain: [R; NX_PLANT],
     /// Estimator states `n` (LQG: ≥ 4, ≥ 5 with [`cancels_input_disturbance`]; MPC: the
-    /// augmented model's).
+    /// augmented model's; LQR: 4 with [`cancels_input_disturbance`], the observer's model,
+    /// else unused).
     ///
     /// [`cancels_input_disturbance`]: Self::cancels_input_disturbance
     pub nx: usize,

@@ -136,7 +136,7 @@
 //! | end − 4 | 4 | CRC-32 (IEEE, [`crc32`]) of every byte before it |
 //!
 //! The paper's MPC (n = 5, P = 50, m = 3, 107 rows) encodes in 10 454 bytes, its LQG in 612
-//! and its LQR in 120.
+//! and its LQR in 120 (312 with its input-disturbance observer).
 
 #![no_std]
 #![forbid(unsafe_code)]

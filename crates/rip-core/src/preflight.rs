@@ -39,7 +39,8 @@
 //!   angle. A controller too slow to simulate within [`PREDICTION_BUDGET`] is not predicted
 //!   (a warning): the loop's timing probe judges it. A current tuning record beside the rig
 //!   file ([`tune_record_path`]) stands for the simulation; a record that is there but cannot
-//!   be read (not a regular file, too large, not a record) refuses.
+//!   be read (not a regular file, too large, not a record) refuses, and so does a controller
+//!   the record says misses the rig's bar (`riprs tune`'s `SHORT`), with the tuning's reason.
 //! - **swing_up** — for a run that swings up ([`Input::swing_up`]) only: the rig cannot be
 //!   swung up at all by rip-core's energy balance of the last swing
 //!   ([`crate::swingup::feasibility()`]), whatever the law. The verdict is the one `riprs tune`

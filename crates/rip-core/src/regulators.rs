@@ -316,17 +316,20 @@ impl Controller for Lqr {
     }
 
     /// The estimate update of [`step`](Controller::step) (an unusable sample counts as held);
-    /// the input plays no part in it.
+    /// with the input-disturbance observer, the estimate is cleared and `u` starts the
+    /// model's prediction (type docs).
     fn observe(&mut self, y: &[f64], u: &[f64]) {
         self.inner.observe(y, u);
     }
 
-    /// `x̂ = x`, the next rate difference taken from this sample's angles.
+    /// `x̂ = x`, the next rate difference taken from this sample's angles; the
+    /// input-disturbance estimate cleared and `u` starting the model's prediction.
     fn seed(&mut self, x: &[f64], u: &[f64]) {
         self.inner.seed(x, u);
     }
 
-    /// Counts the period, so that the next rate difference spans it (type docs).
+    /// Counts the period, so that the next rate difference spans it (type docs); the
+    /// input-disturbance observer's prediction advances over it with `u`.
     fn hold(&mut self, u: &[f64]) {
         self.inner.hold(u);
     }

@@ -351,7 +351,7 @@ fn replace(tuned: &mut Tuned, a: Assessment) {
 }
 
 /// The controllers' own keys searched where the shared weights leave them short
-/// ([`own`] module docs: LQG's filter first, then the MPC's weights).
+/// ([`own`] module docs: LQR's observer, then LQG's filter, then the MPC's weights).
 fn own_keys(tuned: &mut Tuned, ts: f64, bar: &Bar, cancel: &AtomicBool) -> Result<(), SpecError> {
     if short(tuned, ControllerKind::Lqr, bar) {
         check_cancel(cancel)?;
