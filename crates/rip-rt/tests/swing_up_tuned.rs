@@ -156,3 +156,20 @@ fn tuned_rigs_swing_up_end_to_end_run_after_run() {
         tuned_swing_ups_catch(&format!("tuned-rig{n}"), &rig, 300 + 100 * i as u64);
     }
 }
+
+/// The full tier: a generated rig whose tuned LQR cancels an input disturbance
+/// (`lqr.disturbance_bandwidth`), so that the swing-up's catch hands over to the LQR's
+/// observer, which starts from a cleared estimate.
+#[test]
+fn a_tuned_lqr_cancelling_an_input_disturbance_swings_up_end_to_end_run_after_run() {
+    if !rip_test_scale::full() {
+        return;
+    }
+    let rig = rip_core::rig::Rig::random(11).to_toml();
+    let tuned = rip_core::tune::tune(&Spec::parse(&rig).unwrap(), rip_core::paper::TS).unwrap();
+    assert!(
+        tuned.spec.lqr.disturbance_bandwidth > 0.0,
+        "generated rig 11's tuned LQR has no observer"
+    );
+    tuned_swing_ups_catch("tuned-rig11", &rig, 600);
+}
