@@ -616,7 +616,10 @@ fn searched_swing_ups_hold_their_catches_on_rigs_riprs_has_never_seen() {
 /// `rip-rt run --swing-up`'s pre-flight through the record.
 fn searched_swing_ups_hold_their_catches(rigs: Vec<(String, Spec)>) {
     use rip_core::preflight::{self, Input, Verdict};
-    let dir = std::env::temp_dir().join(format!("riprs-swing-rigs-{}", std::process::id()));
+    // One directory per call: the tests calling this run at once, and each removes its own.
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("riprs-swing-rigs-{}-{call}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let (mut pooled, mut pooled_runs) = (0u64, 0u64);
     let mut wrong = Vec::new();
