@@ -660,9 +660,12 @@ def tune(
     Keeps the file's weights when every controller meets the bar with them; otherwise tries
     the candidates of ``rip_core::tune::candidates`` (the estimator's measurement noise, R, the
     arm weight, integral action, then the pendulum weight) and keeps the first that works, or
-    the one that misses by least. Then draws ``runs`` rigs around this one, from the
-    identification's covariance (the ``.identification.toml`` beside the file) or each
-    parameter within ``1 +- spread``, and counts the runs each tuned controller balances.
+    the one that misses by least; where a controller is still short, a second grid whose cost
+    holds the pendulum harder against the arm (``rip_core::tune::pendulum_led_candidates``),
+    kept when every controller meets the bar with it. Then draws ``runs`` rigs around this
+    one, from the identification's covariance (the ``.identification.toml`` beside the file)
+    or each parameter within ``1 +- spread``, and counts the runs each tuned controller
+    balances.
 
     Parameters
     ----------
