@@ -662,9 +662,11 @@ def tune(
     arm weight, integral action, then the pendulum weight) and keeps the first that works, or
     the one that misses by least; where a controller is still short, a second grid whose cost
     holds the pendulum harder against the arm (``rip_core::tune::pendulum_led_candidates``),
-    kept when every controller meets the bar with it. Then draws ``runs`` rigs around this
-    one, from the identification's covariance (the ``.identification.toml`` beside the file)
-    or each parameter within ``1 +- spread``, and counts the runs each tuned controller
+    kept when fewer controllers are short with it; a controller that works on the tuning's
+    noise seeds and falls with the compensation 30 % off on further ones
+    (``rip_core::tune::FALL_CHECK_SEEDS``) is short. Then draws ``runs`` rigs around this one,
+    from the identification's covariance (the ``.identification.toml`` beside the file) or
+    each parameter within ``1 +- spread``, and counts the runs each tuned controller
     balances.
 
     Parameters

@@ -71,7 +71,10 @@ fn assessment_dict<'py>(
         "off_compensation_peak_to_peak",
         a.off_compensation.map(|o| o.arm_peak_to_peak),
     )?;
-    d.set_item("off_compensation_fell", a.off_compensation.map(|o| o.fell))?;
+    d.set_item(
+        "off_compensation_fell",
+        a.off_compensation.map(|o| o.fell || o.fall_check.0 > 0),
+    )?;
     d.set_item("margins_ok", a.margins_ok(bar))?;
     d.set_item("works", a.works(bar))?;
     d.set_item("misses", a.misses(bar))?;

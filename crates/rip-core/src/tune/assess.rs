@@ -16,7 +16,21 @@ pub struct OffCompensation {
     pub fell: bool,
     /// Steady-state arm peak-to-peak (rad).
     pub arm_peak_to_peak: f64,
+    /// `(falls, runs)` of the fall check on further noise seeds ([`FALL_CHECK_SEEDS`]);
+    /// `(0, 0)` where it was not run.
+    pub fall_check: (u32, u32),
 }
+
+/// The noise seeds of the fall check, none of them [`SEEDS`]: each controller that works on
+/// the tuning's seeds is run on every one of these with the compensation 30 % off both ways,
+/// and one that falls there does not work.
+///
+/// A fall is a yes or no that the tuning's four seeds cannot bound as [`GUARD`](super::GUARD)
+/// bounds a steady state: on generated rig 9 an MPC met the bar on them and fell on 13 of 60
+/// other seeds with the compensation 30 % high. No fall in the 2 × 24 runs of the check puts
+/// the fall rate below 7.4 % (Wilson 95 % upper bound; 6.4 % with the tuning's own 8 runs),
+/// and a rate of 20 % passes it one time in 45 000.
+pub const FALL_CHECK_SEEDS: std::ops::Range<u64> = 101..125;
 
 /// How one controller does on the rig (module docs), the worst over [`SEEDS`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -63,7 +77,7 @@ impl Assessment {
     /// Whether the runs with the compensation off meet the bar (true where there are none).
     pub fn holds_off_compensation(&self, bar: &Bar) -> bool {
         self.off_compensation.map_or(true, |o| {
-            !o.fell && o.arm_peak_to_peak <= bar.off_limit(self.kind)
+            !o.fell && o.fall_check.0 == 0 && o.arm_peak_to_peak <= bar.off_limit(self.kind)
         })
     }
 
@@ -99,6 +113,12 @@ impl Assessment {
             let pct = OFF_COMPENSATION * 100.0;
             if o.fell {
                 out.push(format!("falls with the compensation {pct:.0} % off"));
+            } else if o.fall_check.0 > 0 {
+                out.push(format!(
+                    "falls with the compensation {pct:.0} % off on {} of {} runs on further \
+                     noise seeds",
+                    o.fall_check.0, o.fall_check.1
+                ));
             } else if o.arm_peak_to_peak > bar.off_limit(self.kind) {
                 out.push(format!(
                     "arm peak-to-peak {:.3} rad above {:.3} with the compensation {pct:.0} % off",
@@ -148,7 +168,7 @@ impl Assessment {
             s += 1.0;
         }
         if let Some(o) = self.off_compensation {
-            s += if o.fell {
+            s += if o.fell || o.fall_check.0 > 0 {
                 5.0
             } else {
                 over(o.arm_peak_to_peak, bar.off_limit(self.kind))
@@ -283,6 +303,7 @@ fn assess_off(
     let mut worst = OffCompensation {
         fell: false,
         arm_peak_to_peak: 0.0,
+        fall_check: (0, 0),
     };
     for rig in rigs {
         let (Ok(design), Ok(plant)) = (rig.design(ts), rig.plant()) else {
@@ -302,6 +323,43 @@ fn assess_off(
         }
     }
     Ok(worst)
+}
+
+/// The fall check: each of `assessments` (of `spec`'s controllers) that works on the tuning's
+/// seeds is run with the compensation off both ways ([`off_compensation`], stiction on) on
+/// every seed of [`FALL_CHECK_SEEDS`], its falls counted in
+/// [`OffCompensation::fall_check`]; one that falls there no longer
+/// [works](Assessment::works).
+pub(crate) fn check_falls(
+    spec: &Spec,
+    ts: f64,
+    bar: &Bar,
+    assessments: &mut [Assessment],
+) -> Result<(), SpecError> {
+    let off: Vec<Spec> = [-OFF_COMPENSATION, OFF_COMPENSATION]
+        .into_iter()
+        .filter_map(|e| off_compensation(spec, e))
+        .collect();
+    for a in assessments.iter_mut().filter(|a| a.works(bar)) {
+        let Some(o) = a.off_compensation.as_mut() else {
+            continue;
+        };
+        let (mut falls, mut runs) = (0u32, 0u32);
+        for rig in &off {
+            let (Ok(design), Ok(plant)) = (rig.design(ts), rig.plant()) else {
+                continue;
+            };
+            let mut controller = design.controller(a.kind)?;
+            for seed in FALL_CHECK_SEEDS {
+                let run = simulate(&plant, controller.as_mut(), &rig.sim_config(ts, seed))
+                    .map_err(|e| SpecError::new("plant", format!("simulation: {e}")))?;
+                runs += 1;
+                falls += u32::from(run.fell || run.diverged);
+            }
+        }
+        o.fall_check = (falls, runs);
+    }
+    Ok(())
 }
 
 /// `(arm peak-to-peak, max |α|, |mean θ − θ_ref|)` of the true state over the last `window`
