@@ -167,7 +167,8 @@ class ControllerTuning:
         Steady-state arm peak-to-peak (rad) with the compensation 30 % off either way and the
         arm's stiction on, the worst over both; NaN where the rig compensates nothing.
     off_compensation_fell : bool
-        Whether a run with the compensation off fell.
+        Whether a run with the compensation off fell, on the tuning's noise seeds or on the
+        further ones of its fall check (``rip_core::tune::FALL_CHECK_SEEDS``).
     misses : str or None
         What of :class:`Bar` it misses on this rig, or None when it works; ``rip-rt run``'s
         pre-flight refuses it with the same words (``--force`` runs it anyway).
