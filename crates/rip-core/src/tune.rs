@@ -413,7 +413,9 @@ fn tune_over(
     check_cancel(cancel)?;
     check_falls(&tuned.spec, ts, held, &mut tuned.assessments)?;
     tuned.works = tuned.assessments.iter().all(|a| a.works(held));
-    progress.step();
+    // The search may stop at the first candidate that works: what it skipped is done too, so
+    // that a second grid's steps count on from a bar at the end of this one's.
+    progress.finish();
     Ok(tuned)
 }
 
