@@ -233,10 +233,7 @@ pub(crate) fn assess_kinds(
     let comp = design
         .compensation()
         .map_or(0.0, |c| c.dead_zone() + c.friction_voltage());
-    let off: Vec<Spec> = [-OFF_COMPENSATION, OFF_COMPENSATION]
-        .into_iter()
-        .filter_map(|e| off_compensation(spec, e))
-        .collect();
+    let off = off_rigs(spec);
     let mut out = Vec::new();
     for &kind in kinds {
         let mut controller = design.controller(kind)?;
@@ -279,7 +276,12 @@ pub(crate) fn assess_kinds(
         // already fails.
         let screened_out = stop_early && nominal_failed;
         if !screened_out && !off.is_empty() {
-            a.off_compensation = Some(assess_off(&off, kind, ts, bar, seeds)?);
+            let runs = run_off(&off, kind, ts, bar, seeds)?;
+            a.off_compensation = Some(OffCompensation {
+                fell: runs.falls > 0,
+                arm_peak_to_peak: runs.arm_peak_to_peak,
+                fall_check: (0, 0),
+            });
         }
         let failed = nominal_failed || !a.holds_off_compensation(bar);
         out.push(a);
@@ -293,24 +295,43 @@ pub(crate) fn assess_kinds(
     Ok((out, true))
 }
 
-/// `kind` on each of the `rigs` with the compensation off ([`off_compensation`]): the worst
-/// over them and the noise `seeds`. A rig that cannot be designed with its error (a
-/// compensation the input bounds cannot hold) counts as a fall.
-fn assess_off(
+/// The rigs of `spec` with its compensation 30 % off each way ([`off_compensation`]; none
+/// where it compensates nothing).
+fn off_rigs(spec: &Spec) -> Vec<Spec> {
+    [-OFF_COMPENSATION, OFF_COMPENSATION]
+        .into_iter()
+        .filter_map(|e| off_compensation(spec, e))
+        .collect()
+}
+
+/// What [`run_off`] found: falls over runs, and the worst steady-state arm peak-to-peak (rad)
+/// of the runs that did not fall.
+struct OffRuns {
+    falls: u32,
+    runs: u32,
+    arm_peak_to_peak: f64,
+}
+
+/// `kind` on each of the `rigs` with the compensation off ([`off_rigs`]) over the noise
+/// `seeds`. A rig that cannot be designed with its error (a compensation the input bounds
+/// cannot hold) counts as a fall on every seed.
+fn run_off(
     rigs: &[Spec],
     kind: ControllerKind,
     ts: f64,
     bar: &Bar,
     seeds: &[u64],
-) -> Result<OffCompensation, SpecError> {
-    let mut worst = OffCompensation {
-        fell: false,
+) -> Result<OffRuns, SpecError> {
+    let per_rig = seeds.len() as u32;
+    let mut out = OffRuns {
+        falls: 0,
+        runs: 0,
         arm_peak_to_peak: 0.0,
-        fall_check: (0, 0),
     };
     for rig in rigs {
+        out.runs += per_rig;
         let (Ok(design), Ok(plant)) = (rig.design(ts), rig.plant()) else {
-            worst.fell = true;
+            out.falls += per_rig;
             continue;
         };
         let mut controller = design.controller(kind)?;
@@ -318,14 +339,14 @@ fn assess_off(
             let run = simulate(&plant, controller.as_mut(), &rig.sim_config(ts, seed))
                 .map_err(|e| SpecError::new("plant", format!("simulation: {e}")))?;
             if run.fell || run.diverged {
-                worst.fell = true;
+                out.falls += 1;
             } else {
                 let pp = steady_state(&run, bar.window).0;
-                worst.arm_peak_to_peak = worst.arm_peak_to_peak.max(pp);
+                out.arm_peak_to_peak = out.arm_peak_to_peak.max(pp);
             }
         }
     }
-    Ok(worst)
+    Ok(out)
 }
 
 /// The fall check: each of `assessments` (of `spec`'s controllers) that works on the tuning's
@@ -340,11 +361,8 @@ pub fn check_falls(
     bar: &Bar,
     assessments: &mut [Assessment],
 ) -> Result<(), SpecError> {
-    let off: Vec<Spec> = [-OFF_COMPENSATION, OFF_COMPENSATION]
-        .into_iter()
-        .filter_map(|e| off_compensation(spec, e))
-        .collect();
-    let per_rig = FALL_CHECK_SEEDS.count() as u32;
+    let off = off_rigs(spec);
+    let seeds: Vec<u64> = FALL_CHECK_SEEDS.collect();
     for a in assessments.iter_mut().filter(|a| a.works(bar)) {
         let Some(o) = a.off_compensation.as_mut() else {
             continue;
@@ -352,22 +370,7 @@ pub fn check_falls(
         if o.fall_check.1 > 0 {
             continue;
         }
-        let (mut falls, mut runs) = (0u32, 0u32);
-        for rig in &off {
-            // As in `assess_off`: an error the input bounds cannot hold is a fall.
-            let (Ok(design), Ok(plant)) = (rig.design(ts), rig.plant()) else {
-                falls += per_rig;
-                runs += per_rig;
-                continue;
-            };
-            let mut controller = design.controller(a.kind)?;
-            for seed in FALL_CHECK_SEEDS {
-                let run = simulate(&plant, controller.as_mut(), &rig.sim_config(ts, seed))
-                    .map_err(|e| SpecError::new("plant", format!("simulation: {e}")))?;
-                runs += 1;
-                falls += u32::from(run.fell || run.diverged);
-            }
-        }
+        let OffRuns { falls, runs, .. } = run_off(&off, a.kind, ts, bar, &seeds)?;
         o.fall_check = (falls, runs);
     }
     Ok(())
