@@ -386,6 +386,10 @@ riprs reads keeps the ones it sets: `riprs config FILE`, `Spec.to_toml` and the 
   the plant input whose estimate its law cancels, `u = −K (x̂ − x_ref) − d̂`: what the
   compensation leaves of a dead zone, friction or breakaway torque
   ([tuning.md](tuning.md#lqg-cancelling-an-input-disturbance)); `riprs tune` sets it where
+  LQG needs it. `regulate_outputs` (default `false`, the paper's LQG) makes LQG's law act on
+  the estimated outputs, the plant part of the shared filter's estimate plus what the output
+  disturbance of eq. (1) adds to each angle, as the MPC's cost does
+  ([tuning.md](tuning.md#lqg-regulating-the-estimated-outputs)); `riprs tune` sets it where
   LQG needs it.
 - `[mpc]`: section 3's MPC; the section is the MPC's own settings (`MpcSettings`, the keywords
   of Python's `riprs.Mpc`), each missing key taking the paper profile (`riprs.Mpc.paper()`,

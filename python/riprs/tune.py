@@ -215,7 +215,9 @@ class TuneResult:
         ``lqg_disturbance`` (factors on ``kalman.measurement_noise`` and
         ``kalman.disturbance_gain``, which the MPC shares) or ``lqg_input_disturbance``
         (``kalman.input_disturbance`` set: LQG's own filter with an input disturbance its law
-        cancels; 0 for none), and the MPC's weights,
+        cancels; 0 for none), ``lqg_regulate_outputs`` (``kalman.regulate_outputs``: LQG's law
+        on the estimated outputs instead of the plant part of the estimate), and the MPC's
+        weights,
         ``mpc_arm``, ``mpc_pendulum``, ``mpc_rate`` (factors on its output and input-rate
         weights, by their square roots) and ``mpc_input`` (an input weight, relative to the
         input-rate weight).
@@ -333,6 +335,11 @@ class TuneResult:
                     f"; LQG's own filter cancelling an input disturbance: "
                     f"kalman.input_disturbance = {w['lqg_input_disturbance']:g} V^2"
                     if w["lqg_input_disturbance"] > 0.0
+                    else ""
+                )
+                + (
+                    "; LQG regulating the estimated outputs: kalman.regulate_outputs = true"
+                    if w["lqg_regulate_outputs"]
                     else ""
                 )
                 + (
@@ -809,6 +816,7 @@ def tune(
         "lqg_measurement_noise": 1.0,
         "lqg_disturbance": 1.0,
         "lqg_input_disturbance": 0.0,
+        "lqg_regulate_outputs": False,
         "mpc_arm": 1.0,
         "mpc_pendulum": 1.0,
         "mpc_rate": 1.0,

@@ -222,6 +222,12 @@ pub struct Design<R: Real = f64> {
     /// [`disturbance_gain`](Self::disturbance_gain) on the 4-state model `a`, `b`.
     /// Byte-layout flag bit 0.
     pub cancels_input_disturbance: bool,
+    /// LQG only: the law regulates the estimated outputs rather than the plant part of the
+    /// estimate alone. Each angle's state takes on the estimate of what the estimator's extra
+    /// states (an output disturbance) add to that output, `θ̂ ← θ̂ + s_θ Σ_{j≥4} C[0,j] x̂_j`
+    /// and `α̂ ← α̂ + s_α Σ_{j≥4} C[1,j] x̂_j`, as the MPC's cost weights the outputs `y`
+    /// (crate docs, "Estimator"). Byte-layout flag bit 1.
+    pub regulates_outputs: bool,
     /// LQR's input-disturbance observer gain `g` (1×4), used with
     /// [`cancels_input_disturbance`](Self::cancels_input_disturbance):
     /// `d̂ ← d̂ + g (x̂ − x̂⁻)`, `x̂⁻` the model's prediction of `x̂` (crate docs, "LQR").
@@ -302,6 +308,7 @@ impl<R: Real> Design<R> {
             integral_gain: z,
             rate_cutoff_hz: z,
             cancels_input_disturbance: false,
+            regulates_outputs: false,
             disturbance_gain: [z; NX_PLANT],
             nx: 0,
             ny: 0,
@@ -349,6 +356,7 @@ impl<R: Real> Design<R> {
         self.integral_gain = z;
         self.rate_cutoff_hz = R::from_f64(20.0);
         self.cancels_input_disturbance = false;
+        self.regulates_outputs = false;
         self.disturbance_gain = [z; NX_PLANT];
         self.nx = 0;
         self.ny = 0;
@@ -426,6 +434,9 @@ impl<R: Real> Design<R> {
             }
         {
             return Err(BadValue("cancels_input_disturbance"));
+        }
+        if self.regulates_outputs && self.kind != Kind::Lqg {
+            return Err(BadValue("regulates_outputs"));
         }
         match self.kind {
             Kind::Lqr => {

@@ -71,6 +71,12 @@
 //! the plant input (`x[k+1] = A x + B (u + d)`, a random walk: what the compensation leaves of
 //! a dead zone, friction or breakaway torque), and the law cancels its estimate:
 //! `u = −K (x̂ − x_ref) − d̂`.
+//! With [`Design::regulates_outputs`] the law acts on the estimated outputs instead of the
+//! plant part alone: each angle's state takes on what the estimator's extra states add to that
+//! output (`θ̂ + s_θ Σ_{j≥4} C[0,j] x̂_j`), as the MPC's cost does. With the paper's output
+//! disturbance, the integrated white noise that the estimator cannot tell from a slow arm
+//! motion, the plant part alone drifts with it and carries the arm along; the estimated output
+//! does not.
 //!
 //! # MPC
 //!
@@ -107,7 +113,7 @@
 //! | 0 | 4 | magic `"RIPD"` |
 //! | 4 | 2 | layout version `u16` = 3 |
 //! | 6 | 1 | kind: 1 LQR, 2 LQG, 3 MPC |
-//! | 7 | 1 | flags: bit 0 [`Design::cancels_input_disturbance`] (LQR, LQG); the others 0 |
+//! | 7 | 1 | flags: bit 0 [`Design::cancels_input_disturbance`] (LQR, LQG), bit 1 [`Design::regulates_outputs`] (LQG); the others 0 |
 //! | 8 | 4 | total length `u32`, CRC included |
 //! | 12 | 8 | `ts` |
 //! | 20 | 16 | `input_bounds` `[u_min, u_max]` |

@@ -143,7 +143,7 @@ fn the_flag_travels_in_the_layout_and_only_with_a_regulator_that_estimates_it() 
     let back: Design = Design::from_bytes(&buf).unwrap();
     assert!(back.cancels_input_disturbance);
     // An unknown flag is refused, not ignored.
-    buf[7] = 2;
+    buf[7] = 4;
     let n = buf.len();
     let crc = rip_control::crc32(&buf[..n - 4]);
     buf[n - 4..].copy_from_slice(&crc.to_le_bytes());

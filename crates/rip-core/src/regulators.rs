@@ -465,6 +465,20 @@ impl Lqg {
         self.inner.design().cancels_input_disturbance
     }
 
+    /// Makes the law regulate the estimated outputs: each angle's state takes on what the
+    /// estimator's states beyond the plant's four add to that output (its `C` columns 4..n),
+    /// `u = −K (x̂_p + S_y C_e x̂_e − x_ref)` with the angles' rows of that sum (rip-control's
+    /// `Design::regulates_outputs`). With the paper's output disturbance the plant part alone
+    /// drifts with the disturbance estimate; the estimated output does not.
+    pub fn with_outputs_regulated(self) -> Result<Self> {
+        self.rebuilt(|d| d.regulates_outputs = true)
+    }
+
+    /// Whether the law regulates the estimated outputs ([`with_outputs_regulated`](Self::with_outputs_regulated)).
+    pub fn regulates_outputs(&self) -> bool {
+        self.inner.design().regulates_outputs
+    }
+
     /// The gain `K` (1×4).
     pub fn gain(&self) -> Mat {
         Mat::from_row_slice(1, NX, &self.inner.design().k)

@@ -156,12 +156,14 @@ pub struct PyLqrSpec {
     disturbance_bandwidth: f64,
 }
 
-/// `[kalman]` (read-only): ``input_disturbance`` is LQG's own (0: LQG on the shared filter).
+/// `[kalman]` (read-only): ``input_disturbance`` and ``regulate_outputs`` are LQG's own (0 and
+/// ``False``: the paper's LQG on the shared filter).
 #[pyclass(name = "KalmanSpec", module = "riprs._riprs", frozen, get_all)]
 pub struct PyKalmanSpec {
     disturbance_gain: f64,
     measurement_noise: Vec<f64>,
     input_disturbance: f64,
+    regulate_outputs: bool,
 }
 
 /// `[compensation]` (read-only): ``dead_zone`` and ``arm_friction`` are ``None`` when they
@@ -533,6 +535,7 @@ impl PySpec {
             disturbance_gain: k.disturbance_gain,
             measurement_noise: k.measurement_noise.to_vec(),
             input_disturbance: k.input_disturbance,
+            regulate_outputs: k.regulate_outputs,
         }
     }
 

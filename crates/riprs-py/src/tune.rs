@@ -284,6 +284,7 @@ fn tune_weights<'py>(
     w.set_item("lqg_measurement_noise", t.own.kalman.measurement_noise)?;
     w.set_item("lqg_disturbance", t.own.kalman.disturbance)?;
     w.set_item("lqg_input_disturbance", t.own.kalman.input_disturbance)?;
+    w.set_item("lqg_regulate_outputs", t.own.kalman.regulate_outputs)?;
     w.set_item("mpc_arm", m.arm)?;
     w.set_item("mpc_pendulum", m.pendulum)?;
     w.set_item("mpc_rate", m.rate)?;

@@ -127,6 +127,21 @@ impl<R: Real> Controller<R> {
         )
     }
 
+    /// [`Design::regulates_outputs`]: `θ̂ += s_θ Σ_{j≥4} C[0,j] x̂_j`, `α̂ += s_α Σ_{j≥4}
+    /// C[1,j] x̂_j` (crate docs, "Estimator"); the estimate's angles are states 0 and 2.
+    ///
+    /// [`Design::regulates_outputs`]: crate::Design::regulates_outputs
+    fn add_output_disturbance(&mut self) {
+        let (n, d) = (self.design.nx, &self.design);
+        for (i, state) in [0, 2].into_iter().enumerate() {
+            let mut share = R::ZERO;
+            for j in NX_PLANT..n {
+                share += d.c[i * n + j] * self.est.posterior[j];
+            }
+            self.x_hat[state] += d.output_scales[i] * share;
+        }
+    }
+
     pub(super) fn step_lqg(
         &mut self,
         m: &Measurement<R>,
@@ -138,6 +153,9 @@ impl<R: Real> Controller<R> {
         }
         probe(Phase::Estimate);
         self.sync_plant_estimate();
+        if self.design.regulates_outputs {
+            self.add_output_disturbance();
+        }
         let (u, ok) = self.feedback(&m.reference, m.angles[0], usable);
         self.u_prev = u;
         self.predict();

@@ -28,7 +28,7 @@ impl<R: Real> Design<R> {
         buf[..4].copy_from_slice(&MAGIC);
         buf[4..6].copy_from_slice(&LAYOUT_VERSION.to_le_bytes());
         buf[6] = self.kind.code();
-        buf[7] = u8::from(self.cancels_input_disturbance);
+        buf[7] = u8::from(self.cancels_input_disturbance) | (u8::from(self.regulates_outputs) << 1);
         let total = u32::try_from(needed).map_err(|_| DesignError::BadSize("length"))?;
         buf[8..12].copy_from_slice(&total.to_le_bytes());
         let mut w = Writer {
@@ -85,11 +85,12 @@ impl<R: Real> Design<R> {
         }
         let kind = Kind::from_code(bytes[6]).ok_or(DesignError::UnknownKind(bytes[6]))?;
         let flags = bytes[7];
-        if flags & !1 != 0 {
+        if flags & !0b11 != 0 {
             return Err(DesignError::BadValue("flags"));
         }
         self.clear(kind);
         self.cancels_input_disturbance = flags & 1 != 0;
+        self.regulates_outputs = flags & 0b10 != 0;
         let mut r = Reader {
             buf: &bytes[HEADER_LEN..total - 4],
             pos: 0,

@@ -564,7 +564,8 @@ impl Design {
     /// With `kalman.input_disturbance` > 0, LQG runs its own filter instead, with a
     /// disturbance at the plant input whose estimate its law cancels
     /// ([`Lqg::with_input_disturbance_cancelled`]; designed with the spec, the model and the
-    /// noise in the docs of `input_disturbance_filter`).
+    /// noise in the docs of `input_disturbance_filter`). With `kalman.regulate_outputs`, its law
+    /// regulates the estimated outputs ([`Lqg::with_outputs_regulated`]).
     pub fn lqg(&self) -> Result<Lqg, SpecError> {
         let (lo, hi) = self.bounds();
         if let Some(f) = &self.lqg_filter {
@@ -585,10 +586,15 @@ impl Design {
             l.column_mut(i).scale_mut(1.0 / s);
             m.column_mut(i).scale_mut(1.0 / s);
         }
-        Lqg::new(&self.k, &model.a, &model.b, &c, &l, &m, self.ts)
+        let lqg = Lqg::new(&self.k, &model.a, &model.b, &c, &l, &m, self.ts)
             .and_then(|g| g.with_input_bounds(lo, hi))
-            .and_then(|g| g.with_integral_action(self.integral_gain.unwrap_or(0.0)))
-            .map_err(|e| SpecError::new("kalman", format!("the LQG estimator: {e}")))
+            .and_then(|g| g.with_integral_action(self.integral_gain.unwrap_or(0.0)));
+        let lqg = if self.spec.kalman.regulate_outputs {
+            lqg.and_then(Lqg::with_outputs_regulated)
+        } else {
+            lqg
+        };
+        lqg.map_err(|e| SpecError::new("kalman", format!("the LQG estimator: {e}")))
     }
 
     /// The MPC of `[mpc]` on the shared Kalman filter, planning within

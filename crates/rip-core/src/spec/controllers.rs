@@ -91,6 +91,11 @@ pub struct KalmanSpec {
     /// input that LQG's own filter estimates and its law cancels (`Design::lqg`); 0, the
     /// default, for the paper's LQG on the shared filter.
     pub input_disturbance: f64,
+    /// LQG only: its law regulates the estimated outputs, the plant part of the shared
+    /// filter's estimate plus what the output disturbance of eq. (1) adds to each angle, as
+    /// the MPC's cost does (rip-control's `Design::regulates_outputs`); `false`, the default,
+    /// for the paper's LQG on the plant part alone.
+    pub regulate_outputs: bool,
 }
 
 impl Default for KalmanSpec {
@@ -99,6 +104,7 @@ impl Default for KalmanSpec {
             disturbance_gain: crate::mpc::paper::DISTURBANCE_GAIN,
             measurement_noise: [1.0, 1.0],
             input_disturbance: 0.0,
+            regulate_outputs: false,
         }
     }
 }
@@ -111,7 +117,16 @@ impl KalmanSpec {
             &self.measurement_noise,
             positive,
         )?;
-        non_negative("kalman.input_disturbance", self.input_disturbance)
+        non_negative("kalman.input_disturbance", self.input_disturbance)?;
+        if self.regulate_outputs && self.input_disturbance > 0.0 {
+            return Err(bad(
+                "kalman.regulate_outputs",
+                "LQG's own filter (kalman.input_disturbance > 0) has no output disturbance to \
+                 regulate; set one of the two"
+                    .to_string(),
+            ));
+        }
+        Ok(())
     }
 }
 

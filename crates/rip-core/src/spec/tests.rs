@@ -95,6 +95,10 @@ fn bad_values_are_named() {
         ("[plant]\nCr = -0.001\n", "plant.Cr"),
         ("[plant]\nCp = nan\n", "plant.Cp"),
         ("[plant]\nVd = -0.5\n", "plant.Vd"),
+        (
+            "[kalman]\ninput_disturbance = 0.1\nregulate_outputs = true\n",
+            "kalman.regulate_outputs",
+        ),
         ("[plant]\nVd = inf\n", "plant.Vd"),
         (
             "[sensor]\nencoder_offsets = [0.0, 4.0]\n",

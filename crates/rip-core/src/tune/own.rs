@@ -8,8 +8,9 @@
 //!    its law cancels (`kalman.input_disturbance`: what the compensation leaves of a dead
 //!    zone, friction or breakaway torque), then the shared filter's noise model
 //!    (`kalman.measurement_noise`, `kalman.disturbance_gain`; [`KalmanWeights`],
-//!    [`search_lqg`]). LQR does not use the filter; the MPC uses the shared one, and is judged
-//!    again on the filter chosen.
+//!    [`search_lqg`]), then that noise model again with LQG's law on the estimated outputs
+//!    (`kalman.regulate_outputs`). LQR does not use the filter; the MPC uses the shared one,
+//!    and is judged again on the filter chosen.
 //! 2. The MPC: its weights (`mpc.output_weights`, `mpc.input_rate_weights`,
 //!    `mpc.input_weights`; [`MpcWeights`], [`search`]). Its loop differs from LQR's: it
 //!    weights the input's rate, not the input, which adds an integrator's phase lag at the
@@ -169,6 +170,8 @@ pub struct KalmanWeights {
     pub disturbance: f64,
     /// `kalman.input_disturbance` set (0: LQG on the shared filter).
     pub input_disturbance: f64,
+    /// `kalman.regulate_outputs` set: LQG's law on the estimated outputs (shared filter only).
+    pub regulate_outputs: bool,
 }
 
 impl KalmanWeights {
@@ -177,6 +180,7 @@ impl KalmanWeights {
         measurement_noise: 1.0,
         disturbance: 1.0,
         input_disturbance: 0.0,
+        regulate_outputs: false,
     };
 
     /// `spec` with this change to its `[kalman]` noise model.
@@ -187,6 +191,7 @@ impl KalmanWeights {
         }
         s.kalman.disturbance_gain *= self.disturbance;
         s.kalman.input_disturbance = self.input_disturbance;
+        s.kalman.regulate_outputs = self.regulate_outputs;
         s
     }
 }
@@ -197,7 +202,10 @@ pub const INPUT_DISTURBANCES: [f64; 3] = [0.1, 0.01, 1.0];
 
 /// The filters [`search_lqg`] tries: an input disturbance cancelled
 /// ([`INPUT_DISTURBANCES`]), then the shared filter's noise model changed, nearest the
-/// shared one first.
+/// shared one first, then each noise model (the shared one first) with LQG's law on the
+/// estimated outputs (`kalman.regulate_outputs`): the paper's law on the plant part of the
+/// estimate drifts with the estimate of eq. (1)'s output disturbance, which the filter cannot
+/// tell from a slow arm motion (module docs of rip-control, "Estimator").
 pub fn kalman_candidates() -> Vec<KalmanWeights> {
     let mut out: Vec<KalmanWeights> = INPUT_DISTURBANCES
         .into_iter()
@@ -206,15 +214,18 @@ pub fn kalman_candidates() -> Vec<KalmanWeights> {
             ..KalmanWeights::SHARED
         })
         .collect();
-    for disturbance in [1.0, 0.3, 3.0, 0.1, 10.0, 0.01, 100.0] {
-        for measurement_noise in [1.0, 0.3, 3.0, 0.1, 10.0, 0.03, 0.01, 0.001] {
-            let w = KalmanWeights {
-                measurement_noise,
-                disturbance,
-                input_disturbance: 0.0,
-            };
-            if w != KalmanWeights::SHARED {
-                out.push(w);
+    for regulate_outputs in [false, true] {
+        for disturbance in [1.0, 0.3, 3.0, 0.1, 10.0, 0.01, 100.0] {
+            for measurement_noise in [1.0, 0.3, 3.0, 0.1, 10.0, 0.03, 0.01, 0.001] {
+                let w = KalmanWeights {
+                    measurement_noise,
+                    disturbance,
+                    input_disturbance: 0.0,
+                    regulate_outputs,
+                };
+                if w != KalmanWeights::SHARED {
+                    out.push(w);
+                }
             }
         }
     }
