@@ -209,10 +209,21 @@ fn the_dual_active_set_mpc_agrees_with_clarabel_on_ten_thousand_qps() {
 fn a_design_travels_in_bytes_unchanged_and_corruption_is_refused() {
     let spec = Spec::default();
     let design = spec.design(0.01).unwrap();
+    // LQG regulating its estimated outputs: the flag the device runs the law by travels too.
+    let regulating = Spec::parse("[kalman]\nregulate_outputs = true\n")
+        .unwrap()
+        .design(0.01)
+        .unwrap()
+        .lqg()
+        .unwrap()
+        .control_design()
+        .unwrap();
+    assert!(regulating.regulates_outputs);
     let designs: Vec<CDesign> = vec![
         design.lqr().unwrap().control_design(),
         design.lqg().unwrap().control_design().unwrap(),
         design.mpc().unwrap().control_design().unwrap(),
+        regulating,
     ];
     let mut buf = vec![0u8; 20_000];
     for d in &designs {
