@@ -35,7 +35,7 @@ const REGULATOR_STEP_INSTRUCTIONS: u64 = 3_000;
 pub const NX_PLANT: usize = 4;
 
 /// The version of the byte layout written by [`Design::to_bytes`].
-pub const LAYOUT_VERSION: u16 = 3;
+pub const LAYOUT_VERSION: u16 = 4;
 /// The first four bytes of every encoded design.
 pub const MAGIC: [u8; 4] = *b"RIPD";
 /// Bytes before the body: magic, version, kind, flags, total length.
@@ -435,7 +435,9 @@ impl<R: Real> Design<R> {
         {
             return Err(BadValue("cancels_input_disturbance"));
         }
-        if self.regulates_outputs && self.kind != Kind::Lqg {
+        // The law adds the states beyond the plant's four to the angles: an LQG without them,
+        // or whose fifth is an input disturbance, has none to add.
+        if self.regulates_outputs && (self.kind != Kind::Lqg || self.nx <= NX_PLANT || cancels) {
             return Err(BadValue("regulates_outputs"));
         }
         match self.kind {

@@ -103,7 +103,7 @@
 //! `w = v + V_f σ(θ̇̂/ω_s)`, `u = clamp(w + V_d σ(w/v_s), u_min, u_max)`, `σ = clamp(·, −1, 1)`;
 //! the law plans within `[u_min + V_d + V_f, u_max − V_d − V_f]` and the estimator is fed `v`.
 //!
-//! # Byte layout (version 3)
+//! # Byte layout (version 4)
 //!
 //! Little-endian throughout; every real is an IEEE-754 `f64` (8 bytes); matrices row-major,
 //! only their used `rows × cols` entries.
@@ -111,7 +111,7 @@
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `"RIPD"` |
-//! | 4 | 2 | layout version `u16` = 3 |
+//! | 4 | 2 | layout version `u16` = 4 (3 lacked flag bit 1) |
 //! | 6 | 1 | kind: 1 LQR, 2 LQG, 3 MPC |
 //! | 7 | 1 | flags: bit 0 [`Design::cancels_input_disturbance`] (LQR, LQG), bit 1 [`Design::regulates_outputs`] (LQG); the others 0 |
 //! | 8 | 4 | total length `u32`, CRC included |

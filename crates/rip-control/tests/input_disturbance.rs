@@ -8,51 +8,22 @@
 
 use rip_control::{Controller, Design, DesignError, Kind, Measurement};
 
-const N: usize = 5;
+mod common;
 
-/// An LQG design on a 4-state model augmented by an input disturbance, with made-up numbers
-/// (a stable model, small gains).
+use common::N;
+
+/// The common LQG whose fifth state is a disturbance at the plant input, `x[k+1] = A x +
+/// B (u + d)`, measured through the angles alone.
 fn design() -> Design {
-    let a4 = [
-        [1.0, 0.01, 0.0, 0.0],
-        [0.0, 0.98, 0.05, 0.0],
-        [0.0, 0.0, 1.001, 0.01],
-        [0.0, -0.03, 0.12, 0.999],
-    ];
-    let b4 = [0.0005, 0.09, -0.0004, -0.08];
     let mut d = Design {
-        kind: Kind::Lqg,
-        ts: 0.01,
-        k: [-1.2, -0.9, 25.0, 2.1],
-        input_bounds: [-12.0, 12.0],
-        nx: N,
-        ny: 2,
         cancels_input_disturbance: true,
-        ..Design::default()
+        ..common::lqg_base()
     };
     for i in 0..4 {
-        for j in 0..4 {
-            d.a[i * N + j] = a4[i][j];
-        }
-        d.a[i * N + 4] = b4[i];
-        d.b[i] = b4[i];
+        d.a[i * N + 4] = d.b[i];
     }
-    d.a[4 * N + 4] = 1.0;
     d.c[0] = 1.0;
     d.c[N + 2] = 1.0;
-    let l = [
-        [0.5, 0.01],
-        [2.0, 0.1],
-        [0.02, 0.6],
-        [0.1, 3.0],
-        [0.3, -0.2],
-    ];
-    for i in 0..N {
-        for j in 0..2 {
-            d.l[i * 2 + j] = l[i][j];
-            d.m[i * 2 + j] = 0.8 * l[i][j];
-        }
-    }
     d.output_scales[..2].copy_from_slice(&[1.0, 1.0]);
     d
 }

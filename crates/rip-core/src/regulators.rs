@@ -352,7 +352,8 @@ impl Controller for Lqr {
 ///
 /// The estimator model is `x[k+1] = A x + B_u u`, `y = C x` with `n ≥ 4` states whose first four
 /// are the plant's `[θ, θ̇, α, α̇]`; the rest (e.g. the paper's output-disturbance integrator)
-/// are used by the estimator but not fed back. Each sample:
+/// are used by the estimator but not fed back, unless the law
+/// [regulates the estimated outputs](Self::with_outputs_regulated). Each sample:
 ///
 /// ```text
 /// e[k]     = y[k] − C x̂[k|k−1]
@@ -466,10 +467,15 @@ impl Lqg {
     }
 
     /// Makes the law regulate the estimated outputs: each angle's state takes on what the
-    /// estimator's states beyond the plant's four add to that output (its `C` columns 4..n),
-    /// `u = −K (x̂_p + S_y C_e x̂_e − x_ref)` with the angles' rows of that sum (rip-control's
-    /// `Design::regulates_outputs`). With the paper's output disturbance the plant part alone
-    /// drifts with the disturbance estimate; the estimated output does not.
+    /// estimator's states beyond the plant's four add to that output (their columns `C_e` of
+    /// `C`, in the angles' units here), `θ̂ ← θ̂ + (C_e x̂_e)_θ`, `α̂ ← α̂ + (C_e x̂_e)_α`, then
+    /// `u = sat(−K (x̂ − x_ref))` (rip-control's `Design::regulates_outputs`). With the paper's
+    /// output disturbance the plant part alone drifts with the disturbance estimate; the
+    /// estimated output does not.
+    ///
+    /// # Errors
+    /// An estimator with no state beyond the plant's four, or one whose law
+    /// [cancels an input disturbance](Self::with_input_disturbance_cancelled).
     pub fn with_outputs_regulated(self) -> Result<Self> {
         self.rebuilt(|d| d.regulates_outputs = true)
     }

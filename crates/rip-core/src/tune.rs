@@ -439,7 +439,7 @@ fn replace(tuned: &mut Tuned, a: Assessment) {
 fn own_keys(tuned: &mut Tuned, ts: f64, bar: &Bar, cancel: &AtomicBool) -> Result<(), SpecError> {
     if short(tuned, ControllerKind::Lqr, bar) {
         check_cancel(cancel)?;
-        if let Some((w, spec, a)) = own::search_lqr(&tuned.spec, ts, bar)? {
+        if let Some((w, spec, a)) = own::search_lqr(&tuned.spec, ts, bar, cancel)? {
             tuned.spec = spec;
             tuned.own.lqr = w;
             replace(tuned, a);
@@ -447,7 +447,7 @@ fn own_keys(tuned: &mut Tuned, ts: f64, bar: &Bar, cancel: &AtomicBool) -> Resul
     }
     if short(tuned, ControllerKind::Lqg, bar) {
         check_cancel(cancel)?;
-        if let Some((w, spec, a)) = own::search_lqg(&tuned.spec, ts, bar)? {
+        if let Some((w, spec, a)) = own::search_lqg(&tuned.spec, ts, bar, cancel)? {
             let (mut mpc, _) = assess_kinds(&spec, ts, bar, &[ControllerKind::Mpc], &SEEDS, false)?;
             tuned.spec = spec;
             tuned.own.kalman = w;
@@ -459,7 +459,7 @@ fn own_keys(tuned: &mut Tuned, ts: f64, bar: &Bar, cancel: &AtomicBool) -> Resul
     }
     if short(tuned, ControllerKind::Mpc, bar) {
         check_cancel(cancel)?;
-        if let Some((w, spec, a)) = own::search(&tuned.spec, ts, bar)? {
+        if let Some((w, spec, a)) = own::search(&tuned.spec, ts, bar, cancel)? {
             tuned.spec = spec;
             tuned.own.mpc = w;
             replace(tuned, a);

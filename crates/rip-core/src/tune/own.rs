@@ -8,9 +8,9 @@
 //!    its law cancels (`kalman.input_disturbance`: what the compensation leaves of a dead
 //!    zone, friction or breakaway torque), then the shared filter's noise model
 //!    (`kalman.measurement_noise`, `kalman.disturbance_gain`; [`KalmanWeights`],
-//!    [`search_lqg`]), then that noise model again with LQG's law on the estimated outputs
-//!    (`kalman.regulate_outputs`). LQR does not use the filter; the MPC uses the shared one,
-//!    and is judged again on the filter chosen.
+//!    [`search_lqg`]), with LQG's law on the estimated outputs (`kalman.regulate_outputs`) tried
+//!    on the shared filter before any change to it and again with each. LQR does not use the
+//!    filter; the MPC uses the shared one, and is judged again on the filter chosen.
 //! 2. The MPC: its weights (`mpc.output_weights`, `mpc.input_rate_weights`,
 //!    `mpc.input_weights`; [`MpcWeights`], [`search`]). Its loop differs from LQR's: it
 //!    weights the input's rate, not the input, which adds an integrator's phase lag at the
@@ -24,7 +24,9 @@
 
 use crate::spec::{ControllerKind, Spec, SpecError};
 
-use super::{screen_then_confirm, Assessment, Bar};
+use std::sync::atomic::AtomicBool;
+
+use super::{check_cancel, screen_then_confirm, Assessment, Bar};
 
 /// A change to the MPC's own weights on top of the shared ones: its output weights scaled by
 /// `√arm` and `√pendulum`, its input-rate weight by `√rate`, and an input weight added of
@@ -95,6 +97,7 @@ pub fn search(
     spec: &Spec,
     ts: f64,
     bar: &Bar,
+    cancel: &AtomicBool,
 ) -> Result<Option<(MpcWeights, Spec, Assessment)>, SpecError> {
     first_that_works(
         candidates(),
@@ -102,6 +105,7 @@ pub fn search(
         ControllerKind::Mpc,
         ts,
         bar,
+        cancel,
     )
 }
 
@@ -143,6 +147,7 @@ pub fn search_lqr(
     spec: &Spec,
     ts: f64,
     bar: &Bar,
+    cancel: &AtomicBool,
 ) -> Result<Option<(LqrWeights, Spec, Assessment)>, SpecError> {
     first_that_works(
         DISTURBANCE_BANDWIDTHS
@@ -155,6 +160,7 @@ pub fn search_lqr(
         ControllerKind::Lqr,
         ts,
         bar,
+        cancel,
     )
 }
 
@@ -201,11 +207,12 @@ impl KalmanWeights {
 pub const INPUT_DISTURBANCES: [f64; 3] = [0.1, 0.01, 1.0];
 
 /// The filters [`search_lqg`] tries: an input disturbance cancelled
-/// ([`INPUT_DISTURBANCES`]), then the shared filter's noise model changed, nearest the
-/// shared one first, then each noise model (the shared one first) with LQG's law on the
-/// estimated outputs (`kalman.regulate_outputs`): the paper's law on the plant part of the
-/// estimate drifts with the estimate of eq. (1)'s output disturbance, which the filter cannot
-/// tell from a slow arm motion (module docs of rip-control, "Estimator").
+/// ([`INPUT_DISTURBANCES`]); the shared filter with LQG's law on the estimated outputs
+/// (`kalman.regulate_outputs`; the paper's law on the plant part of the estimate drifts with
+/// the estimate of eq. (1)'s output disturbance, which the filter cannot tell from a slow arm
+/// motion: rip-control's crate docs, "Estimator"); then the shared filter's noise model
+/// changed, nearest the shared one first, with the paper's law and then with the law on the
+/// outputs. The first two change LQG alone; the rest change the filter the MPC shares too.
 pub fn kalman_candidates() -> Vec<KalmanWeights> {
     let mut out: Vec<KalmanWeights> = INPUT_DISTURBANCES
         .into_iter()
@@ -214,6 +221,12 @@ pub fn kalman_candidates() -> Vec<KalmanWeights> {
             ..KalmanWeights::SHARED
         })
         .collect();
+    // The law on the estimated outputs with the shared filter changes LQG alone, so it comes
+    // before every change to the filter the MPC shares.
+    out.push(KalmanWeights {
+        regulate_outputs: true,
+        ..KalmanWeights::SHARED
+    });
     for regulate_outputs in [false, true] {
         for disturbance in [1.0, 0.3, 3.0, 0.1, 10.0, 0.01, 100.0] {
             for measurement_noise in [1.0, 0.3, 3.0, 0.1, 10.0, 0.03, 0.01, 0.001] {
@@ -223,7 +236,7 @@ pub fn kalman_candidates() -> Vec<KalmanWeights> {
                     input_disturbance: 0.0,
                     regulate_outputs,
                 };
-                if w != KalmanWeights::SHARED {
+                if !out.contains(&w) && w != KalmanWeights::SHARED {
                     out.push(w);
                 }
             }
@@ -239,6 +252,7 @@ pub fn search_lqg(
     spec: &Spec,
     ts: f64,
     bar: &Bar,
+    cancel: &AtomicBool,
 ) -> Result<Option<(KalmanWeights, Spec, Assessment)>, SpecError> {
     first_that_works(
         kalman_candidates(),
@@ -246,18 +260,22 @@ pub fn search_lqg(
         ControllerKind::Lqg,
         ts,
         bar,
+        cancel,
     )
 }
 
-/// The first of `candidates` whose spec (`apply`) gives `kind` a loop that meets `bar`.
+/// The first of `candidates` whose spec (`apply`) gives `kind` a loop that meets `bar`;
+/// cancelled (`cancel`) between any two candidates.
 fn first_that_works<W: Copy>(
     candidates: Vec<W>,
     apply: impl Fn(&W) -> Spec,
     kind: ControllerKind,
     ts: f64,
     bar: &Bar,
+    cancel: &AtomicBool,
 ) -> Result<Option<(W, Spec, Assessment)>, SpecError> {
     for w in candidates {
+        check_cancel(cancel)?;
         let candidate = apply(&w);
         let Ok(design) = candidate.design(ts) else {
             continue;
