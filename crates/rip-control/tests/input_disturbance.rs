@@ -10,7 +10,7 @@ use rip_control::{Controller, Design, DesignError, Kind, Measurement};
 
 mod common;
 
-use common::N;
+use common::{DenseLqg, N};
 
 /// The common LQG whose fifth state is a disturbance at the plant input, `x[k+1] = A x +
 /// B (u + d)`, measured through the angles alone.
@@ -28,36 +28,10 @@ fn design() -> Design {
     d
 }
 
-/// The law and the filter written out: `x̂[k|k] = x̂⁻ + M e`, `u = sat(−K (x̂ − r) − d̂)`,
-/// `x̂⁻ ← A x̂⁻ + B u + L e`.
-struct Dense {
-    d: Design,
-    prior: [f64; N],
-}
-
-impl Dense {
-    fn step(&mut self, y: [f64; 2], r: f64) -> f64 {
-        let d = &self.d;
-        let mut e = [0.0; 2];
-        for i in 0..2 {
-            e[i] = y[i] - (0..N).map(|j| d.c[i * N + j] * self.prior[j]).sum::<f64>();
-        }
-        let post: Vec<f64> = (0..N)
-            .map(|i| self.prior[i] + d.m[i * 2] * e[0] + d.m[i * 2 + 1] * e[1])
-            .collect();
-        let err = [post[0] - r, post[1], post[2], post[3]];
-        let v = -(0..4).map(|j| d.k[j] * err[j]).sum::<f64>() - post[4];
-        let u = v.clamp(d.input_bounds[0], d.input_bounds[1]);
-        let mut next = [0.0; N];
-        for i in 0..N {
-            next[i] = (0..N).map(|j| d.a[i * N + j] * self.prior[j]).sum::<f64>()
-                + d.b[i] * u
-                + d.l[i * 2] * e[0]
-                + d.l[i * 2 + 1] * e[1];
-        }
-        self.prior = next;
-        u
-    }
+/// The law written out on the dense filter's `x̂[k|k]`: `u = −K (x̂ − r) − d̂`.
+fn cancelling(d: &Design, post: &[f64; N], r: f64) -> f64 {
+    let err = [post[0] - r, post[1], post[2], post[3]];
+    -(0..4).map(|j| d.k[j] * err[j]).sum::<f64>() - post[4]
 }
 
 /// Steps the device's controller of `d` and `dense` (which returns its move and, where it
@@ -98,11 +72,10 @@ fn agrees_with_dense(
 #[test]
 fn the_law_cancels_the_estimated_input_disturbance() {
     let d = design();
-    let mut dense = Dense {
-        d: d.clone(),
-        prior: [0.0; N],
-    };
-    agrees_with_dense(&d, |y, r| (dense.step(y, r), None));
+    let mut dense = DenseLqg::new(&d);
+    agrees_with_dense(&d, |y, r| {
+        (dense.step(y, |d, post| cancelling(d, post, r)), None)
+    });
 }
 
 #[test]
@@ -329,31 +302,9 @@ fn the_lqr_observer_agrees_through_held_unusable_and_seeded_periods() {
 
 #[test]
 fn the_lqr_runs_its_observer_in_single_precision_within_a_millivolt() {
-    // The device runs f32: the same design read as `Design<f32>` keeps the moves within
-    // 1 mV of f64 over 400 samples (the regulators' agreement in the crate docs).
-    let d = lqr_design();
-    let mut buf = vec![0u8; d.encoded_len()];
-    d.to_bytes(&mut buf).unwrap();
-    let single: Design<f32> = Design::from_bytes(&buf).unwrap();
-    let mut c64 = Controller::new(&d).unwrap();
-    let mut c32 = Controller::new(&single).unwrap();
-    for k in 0..400 {
-        let t = k as f64 * 0.01;
-        let y = [0.2 * (1.3 * t).sin(), 0.01 * (7.0 * t).cos()];
-        let u64 = c64
-            .step(Measurement {
-                angles: y,
-                reference: [0.5, 0.0],
-            })
-            .voltage;
-        let u32 = c32
-            .step(Measurement {
-                angles: [y[0] as f32, y[1] as f32],
-                reference: [0.5, 0.0],
-            })
-            .voltage;
-        assert!((u64 - f64::from(u32)).abs() < 1e-3, "k={k}: {u64} {u32}");
-    }
+    common::single_precision_within_a_millivolt(&lqr_design(), |t| {
+        [0.2 * (1.3 * t).sin(), 0.01 * (7.0 * t).cos()]
+    });
 }
 
 #[test]

@@ -9,7 +9,7 @@ use rip_control::{Controller, Design, DesignError, Kind, Measurement};
 
 mod common;
 
-use common::N;
+use common::{DenseLqg, N};
 
 /// The common LQG whose fifth state is one integrated output disturbance feeding both (scaled)
 /// outputs with different weights, as the paper's eq. (1) does with equal ones, and output
@@ -29,51 +29,20 @@ fn design() -> Design {
     d
 }
 
-/// The filter and the law written out: `e = y/s − C x̂⁻` (0 for a sample with non-finite
-/// angles, which is discarded), `x̂[k|k] = x̂⁻ + M e`, `ŷ_i = s_i (C x̂[k|k])_i` (the estimated
-/// outputs, engineering units), `u = sat(−K ([ŷ_θ, x̂_1, ŷ_α, x̂_3] − x_ref))`,
-/// `x̂⁻ ← A x̂⁻ + B u + L e`.
-struct Dense {
-    d: Design,
-    prior: [f64; N],
-}
-
-impl Dense {
-    fn step(&mut self, y: [f64; 2], r: f64) -> f64 {
-        let d = &self.d;
-        let s = d.output_scales;
-        let mut e = [0.0; 2];
-        if y.iter().all(|v| v.is_finite()) {
-            for i in 0..2 {
-                e[i] = y[i] / s[i] - (0..N).map(|j| d.c[i * N + j] * self.prior[j]).sum::<f64>();
-            }
-        }
-        let post: Vec<f64> = (0..N)
-            .map(|i| self.prior[i] + d.m[i * 2] * e[0] + d.m[i * 2 + 1] * e[1])
-            .collect();
-        let output = |i: usize| s[i] * (0..N).map(|j| d.c[i * N + j] * post[j]).sum::<f64>();
-        let err = [output(0) - r, post[1], output(1), post[3]];
-        let v = -(0..4).map(|j| d.k[j] * err[j]).sum::<f64>();
-        let u = v.clamp(d.input_bounds[0], d.input_bounds[1]);
-        let mut next = [0.0; N];
-        for i in 0..N {
-            next[i] = (0..N).map(|j| d.a[i * N + j] * self.prior[j]).sum::<f64>()
-                + d.b[i] * u
-                + d.l[i * 2] * e[0]
-                + d.l[i * 2 + 1] * e[1];
-        }
-        self.prior = next;
-        u
-    }
+/// The law written out on the dense filter's `x̂[k|k]`: the estimated outputs
+/// `ŷ_i = s_i (C x̂[k|k])_i` (engineering units) in place of the angles,
+/// `u = −K ([ŷ_θ, x̂_1, ŷ_α, x̂_3] − x_ref)`.
+fn on_outputs(d: &Design, post: &[f64; N], r: f64) -> f64 {
+    let s = d.output_scales;
+    let output = |i: usize| s[i] * (0..N).map(|j| d.c[i * N + j] * post[j]).sum::<f64>();
+    let err = [output(0) - r, post[1], output(1), post[3]];
+    -(0..4).map(|j| d.k[j] * err[j]).sum::<f64>()
 }
 
 #[test]
 fn the_law_regulates_the_estimated_outputs() {
     let d = design();
-    let mut dense = Dense {
-        d: d.clone(),
-        prior: [0.0; N],
-    };
+    let mut dense = DenseLqg::new(&d);
     let mut c = Controller::new(&d).unwrap();
     let mut plain = Controller::new(&Design {
         regulates_outputs: false,
@@ -96,7 +65,7 @@ fn the_law_regulates_the_estimated_outputs() {
             reference: [r, 0.0],
         };
         let u = c.step(m).voltage;
-        let want = dense.step(y, r);
+        let want = dense.step(y, |d, post| on_outputs(d, post, r));
         assert!((u - want).abs() < 1e-9, "k={k}: {u} {want}");
         apart = apart.max((plain.step(m).voltage - u).abs());
     }
@@ -106,32 +75,10 @@ fn the_law_regulates_the_estimated_outputs() {
 
 #[test]
 fn the_law_runs_in_single_precision_within_a_millivolt() {
-    // The device runs f32: the same design read as `Design<f32>` keeps the moves within 1 mV
-    // of f64 over 400 samples (the regulators' agreement in the crate docs).
-    let d = design();
-    let mut buf = vec![0u8; d.encoded_len()];
-    d.to_bytes(&mut buf).unwrap();
-    let single: Design<f32> = Design::from_bytes(&buf).unwrap();
+    let single = common::single_precision_within_a_millivolt(&design(), |t| {
+        [0.1 + 0.2 * (1.3 * t).sin(), 0.01 * (7.0 * t).cos()]
+    });
     assert!(single.regulates_outputs);
-    let mut c64 = Controller::new(&d).unwrap();
-    let mut c32 = Controller::new(&single).unwrap();
-    for k in 0..400 {
-        let t = k as f64 * 0.01;
-        let y = [0.1 + 0.2 * (1.3 * t).sin(), 0.01 * (7.0 * t).cos()];
-        let u64 = c64
-            .step(Measurement {
-                angles: y,
-                reference: [0.5, 0.0],
-            })
-            .voltage;
-        let u32 = c32
-            .step(Measurement {
-                angles: [y[0] as f32, y[1] as f32],
-                reference: [0.5, 0.0],
-            })
-            .voltage;
-        assert!((u64 - f64::from(u32)).abs() < 1e-3, "k={k}: {u64} {u32}");
-    }
 }
 
 #[test]
