@@ -438,7 +438,6 @@ fn replace(tuned: &mut Tuned, a: Assessment) {
 /// ([`own`] module docs: LQR's observer, then LQG's filter, then the MPC's weights).
 fn own_keys(tuned: &mut Tuned, ts: f64, bar: &Bar, cancel: &AtomicBool) -> Result<(), SpecError> {
     if short(tuned, ControllerKind::Lqr, bar) {
-        check_cancel(cancel)?;
         if let Some((w, spec, a)) = own::search_lqr(&tuned.spec, ts, bar, cancel)? {
             tuned.spec = spec;
             tuned.own.lqr = w;
@@ -446,7 +445,6 @@ fn own_keys(tuned: &mut Tuned, ts: f64, bar: &Bar, cancel: &AtomicBool) -> Resul
         }
     }
     if short(tuned, ControllerKind::Lqg, bar) {
-        check_cancel(cancel)?;
         if let Some((w, spec, a)) = own::search_lqg(&tuned.spec, ts, bar, cancel)? {
             let (mut mpc, _) = assess_kinds(&spec, ts, bar, &[ControllerKind::Mpc], &SEEDS, false)?;
             tuned.spec = spec;
@@ -458,7 +456,6 @@ fn own_keys(tuned: &mut Tuned, ts: f64, bar: &Bar, cancel: &AtomicBool) -> Resul
         }
     }
     if short(tuned, ControllerKind::Mpc, bar) {
-        check_cancel(cancel)?;
         if let Some((w, spec, a)) = own::search(&tuned.spec, ts, bar, cancel)? {
             tuned.spec = spec;
             tuned.own.mpc = w;
